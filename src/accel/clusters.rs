@@ -1,0 +1,177 @@
+//! Clusters of K consecutive (Hilbert-sorted) particles and their bounding boxes (paper §3.2.3).
+
+use std::fmt;
+use std::str::FromStr;
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::scene::Bounds;
+
+/// Particles per cluster: 1, 2, 4, 8 or 16.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(try_from = "u32", into = "u32")]
+pub struct ClusterSize(u32);
+
+impl ClusterSize {
+    pub const ALL: [ClusterSize; 5] = [
+        ClusterSize(1),
+        ClusterSize(2),
+        ClusterSize(4),
+        ClusterSize(8),
+        ClusterSize(16),
+    ];
+
+    pub fn new(k: u32) -> Result<ClusterSize, String> {
+        if matches!(k, 1 | 2 | 4 | 8 | 16) {
+            Ok(ClusterSize(k))
+        } else {
+            Err(format!("cluster size {k} is not one of 1, 2, 4, 8, 16"))
+        }
+    }
+
+    pub fn get(self) -> usize {
+        self.0 as usize
+    }
+
+    /// Clusters needed for `n` particles.
+    pub fn clusters_for(self, n: usize) -> usize {
+        n.div_ceil(self.get())
+    }
+}
+
+impl Default for ClusterSize {
+    fn default() -> Self {
+        ClusterSize(1)
+    }
+}
+
+impl TryFrom<u32> for ClusterSize {
+    type Error = String;
+    fn try_from(k: u32) -> Result<Self, String> {
+        ClusterSize::new(k)
+    }
+}
+
+impl From<ClusterSize> for u32 {
+    fn from(k: ClusterSize) -> u32 {
+        k.0
+    }
+}
+
+impl FromStr for ClusterSize {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let k = s
+            .parse::<u32>()
+            .map_err(|_| format!("cluster size '{s}' is not a number"))?;
+        ClusterSize::new(k)
+    }
+}
+
+impl fmt::Display for ClusterSize {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.0)
+    }
+}
+
+/// The largest f32 not above `x`.
+pub fn f32_down(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) > x { f.next_down() } else { f }
+}
+
+/// The smallest f32 not below `x`.
+pub fn f32_up(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) < x { f.next_up() } else { f }
+}
+
+/// One box per cluster of K consecutive particles, bounding every member's sphere; members
+/// with radius 0 are left out, and a cluster with no member left is empty
+/// (`Bounds::is_empty`). Boxes are rounded outward to f32, so they contain the f64 spheres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClusterBoxes {
+    pub size: ClusterSize,
+    pub boxes: Vec<Bounds>,
+}
+
+impl ClusterBoxes {
+    /// Boxes for particles `centers` (already in cluster order) with `radii`.
+    pub fn build(centers: &[DVec3], radii: &[f64], size: ClusterSize) -> ClusterBoxes {
+        assert_eq!(centers.len(), radii.len());
+        let k = size.get();
+        let boxes = centers
+            .par_chunks(k)
+            .zip(radii.par_chunks(k))
+            .map(|(c, r)| {
+                c.iter()
+                    .zip(r)
+                    .filter(|(_, r)| **r > 0.0)
+                    .fold(Bounds::EMPTY, |b, (c, &r)| {
+                        b.union(Bounds {
+                            min: Vec3::new(f32_down(c.x - r), f32_down(c.y - r), f32_down(c.z - r)),
+                            max: Vec3::new(f32_up(c.x + r), f32_up(c.y + r), f32_up(c.z + r)),
+                        })
+                    })
+            })
+            .collect();
+        ClusterBoxes { size, boxes }
+    }
+
+    pub fn len(&self) -> usize {
+        self.boxes.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.boxes.is_empty()
+    }
+
+    /// Boxes that bound at least one particle.
+    pub fn non_empty(&self) -> usize {
+        self.boxes.iter().filter(|b| !b.is_empty()).count()
+    }
+
+    /// The particle indices (in cluster order) of cluster `c`, for `n` particles in all.
+    pub fn members(&self, c: usize, n: usize) -> std::ops::Range<usize> {
+        let k = self.size.get();
+        c * k..((c + 1) * k).min(n)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outward_rounding_contains_the_f64_value() {
+        for x in [0.1f64, -0.1, 1e6 + 0.3, -3.0, 1e-30, 0.0] {
+            assert!(
+                f64::from(f32_down(x)) <= x && f64::from(f32_up(x)) >= x,
+                "{x}"
+            );
+        }
+        assert_eq!(f32_down(0.5), 0.5);
+        assert_eq!(f32_up(0.5), 0.5);
+    }
+
+    #[test]
+    fn boxes_bound_members_skip_zero_radii_and_mark_empty_clusters() {
+        let c = [DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z, DVec3::ONE];
+        let r = [0.5, 0.0, 0.0, 0.0, 0.25];
+        let b = ClusterBoxes::build(&c, &r, ClusterSize::new(2).unwrap());
+        assert_eq!(b.len(), 3);
+        assert_eq!(b.boxes[0].min, Vec3::splat(-0.5));
+        assert_eq!(
+            b.boxes[0].max,
+            Vec3::splat(0.5),
+            "the zero-radius member adds nothing"
+        );
+        assert!(b.boxes[1].is_empty());
+        assert_eq!(b.boxes[2].min, Vec3::splat(0.75));
+        assert_eq!(b.non_empty(), 2);
+        assert_eq!(b.members(2, 5), 4..5);
+        assert!(ClusterSize::new(3).is_err());
+    }
+}

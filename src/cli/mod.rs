@@ -1,0 +1,49 @@
+//! The `aarbf` command line: argument definitions and the commands behind them.
+
+mod field;
+mod generate;
+mod info;
+pub mod settings;
+mod slice;
+
+use clap::{Parser, Subcommand};
+
+pub use field::FieldArgs;
+pub use generate::GenerateArgs;
+pub use info::InfoArgs;
+pub use slice::SliceArgs;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "aarbf",
+    version,
+    about = "Attribute-aware RBF volume rendering of time-series particle data",
+    long_about = "Attribute-aware RBF volume rendering of time-series particle data \
+                  (Morrical et al., IEEE VIS 2023).\n\nData: .particles, .vtp/.vtu/.vts, .vtk, \
+                  .csv, .ply, .raw, .npy; a file, a directory or a glob is a time series."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Describe a data set: steps, counts, bounds, attributes with ranges, memory per step.
+    Info(InfoArgs),
+    /// Evaluate the density and attribute fields at query points (M x 3 .npy in, .npy out).
+    Field(FieldArgs),
+    /// Show the fields on an axis-aligned plane through the data, as a PNG.
+    Slice(SliceArgs),
+    /// Write a synthetic data set (uniform, random, clusters, dambreak-demo).
+    Generate(GenerateArgs),
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Info(a) => info::run(a),
+        Command::Field(a) => field::run(a),
+        Command::Slice(a) => slice::run(a),
+        Command::Generate(a) => generate::run(a),
+    }
+}

@@ -1,0 +1,181 @@
+//! Data and field options shared by the commands, merged with a scene file (flags win).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+use crate::accel::ClusterSize;
+use crate::field::{Classification, FieldSettings};
+use crate::io::{AttributeSelection, Format};
+use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
+use crate::scene::scene_file::{MapSpec, RadiusSpec, SceneFile};
+use crate::scene::{OpenOptions, TimeSeries};
+
+/// Where the data comes from.
+#[derive(Debug, Clone, Args)]
+pub struct DataArgs {
+    /// A scene file (TOML) with data and field settings; flags override it.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// The data: a file, a directory or a glob (a time series sorted naturally).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// The file format, when the extension does not tell.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+    /// The time step to use (0-based).
+    #[arg(long)]
+    pub step: Option<usize>,
+}
+
+/// How the field is defined.
+#[derive(Debug, Clone, Args)]
+pub struct FieldOptions {
+    /// The attribute the field carries (its colour).
+    #[arg(long)]
+    pub attribute: Option<String>,
+    /// Normalise the attribute over LO,HI instead of its range over the series.
+    #[arg(long, value_parser = parse_range, value_name = "LO,HI")]
+    pub attribute_range: Option<(f64, f64)>,
+    /// Global RBF radius: a length, or a percentage of the bounding-box diagonal ("1%",
+    /// the default).
+    #[arg(long)]
+    pub radius: Option<RadiusSpec>,
+    /// A per-particle radius (smoothing length) attribute, multiplied by the global radius.
+    #[arg(long)]
+    pub radius_attribute: Option<String>,
+    /// Radius map m(t) in [0, 1]: a number, "ramp", "ramp:a:b" or points "x:y,x:y,...".
+    #[arg(long)]
+    pub radius_map: Option<String>,
+    /// Density map w(t) >= 0, spelled like --radius-map.
+    #[arg(long)]
+    pub density_map: Option<String>,
+    /// Colour map: a preset (viridis, plasma, inferno, magma, turbo, cool-warm, grayscale)
+    /// or a ParaView colour-map .json file.
+    #[arg(long)]
+    pub colormap: Option<String>,
+    /// post: average the attribute, then colour it; pre: colour each particle, then average.
+    #[arg(long, value_enum)]
+    pub classification: Option<Classification>,
+    /// Particles per cluster box (1, 2, 4, 8, 16), Hilbert-sorted.
+    #[arg(long)]
+    pub cluster: Option<ClusterSize>,
+}
+
+fn parse_range(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}' is not LO,HI"))?;
+    match v[..] {
+        [lo, hi] if lo.is_finite() && hi.is_finite() && lo <= hi => Ok((lo, hi)),
+        _ => Err(format!("'{s}' is not an ascending pair LO,HI")),
+    }
+}
+
+/// Data and field settings after merging flags over the scene file.
+pub struct Resolved {
+    pub series: TimeSeries,
+    pub step: usize,
+    pub field: FieldSettings,
+    pub cluster: ClusterSize,
+}
+
+impl Resolved {
+    /// The series-wide range of the field's attribute.
+    pub fn series_range(&self) -> Option<(f64, f64)> {
+        let name = self.field.attribute.as_deref()?;
+        let a = self.series.attribute(name)?;
+        Some((f64::from(a.min), f64::from(a.max)))
+    }
+}
+
+pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolved> {
+    let scene = match &data.scene {
+        Some(path) => SceneFile::load(path)?,
+        None => SceneFile::default(),
+    };
+    let path = data
+        .data
+        .clone()
+        .or(scene.data.path.clone())
+        .context("no data given: pass --data <path> or a --scene file with [data] path")?;
+    let attribute = options.attribute.clone().or(scene.data.attribute.clone());
+    let radius_attribute = options
+        .radius_attribute
+        .clone()
+        .or(scene.data.radius_attribute.clone());
+    let selection = AttributeSelection::Only(
+        attribute
+            .iter()
+            .chain(radius_attribute.iter())
+            .cloned()
+            .collect(),
+    );
+    let series = TimeSeries::open(
+        &path,
+        &OpenOptions {
+            format: data.format.or(scene.data.format),
+            attributes: selection,
+            ..OpenOptions::default()
+        },
+    )?;
+    let step = data.step.or(scene.data.step).unwrap_or(0);
+    if step >= series.len() {
+        bail!(
+            "{}: step {step} does not exist; the series has {} steps (0..{})",
+            path.display(),
+            series.len(),
+            series.len() - 1
+        );
+    }
+    let map = |flag: &Option<String>,
+               file: &Option<MapSpec>|
+     -> anyhow::Result<Option<PiecewiseLinear>> {
+        Ok(match (flag, file) {
+            (Some(text), _) => Some(text.parse()?),
+            (None, Some(spec)) => Some(spec.to_map()?),
+            (None, None) => None,
+        })
+    };
+    let radius_map = map(&options.radius_map, &scene.field.radius_map)?
+        .map(RadiusMap::new)
+        .transpose()?
+        .unwrap_or_default();
+    let density_map = map(&options.density_map, &scene.field.density_map)?
+        .map(DensityMap::new)
+        .transpose()?
+        .unwrap_or_default();
+    let color_map = match options.colormap.as_ref().or(scene.field.colormap.as_ref()) {
+        Some(spec) => ColorMap::from_name_or_file(spec)?,
+        None => ColorMap::default(),
+    };
+    let radius = options
+        .radius
+        .or(scene.field.radius)
+        .unwrap_or(RadiusSpec::DEFAULT)
+        .resolve(series.bounds().diagonal());
+    let field = FieldSettings {
+        attribute,
+        attribute_range: options
+            .attribute_range
+            .or(scene.data.attribute_range.map(|[a, b]| (a, b))),
+        radius,
+        radius_attribute,
+        radius_map,
+        density_map,
+        color_map,
+        classification: options
+            .classification
+            .or(scene.field.classification)
+            .unwrap_or_default(),
+    };
+    Ok(Resolved {
+        series,
+        step,
+        field,
+        cluster: options.cluster.or(scene.field.cluster).unwrap_or_default(),
+    })
+}

@@ -1,0 +1,128 @@
+//! `aarbf slice`: the fields on an axis-aligned plane through the data, as an image
+//! (colour from Theta, brightness from Phi), the way yt's SlicePlot shows a field.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use glam::DVec3;
+
+use super::settings::{DataArgs, FieldOptions, resolve};
+use crate::field::{Classification, ReferenceField, normalise};
+use crate::scene::maps::color_space::linear_to_srgb;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+#[derive(Debug, Args)]
+pub struct SliceArgs {
+    #[command(flatten)]
+    pub data: DataArgs,
+    #[command(flatten)]
+    pub field: FieldOptions,
+    /// The axis normal to the slice.
+    #[arg(long, value_enum, default_value = "z")]
+    pub axis: Axis,
+    /// Where along the axis, as a fraction of the data's bounds (0 to 1).
+    #[arg(long, default_value_t = 0.5)]
+    pub position: f64,
+    /// Image width in pixels (the height follows the data's aspect ratio).
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// Output PNG.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn run(args: SliceArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&args.position),
+        "--position must lie in [0, 1], got {}",
+        args.position
+    );
+    anyhow::ensure!(
+        (1..=16384).contains(&args.width),
+        "--width must lie in 1..=16384, got {}",
+        args.width
+    );
+    let resolved = resolve(&args.data, &args.field)?;
+    let step = resolved.series.step(resolved.step)?;
+    let field = ReferenceField::of_step(
+        &step,
+        &resolved.field,
+        resolved.cluster,
+        resolved.series.bounds(),
+        resolved.series_range(),
+    )?;
+    let bounds = resolved.series.bounds();
+    let (lo, hi) = (bounds.min.as_dvec3(), bounds.max.as_dvec3());
+    let (normal, u, v) = match args.axis {
+        Axis::X => (0, 2, 1),
+        Axis::Y => (1, 0, 2),
+        Axis::Z => (2, 0, 1),
+    };
+    let extent = hi - lo;
+    let width = args.width as usize;
+    let height =
+        ((width as f64 * extent[v] / extent[u].max(1e-30)).round() as usize).clamp(1, 16384);
+    let mut points = Vec::with_capacity(width * height);
+    for y in 0..height {
+        for x in 0..width {
+            let mut p = DVec3::ZERO;
+            p[normal] = lo[normal] + args.position * extent[normal];
+            p[u] = lo[u] + (x as f64 + 0.5) / width as f64 * extent[u];
+            // Image rows go down; the v axis goes up.
+            p[v] = hi[v] - (y as f64 + 0.5) / height as f64 * extent[v];
+            points.push(p);
+        }
+    }
+    let samples = field.eval_many(&points);
+
+    // Brightness: 1 - exp(-2 Phi / Phi_ref), Phi_ref the 95th percentile of non-zero Phi.
+    let mut nonzero: Vec<f64> = samples.iter().map(|s| s.phi).filter(|p| *p > 0.0).collect();
+    nonzero.sort_by(f64::total_cmp);
+    let phi_ref = nonzero
+        .get(nonzero.len() * 95 / 100)
+        .copied()
+        .unwrap_or(1.0);
+    let pre = resolved.field.classification == Classification::Pre;
+    let range = field.particles.range;
+    let mut image = image::RgbImage::new(width as u32, height as u32);
+    for (pixel, s) in image.pixels_mut().zip(&samples) {
+        let alpha = 1.0 - (-2.0 * s.phi / phi_ref).exp();
+        let colour = if resolved.field.attribute.is_none() {
+            resolved
+                .field
+                .color_map
+                .linear_rgb((s.phi / phi_ref).min(1.0))
+        } else if pre {
+            s.theta
+        } else {
+            resolved
+                .field
+                .color_map
+                .linear_rgb(normalise(s.theta[0], range))
+        };
+        *pixel = image::Rgb(
+            colour.map(|c| (linear_to_srgb((c * alpha).clamp(0.0, 1.0)) * 255.0).round() as u8),
+        );
+    }
+    image
+        .save(&args.out)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    tracing::info!(
+        "slice of step {} ({} particles) at {:?} = {:.4}: {}x{} pixels, Phi_ref {:.4}",
+        resolved.step,
+        step.len(),
+        args.axis,
+        lo[normal] + args.position * extent[normal],
+        width,
+        height,
+        phi_ref
+    );
+    Ok(())
+}

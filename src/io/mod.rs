@@ -1,0 +1,480 @@
+//! Readers and writers for particle data.
+//!
+//! Every reader turns one file (or one step of a `.particles` header) into a [`Step`], through
+//! [`finish_step`], which checks array lengths, keeps the attributes asked for, drops particles
+//! with NaN/Inf values (with a warning that counts them) and refuses empty steps. A series is a
+//! file, a directory or a glob, sorted naturally (`step2` before `step10`).
+
+pub mod csv;
+pub mod error;
+pub mod natural;
+pub mod npy;
+pub mod particles;
+pub mod ply;
+pub mod raw;
+pub mod vtk;
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+pub use error::{At, DataError, Location, Problem};
+
+use crate::scene::{Attribute, Step};
+
+/// The particle file formats we read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// The AA-RBF sample code's header + binary step files (x, y, z, attribute as f32).
+    Particles,
+    /// VTK XML poly data / unstructured grid (`.vtp`, `.vtu`, also `.vts`).
+    VtkXml,
+    /// Legacy VTK (`.vtk`).
+    Vtk,
+    /// Comma-separated values with a header row.
+    Csv,
+    /// Stanford PLY, ascii or binary, vertex element.
+    Ply,
+    /// Knoll et al.'s raw f32 x, y, z, w records.
+    Raw,
+    /// NumPy `.npy`, an N x (3 + k) array.
+    Npy,
+}
+
+impl Format {
+    pub const ALL: [Format; 7] = [
+        Format::Particles,
+        Format::VtkXml,
+        Format::Vtk,
+        Format::Csv,
+        Format::Ply,
+        Format::Raw,
+        Format::Npy,
+    ];
+
+    /// The format a file's extension names, if any.
+    pub fn from_path(path: &Path) -> Option<Format> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        Some(match ext.as_str() {
+            "particles" => Format::Particles,
+            "vtp" | "vtu" | "vts" => Format::VtkXml,
+            "vtk" => Format::Vtk,
+            "csv" => Format::Csv,
+            "ply" => Format::Ply,
+            "raw" => Format::Raw,
+            "npy" => Format::Npy,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Particles => "particles",
+            Format::VtkXml => "vtk-xml",
+            Format::Vtk => "vtk",
+            Format::Csv => "csv",
+            Format::Ply => "ply",
+            Format::Raw => "raw",
+            Format::Npy => "npy",
+        }
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Format {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let lower = s.to_ascii_lowercase();
+        Format::ALL
+            .into_iter()
+            .find(|f| f.name() == lower)
+            .or(match lower.as_str() {
+                "vtp" | "vtu" | "xml" => Some(Format::VtkXml),
+                _ => None,
+            })
+            .ok_or_else(|| {
+                let names: Vec<_> = Format::ALL.iter().map(|f| f.name()).collect();
+                format!("unknown format '{s}'; known: {}", names.join(", "))
+            })
+    }
+}
+
+/// Which attributes a read keeps. Reading only what a scene needs keeps the memory it costs
+/// to what it uses.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum AttributeSelection {
+    #[default]
+    All,
+    Only(Vec<String>),
+}
+
+/// One step of a series on disk: the file it lives in, and its name.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StepRef {
+    pub path: PathBuf,
+    pub format: Format,
+    pub name: String,
+}
+
+impl StepRef {
+    fn at(&self) -> At<'_> {
+        // A `.particles` step's file is named after the header and the step, so the file alone
+        // says which step; other formats have one step per file.
+        At::new(&self.path, Some(&self.name))
+    }
+}
+
+/// Lists the steps of the series at `path`: a file, a directory or a glob pattern.
+///
+/// `format` overrides detection by extension. A directory may hold other files too; only
+/// those of the (single) particle format in it are taken.
+pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, DataError> {
+    let at = At::new(path, None);
+    let text = path.to_string_lossy();
+    let files: Vec<PathBuf> = if text.contains(['*', '?', '[']) && !path.exists() {
+        let paths = glob::glob(&text)
+            .map_err(|e| at.err(Problem::Malformed(format!("bad glob pattern: {e}"))))?;
+        let mut files = Vec::new();
+        for p in paths {
+            let p = p.map_err(|e| at.err(Problem::Io(e.into())))?;
+            if p.is_file() {
+                files.push(p);
+            }
+        }
+        if files.is_empty() {
+            return Err(at.malformed("the glob pattern matches no files"));
+        }
+        files
+    } else if path.is_dir() {
+        let mut files = Vec::new();
+        for entry in std::fs::read_dir(path).map_err(|e| at.io(e))? {
+            let p = entry.map_err(|e| at.io(e))?.path();
+            if p.is_file() {
+                files.push(p);
+            }
+        }
+        files
+    } else if path.is_file() {
+        vec![path.to_path_buf()]
+    } else {
+        return Err(at.err(Problem::Io(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            "no such file or directory",
+        ))));
+    };
+
+    let single_file = files.len() == 1 && path.is_file();
+    let mut typed: Vec<(PathBuf, Format)> = files
+        .into_iter()
+        .filter_map(|p| {
+            let detected = Format::from_path(&p);
+            match (format, detected) {
+                (Some(f), _) if single_file => Some((p, f)),
+                (Some(f), Some(d)) if f == d => Some((p, f)),
+                (Some(_), _) => None,
+                (None, Some(d)) => Some((p, d)),
+                (None, None) => None,
+            }
+        })
+        .collect();
+    if typed.is_empty() {
+        let what = match format {
+            Some(f) => format!("no {f} files here"),
+            None if single_file => format!(
+                "cannot tell the format from the extension; pass --format (one of: {})",
+                Format::ALL.map(|f| f.name()).join(", ")
+            ),
+            None => "no particle files here (known extensions: .particles, .vtp, .vtu, .vts, .vtk, .csv, .ply, .raw, .npy)".into(),
+        };
+        return Err(at.err(Problem::UnknownFormat(what)));
+    }
+    let first = typed[0].1;
+    if let Some((other, _)) = typed.iter().find(|(_, f)| *f != first) {
+        return Err(at.err(Problem::UnknownFormat(format!(
+            "the series mixes formats ({} and {}, e.g. {}); pass --format to pick one",
+            first,
+            Format::from_path(other).map(|f| f.name()).unwrap_or("?"),
+            other.display()
+        ))));
+    }
+    typed.sort_by(|a, b| natural::compare(&a.0.to_string_lossy(), &b.0.to_string_lossy()));
+
+    if first == Format::Particles {
+        if typed.len() > 1 {
+            return Err(at.malformed(format!(
+                "{} .particles headers found; each is a whole series, name one",
+                typed.len()
+            )));
+        }
+        let header = &typed[0].0;
+        let names = particles::read_header(header)?;
+        return Ok(names
+            .into_iter()
+            .map(|name| StepRef {
+                path: particles::step_path(header, &name),
+                format: Format::Particles,
+                name,
+            })
+            .collect());
+    }
+    Ok(typed
+        .into_iter()
+        .map(|(path, format)| StepRef {
+            name: path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            path,
+            format,
+        })
+        .collect())
+}
+
+/// Reads one step, keeping the attributes `selection` names.
+pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step, DataError> {
+    let at = step.at();
+    let columns = match step.format {
+        Format::Particles => particles::read_step(at)?,
+        Format::VtkXml => vtk::read_step(at, false)?,
+        Format::Vtk => vtk::read_step(at, true)?,
+        Format::Csv => csv::read_step(at)?,
+        Format::Ply => ply::read_step(at)?,
+        Format::Raw => raw::read_step(at)?,
+        Format::Npy => npy::read_step(at)?,
+    };
+    finish_step(at, &step.name, columns, selection)
+}
+
+/// What a reader hands over: positions and named columns, not yet checked.
+pub struct Columns {
+    pub positions: Vec<Vec3>,
+    pub attributes: Vec<Attribute>,
+}
+
+/// Checks and cleans a reader's output: equal lengths, the selected attributes present (and
+/// only those kept), particles with a non-finite position or selected attribute dropped with a
+/// warning that counts them, and no empty step.
+pub fn finish_step(
+    at: At<'_>,
+    name: &str,
+    columns: Columns,
+    selection: &AttributeSelection,
+) -> Result<Step, DataError> {
+    let Columns {
+        positions,
+        mut attributes,
+    } = columns;
+    let n = positions.len();
+    for a in &attributes {
+        if a.values.len() != n {
+            return Err(at.malformed(format!(
+                "attribute '{}' has {} values for {} particles",
+                a.name,
+                a.values.len(),
+                n
+            )));
+        }
+    }
+    if let AttributeSelection::Only(wanted) = selection {
+        for w in wanted {
+            if !attributes.iter().any(|a| &a.name == w) {
+                return Err(at.err(Problem::MissingAttribute {
+                    name: w.clone(),
+                    available: available_list(&attributes),
+                }));
+            }
+        }
+        attributes.retain(|a| wanted.contains(&a.name));
+        attributes.sort_by_key(|a| wanted.iter().position(|w| *w == a.name));
+    }
+    if n == 0 {
+        return Err(at.err(Problem::EmptyStep(String::new())));
+    }
+
+    let mut keep = vec![true; n];
+    let mut bad_positions = 0usize;
+    for (k, p) in keep.iter_mut().zip(&positions) {
+        if !p.is_finite() {
+            *k = false;
+            bad_positions += 1;
+        }
+    }
+    let mut bad_attributes = Vec::new();
+    for a in &attributes {
+        let mut count = 0usize;
+        for (k, v) in keep.iter_mut().zip(&a.values) {
+            if !v.is_finite() {
+                count += usize::from(*k);
+                *k = false;
+            }
+        }
+        if count > 0 {
+            bad_attributes.push(format!("{count} with NaN/Inf '{}'", a.name));
+        }
+    }
+    let dropped = n - keep.iter().filter(|k| **k).count();
+    let (positions, attributes) = if dropped > 0 {
+        let mut why = Vec::new();
+        if bad_positions > 0 {
+            why.push(format!("{bad_positions} with NaN/Inf positions"));
+        }
+        why.extend(bad_attributes);
+        let why = why.join(", ");
+        if dropped == n {
+            return Err(at.err(Problem::EmptyStep(format!(
+                ": all {n} particles were dropped ({why})"
+            ))));
+        }
+        tracing::warn!(
+            "{}: dropped {dropped} of {n} particles ({why})",
+            at.location()
+        );
+        let positions = filter(&positions, &keep);
+        let attributes = attributes
+            .into_iter()
+            .map(|a| Attribute {
+                values: filter(&a.values, &keep),
+                name: a.name,
+            })
+            .collect();
+        (positions, attributes)
+    } else {
+        (positions, attributes)
+    };
+    Ok(Step {
+        name: name.to_owned(),
+        positions,
+        attributes,
+    })
+}
+
+fn filter<T: Copy>(values: &[T], keep: &[bool]) -> Vec<T> {
+    values
+        .iter()
+        .zip(keep)
+        .filter(|(_, k)| **k)
+        .map(|(v, _)| *v)
+        .collect()
+}
+
+fn available_list(attributes: &[Attribute]) -> String {
+    if attributes.is_empty() {
+        "no attributes".into()
+    } else {
+        attributes
+            .iter()
+            .map(|a| format!("'{}'", a.name))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// The size of an open file, for checking counts against it.
+pub(crate) fn file_len(at: At<'_>, file: &std::fs::File) -> Result<u64, DataError> {
+    Ok(file.metadata().map_err(|e| at.io(e))?.len())
+}
+
+/// Names for the components of a multi-component array, as ParaView shows them.
+pub(crate) fn component_names(name: &str, components: usize) -> Vec<String> {
+    match components {
+        1 => vec![name.to_owned()],
+        3 => ["x", "y", "z"]
+            .iter()
+            .map(|c| format!("{name}_{c}"))
+            .collect(),
+        n => (0..n).map(|i| format!("{name}_{i}")).collect(),
+    }
+}
+
+/// Splits an interleaved array of `components` per particle into named attributes; three
+/// components also give their magnitude (`<name>_magnitude`), what users colour by most.
+pub(crate) fn split_components(name: &str, data: &[f64], components: usize) -> Vec<Attribute> {
+    let n = data.len() / components.max(1);
+    let mut out: Vec<Attribute> = component_names(name, components)
+        .into_iter()
+        .enumerate()
+        .map(|(c, name)| Attribute {
+            name,
+            values: (0..n).map(|i| data[i * components + c] as f32).collect(),
+        })
+        .collect();
+    if components == 3 {
+        out.push(Attribute {
+            name: format!("{name}_magnitude"),
+            values: (0..n)
+                .map(|i| {
+                    let v = &data[i * 3..i * 3 + 3];
+                    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() as f32
+                })
+                .collect(),
+        });
+    }
+    out
+}
+
+/// Writes `steps` into `dir` as `<stem>.particles` (+ step files) or `<stem>_<i>.<ext>`, one
+/// file per step. Formats with a single attribute (`.particles`, `.raw`) carry `attribute`.
+/// Returns the path to open the series with.
+pub fn write_series(
+    dir: &Path,
+    stem: &str,
+    steps: &[Step],
+    format: Format,
+    attribute: &str,
+) -> std::io::Result<PathBuf> {
+    std::fs::create_dir_all(dir)?;
+    if format == Format::Particles {
+        let header = dir.join(format!("{stem}.particles"));
+        particles::write_series(&header, steps, attribute)?;
+        return Ok(header);
+    }
+    let width = steps.len().saturating_sub(1).to_string().len().max(4);
+    let ext = match format {
+        Format::VtkXml => "vtp",
+        Format::Csv => "csv",
+        Format::Ply => "ply",
+        Format::Raw => "raw",
+        Format::Npy => "npy",
+        Format::Vtk | Format::Particles => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::Unsupported,
+                format!(
+                    "writing {format} is not supported; use particles, vtk-xml, csv, ply, raw or npy"
+                ),
+            ));
+        }
+    };
+    for (i, step) in steps.iter().enumerate() {
+        let path = dir.join(format!("{stem}_{i:0width$}.{ext}"));
+        match format {
+            Format::VtkXml => vtk::write_vtp(&path, step)?,
+            Format::Csv => csv::write_step(&path, step)?,
+            Format::Ply => ply::write_step(&path, step)?,
+            Format::Raw => raw::write_step(&path, step, attribute)?,
+            Format::Npy => {
+                let cols = 3 + step.attributes.len();
+                let mut data = Vec::with_capacity(step.len() * cols);
+                for (k, p) in step.positions.iter().enumerate() {
+                    data.extend_from_slice(&p.to_array());
+                    data.extend(step.attributes.iter().map(|a| a.values[k]));
+                }
+                npy::write_matrix_f32(&path, step.len(), cols, &data)?;
+            }
+            Format::Vtk | Format::Particles => unreachable!("handled above"),
+        }
+    }
+    Ok(if steps.len() == 1 {
+        dir.join(format!("{stem}_{:0width$}.{ext}", 0))
+    } else {
+        dir.join(format!("{stem}_*.{ext}"))
+    })
+}

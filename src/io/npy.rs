@@ -1,0 +1,158 @@
+//! NumPy `.npy` arrays: particles as an N x (3 + k) array (columns x, y, z, then k attributes
+//! named `col3`, `col4`, ...), and the query points and results of `aarbf field`.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Seek};
+use std::path::Path;
+
+use glam::Vec3;
+use npyz::{DType, NpyFile, Order, WriterBuilder};
+
+use super::{At, Columns, DataError, Problem, file_len};
+use crate::scene::Attribute;
+
+/// A 2-D array in row-major order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Matrix {
+    pub rows: usize,
+    pub cols: usize,
+    pub data: Vec<f64>,
+}
+
+impl Matrix {
+    pub fn row(&self, i: usize) -> &[f64] {
+        &self.data[i * self.cols..(i + 1) * self.cols]
+    }
+}
+
+/// Reads a 2-D numeric array of any element type as f64 (a 1-D array of length 3 is one row).
+pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
+    let file = File::open(at.file).map_err(|e| at.io(e))?;
+    let size = file_len(at, &file)?;
+    let mut reader = BufReader::new(file);
+    let header = npyz::NpyHeader::from_reader(&mut reader)
+        .map_err(|e| at.malformed(format!("not a valid .npy file: {e}")))?;
+    let data_start = reader.stream_position().map_err(|e| at.io(e))?;
+    let npy = NpyFile::with_header(header, reader);
+    let shape = npy.shape().to_vec();
+    let (rows, cols) = match shape.as_slice() {
+        [r, c] => (*r, *c),
+        [n] if *n == 3 => (1, 3),
+        other => {
+            return Err(at.err(Problem::Dimensionality(format!(
+                "expected a 2-D array (N rows x columns), found shape {other:?}"
+            ))));
+        }
+    };
+    let item = match npy.dtype() {
+        DType::Plain(t) => t.size_field(),
+        other => {
+            return Err(at.malformed(format!(
+                "expected a plain numeric array, found dtype {}",
+                other.descr()
+            )));
+        }
+    };
+    let elements = rows
+        .checked_mul(cols)
+        .ok_or_else(|| at.malformed(format!("shape {shape:?} overflows")))?;
+    let available = size.saturating_sub(data_start);
+    at.check_count("array element", elements, item, available)?;
+    if elements * item > available {
+        return Err(at.err(Problem::Truncated {
+            what: format!("a {rows} x {cols} array"),
+            needed: elements * item,
+            available,
+        }));
+    }
+    let fortran = npy.order() == Order::Fortran;
+    let data = read_as_f64(npy).map_err(|e| at.malformed(e))?;
+    let (rows, cols) = (rows as usize, cols as usize);
+    let data = if fortran && rows > 1 && cols > 1 {
+        let mut c = vec![0.0; data.len()];
+        for i in 0..rows {
+            for j in 0..cols {
+                c[i * cols + j] = data[j * rows + i];
+            }
+        }
+        c
+    } else {
+        data
+    };
+    Ok(Matrix { rows, cols, data })
+}
+
+fn read_as_f64<R: Read>(npy: NpyFile<R>) -> Result<Vec<f64>, String> {
+    fn all<T: npyz::Deserialize + Into<f64>, R: Read>(
+        npy: NpyFile<R>,
+    ) -> Result<Result<Vec<f64>, String>, NpyFile<R>> {
+        npy.try_data::<T>().map(|data| {
+            data.map(|v| v.map(Into::into))
+                .collect::<Result<Vec<f64>, _>>()
+                .map_err(|e| format!("cannot read the array data: {e}"))
+        })
+    }
+    macro_rules! try_types {
+        ($npy:expr, $($t:ty),*) => {{
+            let npy = $npy;
+            $(let npy = match all::<$t, _>(npy) { Ok(r) => return r, Err(npy) => npy };)*
+            Err(format!("unsupported element type {}", npy.dtype().descr()))
+        }};
+    }
+    try_types!(npy, f64, f32, i32, u32, i16, u16, i8, u8)
+}
+
+pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+    let m = read_matrix(at)?;
+    if m.cols < 3 {
+        return Err(at.err(Problem::Dimensionality(format!(
+            "a particle array needs at least 3 columns (x, y, z), found {}",
+            m.cols
+        ))));
+    }
+    let positions = (0..m.rows)
+        .map(|i| {
+            let r = m.row(i);
+            Vec3::new(r[0] as f32, r[1] as f32, r[2] as f32)
+        })
+        .collect();
+    let attributes = (3..m.cols)
+        .map(|c| Attribute {
+            name: format!("col{c}"),
+            values: (0..m.rows).map(|i| m.data[i * m.cols + c] as f32).collect(),
+        })
+        .collect();
+    Ok(Columns {
+        positions,
+        attributes,
+    })
+}
+
+/// Writes a row-major `rows x cols` float64 array.
+pub fn write_matrix(path: &Path, rows: usize, cols: usize, data: &[f64]) -> std::io::Result<()> {
+    assert_eq!(data.len(), rows * cols);
+    let mut writer = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&[rows as u64, cols as u64])
+        .writer(BufWriter::new(File::create(path)?))
+        .begin_nd()?;
+    writer.extend(data.iter().copied())?;
+    writer.finish()
+}
+
+/// Writes a row-major `rows x cols` float32 array.
+pub fn write_matrix_f32(
+    path: &Path,
+    rows: usize,
+    cols: usize,
+    data: &[f32],
+) -> std::io::Result<()> {
+    assert_eq!(data.len(), rows * cols);
+    let mut writer = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&[rows as u64, cols as u64])
+        .writer(BufWriter::new(File::create(path)?))
+        .begin_nd()?;
+    writer.extend(data.iter().copied())?;
+    writer.finish()
+}

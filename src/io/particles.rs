@@ -1,0 +1,117 @@
+//! The AA-RBF sample code's `.particles` format.
+//!
+//! A text header lists step names, one per line. Step `name` lives in the file
+//! `<header path>_<name>`: a little-endian u64 particle count, then count records of four
+//! little-endian f32 (x, y, z, attribute).
+
+use std::fs::File;
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+use super::{At, Columns, DataError, Problem, file_len};
+use crate::scene::{Attribute, Step};
+
+/// The name the format's single unnamed attribute gets.
+pub const ATTRIBUTE_NAME: &str = "attribute";
+const RECORD_BYTES: u64 = 16;
+
+/// The step names a header lists (blank lines skipped).
+pub fn read_header(header: &Path) -> Result<Vec<String>, DataError> {
+    let at = At::new(header, None);
+    let bytes = std::fs::read(header).map_err(|e| at.io(e))?;
+    let text = String::from_utf8(bytes).map_err(|_| {
+        at.malformed(
+            "the header is not UTF-8 text (a .particles header lists step names, one per line)",
+        )
+    })?;
+    let names: Vec<String> = text
+        .lines()
+        .map(|l| l.trim())
+        .filter(|l| !l.is_empty())
+        .map(str::to_owned)
+        .collect();
+    if names.is_empty() {
+        return Err(at.malformed("the header lists no steps"));
+    }
+    Ok(names)
+}
+
+/// The file holding step `name` of the series whose header is `header`.
+pub fn step_path(header: &Path, name: &str) -> PathBuf {
+    let mut s = header.as_os_str().to_owned();
+    s.push("_");
+    s.push(name);
+    PathBuf::from(s)
+}
+
+pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+    let mut file = File::open(at.file).map_err(|e| at.io(e))?;
+    let size = file_len(at, &file)?;
+    if size < 8 {
+        return Err(at.err(Problem::Truncated {
+            what: "the u64 particle count".into(),
+            needed: 8,
+            available: size,
+        }));
+    }
+    let mut count = [0u8; 8];
+    file.read_exact(&mut count).map_err(|e| at.io(e))?;
+    let count = u64::from_le_bytes(count);
+    let n = at.check_count("particle", count, RECORD_BYTES, size - 8)?;
+    let expected = 8 + n as u64 * RECORD_BYTES;
+    if size > expected {
+        tracing::warn!(
+            "{}: {} bytes after the {n} particles are ignored",
+            at.location(),
+            size - expected
+        );
+    }
+    let mut bytes = vec![0u8; n * RECORD_BYTES as usize];
+    file.read_exact(&mut bytes).map_err(|e| at.io(e))?;
+    let mut positions = Vec::with_capacity(n);
+    let mut values = Vec::with_capacity(n);
+    for record in bytes.chunks_exact(RECORD_BYTES as usize) {
+        let f = |i: usize| f32::from_le_bytes(record[i * 4..i * 4 + 4].try_into().unwrap());
+        positions.push(Vec3::new(f(0), f(1), f(2)));
+        values.push(f(3));
+    }
+    Ok(Columns {
+        positions,
+        attributes: vec![Attribute {
+            name: ATTRIBUTE_NAME.into(),
+            values,
+        }],
+    })
+}
+
+/// Writes a series as a `.particles` header and one file per step, carrying `attribute`.
+/// Step names are the zero-padded step indices.
+pub fn write_series(header: &Path, steps: &[Step], attribute: &str) -> std::io::Result<()> {
+    let width = steps.len().saturating_sub(1).to_string().len().max(4);
+    let mut names = String::new();
+    for (i, step) in steps.iter().enumerate() {
+        let name = format!("{i:0width$}");
+        let values = &step
+            .attribute(attribute)
+            .ok_or_else(|| {
+                std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!("step {i} has no attribute '{attribute}'"),
+                )
+            })?
+            .values;
+        let mut out = BufWriter::new(File::create(step_path(header, &name))?);
+        out.write_all(&(step.len() as u64).to_le_bytes())?;
+        for (p, v) in step.positions.iter().zip(values) {
+            for x in [p.x, p.y, p.z, *v] {
+                out.write_all(&x.to_le_bytes())?;
+            }
+        }
+        out.flush()?;
+        names.push_str(&name);
+        names.push('\n');
+    }
+    std::fs::write(header, names)
+}

@@ -1,0 +1,339 @@
+//! Stanford PLY (ascii, binary little- and big-endian): the `vertex` element's `x, y, z` are
+//! positions, its other scalar properties attributes. Other elements (faces, ...) are skipped.
+
+use std::io::Write;
+use std::path::Path;
+
+use glam::Vec3;
+
+use super::{At, Columns, DataError, Problem};
+use crate::scene::{Attribute, Step};
+
+/// Largest header we accept: real headers are a few hundred bytes.
+const MAX_HEADER_BYTES: usize = 1 << 20;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Encoding {
+    Ascii,
+    LittleEndian,
+    BigEndian,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Scalar> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+
+    fn read(self, b: &[u8], enc: Encoding) -> f64 {
+        macro_rules! num {
+            ($t:ty) => {{
+                let a = b[..std::mem::size_of::<$t>()].try_into().unwrap();
+                (if enc == Encoding::BigEndian {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }) as f64
+            }};
+        }
+        match self {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => num!(i16),
+            Scalar::U16 => num!(u16),
+            Scalar::I32 => num!(i32),
+            Scalar::U32 => num!(u32),
+            Scalar::F32 => num!(f32),
+            Scalar::F64 => num!(f64),
+        }
+    }
+}
+
+#[derive(Debug)]
+enum Property {
+    Scalar(String, Scalar),
+    /// A list property (count type, item type): skipped.
+    List(Scalar, Scalar),
+}
+
+#[derive(Debug)]
+struct Element {
+    name: String,
+    count: u64,
+    properties: Vec<Property>,
+}
+
+struct Header {
+    encoding: Encoding,
+    elements: Vec<Element>,
+    body_start: usize,
+}
+
+fn parse_header(at: At<'_>, bytes: &[u8]) -> Result<Header, DataError> {
+    if !bytes.starts_with(b"ply") {
+        return Err(at.malformed("not a PLY file (it does not start with 'ply')"));
+    }
+    let search = &bytes[..bytes.len().min(MAX_HEADER_BYTES)];
+    let end = search
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .ok_or_else(|| at.malformed("the PLY header has no 'end_header' line"))?;
+    let mut body_start = end + 10;
+    // The header ends with "end_header" and one line break (\n or \r\n).
+    if bytes.get(body_start) == Some(&b'\r') {
+        body_start += 1;
+    }
+    if bytes.get(body_start) == Some(&b'\n') {
+        body_start += 1;
+    }
+    let text = std::str::from_utf8(&bytes[..end])
+        .map_err(|_| at.malformed("the PLY header is not text"))?;
+    let mut encoding = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for (number, line) in text.lines().enumerate().skip(1) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let bad =
+            |what: &str| at.malformed(format!("PLY header line {}: {what}: '{line}'", number + 1));
+        match words.as_slice() {
+            [] | ["comment", ..] | ["obj_info", ..] => {}
+            ["format", f, _version] => {
+                encoding = Some(match *f {
+                    "ascii" => Encoding::Ascii,
+                    "binary_little_endian" => Encoding::LittleEndian,
+                    "binary_big_endian" => Encoding::BigEndian,
+                    _ => return Err(bad("unknown format")),
+                })
+            }
+            ["element", name, count] => elements.push(Element {
+                name: (*name).to_owned(),
+                count: count.parse().map_err(|_| bad("bad element count"))?,
+                properties: Vec::new(),
+            }),
+            ["property", "list", count_type, item_type, _name] => {
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| bad("property before any element"))?;
+                let c = Scalar::parse(count_type).ok_or_else(|| bad("unknown type"))?;
+                let i = Scalar::parse(item_type).ok_or_else(|| bad("unknown type"))?;
+                e.properties.push(Property::List(c, i));
+            }
+            ["property", ty, name] => {
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| bad("property before any element"))?;
+                let t = Scalar::parse(ty).ok_or_else(|| bad("unknown type"))?;
+                e.properties.push(Property::Scalar((*name).to_owned(), t));
+            }
+            _ => return Err(bad("not understood")),
+        }
+    }
+    let encoding = encoding.ok_or_else(|| at.malformed("the PLY header has no 'format' line"))?;
+    Ok(Header {
+        encoding,
+        elements,
+        body_start,
+    })
+}
+
+/// Reads values one at a time from the body, ascii or binary.
+struct Body<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    encoding: Encoding,
+}
+
+impl Body<'_> {
+    fn next(&mut self, at: At<'_>, t: Scalar, element: &str, row: u64) -> Result<f64, DataError> {
+        if self.encoding == Encoding::Ascii {
+            let rest = &self.bytes[self.pos..];
+            let start = rest
+                .iter()
+                .position(|c| !c.is_ascii_whitespace())
+                .ok_or_else(|| self.truncated(at, element, row))?;
+            let len = rest[start..]
+                .iter()
+                .position(|c| c.is_ascii_whitespace())
+                .unwrap_or(rest.len() - start);
+            let word = &rest[start..start + len];
+            self.pos += start + len;
+            std::str::from_utf8(word)
+                .ok()
+                .and_then(|w| w.parse::<f64>().ok())
+                .ok_or_else(|| {
+                    at.malformed(format!(
+                        "PLY element '{element}' row {row}: '{}' is not a number",
+                        String::from_utf8_lossy(word)
+                    ))
+                })
+        } else {
+            let n = t.size();
+            if self.pos + n > self.bytes.len() {
+                return Err(self.truncated(at, element, row));
+            }
+            let v = t.read(&self.bytes[self.pos..], self.encoding);
+            self.pos += n;
+            Ok(v)
+        }
+    }
+
+    fn truncated(&self, at: At<'_>, element: &str, row: u64) -> DataError {
+        at.malformed(format!(
+            "file is truncated: PLY element '{element}' ends at row {row}"
+        ))
+    }
+}
+
+pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+    let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
+    let header = parse_header(at, &bytes)?;
+    let body_len = (bytes.len() - header.body_start) as u64;
+    let mut body = Body {
+        bytes: &bytes[header.body_start..],
+        pos: 0,
+        encoding: header.encoding,
+    };
+    for element in &header.elements {
+        // The smallest a row can be: in binary, its scalars' sizes; in ascii, one character and
+        // one separator per value. Checked before allocating anything from the count.
+        let min_row = element
+            .properties
+            .iter()
+            .map(|p| match (header.encoding, p) {
+                (Encoding::Ascii, _) => 2,
+                (_, Property::Scalar(_, t)) => t.size() as u64,
+                (_, Property::List(c, _)) => c.size() as u64,
+            })
+            .sum::<u64>();
+        let n = at.check_count(
+            &format!("PLY element '{}'", element.name),
+            element.count,
+            min_row,
+            body_len,
+        )?;
+        if element.name != "vertex" {
+            for row in 0..element.count {
+                for p in &element.properties {
+                    match p {
+                        Property::Scalar(_, t) => {
+                            body.next(at, *t, &element.name, row)?;
+                        }
+                        Property::List(c, i) => {
+                            let len = body.next(at, *c, &element.name, row)?;
+                            for _ in 0..(len.max(0.0) as u64) {
+                                body.next(at, *i, &element.name, row)?;
+                            }
+                        }
+                    }
+                }
+            }
+            continue;
+        }
+        let scalars: Vec<(&str, Scalar)> = element
+            .properties
+            .iter()
+            .filter_map(|p| match p {
+                Property::Scalar(name, t) => Some((name.as_str(), *t)),
+                Property::List(..) => None,
+            })
+            .collect();
+        let find = |name: &str| scalars.iter().position(|(n, _)| *n == name);
+        let (Some(ix), Some(iy), Some(iz)) = (find("x"), find("y"), find("z")) else {
+            return Err(at.err(Problem::Dimensionality(
+                "the PLY vertex element needs properties x, y and z".into(),
+            )));
+        };
+        let mut columns: Vec<Vec<f32>> = vec![Vec::with_capacity(n); scalars.len()];
+        let mut row_values = vec![0.0f64; scalars.len()];
+        for row in 0..element.count {
+            let mut k = 0;
+            for p in &element.properties {
+                match p {
+                    Property::Scalar(_, t) => {
+                        row_values[k] = body.next(at, *t, "vertex", row)?;
+                        k += 1;
+                    }
+                    Property::List(c, i) => {
+                        let len = body.next(at, *c, "vertex", row)?;
+                        for _ in 0..(len.max(0.0) as u64) {
+                            body.next(at, *i, "vertex", row)?;
+                        }
+                    }
+                }
+            }
+            for (col, v) in columns.iter_mut().zip(&row_values) {
+                col.push(*v as f32);
+            }
+        }
+        let positions = (0..n)
+            .map(|i| Vec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
+            .collect();
+        let attributes = scalars
+            .iter()
+            .zip(columns)
+            .enumerate()
+            .filter(|(k, _)| ![ix, iy, iz].contains(k))
+            .map(|(_, ((name, _), values))| Attribute {
+                name: (*name).to_owned(),
+                values,
+            })
+            .collect();
+        return Ok(Columns {
+            positions,
+            attributes,
+        });
+    }
+    Err(at.err(Problem::Dimensionality(
+        "the PLY file has no 'vertex' element".into(),
+    )))
+}
+
+/// Writes a step as binary little-endian PLY with float properties.
+pub fn write_step(path: &Path, step: &Step) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    writeln!(out, "ply\nformat binary_little_endian 1.0")?;
+    writeln!(out, "element vertex {}", step.len())?;
+    writeln!(out, "property float x\nproperty float y\nproperty float z")?;
+    for a in &step.attributes {
+        writeln!(out, "property float {}", a.name)?;
+    }
+    writeln!(out, "end_header")?;
+    for (i, p) in step.positions.iter().enumerate() {
+        for v in [p.x, p.y, p.z] {
+            out.write_all(&v.to_le_bytes())?;
+        }
+        for a in &step.attributes {
+            out.write_all(&a.values[i].to_le_bytes())?;
+        }
+    }
+    out.flush()
+}

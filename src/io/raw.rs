@@ -1,0 +1,51 @@
+//! Knoll et al.'s `.raw` particle files: records of four little-endian f32 (x, y, z, w), no
+//! header; `w` is the attribute.
+
+use std::path::Path;
+
+use glam::Vec3;
+
+use super::{At, Columns, DataError, Problem};
+use crate::scene::{Attribute, Step};
+
+pub const ATTRIBUTE_NAME: &str = "w";
+
+pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+    let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
+    if bytes.len() % 16 != 0 {
+        let n = bytes.len() / 16;
+        return Err(at.err(Problem::Truncated {
+            what: format!("{} records of 16 bytes (x, y, z, w as f32)", n + 1),
+            needed: (n as u64 + 1) * 16,
+            available: bytes.len() as u64,
+        }));
+    }
+    let mut positions = Vec::with_capacity(bytes.len() / 16);
+    let mut values = Vec::with_capacity(bytes.len() / 16);
+    for record in bytes.chunks_exact(16) {
+        let f = |i: usize| f32::from_le_bytes(record[i * 4..i * 4 + 4].try_into().unwrap());
+        positions.push(Vec3::new(f(0), f(1), f(2)));
+        values.push(f(3));
+    }
+    Ok(Columns {
+        positions,
+        attributes: vec![Attribute {
+            name: ATTRIBUTE_NAME.into(),
+            values,
+        }],
+    })
+}
+
+pub fn write_step(path: &Path, step: &Step, attribute: &str) -> std::io::Result<()> {
+    let values = &step
+        .attribute(attribute)
+        .ok_or_else(|| std::io::Error::other(format!("no attribute '{attribute}'")))?
+        .values;
+    let mut bytes = Vec::with_capacity(step.len() * 16);
+    for (p, v) in step.positions.iter().zip(values) {
+        for x in [p.x, p.y, p.z, *v] {
+            bytes.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes)
+}

@@ -1,0 +1,345 @@
+//! VTK point data through `vtkio`: XML poly data / unstructured / structured grids (`.vtp`,
+//! `.vtu`, `.vts`; ascii, base64 binary, appended and compressed) and legacy `.vtk` files.
+//! Every point-data array is an attribute; a 3-component array `v` becomes `v_x`, `v_y`, `v_z`
+//! and `v_magnitude`.
+
+use std::path::Path;
+
+use glam::Vec3;
+use vtkio::model::{
+    Attribute as VtkAttribute, Attributes, ByteOrder, DataArray, DataSet, ElementType, IOBuffer,
+    Piece, PieceData, PolyDataPiece, Version, VertexNumbers, Vtk,
+};
+
+use super::{At, Columns, DataError, Problem, split_components};
+use crate::scene::{Attribute, Step};
+
+/// Compression ratios above this are not believed: a header announcing more points than the
+/// file could hold even compressed is refused before anything is allocated.
+const MAX_COMPRESSION_RATIO: u64 = 1100;
+
+pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
+    precheck_counts(at, legacy)?;
+    let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
+    let xml = if legacy {
+        None
+    } else {
+        Some(appended_raw_to_base64(&bytes).map_err(|e| at.malformed(e))?)
+    };
+    // vtkio is not hardened against every hostile input; a panic inside it becomes an error.
+    let parsed = std::panic::catch_unwind(|| match xml {
+        None => Vtk::parse_legacy_be(&bytes[..]),
+        Some(text) => {
+            let text = text.as_deref().unwrap_or(&bytes);
+            vtkio::xml::VTKFile::parse(text)
+                .map_err(vtkio::Error::from)
+                .and_then(|f| Ok(Vtk::try_from(f)?))
+        }
+    })
+    .map_err(|_| {
+        at.malformed("cannot parse the VTK file (the parser gave up on malformed content)")
+    })?;
+    let mut vtk = parsed.map_err(|e| at.malformed(format!("cannot parse the VTK file: {e}")))?;
+    vtk.file_path = Some(at.file.to_path_buf());
+    let source = vtk.file_path.clone();
+    let mut pieces: Vec<(IOBuffer, Attributes)> = Vec::new();
+    match vtk.data {
+        DataSet::PolyData { pieces: p, .. } => {
+            for piece in p {
+                let d = load(at, piece, source.as_deref())?;
+                pieces.push((d.points, d.data));
+            }
+        }
+        DataSet::UnstructuredGrid { pieces: p, .. } => {
+            for piece in p {
+                let d = load(at, piece, source.as_deref())?;
+                pieces.push((d.points, d.data));
+            }
+        }
+        DataSet::StructuredGrid { pieces: p, .. } => {
+            for piece in p {
+                let d = load(at, piece, source.as_deref())?;
+                pieces.push((d.points, d.data));
+            }
+        }
+        DataSet::ImageData { .. } | DataSet::RectilinearGrid { .. } | DataSet::Field { .. } => {
+            return Err(at.err(Problem::Dimensionality(
+                "this VTK data set (image, rectilinear grid or field) has no particle positions; \
+                 particles come as poly data, unstructured or structured grids"
+                    .into(),
+            )));
+        }
+    }
+
+    let mut positions = Vec::new();
+    let mut attributes: Vec<Attribute> = Vec::new();
+    for (index, (points, data)) in pieces.into_iter().enumerate() {
+        let coords = points
+            .cast_into::<f64>()
+            .ok_or_else(|| at.malformed("point coordinates are not numbers"))?;
+        if coords.len() % 3 != 0 {
+            return Err(at.err(Problem::Dimensionality(format!(
+                "{} point coordinates is not a multiple of 3",
+                coords.len()
+            ))));
+        }
+        let n = coords.len() / 3;
+        let mut piece_attributes = Vec::new();
+        for attribute in data.point {
+            let arrays: Vec<(String, u32, IOBuffer)> = match attribute {
+                VtkAttribute::DataArray(DataArray { name, elem, data }) => {
+                    vec![(name, elem.num_comp(), data)]
+                }
+                VtkAttribute::Field { data_array, .. } => data_array
+                    .into_iter()
+                    .map(|a| (a.name, a.elem, a.data))
+                    .collect(),
+            };
+            for (name, components, data) in arrays {
+                let components = components.max(1) as usize;
+                let values = data.cast_into::<f64>().ok_or_else(|| {
+                    at.malformed(format!("point-data array '{name}' is not numeric"))
+                })?;
+                if values.len() != n * components {
+                    return Err(at.malformed(format!(
+                        "point-data array '{name}' has {} values for {n} points of {components} components",
+                        values.len()
+                    )));
+                }
+                piece_attributes.extend(split_components(&name, &values, components));
+            }
+        }
+        if index == 0 {
+            attributes = piece_attributes;
+        } else {
+            for a in &mut attributes {
+                let p = piece_attributes
+                    .iter_mut()
+                    .find(|p| p.name == a.name)
+                    .ok_or_else(|| {
+                        at.malformed(format!(
+                            "piece {index} lacks the point-data array '{}'",
+                            a.name
+                        ))
+                    })?;
+                a.values.append(&mut p.values);
+            }
+        }
+        positions.extend(
+            coords
+                .chunks_exact(3)
+                .map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32)),
+        );
+    }
+    Ok(Columns {
+        positions,
+        attributes,
+    })
+}
+
+/// vtkio reads appended data only base64-encoded, while VTK and ParaView write it raw by
+/// default. This re-encodes a file's raw appended block as base64 (each array's header and data
+/// as VTK itself would write them) and rewrites the arrays' offsets; `None` when the file has
+/// no raw appended data.
+fn appended_raw_to_base64(bytes: &[u8]) -> Result<Option<Vec<u8>>, String> {
+    use base64::Engine;
+    let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
+    let find = |hay: &[u8], needle: &[u8], from: usize| {
+        hay.get(from..)?
+            .windows(needle.len())
+            .position(|w| w == needle)
+            .map(|p| p + from)
+    };
+    let Some(tag) = find(bytes, b"<AppendedData", 0) else {
+        return Ok(None);
+    };
+    let tag_end = find(bytes, b">", tag).ok_or("unterminated <AppendedData> tag")?;
+    let tag_text = String::from_utf8_lossy(&bytes[tag..tag_end]);
+    if !tag_text.contains("\"raw\"") {
+        return Ok(None);
+    }
+    let underscore = find(bytes, b"_", tag_end).ok_or("raw appended data lacks its '_' marker")?;
+    let raw = &bytes[underscore + 1..];
+    let head = std::str::from_utf8(&bytes[..tag])
+        .map_err(|_| "the XML before the appended data is not UTF-8")?;
+    let header_bytes = if head.contains("header_type=\"UInt64\"") {
+        8
+    } else {
+        4
+    };
+    let compressed = head.contains("compressor=\"vtk");
+    let int_at = |pos: usize| -> Result<usize, String> {
+        let b = raw
+            .get(pos..pos + header_bytes)
+            .ok_or("appended data is truncated (an array header lies past the end)")?;
+        let v = if header_bytes == 8 {
+            u64::from_le_bytes(b.try_into().unwrap())
+        } else {
+            u64::from(u32::from_le_bytes(b.try_into().unwrap()))
+        };
+        usize::try_from(v).map_err(|_| "an appended array size overflows".to_owned())
+    };
+
+    // Every `offset="N"` before the appended block belongs to an appended DataArray.
+    let mut pieces = Vec::new(); // (start, end) of each number in `head`
+    let mut search = 0;
+    while let Some(i) = head[search..].find("offset=\"") {
+        let start = search + i + 8;
+        let end = start
+            + head[start..]
+                .find('"')
+                .ok_or("unterminated offset attribute")?;
+        pieces.push((start, end));
+        search = end;
+    }
+    let mut offsets: Vec<usize> = pieces
+        .iter()
+        .map(|&(a, b)| {
+            head[a..b]
+                .trim()
+                .parse::<usize>()
+                .map_err(|_| format!("bad offset '{}'", &head[a..b]))
+        })
+        .collect::<Result<_, _>>()?;
+    offsets.sort_unstable();
+    offsets.dedup();
+    let mut encoded = String::new();
+    let mut new_offset = std::collections::HashMap::new();
+    for &off in &offsets {
+        new_offset.insert(off, encoded.len());
+        if compressed {
+            let blocks = int_at(off)?;
+            let header_len = blocks
+                .checked_add(3)
+                .and_then(|n| n.checked_mul(header_bytes))
+                .ok_or("an appended array header overflows")?;
+            let mut data_len = 0usize;
+            for b in 0..blocks {
+                data_len = data_len
+                    .checked_add(int_at(off + (3 + b) * header_bytes)?)
+                    .ok_or("appended block sizes overflow")?;
+            }
+            let header = raw
+                .get(off..off + header_len)
+                .ok_or("appended data is truncated")?;
+            let data = raw
+                .get(off + header_len..off + header_len + data_len)
+                .ok_or("appended data is truncated (compressed blocks lie past the end)")?;
+            encoded.push_str(&b64(header));
+            encoded.push_str(&b64(data));
+        } else {
+            let len = int_at(off)?;
+            let block = raw
+                .get(off..off + header_bytes + len)
+                .ok_or("appended data is truncated (an array lies past the end)")?;
+            encoded.push_str(&b64(block));
+        }
+    }
+    let mut out = String::with_capacity(head.len() + encoded.len() + 64);
+    let mut last = 0;
+    for &(a, b) in &pieces {
+        out.push_str(&head[last..a]);
+        let old: usize = head[a..b].trim().parse().unwrap_or(0);
+        out.push_str(&new_offset[&old].to_string());
+        last = b;
+    }
+    out.push_str(&head[last..]);
+    out.push_str("<AppendedData encoding=\"base64\">\n_");
+    out.push_str(&encoded);
+    out.push_str("\n</AppendedData>\n</VTKFile>\n");
+    Ok(Some(out.into_bytes()))
+}
+
+fn load<P: PieceData>(at: At<'_>, piece: Piece<P>, source: Option<&Path>) -> Result<P, DataError> {
+    piece
+        .into_loaded_piece_data(source)
+        .map_err(|e| at.malformed(format!("cannot load a VTK piece: {e}")))
+}
+
+/// Refuses point counts the file cannot hold, before the parser allocates for them.
+fn precheck_counts(at: At<'_>, legacy: bool) -> Result<(), DataError> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    let file = std::fs::File::open(at.file).map_err(|e| at.io(e))?;
+    let size = super::file_len(at, &file)?;
+    file.take(1 << 16)
+        .read_to_end(&mut head)
+        .map_err(|e| at.io(e))?;
+    let head = String::from_utf8_lossy(&head);
+    let counts: Vec<u64> = if legacy {
+        head.lines()
+            .filter_map(|l| {
+                let mut w = l.split_whitespace();
+                (w.next()? == "POINTS").then(|| w.next()?.parse().ok())?
+            })
+            .collect()
+    } else {
+        head.match_indices("NumberOfPoints=\"")
+            .filter_map(|(i, m)| {
+                let rest = &head[i + m.len()..];
+                rest[..rest.find('"')?].parse().ok()
+            })
+            .collect()
+    };
+    let compressed = head.contains("compressor=");
+    // The fewest bytes a point can take: 3 f32, or in ascii three one-digit numbers.
+    let per_point = if legacy && !head.contains("BINARY") {
+        6
+    } else {
+        12
+    };
+    let budget = if compressed {
+        size.saturating_mul(MAX_COMPRESSION_RATIO)
+    } else {
+        size
+    };
+    for count in counts {
+        at.check_count("VTK point", count, per_point, budget)?;
+    }
+    Ok(())
+}
+
+/// Writes a step as VTK XML poly data (`.vtp`, base64 binary, zlib-compressed) with every
+/// attribute as a point-data array and one vertex cell per particle, so ParaView shows points.
+pub fn write_vtp(path: &Path, step: &Step) -> std::io::Result<()> {
+    let n = step.len() as u64;
+    let points: Vec<f32> = step.positions.iter().flat_map(|p| p.to_array()).collect();
+    let piece = PolyDataPiece {
+        points: points.into(),
+        verts: Some(VertexNumbers::XML {
+            connectivity: (0..n).collect(),
+            offsets: (1..=n).collect(),
+        }),
+        lines: None,
+        polys: None,
+        strips: None,
+        data: Attributes {
+            point: step
+                .attributes
+                .iter()
+                .map(|a| {
+                    VtkAttribute::DataArray(DataArray {
+                        name: a.name.clone(),
+                        elem: ElementType::Scalars {
+                            num_comp: 1,
+                            lookup_table: None,
+                        },
+                        data: a.values.clone().into(),
+                    })
+                })
+                .collect(),
+            cell: Vec::new(),
+        },
+    };
+    let vtk = Vtk {
+        version: Version::new_xml(1, 0),
+        title: step.name.clone(),
+        byte_order: ByteOrder::LittleEndian,
+        data: DataSet::inline(piece),
+        file_path: None,
+    };
+    let xml = vtk
+        .try_into_xml_format(vtkio::xml::Compressor::ZLib, 5)
+        .map_err(std::io::Error::other)?;
+    xml.export(path).map_err(std::io::Error::other)
+}

@@ -1,0 +1,239 @@
+//! The TOML scene file: data, attribute, radius, maps (and later camera and render options)
+//! in one place. Relative paths are relative to the scene file. Command-line flags override it.
+//!
+//! ```toml
+//! [data]
+//! path = "dambreak/dambreak-demo.particles"
+//! step = 10
+//! attribute = "velocity"
+//! attribute_range = [0.0, 3.0]
+//!
+//! [field]
+//! radius = "1.5%"            # of the series' bounding-box diagonal, or a length
+//! radius_map = "0:0.5,1:1"   # or [[0.0, 0.5], [1.0, 1.0]]
+//! density_map = 1.0
+//! colormap = "viridis"       # a preset, or a ParaView JSON file
+//! classification = "post"
+//! cluster = 4
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::maps::{MapError, PiecewiseLinear};
+use crate::accel::ClusterSize;
+use crate::field::Classification;
+use crate::io::Format;
+
+/// Where the data comes from.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataSection {
+    pub path: Option<PathBuf>,
+    pub format: Option<Format>,
+    pub step: Option<usize>,
+    pub attribute: Option<String>,
+    pub attribute_range: Option<[f64; 2]>,
+    pub radius_attribute: Option<String>,
+}
+
+/// A map written as CLI text (`"ramp"`, `"0:0,1:1"`, `1.0`) or as control points.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum MapSpec {
+    Constant(f64),
+    Text(String),
+    Points(Vec<[f64; 2]>),
+}
+
+impl MapSpec {
+    pub fn to_map(&self) -> Result<PiecewiseLinear, MapError> {
+        match self {
+            MapSpec::Constant(y) => y.to_string().parse(),
+            MapSpec::Text(s) => s.parse(),
+            MapSpec::Points(p) => PiecewiseLinear::new(p.clone()),
+        }
+    }
+}
+
+/// A radius: a length in data units, or a percentage of the bounding-box diagonal (`"1%"`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "RadiusText", into = "RadiusText")]
+pub enum RadiusSpec {
+    Absolute(f64),
+    PercentOfDiagonal(f64),
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(untagged)]
+enum RadiusText {
+    Number(f64),
+    Text(String),
+}
+
+impl TryFrom<RadiusText> for RadiusSpec {
+    type Error = String;
+    fn try_from(r: RadiusText) -> Result<Self, String> {
+        match r {
+            RadiusText::Number(v) => Ok(RadiusSpec::Absolute(v)),
+            RadiusText::Text(s) => s.parse(),
+        }
+    }
+}
+
+impl From<RadiusSpec> for RadiusText {
+    fn from(r: RadiusSpec) -> Self {
+        match r {
+            RadiusSpec::Absolute(v) => RadiusText::Number(v),
+            RadiusSpec::PercentOfDiagonal(p) => RadiusText::Text(format!("{p}%")),
+        }
+    }
+}
+
+impl std::str::FromStr for RadiusSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let s = s.trim();
+        let (number, percent) = match s.strip_suffix('%') {
+            Some(n) => (n.trim(), true),
+            None => (s, false),
+        };
+        let v: f64 = number
+            .parse()
+            .map_err(|_| format!("radius '{s}' is not a number or a percentage like '1%'"))?;
+        if !(v.is_finite() && v > 0.0) {
+            return Err(format!("radius '{s}' must be positive"));
+        }
+        Ok(if percent {
+            RadiusSpec::PercentOfDiagonal(v)
+        } else {
+            RadiusSpec::Absolute(v)
+        })
+    }
+}
+
+impl RadiusSpec {
+    /// The paper's sample code's default: 1% of the bounding-box diagonal.
+    pub const DEFAULT: RadiusSpec = RadiusSpec::PercentOfDiagonal(1.0);
+
+    pub fn resolve(self, diagonal: f64) -> f64 {
+        match self {
+            RadiusSpec::Absolute(r) => r,
+            RadiusSpec::PercentOfDiagonal(p) => p / 100.0 * diagonal,
+        }
+    }
+}
+
+/// How the field is defined.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldSection {
+    pub radius: Option<RadiusSpec>,
+    pub radius_map: Option<MapSpec>,
+    pub density_map: Option<MapSpec>,
+    pub colormap: Option<String>,
+    pub classification: Option<Classification>,
+    pub cluster: Option<ClusterSize>,
+}
+
+/// A scene file.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    #[serde(default)]
+    pub data: DataSection,
+    #[serde(default)]
+    pub field: FieldSection,
+}
+
+/// A scene file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[error("scene file {path}: {problem}")]
+pub struct SceneFileError {
+    pub path: PathBuf,
+    pub problem: String,
+}
+
+impl SceneFile {
+    pub fn load(path: &Path) -> Result<SceneFile, SceneFileError> {
+        let err = |problem: String| SceneFileError {
+            path: path.to_path_buf(),
+            problem,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let mut scene: SceneFile = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+        // Paths inside the file are relative to it.
+        let base = path.parent().unwrap_or(Path::new("."));
+        if let Some(p) = &scene.data.path
+            && p.is_relative()
+        {
+            scene.data.path = Some(base.join(p));
+        }
+        if let Some(c) = &scene.field.colormap
+            && c.ends_with(".json")
+            && Path::new(c).is_relative()
+        {
+            scene.field.colormap = Some(base.join(c).to_string_lossy().into_owned());
+        }
+        Ok(scene)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_a_full_scene_and_resolves_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.toml");
+        std::fs::write(
+            &path,
+            r#"
+[data]
+path = "d/x.particles"
+step = 3
+attribute = "velocity"
+attribute_range = [0.0, 2.0]
+[field]
+radius = "1.5%"
+radius_map = [[0.0, 0.5], [1.0, 1.0]]
+density_map = "ramp"
+colormap = "maps/m.json"
+classification = "pre"
+cluster = 8
+"#,
+        )
+        .unwrap();
+        let s = SceneFile::load(&path).unwrap();
+        assert_eq!(s.data.path.unwrap(), dir.path().join("d/x.particles"));
+        assert_eq!(s.data.step, Some(3));
+        assert_eq!(s.field.radius, Some(RadiusSpec::PercentOfDiagonal(1.5)));
+        assert_eq!(
+            s.field.radius_map.unwrap().to_map().unwrap().eval(0.5),
+            0.75
+        );
+        assert_eq!(
+            s.field.density_map.unwrap().to_map().unwrap().eval(0.25),
+            0.25
+        );
+        assert!(s.field.colormap.unwrap().ends_with("maps/m.json"));
+        assert_eq!(s.field.classification, Some(Classification::Pre));
+        assert_eq!(s.field.cluster.unwrap().get(), 8);
+    }
+
+    #[test]
+    fn unknown_fields_and_bad_values_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.toml");
+        std::fs::write(&path, "[field]\nradus = 1.0\n").unwrap();
+        let e = SceneFile::load(&path).unwrap_err().to_string();
+        assert!(e.contains("radus") && e.contains("s.toml"), "{e}");
+        std::fs::write(&path, "[field]\ncluster = 3\n").unwrap();
+        let e = SceneFile::load(&path).unwrap_err().to_string();
+        assert!(e.contains("cluster size 3"), "{e}");
+        std::fs::write(&path, "[field]\nradius = \"-2%\"\n").unwrap();
+        assert!(SceneFile::load(&path).is_err());
+    }
+}

@@ -1,0 +1,438 @@
+//! Synthetic data sets, deterministic from a seed: the paper's `uniform` and `random` sets,
+//! a `clusters` stress case, and an animated `dambreak-demo` time series.
+
+use std::fmt;
+use std::str::FromStr;
+
+use glam::DVec3;
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use rayon::prelude::*;
+
+use super::{Attribute, Step};
+
+/// The generators.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Generator {
+    /// Poisson-disk samples in the unit cube (the paper's Fig. 10 "Uniform", 60K by default).
+    Uniform,
+    /// `uniform` with every sample displaced by the Poisson radius in a random direction.
+    Random,
+    /// Gaussian blobs whose densities differ by 1000x (a stress case for trees and grids).
+    Clusters,
+    /// A column of fluid-like particles collapsing under gravity in a tank (a time series).
+    #[value(name = "dambreak-demo")]
+    DambreakDemo,
+}
+
+impl Generator {
+    pub fn default_count(self) -> usize {
+        match self {
+            Generator::Uniform | Generator::Random => 60_000,
+            Generator::Clusters => 100_000,
+            Generator::DambreakDemo => 20_000,
+        }
+    }
+
+    pub fn default_steps(self) -> usize {
+        match self {
+            Generator::DambreakDemo => 48,
+            _ => 1,
+        }
+    }
+
+    /// The attribute a scene colours this data by.
+    pub fn main_attribute(self) -> &'static str {
+        match self {
+            Generator::Uniform | Generator::Random => "distance",
+            Generator::Clusters => "blob",
+            Generator::DambreakDemo => "velocity",
+        }
+    }
+
+    /// Generates `steps` steps of about `count` particles (exactly `count` except where noted).
+    pub fn generate(self, count: usize, steps: usize, seed: u64) -> Vec<Step> {
+        match self {
+            Generator::Uniform | Generator::Random => {
+                let (points, radius) = poisson_disk_unit_cube(count, seed);
+                let mut rng = Pcg64::seed_from_u64(seed ^ 0x5eed);
+                let points: Vec<DVec3> = if self == Generator::Random {
+                    points
+                        .into_iter()
+                        .map(|p| p + random_unit_vector(&mut rng) * radius)
+                        .collect()
+                } else {
+                    points
+                };
+                let step = static_step(&points, DVec3::splat(0.5));
+                vec![step; steps.max(1)]
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, mut s)| {
+                        s.name = format!("{i:04}");
+                        s
+                    })
+                    .collect()
+            }
+            Generator::Clusters => {
+                let step = gaussian_blobs(count, seed);
+                (0..steps.max(1))
+                    .map(|i| Step {
+                        name: format!("{i:04}"),
+                        ..step.clone()
+                    })
+                    .collect()
+            }
+            Generator::DambreakDemo => dambreak(count, steps.max(1), seed),
+        }
+    }
+}
+
+impl fmt::Display for Generator {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Generator::Uniform => "uniform",
+            Generator::Random => "random",
+            Generator::Clusters => "clusters",
+            Generator::DambreakDemo => "dambreak-demo",
+        })
+    }
+}
+
+impl FromStr for Generator {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        <Generator as clap::ValueEnum>::from_str(s, true).map_err(|_| {
+            format!("unknown generator '{s}' (uniform, random, clusters, dambreak-demo)")
+        })
+    }
+}
+
+/// A step of static points with their distance to `centre` as the attribute.
+fn static_step(points: &[DVec3], centre: DVec3) -> Step {
+    Step {
+        name: String::new(),
+        positions: points.iter().map(|p| p.as_vec3()).collect(),
+        attributes: vec![Attribute {
+            name: "distance".into(),
+            values: points.iter().map(|p| p.distance(centre) as f32).collect(),
+        }],
+    }
+}
+
+fn random_unit_vector(rng: &mut Pcg64) -> DVec3 {
+    loop {
+        let v = DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        let l = v.length_squared();
+        if l > 1e-6 && l <= 1.0 {
+            return v / l.sqrt();
+        }
+    }
+}
+
+fn gaussian(rng: &mut Pcg64) -> f64 {
+    // Box–Muller.
+    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// Exactly `n` Poisson-disk samples in the unit cube (Bridson, "Fast Poisson disk sampling in
+/// arbitrary dimensions", 2007): sampling runs with a radius small enough to give at least `n`
+/// points, then a random subset of `n` is kept. Returns the points and the radius.
+pub fn poisson_disk_unit_cube(n: usize, seed: u64) -> (Vec<DVec3>, f64) {
+    if n == 0 {
+        return (Vec::new(), 0.0);
+    }
+    let mut c = 0.5;
+    loop {
+        let radius = (c / n as f64).cbrt();
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let mut points = bridson(radius, &mut rng);
+        if points.len() >= n {
+            points.shuffle(&mut rng);
+            points.truncate(n);
+            return (points, radius);
+        }
+        c *= 0.8;
+    }
+}
+
+fn bridson(radius: f64, rng: &mut Pcg64) -> Vec<DVec3> {
+    let cell = radius / 3f64.sqrt();
+    let side = (1.0 / cell).ceil() as usize;
+    let mut grid = vec![u32::MAX; side * side * side];
+    let index = |p: DVec3| {
+        let c = (p / cell)
+            .as_uvec3()
+            .min(glam::UVec3::splat(side as u32 - 1));
+        (c.x as usize, c.y as usize, c.z as usize)
+    };
+    let mut points: Vec<DVec3> = Vec::new();
+    let mut active: Vec<u32> = Vec::new();
+    let first = DVec3::new(rng.random(), rng.random(), rng.random());
+    let (x, y, z) = index(first);
+    grid[(z * side + y) * side + x] = 0;
+    points.push(first);
+    active.push(0);
+    const ATTEMPTS: usize = 30;
+    while !active.is_empty() {
+        let k = rng.random_range(0..active.len());
+        let centre = points[active[k] as usize];
+        let mut found = false;
+        for _ in 0..ATTEMPTS {
+            // Uniform in the spherical shell [r, 2r].
+            let dir = random_unit_vector(rng);
+            let u: f64 = rng.random();
+            let dist = (radius.powi(3) + u * (8.0 * radius.powi(3) - radius.powi(3))).cbrt();
+            let p = centre + dir * dist;
+            if p.min_element() < 0.0 || p.max_element() >= 1.0 {
+                continue;
+            }
+            let (x, y, z) = index(p);
+            let mut ok = true;
+            'search: for zz in z.saturating_sub(2)..(z + 3).min(side) {
+                for yy in y.saturating_sub(2)..(y + 3).min(side) {
+                    for xx in x.saturating_sub(2)..(x + 3).min(side) {
+                        let q = grid[(zz * side + yy) * side + xx];
+                        if q != u32::MAX && points[q as usize].distance_squared(p) < radius * radius
+                        {
+                            ok = false;
+                            break 'search;
+                        }
+                    }
+                }
+            }
+            if ok {
+                grid[(z * side + y) * side + x] = points.len() as u32;
+                active.push(points.len() as u32);
+                points.push(p);
+                found = true;
+                break;
+            }
+        }
+        if !found {
+            active.swap_remove(k);
+        }
+    }
+    points
+}
+
+/// Eight Gaussian blobs with equal counts and standard deviations from 0.01 to 0.1, so their
+/// peak densities differ by 1000x. Attributes: `blob` (0..7) and `sigma_distance` (distance
+/// to the blob's centre in standard deviations).
+fn gaussian_blobs(n: usize, seed: u64) -> Step {
+    const BLOBS: usize = 8;
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let centres: Vec<DVec3> = (0..BLOBS)
+        .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()) * 0.6 + 0.2)
+        .collect();
+    let sigma = |b: usize| 0.01 * 10f64.powf(b as f64 / (BLOBS - 1) as f64);
+    let mut positions = Vec::with_capacity(n);
+    let mut blob = Vec::with_capacity(n);
+    let mut distance = Vec::with_capacity(n);
+    for i in 0..n {
+        let b = i % BLOBS;
+        let offset = DVec3::new(gaussian(&mut rng), gaussian(&mut rng), gaussian(&mut rng));
+        positions.push((centres[b] + offset * sigma(b)).as_vec3());
+        blob.push(b as f32);
+        distance.push(offset.length() as f32);
+    }
+    Step {
+        name: String::new(),
+        positions,
+        attributes: vec![
+            Attribute {
+                name: "blob".into(),
+                values: blob,
+            },
+            Attribute {
+                name: "sigma_distance".into(),
+                values: distance,
+            },
+        ],
+    }
+}
+
+/// A uniform grid of particle indices for neighbour searches.
+struct NeighbourGrid {
+    cell: f64,
+    dims: [usize; 3],
+    starts: Vec<u32>,
+    indices: Vec<u32>,
+}
+
+impl NeighbourGrid {
+    fn new(points: &[DVec3], cell: f64, extent: DVec3) -> NeighbourGrid {
+        let dims = [0, 1, 2].map(|a| ((extent[a] / cell).ceil() as usize).max(1));
+        let cell_of = |p: DVec3| -> usize {
+            let c = [0, 1, 2].map(|a| ((p[a] / cell).max(0.0) as usize).min(dims[a] - 1));
+            (c[2] * dims[1] + c[1]) * dims[0] + c[0]
+        };
+        let cells: Vec<usize> = points.iter().map(|&p| cell_of(p)).collect();
+        let mut starts = vec![0u32; dims[0] * dims[1] * dims[2] + 1];
+        for &c in &cells {
+            starts[c + 1] += 1;
+        }
+        for i in 1..starts.len() {
+            starts[i] += starts[i - 1];
+        }
+        let mut fill = starts.clone();
+        let mut indices = vec![0u32; points.len()];
+        for (i, &c) in cells.iter().enumerate() {
+            indices[fill[c] as usize] = i as u32;
+            fill[c] += 1;
+        }
+        NeighbourGrid {
+            cell,
+            dims,
+            starts,
+            indices,
+        }
+    }
+
+    /// Calls `f(j)` for every particle in the 27 cells around `p`, in a fixed order.
+    fn for_each_near(&self, p: DVec3, mut f: impl FnMut(usize)) {
+        let c = [0, 1, 2].map(|a| ((p[a] / self.cell).max(0.0) as usize).min(self.dims[a] - 1));
+        for z in c[2].saturating_sub(1)..(c[2] + 2).min(self.dims[2]) {
+            for y in c[1].saturating_sub(1)..(c[1] + 2).min(self.dims[1]) {
+                for x in c[0].saturating_sub(1)..(c[0] + 2).min(self.dims[0]) {
+                    let cell = (z * self.dims[1] + y) * self.dims[0] + x;
+                    for k in self.starts[cell]..self.starts[cell + 1] {
+                        f(self.indices[k as usize] as usize);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A dam break: a column of particles in the corner of a 1.2 x 0.8 x 0.3 tank collapses under
+/// gravity. Position-based dynamics (positions projected apart to the particle spacing, walls
+/// as constraints, velocities from positions, XSPH-style viscosity): not physically exact, but
+/// it moves plausibly, splashes, and its density varies. Attributes: `velocity` (magnitude,
+/// m/s) and `neighbours` (particles within two spacings, a density estimate).
+fn dambreak(n: usize, steps: usize, seed: u64) -> Vec<Step> {
+    let tank = DVec3::new(1.2, 0.8, 0.3);
+    let column = DVec3::new(0.35, 0.7, tank.z);
+    let spacing = (column.x * column.y * column.z / n.max(1) as f64).cbrt();
+    let per_axis = (column / spacing).ceil().as_uvec3().max(glam::UVec3::ONE);
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut x: Vec<DVec3> = Vec::with_capacity(n);
+    // Fill the column bottom-up, layer by layer, so the last layer is the partial one.
+    'fill: for j in 0..u32::MAX {
+        for i in 0..per_axis.x {
+            for k in 0..per_axis.z {
+                let p = (DVec3::new(i as f64, j as f64, k as f64) + 0.5) * spacing;
+                let jitter = DVec3::new(rng.random(), rng.random(), rng.random()) - 0.5;
+                x.push(p + jitter * 0.1 * spacing);
+                if x.len() == n {
+                    break 'fill;
+                }
+            }
+        }
+    }
+    let mut v = vec![DVec3::ZERO; n];
+    let gravity = DVec3::new(0.0, -9.81, 0.0);
+    let frame = 1.0 / 30.0;
+    let substeps = 8;
+    let h = frame / substeps as f64;
+    let radius = 0.5 * spacing;
+    let lo = DVec3::splat(radius);
+    let hi = tank - radius;
+
+    let mut out = Vec::with_capacity(steps);
+    for step in 0..steps {
+        if step > 0 {
+            for _ in 0..substeps {
+                let mut p: Vec<DVec3> = x
+                    .par_iter()
+                    .zip(&mut v)
+                    .map(|(x, v)| {
+                        *v += gravity * h;
+                        (*x + *v * h).clamp(lo, hi)
+                    })
+                    .collect();
+                for _ in 0..3 {
+                    let grid = NeighbourGrid::new(&p, spacing, tank);
+                    p = (0..n)
+                        .into_par_iter()
+                        .map(|i| {
+                            let mut correction = DVec3::ZERO;
+                            grid.for_each_near(p[i], |j| {
+                                if j == i {
+                                    return;
+                                }
+                                let d = p[i] - p[j];
+                                let len = d.length();
+                                if len < spacing {
+                                    // Co-located particles separate along a fixed, index-derived axis.
+                                    let dir = if len > 1e-12 * spacing {
+                                        d / len
+                                    } else {
+                                        let a = (i.wrapping_mul(2654435761) ^ j) as f64;
+                                        DVec3::new(a.sin(), a.cos(), (a * 0.5).sin()).normalize()
+                                            * if i < j { 1.0 } else { -1.0 }
+                                    };
+                                    correction += dir * 0.5 * (spacing - len);
+                                }
+                            });
+                            (p[i] + correction * 0.5).clamp(lo, hi)
+                        })
+                        .collect();
+                }
+                let new_v: Vec<DVec3> = (0..n).into_par_iter().map(|i| (p[i] - x[i]) / h).collect();
+                // XSPH-style viscosity: blend each velocity towards its neighbours' mean.
+                let grid = NeighbourGrid::new(&p, 2.0 * spacing, tank);
+                v = (0..n)
+                    .into_par_iter()
+                    .map(|i| {
+                        let (mut sum, mut weight) = (DVec3::ZERO, 0.0);
+                        grid.for_each_near(p[i], |j| {
+                            let d = p[i].distance(p[j]);
+                            if d < 2.0 * spacing {
+                                let w = 1.0 - d / (2.0 * spacing);
+                                sum += new_v[j] * w;
+                                weight += w;
+                            }
+                        });
+                        let mean = if weight > 0.0 { sum / weight } else { new_v[i] };
+                        new_v[i] + (mean - new_v[i]) * 0.05
+                    })
+                    .collect();
+                x = p;
+            }
+        }
+        let grid = NeighbourGrid::new(&x, 2.0 * spacing, tank);
+        let neighbours: Vec<f32> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let mut count = 0u32;
+                grid.for_each_near(x[i], |j| {
+                    count += u32::from(j != i && x[i].distance(x[j]) < 2.0 * spacing);
+                });
+                count as f32
+            })
+            .collect();
+        out.push(Step {
+            name: format!("{step:04}"),
+            positions: x.iter().map(|p| p.as_vec3()).collect(),
+            attributes: vec![
+                Attribute {
+                    name: "velocity".into(),
+                    values: v.iter().map(|v| v.length() as f32).collect(),
+                },
+                Attribute {
+                    name: "neighbours".into(),
+                    values: neighbours,
+                },
+            ],
+        });
+    }
+    out
+}

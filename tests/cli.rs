@@ -1,0 +1,289 @@
+//! The `aarbf` binary as a user runs it: generate → info → field/slice, scene files, errors.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use aarbf::accel::ClusterSize;
+use aarbf::field::{Classification, FieldSettings, ReferenceField};
+use aarbf::io::{At, npy};
+use aarbf::scene::{OpenOptions, TimeSeries};
+use glam::DVec3;
+
+fn aarbf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("AARBF_LOG", "warn")
+        .output()
+        .expect("the binary runs")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = aarbf(args);
+    assert!(
+        out.status.success(),
+        "aarbf {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+fn fails(args: &[&str]) -> String {
+    let out = aarbf(args);
+    assert!(!out.status.success(), "aarbf {args:?} should fail");
+    String::from_utf8(out.stderr).unwrap()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn generate_info_and_field_agree_with_the_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = ok(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        s(&d.join("db")),
+        "--count",
+        "800",
+        "--steps",
+        "3",
+        "--seed",
+        "5",
+    ]);
+    let header = header.trim();
+    assert!(header.ends_with("dambreak-demo.particles"), "{header}");
+    let vtp = ok(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        s(&d.join("vtp")),
+        "--count",
+        "800",
+        "--steps",
+        "3",
+        "--seed",
+        "5",
+        "--format",
+        "vtk-xml",
+    ]);
+
+    let info = ok(&["info", header]);
+    assert!(
+        info.contains("steps:      3")
+            && info.contains("800 at most per step")
+            && info.contains("attribute"),
+        "{info}"
+    );
+    let info_vtp = ok(&["info", vtp.trim()]);
+    assert!(
+        info_vtp.contains("velocity") && info_vtp.contains("neighbours"),
+        "{info_vtp}"
+    );
+
+    // Queries: a line through the data, float32.
+    let queries: Vec<f32> = (0..64).flat_map(|i| [i as f32 / 64.0, 0.1, 0.15]).collect();
+    let q = d.join("q.npy");
+    npy::write_matrix_f32(&q, 64, 3, &queries).unwrap();
+    for (classification, cols) in [("post", 2), ("pre", 4)] {
+        let out = d.join(format!("f_{classification}.npy"));
+        ok(&[
+            "field",
+            "--data",
+            vtp.trim(),
+            "--step",
+            "2",
+            "--attribute",
+            "velocity",
+            "--radius",
+            "0.05",
+            "--radius-map",
+            "0:0.5,1:1",
+            "--classification",
+            classification,
+            "--cluster",
+            "4",
+            "--queries",
+            s(&q),
+            "--out",
+            s(&out),
+        ]);
+        let m = npy::read_matrix(At::new(&out, None)).unwrap();
+        assert_eq!((m.rows, m.cols), (64, cols));
+        // The same field through the library.
+        let series = TimeSeries::open(Path::new(vtp.trim()), &OpenOptions::default()).unwrap();
+        let mut settings = FieldSettings::new(Some("velocity"), 0.05);
+        settings.radius_map =
+            aarbf::scene::maps::RadiusMap::new("0:0.5,1:1".parse().unwrap()).unwrap();
+        settings.classification = if classification == "pre" {
+            Classification::Pre
+        } else {
+            Classification::Post
+        };
+        let a = series.attribute("velocity").unwrap();
+        let field = ReferenceField::of_step(
+            &series.step(2).unwrap(),
+            &settings,
+            ClusterSize::new(4).unwrap(),
+            series.bounds(),
+            Some((a.min as f64, a.max as f64)),
+        )
+        .unwrap();
+        let mut hits = 0;
+        for i in 0..64 {
+            let x = DVec3::new(
+                queries[i * 3] as f64,
+                queries[i * 3 + 1] as f64,
+                queries[i * 3 + 2] as f64,
+            );
+            let expect = field.eval_brute_force(x);
+            let row = m.row(i);
+            assert!(
+                (row[0] - expect.phi).abs() <= 1e-12 * expect.phi.abs(),
+                "{row:?} vs {expect:?}"
+            );
+            for (got, want) in row[1..].iter().zip(&expect.theta) {
+                assert!((got - want).abs() <= 1e-12 * want.abs().max(1.0) && got.is_finite());
+            }
+            hits += usize::from(row[0] > 0.0);
+        }
+        assert!(hits > 5, "the line should pass through fluid ({hits} hits)");
+    }
+
+    // The slice image exists and is not black.
+    let png = d.join("slice.png");
+    ok(&[
+        "slice",
+        "--data",
+        header,
+        "--attribute",
+        "attribute",
+        "--width",
+        "64",
+        "--out",
+        s(&png),
+    ]);
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(img.width(), 64);
+    assert!(img.pixels().any(|p| p.0.iter().any(|&c| c > 40)));
+}
+
+#[test]
+fn scene_file_settings_and_flag_overrides() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&[
+        "generate",
+        "uniform",
+        "--out",
+        s(&d.join("u")),
+        "--count",
+        "500",
+    ]);
+    std::fs::write(
+        d.join("scene.toml"),
+        "[data]\npath = \"u/uniform.particles\"\nattribute = \"attribute\"\n[field]\nradius = 0.2\nclassification = \"pre\"\ncolormap = \"grayscale\"\n",
+    )
+    .unwrap();
+    let q = d.join("q.npy");
+    npy::write_matrix(&q, 2, 3, &[0.5, 0.5, 0.5, 0.25, 0.5, 0.5]).unwrap();
+    let out = d.join("o.npy");
+    ok(&[
+        "field",
+        "--scene",
+        s(&d.join("scene.toml")),
+        "--queries",
+        s(&q),
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(
+        npy::read_matrix(At::new(&out, None)).unwrap().cols,
+        4,
+        "pre-classification from the scene file"
+    );
+    ok(&[
+        "field",
+        "--scene",
+        s(&d.join("scene.toml")),
+        "--classification",
+        "post",
+        "--queries",
+        s(&q),
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(
+        npy::read_matrix(At::new(&out, None)).unwrap().cols,
+        2,
+        "the flag overrides the file"
+    );
+}
+
+#[test]
+fn bad_input_gives_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = ok(&[
+        "generate",
+        "uniform",
+        "--out",
+        s(&d.join("u")),
+        "--count",
+        "100",
+    ]);
+    let header = header.trim();
+    let q = d.join("q.npy");
+    npy::write_matrix(&q, 1, 3, &[0.5; 3]).unwrap();
+    let out = d.join("o.npy");
+    let field = |extra: &[&str]| {
+        let mut args = vec![
+            "field",
+            "--data",
+            header,
+            "--queries",
+            s(&q),
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        fails(&args)
+    };
+    assert!(field(&[]).contains("--attribute is required"));
+    let e = field(&["--attribute", "velocity"]);
+    assert!(
+        e.contains("attribute 'velocity' not found") && e.contains("'attribute'"),
+        "{e}"
+    );
+    let e = field(&["--attribute", "attribute", "--step", "7"]);
+    assert!(
+        e.contains("step 7 does not exist") && e.contains("1 steps"),
+        "{e}"
+    );
+    let e = field(&["--attribute", "attribute", "--cluster", "3"]);
+    assert!(
+        e.contains("cluster size 3 is not one of 1, 2, 4, 8, 16"),
+        "{e}"
+    );
+    let e = field(&["--attribute", "attribute", "--radius-map", "0:2,1:1"]);
+    assert!(e.contains("radius map") && e.contains("[0, 1]"), "{e}");
+    let e = field(&["--attribute", "attribute", "--colormap", "rainbow"]);
+    assert!(e.contains("'rainbow'") && e.contains("viridis"), "{e}");
+    let e = field(&["--attribute", "attribute", "--radius=-1"]);
+    assert!(e.contains("radius '-1' must be positive"), "{e}");
+    npy::write_matrix(&q, 1, 2, &[0.5; 2]).unwrap();
+    let e = field(&["--attribute", "attribute"]);
+    assert!(e.contains("q.npy") && e.contains("M x 3"), "{e}");
+    npy::write_matrix(&q, 1, 3, &[0.5, f64::NAN, 0.5]).unwrap();
+    let e = field(&["--attribute", "attribute"]);
+    assert!(e.contains("query 0 is not finite"), "{e}");
+    let e = fails(&["info", s(&d.join("missing.vtp"))]);
+    assert!(
+        e.contains("missing.vtp") && e.contains("no such file"),
+        "{e}"
+    );
+    let e = fails(&["info", s(&d.join("u/uniform.particles_0000"))]);
+    assert!(e.contains("unknown format"), "{e}");
+}
