@@ -7,8 +7,12 @@
 //! tested against) → backends and rendering → [`cli`].
 
 pub mod accel;
+pub mod backend;
 pub mod cli;
 pub mod field;
 pub mod io;
+pub mod noise;
 pub mod progress;
+pub mod render;
 pub mod scene;
+pub mod shaders;

@@ -287,3 +287,88 @@ fn bad_input_gives_clear_errors() {
     let e = fails(&["info", s(&d.join("u/uniform.particles_0000"))]);
     assert!(e.contains("unknown format"), "{e}");
 }
+
+#[test]
+fn render_writes_images_and_sequences() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = ok(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        s(&d.join("db")),
+        "--count",
+        "1500",
+        "--steps",
+        "4",
+    ]);
+    let header = header.trim();
+    let png = d.join("one.png");
+    let common = [
+        "--attribute",
+        "attribute",
+        "--radius",
+        "2%",
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--spp",
+        "2",
+        "--backend",
+        "cpu",
+    ];
+    let mut args = vec!["render", "--data", header, "--step", "3", "--out", s(&png)];
+    args.extend_from_slice(&common);
+    ok(&args);
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!((img.width(), img.height()), (40, 30));
+    assert!(
+        img.pixels().any(|p| p.0.iter().any(|&c| c > 30)),
+        "the fluid shows"
+    );
+    // An existing output is not overwritten without --force.
+    let e = fails(&args);
+    assert!(e.contains("exists") && e.contains("--force"), "{e}");
+    args.push("--force");
+    ok(&args);
+
+    let seq = d.join("seq.png");
+    let mut args = vec![
+        "render",
+        "--data",
+        header,
+        "--steps",
+        "1..=2",
+        "--integrator",
+        "marching",
+        "--orbit",
+        "3/50",
+        "--out",
+        s(&seq),
+    ];
+    args.extend_from_slice(&common);
+    ok(&args);
+    assert!(d.join("seq_0001.png").exists() && d.join("seq_0002.png").exists());
+    assert!(!d.join("seq_0003.png").exists());
+    let e = fails(&[
+        "render",
+        "--data",
+        header,
+        "--steps",
+        "2..9",
+        "--out",
+        s(&seq),
+    ]);
+    assert!(e.contains("beyond the series' 4 steps"), "{e}");
+    let e = fails(&[
+        "render",
+        "--data",
+        header,
+        "--camera",
+        "0,0,0,0,0,0,0,1,0,40",
+        "--out",
+        s(&seq),
+    ]);
+    assert!(e.contains("eye and target coincide"), "{e}");
+}

@@ -67,6 +67,47 @@ impl ClusterBvh {
         });
     }
 
+    /// Appends `(t_in, t_out, cluster)` for every cluster box the ray `origin + t dir` crosses
+    /// within `[t0, t1]`, in f64 (the boxes' f32 bounds are exact in f64, so nothing is missed
+    /// to rounding).
+    pub fn ray_boxes(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t0: f64,
+        t1: f64,
+        out: &mut Vec<(f64, f64, u32)>,
+    ) {
+        let Some(bvh) = &self.bvh else { return };
+        let inv = dir.recip();
+        let hit = |b: &Aabb| -> Option<(f64, f64)> {
+            let lo = (b.min.as_dvec3() - origin) * inv;
+            let hi = (b.max.as_dvec3() - origin) * inv;
+            // NaN (0 * inf on a face) must not shrink the interval: min/max ignore NaN.
+            let t_in = lo.min(hi).max_element().max(t0);
+            let t_out = lo.max(hi).min_element().min(t1);
+            (t_in <= t_out).then_some((t_in, t_out))
+        };
+        let mut stack = vec![0u32];
+        while let Some(index) = stack.pop() {
+            let node = &bvh.nodes[index as usize];
+            if hit(node.aabb()).is_none() {
+                continue;
+            }
+            if node.is_leaf() {
+                for i in node.first_index..node.first_index + node.prim_count {
+                    let prim = bvh.primitive_indices[i as usize] as usize;
+                    if let Some((a, b)) = hit(&self.leaf_boxes[prim]) {
+                        out.push((a, b, self.clusters[prim]));
+                    }
+                }
+            } else {
+                stack.push(node.first_index);
+                stack.push(node.first_index + 1);
+            }
+        }
+    }
+
     /// Bytes of the tree's nodes and index arrays.
     pub fn bytes(&self) -> usize {
         self.bvh.as_ref().map_or(0, |b| {

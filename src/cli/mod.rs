@@ -3,15 +3,19 @@
 mod field;
 mod generate;
 mod info;
+mod render;
 pub mod settings;
 mod slice;
+mod stbn;
 
 use clap::{Parser, Subcommand};
 
 pub use field::FieldArgs;
 pub use generate::GenerateArgs;
 pub use info::InfoArgs;
+pub use render::RenderArgs;
 pub use slice::SliceArgs;
+pub use stbn::StbnArgs;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -27,14 +31,20 @@ pub struct Cli {
     pub command: Command,
 }
 
+// Parsed once per process: the size difference between variants costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Describe a data set: steps, counts, bounds, attributes with ranges, memory per step.
     Info(InfoArgs),
     /// Evaluate the density and attribute fields at query points (M x 3 .npy in, .npy out).
     Field(FieldArgs),
+    /// Render one step or a range of steps to PNG images.
+    Render(RenderArgs),
     /// Show the fields on an axis-aligned plane through the data, as a PNG.
     Slice(SliceArgs),
+    /// Generate a spatiotemporal blue-noise mask (the renderer ships one: assets/).
+    Stbn(StbnArgs),
     /// Write a synthetic data set (uniform, random, clusters, dambreak-demo).
     Generate(GenerateArgs),
 }
@@ -43,7 +53,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(a) => info::run(a),
         Command::Field(a) => field::run(a),
+        Command::Render(a) => render::run(a),
         Command::Slice(a) => slice::run(a),
+        Command::Stbn(a) => stbn::run(a),
         Command::Generate(a) => generate::run(a),
     }
 }

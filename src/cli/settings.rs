@@ -77,6 +77,8 @@ fn parse_range(s: &str) -> Result<(f64, f64), String> {
 
 /// Data and field settings after merging flags over the scene file.
 pub struct Resolved {
+    /// The scene file (or an empty one), for the sections a command reads itself.
+    pub scene: SceneFile,
     pub series: TimeSeries,
     pub step: usize,
     pub field: FieldSettings,
@@ -172,10 +174,12 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             .or(scene.field.classification)
             .unwrap_or_default(),
     };
+    let cluster = options.cluster.or(scene.field.cluster).unwrap_or_default();
     Ok(Resolved {
+        scene,
         series,
         step,
         field,
-        cluster: options.cluster.or(scene.field.cluster).unwrap_or_default(),
+        cluster,
     })
 }

@@ -322,6 +322,45 @@ impl ReferenceField {
         self.finish(acc)
     }
 
+    /// Phi and the Theta numerator at `x` as the renderer uses them: Σ phi_i and
+    /// Σ theta_i phi_i with theta_i the normalised attribute t_i (post) or linear RGB (pre).
+    pub fn eval_sums(&self, x: DVec3) -> (f64, [f64; 3]) {
+        let mut acc = Accumulator::default();
+        let n = self.particles.len();
+        self.bvh.for_each_cluster_at(x, |c| {
+            for i in self.boxes.members(c, n) {
+                self.particles.accumulate(i, x, &mut acc);
+            }
+        });
+        (acc.phi, acc.theta)
+    }
+
+    /// The disjoint, ordered sub-intervals of `[t0, t1]` along a ray that cross any cluster
+    /// box: outside them the field is 0.
+    pub fn occupied_intervals(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t0: f64,
+        t1: f64,
+        out: &mut Vec<(f64, f64)>,
+    ) {
+        let mut hits = Vec::new();
+        self.bvh.ray_boxes(origin, dir, t0, t1, &mut hits);
+        hits.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        for (a, b, _) in hits {
+            match out.last_mut() {
+                Some(last) if a <= last.1 => last.1 = last.1.max(b),
+                _ => out.push((a, b)),
+            }
+        }
+    }
+
+    /// Bytes of the cluster boxes and the BVH.
+    pub fn structure_bytes(&self) -> usize {
+        self.boxes.len() * std::mem::size_of::<Bounds>() + self.bvh.bytes()
+    }
+
     /// The field at `x` by visiting every particle.
     pub fn eval_brute_force(&self, x: DVec3) -> Sample {
         let mut acc = Accumulator::default();

@@ -137,6 +137,39 @@ pub struct FieldSection {
     pub cluster: Option<ClusterSize>,
 }
 
+/// The view: an explicit look-at camera, or a position on the benchmark orbit.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSection {
+    pub eye: Option<[f64; 3]>,
+    pub at: Option<[f64; 3]>,
+    pub up: Option<[f64; 3]>,
+    /// Vertical field of view, degrees.
+    pub fovy: Option<f64>,
+    /// `"i/n"`: camera i of the n-camera benchmark orbit (instead of eye/at/up).
+    pub orbit: Option<String>,
+}
+
+/// How to render.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSection {
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub spp: Option<u32>,
+    pub integrator: Option<crate::render::Integrator>,
+    pub noise: Option<crate::render::NoiseKind>,
+    pub seed: Option<u32>,
+    pub step_size: Option<f64>,
+    pub density_scale: Option<f64>,
+    pub phi_ref: Option<f64>,
+    pub optical_map: Option<MapSpec>,
+    pub color_by_density: Option<bool>,
+    pub background: Option<[f64; 3]>,
+    pub opacity_threshold: Option<f64>,
+    pub light: Option<crate::render::Light>,
+}
+
 /// A scene file.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -145,6 +178,10 @@ pub struct SceneFile {
     pub data: DataSection,
     #[serde(default)]
     pub field: FieldSection,
+    #[serde(default)]
+    pub camera: CameraSection,
+    #[serde(default)]
+    pub render: RenderSection,
 }
 
 /// A scene file that cannot be used.

@@ -291,23 +291,28 @@ fn demo() -> Result<()> {
     } else {
         step(&format!("demo data already at {}", data_dir.display()));
     }
-    step(
-        "the renderer is not built yet: evaluating the field on a slice through the demo data instead",
-    );
     run(vulkan_env(&mut Command::new(&aarbf))
-        .args(["slice", "--data"])
+        .args(["render", "--data"])
         .arg(&header)
         .args([
             "--step",
-            "12",
+            "14",
             "--attribute",
             "attribute",
             "--radius",
             "1.5%",
-            "--axis",
-            "z",
         ])
-        .args(["--width", "768", "--out"])
+        .args([
+            "--width",
+            "512",
+            "--height",
+            "512",
+            "--spp",
+            "16",
+            "--integrator",
+            "marching",
+        ])
+        .args(["--force", "--out"])
         .arg(root.join("demo.png")))?;
     step(&format!("wrote {}", root.join("demo.png").display()));
     Ok(())

@@ -1,0 +1,131 @@
+//! Shader build: every GPU kernel is checked at build time, so a shader error is a build error.
+//!
+//! - `shaders_glsl/wgpu/*.comp` (GLSL compute kernels the wgpu backend runs through naga's GLSL
+//!   front end) and `shaders_wgsl/*.wgsl`: includes resolved, parsed and validated by naga.
+//! - `shaders_glsl/vulkan/*.{rgen,rint,rahit,rmiss,rchit,comp}` (the ash backend's ray-tracing
+//!   pipeline and compute kernels): compiled to SPIR-V with `glslc` into OUT_DIR (no SPIR-V is
+//!   committed). `cargo xtask setup` installs glslc.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+include!("src/shaders/include.rs");
+
+fn shared(name: &str) -> Option<String> {
+    std::fs::read_to_string(Path::new("shaders_glsl").join(name)).ok()
+}
+
+fn files(dir: &str, extensions: &[&str]) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    out.retain(|p| {
+        p.extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| extensions.contains(&e))
+    });
+    out.sort();
+    out
+}
+
+fn fail(message: String) -> ! {
+    eprintln!("{message}");
+    println!(
+        "cargo::error={}",
+        message.lines().next().unwrap_or("shader error")
+    );
+    std::process::exit(1);
+}
+
+fn validate(module: &naga::Module, path: &Path, source: &str) {
+    let mut validator = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    );
+    if let Err(e) = validator.validate(module) {
+        fail(format!(
+            "{}: naga validation failed:\n{}",
+            path.display(),
+            e.emit_to_string(source)
+        ));
+    }
+}
+
+fn main() {
+    println!("cargo::rerun-if-changed=shaders_glsl");
+    println!("cargo::rerun-if-changed=shaders_wgsl");
+    println!("cargo::rerun-if-changed=src/shaders/include.rs");
+
+    for path in files("shaders_glsl/wgpu", &["comp"]) {
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+        let source = resolve_includes(&text, &shared)
+            .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+        let mut frontend = naga::front::glsl::Frontend::default();
+        let options = naga::front::glsl::Options::from(naga::ShaderStage::Compute);
+        let module = frontend.parse(&options, &source).unwrap_or_else(|e| {
+            fail(format!(
+                "{}: GLSL parse failed:\n{}",
+                path.display(),
+                e.emit_to_string(&source)
+            ))
+        });
+        validate(&module, &path, &source);
+    }
+    for path in files("shaders_wgsl", &["wgsl"]) {
+        let source = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+        let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
+            fail(format!(
+                "{}: WGSL parse failed:\n{}",
+                path.display(),
+                e.emit_to_string(&source)
+            ))
+        });
+        validate(&module, &path, &source);
+    }
+
+    let vulkan = files(
+        "shaders_glsl/vulkan",
+        &["rgen", "rint", "rahit", "rmiss", "rchit", "comp"],
+    );
+    if vulkan.is_empty() {
+        return;
+    }
+    let out_dir = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
+    let glslc = std::env::var("GLSLC").unwrap_or_else(|_| "glslc".into());
+    if Command::new(&glslc).arg("--version").output().is_err() {
+        fail(format!(
+            "the GLSL compiler '{glslc}' was not found: run `cargo xtask setup` (it installs Debian's \
+             glslc), install glslc from the Vulkan SDK, or point GLSLC at one"
+        ));
+    }
+    for path in vulkan {
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+        let source = resolve_includes(&text, &shared)
+            .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let resolved = out_dir.join(format!("{name}.glsl"));
+        std::fs::write(&resolved, &source).unwrap();
+        let stage = path.extension().unwrap().to_string_lossy().into_owned();
+        let output = Command::new(&glslc)
+            .args([
+                "--target-env=vulkan1.2",
+                "-O",
+                &format!("-fshader-stage={stage}"),
+            ])
+            .arg(&resolved)
+            .arg("-o")
+            .arg(out_dir.join(format!("{name}.spv")))
+            .output()
+            .unwrap_or_else(|e| fail(format!("cannot run {glslc}: {e}")));
+        if !output.status.success() {
+            fail(format!(
+                "{}: glslc failed:\n{}",
+                path.display(),
+                String::from_utf8_lossy(&output.stderr)
+            ));
+        }
+    }
+}

@@ -1,0 +1,174 @@
+// The integrators, per pixel: the GLSL twin of src/render/integrator.rs (read that file's
+// documentation; the two are kept statement for statement alike, f32 here, f64 there).
+//
+// The includer defines, before this file: `Frame frame` (params.glsl, e.g. as a uniform
+// block member), the noise inputs (noise.glsl), and `vec4 field_query(vec3 x)` returning
+// (Phi, Theta numerator) at a local position: the only part each backend supplies.
+
+const float PHI_EPSILON = 1e-30;
+
+// Toroidal offsets of the blue-noise mask per random dimension (NOISE_OFFSETS in Rust).
+uvec2 noise_offset(uint dim) {
+    if (dim == 1u) {
+        return uvec2(61u, 29u);
+    } else if (dim == 2u) {
+        return uvec2(23u, 97u);
+    }
+    return uvec2(0u, 0u);
+}
+
+float random_number(uvec2 pixel, uint dim) {
+    uint seed = frame.image.w;
+    if (NOISE_KIND == 0u && dim < 3u) {
+        uvec2 o = noise_offset(dim);
+        uint s = seed * 0x9e3779b9u;
+        return stbn_value(pixel.x + o.x + (s & 0xffffu), pixel.y + o.y + (s >> 16u), frame.image.z);
+    }
+    return white_noise(pixel.x, pixel.y, frame.image.z, dim, seed);
+}
+
+// Extinction (w) and colour (rgb) of a sample with field value f = (Phi, Theta numerator).
+vec4 shade(vec4 f) {
+    float phi = f.x;
+    float x = phi / frame.shading.x;
+    float sigma = frame.shading.y * map_lookup(TABLE_OPTICAL, x);
+    vec3 rgb = vec3(0.0);
+    if (COLOUR_MODE == COLOUR_DENSITY) {
+        rgb = colour_lookup(x);
+    } else if (phi >= PHI_EPSILON) {
+        if (COLOUR_MODE == COLOUR_POST) {
+            rgb = colour_lookup(f.y / phi);
+        } else {
+            rgb = f.yzw / phi;
+        }
+    }
+    return vec4(rgb, sigma);
+}
+
+// Where a ray meets a box: (t_enter, t_exit) clipped to t >= 0; empty when t_enter >= t_exit.
+vec2 ray_box(vec3 origin, vec3 dir, vec3 lo, vec3 hi) {
+    vec3 inv = 1.0 / dir;
+    vec3 t1 = (lo - origin) * inv;
+    vec3 t2 = (hi - origin) * inv;
+    vec3 tmin = min(t1, t2);
+    vec3 tmax = max(t1, t2);
+    float t_enter = max(max(max(tmin.x, tmin.y), tmin.z), 0.0);
+    float t_exit = min(min(tmax.x, tmax.y), tmax.z);
+    return vec2(t_enter, t_exit);
+}
+
+// The index of the first march sample t0 + (k + jitter) dt at or after a (k >= 0).
+float first_sample(float t0, float a, float dt, float jitter) {
+    return max(ceil((a - t0) / dt - jitter), 0.0);
+}
+
+// Transmittance from x towards the light to the march box's exit: exp(-Σ sigma dt).
+float shadow_transmittance(vec3 x, float jitter) {
+    vec3 dir = frame.light.xyz;
+    vec2 span = ray_box(x, dir, frame.box_min.xyz, frame.box_max.xyz);
+    if (!(span.x < span.y)) {
+        return 1.0;
+    }
+    float dt = frame.box_min.w;
+    float tau = 0.0;
+    for (float k = 0.0;; k += 1.0) {
+        float t = (k + jitter) * dt;
+        if (t >= span.y || tau >= 745.0) {
+            break;
+        }
+        tau += shade(field_query(x + dir * t)).w * dt;
+    }
+    return exp(-tau);
+}
+
+vec3 scattered(vec3 x, vec3 albedo, float shadow_jitter) {
+    float light = frame.light.w * shadow_transmittance(x, shadow_jitter) + frame.background.w;
+    return albedo * light;
+}
+
+// The radiance of a pixel in this frame: linear RGB and opacity.
+vec4 render_pixel(uvec2 pixel) {
+    vec3 bg = frame.background.rgb;
+    float sx = 2.0 * (float(pixel.x) + 0.5) / float(frame.image.x) - 1.0;
+    float sy = 1.0 - 2.0 * (float(pixel.y) + 0.5) / float(frame.image.y);
+    vec3 origin = frame.eye.xyz;
+    vec3 dir = normalize(frame.forward.xyz + frame.right.xyz * sx + frame.up.xyz * sy);
+    vec2 span = ray_box(origin, dir, frame.box_min.xyz, frame.box_max.xyz);
+    if (!(span.x < span.y)) {
+        return vec4(bg, 0.0);
+    }
+    float t_enter = span.x;
+    float t_exit = span.y;
+    float dt = frame.box_min.w;
+
+    if (INTEGRATOR == INTEGRATOR_EA || INTEGRATOR == INTEGRATOR_SS_REFERENCE) {
+        bool scatter = INTEGRATOR == INTEGRATOR_SS_REFERENCE;
+        float jitter = random_number(pixel, scatter ? 1u : 0u);
+        float shadow_jitter = random_number(pixel, 2u);
+        vec3 colour = vec3(0.0);
+        float transmittance = 1.0;
+        for (float k = first_sample(t_enter, t_enter, dt, jitter);; k += 1.0) {
+            float t = t_enter + (k + jitter) * dt;
+            if (t >= t_exit) {
+                break;
+            }
+            vec3 at = origin + dir * t;
+            vec4 s = shade(field_query(at));
+            if (s.w <= 0.0) {
+                continue;
+            }
+            float alpha = 1.0 - exp(-s.w * dt);
+            vec3 emitted = scatter ? scattered(at, s.rgb, shadow_jitter) : s.rgb;
+            colour += transmittance * alpha * emitted;
+            transmittance *= 1.0 - alpha;
+            if (1.0 - transmittance >= frame.box_max.w) {
+                break;
+            }
+        }
+        return vec4(colour + transmittance * bg, 1.0 - transmittance);
+    } else if (INTEGRATOR == INTEGRATOR_MARCHING) {
+        float xi = random_number(pixel, 0u);
+        float jitter = random_number(pixel, 1u);
+        float target_tau = -log(1.0 - xi);
+        float tau = 0.0;
+        for (float k = first_sample(t_enter, t_enter, dt, jitter);; k += 1.0) {
+            float t = t_enter + (k + jitter) * dt;
+            if (t >= t_exit) {
+                break;
+            }
+            vec3 at = origin + dir * t;
+            vec4 s = shade(field_query(at));
+            tau += s.w * dt;
+            if (tau > target_tau) {
+                return vec4(scattered(at, s.rgb, random_number(pixel, 2u)), 1.0);
+            }
+        }
+        return vec4(bg, 0.0);
+    } else {
+        float majorant = frame.shading.z;
+        if (majorant <= 0.0) {
+            return vec4(bg, 0.0);
+        }
+        uint dim = 0u;
+        float t = t_enter;
+        for (;;) {
+            float xi = random_number(pixel, dim);
+            dim = (dim == 0u) ? 3u : dim + 1u;
+            t -= log(1.0 - xi) / majorant;
+            if (t >= t_exit) {
+                return vec4(bg, 0.0);
+            }
+            vec3 at = origin + dir * t;
+            vec4 s = shade(field_query(at));
+            float accept = random_number(pixel, dim);
+            dim += 1u;
+            if (accept * majorant < s.w) {
+                return vec4(scattered(at, s.rgb, random_number(pixel, 2u)), 1.0);
+            }
+            if (dim > 100000u) {
+                // Bounded work per pixel, as on the CPU.
+                return vec4(bg, 0.0);
+            }
+        }
+    }
+}

@@ -1,0 +1,52 @@
+// The attribute-aware RBF (method.md §2): the GLSL twin of field::Particles::accumulate.
+//
+// A particle is a vec4: xyz its local position, w its normalised attribute t. Its radius is
+// R * m(t) * h (h from the radius attribute when the scene has one), its weight w(t), its
+// theta t (post-classification) or C(t) (pre-classification). A field value is a vec4:
+// x = Phi, yzw = the Theta numerator Σ theta_i phi_i.
+//
+// The includer defines, before this file, `Field field_params` (params.glsl) and, when
+// HAS_RADIUS_ATTRIBUTE is 1, `float radius_attribute(uint particle)`.
+
+float particle_radius(vec4 p, uint index) {
+    float m = (RADIUS_MAP_VARIES == 1u) ? map_lookup(TABLE_RADIUS, p.w) : field_params.radius.y;
+    float r = field_params.radius.x * m;
+    if (HAS_RADIUS_ATTRIBUTE == 1u) {
+        r *= radius_attribute(index);
+    }
+    return r;
+}
+
+float particle_weight(vec4 p) {
+    return (DENSITY_MAP_VARIES == 1u) ? map_lookup(TABLE_DENSITY, p.w) : field_params.radius.z;
+}
+
+vec3 particle_theta(vec4 p) {
+    if (COLOUR_MODE == COLOUR_PRE) {
+        return colour_lookup(p.w);
+    } else if (COLOUR_MODE == COLOUR_POST) {
+        return vec3(p.w, 0.0, 0.0);
+    }
+    return vec3(0.0);
+}
+
+// Whether a point at squared distance d2 lies within radius r (radius 0: never).
+bool rbf_inside(float d2, float r) {
+    return r > 0.0 && d2 <= r * r;
+}
+
+// Adds the contribution of particle p, at squared distance d2 (inside radius r), to acc.
+void rbf_add(inout vec4 acc, float d2, float r, vec4 p) {
+    float phi = particle_weight(p) * exp(-4.5 * d2 / (r * r));
+    acc.x += phi;
+    acc.yzw += particle_theta(p) * phi;
+}
+
+// Adds particle p's contribution at x to acc when x lies within its radius r.
+void rbf_accumulate(inout vec4 acc, vec3 x, vec4 p, float r) {
+    vec3 d = x - p.xyz;
+    float d2 = dot(d, d);
+    if (rbf_inside(d2, r)) {
+        rbf_add(acc, d2, r, p);
+    }
+}

@@ -1,0 +1,113 @@
+//! A step prepared for a GPU backend: Hilbert-sorted particles in local coordinates, packed
+//! the way `shaders_glsl/shared/rbf.glsl` reads them. Both GPU backends upload exactly this.
+
+use glam::DVec3;
+
+use super::StepInput;
+use crate::accel::{ClusterSize, hilbert_order};
+use crate::field::{FieldError, FieldSettings, normalise};
+use crate::render::tables::{bake, bake_colour};
+use crate::shaders::GpuField;
+
+/// One step, ready to upload.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GpuStepData {
+    /// Local coordinates are data coordinates minus this (the series' bounding-box centre), so
+    /// f32 keeps its digits for data far from the origin.
+    pub origin: DVec3,
+    /// Per particle, in Hilbert order: xyz local position, w the normalised attribute t (0
+    /// without an attribute).
+    pub points: Vec<[f32; 4]>,
+    /// Per particle (Hilbert order): the radius attribute h, only when the scene uses one.
+    pub radius_attribute: Option<Vec<f32>>,
+    /// `order[k]` is the step's index of sorted particle k.
+    pub order: Vec<u32>,
+    pub cluster: ClusterSize,
+    pub field: GpuField,
+    pub radius_map_varies: bool,
+    pub density_map_varies: bool,
+    /// The density and radius maps (256 samples each) and the colour map (linear RGB).
+    pub density_table: Vec<f32>,
+    pub radius_table: Vec<f32>,
+    pub colour_table: Vec<[f32; 3]>,
+}
+
+impl GpuStepData {
+    pub fn prepare(input: &StepInput<'_>) -> Result<GpuStepData, FieldError> {
+        let step = input.step;
+        let settings = input.field;
+        // The same checks and range as the CPU reference, so every backend refuses the same input.
+        let reference = crate::field::Particles::prepare(
+            step,
+            settings,
+            input.series_bounds,
+            input.series_range,
+        )?;
+        let origin = input.series_bounds.center();
+        let order = hilbert_order(&step.positions, input.series_bounds);
+        let attribute = settings
+            .attribute
+            .as_deref()
+            .and_then(|a| step.attribute(a));
+        let points = order
+            .iter()
+            .map(|&i| {
+                let p = step.positions[i as usize].as_dvec3() - origin;
+                let t = attribute.map_or(0.0, |a| {
+                    normalise(f64::from(a.values[i as usize]), reference.range)
+                });
+                [p.x as f32, p.y as f32, p.z as f32, t as f32]
+            })
+            .collect();
+        let radius_attribute = settings
+            .radius_attribute
+            .as_deref()
+            .and_then(|a| step.attribute(a))
+            .map(|h| order.iter().map(|&i| h.values[i as usize]).collect());
+        let mut data = GpuStepData {
+            origin,
+            points,
+            radius_attribute,
+            order,
+            cluster: input.cluster,
+            field: GpuField::default(),
+            radius_map_varies: false,
+            density_map_varies: false,
+            density_table: Vec::new(),
+            radius_table: Vec::new(),
+            colour_table: Vec::new(),
+        };
+        data.set_maps(settings);
+        Ok(data)
+    }
+
+    /// Updates everything that depends on the maps and the global radius (not the particles).
+    pub fn set_maps(&mut self, settings: &FieldSettings) {
+        let n = self.points.len();
+        self.radius_map_varies = !settings.radius_map.0.is_constant();
+        self.density_map_varies = !settings.density_map.0.is_constant();
+        self.field = GpuField {
+            radius: [
+                settings.radius as f32,
+                settings.radius_map.0.eval(0.0) as f32,
+                settings.density_map.0.eval(0.0) as f32,
+                0.0,
+            ],
+            counts: [n as u32, self.cluster.clusters_for(n) as u32, 0, 0],
+        };
+        self.density_table = bake(&settings.density_map.0);
+        self.radius_table = bake(&settings.radius_map.0);
+        self.colour_table = bake_colour(&settings.color_map);
+    }
+
+    /// A query point in local coordinates.
+    pub fn local(&self, x: DVec3) -> [f32; 3] {
+        let l = x - self.origin;
+        [l.x as f32, l.y as f32, l.z as f32]
+    }
+
+    /// Bytes of particle data a GPU holds (positions with attribute, and radii when used).
+    pub fn particle_bytes(&self) -> usize {
+        self.points.len() * 16 + self.radius_attribute.as_ref().map_or(0, |h| h.len() * 4)
+    }
+}

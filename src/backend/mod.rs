@@ -1,0 +1,156 @@
+//! The one interface the CLI, viewer and studies render and query through, and its
+//! implementations: `cpu` (rayon + BVH, the reference), later `wgpu` (LBVH compute) and `ash`
+//! (Vulkan ray-tracing pipeline).
+//!
+//! A backend holds one step's particles and its acceleration structure. The caller
+//! ([`crate::render::RenderSession`]) decides what a change costs: a new step or attribute
+//! means [`Backend::upload`] + [`Backend::build`]; a new radius (global radius, radius map or
+//! radius attribute) means [`Backend::refit`]; anything else only restarts accumulation.
+
+pub mod cpu;
+pub mod gpu_data;
+
+use std::fmt;
+use std::time::Duration;
+
+use glam::DVec3;
+
+use crate::accel::ClusterSize;
+use crate::field::{FieldError, FieldSettings};
+use crate::render::FrameParams;
+use crate::render::image::Image;
+use crate::scene::{Bounds, Step};
+
+/// Which backend.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Hash,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendKind {
+    /// The best available: ash with ray tracing, else wgpu, else cpu.
+    #[default]
+    Auto,
+    /// CPU: rayon over tiles, a BVH over cluster boxes, f64 throughout (the reference).
+    Cpu,
+}
+
+impl fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BackendKind::Auto => "auto",
+            BackendKind::Cpu => "cpu",
+        })
+    }
+}
+
+/// Creates a backend (`Auto` picks the best one this machine has).
+pub fn create(kind: BackendKind) -> Result<Box<dyn Backend>, BackendError> {
+    match kind {
+        BackendKind::Auto | BackendKind::Cpu => Ok(Box::new(cpu::CpuBackend::new())),
+    }
+}
+
+/// What a backend is and can do.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Capabilities {
+    pub name: &'static str,
+    /// The device it runs on, in words.
+    pub device: String,
+    /// Whether range queries run on ray-tracing hardware (or a driver's RT pipeline).
+    pub hardware_rt: bool,
+    /// The most particles one step may hold, if limited.
+    pub max_particles: Option<usize>,
+}
+
+/// Time spent in each stage, for the last time each ran.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timings {
+    pub upload: Duration,
+    pub build: Duration,
+    pub refit: Duration,
+    pub frame: Duration,
+    pub query: Duration,
+}
+
+/// Memory held for the current step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MemoryReport {
+    /// Particle data (positions, attributes, radii).
+    pub particle_bytes: usize,
+    /// The acceleration structure (boxes, tree).
+    pub structure_bytes: usize,
+    /// The accumulation image.
+    pub image_bytes: usize,
+}
+
+/// One step as a backend receives it.
+pub struct StepInput<'a> {
+    pub step: &'a Step,
+    pub field: &'a FieldSettings,
+    pub cluster: ClusterSize,
+    /// The series' bounds (Hilbert grid, local coordinates).
+    pub series_bounds: Bounds,
+    /// The attribute's range over the series.
+    pub series_range: Option<(f64, f64)>,
+}
+
+/// Why a backend cannot do what was asked.
+#[derive(Debug, thiserror::Error)]
+pub enum BackendError {
+    #[error(transparent)]
+    Field(#[from] FieldError),
+    #[error("{0}: no step uploaded yet")]
+    NothingUploaded(&'static str),
+    #[error("{backend}: {message}")]
+    Device {
+        backend: &'static str,
+        message: String,
+    },
+    #[error("the {0} backend is not available on this machine: {1}")]
+    Unavailable(&'static str, String),
+}
+
+/// A rendering and query backend.
+pub trait Backend: Send {
+    fn capabilities(&self) -> &Capabilities;
+
+    /// Takes a step's particles (sorted, with their attribute and radii) and keeps them.
+    fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError>;
+
+    /// Builds the acceleration structure over the uploaded step from scratch.
+    fn build(&mut self) -> Result<(), BackendError>;
+
+    /// Applies new field settings whose only change is the particles' radii (global radius,
+    /// radius map or radius attribute), keeping the structure's topology.
+    fn refit(&mut self, field: &FieldSettings) -> Result<(), BackendError>;
+
+    /// Applies field settings that change neither particles nor radii (density map, colour
+    /// map): no structure work.
+    fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError>;
+
+    /// Phi and the Theta numerator at each point (see [`crate::render::FieldSampler`]).
+    fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError>;
+
+    /// Renders one frame and adds it to the accumulation (restarted by `reset`, or when the
+    /// frame's size differs from the accumulated one's).
+    fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError>;
+
+    /// Restarts progressive accumulation.
+    fn reset(&mut self);
+
+    /// The mean of the frames accumulated so far.
+    fn image(&mut self) -> Result<Image, BackendError>;
+
+    fn timings(&self) -> Timings;
+
+    fn memory(&self) -> MemoryReport;
+}

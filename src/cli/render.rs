@@ -1,0 +1,253 @@
+//! `aarbf render`: images of one step or a range of steps.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use glam::DVec3;
+
+use super::settings::{DataArgs, FieldOptions, resolve};
+use crate::backend::{self, BackendKind};
+use crate::render::{Camera, Integrator, Light, NoiseKind, RenderSession, RenderSettings};
+
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub data: DataArgs,
+    #[command(flatten)]
+    pub field: FieldOptions,
+    /// A range of steps, `a..b` (b excluded) or `a..=b`: writes OUT_<step>.png for each.
+    #[arg(long, conflicts_with = "step")]
+    pub steps: Option<String>,
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendKind,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Samples (frames) per pixel.
+    #[arg(long)]
+    pub spp: Option<u32>,
+    #[arg(long, value_enum)]
+    pub integrator: Option<Integrator>,
+    #[arg(long, value_enum)]
+    pub noise: Option<NoiseKind>,
+    /// Seed of the random numbers: the same seed gives the same image on the same backend.
+    #[arg(long)]
+    pub seed: Option<u32>,
+    /// Camera: ex,ey,ez,ax,ay,az,ux,uy,uz,fovy (eye, target, up, vertical FOV in degrees).
+    #[arg(long, conflicts_with = "orbit")]
+    pub camera: Option<Camera>,
+    /// Camera i of the paper's n-camera benchmark orbit, as i/n (e.g. 3/50).
+    #[arg(long)]
+    pub orbit: Option<String>,
+    /// Ray-marching step in data units (default: from the radius and particle spacing).
+    #[arg(long)]
+    pub step_size: Option<f64>,
+    /// Extinction per unit length where the optical-density map is 1 (default 0.4 / radius).
+    #[arg(long)]
+    pub density_scale: Option<f64>,
+    /// The density that maps to 1 for colour and extinction (default: estimated).
+    #[arg(long)]
+    pub phi_ref: Option<f64>,
+    /// Optical-density map over Phi / Phi_ref, spelled like --radius-map (default "ramp").
+    #[arg(long)]
+    pub optical_map: Option<String>,
+    /// Colour by density (C(Phi / Phi_ref)) instead of the attribute.
+    #[arg(long)]
+    pub color_by_density: bool,
+    /// Light: azimuth,elevation,intensity (degrees, degrees, scale) for single scattering.
+    #[arg(long, value_name = "AZ,EL,I")]
+    pub light: Option<String>,
+    #[arg(long)]
+    pub ambient: Option<f64>,
+    /// Background colour r,g,b (linear, 0..1).
+    #[arg(long, value_name = "R,G,B")]
+    pub background: Option<String>,
+    /// Output PNG (for a step range: the prefix of the sequence).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Overwrite existing outputs.
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--{flag} '{text}': not {N} comma-separated numbers"))?;
+    v.try_into()
+        .map_err(|_| anyhow::anyhow!("--{flag} '{text}': expected {N} comma-separated numbers"))
+}
+
+/// Parses `a..b` / `a..=b`.
+fn step_range(text: &str, len: usize) -> anyhow::Result<std::ops::Range<usize>> {
+    let (a, b, inclusive) = if let Some((a, b)) = text.split_once("..=") {
+        (a, b, true)
+    } else if let Some((a, b)) = text.split_once("..") {
+        (a, b, false)
+    } else {
+        bail!("--steps '{text}': expected a..b or a..=b");
+    };
+    let a: usize = if a.is_empty() {
+        0
+    } else {
+        a.parse().with_context(|| format!("--steps '{text}'"))?
+    };
+    let b: usize = if b.is_empty() {
+        len
+    } else {
+        b.parse::<usize>()
+            .with_context(|| format!("--steps '{text}'"))?
+            + usize::from(inclusive)
+    };
+    if a >= b || b > len {
+        bail!("--steps '{text}' is empty or beyond the series' {len} steps");
+    }
+    Ok(a..b)
+}
+
+fn parse_orbit(text: &str) -> anyhow::Result<(usize, usize)> {
+    let (i, n) = text
+        .split_once('/')
+        .with_context(|| format!("orbit '{text}': expected i/n"))?;
+    let (i, n): (usize, usize) = (i.trim().parse()?, n.trim().parse()?);
+    if n == 0 || i >= n {
+        bail!("orbit '{text}': need 0 <= i < n");
+    }
+    Ok((i, n))
+}
+
+pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    let resolved = resolve(&args.data, &args.field)?;
+    let scene = &resolved.scene;
+    let r = &scene.render;
+    let mut settings = RenderSettings::default();
+    settings.width = args.width.or(r.width).unwrap_or(settings.width);
+    settings.height = args.height.or(r.height).unwrap_or(settings.height);
+    settings.integrator = args.integrator.or(r.integrator).unwrap_or_default();
+    settings.noise = args.noise.or(r.noise).unwrap_or_default();
+    settings.seed = args.seed.or(r.seed).unwrap_or(settings.seed);
+    settings.step_size = args.step_size.or(r.step_size);
+    settings.density_scale = args.density_scale.or(r.density_scale);
+    settings.phi_ref = args.phi_ref.or(r.phi_ref);
+    settings.colour_by_density = args.color_by_density || r.color_by_density.unwrap_or(false);
+    settings.opacity_threshold = r.opacity_threshold.unwrap_or(settings.opacity_threshold);
+    if let Some(text) = &args.optical_map {
+        settings.optical_map = text.parse()?;
+    } else if let Some(spec) = &r.optical_map {
+        settings.optical_map = spec.to_map()?;
+    }
+    let mut light = r.light.unwrap_or_default();
+    if let Some(text) = &args.light {
+        let [az, el, i] = numbers::<3>("light", text)?;
+        light = Light {
+            azimuth: az,
+            elevation: el,
+            intensity: i,
+            ..light
+        };
+    }
+    light.ambient = args.ambient.unwrap_or(light.ambient);
+    settings.light = light;
+    if let Some(text) = &args.background {
+        settings.background = numbers::<3>("background", text)?;
+    } else if let Some(bg) = r.background {
+        settings.background = bg;
+    }
+    let bounds = resolved.series.bounds();
+    let c = &scene.camera;
+    settings.camera = if let Some(camera) = args.camera {
+        Some(camera)
+    } else if let Some(orbit) = args.orbit.as_ref().or(c.orbit.as_ref()) {
+        let (i, n) = parse_orbit(orbit)?;
+        Some(Camera::benchmark_orbit(
+            bounds,
+            i,
+            n,
+            c.fovy.unwrap_or(40.0),
+        ))
+    } else if let (Some(eye), Some(at)) = (c.eye, c.at) {
+        Some(Camera {
+            eye: DVec3::from(eye),
+            at: DVec3::from(at),
+            up: DVec3::from(c.up.unwrap_or([0.0, 1.0, 0.0])),
+            fovy: c.fovy.unwrap_or(40.0),
+        })
+    } else {
+        None
+    };
+    let spp = args.spp.or(r.spp).unwrap_or(16);
+    anyhow::ensure!(spp > 0, "--spp must be at least 1");
+
+    let steps = match &args.steps {
+        Some(text) => step_range(text, resolved.series.len())?,
+        None => resolved.step..resolved.step + 1,
+    };
+    let sequence = args.steps.is_some();
+    let out_for = |step: usize| -> PathBuf {
+        if !sequence {
+            return args.out.clone();
+        }
+        let stem = args
+            .out
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "frame".into());
+        let dir = args.out.parent().unwrap_or(Path::new(""));
+        dir.join(format!("{stem}_{step:04}.png"))
+    };
+    if !args.force {
+        for step in steps.clone() {
+            let path = out_for(step);
+            if path.exists() {
+                bail!("{} exists; pass --force to overwrite it", path.display());
+            }
+        }
+    }
+    let backend = backend::create(args.backend)?;
+    tracing::info!(
+        "backend: {} ({})",
+        backend.capabilities().name,
+        backend.capabilities().device
+    );
+    let mut session = RenderSession::new(backend, &resolved.series);
+    let bar = crate::progress::bar(
+        (steps.len() as u64) * u64::from(spp),
+        if sequence {
+            "rendering steps"
+        } else {
+            "rendering"
+        },
+    );
+    for step in steps {
+        let started = Instant::now();
+        session.show(&resolved.series, step, &resolved.field, resolved.cluster)?;
+        let mut image = None;
+        for _ in 0..spp {
+            image = Some(session.render(&settings, 1)?);
+            bar.inc(1);
+        }
+        let path = out_for(step);
+        image
+            .expect("spp >= 1")
+            .save_png(&path)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let t = session.backend().timings();
+        tracing::info!(
+            "step {step}: {} ({}x{}, {spp} spp, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",
+            path.display(),
+            settings.width,
+            settings.height,
+            settings.integrator,
+            t.build.as_secs_f64(),
+            t.frame.as_secs_f64(),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    bar.finish_and_clear();
+    Ok(())
+}

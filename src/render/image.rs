@@ -1,0 +1,154 @@
+//! Progressive accumulation and image output.
+
+use std::path::Path;
+
+use crate::scene::maps::color_space::linear_to_srgb;
+
+/// A linear-light RGBA image (the mean over accumulated frames).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[f32; 4]>,
+}
+
+impl Image {
+    /// 8-bit sRGB, opaque (the background is already composited).
+    pub fn to_srgb8(&self) -> image::RgbImage {
+        let mut out = image::RgbImage::new(self.width, self.height);
+        for (o, p) in out.pixels_mut().zip(&self.pixels) {
+            *o = image::Rgb(std::array::from_fn(|c| {
+                let v = f64::from(p[c]);
+                let v = if v.is_finite() {
+                    v.clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (linear_to_srgb(v) * 255.0).round() as u8
+            }));
+        }
+        out
+    }
+
+    /// Writes a PNG, through a temporary file renamed into place, so an interrupted run never
+    /// leaves a truncated image.
+    pub fn save_png(&self, path: &Path) -> std::io::Result<()> {
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let tmp = tempfile::Builder::new()
+            .prefix(".aarbf-")
+            .suffix(".png")
+            .tempfile_in(dir)?;
+        self.to_srgb8()
+            .save_with_format(tmp.path(), image::ImageFormat::Png)
+            .map_err(std::io::Error::other)?;
+        tmp.persist(path).map_err(|e| e.error)?;
+        Ok(())
+    }
+
+    /// The image blurred by a normalised Gaussian of standard deviation `sigma` pixels
+    /// (separable, clamped at the borders): how error looks to a viewer, whose eye low-pass
+    /// filters; blue noise pushes error to frequencies this removes.
+    pub fn blurred(&self, sigma: f64) -> Image {
+        let radius = (3.0 * sigma).ceil() as i64;
+        let kernel: Vec<f64> = (-radius..=radius)
+            .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+            .collect();
+        let norm: f64 = kernel.iter().sum();
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
+        let pass = |src: &[[f32; 4]], horizontal: bool| -> Vec<[f32; 4]> {
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    let mut acc = [0.0f64; 4];
+                    for (k, kv) in kernel.iter().enumerate() {
+                        let o = k as i64 - radius;
+                        let (sx, sy) = if horizontal {
+                            ((x + o).clamp(0, w - 1), y)
+                        } else {
+                            (x, (y + o).clamp(0, h - 1))
+                        };
+                        let p = src[(sy * w + sx) as usize];
+                        for c in 0..4 {
+                            acc[c] += kv * f64::from(p[c]);
+                        }
+                    }
+                    acc.map(|v| (v / norm) as f32)
+                })
+                .collect()
+        };
+        let pixels = pass(&pass(&self.pixels, true), false);
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels,
+        }
+    }
+
+    /// Root-mean-square difference over RGB.
+    pub fn rmse(&self, other: &Image) -> f64 {
+        assert_eq!((self.width, self.height), (other.width, other.height));
+        let sum: f64 = self
+            .pixels
+            .iter()
+            .zip(&other.pixels)
+            .map(|(a, b)| {
+                (0..3)
+                    .map(|c| (f64::from(a[c]) - f64::from(b[c])).powi(2))
+                    .sum::<f64>()
+            })
+            .sum();
+        (sum / (3 * self.pixels.len().max(1)) as f64).sqrt()
+    }
+}
+
+/// Sums frames per pixel; the image is their mean. Reset on any change.
+#[derive(Clone, Debug)]
+pub struct Accumulator {
+    pub width: u32,
+    pub height: u32,
+    pub frames: u32,
+    sum: Vec<[f64; 4]>,
+}
+
+impl Accumulator {
+    pub fn new(width: u32, height: u32) -> Accumulator {
+        Accumulator {
+            width,
+            height,
+            frames: 0,
+            sum: vec![[0.0; 4]; (width as usize) * (height as usize)],
+        }
+    }
+
+    pub fn reset(&mut self) {
+        self.frames = 0;
+        self.sum.fill([0.0; 4]);
+    }
+
+    /// Adds one frame's pixels (row-major).
+    pub fn add(&mut self, frame: &[[f64; 4]]) {
+        assert_eq!(frame.len(), self.sum.len());
+        for (s, f) in self.sum.iter_mut().zip(frame) {
+            for c in 0..4 {
+                s[c] += f[c];
+            }
+        }
+        self.frames += 1;
+    }
+
+    pub fn image(&self) -> Image {
+        let n = f64::from(self.frames.max(1));
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels: self.sum.iter().map(|s| s.map(|v| (v / n) as f32)).collect(),
+        }
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.sum.len() * std::mem::size_of::<[f64; 4]>()
+    }
+}

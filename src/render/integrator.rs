@@ -1,0 +1,490 @@
+//! The integrators, per pixel: the CPU twin of `shaders_glsl/shared/integrators.glsl`.
+//!
+//! A primary ray is clipped to the march box (the series' bounds grown by twice the radius).
+//! Samples lie at `t_enter + (k + jitter) dt`. Each sample's extinction is
+//! `sigma = density_scale * D(Phi / Phi_ref)` and its colour C(Theta), Theta or
+//! C(Phi / Phi_ref) by colour mode.
+//!
+//! - Emission–absorption: front-to-back Beer–Lambert compositing, `alpha = 1 - exp(-sigma dt)`,
+//!   stopping at the opacity threshold.
+//! - Single scattering: one shade point per ray, chosen by delta tracking (majorant
+//!   `density_scale * max D`) or by stochastic marching (march until `Σ sigma dt` exceeds
+//!   `-ln(1 - xi)`); then one shadow ray with transmittance `exp(-Σ sigma dt)` to the light.
+//!   Radiance `albedo * (intensity * T_shadow + ambient)`, albedo the sample colour.
+//!
+//! Random numbers: dimension 0 drives the primary decision (the EA jitter or the free-flight
+//! xi), 1 the stochastic-marching jitter, 2 the shadow-ray jitter: each comes from the blue
+//! noise mask or the white hash. Delta tracking's further steps use white noise (dimensions
+//! 3, 4, ...), since only the first decision can keep the blue-noise structure.
+
+use std::sync::Arc;
+
+use glam::DVec3;
+
+use super::camera::CameraFrame;
+use super::settings::{ColourMode, Integrator, NoiseKind};
+use super::tables::{lookup, lookup_colour};
+use crate::noise::{BlueNoiseMask, white::white};
+
+/// Below this, Phi counts as "no density": the sample has no colour (never NaN).
+pub const PHI_EPSILON: f64 = 1e-30;
+
+/// Toroidal offsets of the blue-noise mask per random dimension, so different decisions of a
+/// pixel read different (decorrelated) mask values.
+pub const NOISE_OFFSETS: [[u32; 2]; 3] = [[0, 0], [61, 29], [23, 97]];
+
+/// The field as an integrator sees it.
+pub trait FieldSampler: Sync {
+    /// Phi and the Theta numerator (Σ theta_i phi_i: normalised attribute in `[0]`, or
+    /// linear RGB) at `x`, in the data's coordinates.
+    fn sample(&self, x: DVec3) -> (f64, [f64; 3]);
+
+    /// Appends the sub-intervals of `[t0, t1]` along `origin + t dir` where the field may be
+    /// non-zero, in order. The default is the whole interval; a sampler that knows where its
+    /// particles are may skip empty space (it changes no result: the field there is 0).
+    fn occupied(&self, _origin: DVec3, _dir: DVec3, t0: f64, t1: f64, out: &mut Vec<(f64, f64)>) {
+        out.push((t0, t1));
+    }
+}
+
+/// Everything fixed for one frame.
+#[derive(Clone, Debug)]
+pub struct FrameParams {
+    pub width: u32,
+    pub height: u32,
+    pub frame: u32,
+    pub seed: u32,
+    pub camera: CameraFrame,
+    pub box_min: DVec3,
+    pub box_max: DVec3,
+    pub dt: f64,
+    pub opacity_threshold: f64,
+    pub phi_ref: f64,
+    pub density_scale: f64,
+    /// `density_scale * max D`: bounds sigma everywhere (delta tracking's majorant).
+    pub majorant: f64,
+    pub light_dir: DVec3,
+    pub light_intensity: f64,
+    pub ambient: f64,
+    pub background: [f64; 3],
+    pub integrator: Integrator,
+    pub noise: NoiseKind,
+    pub colour: ColourMode,
+    pub optical_table: Arc<Vec<f32>>,
+    pub colour_table: Arc<Vec<[f32; 3]>>,
+}
+
+impl FrameParams {
+    /// A random number in [0, 1) for pixel (x, y), this frame, dimension `dim`.
+    pub fn random(&self, x: u32, y: u32, dim: u32) -> f64 {
+        match self.noise {
+            NoiseKind::Stbn if (dim as usize) < NOISE_OFFSETS.len() => {
+                let o = NOISE_OFFSETS[dim as usize];
+                // The seed shifts the mask so different seeds give different (equally blue) noise.
+                let s = self.seed.wrapping_mul(0x9e37_79b9);
+                let mask = BlueNoiseMask::builtin();
+                f64::from(mask.get(
+                    x.wrapping_add(o[0]).wrapping_add(s & 0xffff),
+                    y.wrapping_add(o[1]).wrapping_add(s >> 16),
+                    self.frame,
+                ))
+            }
+            _ => f64::from(white(x, y, self.frame, dim, self.seed)),
+        }
+    }
+
+    /// The primary ray of pixel (x, y): origin and unit direction.
+    pub fn primary_ray(&self, x: u32, y: u32) -> (DVec3, DVec3) {
+        let sx = (2.0 * (f64::from(x) + 0.5) / f64::from(self.width)) - 1.0;
+        let sy = 1.0 - (2.0 * (f64::from(y) + 0.5) / f64::from(self.height));
+        let c = &self.camera;
+        (c.eye, (c.forward + c.right * sx + c.up * sy).normalize())
+    }
+
+    /// Extinction and colour of a sample with density `phi` and Theta numerator `num`.
+    pub fn shade(&self, phi: f64, num: [f64; 3]) -> (f64, [f64; 3]) {
+        let x = phi / self.phi_ref;
+        let sigma = self.density_scale * lookup(&self.optical_table, x);
+        let rgb = match self.colour {
+            ColourMode::Density => lookup_colour(&self.colour_table, x),
+            _ if phi < PHI_EPSILON => [0.0; 3],
+            ColourMode::Post => lookup_colour(&self.colour_table, num[0] / phi),
+            ColourMode::Pre => num.map(|c| c / phi),
+        };
+        (sigma, rgb)
+    }
+}
+
+/// Where a ray meets a box: `(t_enter, t_exit)` clipped to t >= 0, if it does.
+pub fn ray_box(origin: DVec3, dir: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+    let inv = dir.recip();
+    let t1 = (lo - origin) * inv;
+    let t2 = (hi - origin) * inv;
+    let t_enter = t1.min(t2).max_element().max(0.0);
+    let t_exit = t1.max(t2).min_element();
+    (t_enter < t_exit).then_some((t_enter, t_exit))
+}
+
+/// Calls `visit(t)` at every march sample `t = t0 + (k + jitter) dt` (k >= 0) that lies in
+/// one of `intervals` and before `t1`, in order, until `visit` returns false.
+fn march(
+    t0: f64,
+    t1: f64,
+    dt: f64,
+    jitter: f64,
+    intervals: &[(f64, f64)],
+    mut visit: impl FnMut(f64) -> bool,
+) {
+    for &(a, b) in intervals {
+        let b = b.min(t1);
+        let first = ((a - t0) / dt - jitter).ceil().max(0.0);
+        let mut k = first;
+        loop {
+            let t = t0 + (k + jitter) * dt;
+            if t >= b {
+                break;
+            }
+            if t >= a && !visit(t) {
+                return;
+            }
+            k += 1.0;
+        }
+    }
+}
+
+/// Transmittance from `x` towards the light to the march box's exit: `exp(-Σ sigma dt)`.
+fn shadow(
+    p: &FrameParams,
+    field: &impl FieldSampler,
+    x: DVec3,
+    jitter: f64,
+    scratch: &mut Vec<(f64, f64)>,
+) -> f64 {
+    let Some((_, t_exit)) = ray_box(x, p.light_dir, p.box_min, p.box_max) else {
+        return 1.0;
+    };
+    scratch.clear();
+    field.occupied(x, p.light_dir, 0.0, t_exit, scratch);
+    let mut tau = 0.0;
+    march(0.0, t_exit, p.dt, jitter, scratch, |t| {
+        let (phi, num) = field.sample(x + p.light_dir * t);
+        tau += p.shade(phi, num).0 * p.dt;
+        // Beyond this the light is gone to f64 precision; stop marching.
+        tau < 745.0
+    });
+    (-tau).exp()
+}
+
+/// The radiance of pixel (x, y) in this frame: linear RGB and opacity.
+pub fn render_pixel(p: &FrameParams, field: &impl FieldSampler, x: u32, y: u32) -> [f64; 4] {
+    let (origin, dir) = p.primary_ray(x, y);
+    let bg = p.background;
+    let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
+        return [bg[0], bg[1], bg[2], 0.0];
+    };
+    let mut intervals = Vec::new();
+    field.occupied(origin, dir, t_enter, t_exit, &mut intervals);
+    let mut scratch = Vec::new();
+    let radiance =
+        |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, shadow_jitter: f64| {
+            let light =
+                p.light_intensity * shadow(p, field, at, shadow_jitter, scratch) + p.ambient;
+            albedo.map(|a| a * light)
+        };
+
+    match p.integrator {
+        Integrator::Ea | Integrator::SsReference => {
+            let scatter = p.integrator == Integrator::SsReference;
+            let jitter = p.random(x, y, if scatter { 1 } else { 0 });
+            let shadow_jitter = p.random(x, y, 2);
+            let mut colour = [0.0; 3];
+            let mut transmittance = 1.0;
+            march(t_enter, t_exit, p.dt, jitter, &intervals, |t| {
+                let at = origin + dir * t;
+                let (phi, num) = field.sample(at);
+                let (sigma, rgb) = p.shade(phi, num);
+                if sigma <= 0.0 {
+                    return true;
+                }
+                let alpha = 1.0 - (-sigma * p.dt).exp();
+                let emitted = if scatter {
+                    radiance(at, rgb, &mut scratch, shadow_jitter)
+                } else {
+                    rgb
+                };
+                for c in 0..3 {
+                    colour[c] += transmittance * alpha * emitted[c];
+                }
+                transmittance *= 1.0 - alpha;
+                1.0 - transmittance < p.opacity_threshold
+            });
+            [
+                colour[0] + transmittance * bg[0],
+                colour[1] + transmittance * bg[1],
+                colour[2] + transmittance * bg[2],
+                1.0 - transmittance,
+            ]
+        }
+        Integrator::Marching => {
+            let xi = p.random(x, y, 0);
+            let jitter = p.random(x, y, 1);
+            let target = -(1.0 - xi).ln();
+            let mut tau = 0.0;
+            let mut hit = None;
+            march(t_enter, t_exit, p.dt, jitter, &intervals, |t| {
+                let at = origin + dir * t;
+                let (phi, num) = field.sample(at);
+                let (sigma, rgb) = p.shade(phi, num);
+                tau += sigma * p.dt;
+                if tau > target {
+                    hit = Some((at, rgb));
+                    return false;
+                }
+                true
+            });
+            match hit {
+                Some((at, albedo)) => {
+                    let l = radiance(at, albedo, &mut scratch, p.random(x, y, 2));
+                    [l[0], l[1], l[2], 1.0]
+                }
+                None => [bg[0], bg[1], bg[2], 0.0],
+            }
+        }
+        Integrator::Delta => {
+            if p.majorant <= 0.0 {
+                return [bg[0], bg[1], bg[2], 0.0];
+            }
+            let Some(&(first, _)) = intervals.first() else {
+                return [bg[0], bg[1], bg[2], 0.0];
+            };
+            let mut dim = 0;
+            let mut interval = 0;
+            let mut t = first;
+            loop {
+                let xi = p.random(x, y, dim);
+                dim = if dim == 0 { 3 } else { dim + 1 };
+                t -= (1.0 - xi).ln() / p.majorant;
+                // Skip empty space: a flight through it is a run of null collisions, and what
+                // overshoots an interval's end carries on from the next one's start (the
+                // exponential distribution is memoryless).
+                while t >= intervals[interval].1 {
+                    let over = t - intervals[interval].1;
+                    interval += 1;
+                    if interval == intervals.len() {
+                        return [bg[0], bg[1], bg[2], 0.0];
+                    }
+                    t = intervals[interval].0 + over;
+                }
+                let at = origin + dir * t;
+                let (phi, num) = field.sample(at);
+                let (sigma, rgb) = p.shade(phi, num);
+                let accept = p.random(x, y, dim);
+                dim += 1;
+                if accept * p.majorant < sigma {
+                    let l = radiance(at, rgb, &mut scratch, p.random(x, y, 2));
+                    return [l[0], l[1], l[2], 1.0];
+                }
+                if dim > 100_000 {
+                    // Bounded work per pixel: a majorant far above the real extinction would
+                    // otherwise take arbitrarily many null collisions.
+                    return [bg[0], bg[1], bg[2], 0.0];
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::camera::Camera;
+    use crate::render::tables::{bake, bake_colour};
+    use crate::scene::maps::{ColorMap, PiecewiseLinear};
+
+    /// A field given by a closure: Phi(x), with Theta numerator 0.5 Phi (mid attribute).
+    struct Analytic<F: Fn(DVec3) -> f64 + Sync>(F);
+
+    impl<F: Fn(DVec3) -> f64 + Sync> FieldSampler for Analytic<F> {
+        fn sample(&self, x: DVec3) -> (f64, [f64; 3]) {
+            let phi = (self.0)(x);
+            (phi, [0.5 * phi, 0.0, 0.0])
+        }
+    }
+
+    /// A 1-pixel (or n x n) view down -z from (0, 0, 5) onto the origin, box [-1, 1]^3.
+    fn params(integrator: Integrator, size: u32, dt: f64, density_scale: f64) -> FrameParams {
+        let camera = Camera {
+            eye: DVec3::new(0.0, 0.0, 5.0),
+            at: DVec3::ZERO,
+            up: DVec3::Y,
+            fovy: 20.0,
+        };
+        FrameParams {
+            width: size,
+            height: size,
+            frame: 0,
+            seed: 7,
+            camera: camera.frame(size, size).unwrap(),
+            box_min: DVec3::splat(-1.0),
+            box_max: DVec3::splat(1.0),
+            dt,
+            opacity_threshold: 1.0,
+            phi_ref: 1.0,
+            density_scale,
+            majorant: density_scale,
+            light_dir: DVec3::new(0.3, 0.8, 0.5).normalize(),
+            light_intensity: 1.0,
+            ambient: 0.2,
+            background: [0.1, 0.2, 0.3],
+            integrator,
+            noise: NoiseKind::White,
+            colour: ColourMode::Post,
+            optical_table: Arc::new(bake(&PiecewiseLinear::ramp(0.0, 1.0))),
+            colour_table: Arc::new(bake_colour(&ColorMap::preset("grayscale").unwrap())),
+        }
+    }
+
+    fn mean_pixel(
+        p: &mut FrameParams,
+        field: &impl FieldSampler,
+        x: u32,
+        y: u32,
+        frames: u32,
+    ) -> [f64; 4] {
+        let mut sum = [0.0; 4];
+        for f in 0..frames {
+            p.frame = f;
+            let v = render_pixel(p, field, x, y);
+            for c in 0..4 {
+                sum[c] += v[c] / f64::from(frames);
+            }
+        }
+        sum
+    }
+
+    /// erf by its Abramowitz–Stegun 7.1.26 approximation is too coarse here; integrate the
+    /// truncated Gaussian numerically with Simpson's rule instead (error < 1e-12).
+    fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+        let h = (b - a) / n as f64;
+        let mut s = f(a) + f(b);
+        for i in 1..n {
+            s += f(a + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+        }
+        s * h / 3.0
+    }
+
+    #[test]
+    fn one_particle_optical_depth_through_its_centre() {
+        // One particle of radius r at the origin: along a ray through the centre the optical
+        // depth is scale * ∫_{-r}^{r} exp(-4.5 s² / r²) ds (the truncated Gaussian integral).
+        let r = 0.5;
+        let field = Analytic(|x: DVec3| {
+            let d2 = x.length_squared();
+            if d2 <= r * r {
+                (-4.5 * d2 / (r * r)).exp()
+            } else {
+                0.0
+            }
+        });
+        let scale = 3.0;
+        let tau = scale * simpson(|s| (-4.5 * s * s / (r * r)).exp(), -r, r, 10_000);
+        assert!(
+            (tau / scale - r * (std::f64::consts::PI / 4.5).sqrt() * 0.997_300_2).abs() < 1e-6,
+            "closed form: r sqrt(pi/4.5) erf(sqrt 4.5)"
+        );
+        let mut p = params(Integrator::Ea, 1, r / 200.0, scale);
+        let got = mean_pixel(&mut p, &field, 0, 0, 64);
+        let expected_alpha = 1.0 - (-tau).exp();
+        assert!(
+            (got[3] - expected_alpha).abs() < 1e-5,
+            "alpha {} vs {expected_alpha}",
+            got[3]
+        );
+        // The colour: grayscale C(0.5) emitted, background behind.
+        let grey = ColorMap::preset("grayscale").unwrap().linear_rgb(0.5)[0];
+        let expected_red = expected_alpha * grey + (1.0 - expected_alpha) * 0.1;
+        assert!(
+            (got[0] - expected_red).abs() < 1e-4,
+            "red {} vs {expected_red}",
+            got[0]
+        );
+    }
+
+    #[test]
+    fn homogeneous_slab_transmittance() {
+        // sigma = 2 for |z| < 0.25 (Phi = 1): T = exp(-2 * 0.5).
+        let field = Analytic(|x: DVec3| if x.z.abs() < 0.25 { 1.0 } else { 0.0 });
+        let mut p = params(Integrator::Ea, 1, 0.01, 2.0);
+        let got = mean_pixel(&mut p, &field, 0, 0, 256);
+        let expected = 1.0 - (-1.0f64).exp();
+        assert!((got[3] - expected).abs() < 2e-3, "{} vs {expected}", got[3]);
+    }
+
+    #[test]
+    fn early_exit_and_empty_rays() {
+        let field = Analytic(|_| 1.0);
+        let mut p = params(Integrator::Ea, 1, 0.01, 50.0);
+        p.opacity_threshold = 0.99;
+        let v = render_pixel(&p, &field, 0, 0);
+        assert!(v[3] >= 0.99 && v[3] < 0.9999, "stops once opaque: {}", v[3]);
+        let empty = Analytic(|_| 0.0);
+        for integrator in [
+            Integrator::Ea,
+            Integrator::Delta,
+            Integrator::Marching,
+            Integrator::SsReference,
+        ] {
+            let v = render_pixel(&params(integrator, 1, 0.01, 1.0), &empty, 0, 0);
+            assert_eq!(
+                v,
+                [0.1, 0.2, 0.3, 0.0],
+                "{integrator:?}: an empty volume shows the background"
+            );
+        }
+    }
+
+    /// RMSE over an image between an estimator at `spp` and a reference.
+    fn rmse(
+        p: &mut FrameParams,
+        field: &impl FieldSampler,
+        spp: u32,
+        reference: &[[f64; 4]],
+    ) -> f64 {
+        let n = p.width;
+        let mut err = 0.0;
+        for y in 0..n {
+            for x in 0..n {
+                let v = mean_pixel(p, field, x, y, spp);
+                let r = reference[(y * n + x) as usize];
+                err += (0..3).map(|c| (v[c] - r[c]).powi(2)).sum::<f64>();
+            }
+        }
+        (err / f64::from(3 * n * n)).sqrt()
+    }
+
+    #[test]
+    fn delta_tracking_and_stochastic_marching_converge_to_the_marched_reference() {
+        // A Gaussian blob, lit from above: the marched single-scattering reference (every
+        // sample shaded, a shadow ray each) against the one-shade-point estimators.
+        let field = Analytic(|x: DVec3| 1.5 * (-x.length_squared() / (2.0 * 0.3f64.powi(2))).exp());
+        let (size, dt, scale) = (6, 0.02, 4.0);
+        let mut reference_params = params(Integrator::SsReference, size, dt, scale);
+        let reference: Vec<[f64; 4]> = (0..size * size)
+            .map(|i| mean_pixel(&mut reference_params, &field, i % size, i / size, 32))
+            .collect();
+        for integrator in [Integrator::Delta, Integrator::Marching] {
+            let mut p = params(integrator, size, dt, scale);
+            p.majorant = scale * 1.5;
+            let errors: Vec<f64> = [16, 256, 4096]
+                .iter()
+                .map(|&spp| rmse(&mut p, &field, spp, &reference))
+                .collect();
+            eprintln!("{integrator:?}: RMSE at 16, 256, 4096 spp = {errors:?}");
+            assert!(
+                errors[1] < errors[0] * 0.5 && errors[2] < errors[1] * 0.5,
+                "{integrator:?}: {errors:?}"
+            );
+            assert!(errors[2] < 0.01, "{integrator:?} converges: {errors:?}");
+        }
+    }
+}

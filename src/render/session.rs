@@ -1,0 +1,285 @@
+//! A rendering session: one backend, one series, the current step and settings. It decides
+//! what each change costs (rebuild, refit, map update or only a restart of accumulation), so
+//! the CLI, the viewer and the studies all drive a backend the same way.
+
+use std::sync::Arc;
+
+use glam::DVec3;
+
+use super::camera::Camera;
+use super::image::Image;
+use super::integrator::FrameParams;
+use super::settings::{ColourMode, RenderSettings};
+use super::tables::{bake, bake_colour};
+use crate::accel::ClusterSize;
+use crate::backend::{Backend, BackendError, StepInput};
+use crate::field::{Classification, FieldSettings};
+use crate::io::DataError;
+use crate::render::camera::CameraError;
+use crate::scene::{Bounds, TimeSeries};
+
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Backend(#[from] BackendError),
+    #[error(transparent)]
+    Data(#[from] DataError),
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    #[error("render settings: {0}")]
+    Settings(String),
+}
+
+/// What the backend holds now.
+#[derive(Clone, PartialEq)]
+struct Loaded {
+    step: usize,
+    field: FieldSettings,
+    cluster: ClusterSize,
+}
+
+/// Values derived once per field (not per step, so a time series keeps one normalisation).
+#[derive(Clone, Copy)]
+struct Derived {
+    phi_ref: f64,
+    typical_radius: f64,
+    max_radius: f64,
+}
+
+pub struct RenderSession {
+    backend: Box<dyn Backend>,
+    bounds: Bounds,
+    max_count: usize,
+    loaded: Option<Loaded>,
+    derived: Option<Derived>,
+    frames: u32,
+    last_frame_key: Option<(RenderSettings, Loaded)>,
+}
+
+impl RenderSession {
+    pub fn new(backend: Box<dyn Backend>, series: &TimeSeries) -> RenderSession {
+        RenderSession {
+            backend,
+            bounds: series.bounds(),
+            max_count: series.max_count(),
+            loaded: None,
+            derived: None,
+            frames: 0,
+            last_frame_key: None,
+        }
+    }
+
+    pub fn backend(&self) -> &dyn Backend {
+        self.backend.as_ref()
+    }
+
+    pub fn backend_mut(&mut self) -> &mut dyn Backend {
+        self.backend.as_mut()
+    }
+
+    /// Frames accumulated since the last change.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Makes the backend hold step `step` under `field`, doing only the work the change needs.
+    pub fn show(
+        &mut self,
+        series: &TimeSeries,
+        step: usize,
+        field: &FieldSettings,
+        cluster: ClusterSize,
+    ) -> Result<(), RenderError> {
+        let want = Loaded {
+            step,
+            field: field.clone(),
+            cluster,
+        };
+        match &self.loaded {
+            Some(have) if *have == want => return Ok(()),
+            Some(have)
+                if have.step == step
+                    && have.cluster == cluster
+                    && same_particles(&have.field, field) =>
+            {
+                if same_radii(&have.field, field) {
+                    self.backend.update_maps(field)?;
+                } else {
+                    self.backend.refit(field)?;
+                }
+                self.derived = None;
+            }
+            _ => {
+                let data = series.step(step)?;
+                let range = field
+                    .attribute
+                    .as_deref()
+                    .and_then(|a| series.attribute(a))
+                    .map(|a| (f64::from(a.min), f64::from(a.max)));
+                self.backend.upload(&StepInput {
+                    step: &data,
+                    field,
+                    cluster,
+                    series_bounds: self.bounds,
+                    series_range: range,
+                })?;
+                self.backend.build()?;
+                // A new step keeps the normalisation (no flicker over time); a new field does not.
+                if self.loaded.as_ref().is_some_and(|l| l.field != *field) {
+                    self.derived = None;
+                }
+            }
+        }
+        self.loaded = Some(want);
+        if self.derived.is_none() {
+            self.derived = Some(self.derive(series, step, field)?);
+        }
+        Ok(())
+    }
+
+    /// Phi_ref (95th percentile of Phi at up to 4096 particle centres) and radii.
+    fn derive(
+        &mut self,
+        series: &TimeSeries,
+        step: usize,
+        field: &FieldSettings,
+    ) -> Result<Derived, RenderError> {
+        let data = series.step(step)?;
+        let n = data.len();
+        let stride = n.div_ceil(4096).max(1);
+        let centres: Vec<DVec3> = data
+            .positions
+            .iter()
+            .step_by(stride)
+            .map(|p| p.as_dvec3())
+            .collect();
+        let mut phi: Vec<f64> = self
+            .backend
+            .query(&centres)?
+            .into_iter()
+            .map(|(p, _)| p)
+            .filter(|p| *p > 0.0)
+            .collect();
+        phi.sort_by(f64::total_cmp);
+        let phi_ref = phi.get(phi.len() * 95 / 100).copied().unwrap_or(1.0);
+        let h = field
+            .radius_attribute
+            .as_deref()
+            .and_then(|a| data.attribute(a));
+        let (mean_h, max_h) = h.map_or((1.0, 1.0), |h| {
+            let sum: f64 = h.values.iter().map(|&v| f64::from(v)).sum();
+            let max = h.values.iter().fold(0.0f32, |m, &v| m.max(v));
+            (sum / h.values.len().max(1) as f64, f64::from(max))
+        });
+        Ok(Derived {
+            phi_ref,
+            typical_radius: field.radius * field.radius_map.0.max_value() * mean_h,
+            max_radius: field.radius * field.radius_map.0.max_value() * max_h,
+        })
+    }
+
+    /// The frame constants for `settings`, frame number `frame`.
+    pub fn frame_params(
+        &self,
+        settings: &RenderSettings,
+        frame: u32,
+    ) -> Result<FrameParams, RenderError> {
+        let (Some(loaded), Some(derived)) = (&self.loaded, &self.derived) else {
+            return Err(BackendError::NothingUploaded("session").into());
+        };
+        if settings.width == 0
+            || settings.height == 0
+            || settings.width > 16384
+            || settings.height > 16384
+        {
+            return Err(RenderError::Settings(format!(
+                "image size {}x{} must lie in 1..=16384",
+                settings.width, settings.height
+            )));
+        }
+        let camera = settings
+            .camera
+            .unwrap_or_else(|| Camera::default_for(self.bounds));
+        let grow = DVec3::splat(2.0 * derived.max_radius);
+        let r = derived.typical_radius.max(1e-30);
+        let spacing = (self.bounds.extent().max(DVec3::splat(r)).element_product()
+            / self.max_count.max(1) as f64)
+            .cbrt();
+        let dt = settings.step_size.unwrap_or((r / 3.0).min(0.5 * spacing));
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(RenderError::Settings(format!(
+                "step size {dt} must be positive"
+            )));
+        }
+        let density_scale = settings.density_scale.unwrap_or(0.4 / r);
+        let phi_ref = settings.phi_ref.unwrap_or(derived.phi_ref);
+        if !(phi_ref.is_finite() && phi_ref > 0.0) {
+            return Err(RenderError::Settings(format!(
+                "Phi_ref {phi_ref} must be positive"
+            )));
+        }
+        let colour = if settings.colour_by_density || loaded.field.attribute.is_none() {
+            ColourMode::Density
+        } else if loaded.field.classification == Classification::Pre {
+            ColourMode::Pre
+        } else {
+            ColourMode::Post
+        };
+        Ok(FrameParams {
+            width: settings.width,
+            height: settings.height,
+            frame,
+            seed: settings.seed,
+            camera: camera.frame(settings.width, settings.height)?,
+            box_min: self.bounds.min.as_dvec3() - grow,
+            box_max: self.bounds.max.as_dvec3() + grow,
+            dt,
+            opacity_threshold: settings.opacity_threshold,
+            phi_ref,
+            density_scale,
+            majorant: density_scale * settings.optical_map.max_value().max(0.0),
+            light_dir: settings.light.direction(),
+            light_intensity: settings.light.intensity,
+            ambient: settings.light.ambient,
+            background: settings.background,
+            integrator: settings.integrator,
+            noise: settings.noise,
+            colour,
+            optical_table: Arc::new(bake(&settings.optical_map)),
+            colour_table: Arc::new(bake_colour(&loaded.field.color_map)),
+        })
+    }
+
+    /// Renders `frames` more frames into the accumulation (restarted if anything changed since
+    /// the last call) and returns the image.
+    pub fn render(&mut self, settings: &RenderSettings, frames: u32) -> Result<Image, RenderError> {
+        let loaded = self
+            .loaded
+            .clone()
+            .ok_or(BackendError::NothingUploaded("session"))?;
+        let key = (settings.clone(), loaded);
+        if self.last_frame_key.as_ref() != Some(&key) {
+            self.backend.reset();
+            self.frames = 0;
+            self.last_frame_key = Some(key);
+        }
+        for _ in 0..frames {
+            let params = self.frame_params(settings, self.frames)?;
+            self.backend.render(&params)?;
+            self.frames += 1;
+        }
+        Ok(self.backend.image()?)
+    }
+}
+
+/// Whether two field settings give the same per-particle data (positions, attribute).
+fn same_particles(a: &FieldSettings, b: &FieldSettings) -> bool {
+    a.attribute == b.attribute
+        && a.attribute_range == b.attribute_range
+        && a.classification == b.classification
+}
+
+/// Whether two field settings give the same radii.
+fn same_radii(a: &FieldSettings, b: &FieldSettings) -> bool {
+    a.radius == b.radius && a.radius_map == b.radius_map && a.radius_attribute == b.radius_attribute
+}

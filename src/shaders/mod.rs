@@ -1,0 +1,208 @@
+//! GPU-side definitions shared by the GPU backends: the shader sources (GLSL under
+//! `shaders_glsl/`, WGSL under `shaders_wgsl/`) with their includes resolved, and the
+//! `#[repr(C)]` twins of the structs in `shaders_glsl/shared/params.glsl`.
+
+use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+
+use crate::render::integrator::FrameParams;
+use crate::render::settings::{ColourMode, Integrator, NoiseKind};
+
+include!("include.rs");
+
+/// The shared GLSL files, by the name kernels include them with.
+pub const SHARED_GLSL: &[(&str, &str)] = &[
+    (
+        "shared/params.glsl",
+        include_str!("../../shaders_glsl/shared/params.glsl"),
+    ),
+    (
+        "shared/maps.glsl",
+        include_str!("../../shaders_glsl/shared/maps.glsl"),
+    ),
+    (
+        "shared/noise.glsl",
+        include_str!("../../shaders_glsl/shared/noise.glsl"),
+    ),
+    (
+        "shared/rbf.glsl",
+        include_str!("../../shaders_glsl/shared/rbf.glsl"),
+    ),
+    (
+        "shared/integrators.glsl",
+        include_str!("../../shaders_glsl/shared/integrators.glsl"),
+    ),
+];
+
+/// `source` with its `#include "shared/..."` lines replaced by the shared files.
+pub fn glsl_with_includes(source: &str) -> String {
+    resolve_includes(source, &|name| {
+        SHARED_GLSL
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, s)| (*s).to_owned())
+    })
+    .expect("build.rs validated every include")
+}
+
+/// `params.glsl`'s `Frame`, in local coordinates (data coordinates minus `origin`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuFrame {
+    pub eye: [f32; 4],
+    pub forward: [f32; 4],
+    pub right: [f32; 4],
+    pub up: [f32; 4],
+    pub box_min: [f32; 4],
+    pub box_max: [f32; 4],
+    pub light: [f32; 4],
+    pub background: [f32; 4],
+    pub shading: [f32; 4],
+    pub image: [u32; 4],
+}
+
+fn v4(v: DVec3, w: f64) -> [f32; 4] {
+    [v.x as f32, v.y as f32, v.z as f32, w as f32]
+}
+
+impl GpuFrame {
+    /// The frame constants, with positions made relative to `origin` in f64 before rounding.
+    pub fn new(p: &FrameParams, origin: DVec3) -> GpuFrame {
+        GpuFrame {
+            eye: v4(p.camera.eye - origin, 0.0),
+            forward: v4(p.camera.forward, 0.0),
+            right: v4(p.camera.right, 0.0),
+            up: v4(p.camera.up, 0.0),
+            box_min: v4(p.box_min - origin, p.dt),
+            box_max: v4(p.box_max - origin, p.opacity_threshold),
+            light: v4(p.light_dir, p.light_intensity),
+            background: [
+                p.background[0] as f32,
+                p.background[1] as f32,
+                p.background[2] as f32,
+                p.ambient as f32,
+            ],
+            shading: [
+                p.phi_ref as f32,
+                p.density_scale as f32,
+                p.majorant as f32,
+                0.0,
+            ],
+            image: [p.width, p.height, p.frame, p.seed],
+        }
+    }
+}
+
+/// `params.glsl`'s `Field`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuField {
+    /// Global radius R, constant radius-map value, constant density-map value, unused.
+    pub radius: [f32; 4],
+    /// Particles, clusters, unused, unused.
+    pub counts: [u32; 4],
+}
+
+/// The specialisation constants of `params.glsl`, in constant_id order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SpecConstants {
+    pub integrator: u32,
+    pub colour_mode: u32,
+    pub noise_kind: u32,
+    pub cluster_size: u32,
+    pub radius_map_varies: u32,
+    pub density_map_varies: u32,
+    pub has_radius_attribute: u32,
+}
+
+impl SpecConstants {
+    pub fn values(&self) -> [u32; 7] {
+        [
+            self.integrator,
+            self.colour_mode,
+            self.noise_kind,
+            self.cluster_size,
+            self.radius_map_varies,
+            self.density_map_varies,
+            self.has_radius_attribute,
+        ]
+    }
+
+    /// The names naga gives the constants (for wgpu's pipeline-overridable constants).
+    pub const NAMES: [&'static str; 7] = [
+        "INTEGRATOR",
+        "COLOUR_MODE",
+        "NOISE_KIND",
+        "CLUSTER_SIZE",
+        "RADIUS_MAP_VARIES",
+        "DENSITY_MAP_VARIES",
+        "HAS_RADIUS_ATTRIBUTE",
+    ];
+
+    pub fn integrator_id(i: Integrator) -> u32 {
+        match i {
+            Integrator::Ea => 0,
+            Integrator::Delta => 1,
+            Integrator::Marching => 2,
+            Integrator::SsReference => 3,
+        }
+    }
+
+    pub fn colour_id(c: ColourMode) -> u32 {
+        match c {
+            ColourMode::Post => 0,
+            ColourMode::Pre => 1,
+            ColourMode::Density => 2,
+        }
+    }
+
+    pub fn noise_id(n: NoiseKind) -> u32 {
+        match n {
+            NoiseKind::Stbn => 0,
+            NoiseKind::White => 1,
+        }
+    }
+}
+
+/// The map-table buffer of `maps.glsl`: density, radius, optical density (256 each), then
+/// the colour map as interleaved linear RGB (3 x 256).
+pub fn pack_map_tables(
+    density: &[f32],
+    radius: &[f32],
+    optical: &[f32],
+    colour: &[[f32; 3]],
+) -> Vec<f32> {
+    use crate::render::tables::TABLE_SIZE;
+    assert!(
+        density.len() == TABLE_SIZE
+            && radius.len() == TABLE_SIZE
+            && optical.len() == TABLE_SIZE
+            && colour.len() == TABLE_SIZE
+    );
+    let mut out = Vec::with_capacity(6 * TABLE_SIZE);
+    out.extend_from_slice(density);
+    out.extend_from_slice(radius);
+    out.extend_from_slice(optical);
+    out.extend(colour.iter().flatten());
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn includes_resolve_once_and_name_missing_files() {
+        let files = |name: &str| match name {
+            "a" => Some("A\n#include \"b\"\n".to_owned()),
+            "b" => Some("B\n".to_owned()),
+            _ => None,
+        };
+        let out = resolve_includes("#include \"a\"\n#include \"b\"\nmain", &files).unwrap();
+        assert_eq!(out.matches("\nB\n").count(), 1);
+        assert!(out.trim_end().ends_with("main"));
+        let e = resolve_includes("#include \"zzz\"", &files).unwrap_err();
+        assert!(e.contains("zzz"));
+        assert_eq!(std::mem::size_of::<GpuFrame>(), 160);
+    }
+}
