@@ -27,6 +27,9 @@ pub struct GenerateArgs {
     /// Output format: particles, vtk-xml (.vtp), csv, ply, raw or npy.
     #[arg(long, value_enum, default_value = "particles")]
     pub format: Format,
+    /// Overwrite an earlier output of the same data set in the directory.
+    #[arg(long)]
+    pub force: bool,
 }
 
 pub fn run(args: GenerateArgs) -> anyhow::Result<()> {

@@ -200,13 +200,9 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         let dir = args.out.parent().unwrap_or(Path::new(""));
         dir.join(format!("{stem}_{step:04}.png"))
     };
-    if !args.force {
-        for step in steps.clone() {
-            let path = out_for(step);
-            if path.exists() {
-                bail!("{} exists; pass --force to overwrite it", path.display());
-            }
-        }
+    // Check every output before rendering any, so a sequence never stops half way.
+    for step in steps.clone() {
+        crate::io::output::check_writable(&out_for(step), args.force)?;
     }
     let backend = backend::create(args.backend)?;
     tracing::info!(
@@ -232,10 +228,8 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             bar.inc(1);
         }
         let path = out_for(step);
-        image
-            .expect("spp >= 1")
-            .save_png(&path)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
+        image.expect("spp >= 1").save_png(&path, true)?;
         let t = session.backend().timings();
         tracing::info!(
             "step {step}: {} ({}x{}, {spp} spp, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",

@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clap::Args;
 use glam::DVec3;
 
@@ -36,6 +35,9 @@ pub struct SliceArgs {
     /// Output PNG.
     #[arg(long)]
     pub out: PathBuf,
+    /// Overwrite an existing output.
+    #[arg(long)]
+    pub force: bool,
 }
 
 pub fn run(args: SliceArgs) -> anyhow::Result<()> {
@@ -49,6 +51,7 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         "--width must lie in 1..=16384, got {}",
         args.width
     );
+    crate::io::output::check_writable(&args.out, args.force)?;
     let resolved = resolve(&args.data, &args.field)?;
     let step = resolved.series.step(resolved.step)?;
     let field = ReferenceField::of_step(
@@ -111,9 +114,11 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
             colour.map(|c| (linear_to_srgb((c * alpha).clamp(0.0, 1.0)) * 255.0).round() as u8),
         );
     }
-    image
-        .save(&args.out)
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    crate::io::output::write_atomically(&args.out, args.force, |tmp| {
+        image
+            .save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })?;
     tracing::info!(
         "slice of step {} ({} particles) at {:?} = {:.4}: {}x{} pixels, Phi_ref {:.4}",
         resolved.step,

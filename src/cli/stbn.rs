@@ -22,6 +22,9 @@ pub struct StbnArgs {
     pub seed: u64,
     #[arg(long)]
     pub out: PathBuf,
+    /// Overwrite an existing output.
+    #[arg(long)]
+    pub force: bool,
 }
 
 pub fn run(args: StbnArgs) -> anyhow::Result<()> {
@@ -57,7 +60,9 @@ pub fn run(args: StbnArgs) -> anyhow::Result<()> {
         },
     );
     bar.finish_and_clear();
-    mask.write(&args.out)?;
+    crate::io::output::write_atomically(&args.out, args.force, |tmp| {
+        mask.write(tmp).map_err(std::io::Error::other)
+    })?;
     println!("{}", args.out.display());
     Ok(())
 }

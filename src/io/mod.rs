@@ -9,6 +9,7 @@ pub mod csv;
 pub mod error;
 pub mod natural;
 pub mod npy;
+pub mod output;
 pub mod particles;
 pub mod ply;
 pub mod raw;
@@ -421,8 +422,25 @@ pub(crate) fn split_components(name: &str, data: &[f64], components: usize) -> V
     out
 }
 
+/// Files in `dir` that a [`write_series`] of `stem` could overwrite.
+pub fn existing_outputs(dir: &Path, stem: &str) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+                n.starts_with(&format!("{stem}.particles")) || n.starts_with(&format!("{stem}_"))
+            })
+        })
+        .collect();
+    out.sort();
+    out
+}
+
 /// Writes `steps` into `dir` as `<stem>.particles` (+ step files) or `<stem>_<i>.<ext>`, one
-/// file per step. Formats with a single attribute (`.particles`, `.raw`) carry `attribute`.
+/// file per step, each atomically (overwriting: callers check first, see
+/// [`existing_outputs`]). Formats with a single attribute (`.particles`, `.raw`) carry `attribute`.
 /// Returns the path to open the series with.
 pub fn write_series(
     dir: &Path,
@@ -455,11 +473,11 @@ pub fn write_series(
     };
     for (i, step) in steps.iter().enumerate() {
         let path = dir.join(format!("{stem}_{i:0width$}.{ext}"));
-        match format {
-            Format::VtkXml => vtk::write_vtp(&path, step)?,
-            Format::Csv => csv::write_step(&path, step)?,
-            Format::Ply => ply::write_step(&path, step)?,
-            Format::Raw => raw::write_step(&path, step, attribute)?,
+        output::write_atomically(&path, true, |path| match format {
+            Format::VtkXml => vtk::write_vtp(path, step),
+            Format::Csv => csv::write_step(path, step),
+            Format::Ply => ply::write_step(path, step),
+            Format::Raw => raw::write_step(path, step, attribute),
             Format::Npy => {
                 let cols = 3 + step.attributes.len();
                 let mut data = Vec::with_capacity(step.len() * cols);
@@ -467,10 +485,11 @@ pub fn write_series(
                     data.extend_from_slice(&p.to_array());
                     data.extend(step.attributes.iter().map(|a| a.values[k]));
                 }
-                npy::write_matrix_f32(&path, step.len(), cols, &data)?;
+                npy::write_matrix_f32(path, step.len(), cols, &data)
             }
             Format::Vtk | Format::Particles => unreachable!("handled above"),
-        }
+        })
+        .map_err(std::io::Error::other)?;
     }
     Ok(if steps.len() == 1 {
         dir.join(format!("{stem}_{:0width$}.{ext}", 0))

@@ -102,16 +102,21 @@ pub fn write_series(header: &Path, steps: &[Step], attribute: &str) -> std::io::
                 )
             })?
             .values;
-        let mut out = BufWriter::new(File::create(step_path(header, &name))?);
-        out.write_all(&(step.len() as u64).to_le_bytes())?;
-        for (p, v) in step.positions.iter().zip(values) {
-            for x in [p.x, p.y, p.z, *v] {
-                out.write_all(&x.to_le_bytes())?;
+        super::output::write_atomically(&step_path(header, &name), true, |tmp| {
+            let mut out = BufWriter::new(File::create(tmp)?);
+            out.write_all(&(step.len() as u64).to_le_bytes())?;
+            for (p, v) in step.positions.iter().zip(values) {
+                for x in [p.x, p.y, p.z, *v] {
+                    out.write_all(&x.to_le_bytes())?;
+                }
             }
-        }
-        out.flush()?;
+            out.flush()
+        })
+        .map_err(std::io::Error::other)?;
         names.push_str(&name);
         names.push('\n');
     }
-    std::fs::write(header, names)
+    // The header last: a series is complete once its header exists.
+    super::output::write_atomically(header, true, |tmp| std::fs::write(tmp, &names))
+        .map_err(std::io::Error::other)
 }

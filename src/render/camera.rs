@@ -108,7 +108,7 @@ impl Camera {
         let phi = i * std::f64::consts::PI * (3.0 - 5f64.sqrt());
         let dir = DVec3::new(phi.cos() * r, y.abs(), phi.sin() * r);
         let centre = bounds.center();
-        let distance = (bounds.diagonal() * 0.5).max(1e-9);
+        let distance = view_radius(bounds);
         // Straight overhead views need another up vector.
         let up = if dir.y > 0.999 { DVec3::Z } else { DVec3::Y };
         Camera {
@@ -117,6 +117,18 @@ impl Camera {
             up,
             fovy,
         }
+    }
+}
+
+/// Half the bounds' diagonal; for a point or an empty box, a unit (or, far from the origin, a
+/// size the coordinates can resolve), so a camera always has somewhere to stand.
+fn view_radius(bounds: Bounds) -> f64 {
+    let r = bounds.diagonal() * 0.5;
+    let resolvable = bounds.center().abs().max_element() * 1e-5;
+    if r > resolvable {
+        r
+    } else {
+        resolvable.max(1.0)
     }
 }
 

@@ -30,22 +30,13 @@ impl Image {
         out
     }
 
-    /// Writes a PNG, through a temporary file renamed into place, so an interrupted run never
-    /// leaves a truncated image.
-    pub fn save_png(&self, path: &Path) -> std::io::Result<()> {
-        let dir = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        let tmp = tempfile::Builder::new()
-            .prefix(".aarbf-")
-            .suffix(".png")
-            .tempfile_in(dir)?;
-        self.to_srgb8()
-            .save_with_format(tmp.path(), image::ImageFormat::Png)
-            .map_err(std::io::Error::other)?;
-        tmp.persist(path).map_err(|e| e.error)?;
-        Ok(())
+    /// Writes a PNG atomically (see [`crate::io::output`]); an existing file only with `force`.
+    pub fn save_png(&self, path: &Path, force: bool) -> Result<(), crate::io::output::OutputError> {
+        let rgb = self.to_srgb8();
+        crate::io::output::write_atomically(path, force, |tmp| {
+            rgb.save_with_format(tmp, image::ImageFormat::Png)
+                .map_err(std::io::Error::other)
+        })
     }
 
     /// The image blurred by a normalised Gaussian of standard deviation `sigma` pixels

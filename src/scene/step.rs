@@ -50,8 +50,13 @@ impl Bounds {
         self.extent().length()
     }
 
+    /// The centre (the origin for an empty box).
     pub fn center(&self) -> DVec3 {
-        (self.min.as_dvec3() + self.max.as_dvec3()) * 0.5
+        if self.is_empty() {
+            DVec3::ZERO
+        } else {
+            (self.min.as_dvec3() + self.max.as_dvec3()) * 0.5
+        }
     }
 }
 

@@ -1,0 +1,239 @@
+//! The extremes matrix (issue: numerical extremes): every backend against the f64 reference on
+//! data no one planned for. Expected: no NaN or Inf in any field value or pixel, bounded work,
+//! field values within the backend's tolerance of the reference.
+
+use aarbf::accel::ClusterSize;
+use aarbf::backend::{self, BackendKind, StepInput};
+use aarbf::field::{Classification, FieldSettings, ReferenceField};
+use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::scene::maps::{DensityMap, RadiusMap};
+use aarbf::scene::{Attribute, Step, TimeSeries};
+use glam::{DVec3, Vec3};
+use rand::{Rng, SeedableRng};
+
+/// The backends under test and their relative tolerance against the f64 reference.
+fn backends() -> Vec<(BackendKind, f64)> {
+    vec![(BackendKind::Cpu, 1e-9)]
+}
+
+struct Case {
+    name: &'static str,
+    step: Step,
+    field: FieldSettings,
+}
+
+fn uniform(n: usize, seed: u64, offset: f64, scale: f64) -> Step {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let positions: Vec<Vec3> = (0..n)
+        .map(|_| (DVec3::new(rng.random(), rng.random(), rng.random()) * scale + offset).as_vec3())
+        .collect();
+    let s = (0..n).map(|_| rng.random_range(0.0..1.0f32)).collect();
+    let h = (0..n).map(|_| rng.random_range(0.5..1.5f32)).collect();
+    Step {
+        name: format!("uniform{n}"),
+        positions,
+        attributes: vec![
+            Attribute {
+                name: "s".into(),
+                values: s,
+            },
+            Attribute {
+                name: "h".into(),
+                values: h,
+            },
+        ],
+    }
+}
+
+fn with_attribute(mut step: Step, values: Vec<f32>) -> Step {
+    step.attributes[0].values = values;
+    step
+}
+
+fn cases() -> Vec<Case> {
+    let diag = 3f64.sqrt();
+    let settings = |radius: f64| FieldSettings::new(Some("s"), radius);
+    let mut out = Vec::new();
+    for (name, frac) in [
+        ("radius 1e-6 of the diagonal", 1e-6),
+        ("radius 1e-3", 1e-3),
+        ("radius 1", 1.0),
+        ("radius 1e2", 1e2),
+    ] {
+        out.push(Case {
+            name,
+            step: uniform(800, 1, 0.0, 1.0),
+            field: settings(frac * diag),
+        });
+    }
+    // Per-particle radii spanning 1e-8..1e-2 of the diagonal in one step.
+    let mut step = uniform(800, 2, 0.0, 1.0);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+    step.attributes[1].values = (0..800)
+        .map(|_| 10f64.powf(rng.random_range(-8.0..-2.0)) as f32)
+        .collect();
+    let mut f = settings(diag);
+    f.radius_attribute = Some("h".into());
+    out.push(Case {
+        name: "per-particle radii 1e-8..1e-2",
+        step,
+        field: f,
+    });
+    // Radius 0 for some, most and all particles (radius map over the attribute).
+    for (name, zero_below) in [
+        ("radius 0 for some", 0.1),
+        ("radius 0 for most", 0.9),
+        ("radius 0 for all", 1.01),
+    ] {
+        let mut f = settings(0.05);
+        let z = (zero_below as f64).min(0.999);
+        f.radius_map = RadiusMap::new(format!("0:0,{z}:0,1:1").parse().unwrap()).unwrap();
+        if zero_below > 1.0 {
+            f.radius_map = RadiusMap::new("0".parse().unwrap()).unwrap();
+        }
+        out.push(Case {
+            name,
+            step: uniform(800, 4, 0.0, 1.0),
+            field: f,
+        });
+    }
+    for n in [0, 1, 2] {
+        out.push(Case {
+            name: ["N = 0", "N = 1", "N = 2"][n],
+            step: uniform(n, 5, 0.0, 1.0),
+            field: settings(0.3),
+        });
+    }
+    let mut one_point = uniform(1000, 6, 0.0, 1.0);
+    one_point
+        .positions
+        .iter_mut()
+        .for_each(|p| *p = Vec3::splat(0.5));
+    out.push(Case {
+        name: "1000 particles at one point",
+        step: one_point,
+        field: settings(0.1),
+    });
+    for (name, offset) in [("offset 1e3", 1e3), ("offset 1e6", 1e6)] {
+        out.push(Case {
+            name,
+            step: uniform(800, 7, offset, 1.0),
+            field: settings(0.1),
+        });
+    }
+    let mut f = settings(0.1);
+    f.density_map = DensityMap::new("1e-40".parse().unwrap()).unwrap();
+    out.push(Case {
+        name: "Phi in the denormal range",
+        step: uniform(800, 8, 0.0, 1.0),
+        field: f,
+    });
+    let big: Vec<f32> = (0..800)
+        .map(|i| if i % 2 == 0 { 1e30 } else { -1e30 })
+        .collect();
+    out.push(Case {
+        name: "attributes at +-1e30",
+        step: with_attribute(uniform(800, 9, 0.0, 1.0), big),
+        field: settings(0.1),
+    });
+    out.push(Case {
+        name: "constant attribute",
+        step: with_attribute(uniform(800, 10, 0.0, 1.0), vec![3.0; 800]),
+        field: settings(0.1),
+    });
+    let mut f = settings(0.1);
+    f.density_map = DensityMap::new("0".parse().unwrap()).unwrap();
+    out.push(Case {
+        name: "density map 0 everywhere",
+        step: uniform(800, 11, 0.0, 1.0),
+        field: f,
+    });
+    out
+}
+
+fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
+    let b = step.bounds();
+    let (lo, ext) = if b.is_empty() {
+        (DVec3::ZERO, DVec3::ONE)
+    } else {
+        (b.min.as_dvec3(), b.extent().max(DVec3::splat(1e-3)))
+    };
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let mut q: Vec<DVec3> = (0..256)
+        .map(|_| lo + DVec3::new(rng.random(), rng.random(), rng.random()) * ext)
+        .collect();
+    q.extend(step.positions.iter().take(64).map(|p| p.as_dvec3()));
+    q
+}
+
+#[test]
+fn extremes_matrix() {
+    for (kind, tolerance) in backends() {
+        for case in cases() {
+            for classification in [Classification::Post, Classification::Pre] {
+                let mut field = case.field.clone();
+                field.classification = classification;
+                let label = format!("{kind} / {} / {classification:?}", case.name);
+                let series = TimeSeries::from_steps(vec![case.step.clone()]);
+                let range = series
+                    .attribute("s")
+                    .map(|a| (f64::from(a.min), f64::from(a.max)));
+                let cluster = ClusterSize::new(4).unwrap();
+                let reference =
+                    ReferenceField::of_step(&case.step, &field, cluster, series.bounds(), range)
+                        .unwrap();
+                let mut b = backend::create(kind).unwrap();
+                b.upload(&StepInput {
+                    step: &case.step,
+                    field: &field,
+                    cluster,
+                    series_bounds: series.bounds(),
+                    series_range: range,
+                })
+                .unwrap();
+                b.build().unwrap();
+                let q = queries(&case.step, 1);
+                let got = b.query(&q).unwrap();
+                for (x, (phi, num)) in q.iter().zip(&got) {
+                    let (rphi, rnum) = reference.eval_sums(*x);
+                    assert!(
+                        phi.is_finite() && num.iter().all(|v| v.is_finite()),
+                        "{label}: non-finite at {x}"
+                    );
+                    let scale = rphi.abs().max(1e-30);
+                    assert!(
+                        (phi - rphi).abs() <= tolerance * scale,
+                        "{label}: Phi {phi} vs {rphi} at {x}"
+                    );
+                    for c in 0..3 {
+                        assert!(
+                            (num[c] - rnum[c]).abs() <= tolerance * rnum[c].abs().max(scale),
+                            "{label}: Theta {num:?} vs {rnum:?}"
+                        );
+                    }
+                }
+                let mut session = RenderSession::new(b, &series);
+                session.show(&series, 0, &field, cluster).unwrap();
+                for integrator in [Integrator::Ea, Integrator::Marching, Integrator::Delta] {
+                    let settings = RenderSettings {
+                        width: 12,
+                        height: 12,
+                        integrator,
+                        noise: NoiseKind::White,
+                        ..RenderSettings::default()
+                    };
+                    let started = std::time::Instant::now();
+                    let image = session.render(&settings, 1).unwrap();
+                    assert!(
+                        image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())),
+                        "{label} / {integrator:?}: non-finite pixel"
+                    );
+                    assert!(
+                        started.elapsed().as_secs() < 60,
+                        "{label} / {integrator:?}: work per frame must stay bounded"
+                    );
+                }
+            }
+        }
+    }
+}
