@@ -31,7 +31,7 @@ fn main() {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(2);
     let queries: Vec<f32> = (0..m * 3).map(|_| rng.random::<f32>()).collect();
     let q = dir.path().join("queries.npy");
-    npy::write_matrix_f32(&q, m, 3, &queries).unwrap();
+    npy::write_matrix(&q, m, 3, &queries).unwrap();
 
     // N (4/3) pi r^3 = 30 particles within r of a point (unit cube).
     let radius = (30.0 * 3.0 / (4.0 * std::f64::consts::PI * n as f64)).cbrt();

@@ -86,7 +86,7 @@ fn generate_info_and_field_agree_with_the_library() {
     // Queries: a line through the data, float32.
     let queries: Vec<f32> = (0..64).flat_map(|i| [i as f32 / 64.0, 0.1, 0.15]).collect();
     let q = d.join("q.npy");
-    npy::write_matrix_f32(&q, 64, 3, &queries).unwrap();
+    npy::write_matrix(&q, 64, 3, &queries).unwrap();
     for (classification, cols) in [("post", 2), ("pre", 4)] {
         let out = d.join(format!("f_{classification}.npy"));
         ok(&[

@@ -469,7 +469,7 @@ fn raw_and_npy() {
     assert_eq!(step.positions[1], Vec3::new(3.0, 4.0, 5.0));
     assert_eq!(step.attribute("col3").unwrap().values, MASS);
     let data32: Vec<f32> = data.iter().map(|&x| x as f32).collect();
-    io::npy::write_matrix_f32(&npy, 3, 4, &data32).unwrap();
+    io::npy::write_matrix(&npy, 3, 4, &data32).unwrap();
     assert_eq!(read(&npy).unwrap().attribute("col3").unwrap().values, MASS);
 
     // Fortran order, as numpy.asfortranarray writes it: a hand-made header.

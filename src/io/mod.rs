@@ -485,7 +485,7 @@ pub fn write_series(
                     data.extend_from_slice(&p.to_array());
                     data.extend(step.attributes.iter().map(|a| a.values[k]));
                 }
-                npy::write_matrix_f32(path, step.len(), cols, &data)
+                npy::write_matrix(path, step.len(), cols, &data)
             }
             Format::Vtk | Format::Particles => unreachable!("handled above"),
         })
@@ -496,4 +496,51 @@ pub fn write_series(
     } else {
         dir.join(format!("{stem}_*.{ext}"))
     })
+}
+
+/// Reads one step of `format` from bytes (through a temporary file, as the readers read files):
+/// what the fuzz targets and their regression tests call. For `.particles` the bytes are a step
+/// file (count + records) under a one-step header.
+pub fn read_bytes(format: Format, data: &[u8]) -> Result<Step, DataError> {
+    // Memory-backed where available: fuzzers call this many thousand times a second.
+    let shm = Path::new("/dev/shm");
+    let base = if shm.is_dir() {
+        shm.to_path_buf()
+    } else {
+        std::env::temp_dir()
+    };
+    let dir = tempfile::Builder::new()
+        .prefix("aarbf-read-")
+        .tempdir_in(base)
+        .map_err(|e| DataError::new("<temporary directory>", None, Problem::Io(e)))?;
+    let ext = match format {
+        Format::Particles => "particles",
+        Format::VtkXml => "vtp",
+        Format::Vtk => "vtk",
+        Format::Csv => "csv",
+        Format::Ply => "ply",
+        Format::Raw => "raw",
+        Format::Npy => "npy",
+    };
+    let path = dir.path().join(format!("input.{ext}"));
+    let write = |p: &Path, bytes: &[u8]| {
+        std::fs::write(p, bytes).map_err(|e| DataError::new(p, None, Problem::Io(e)))
+    };
+    let step = if format == Format::Particles {
+        write(&path, b"0\n")?;
+        write(&particles::step_path(&path, "0"), data)?;
+        StepRef {
+            path: particles::step_path(&path, "0"),
+            format,
+            name: "0".into(),
+        }
+    } else {
+        write(&path, data)?;
+        StepRef {
+            path: path.clone(),
+            format,
+            name: "input".into(),
+        }
+    };
+    read_step(&step, &AttributeSelection::All)
 }

@@ -128,24 +128,12 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     })
 }
 
-/// Writes a row-major `rows x cols` float64 array.
-pub fn write_matrix(path: &Path, rows: usize, cols: usize, data: &[f64]) -> std::io::Result<()> {
-    assert_eq!(data.len(), rows * cols);
-    let mut writer = npyz::WriteOptions::new()
-        .default_dtype()
-        .shape(&[rows as u64, cols as u64])
-        .writer(BufWriter::new(File::create(path)?))
-        .begin_nd()?;
-    writer.extend(data.iter().copied())?;
-    writer.finish()
-}
-
-/// Writes a row-major `rows x cols` float32 array.
-pub fn write_matrix_f32(
+/// Writes a row-major `rows x cols` array of f64 or f32 (the dtype follows the element type).
+pub fn write_matrix<T: npyz::AutoSerialize + Copy>(
     path: &Path,
     rows: usize,
     cols: usize,
-    data: &[f32],
+    data: &[T],
 ) -> std::io::Result<()> {
     assert_eq!(data.len(), rows * cols);
     let mut writer = npyz::WriteOptions::new()

@@ -5,13 +5,11 @@
 //! little-endian f32 (x, y, z, attribute).
 
 use std::fs::File;
-use std::io::{BufWriter, Read, Write};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
-
 use super::{At, Columns, DataError, Problem, file_len};
-use crate::scene::{Attribute, Step};
+use crate::scene::Step;
 
 /// The name the format's single unnamed attribute gets.
 pub const ATTRIBUTE_NAME: &str = "attribute";
@@ -70,20 +68,7 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     }
     let mut bytes = vec![0u8; n * RECORD_BYTES as usize];
     file.read_exact(&mut bytes).map_err(|e| at.io(e))?;
-    let mut positions = Vec::with_capacity(n);
-    let mut values = Vec::with_capacity(n);
-    for record in bytes.chunks_exact(RECORD_BYTES as usize) {
-        let f = |i: usize| f32::from_le_bytes(record[i * 4..i * 4 + 4].try_into().unwrap());
-        positions.push(Vec3::new(f(0), f(1), f(2)));
-        values.push(f(3));
-    }
-    Ok(Columns {
-        positions,
-        attributes: vec![Attribute {
-            name: ATTRIBUTE_NAME.into(),
-            values,
-        }],
-    })
+    Ok(super::raw::xyzw_columns(&bytes, ATTRIBUTE_NAME))
 }
 
 /// Writes a series as a `.particles` header and one file per step, carrying `attribute`.
@@ -93,24 +78,10 @@ pub fn write_series(header: &Path, steps: &[Step], attribute: &str) -> std::io::
     let mut names = String::new();
     for (i, step) in steps.iter().enumerate() {
         let name = format!("{i:0width$}");
-        let values = &step
-            .attribute(attribute)
-            .ok_or_else(|| {
-                std::io::Error::new(
-                    std::io::ErrorKind::InvalidInput,
-                    format!("step {i} has no attribute '{attribute}'"),
-                )
-            })?
-            .values;
+        let mut bytes = (step.len() as u64).to_le_bytes().to_vec();
+        bytes.extend(super::raw::xyzw_bytes(step, attribute)?);
         super::output::write_atomically(&step_path(header, &name), true, |tmp| {
-            let mut out = BufWriter::new(File::create(tmp)?);
-            out.write_all(&(step.len() as u64).to_le_bytes())?;
-            for (p, v) in step.positions.iter().zip(values) {
-                for x in [p.x, p.y, p.z, *v] {
-                    out.write_all(&x.to_le_bytes())?;
-                }
-            }
-            out.flush()
+            std::fs::write(tmp, &bytes)
         })
         .map_err(std::io::Error::other)?;
         names.push_str(&name);

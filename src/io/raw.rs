@@ -20,6 +20,12 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
             available: bytes.len() as u64,
         }));
     }
+    Ok(xyzw_columns(&bytes, ATTRIBUTE_NAME))
+}
+
+/// Columns from little-endian records of four f32 (x, y, z, attribute): the body of both
+/// `.raw` files and `.particles` step files.
+pub(crate) fn xyzw_columns(bytes: &[u8], attribute: &str) -> Columns {
     let mut positions = Vec::with_capacity(bytes.len() / 16);
     let mut values = Vec::with_capacity(bytes.len() / 16);
     for record in bytes.chunks_exact(16) {
@@ -27,19 +33,25 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
         positions.push(Vec3::new(f(0), f(1), f(2)));
         values.push(f(3));
     }
-    Ok(Columns {
+    Columns {
         positions,
         attributes: vec![Attribute {
-            name: ATTRIBUTE_NAME.into(),
+            name: attribute.into(),
             values,
         }],
-    })
+    }
 }
 
-pub fn write_step(path: &Path, step: &Step, attribute: &str) -> std::io::Result<()> {
+/// Records of four little-endian f32 (x, y, z, `attribute`) for a step.
+pub(crate) fn xyzw_bytes(step: &Step, attribute: &str) -> std::io::Result<Vec<u8>> {
     let values = &step
         .attribute(attribute)
-        .ok_or_else(|| std::io::Error::other(format!("no attribute '{attribute}'")))?
+        .ok_or_else(|| {
+            std::io::Error::other(format!(
+                "step '{}' has no attribute '{attribute}'",
+                step.name
+            ))
+        })?
         .values;
     let mut bytes = Vec::with_capacity(step.len() * 16);
     for (p, v) in step.positions.iter().zip(values) {
@@ -47,5 +59,9 @@ pub fn write_step(path: &Path, step: &Step, attribute: &str) -> std::io::Result<
             bytes.extend_from_slice(&x.to_le_bytes());
         }
     }
-    std::fs::write(path, bytes)
+    Ok(bytes)
+}
+
+pub fn write_step(path: &Path, step: &Step, attribute: &str) -> std::io::Result<()> {
+    std::fs::write(path, xyzw_bytes(step, attribute)?)
 }

@@ -7,6 +7,8 @@
 //! - `test`: setup, then the whole test suite (optimised, with debug assertions).
 //! - `demo`: setup, then render the built-in demo scene to `demo.png`.
 //! - `bench NAME [args]`: setup, then `cargo bench --bench NAME -- args`.
+//! - `fuzz [--seconds N] [TARGET...]`: run the reader fuzz targets (cargo fuzz, libFuzzer) for a
+//!   bounded time each, copy any finding into tests/fuzz_regressions/, print a summary.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -32,13 +34,15 @@ fn main() -> ExitCode {
         Some("test") => test(&args[1..]),
         Some("demo") => demo(),
         Some("bench") if args.len() > 1 => bench(&args[1], &args[2..]),
+        Some("fuzz") => fuzz(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <setup | test [cargo test args] | demo | bench NAME [args]>\n\n  \
+                "usage: cargo xtask <setup | test [cargo test args] | demo | bench NAME [args] | fuzz [--seconds N] [TARGET...]>\n\n  \
                  setup  install the Vulkan driver (lavapipe) and tools if missing\n  \
                  test   setup, then run every test\n  \
                  demo   setup, then render the demo scene to demo.png\n  \
-                 bench  run benches/NAME.rs (results belong in docs/benchmarks.md)"
+                 bench  run benches/NAME.rs (results belong in docs/benchmarks.md)\n  \
+                 fuzz   [--seconds N] [TARGET...]: fuzz the readers (default 600 s each)"
             );
             return ExitCode::from(2);
         }
@@ -270,6 +274,129 @@ fn test(extra: &[String]) -> Result<()> {
     run(cargo()
         .args(["test", "--workspace", "--profile", PROFILE])
         .args(extra))
+}
+
+const FUZZ_TARGETS: [&str; 7] = [
+    "read_particles",
+    "read_vtk_xml",
+    "read_vtk_legacy",
+    "read_csv",
+    "read_ply",
+    "read_raw",
+    "read_npy",
+];
+
+fn fuzz(args: &[String]) -> Result<()> {
+    let mut seconds = 600u64;
+    let mut targets: Vec<String> = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if a == "--seconds" {
+            let v = it.next().context("--seconds needs a number")?;
+            seconds = v.parse().with_context(|| format!("--seconds {v}"))?;
+        } else if FUZZ_TARGETS.contains(&a.as_str()) {
+            targets.push(a.clone());
+        } else {
+            bail!(
+                "unknown fuzz target '{a}' (targets: {})",
+                FUZZ_TARGETS.join(", ")
+            );
+        }
+    }
+    if targets.is_empty() {
+        targets = FUZZ_TARGETS.iter().map(|t| (*t).to_owned()).collect();
+    }
+    let root = workspace_root();
+    let fuzz_dir = root.join("fuzz");
+    if !Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+        .args(["fuzz", "--version"])
+        .output()
+        .is_ok_and(|o| o.status.success())
+    {
+        step("installing cargo-fuzz");
+        run(cargo().args(["install", "cargo-fuzz", "--locked"]))?;
+    }
+    // cargo fuzz needs nightly flags (sanitizers); a stable toolchain accepts them with
+    // RUSTC_BOOTSTRAP, so no second toolchain is needed.
+    let mut rows = Vec::new();
+    for target in &targets {
+        let corpus = fuzz_dir.join("corpus").join(target);
+        std::fs::create_dir_all(&corpus)?;
+        for seed in std::fs::read_dir(fuzz_dir.join("seeds").join(target))?.flatten() {
+            std::fs::copy(seed.path(), corpus.join(seed.file_name()))?;
+        }
+        step(&format!("fuzzing {target} for {seconds} s"));
+        let output = cargo()
+            .current_dir(&fuzz_dir)
+            .env("RUSTC_BOOTSTRAP", "1")
+            .args(["fuzz", "run", target])
+            .arg(&corpus)
+            .args([
+                "--",
+                &format!("-max_total_time={seconds}"),
+                "-malloc_limit_mb=512",
+                "-rss_limit_mb=2048",
+                "-timeout=10",
+                "-max_len=65536",
+                "-print_final_stats=1",
+            ])
+            .output()
+            .with_context(|| format!("cannot run cargo fuzz for {target}"))?;
+        let log = String::from_utf8_lossy(&output.stderr).into_owned();
+        std::fs::write(fuzz_dir.join(format!("{target}.log")), &log)?;
+        let stat = |key: &str| -> String {
+            log.lines()
+                .rev()
+                .find_map(|l| {
+                    l.strip_prefix(&format!("stat::{key}:"))
+                        .map(|v| v.trim().to_owned())
+                })
+                .unwrap_or_else(|| "?".into())
+        };
+        let coverage = log
+            .lines()
+            .rev()
+            .find_map(|l| {
+                l.split("cov: ")
+                    .nth(1)
+                    .and_then(|r| r.split_whitespace().next())
+                    .map(str::to_owned)
+            })
+            .unwrap_or_else(|| "?".into());
+        // Findings become regression tests.
+        let mut findings = Vec::new();
+        if let Ok(artifacts) = std::fs::read_dir(fuzz_dir.join("artifacts").join(target)) {
+            let regressions = root.join("tests").join("fuzz_regressions").join(target);
+            std::fs::create_dir_all(&regressions)?;
+            for a in artifacts.flatten() {
+                let name = a.file_name().to_string_lossy().into_owned();
+                std::fs::copy(a.path(), regressions.join(&name))?;
+                findings.push(name);
+            }
+        }
+        if !output.status.success() && findings.is_empty() {
+            eprintln!("{log}");
+            bail!(
+                "cargo fuzz run {target} failed without leaving an artifact (see fuzz/{target}.log)"
+            );
+        }
+        rows.push(format!(
+            "| {target} | {seconds} | {} | {} | {coverage} | {} |",
+            stat("number_of_executed_units"),
+            stat("average_exec_per_sec"),
+            if findings.is_empty() {
+                "none".to_owned()
+            } else {
+                findings.join(", ")
+            }
+        ));
+    }
+    println!("| target | seconds | executions | exec/s | coverage (edges) | findings |");
+    println!("|---|---|---|---|---|---|");
+    for r in rows {
+        println!("{r}");
+    }
+    Ok(())
 }
 
 fn bench(name: &str, extra: &[String]) -> Result<()> {
