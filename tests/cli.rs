@@ -204,8 +204,19 @@ fn scene_file_settings_and_flag_overrides() {
         4,
         "pre-classification from the scene file"
     );
+    let e = fails(&[
+        "field",
+        "--scene",
+        s(&d.join("scene.toml")),
+        "--queries",
+        s(&q),
+        "--out",
+        s(&out),
+    ]);
+    assert!(e.contains("exists; pass --force"), "{e}");
     ok(&[
         "field",
+        "--force",
         "--scene",
         s(&d.join("scene.toml")),
         "--classification",
@@ -332,6 +343,17 @@ fn render_writes_images_and_sequences() {
     assert!(e.contains("exists") && e.contains("--force"), "{e}");
     args.push("--force");
     ok(&args);
+    // Settings that leave no density anywhere render (a background image) but say why.
+    for (flag, value, says) in [
+        ("--radius-map", "0", "every particle has radius 0"),
+        ("--density-map", "0", "gives every particle weight 0"),
+    ] {
+        let mut a = args.clone();
+        a.extend([flag, value]);
+        let out = aarbf(&a);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success() && stderr.contains(says), "{stderr}");
+    }
 
     let seq = d.join("seq.png");
     let mut args = vec![

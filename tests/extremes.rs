@@ -11,9 +11,49 @@ use aarbf::scene::{Attribute, Step, TimeSeries};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 
-/// The backends under test and their relative tolerance against the f64 reference.
+/// The backends under test and their relative tolerance against the f64 reference (those the
+/// backends' own tests state: f64 agrees to rounding; the GPUs compute in f32 and look colours
+/// up in a 256-entry table). A GPU backend that cannot start fails the test under `CI` and is
+/// skipped with a notice otherwise.
 fn backends() -> Vec<(BackendKind, f64)> {
-    vec![(BackendKind::Cpu, 1e-9)]
+    let mut out = vec![(BackendKind::Cpu, 1e-9)];
+    for (kind, tolerance) in [(BackendKind::Wgpu, 5e-4), (BackendKind::Ash, 5e-4)] {
+        match backend::create(kind) {
+            Ok(_) => out.push((kind, tolerance)),
+            Err(e) if std::env::var_os("CI").is_some() => {
+                panic!("CI is set, but the {kind} backend is unavailable: {e}")
+            }
+            Err(e) => eprintln!("SKIPPED {kind} (set CI to make this fail): {e}"),
+        }
+    }
+    out
+}
+
+/// What f32 cannot resolve: the contributions of particles whose sphere's edge lies within
+/// 1e-4 of its radius (plus the f32 rounding of the local coordinates) of `x`. A GPU may count
+/// such a particle in or out; the phi at an edge is exp(-4.5) w, not small.
+fn edge_allowance(reference: &ReferenceField, x: DVec3, origin: DVec3) -> (f64, [f64; 3]) {
+    let p = &reference.particles;
+    let ulp = 2.0 * f64::from(f32::EPSILON) * (x - origin).abs().max_element().max(1e-30);
+    let mut phi = 0.0;
+    let mut theta = [0.0; 3];
+    for i in 0..p.len() {
+        let r = p.radii[i];
+        let d = (x - p.centers[i]).length();
+        if r > 0.0 && (d - r).abs() <= 1e-4 * r + ulp {
+            let w = p.weights[i] * (-4.5f64).exp() * 1.01;
+            phi += w;
+            let t = match &p.theta {
+                aarbf::field::Theta::Scalar(t) => [t[i], 0.0, 0.0],
+                aarbf::field::Theta::Rgb(c) => c[i],
+                aarbf::field::Theta::None => [0.0; 3],
+            };
+            for c in 0..3 {
+                theta[c] += w * t[c].abs();
+            }
+        }
+    }
+    (phi, theta)
 }
 
 struct Case {
@@ -86,7 +126,7 @@ fn cases() -> Vec<Case> {
         ("radius 0 for all", 1.01),
     ] {
         let mut f = settings(0.05);
-        let z = (zero_below as f64).min(0.999);
+        let z: f64 = f64::min(zero_below, 0.999);
         f.radius_map = RadiusMap::new(format!("0:0,{z}:0,1:1").parse().unwrap()).unwrap();
         if zero_below > 1.0 {
             f.radius_map = RadiusMap::new("0".parse().unwrap()).unwrap();
@@ -168,72 +208,108 @@ fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
 
 #[test]
 fn extremes_matrix() {
+    let mut times = Vec::new();
     for (kind, tolerance) in backends() {
         for case in cases() {
+            let started = std::time::Instant::now();
             for classification in [Classification::Post, Classification::Pre] {
-                let mut field = case.field.clone();
-                field.classification = classification;
-                let label = format!("{kind} / {} / {classification:?}", case.name);
-                let series = TimeSeries::from_steps(vec![case.step.clone()]);
-                let range = series
-                    .attribute("s")
-                    .map(|a| (f64::from(a.min), f64::from(a.max)));
-                let cluster = ClusterSize::new(4).unwrap();
-                let reference =
-                    ReferenceField::of_step(&case.step, &field, cluster, series.bounds(), range)
-                        .unwrap();
-                let mut b = backend::create(kind).unwrap();
-                b.upload(&StepInput {
-                    step: &case.step,
-                    field: &field,
-                    cluster,
-                    series_bounds: series.bounds(),
-                    series_range: range,
-                })
-                .unwrap();
-                b.build().unwrap();
-                let q = queries(&case.step, 1);
-                let got = b.query(&q).unwrap();
-                for (x, (phi, num)) in q.iter().zip(&got) {
-                    let (rphi, rnum) = reference.eval_sums(*x);
-                    assert!(
-                        phi.is_finite() && num.iter().all(|v| v.is_finite()),
-                        "{label}: non-finite at {x}"
-                    );
-                    let scale = rphi.abs().max(1e-30);
-                    assert!(
-                        (phi - rphi).abs() <= tolerance * scale,
-                        "{label}: Phi {phi} vs {rphi} at {x}"
-                    );
-                    for c in 0..3 {
-                        assert!(
-                            (num[c] - rnum[c]).abs() <= tolerance * rnum[c].abs().max(scale),
-                            "{label}: Theta {num:?} vs {rnum:?}"
-                        );
-                    }
-                }
-                let mut session = RenderSession::new(b, &series);
-                session.show(&series, 0, &field, cluster).unwrap();
-                for integrator in [Integrator::Ea, Integrator::Marching, Integrator::Delta] {
-                    let settings = RenderSettings {
-                        width: 12,
-                        height: 12,
-                        integrator,
-                        noise: NoiseKind::White,
-                        ..RenderSettings::default()
-                    };
-                    let started = std::time::Instant::now();
-                    let image = session.render(&settings, 1).unwrap();
-                    assert!(
-                        image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())),
-                        "{label} / {integrator:?}: non-finite pixel"
-                    );
-                    assert!(
-                        started.elapsed().as_secs() < 60,
-                        "{label} / {integrator:?}: work per frame must stay bounded"
-                    );
-                }
+                check_case(kind, tolerance, &case, classification);
             }
+            let line = format!(
+                "{kind} / {}: {:.1} s",
+                case.name,
+                started.elapsed().as_secs_f64()
+            );
+            eprintln!("{line}");
+            times.push(line);
         }
+    }
+    eprintln!("{}", times.join("\n"));
+}
+
+fn check_case(kind: BackendKind, tolerance: f64, case: &Case, classification: Classification) {
+    let mut field = case.field.clone();
+    field.classification = classification;
+    let label = format!("{kind} / {} / {classification:?}", case.name);
+    let series = TimeSeries::from_steps(vec![case.step.clone()]);
+    let range = series
+        .attribute("s")
+        .map(|a| (f64::from(a.min), f64::from(a.max)));
+    let cluster = ClusterSize::new(4).unwrap();
+    let reference =
+        ReferenceField::of_step(&case.step, &field, cluster, series.bounds(), range).unwrap();
+    let mut b = backend::create(kind).unwrap();
+    b.upload(&StepInput {
+        step: &case.step,
+        field: &field,
+        cluster,
+        series_bounds: series.bounds(),
+        series_range: range,
+    })
+    .unwrap();
+    b.build().unwrap();
+    let q = queries(&case.step, 1);
+    let got = b.query(&q).unwrap();
+    let origin = series.bounds().center();
+    // Below this a density counts as none (PHI_EPSILON; f32 flushes denormals).
+    let floor = 1e-30;
+    for (x, (phi, num)) in q.iter().zip(&got) {
+        let (rphi, rnum) = reference.eval_sums(*x);
+        assert!(
+            phi.is_finite() && num.iter().all(|v| v.is_finite()),
+            "{label}: non-finite at {x}"
+        );
+        let (edge_phi, edge_num) = if kind == BackendKind::Cpu {
+            (0.0, [0.0; 3])
+        } else {
+            edge_allowance(&reference, *x, origin)
+        };
+        assert!(
+            (phi - rphi).abs() <= tolerance * rphi.abs() + edge_phi + floor,
+            "{label}: Phi {phi} vs {rphi} at {x}"
+        );
+        for c in 0..3 {
+            let allowed = tolerance * rnum[c].abs().max(rphi.abs()) + edge_num[c] + floor;
+            assert!(
+                (num[c] - rnum[c]).abs() <= allowed,
+                "{label}: Theta {num:?} vs {rnum:?} at {x}"
+            );
+        }
+    }
+    let mut session = RenderSession::new(b, &series);
+    session.show(&series, 0, &field, cluster).unwrap();
+    // The GPUs share the integrator code, which the CPU twin and the backends' own image tests
+    // cover; here the point is finite pixels and bounded work on extreme data, so they render
+    // fewer, smaller frames (lavapipe runs them on the same two cores).
+    let (size, integrators): (u32, &[Integrator]) = if kind == BackendKind::Cpu {
+        (
+            12,
+            &[Integrator::Ea, Integrator::Marching, Integrator::Delta],
+        )
+    } else {
+        (6, &[Integrator::Ea, Integrator::Marching])
+    };
+    for &integrator in integrators {
+        let settings = RenderSettings {
+            width: size,
+            height: size,
+            integrator,
+            noise: NoiseKind::White,
+            ..RenderSettings::default()
+        };
+        let started = std::time::Instant::now();
+        let image = session.render(&settings, 1).unwrap();
+        eprintln!(
+            "  {label} / {integrator:?}: {:.2} s",
+            started.elapsed().as_secs_f64()
+        );
+        assert!(
+            image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())),
+            "{label} / {integrator:?}: non-finite pixel"
+        );
+        assert!(
+            started.elapsed().as_secs() < 60,
+            "{label} / {integrator:?}: work per frame must stay bounded"
+        );
     }
 }

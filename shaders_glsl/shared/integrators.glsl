@@ -54,6 +54,11 @@ vec2 ray_box(vec3 origin, vec3 dir, vec3 lo, vec3 hi) {
     vec3 tmax = max(t1, t2);
     float t_enter = max(max(max(tmin.x, tmin.y), tmin.z), 0.0);
     float t_exit = min(min(tmax.x, tmax.y), tmax.z);
+    // An inverted or unbounded box (no particles) is missed: a march to t = inf would never
+    // end. Callers test !(span.x < span.y), which also rejects NaN.
+    if (any(greaterThan(lo, hi)) || !(t_exit < 3.0e38)) {
+        return vec2(0.0, -1.0);
+    }
     return vec2(t_enter, t_exit);
 }
 
@@ -171,4 +176,6 @@ vec4 render_pixel(uvec2 pixel) {
             }
         }
     }
+    // Unreachable (every branch returns); naga's validator wants a return on every path.
+    return vec4(bg, 0.0);
 }

@@ -2,10 +2,11 @@
 //! the way `shaders_glsl/shared/rbf.glsl` reads them. Both GPU backends upload exactly this.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 use super::StepInput;
 use crate::accel::{ClusterSize, hilbert_order};
-use crate::field::{FieldError, FieldSettings, normalise};
+use crate::field::{FieldError, FieldInputs, FieldSettings, normalise};
 use crate::render::tables::{bake, bake_colour};
 use crate::shaders::GpuField;
 
@@ -37,33 +38,22 @@ impl GpuStepData {
         let step = input.step;
         let settings = input.field;
         // The same checks and range as the CPU reference, so every backend refuses the same input.
-        let reference = crate::field::Particles::prepare(
-            step,
-            settings,
-            input.series_bounds,
-            input.series_range,
-        )?;
+        let inputs = FieldInputs::check(step, settings, input.series_range)?;
         let origin = input.series_bounds.center();
         let order = hilbert_order(&step.positions, input.series_bounds);
-        let attribute = settings
-            .attribute
-            .as_deref()
-            .and_then(|a| step.attribute(a));
         let points = order
-            .iter()
+            .par_iter()
             .map(|&i| {
                 let p = step.positions[i as usize].as_dvec3() - origin;
-                let t = attribute.map_or(0.0, |a| {
-                    normalise(f64::from(a.values[i as usize]), reference.range)
+                let t = inputs.attribute.map_or(0.0, |a| {
+                    normalise(f64::from(a.values[i as usize]), inputs.range)
                 });
                 [p.x as f32, p.y as f32, p.z as f32, t as f32]
             })
             .collect();
-        let radius_attribute = settings
-            .radius_attribute
-            .as_deref()
-            .and_then(|a| step.attribute(a))
-            .map(|h| order.iter().map(|&i| h.values[i as usize]).collect());
+        let radius_attribute = inputs
+            .radius
+            .map(|h| order.par_iter().map(|&i| h.values[i as usize]).collect());
         let mut data = GpuStepData {
             origin,
             points,

@@ -7,8 +7,10 @@
 //! means [`Backend::upload`] + [`Backend::build`]; a new radius (global radius, radius map or
 //! radius attribute) means [`Backend::refit`]; anything else only restarts accumulation.
 
+pub mod ash_rt;
 pub mod cpu;
 pub mod gpu_data;
+pub mod wgpu_lbvh;
 
 use std::fmt;
 use std::time::Duration;
@@ -36,11 +38,16 @@ use crate::scene::{Bounds, Step};
 )]
 #[serde(rename_all = "lowercase")]
 pub enum BackendKind {
-    /// The best available: ash with ray tracing, else wgpu, else cpu.
+    /// The best available: ash on a GPU with ray tracing, else wgpu on a GPU, else cpu
+    /// (software devices such as lavapipe are skipped: the CPU backend is faster there).
     #[default]
     Auto,
     /// CPU: rayon over tiles, a BVH over cluster boxes, f64 throughout (the reference).
     Cpu,
+    /// wgpu compute: a GPU-built LBVH (Karras 2012) with stack traversal; any GPU (or lavapipe).
+    Wgpu,
+    /// Vulkan ray-tracing pipeline (ash): hardware range queries over an AABB BLAS.
+    Ash,
 }
 
 impl fmt::Display for BackendKind {
@@ -48,6 +55,8 @@ impl fmt::Display for BackendKind {
         f.write_str(match self {
             BackendKind::Auto => "auto",
             BackendKind::Cpu => "cpu",
+            BackendKind::Wgpu => "wgpu",
+            BackendKind::Ash => "ash",
         })
     }
 }
@@ -55,8 +64,34 @@ impl fmt::Display for BackendKind {
 /// Creates a backend (`Auto` picks the best one this machine has).
 pub fn create(kind: BackendKind) -> Result<Box<dyn Backend>, BackendError> {
     match kind {
-        BackendKind::Auto | BackendKind::Cpu => Ok(Box::new(cpu::CpuBackend::new())),
+        BackendKind::Ash => Ok(Box::new(ash_rt::AshBackend::new()?)),
+        BackendKind::Auto => Ok(auto()),
+        BackendKind::Wgpu => Ok(Box::new(wgpu_lbvh::WgpuBackend::new()?)),
+        BackendKind::Cpu => Ok(Box::new(cpu::CpuBackend::new())),
     }
+}
+
+/// The best backend here: ash on a GPU with ray tracing, else wgpu on a GPU, else the CPU
+/// backend. A software device (lavapipe) is never "best": on the same cores the CPU backend is
+/// 2.5-6x faster (docs/benchmarks.md); ask for `--backend ash|wgpu` to use one anyway.
+fn auto() -> Box<dyn Backend> {
+    match ash_rt::AshBackend::new() {
+        Ok(b) if !b.capabilities().software => return Box::new(b),
+        Ok(b) => tracing::info!(
+            "auto: skipping ash on a software device ({})",
+            b.capabilities().device
+        ),
+        Err(e) => tracing::info!("auto: ash unavailable ({e})"),
+    }
+    match wgpu_lbvh::WgpuBackend::new() {
+        Ok(b) if !b.capabilities().software => return Box::new(b),
+        Ok(b) => tracing::info!(
+            "auto: skipping wgpu on a software device ({})",
+            b.capabilities().device
+        ),
+        Err(e) => tracing::info!("auto: wgpu unavailable ({e})"),
+    }
+    Box::new(cpu::CpuBackend::new())
 }
 
 /// What a backend is and can do.
@@ -67,6 +102,9 @@ pub struct Capabilities {
     pub device: String,
     /// Whether range queries run on ray-tracing hardware (or a driver's RT pipeline).
     pub hardware_rt: bool,
+    /// Whether the device is a CPU implementation of the GPU API (Mesa lavapipe): it runs
+    /// everything correctly, but more slowly than the CPU backend on the same cores.
+    pub software: bool,
     /// The most particles one step may hold, if limited.
     pub max_particles: Option<usize>,
 }
@@ -122,6 +160,10 @@ pub enum BackendError {
 /// A rendering and query backend.
 pub trait Backend: Send {
     fn capabilities(&self) -> &Capabilities;
+
+    /// Makes room for steps of up to `max_particles` particles (a series' maximum count), so
+    /// stepping through a series allocates nothing more. Optional: backends grow as needed.
+    fn reserve(&mut self, _max_particles: usize) {}
 
     /// Takes a step's particles (sorted, with their attribute and radii) and keeps them.
     fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError>;

@@ -10,22 +10,75 @@ use crate::scene::{OpenOptions, TimeSeries};
 #[derive(Debug, Args)]
 pub struct InfoArgs {
     /// The data: a file, a directory or a glob.
-    pub data: PathBuf,
+    #[arg(required_unless_present = "devices")]
+    pub data: Option<PathBuf>,
+    /// List the GPU adapters wgpu finds (every backend it was built with) and their features.
+    #[arg(long)]
+    pub devices: bool,
     /// The file format, when the extension does not tell.
     #[arg(long, value_enum)]
     pub format: Option<Format>,
 }
 
 pub fn run(args: InfoArgs) -> anyhow::Result<()> {
+    if args.devices {
+        print!("{}", devices());
+    }
+    let Some(data) = &args.data else {
+        return Ok(());
+    };
     let series = TimeSeries::open(
-        &args.data,
+        data,
         &OpenOptions {
             format: args.format,
             ..OpenOptions::default()
         },
     )?;
-    print!("{}", describe(&args.data, &series));
+    print!("{}", describe(data, &series));
     Ok(())
+}
+
+/// The adapters wgpu finds, with their features and the limits the backends depend on.
+pub fn devices() -> String {
+    use std::fmt::Write;
+    let adapters = crate::backend::wgpu_lbvh::adapters();
+    let mut out = String::new();
+    if adapters.is_empty() {
+        let _ = writeln!(
+            out,
+            "no wgpu adapter found (`cargo xtask setup` installs Mesa lavapipe); the cpu backend works anywhere"
+        );
+    }
+    for (i, a) in adapters.iter().enumerate() {
+        let info = &a.info;
+        let _ = writeln!(out, "adapter {i}: {}", info.name);
+        let _ = writeln!(
+            out,
+            "  backend {:?}, type {:?}, driver {} {}",
+            info.backend, info.device_type, info.driver, info.driver_info
+        );
+        let _ = writeln!(
+            out,
+            "  limits: storage binding {}, buffer {}, workgroup storage {} B, invocations {}",
+            mib(a.limits.max_storage_buffer_binding_size as usize),
+            mib(a.limits.max_buffer_size as usize),
+            a.limits.max_compute_workgroup_storage_size,
+            a.limits.max_compute_invocations_per_workgroup
+        );
+        let names: Vec<&str> = a.features.iter_names().map(|(n, _)| n).collect();
+        let _ = writeln!(out, "  features ({}):", names.len());
+        for chunk in names.chunks(3) {
+            let _ = writeln!(out, "    {}", chunk.join(", "));
+        }
+    }
+    let _ = writeln!(
+        out,
+        "the wgpu backend uses: {}",
+        crate::backend::wgpu_lbvh::GpuContext::shared()
+            .map(|c| c.describe())
+            .unwrap_or_else(|e| e.to_string())
+    );
+    out
 }
 
 fn mib(bytes: usize) -> String {

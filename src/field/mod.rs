@@ -102,40 +102,25 @@ pub enum Theta {
     Rgb(Vec<[f64; 3]>),
 }
 
-/// The particles of one step, prepared for the field: Hilbert-sorted, with radius, weight and
-/// theta evaluated once per particle.
-#[derive(Clone, Debug)]
-pub struct Particles {
-    pub centers: Vec<DVec3>,
-    pub radii: Vec<f64>,
-    pub weights: Vec<f64>,
-    pub theta: Theta,
-    /// The attribute range t is normalised over (`lo == hi` for a constant attribute, where
-    /// every t is 0.5).
+/// The arrays a field reads from a step, checked against its settings: what every backend
+/// needs before it prepares anything.
+pub struct FieldInputs<'a> {
+    /// The attribute the field carries, if any.
+    pub attribute: Option<&'a crate::scene::Attribute>,
+    /// The per-particle radius attribute, if any.
+    pub radius: Option<&'a crate::scene::Attribute>,
+    /// The range t is normalised over.
     pub range: (f64, f64),
-    /// `order[k]` is the step's index of sorted particle k.
-    pub order: Vec<u32>,
 }
 
-/// Normalises s into t over `range`; a zero-width range maps everything to 0.5.
-pub fn normalise(s: f64, range: (f64, f64)) -> f64 {
-    let width = range.1 - range.0;
-    if width > 0.0 {
-        (s - range.0) / width
-    } else {
-        0.5
-    }
-}
-
-impl Particles {
-    /// Prepares `step` under `settings`. `series_bounds` fixes the Hilbert grid and
-    /// `series_range` the attribute's range (both over the whole series).
-    pub fn prepare(
-        step: &Step,
+impl<'a> FieldInputs<'a> {
+    /// Checks `settings` against `step`: a positive finite radius, the attributes present, no
+    /// negative per-particle radius, constant maps when no attribute is carried, a valid range.
+    pub fn check(
+        step: &'a Step,
         settings: &FieldSettings,
-        series_bounds: Bounds,
         series_range: Option<(f64, f64)>,
-    ) -> Result<Particles, FieldError> {
+    ) -> Result<FieldInputs<'a>, FieldError> {
         if !(settings.radius.is_finite() && settings.radius > 0.0) {
             return Err(FieldError::BadRadius(settings.radius));
         }
@@ -185,6 +170,88 @@ impl Particles {
             (None, None) => (0.0, 0.0),
         };
 
+        let inputs = FieldInputs {
+            attribute,
+            radius: per_particle_radius,
+            range,
+        };
+        inputs.warn_if_meaningless(step, settings);
+        Ok(inputs)
+    }
+
+    /// Warns (once per preparation, on every backend) when the settings leave this step no
+    /// density anywhere, so the image is empty for a reason the user can fix.
+    fn warn_if_meaningless(&self, step: &Step, settings: &FieldSettings) {
+        if step.is_empty() {
+            return;
+        }
+        let t_of = |i: usize| {
+            self.attribute
+                .map_or(0.5, |a| normalise(f64::from(a.values[i]), self.range))
+        };
+        let no_radius = (0..step.len()).into_par_iter().all(|i| {
+            let h = self.radius.map_or(1.0, |h| f64::from(h.values[i]));
+            settings.radius_map.0.eval(t_of(i)) * h <= 0.0
+        });
+        if no_radius {
+            tracing::warn!(
+                "step '{}': every particle has radius 0 under the radius map{}, so the field is 0 everywhere",
+                step.name,
+                self.radius
+                    .map(|h| format!(" and radius attribute '{}'", h.name))
+                    .unwrap_or_default()
+            );
+        } else if (0..step.len())
+            .into_par_iter()
+            .all(|i| settings.density_map.0.eval(t_of(i)) <= 0.0)
+        {
+            tracing::warn!(
+                "step '{}': the density map gives every particle weight 0, so the field is 0 everywhere",
+                step.name
+            );
+        }
+    }
+}
+
+/// The particles of one step, prepared for the field: Hilbert-sorted, with radius, weight and
+/// theta evaluated once per particle.
+#[derive(Clone, Debug)]
+pub struct Particles {
+    pub centers: Vec<DVec3>,
+    pub radii: Vec<f64>,
+    pub weights: Vec<f64>,
+    pub theta: Theta,
+    /// The attribute range t is normalised over (`lo == hi` for a constant attribute, where
+    /// every t is 0.5).
+    pub range: (f64, f64),
+    /// `order[k]` is the step's index of sorted particle k.
+    pub order: Vec<u32>,
+}
+
+/// Normalises s into t over `range`; a zero-width range maps everything to 0.5.
+pub fn normalise(s: f64, range: (f64, f64)) -> f64 {
+    let width = range.1 - range.0;
+    if width > 0.0 {
+        (s - range.0) / width
+    } else {
+        0.5
+    }
+}
+
+impl Particles {
+    /// Prepares `step` under `settings`. `series_bounds` fixes the Hilbert grid and
+    /// `series_range` the attribute's range (both over the whole series).
+    pub fn prepare(
+        step: &Step,
+        settings: &FieldSettings,
+        series_bounds: Bounds,
+        series_range: Option<(f64, f64)>,
+    ) -> Result<Particles, FieldError> {
+        let FieldInputs {
+            attribute,
+            radius: per_particle_radius,
+            range,
+        } = FieldInputs::check(step, settings, series_range)?;
         let order = hilbert_order(&step.positions, series_bounds);
         let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(f64::from(a.values[i]), range));
         let centers = order
@@ -215,12 +282,6 @@ impl Particles {
                     .collect(),
             ),
         };
-        if !step.is_empty() && radii.iter().all(|r| *r <= 0.0) {
-            tracing::warn!(
-                "step '{}': every particle has radius 0 under the radius map, so the field is 0 everywhere",
-                step.name
-            );
-        }
         Ok(Particles {
             centers,
             radii,
@@ -278,6 +339,30 @@ pub struct Sample {
     /// Theta: the attribute in its own units in `theta[0]` (post-classification), or linear
     /// RGB (pre-classification); zeros where Phi is 0.
     pub theta: [f64; 3],
+}
+
+/// Phi and Theta from the sums Σ phi_i and Σ theta_i phi_i (what every backend's query
+/// returns): Theta = numerator / Phi, in the attribute's units for post-classification
+/// (`range` undoes the normalisation), linear RGB for pre-classification.
+pub fn finish_sums(phi: f64, num: [f64; 3], post: bool, range: (f64, f64)) -> Sample {
+    // Theta is undefined where Phi vanishes; a denormal Phi would make the ratio meaningless
+    // (or infinite in f32 on a GPU), so both count as "no density here".
+    if phi.is_nan() || phi < f64::MIN_POSITIVE {
+        return Sample {
+            phi: if phi.is_finite() { phi } else { 0.0 },
+            theta: [0.0; 3],
+        };
+    }
+    let mut theta = num.map(|v| v / phi);
+    if post {
+        let (lo, hi) = range;
+        theta[0] = if hi > lo {
+            lo + theta[0] * (hi - lo)
+        } else {
+            lo
+        };
+    }
+    Sample { phi, theta }
 }
 
 /// The reference field of one step: prepared particles, cluster boxes and their BVH.
@@ -398,26 +483,7 @@ impl ReferenceField {
     }
 
     fn finish(&self, acc: Accumulator) -> Sample {
-        // Theta is undefined where Phi vanishes; a denormal Phi would make the ratio meaningless
-        // (or infinite in f32 on a GPU), so both count as "no density here".
-        if acc.phi < f64::MIN_POSITIVE {
-            return Sample {
-                phi: acc.phi,
-                theta: [0.0; 3],
-            };
-        }
-        let mut theta = acc.theta.map(|v| v / acc.phi);
-        if let Theta::Scalar(_) = self.particles.theta {
-            let (lo, hi) = self.particles.range;
-            theta[0] = if hi > lo {
-                lo + theta[0] * (hi - lo)
-            } else {
-                lo
-            };
-        }
-        Sample {
-            phi: acc.phi,
-            theta,
-        }
+        let post = matches!(self.particles.theta, Theta::Scalar(_));
+        finish_sums(acc.phi, acc.theta, post, self.particles.range)
     }
 }

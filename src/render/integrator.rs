@@ -122,7 +122,8 @@ pub fn ray_box(origin: DVec3, dir: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, 
     let t2 = (hi - origin) * inv;
     let t_enter = t1.min(t2).max_element().max(0.0);
     let t_exit = t1.max(t2).min_element();
-    (t_enter < t_exit).then_some((t_enter, t_exit))
+    // As the GLSL twin: an inverted or unbounded box is missed.
+    (t_enter < t_exit && t_exit.is_finite() && !lo.cmpgt(hi).any()).then_some((t_enter, t_exit))
 }
 
 /// Calls `visit(t)` at every march sample `t = t0 + (k + jitter) dt` (k >= 0) that lies in

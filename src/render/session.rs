@@ -46,6 +46,11 @@ struct Derived {
     max_radius: f64,
 }
 
+/// The default march never takes more samples than this across the data's box.
+pub const DEFAULT_SAMPLES_PER_RAY: f64 = 4096.0;
+/// No march takes more samples than this across the data's box (bounded work per pixel).
+pub const MAX_SAMPLES_PER_RAY: f64 = 100_000.0;
+
 pub struct RenderSession {
     backend: Box<dyn Backend>,
     bounds: Bounds,
@@ -54,10 +59,13 @@ pub struct RenderSession {
     derived: Option<Derived>,
     frames: u32,
     last_frame_key: Option<(RenderSettings, Loaded)>,
+    warned_coarse_step: std::sync::atomic::AtomicBool,
 }
 
 impl RenderSession {
-    pub fn new(backend: Box<dyn Backend>, series: &TimeSeries) -> RenderSession {
+    pub fn new(mut backend: Box<dyn Backend>, series: &TimeSeries) -> RenderSession {
+        // Allocate once for the largest step, so stepping through time allocates nothing.
+        backend.reserve(series.max_count());
         RenderSession {
             backend,
             bounds: series.bounds(),
@@ -66,6 +74,7 @@ impl RenderSession {
             derived: None,
             frames: 0,
             last_frame_key: None,
+            warned_coarse_step: std::sync::atomic::AtomicBool::new(false),
         }
     }
 
@@ -205,11 +214,35 @@ impl RenderSession {
         let spacing = (self.bounds.extent().max(DVec3::splat(r)).element_product()
             / self.max_count.max(1) as f64)
             .cbrt();
-        let dt = settings.step_size.unwrap_or((r / 3.0).min(0.5 * spacing));
+        // Work per pixel stays bounded: at most MAX_SAMPLES_PER_RAY samples across the march
+        // box. The default resolves the kernel (R / 3) and the particle spacing, but never
+        // finer than the box's diagonal / DEFAULT_SAMPLES_PER_RAY.
+        let box_diagonal = (self.bounds.extent() + 4.0 * derived.max_radius).length();
+        let dt = settings.step_size.unwrap_or_else(|| {
+            (r / 3.0)
+                .min(0.5 * spacing)
+                .max(box_diagonal / DEFAULT_SAMPLES_PER_RAY)
+        });
         if !(dt.is_finite() && dt > 0.0) {
             return Err(RenderError::Settings(format!(
                 "step size {dt} must be positive"
             )));
+        }
+        if box_diagonal / dt > MAX_SAMPLES_PER_RAY {
+            return Err(RenderError::Settings(format!(
+                "step size {dt} would take {:.0} samples across the data ({box_diagonal}); at most {MAX_SAMPLES_PER_RAY} are allowed",
+                box_diagonal / dt
+            )));
+        }
+        if settings.step_size.is_none()
+            && dt > r
+            && !self
+                .warned_coarse_step
+                .swap(true, std::sync::atomic::Ordering::Relaxed)
+        {
+            tracing::warn!(
+                "the particles' radius ({r:.3e}) is below the march step ({dt:.3e}, {DEFAULT_SAMPLES_PER_RAY} samples across the data): the image will miss particles; pass --step-size to march finer"
+            );
         }
         let density_scale = settings.density_scale.unwrap_or(0.4 / r);
         let phi_ref = settings.phi_ref.unwrap_or(derived.phi_ref);
@@ -225,14 +258,24 @@ impl RenderSession {
         } else {
             ColourMode::Post
         };
+        // A series without particles has inverted (infinite) bounds; its march box is a point,
+        // which every ray misses, so the frame is background at no cost on any backend.
+        let (box_min, box_max) = if self.bounds.is_empty() {
+            (DVec3::ZERO, DVec3::ZERO)
+        } else {
+            (
+                self.bounds.min.as_dvec3() - grow,
+                self.bounds.max.as_dvec3() + grow,
+            )
+        };
         Ok(FrameParams {
             width: settings.width,
             height: settings.height,
             frame,
             seed: settings.seed,
             camera: camera.frame(settings.width, settings.height)?,
-            box_min: self.bounds.min.as_dvec3() - grow,
-            box_max: self.bounds.max.as_dvec3() + grow,
+            box_min,
+            box_max,
             dt,
             opacity_threshold: settings.opacity_threshold,
             phi_ref,

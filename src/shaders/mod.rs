@@ -32,6 +32,10 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
         "shared/integrators.glsl",
         include_str!("../../shaders_glsl/shared/integrators.glsl"),
     ),
+    (
+        "shared/lbvh.glsl",
+        include_str!("../../shaders_glsl/shared/lbvh.glsl"),
+    ),
 ];
 
 /// `source` with its `#include "shared/..."` lines replaced by the shared files.
@@ -116,6 +120,8 @@ pub struct SpecConstants {
 }
 
 impl SpecConstants {
+    /// In constant_id order: Vulkan's specialisation map entries, and the keys naga 30 gives
+    /// wgpu's pipeline-overridable constants ("0" .. "6").
     pub fn values(&self) -> [u32; 7] {
         [
             self.integrator,
@@ -127,17 +133,6 @@ impl SpecConstants {
             self.has_radius_attribute,
         ]
     }
-
-    /// The names naga gives the constants (for wgpu's pipeline-overridable constants).
-    pub const NAMES: [&'static str; 7] = [
-        "INTEGRATOR",
-        "COLOUR_MODE",
-        "NOISE_KIND",
-        "CLUSTER_SIZE",
-        "RADIUS_MAP_VARIES",
-        "DENSITY_MAP_VARIES",
-        "HAS_RADIUS_ATTRIBUTE",
-    ];
 
     pub fn integrator_id(i: Integrator) -> u32 {
         match i {

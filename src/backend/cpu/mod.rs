@@ -48,6 +48,7 @@ impl CpuBackend {
                 name: "cpu",
                 device: format!("CPU, {} threads", rayon::current_num_threads()),
                 hardware_rt: false,
+                software: false,
                 max_particles: None,
             },
             uploaded: None,

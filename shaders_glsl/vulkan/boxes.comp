@@ -1,0 +1,58 @@
+#version 460
+// One AABB per cluster of CLUSTER_SIZE Hilbert-sorted particles (the GPU twin of
+// accel::ClusterBoxes::build), written as VkAabbPositionsKHR (6 floats) for the BLAS build.
+//
+// - Clusters past the step's particles (the buffer holds the series' maximum) get NaN boxes,
+//   Vulkan's inactive primitives. The BLAS build takes only the step's clusters anyway
+//   (lavapipe does not treat NaN boxes as inactive; see src/backend/ash_rt/structure.rs), so
+//   the NaN tail only keeps a previous step's boxes out of the buffer.
+// - A cluster whose particles all have radius 0 gets a degenerate box (min = max = its first
+//   particle's centre), never NaN: it stays active, so a later radius change can refit it
+//   (an update may not turn an inactive primitive active). The intersection shader reports
+//   nothing for radius 0, so the box adds no term.
+// - Boxes are padded by 2 ulp of the coordinates, so the f32 box holds every point the f32
+//   intersection test accepts.
+#include "vulkan/bindings.glsl"
+
+layout(local_size_x = 64) in;
+layout(std430, set = 0, binding = 9) writeonly buffer Boxes { float boxes[]; };
+
+void main() {
+    uint c = gl_GlobalInvocationID.y * push.width + gl_GlobalInvocationID.x;
+    if (c >= push.count) {
+        return;
+    }
+    uint n = field_params.counts.x;
+    uint first = c * CLUSTER_SIZE;
+    vec3 lo = vec3(uintBitsToFloat(0x7fc00000u));
+    vec3 hi = lo;
+    if (first < n) {
+        bool any = false;
+        for (uint k = 0u; k < CLUSTER_SIZE; k++) {
+            uint i = first + k;
+            if (i >= n) {
+                break;
+            }
+            vec4 p = particles[i];
+            float r = particle_radius(p, i);
+            if (r > 0.0) {
+                vec3 pad = max(abs(p.xyz), vec3(r)) * 2.4e-7;
+                vec3 a = p.xyz - vec3(r) - pad;
+                vec3 b = p.xyz + vec3(r) + pad;
+                lo = any ? min(lo, a) : a;
+                hi = any ? max(hi, b) : b;
+                any = true;
+            }
+        }
+        if (!any) {
+            lo = particles[first].xyz;
+            hi = lo;
+        }
+    }
+    boxes[6u * c + 0u] = lo.x;
+    boxes[6u * c + 1u] = lo.y;
+    boxes[6u * c + 2u] = lo.z;
+    boxes[6u * c + 3u] = hi.x;
+    boxes[6u * c + 4u] = hi.y;
+    boxes[6u * c + 5u] = hi.z;
+}

@@ -1,0 +1,22 @@
+#version 460
+// The software side of the paper's Fig. 10a on the same Vulkan device: field queries by the
+// shared LBVH stack traversal (shared/lbvh.glsl, the wgpu backend's) instead of the RT
+// pipeline, over the same particles, maps and RBF code. The tree is built on the CPU
+// (accel::lbvh, the wgpu build's twin) and uploaded.
+#include "vulkan/bindings.glsl"
+
+layout(local_size_x = 64) in;
+layout(std430, set = 0, binding = 7) readonly buffer QueryPoints { vec4 query_points[]; };
+layout(std430, set = 0, binding = 8) writeonly buffer QueryResults { vec4 query_results[]; };
+layout(std430, set = 0, binding = 10) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
+layout(std430, set = 0, binding = 11) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
+
+#include "shared/lbvh.glsl"
+
+void main() {
+    uint i = gl_GlobalInvocationID.y * push.width + gl_GlobalInvocationID.x;
+    if (i >= push.count) {
+        return;
+    }
+    query_results[i] = lbvh_field(query_points[i].xyz);
+}

@@ -1,0 +1,28 @@
+#version 460
+// One frame of the shared integrators with the LBVH traversal as the field query (the
+// software side of Fig. 10a on the same device; raygen.rgen is the hardware side). Added into
+// the same accumulation buffer.
+#include "vulkan/bindings.glsl"
+
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(std430, set = 0, binding = 6) buffer Accumulation { vec4 accum[]; };
+layout(std430, set = 0, binding = 10) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
+layout(std430, set = 0, binding = 11) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
+
+#include "shared/lbvh.glsl"
+
+vec4 field_query(vec3 x) {
+    return lbvh_field(x);
+}
+
+#include "shared/integrators.glsl"
+
+void main() {
+    uvec2 pixel = gl_GlobalInvocationID.xy;
+    if (pixel.x >= frame.image.x || pixel.y >= frame.image.y) {
+        return;
+    }
+    vec4 c = render_pixel(pixel);
+    uint i = pixel.y * frame.image.x + pixel.x;
+    accum[i] = (push.first_frame == 1u) ? c : accum[i] + c;
+}

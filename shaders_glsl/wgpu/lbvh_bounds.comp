@@ -1,0 +1,48 @@
+#version 450
+// The LBVH build's first stage (the paper's bounds kernel): one box per cluster of
+// CLUSTER_SIZE consecutive particles, bounding [p - r, p + r] over the members with r > 0.
+// A cluster with no such member gets the empty box (+inf, -inf) and is left out of the tree.
+// The radius is rbf.glsl's particle_radius, the very function the query tests particles
+// with, so a box always holds the spheres the traversal looks for. (This stage is GLSL rather
+// than WGSL for that reason: one source for the radius; it needs no atomics.)
+// Twin: aarbf::accel::lbvh::cluster_boxes.
+
+layout(local_size_x = 64) in;
+
+#include "shared/params.glsl"
+
+layout(std140, set = 0, binding = 0) uniform FieldBlock { Field field_params; };
+layout(std430, set = 0, binding = 1) readonly buffer Particles { vec4 particles[]; };
+layout(std430, set = 0, binding = 2) readonly buffer MapTables { float map_tables[]; };
+layout(std430, set = 0, binding = 3) readonly buffer RadiusAttributes { float radius_attributes[]; };
+layout(std430, set = 0, binding = 4) buffer ClusterBoxes { vec4 cluster_boxes[]; };
+
+#include "shared/maps.glsl"
+
+float radius_attribute(uint i) {
+    return radius_attributes[i];
+}
+
+#include "shared/rbf.glsl"
+
+void main() {
+    uint c = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64u + gl_LocalInvocationID.x;
+    if (c >= field_params.counts.y) {
+        return;
+    }
+    float inf = uintBitsToFloat(0x7f800000u);
+    vec3 lo = vec3(inf);
+    vec3 hi = vec3(-inf);
+    uint first = c * CLUSTER_SIZE;
+    uint end = min(first + CLUSTER_SIZE, field_params.counts.x);
+    for (uint k = first; k < end; k++) {
+        vec4 p = particles[k];
+        float r = particle_radius(p, k);
+        if (r > 0.0) {
+            lo = min(lo, p.xyz - vec3(r));
+            hi = max(hi, p.xyz + vec3(r));
+        }
+    }
+    cluster_boxes[2u * c] = vec4(lo, 0.0);
+    cluster_boxes[2u * c + 1u] = vec4(hi, 0.0);
+}

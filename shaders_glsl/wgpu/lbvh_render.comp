@@ -1,0 +1,57 @@
+#version 450
+// One frame of the shared integrators over the LBVH field, added to the accumulation (sums of
+// linear RGBA; the host divides by the frame count). Twin: render::integrator::render_pixel.
+
+layout(local_size_x = 8, local_size_y = 8) in;
+
+#include "shared/params.glsl"
+
+layout(std140, set = 0, binding = 0) uniform FrameBlock { Frame frame; };
+layout(std140, set = 0, binding = 1) uniform FieldBlock { Field field_params; };
+layout(std430, set = 0, binding = 2) readonly buffer Particles { vec4 particles[]; };
+layout(std430, set = 0, binding = 3) readonly buffer MapTables { float map_tables[]; };
+layout(std430, set = 0, binding = 4) readonly buffer RadiusAttributes { float radius_attributes[]; };
+layout(std430, set = 0, binding = 5) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
+layout(std430, set = 0, binding = 6) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
+layout(std430, set = 0, binding = 7) readonly buffer StbnMask { uint stbn_words[]; };
+layout(std430, set = 0, binding = 8) buffer Accumulation { vec4 accumulation[]; };
+// x: 8x8 tiles per row, y: tiles, z: blocks B, w: tiles per block S (see main).
+layout(std140, set = 0, binding = 9) uniform TilingBlock { uvec4 tiling; };
+
+const uint STBN_WIDTH = 128u;
+const uint STBN_HEIGHT = 128u;
+const uint STBN_DEPTH = 64u;
+
+#include "shared/maps.glsl"
+#include "shared/noise.glsl"
+
+float radius_attribute(uint i) {
+    return radius_attributes[i];
+}
+
+#include "shared/rbf.glsl"
+#include "shared/lbvh.glsl"
+
+vec4 field_query(vec3 x) {
+    return lbvh_field(x);
+}
+
+#include "shared/integrators.glsl"
+
+void main() {
+    // Workgroup g renders tile (g mod B) S + g / B: consecutive workgroups fall in different
+    // bands of the image. Lavapipe hands each thread one contiguous range of workgroups; without
+    // this, one thread would get the top of the image and another the (often much busier)
+    // bottom. Any order is the same image; other GPUs schedule dynamically and don't care.
+    uint g = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    uint tile = (g % tiling.z) * tiling.w + g / tiling.z;
+    if (tile >= tiling.y) {
+        return;
+    }
+    uvec2 pixel = uvec2(tile % tiling.x, tile / tiling.x) * 8u + gl_LocalInvocationID.xy;
+    if (pixel.x >= frame.image.x || pixel.y >= frame.image.y) {
+        return;
+    }
+    uint i = pixel.y * frame.image.x + pixel.x;
+    accumulation[i] += render_pixel(pixel);
+}

@@ -1,0 +1,59 @@
+// LBVH build, stage 2: a 30-bit Morton key per cluster from its box centre on a 1024^3 grid
+// over the series' bounds (EMPTY_KEY for an empty box, so empty clusters sort last), the
+// identity permutation the sort carries along, and the count of non-empty clusters (the
+// tree's leaves). Twin: aarbf::accel::lbvh::morton_key.
+
+struct TreeParams {
+    key_lo: vec4<f32>,
+    key_scale: vec4<f32>,
+    clusters: u32,
+    components: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+const EMPTY_KEY: u32 = 0xffffffffu;
+const NONE: u32 = 0xffffffffu;
+
+@group(0) @binding(0) var<uniform> params: TreeParams;
+@group(0) @binding(1) var<storage, read> boxes: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> keys: array<u32>;
+@group(0) @binding(3) var<storage, read_write> values: array<u32>;
+@group(0) @binding(4) var<storage, read_write> leaf_parents: array<u32>;
+// [0] non-empty clusters (cleared by the host before this pass).
+@group(0) @binding(5) var<storage, read_write> counters: array<atomic<u32>>;
+
+fn expand_bits(v: u32) -> u32 {
+    var x = v & 0x3ffu;
+    x = (x | (x << 16u)) & 0x030000ffu;
+    x = (x | (x << 8u)) & 0x0300f00fu;
+    x = (x | (x << 4u)) & 0x030c30c3u;
+    x = (x | (x << 2u)) & 0x09249249u;
+    return x;
+}
+
+@compute @workgroup_size(64)
+fn main(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let c = (wg.y * groups.x + wg.x) * 64u + lid;
+    if c >= params.clusters {
+        return;
+    }
+    let lo = boxes[2u * c].xyz;
+    let hi = boxes[2u * c + 1u].xyz;
+    var key = EMPTY_KEY;
+    if lo.x <= hi.x {
+        let centre = (lo + hi) * 0.5;
+        let q = clamp((centre - params.key_lo.xyz) * params.key_scale.xyz, vec3<f32>(0.0), vec3<f32>(1023.0));
+        let cell = vec3<u32>(q);
+        key = (expand_bits(cell.x) << 2u) | (expand_bits(cell.y) << 1u) | expand_bits(cell.z);
+        atomicAdd(&counters[0], 1u);
+    }
+    keys[c] = key;
+    values[c] = c;
+    // The hierarchy pass links the clusters that are leaves; the rest stay out.
+    leaf_parents[c] = NONE;
+}

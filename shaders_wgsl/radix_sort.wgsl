@@ -1,0 +1,169 @@
+// A stable LSD radix sort of (key, value) u32 pairs: 4-bit digits, one pass per digit, each
+// pass three dispatches (count, scan, scatter). Portable: workgroup memory and barriers only,
+// no subgroup operations, so it runs on lavapipe and every wgpu backend. Twin: a stable
+// sort_by_key (aarbf::accel::lbvh::sort_pairs).
+//
+// A tile of TILE = THREADS * ITEMS keys belongs to one workgroup; thread t owns the ITEMS
+// consecutive keys tile * TILE + t * ITEMS ... and walks them in order, so ranking within a
+// tile is stable by construction (the keys of thread t precede those of thread t + 1).
+// histogram[d * tiles + tile] counts digit d in a tile; its exclusive scan (digit-major) is
+// where the tile's first key of digit d goes.
+
+struct SortParams {
+    count: u32,
+    shift: u32,
+    tiles: u32,
+    pad: u32,
+}
+
+const THREADS: u32 = 128u;
+const ITEMS: u32 = 32u;
+const TILE: u32 = 4096u;
+const RADIX: u32 = 16u;
+const SCAN_THREADS: u32 = 256u;
+
+@group(0) @binding(0) var<uniform> params: SortParams;
+@group(0) @binding(1) var<storage, read> keys_in: array<u32>;
+@group(0) @binding(2) var<storage, read> values_in: array<u32>;
+@group(0) @binding(3) var<storage, read_write> keys_out: array<u32>;
+@group(0) @binding(4) var<storage, read_write> values_out: array<u32>;
+@group(0) @binding(5) var<storage, read_write> histogram: array<u32>;
+
+var<workgroup> tile_counts: array<atomic<u32>, 16>;
+var<workgroup> offsets: array<u32, 2048>; // RADIX * THREADS, digit-major
+var<workgroup> sums: array<u32, 256>;
+
+fn digit(key: u32) -> u32 {
+    return (key >> params.shift) & (RADIX - 1u);
+}
+
+// Pass 1: per-tile digit counts.
+@compute @workgroup_size(128)
+fn count(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let tile = wg.y * groups.x + wg.x;
+    if tile >= params.tiles {
+        return;
+    }
+    if lid < RADIX {
+        atomicStore(&tile_counts[lid], 0u);
+    }
+    workgroupBarrier();
+    var local: array<u32, 16>;
+    let start = tile * TILE + lid * ITEMS;
+    let end = min(start + ITEMS, params.count);
+    for (var i = start; i < end; i++) {
+        let d = digit(keys_in[i]);
+        local[d] += 1u;
+    }
+    for (var d = 0u; d < RADIX; d++) {
+        if local[d] != 0u {
+            atomicAdd(&tile_counts[d], local[d]);
+        }
+    }
+    workgroupBarrier();
+    if lid < RADIX {
+        histogram[lid * params.tiles + tile] = atomicLoad(&tile_counts[lid]);
+    }
+}
+
+// Pass 2: exclusive scan of the whole histogram, one workgroup: each thread scans a
+// contiguous segment serially, the segments' totals are scanned in workgroup memory.
+@compute @workgroup_size(256)
+fn scan(@builtin(local_invocation_index) lid: u32) {
+    let total = RADIX * params.tiles;
+    let per = (total + SCAN_THREADS - 1u) / SCAN_THREADS;
+    let start = min(lid * per, total);
+    let end = min(start + per, total);
+    var sum = 0u;
+    for (var i = start; i < end; i++) {
+        sum += histogram[i];
+    }
+    sums[lid] = sum;
+    workgroupBarrier();
+    // Hillis–Steele inclusive scan of the 256 totals.
+    for (var step = 1u; step < SCAN_THREADS; step <<= 1u) {
+        var v = sums[lid];
+        if lid >= step {
+            v += sums[lid - step];
+        }
+        workgroupBarrier();
+        sums[lid] = v;
+        workgroupBarrier();
+    }
+    var running = 0u;
+    if lid > 0u {
+        running = sums[lid - 1u];
+    }
+    for (var i = start; i < end; i++) {
+        let h = histogram[i];
+        histogram[i] = running;
+        running += h;
+    }
+}
+
+// Pass 3: stable scatter.
+@compute @workgroup_size(128)
+fn scatter(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let tile = wg.y * groups.x + wg.x;
+    if tile >= params.tiles {
+        return;
+    }
+    var local: array<u32, 16>;
+    let start = tile * TILE + lid * ITEMS;
+    let end = min(start + ITEMS, params.count);
+    for (var i = start; i < end; i++) {
+        let d = digit(keys_in[i]);
+        local[d] += 1u;
+    }
+    for (var d = 0u; d < RADIX; d++) {
+        offsets[d * THREADS + lid] = local[d];
+    }
+    workgroupBarrier();
+    // Exclusive scan of offsets (digit-major): thread t scans entries 16t .. 16t + 15.
+    var sum = 0u;
+    for (var k = 0u; k < RADIX; k++) {
+        sum += offsets[lid * RADIX + k];
+    }
+    sums[lid] = sum;
+    workgroupBarrier();
+    for (var step = 1u; step < THREADS; step <<= 1u) {
+        var v = sums[lid];
+        if lid >= step {
+            v += sums[lid - step];
+        }
+        workgroupBarrier();
+        sums[lid] = v;
+        workgroupBarrier();
+    }
+    var running = 0u;
+    if lid > 0u {
+        running = sums[lid - 1u];
+    }
+    for (var k = 0u; k < RADIX; k++) {
+        let v = offsets[lid * RADIX + k];
+        offsets[lid * RADIX + k] = running;
+        running += v;
+    }
+    workgroupBarrier();
+    // offsets[d * THREADS + t]: keys of the tile before thread t's first key of digit d, in
+    // digit-major order; offsets[d * THREADS] counts the tile's keys of smaller digits.
+    var dest: array<u32, 16>;
+    for (var d = 0u; d < RADIX; d++) {
+        dest[d] = histogram[d * params.tiles + tile] + offsets[d * THREADS + lid] - offsets[d * THREADS];
+    }
+    for (var i = start; i < end; i++) {
+        let key = keys_in[i];
+        let d = digit(key);
+        keys_out[dest[d]] = key;
+        values_out[dest[d]] = values_in[i];
+        dest[d] += 1u;
+    }
+}

@@ -1,0 +1,417 @@
+//! The descriptor layout, the ray-tracing pipeline (one per specialisation variant, compiled
+//! once per process and cached in the [`Context`]), its shader binding table, and the compute
+//! pipelines.
+//!
+//! Shaders (`shaders_glsl/vulkan/`, compiled by build.rs with glslc):
+//! - `raygen.rgen`: the shared integrator (`shared/integrators.glsl`) per pixel, adding the
+//!   frame into the accumulation buffer; `query.rgen`: the field at points from a buffer.
+//!   Both define `field_query(x)` (`vulkan/field_query.glsl`): one ray from x along (1, 1, 1)
+//!   with tmin = tmax = 0.
+//! - `particle.rint`: tests each particle of the hit box (one box per cluster of
+//!   `CLUSTER_SIZE` particles) and reports (d², r, t) for each that contains the point;
+//!   `particle.rahit`: adds the particle's RBF term into the payload and ignores the hit, so
+//!   traversal goes on; `empty.rmiss`.
+//! - `boxes.comp`: the AABB of each cluster from positions, radius map and global radius.
+//! - `lbvh_query.comp`, `lbvh_render.comp`: the same queries and integrators with the shared
+//!   LBVH stack traversal (`shared/lbvh.glsl`) in place of the RT pipeline, for the
+//!   same-device hardware-versus-software comparison (the paper's Fig. 10a).
+//!
+//! Shader groups: 0 render raygen, 1 query raygen, 2 miss, 3 the procedural hit group
+//! (intersection + any-hit).
+
+use std::io::Cursor;
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::context::{Context, device_error, vk_error};
+use super::resources::Buffer;
+use crate::backend::BackendError;
+use crate::shaders::SpecConstants;
+
+macro_rules! spirv {
+    ($name:literal) => {
+        include_bytes!(concat!(env!("OUT_DIR"), "/", $name, ".spv"))
+    };
+}
+
+const RAYGEN: &[u8] = spirv!("raygen.rgen");
+const QUERY: &[u8] = spirv!("query.rgen");
+const MISS: &[u8] = spirv!("empty.rmiss");
+const INTERSECTION: &[u8] = spirv!("particle.rint");
+const ANY_HIT: &[u8] = spirv!("particle.rahit");
+const BOXES: &[u8] = spirv!("boxes.comp");
+const LBVH_QUERY: &[u8] = spirv!("lbvh_query.comp");
+const LBVH_RENDER: &[u8] = spirv!("lbvh_render.comp");
+
+/// Descriptor bindings (set 0); `shaders_glsl/vulkan/bindings.glsl` declares the same.
+pub mod binding {
+    pub const TLAS: u32 = 0;
+    pub const PARAMS: u32 = 1;
+    pub const POINTS: u32 = 2;
+    pub const RADIUS: u32 = 3;
+    pub const TABLES: u32 = 4;
+    pub const STBN: u32 = 5;
+    pub const ACCUM: u32 = 6;
+    pub const QUERY_POINTS: u32 = 7;
+    pub const QUERY_RESULTS: u32 = 8;
+    pub const BOXES: u32 = 9;
+    pub const LBVH_NODES: u32 = 10;
+    pub const LBVH_BOXES: u32 = 11;
+    /// Storage buffers: every binding but the TLAS and the uniform block.
+    pub const STORAGE: [u32; 10] = [
+        POINTS,
+        RADIUS,
+        TABLES,
+        STBN,
+        ACCUM,
+        QUERY_POINTS,
+        QUERY_RESULTS,
+        BOXES,
+        LBVH_NODES,
+        LBVH_BOXES,
+    ];
+}
+
+/// The push constants of every kernel (`Push` in bindings.glsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Push {
+    /// Items to process (queries, boxes).
+    pub count: u32,
+    /// Row width of a 2D launch over a 1D array.
+    pub width: u32,
+    /// 1: the frame replaces the accumulation instead of adding to it.
+    pub first_frame: u32,
+    pub unused: u32,
+}
+
+/// The descriptor-set layout and pipeline layout every pipeline uses.
+pub struct Layouts {
+    pub set: vk::DescriptorSetLayout,
+    pub pipeline: vk::PipelineLayout,
+}
+
+impl Layouts {
+    pub fn new(device: &ash::Device) -> Result<Layouts, vk::Result> {
+        let mut bindings = vec![
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(binding::TLAS)
+                .descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::RAYGEN_KHR),
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(binding::PARAMS)
+                .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::ALL),
+        ];
+        for b in binding::STORAGE {
+            bindings.push(
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::ALL),
+            );
+        }
+        // SAFETY: valid create infos; destroyed in `destroy`.
+        unsafe {
+            let set = device.create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                None,
+            )?;
+            let sets = [set];
+            let push = [vk::PushConstantRange::default()
+                .stage_flags(vk::ShaderStageFlags::ALL)
+                .size(std::mem::size_of::<Push>() as u32)];
+            let pipeline = device
+                .create_pipeline_layout(
+                    &vk::PipelineLayoutCreateInfo::default()
+                        .set_layouts(&sets)
+                        .push_constant_ranges(&push),
+                    None,
+                )
+                .inspect_err(|_| device.destroy_descriptor_set_layout(set, None))?;
+            Ok(Layouts { set, pipeline })
+        }
+    }
+
+    /// # Safety
+    /// No pipeline or set made with these layouts may be in use.
+    pub unsafe fn destroy(&self, device: &ash::Device) {
+        // SAFETY: per the contract.
+        unsafe {
+            device.destroy_pipeline_layout(self.pipeline, None);
+            device.destroy_descriptor_set_layout(self.set, None);
+        }
+    }
+}
+
+/// The compute kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ComputeKind {
+    /// One AABB per cluster (`boxes.comp`).
+    Boxes,
+    /// Field queries by LBVH traversal (`lbvh_query.comp`).
+    LbvhQuery,
+    /// One frame by LBVH traversal (`lbvh_render.comp`).
+    LbvhRender,
+}
+
+/// Shader modules destroyed when dropped.
+struct Modules<'a> {
+    device: &'a ash::Device,
+    modules: Vec<vk::ShaderModule>,
+}
+
+impl Modules<'_> {
+    fn load(&mut self, spirv: &[u8]) -> Result<vk::ShaderModule, BackendError> {
+        let words = ash::util::read_spv(&mut Cursor::new(spirv))
+            .map_err(|e| device_error("reading SPIR-V", e))?;
+        // SAFETY: valid SPIR-V produced by glslc at build time.
+        let m = unsafe {
+            self.device
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+        }
+        .map_err(|e| vk_error("creating a shader module", e))?;
+        self.modules.push(m);
+        Ok(m)
+    }
+}
+
+impl Drop for Modules<'_> {
+    fn drop(&mut self) {
+        for &m in &self.modules {
+            // SAFETY: modules may be destroyed once the pipelines using them exist.
+            unsafe { self.device.destroy_shader_module(m, None) };
+        }
+    }
+}
+
+const SPEC_ENTRIES: [vk::SpecializationMapEntry; 7] = {
+    let mut e = [vk::SpecializationMapEntry {
+        constant_id: 0,
+        offset: 0,
+        size: 4,
+    }; 7];
+    let mut i = 0;
+    while i < 7 {
+        e[i].constant_id = i as u32;
+        e[i].offset = 4 * i as u32;
+        i += 1;
+    }
+    e
+};
+
+/// The ray-tracing pipeline for `spec`, compiled on first use in this process.
+pub fn rt_pipeline(ctx: &Context, spec: SpecConstants) -> Result<vk::Pipeline, BackendError> {
+    // The lock is held while compiling, so two threads never compile the same variant.
+    let mut cache = ctx.rt_pipelines.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(&p) = cache.get(&spec) {
+        return Ok(p);
+    }
+    let started = std::time::Instant::now();
+    let device = &ctx.device;
+    let mut modules = Modules {
+        device,
+        modules: Vec::new(),
+    };
+    let values = spec.values();
+    let data: &[u8] = bytemuck::cast_slice(&values);
+    let spec_info = vk::SpecializationInfo::default()
+        .map_entries(&SPEC_ENTRIES)
+        .data(data);
+    let stage = |flags, module| {
+        vk::PipelineShaderStageCreateInfo::default()
+            .stage(flags)
+            .module(module)
+            .name(c"main")
+            .specialization_info(&spec_info)
+    };
+    let stages = [
+        stage(vk::ShaderStageFlags::RAYGEN_KHR, modules.load(RAYGEN)?),
+        stage(vk::ShaderStageFlags::RAYGEN_KHR, modules.load(QUERY)?),
+        stage(vk::ShaderStageFlags::MISS_KHR, modules.load(MISS)?),
+        stage(
+            vk::ShaderStageFlags::INTERSECTION_KHR,
+            modules.load(INTERSECTION)?,
+        ),
+        stage(vk::ShaderStageFlags::ANY_HIT_KHR, modules.load(ANY_HIT)?),
+    ];
+    let general = |i: u32| {
+        vk::RayTracingShaderGroupCreateInfoKHR::default()
+            .ty(vk::RayTracingShaderGroupTypeKHR::GENERAL)
+            .general_shader(i)
+            .closest_hit_shader(vk::SHADER_UNUSED_KHR)
+            .any_hit_shader(vk::SHADER_UNUSED_KHR)
+            .intersection_shader(vk::SHADER_UNUSED_KHR)
+    };
+    let groups = [
+        general(0),
+        general(1),
+        general(2),
+        vk::RayTracingShaderGroupCreateInfoKHR::default()
+            .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)
+            .general_shader(vk::SHADER_UNUSED_KHR)
+            .closest_hit_shader(vk::SHADER_UNUSED_KHR)
+            .any_hit_shader(4)
+            .intersection_shader(3),
+    ];
+    let info = [vk::RayTracingPipelineCreateInfoKHR::default()
+        .stages(&stages)
+        .groups(&groups)
+        .max_pipeline_ray_recursion_depth(1)
+        .layout(ctx.layouts.pipeline)];
+    // SAFETY: valid create info; modules outlive the call.
+    let pipeline = unsafe {
+        ctx.rt.create_ray_tracing_pipelines(
+            vk::DeferredOperationKHR::null(),
+            vk::PipelineCache::null(),
+            &info,
+            None,
+        )
+    }
+    .map_err(|(_, e)| vk_error("creating the ray-tracing pipeline", e))?[0];
+    tracing::debug!(
+        "ash: ray-tracing pipeline {spec:?} created in {:.2} s",
+        started.elapsed().as_secs_f64()
+    );
+    cache.insert(spec, pipeline);
+    Ok(pipeline)
+}
+
+/// The compute pipeline `kind` for `spec` (only the constants the kernel reads matter).
+pub fn compute_pipeline(
+    ctx: &Context,
+    kind: ComputeKind,
+    spec: SpecConstants,
+) -> Result<vk::Pipeline, BackendError> {
+    let key_spec = match kind {
+        ComputeKind::Boxes => SpecConstants {
+            integrator: 0,
+            colour_mode: 0,
+            noise_kind: 0,
+            density_map_varies: 0,
+            ..spec
+        },
+        ComputeKind::LbvhQuery => SpecConstants {
+            integrator: 0,
+            noise_kind: 0,
+            ..spec
+        },
+        ComputeKind::LbvhRender => spec,
+    };
+    let mut cache = ctx
+        .compute_pipelines
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(&p) = cache.get(&(kind, key_spec)) {
+        return Ok(p);
+    }
+    let mut modules = Modules {
+        device: &ctx.device,
+        modules: Vec::new(),
+    };
+    let code = match kind {
+        ComputeKind::Boxes => BOXES,
+        ComputeKind::LbvhQuery => LBVH_QUERY,
+        ComputeKind::LbvhRender => LBVH_RENDER,
+    };
+    let values = key_spec.values();
+    let spec_info = vk::SpecializationInfo::default()
+        .map_entries(&SPEC_ENTRIES)
+        .data(bytemuck::cast_slice(&values));
+    let stage = vk::PipelineShaderStageCreateInfo::default()
+        .stage(vk::ShaderStageFlags::COMPUTE)
+        .module(modules.load(code)?)
+        .name(c"main")
+        .specialization_info(&spec_info);
+    let info = [vk::ComputePipelineCreateInfo::default()
+        .stage(stage)
+        .layout(ctx.layouts.pipeline)];
+    // SAFETY: valid create info.
+    let pipeline = unsafe {
+        ctx.device
+            .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+    }
+    .map_err(|(_, e)| vk_error("creating a compute pipeline", e))?[0];
+    cache.insert((kind, key_spec), pipeline);
+    Ok(pipeline)
+}
+
+fn align_up(x: u64, a: u64) -> u64 {
+    x.div_ceil(a.max(1)) * a.max(1)
+}
+
+/// A shader binding table for one ray-tracing pipeline: the render raygen, the query raygen,
+/// the miss shader and the hit group, each region starting at a multiple of
+/// `shaderGroupBaseAlignment`, records `shaderGroupHandleAlignment`-aligned, and each raygen
+/// region's size equal to its stride (as the specification requires).
+pub struct BindingTable {
+    _buffer: Buffer,
+    pub render: vk::StridedDeviceAddressRegionKHR,
+    pub query: vk::StridedDeviceAddressRegionKHR,
+    pub miss: vk::StridedDeviceAddressRegionKHR,
+    pub hit: vk::StridedDeviceAddressRegionKHR,
+}
+
+impl BindingTable {
+    pub fn new(ctx: &Arc<Context>, pipeline: vk::Pipeline) -> Result<BindingTable, BackendError> {
+        let info = &ctx.info;
+        let handle = u64::from(info.handle_size);
+        let stride = align_up(handle, u64::from(info.handle_alignment));
+        if stride > u64::from(info.max_group_stride) {
+            return Err(device_error(
+                "shader binding table",
+                format!(
+                    "record stride {stride} exceeds the device's maximum {}",
+                    info.max_group_stride
+                ),
+            ));
+        }
+        let slot = align_up(stride, u64::from(info.base_alignment));
+        let groups = 4u32;
+        // SAFETY: the pipeline has 4 groups.
+        let handles = unsafe {
+            ctx.rt.get_ray_tracing_shader_group_handles(
+                pipeline,
+                0,
+                groups,
+                (handle * u64::from(groups)) as usize,
+            )
+        }
+        .map_err(|e| vk_error("reading shader group handles", e))?;
+        let base = u64::from(info.base_alignment);
+        // Room to align the start to the base alignment.
+        let mut buffer = Buffer::new(
+            ctx,
+            "shader binding table",
+            slot * u64::from(groups) + base,
+            vk::BufferUsageFlags::SHADER_BINDING_TABLE_KHR
+                | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            MemoryLocation::CpuToGpu,
+        )?;
+        let start = align_up(buffer.address, base) - buffer.address;
+        let mut bytes = vec![0u8; (slot * u64::from(groups)) as usize];
+        for g in 0..groups as usize {
+            let src = &handles[g * handle as usize..(g + 1) * handle as usize];
+            bytes[g * slot as usize..g * slot as usize + handle as usize].copy_from_slice(src);
+        }
+        buffer.write(start, &bytes)?;
+        let region = |g: u64| {
+            vk::StridedDeviceAddressRegionKHR::default()
+                .device_address(buffer.address + start + g * slot)
+                .stride(stride)
+                .size(stride)
+        };
+        Ok(BindingTable {
+            render: region(0),
+            query: region(1),
+            miss: region(2),
+            hit: region(3),
+            _buffer: buffer,
+        })
+    }
+}

@@ -1,0 +1,376 @@
+//! The wgpu device every wgpu backend in a process shares (pipelines are compiled once; on
+//! lavapipe each compilation is a JIT run of 0.5–10 s), its compiled kernels, and error capture:
+//! every device operation runs inside error scopes, so a validation error, an out-of-memory
+//! or a lost device becomes a [`BackendError`], never a panic.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use crate::backend::BackendError;
+use crate::shaders::glsl_with_includes;
+
+pub(crate) fn device_error(message: impl Into<String>) -> BackendError {
+    BackendError::Device {
+        backend: "wgpu",
+        message: message.into(),
+    }
+}
+
+/// A compute kernel of the backend: a shader file and an entry point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Kernel {
+    /// `shaders_glsl/wgpu/lbvh_bounds.comp`: cluster boxes.
+    Bounds,
+    /// `shaders_glsl/wgpu/lbvh_query.comp`: field queries.
+    Query,
+    /// `shaders_glsl/wgpu/lbvh_render.comp`: one frame of an integrator.
+    Render,
+    /// `shaders_wgsl/lbvh_keys.wgsl`.
+    Keys,
+    /// `shaders_wgsl/radix_sort.wgsl`, its three entry points.
+    SortCount,
+    SortScan,
+    SortScatter,
+    /// `shaders_wgsl/lbvh_hierarchy.wgsl`.
+    Hierarchy,
+    /// `shaders_wgsl/lbvh_fit.wgsl`: the bottom-up climb and the refit's reset.
+    FitClimb,
+    FitReset,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum ShaderFile {
+    Bounds,
+    Query,
+    Render,
+    Keys,
+    Sort,
+    Hierarchy,
+    Fit,
+}
+
+impl Kernel {
+    fn file(self) -> ShaderFile {
+        match self {
+            Kernel::Bounds => ShaderFile::Bounds,
+            Kernel::Query => ShaderFile::Query,
+            Kernel::Render => ShaderFile::Render,
+            Kernel::Keys => ShaderFile::Keys,
+            Kernel::SortCount | Kernel::SortScan | Kernel::SortScatter => ShaderFile::Sort,
+            Kernel::Hierarchy => ShaderFile::Hierarchy,
+            Kernel::FitClimb | Kernel::FitReset => ShaderFile::Fit,
+        }
+    }
+
+    fn entry_point(self) -> &'static str {
+        match self {
+            Kernel::SortCount => "count",
+            Kernel::SortScan => "scan",
+            Kernel::SortScatter => "scatter",
+            Kernel::FitClimb => "climb",
+            Kernel::FitReset => "reset",
+            _ => "main",
+        }
+    }
+
+    /// Whether the kernel is GLSL with the specialisation constants of `params.glsl`.
+    fn specialised(self) -> bool {
+        matches!(self, Kernel::Bounds | Kernel::Query | Kernel::Render)
+    }
+}
+
+enum Source {
+    Glsl(&'static str),
+    Wgsl(&'static str),
+}
+
+impl ShaderFile {
+    fn source(self) -> Source {
+        match self {
+            ShaderFile::Bounds => {
+                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_bounds.comp"))
+            }
+            ShaderFile::Query => {
+                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_query.comp"))
+            }
+            ShaderFile::Render => {
+                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_render.comp"))
+            }
+            ShaderFile::Keys => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_keys.wgsl")),
+            ShaderFile::Sort => Source::Wgsl(include_str!("../../../shaders_wgsl/radix_sort.wgsl")),
+            ShaderFile::Hierarchy => {
+                Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_hierarchy.wgsl"))
+            }
+            ShaderFile::Fit => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_fit.wgsl")),
+        }
+    }
+}
+
+/// The specialisation-constant values of a GLSL kernel variant (constant_id order), or none.
+pub type Variant = Option<[u32; 7]>;
+
+/// A wgpu adapter, as `aarbf info --devices` lists it.
+#[derive(Clone, Debug)]
+pub struct AdapterSummary {
+    pub info: wgpu::AdapterInfo,
+    pub features: wgpu::Features,
+    pub limits: wgpu::Limits,
+}
+
+/// Every adapter wgpu finds, on every backend it was built with.
+pub fn adapters() -> Vec<AdapterSummary> {
+    let instance = instance();
+    pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
+        .into_iter()
+        .map(|a| AdapterSummary {
+            info: a.get_info(),
+            features: a.features(),
+            limits: a.limits(),
+        })
+        .collect()
+}
+
+fn instance() -> wgpu::Instance {
+    instance_for(None)
+}
+
+/// An instance over `backends` (None: `WGPU_BACKEND`, else all). Validation layers follow the
+/// build (on with debug assertions, as in the tests) unless WGPU_VALIDATION says otherwise.
+/// Shader debug information stays off unless WGPU_DEBUG=1: with it naga tags WGSL modules with
+/// a SPIR-V source language (WGSL, 10) that Debian's validation layers (1.3.239) reject as
+/// invalid SPIR-V, a false alarm that would hide real messages.
+fn instance_for(backends: Option<wgpu::Backends>) -> wgpu::Instance {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    desc.flags = (wgpu::InstanceFlags::from_build_config() - wgpu::InstanceFlags::DEBUG).with_env();
+    if let Some(b) = backends {
+        desc.backends = b;
+    }
+    wgpu::Instance::new(desc)
+}
+
+/// A device, its queue and compiled kernels.
+pub struct GpuContext {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    pub limits: wgpu::Limits,
+    lost: Arc<Mutex<Option<String>>>,
+    modules: Mutex<HashMap<ShaderFile, Arc<wgpu::ShaderModule>>>,
+    pipelines: Mutex<HashMap<(Kernel, Variant), Arc<wgpu::ComputePipeline>>>,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("adapter", &self.info.name)
+            .field("backend", &self.info.backend)
+            .finish()
+    }
+}
+
+impl GpuContext {
+    /// The process-wide device (created on first use; an error, such as no adapter, is kept).
+    pub fn shared() -> Result<Arc<GpuContext>, BackendError> {
+        static SHARED: OnceLock<Result<Arc<GpuContext>, String>> = OnceLock::new();
+        SHARED
+            .get_or_init(|| GpuContext::create().map(Arc::new))
+            .clone()
+            .map_err(|e| BackendError::Unavailable("wgpu", e))
+    }
+
+    /// A new device on the best adapter (`WGPU_ADAPTER_NAME` / `WGPU_BACKEND` narrow it).
+    pub fn create() -> Result<GpuContext, String> {
+        // Vulkan, Metal or DX12 first; GL only when none of them has an adapter (unless
+        // WGPU_BACKEND chooses).
+        let chosen = std::env::var_os("WGPU_BACKEND").is_some();
+        let mut adapter = Err("no adapter".to_owned());
+        for backends in [wgpu::Backends::PRIMARY, wgpu::Backends::all()] {
+            let instance = instance_for((!chosen).then_some(backends));
+            adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+                &instance, None,
+            ))
+            .map_err(|e| format!("no wgpu adapter: {e}"));
+            if adapter.is_ok() || chosen {
+                break;
+            }
+        }
+        let adapter = adapter?;
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("aarbf wgpu"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| format!("{}: cannot open a device: {e}", info.name))?;
+        let lost = Arc::new(Mutex::new(None));
+        let lost_in = lost.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            tracing::error!("wgpu device lost ({reason:?}): {message}");
+            *lost_in.lock().unwrap_or_else(|e| e.into_inner()) =
+                Some(format!("device lost ({reason:?}): {message}"));
+        });
+        // Errors outside any scope (there should be none) are logged, never a panic.
+        device.on_uncaptured_error(Arc::new(|e: wgpu::Error| {
+            tracing::error!("wgpu: uncaptured error: {e}");
+        }));
+        tracing::info!(
+            "wgpu: {} ({:?}, {:?}, {} {})",
+            info.name,
+            info.backend,
+            info.device_type,
+            info.driver,
+            info.driver_info
+        );
+        Ok(GpuContext {
+            adapter,
+            device,
+            queue,
+            info,
+            limits,
+            lost,
+            modules: Mutex::new(HashMap::new()),
+            pipelines: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The adapter in words.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {:?}; {} {})",
+            self.info.name,
+            self.info.backend,
+            self.info.device_type,
+            self.info.driver,
+            self.info.driver_info
+        )
+    }
+
+    /// The largest storage-buffer binding, in bytes.
+    pub fn max_binding(&self) -> u64 {
+        self.limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size)
+    }
+
+    /// Runs `f` inside validation, out-of-memory and internal error scopes; any error (or a
+    /// lost device) is returned as [`BackendError::Device`] naming `what`.
+    pub fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, BackendError> {
+        self.check_lost()?;
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let internal = self.device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let out = f();
+        let errors = [
+            pollster::block_on(internal.pop()),
+            pollster::block_on(memory.pop()),
+            pollster::block_on(validation.pop()),
+        ];
+        if let Some(e) = errors.into_iter().flatten().next() {
+            return Err(device_error(format!("{what}: {e}")));
+        }
+        self.check_lost()?;
+        Ok(out)
+    }
+
+    fn check_lost(&self) -> Result<(), BackendError> {
+        match &*self.lost.lock().unwrap_or_else(|e| e.into_inner()) {
+            Some(m) => Err(device_error(m.clone())),
+            None => Ok(()),
+        }
+    }
+
+    /// Waits until the device has finished everything submitted.
+    pub fn wait(&self) -> Result<(), BackendError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| device_error(format!("waiting for the device: {e}")))?;
+        self.check_lost()
+    }
+
+    fn module(&self, file: ShaderFile) -> Result<Arc<wgpu::ShaderModule>, BackendError> {
+        let mut modules = self.modules.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(m) = modules.get(&file) {
+            return Ok(m.clone());
+        }
+        let label = format!("{file:?}");
+        let source = match file.source() {
+            Source::Glsl(text) => wgpu::ShaderSource::Glsl {
+                shader: Cow::Owned(glsl_with_includes(text)),
+                stage: wgpu::naga::ShaderStage::Compute,
+                defines: &[],
+            },
+            Source::Wgsl(text) => wgpu::ShaderSource::Wgsl(Cow::Borrowed(text)),
+        };
+        let module = self.scoped(&format!("shader {label}"), || {
+            self.device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(&label),
+                    source,
+                })
+        })?;
+        let module = Arc::new(module);
+        modules.insert(file, module.clone());
+        Ok(module)
+    }
+
+    /// The pipeline of `kernel` (with specialisation constants `variant` for the GLSL kernels),
+    /// compiled on first use and cached for the process.
+    pub fn pipeline(
+        &self,
+        kernel: Kernel,
+        variant: Variant,
+    ) -> Result<Arc<wgpu::ComputePipeline>, BackendError> {
+        let variant = if kernel.specialised() { variant } else { None };
+        if let Some(p) = self
+            .pipelines
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&(kernel, variant))
+        {
+            return Ok(p.clone());
+        }
+        let module = self.module(kernel.file())?;
+        // naga names an override by its constant_id when it has one: the keys are "0".."6".
+        let keys = ["0", "1", "2", "3", "4", "5", "6"];
+        let constants: Vec<(&str, f64)> = variant
+            .map(|v| {
+                keys.iter()
+                    .zip(v)
+                    .map(|(k, v)| (*k, f64::from(v)))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let label = format!("{kernel:?} {variant:?}");
+        let started = std::time::Instant::now();
+        let pipeline = self.scoped(&format!("pipeline {label}"), || {
+            self.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(&label),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some(kernel.entry_point()),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        zero_initialize_workgroup_memory: false,
+                    },
+                    cache: None,
+                })
+        })?;
+        tracing::debug!(
+            "wgpu: compiled {label} in {:.2} s",
+            started.elapsed().as_secs_f64()
+        );
+        let pipeline = Arc::new(pipeline);
+        self.pipelines
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert((kernel, variant), pipeline.clone());
+        Ok(pipeline)
+    }
+}

@@ -1,0 +1,716 @@
+//! The portable GPU backend: wgpu compute over a GPU-built LBVH (Karras 2012). The paper's
+//! software baseline, and the fallback on every GPU without ray-tracing hardware.
+//!
+//! - **Upload**: a step prepared by [`GpuStepData`] (Hilbert-sorted particles in local
+//!   coordinates, maps baked to tables) goes into buffers kept for the largest step seen (or
+//!   [`Backend::reserve`]d for the series' maximum count); the radius-attribute buffer exists
+//!   only when the scene has one.
+//! - **Build**, every stage a compute pass: cluster boxes (`shaders_glsl/wgpu/lbvh_bounds.comp`),
+//!   Morton keys (`shaders_wgsl/lbvh_keys.wgsl`), a portable LSD radix sort
+//!   (`radix_sort.wgsl`), Karras' hierarchy (`lbvh_hierarchy.wgsl`) and bottom-up bounds
+//!   (`lbvh_fit.wgsl`). The build reads back the leaf count and the tree's depth.
+//! - **Refit** (radius changes): boxes and bottom-up bounds again over the same topology. A
+//!   cluster that was empty at the build and is not any more forces a rebuild (it has no leaf).
+//! - **Query and render**: `shaders_glsl/wgpu/lbvh_query.comp` and `lbvh_render.comp`, the
+//!   shared GLSL (`shaders_glsl/shared/`: RBF, maps, noise, integrators and the LBVH traversal
+//!   `lbvh.glsl`) through naga's GLSL front end; one pipeline per specialisation-constant
+//!   variant, cached for the process. Frames accumulate as f32 sums in a storage buffer.
+//!
+//! The CPU twin of every build stage is [`crate::accel::lbvh`]; `tests/wgpu_lbvh.rs` compares
+//! them, and the backend with the CPU reference.
+
+mod context;
+pub mod sort;
+pub mod tree;
+mod util;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::DVec3;
+
+pub use context::{AdapterSummary, GpuContext, Kernel, adapters};
+pub use tree::{BuildStage, TreeReport, TreeSnapshot};
+
+use super::gpu_data::GpuStepData;
+use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
+use crate::accel::ClusterSize;
+use crate::accel::lbvh::{KeyGrid, STACK_SIZE, structure_bytes};
+use crate::field::{Classification, FieldSettings};
+use crate::noise::BlueNoiseMask;
+use crate::render::image::Image;
+use crate::render::integrator::FrameParams;
+use crate::render::settings::{ColourMode, Integrator, NoiseKind};
+use crate::render::tables::TABLE_SIZE;
+use crate::scene::{Bounds, Step};
+use crate::shaders::{GpuFrame, SpecConstants, pack_map_tables};
+use context::device_error;
+use tree::{GpuTree, SceneBindings};
+use util::{bind, dispatch, grid, storage, uniform, write};
+
+/// Bytes per particle the buffers bind (vec4 position + attribute).
+const PARTICLE_BYTES: u64 = 16;
+/// Bytes per cluster of the largest per-cluster buffers (nodes, boxes).
+const CLUSTER_BYTES: u64 = 32;
+/// Queries per dispatch (the points and results buffers are 16 MiB each).
+const QUERY_CHUNK: usize = 1 << 20;
+
+/// The uploaded step and its buffers.
+struct Scene {
+    step: Step,
+    field: FieldSettings,
+    cluster: ClusterSize,
+    series_bounds: Bounds,
+    series_range: Option<(f64, f64)>,
+    data: GpuStepData,
+    grid: KeyGrid,
+    particles: wgpu::Buffer,
+    particle_capacity: usize,
+    radius_attribute: Option<wgpu::Buffer>,
+    maps: wgpu::Buffer,
+    field_uniform: wgpu::Buffer,
+}
+
+impl Scene {
+    fn clusters(&self) -> u32 {
+        self.data.field.counts[1]
+    }
+
+    fn colour_mode(&self) -> ColourMode {
+        match (&self.field.attribute, self.field.classification) {
+            (None, _) => ColourMode::Density,
+            (Some(_), Classification::Post) => ColourMode::Post,
+            (Some(_), Classification::Pre) => ColourMode::Pre,
+        }
+    }
+
+    fn variant(&self, integrator: Integrator, colour: ColourMode, noise: NoiseKind) -> [u32; 7] {
+        SpecConstants {
+            integrator: SpecConstants::integrator_id(integrator),
+            colour_mode: SpecConstants::colour_id(colour),
+            noise_kind: SpecConstants::noise_id(noise),
+            cluster_size: self.cluster.get() as u32,
+            radius_map_varies: u32::from(self.data.radius_map_varies),
+            density_map_varies: u32::from(self.data.density_map_varies),
+            has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
+        }
+        .values()
+    }
+}
+
+struct Accumulation {
+    width: u32,
+    height: u32,
+    frames: u32,
+    sums: wgpu::Buffer,
+    clear: bool,
+}
+
+/// The wgpu LBVH backend.
+pub struct WgpuBackend {
+    ctx: Arc<GpuContext>,
+    capabilities: Capabilities,
+    reserved: usize,
+    scene: Option<Scene>,
+    tree: Option<GpuTree>,
+    built: Option<TreeReport>,
+    accumulation: Option<Accumulation>,
+    stbn: Option<wgpu::Buffer>,
+    query_buffers: Option<(usize, wgpu::Buffer, wgpu::Buffer, wgpu::Buffer)>,
+    dummy: wgpu::Buffer,
+    optical: Vec<f32>,
+    frame_uniform: wgpu::Buffer,
+    tiling_uniform: wgpu::Buffer,
+    timings: Timings,
+}
+
+impl WgpuBackend {
+    /// A backend on the process-wide device; an error when wgpu finds no adapter.
+    pub fn new() -> Result<WgpuBackend, BackendError> {
+        Ok(WgpuBackend::with_context(GpuContext::shared()?))
+    }
+
+    pub fn with_context(ctx: Arc<GpuContext>) -> WgpuBackend {
+        let max_binding = ctx.max_binding();
+        WgpuBackend {
+            capabilities: Capabilities {
+                name: "wgpu",
+                device: ctx.describe(),
+                hardware_rt: false,
+                software: ctx.info.device_type == wgpu::DeviceType::Cpu,
+                // At K = 1 the nodes and boxes (32 B per cluster) bind the fewest particles.
+                max_particles: Some((max_binding / CLUSTER_BYTES) as usize),
+            },
+            reserved: 0,
+            scene: None,
+            tree: None,
+            built: None,
+            accumulation: None,
+            stbn: None,
+            query_buffers: None,
+            dummy: storage(&ctx, "unused radius attribute", 16),
+            optical: vec![0.0; TABLE_SIZE],
+            frame_uniform: uniform(&ctx, "frame", std::mem::size_of::<GpuFrame>() as u64),
+            tiling_uniform: uniform(&ctx, "tiling", 16),
+            ctx,
+            timings: Timings::default(),
+        }
+    }
+
+    pub fn context(&self) -> &Arc<GpuContext> {
+        &self.ctx
+    }
+
+    /// The uploaded step as the GPU holds it.
+    pub fn step_data(&self) -> Option<&GpuStepData> {
+        self.scene.as_ref().map(|s| &s.data)
+    }
+
+    /// The Morton grid of the uploaded step.
+    pub fn key_grid(&self) -> Option<KeyGrid> {
+        self.scene.as_ref().map(|s| s.grid)
+    }
+
+    /// What the last build or refit reported (None before a build).
+    pub fn tree_report(&self) -> Option<TreeReport> {
+        self.built
+    }
+
+    /// Frames accumulated since the last reset.
+    pub fn frames(&self) -> u32 {
+        self.accumulation.as_ref().map_or(0, |a| a.frames)
+    }
+
+    /// Bytes of build scratch (sort keys, values, histogram) beside the structure.
+    pub fn scratch_bytes(&self) -> usize {
+        self.tree.as_ref().map_or(0, GpuTree::scratch_bytes)
+    }
+
+    /// Fills the tree's buffers with 0xFF (tests: poison before a build).
+    pub fn poison_tree(&mut self) -> Result<(), BackendError> {
+        let tree = self
+            .tree
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded("wgpu"))?;
+        tree.poison(&self.ctx);
+        Ok(())
+    }
+
+    /// Reads the tree back (tests).
+    pub fn snapshot(&self) -> Result<TreeSnapshot, BackendError> {
+        let (Some(scene), Some(tree)) = (&self.scene, &self.tree) else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        tree.snapshot(&self.ctx, scene.clusters() as usize)
+    }
+
+    fn bindings<'a>(scene: &'a Scene, dummy: &'a wgpu::Buffer) -> SceneBindings<'a> {
+        let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn);
+        // Only what the bounds kernel reads varies its pipeline.
+        let mut v = variant;
+        v[0] = 0;
+        v[1] = 0;
+        v[2] = 0;
+        v[5] = 0;
+        SceneBindings {
+            field: &scene.field_uniform,
+            particles: &scene.particles,
+            maps: &scene.maps,
+            radius_attribute: scene.radius_attribute.as_ref().unwrap_or(dummy),
+            variant: Some(v),
+        }
+    }
+
+    /// Builds up to `until` (tests compare each stage with its CPU twin); `Fit` is a full build.
+    pub fn build_until(&mut self, until: BuildStage) -> Result<TreeReport, BackendError> {
+        let (Some(scene), Some(tree)) = (&self.scene, &self.tree) else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        let started = Instant::now();
+        let report = tree.build(
+            &self.ctx,
+            &Self::bindings(scene, &self.dummy),
+            &scene.grid,
+            scene.clusters(),
+            until,
+        )?;
+        self.built = None;
+        if until == BuildStage::Fit {
+            if report.leaves > scene.clusters() {
+                return Err(device_error(format!(
+                    "the build counted {} leaves for {} clusters",
+                    report.leaves,
+                    scene.clusters()
+                )));
+            }
+            if report.depth as usize > STACK_SIZE {
+                return Err(device_error(format!(
+                    "the tree is {} deep, more than the traversal stack's {STACK_SIZE} entries",
+                    report.depth
+                )));
+            }
+            self.built = Some(report);
+            self.timings.build = started.elapsed();
+            tracing::debug!(
+                "wgpu: built an LBVH over {} clusters ({} leaves, depth {}) in {:.1} ms",
+                scene.clusters(),
+                report.leaves,
+                report.depth,
+                self.timings.build.as_secs_f64() * 1e3
+            );
+        }
+        Ok(report)
+    }
+
+    /// Writes the map tables (with the last frame's optical-density table) and field constants.
+    fn write_maps(ctx: &GpuContext, scene: &Scene, optical: &[f32], colour: &[[f32; 3]]) {
+        let tables = pack_map_tables(
+            &scene.data.density_table,
+            &scene.data.radius_table,
+            optical,
+            colour,
+        );
+        write(ctx, &scene.maps, bytemuck::cast_slice(&tables));
+        write(
+            ctx,
+            &scene.field_uniform,
+            bytemuck::bytes_of(&scene.data.field),
+        );
+    }
+
+    fn write_radius_attribute(ctx: &GpuContext, scene: &mut Scene) -> Result<(), BackendError> {
+        match &scene.data.radius_attribute {
+            Some(h) => {
+                let needed = (scene.particle_capacity.max(h.len()) * 4) as u64;
+                if scene
+                    .radius_attribute
+                    .as_ref()
+                    .is_none_or(|b| b.size() < needed)
+                {
+                    scene.radius_attribute = Some(ctx.scoped("radius attribute buffer", || {
+                        storage(ctx, "radius attribute", needed)
+                    })?);
+                }
+                if let Some(b) = &scene.radius_attribute {
+                    write(ctx, b, bytemuck::cast_slice(h));
+                }
+            }
+            None => scene.radius_attribute = None,
+        }
+        Ok(())
+    }
+
+    fn built_scene(&self) -> Result<&Scene, BackendError> {
+        match (&self.scene, self.built) {
+            (Some(s), Some(_)) => Ok(s),
+            _ => Err(BackendError::NothingUploaded("wgpu")),
+        }
+    }
+}
+
+impl Backend for WgpuBackend {
+    fn capabilities(&self) -> &Capabilities {
+        &self.capabilities
+    }
+
+    fn reserve(&mut self, max_particles: usize) {
+        self.reserved = self.reserved.max(max_particles);
+    }
+
+    fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError> {
+        let started = Instant::now();
+        let data = GpuStepData::prepare(input)?;
+        let n = data.points.len();
+        let clusters = data.field.counts[1] as usize;
+        let max_binding = self.ctx.max_binding();
+        if n as u64 * PARTICLE_BYTES > max_binding || clusters as u64 * CLUSTER_BYTES > max_binding
+        {
+            return Err(device_error(format!(
+                "step '{}' holds {n} particles in {clusters} clusters of {}; {} binds at most \
+                 {} particles and {} clusters (a larger cluster size fits more)",
+                input.step.name,
+                input.cluster,
+                self.ctx.info.name,
+                max_binding / PARTICLE_BYTES,
+                max_binding / CLUSTER_BYTES
+            )));
+        }
+        let ctx = self.ctx.clone();
+        // Keep buffers for the largest step seen (or reserved): a series allocates once.
+        let capacity = n.max(self.reserved.min((max_binding / PARTICLE_BYTES) as usize));
+        let old = self.scene.take();
+        let (particles, particle_capacity, maps, field_uniform, radius_attribute) = match old {
+            Some(s) if s.particle_capacity >= n => (
+                s.particles,
+                s.particle_capacity,
+                s.maps,
+                s.field_uniform,
+                s.radius_attribute,
+            ),
+            _ => ctx.scoped("particle buffers", || {
+                (
+                    storage(&ctx, "particles", capacity as u64 * PARTICLE_BYTES),
+                    capacity,
+                    storage(&ctx, "map tables", 6 * TABLE_SIZE as u64 * 4),
+                    uniform(&ctx, "field", 32),
+                    None,
+                )
+            })?,
+        };
+        let mut scene = Scene {
+            step: input.step.clone(),
+            field: input.field.clone(),
+            cluster: input.cluster,
+            series_bounds: input.series_bounds,
+            series_range: input.series_range,
+            grid: KeyGrid::new(input.series_bounds, data.origin),
+            data,
+            particles,
+            particle_capacity,
+            radius_attribute,
+            maps,
+            field_uniform,
+        };
+        write(
+            &ctx,
+            &scene.particles,
+            bytemuck::cast_slice(&scene.data.points),
+        );
+        Self::write_radius_attribute(&ctx, &mut scene)?;
+        Self::write_maps(&ctx, &scene, &self.optical, &scene.data.colour_table);
+        let cluster_capacity = input.cluster.clusters_for(scene.particle_capacity);
+        if self.tree.as_ref().is_none_or(|t| t.capacity < clusters) {
+            self.tree = None;
+            self.tree = Some(GpuTree::new(&ctx, cluster_capacity)?);
+        }
+        self.scene = Some(scene);
+        self.built = None;
+        self.timings.upload = started.elapsed();
+        Ok(())
+    }
+
+    fn build(&mut self) -> Result<(), BackendError> {
+        self.build_until(BuildStage::Fit).map(|_| ())
+    }
+
+    fn refit(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
+        let started = Instant::now();
+        if self.built.is_none() {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        }
+        let ctx = self.ctx.clone();
+        let Some(scene) = self.scene.as_mut() else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        if field.radius_attribute != scene.field.radius_attribute {
+            // New per-particle radii: prepare the step again (same order, same positions).
+            scene.data = GpuStepData::prepare(&StepInput {
+                step: &scene.step,
+                field,
+                cluster: scene.cluster,
+                series_bounds: scene.series_bounds,
+                series_range: scene.series_range,
+            })?;
+            Self::write_radius_attribute(&ctx, scene)?;
+        } else {
+            // Same checks as a fresh preparation (a bad radius is refused the same way).
+            if !(field.radius.is_finite() && field.radius > 0.0) {
+                return Err(crate::field::FieldError::BadRadius(field.radius).into());
+            }
+            scene.data.set_maps(field);
+        }
+        scene.field = field.clone();
+        let colour = scene.data.colour_table.clone();
+        Self::write_maps(&ctx, scene, &self.optical, &colour);
+        let (Some(scene), Some(tree)) = (&self.scene, &self.tree) else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        let report = tree.refit(
+            &ctx,
+            &Self::bindings(scene, &self.dummy),
+            &scene.grid,
+            scene.clusters(),
+        )?;
+        if report.needs_rebuild {
+            tracing::debug!("wgpu: a refit left a non-empty cluster outside the tree; rebuilding");
+            self.build_until(BuildStage::Fit)?;
+        } else if let Some(b) = &mut self.built {
+            b.needs_rebuild = false;
+        }
+        self.timings.refit = started.elapsed();
+        Ok(())
+    }
+
+    fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
+        let Some(scene) = self.scene.as_mut() else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        scene.data.set_maps(field);
+        scene.field = field.clone();
+        let colour = scene.data.colour_table.clone();
+        Self::write_maps(&self.ctx, scene, &self.optical, &colour);
+        Ok(())
+    }
+
+    fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
+        let started = Instant::now();
+        let ctx = self.ctx.clone();
+        self.built_scene()?;
+        if points.is_empty() {
+            return Ok(Vec::new());
+        }
+        let chunk = QUERY_CHUNK
+            .min((ctx.max_binding() / 16) as usize)
+            .min(points.len());
+        if self.query_buffers.as_ref().is_none_or(|q| q.0 < chunk) {
+            self.query_buffers = Some(ctx.scoped("query buffers", || {
+                (
+                    chunk,
+                    uniform(&ctx, "query count", 16),
+                    storage(&ctx, "query points", chunk as u64 * 16),
+                    storage(&ctx, "query results", chunk as u64 * 16),
+                )
+            })?);
+        }
+        let scene = self.scene.as_ref().expect("checked above");
+        let tree = self
+            .tree
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded("wgpu"))?;
+        let (_, count_buffer, points_buffer, results_buffer) =
+            self.query_buffers.as_ref().expect("made above");
+        let pipeline = ctx.pipeline(
+            Kernel::Query,
+            Some(scene.variant(Integrator::Ea, scene.colour_mode(), NoiseKind::Stbn)),
+        )?;
+        let bg = ctx.scoped("query bind group", || {
+            bind(
+                &ctx,
+                &pipeline,
+                &[
+                    (0, count_buffer.as_entire_binding()),
+                    (1, scene.field_uniform.as_entire_binding()),
+                    (2, scene.particles.as_entire_binding()),
+                    (3, scene.maps.as_entire_binding()),
+                    (
+                        4,
+                        scene
+                            .radius_attribute
+                            .as_ref()
+                            .unwrap_or(&self.dummy)
+                            .as_entire_binding(),
+                    ),
+                    (5, tree.nodes.as_entire_binding()),
+                    (6, tree.boxes.as_entire_binding()),
+                    (7, points_buffer.as_entire_binding()),
+                    (8, results_buffer.as_entire_binding()),
+                ],
+            )
+        })?;
+        let mut out = Vec::with_capacity(points.len());
+        let mut bytes = Vec::new();
+        for part in points.chunks(chunk) {
+            let local: Vec<[f32; 4]> = part
+                .iter()
+                .map(|&x| {
+                    let l = scene.data.local(x);
+                    [l[0], l[1], l[2], 0.0]
+                })
+                .collect();
+            write(&ctx, points_buffer, bytemuck::cast_slice(&local));
+            let groups = (part.len() as u32).div_ceil(64);
+            let (blocks, per_block, dispatched) = util::interleave(groups);
+            write(
+                &ctx,
+                count_buffer,
+                bytemuck::cast_slice(&[part.len() as u32, groups, blocks, per_block]),
+            );
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            ctx.scoped("query", || {
+                dispatch(
+                    &mut encoder,
+                    "lbvh query",
+                    &pipeline,
+                    &bg,
+                    grid(u64::from(dispatched), 1),
+                );
+            })?;
+            bytes.clear();
+            util::read_into(
+                &ctx,
+                Some(encoder),
+                results_buffer,
+                0,
+                part.len() as u64 * 16,
+                &mut bytes,
+            )?;
+            let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
+            out.extend(values.iter().map(|v| {
+                (
+                    f64::from(v[0]),
+                    [f64::from(v[1]), f64::from(v[2]), f64::from(v[3])],
+                )
+            }));
+        }
+        self.timings.query = started.elapsed();
+        Ok(out)
+    }
+
+    fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
+        let started = Instant::now();
+        let ctx = self.ctx.clone();
+        self.built_scene()?;
+        let (w, h) = (frame.width, frame.height);
+        let bytes = u64::from(w) * u64::from(h) * 16;
+        if bytes > ctx.max_binding() {
+            return Err(device_error(format!(
+                "a {w}x{h} image needs {bytes} bytes of accumulation; {} binds at most {}",
+                ctx.info.name,
+                ctx.max_binding()
+            )));
+        }
+        if self
+            .accumulation
+            .as_ref()
+            .is_none_or(|a| a.width != w || a.height != h)
+        {
+            self.accumulation = None;
+            let sums = ctx.scoped("accumulation buffer", || {
+                storage(&ctx, "accumulation", bytes)
+            })?;
+            self.accumulation = Some(Accumulation {
+                width: w,
+                height: h,
+                frames: 0,
+                sums,
+                clear: true,
+            });
+        }
+        if self.stbn.is_none() {
+            let mask = BlueNoiseMask::builtin();
+            if (mask.width, mask.height, mask.depth) != (128, 128, 64) {
+                return Err(device_error(format!(
+                    "the shaders expect a 128x128x64 blue-noise mask, not {}x{}x{}",
+                    mask.width, mask.height, mask.depth
+                )));
+            }
+            let words = mask.packed_words();
+            let buffer = ctx.scoped("blue-noise mask", || {
+                storage(&ctx, "stbn mask", words.len() as u64 * 4)
+            })?;
+            write(&ctx, &buffer, bytemuck::cast_slice(&words));
+            self.stbn = Some(buffer);
+        }
+        let scene = self.scene.as_ref().expect("checked above");
+        let tree = self.tree.as_ref().expect("built");
+        self.optical = frame.optical_table.to_vec();
+        Self::write_maps(&ctx, scene, &self.optical, &frame.colour_table);
+        write(
+            &ctx,
+            &self.frame_uniform,
+            bytemuck::bytes_of(&GpuFrame::new(frame, scene.data.origin)),
+        );
+        let pipeline = ctx.pipeline(
+            Kernel::Render,
+            Some(scene.variant(frame.integrator, frame.colour, frame.noise)),
+        )?;
+        let tiles_x = w.div_ceil(8);
+        let tiles = tiles_x * h.div_ceil(8);
+        let (blocks, per_block, dispatched) = util::interleave(tiles);
+        write(
+            &ctx,
+            &self.tiling_uniform,
+            bytemuck::cast_slice(&[tiles_x, tiles, blocks, per_block]),
+        );
+        let acc = self.accumulation.as_mut().expect("made above");
+        let stbn = self.stbn.as_ref().expect("made above");
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        ctx.scoped("render", || {
+            let bg = bind(
+                &ctx,
+                &pipeline,
+                &[
+                    (0, self.frame_uniform.as_entire_binding()),
+                    (1, scene.field_uniform.as_entire_binding()),
+                    (2, scene.particles.as_entire_binding()),
+                    (3, scene.maps.as_entire_binding()),
+                    (
+                        4,
+                        scene
+                            .radius_attribute
+                            .as_ref()
+                            .unwrap_or(&self.dummy)
+                            .as_entire_binding(),
+                    ),
+                    (5, tree.nodes.as_entire_binding()),
+                    (6, tree.boxes.as_entire_binding()),
+                    (7, stbn.as_entire_binding()),
+                    (8, acc.sums.as_entire_binding()),
+                    (9, self.tiling_uniform.as_entire_binding()),
+                ],
+            );
+            if acc.clear {
+                encoder.clear_buffer(&acc.sums, 0, None);
+                acc.frames = 0;
+                acc.clear = false;
+            }
+            dispatch(
+                &mut encoder,
+                "lbvh render",
+                &pipeline,
+                &bg,
+                grid(u64::from(dispatched), 1),
+            );
+        })?;
+        util::submit_and_wait(&ctx, "render", encoder)?;
+        acc.frames += 1;
+        self.timings.frame = started.elapsed();
+        Ok(())
+    }
+
+    fn reset(&mut self) {
+        if let Some(a) = &mut self.accumulation {
+            a.frames = 0;
+            a.clear = true;
+        }
+    }
+
+    fn image(&mut self) -> Result<Image, BackendError> {
+        let acc = self
+            .accumulation
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded("wgpu"))?;
+        let pixels = acc.width as usize * acc.height as usize;
+        let bytes = if acc.clear || acc.frames == 0 {
+            vec![0u8; pixels * 16]
+        } else {
+            util::read(&self.ctx, &acc.sums, 0, pixels as u64 * 16)?
+        };
+        let sums: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
+        let n = acc.frames.max(1) as f32;
+        Ok(Image {
+            width: acc.width,
+            height: acc.height,
+            pixels: sums.iter().map(|s| s.map(|v| v / n)).collect(),
+        })
+    }
+
+    fn timings(&self) -> Timings {
+        self.timings
+    }
+
+    fn memory(&self) -> MemoryReport {
+        MemoryReport {
+            particle_bytes: self.scene.as_ref().map_or(0, |s| s.data.particle_bytes()),
+            structure_bytes: self
+                .scene
+                .as_ref()
+                .filter(|_| self.built.is_some())
+                .map_or(0, |s| structure_bytes(s.clusters() as usize)),
+            image_bytes: self
+                .accumulation
+                .as_ref()
+                .map_or(0, |a| a.sums.size() as usize),
+        }
+    }
+}

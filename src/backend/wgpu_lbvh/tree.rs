@@ -1,0 +1,352 @@
+//! The GPU-built LBVH: its buffers and the passes that build and refit it. Layout and stages:
+//! `src/accel/lbvh.rs` (the CPU twin).
+
+use bytemuck::{Pod, Zeroable};
+
+use super::context::{GpuContext, Kernel, Variant};
+use super::sort::RadixSort;
+use super::util::{bind, dispatch, grid, poison, read, read_u32, storage, write};
+use crate::accel::lbvh::{GpuBox, KeyGrid, Lbvh, NODE_WORDS};
+use crate::backend::BackendError;
+
+/// How far a build goes (tests stop early to compare a stage with its twin).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum BuildStage {
+    Bounds,
+    Keys,
+    Sort,
+    Hierarchy,
+    Fit,
+}
+
+/// `TreeParams` of the WGSL passes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct TreeParams {
+    pub key_lo: [f32; 4],
+    pub key_scale: [f32; 4],
+    pub clusters: u32,
+    pub components: u32,
+    pub pad: [u32; 2],
+}
+
+/// What a build or refit reports back (the counters buffer).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TreeReport {
+    /// Non-empty clusters: the tree's leaves.
+    pub leaves: u32,
+    /// The root's height in edges.
+    pub depth: u32,
+    /// A refit found a cluster outside the tree holding particles: rebuild.
+    pub needs_rebuild: bool,
+}
+
+/// The scene's buffers a tree pass reads.
+pub struct SceneBindings<'a> {
+    pub field: &'a wgpu::Buffer,
+    pub particles: &'a wgpu::Buffer,
+    pub maps: &'a wgpu::Buffer,
+    pub radius_attribute: &'a wgpu::Buffer,
+    /// The bounds kernel's specialisation constants.
+    pub variant: Variant,
+}
+
+/// The tree's buffers, for up to `capacity` clusters.
+pub struct GpuTree {
+    pub capacity: usize,
+    params: wgpu::Buffer,
+    pub boxes: wgpu::Buffer,
+    pub keys: wgpu::Buffer,
+    pub values: wgpu::Buffer,
+    /// Sort scratch; after the sort, the bottom-up pass's height words.
+    pub keys_tmp: wgpu::Buffer,
+    pub values_tmp: wgpu::Buffer,
+    pub nodes: wgpu::Buffer,
+    pub node_parents: wgpu::Buffer,
+    pub leaf_parents: wgpu::Buffer,
+    pub counters: wgpu::Buffer,
+    sort: RadixSort,
+}
+
+impl GpuTree {
+    pub fn new(ctx: &GpuContext, capacity: usize) -> Result<GpuTree, BackendError> {
+        let c = capacity.max(1) as u64;
+        ctx.scoped("tree buffers", || GpuTree {
+            capacity,
+            params: super::util::uniform(ctx, "tree params", 48),
+            boxes: storage(ctx, "cluster boxes", c * 32),
+            keys: storage(ctx, "keys", c * 4),
+            values: storage(ctx, "values", c * 4),
+            keys_tmp: storage(ctx, "keys scratch / heights", c * 4),
+            values_tmp: storage(ctx, "values scratch", c * 4),
+            nodes: storage(ctx, "nodes", c * 32),
+            node_parents: storage(ctx, "node parents", c * 4),
+            leaf_parents: storage(ctx, "leaf parents", c * 4),
+            counters: storage(ctx, "counters", 16),
+            sort: RadixSort::new(ctx, capacity),
+        })
+    }
+
+    /// Bytes of scratch (sort buffers), beside the structure proper.
+    pub fn scratch_bytes(&self) -> usize {
+        (self.keys.size() + self.values.size() + self.keys_tmp.size() + self.values_tmp.size())
+            as usize
+            + self.sort.bytes()
+    }
+
+    /// Fills every tree buffer with 0xFF (tests: unwritten elements show).
+    pub fn poison(&self, ctx: &GpuContext) {
+        for b in [
+            &self.boxes,
+            &self.keys,
+            &self.values,
+            &self.keys_tmp,
+            &self.values_tmp,
+            &self.nodes,
+            &self.node_parents,
+            &self.leaf_parents,
+            &self.counters,
+        ] {
+            poison(ctx, b);
+        }
+    }
+
+    fn write_params(&self, ctx: &GpuContext, grid_: &KeyGrid, clusters: u32, components: u32) {
+        let p = TreeParams {
+            key_lo: [grid_.lo[0], grid_.lo[1], grid_.lo[2], 0.0],
+            key_scale: [grid_.scale[0], grid_.scale[1], grid_.scale[2], 0.0],
+            clusters,
+            components,
+            pad: [0; 2],
+        };
+        write(ctx, &self.params, bytemuck::bytes_of(&p));
+    }
+
+    fn encode_bounds(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &SceneBindings<'_>,
+        clusters: u32,
+    ) -> Result<(), BackendError> {
+        let pipeline = ctx.pipeline(Kernel::Bounds, scene.variant)?;
+        let bg = bind(
+            ctx,
+            &pipeline,
+            &[
+                (0, scene.field.as_entire_binding()),
+                (1, scene.particles.as_entire_binding()),
+                (2, scene.maps.as_entire_binding()),
+                (3, scene.radius_attribute.as_entire_binding()),
+                (4, self.boxes.as_entire_binding()),
+            ],
+        );
+        dispatch(
+            encoder,
+            "lbvh bounds",
+            &pipeline,
+            &bg,
+            grid(u64::from(clusters), 64),
+        );
+        Ok(())
+    }
+
+    fn encode_climb(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        clusters: u32,
+    ) -> Result<(), BackendError> {
+        let pipeline = ctx.pipeline(Kernel::FitClimb, None)?;
+        let bg = bind(
+            ctx,
+            &pipeline,
+            &[
+                (0, self.params.as_entire_binding()),
+                (1, self.boxes.as_entire_binding()),
+                (2, self.nodes.as_entire_binding()),
+                (3, self.node_parents.as_entire_binding()),
+                (4, self.leaf_parents.as_entire_binding()),
+                (5, self.keys_tmp.as_entire_binding()),
+                (6, self.counters.as_entire_binding()),
+            ],
+        );
+        dispatch(
+            encoder,
+            "lbvh climb",
+            &pipeline,
+            &bg,
+            grid(u64::from(clusters), 64),
+        );
+        Ok(())
+    }
+
+    /// Encodes a build over `clusters` clusters up to `until`, and submits it; returns the
+    /// counters (meaningful after [`BuildStage::Fit`]).
+    pub fn build(
+        &self,
+        ctx: &GpuContext,
+        scene: &SceneBindings<'_>,
+        grid_: &KeyGrid,
+        clusters: u32,
+        until: BuildStage,
+    ) -> Result<TreeReport, BackendError> {
+        assert!(clusters as usize <= self.capacity);
+        self.write_params(ctx, grid_, clusters, 7);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        ctx.scoped("lbvh build", || -> Result<(), BackendError> {
+            encoder.clear_buffer(&self.counters, 0, None);
+            self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
+            if until >= BuildStage::Keys {
+                let pipeline = ctx.pipeline(Kernel::Keys, None)?;
+                let bg = bind(
+                    ctx,
+                    &pipeline,
+                    &[
+                        (0, self.params.as_entire_binding()),
+                        (1, self.boxes.as_entire_binding()),
+                        (2, self.keys.as_entire_binding()),
+                        (3, self.values.as_entire_binding()),
+                        (4, self.leaf_parents.as_entire_binding()),
+                        (5, self.counters.as_entire_binding()),
+                    ],
+                );
+                dispatch(
+                    &mut encoder,
+                    "lbvh keys",
+                    &pipeline,
+                    &bg,
+                    grid(u64::from(clusters), 64),
+                );
+            }
+            if until >= BuildStage::Sort {
+                self.sort.encode(
+                    ctx,
+                    &mut encoder,
+                    clusters,
+                    &self.keys,
+                    &self.values,
+                    &self.keys_tmp,
+                    &self.values_tmp,
+                )?;
+            }
+            if until >= BuildStage::Hierarchy {
+                let pipeline = ctx.pipeline(Kernel::Hierarchy, None)?;
+                let bg = bind(
+                    ctx,
+                    &pipeline,
+                    &[
+                        (1, self.keys.as_entire_binding()),
+                        (2, self.values.as_entire_binding()),
+                        (3, self.nodes.as_entire_binding()),
+                        (4, self.node_parents.as_entire_binding()),
+                        (5, self.leaf_parents.as_entire_binding()),
+                        (6, self.keys_tmp.as_entire_binding()),
+                        (7, self.counters.as_entire_binding()),
+                    ],
+                );
+                // Thread 0 writes the header even for zero or one leaf.
+                dispatch(
+                    &mut encoder,
+                    "lbvh hierarchy",
+                    &pipeline,
+                    &bg,
+                    grid(u64::from(clusters.max(1)), 64),
+                );
+            }
+            if until >= BuildStage::Fit {
+                self.encode_climb(ctx, &mut encoder, clusters)?;
+            }
+            Ok(())
+        })??;
+        self.report(ctx, encoder)
+    }
+
+    /// Encodes a refit (bounds, reset, climb over the built topology) and submits it.
+    pub fn refit(
+        &self,
+        ctx: &GpuContext,
+        scene: &SceneBindings<'_>,
+        grid_: &KeyGrid,
+        clusters: u32,
+    ) -> Result<TreeReport, BackendError> {
+        self.write_params(ctx, grid_, clusters, 6);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        ctx.scoped("lbvh refit", || -> Result<(), BackendError> {
+            self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
+            encoder.clear_buffer(&self.counters, 8, Some(4));
+            let pipeline = ctx.pipeline(Kernel::FitReset, None)?;
+            let bg = bind(
+                ctx,
+                &pipeline,
+                &[
+                    (2, self.nodes.as_entire_binding()),
+                    (6, self.counters.as_entire_binding()),
+                ],
+            );
+            dispatch(
+                &mut encoder,
+                "lbvh reset",
+                &pipeline,
+                &bg,
+                grid(u64::from(clusters), 64),
+            );
+            self.encode_climb(ctx, &mut encoder, clusters)
+        })??;
+        self.report(ctx, encoder)
+    }
+
+    fn report(
+        &self,
+        ctx: &GpuContext,
+        encoder: wgpu::CommandEncoder,
+    ) -> Result<TreeReport, BackendError> {
+        let mut bytes = Vec::new();
+        super::util::read_into(ctx, Some(encoder), &self.counters, 0, 16, &mut bytes)?;
+        let c: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        Ok(TreeReport {
+            leaves: c[0],
+            depth: c[1],
+            needs_rebuild: c[2] != 0,
+        })
+    }
+
+    /// Reads the tree back (tests): cluster boxes, keys and values (sorted after the sort
+    /// stage), the hierarchy as an [`Lbvh`] and the counters.
+    pub fn snapshot(
+        &self,
+        ctx: &GpuContext,
+        clusters: usize,
+    ) -> Result<TreeSnapshot, BackendError> {
+        let counters = read_u32(ctx, &self.counters, 4)?;
+        let leaves = counters[0] as usize;
+        let node_count = if leaves <= clusters { leaves.max(1) } else { 1 };
+        let boxes_raw = read(ctx, &self.boxes, 0, clusters as u64 * 32)?;
+        let boxes: Vec<GpuBox> = bytemuck::pod_collect_to_vec(&boxes_raw);
+        let nodes_raw = read(ctx, &self.nodes, 0, (node_count * NODE_WORDS * 4) as u64)?;
+        let nodes: Vec<[u32; NODE_WORDS]> = bytemuck::pod_collect_to_vec(&nodes_raw);
+        Ok(TreeSnapshot {
+            boxes,
+            keys: read_u32(ctx, &self.keys, clusters)?,
+            values: read_u32(ctx, &self.values, clusters)?,
+            lbvh: Lbvh {
+                nodes,
+                node_parents: read_u32(ctx, &self.node_parents, node_count)?,
+                leaf_parents: read_u32(ctx, &self.leaf_parents, clusters)?,
+                leaves: counters[0],
+                depth: counters[1],
+            },
+            counters: [counters[0], counters[1], counters[2], counters[3]],
+        })
+    }
+}
+
+/// A tree read back from the GPU.
+#[derive(Clone, Debug)]
+pub struct TreeSnapshot {
+    pub boxes: Vec<GpuBox>,
+    pub keys: Vec<u32>,
+    pub values: Vec<u32>,
+    pub lbvh: Lbvh,
+    pub counters: [u32; 4],
+}

@@ -1,0 +1,783 @@
+//! The ash (Vulkan ray-tracing) backend against the CPU f64 reference, on whatever Vulkan
+//! device with ray-tracing pipelines this machine has (lavapipe in CI).
+//!
+//! - Without such a device the tests print a notice and pass, unless `CI` is set: then they
+//!   fail.
+//! - One Vulkan device serves every test of this process (the backend shares it), so each
+//!   pipeline variant is JIT-compiled once.
+//! - The validation layer is on (the `checked` profile has debug assertions) when installed,
+//!   and every test ends by asserting that it reported nothing.
+
+use aarbf::accel::{ClusterBoxes, ClusterSize};
+use aarbf::backend::ash_rt::{self, AshBackend};
+use aarbf::backend::{Backend, StepInput};
+use aarbf::field::{Classification, FieldSettings, ReferenceField};
+use aarbf::render::image::Image;
+use aarbf::scene::maps::{DensityMap, RadiusMap};
+use aarbf::scene::{Attribute, Bounds, Step};
+use glam::{DVec3, Vec3};
+use rand::{Rng, SeedableRng};
+
+/// A backend, or `None` (with a notice) where no ray-tracing device exists and CI is unset.
+fn backend() -> Option<AshBackend> {
+    match AshBackend::new() {
+        Ok(b) => Some(b),
+        Err(e) if std::env::var_os("CI").is_some() => {
+            panic!("CI is set, but the ash backend is unavailable: {e}")
+        }
+        Err(e) => {
+            eprintln!("SKIPPED (no Vulkan ray-tracing device; set CI to make this fail): {e}");
+            None
+        }
+    }
+}
+
+fn assert_no_validation_messages() {
+    let messages = ash_rt::validation_messages();
+    assert!(
+        messages.is_empty(),
+        "{} validation message(s):\n{}",
+        messages.len(),
+        messages.join("\n")
+    );
+}
+
+/// `n` random particles in a box far from the origin (so local coordinates matter), with an
+/// attribute `s` and a radius attribute `h` (some zeros).
+fn random_step(n: usize, seed: u64) -> Step {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let centre = Vec3::new(1000.0, -50.0, 3.0);
+    let positions = (0..n)
+        .map(|_| centre + Vec3::new(rng.random(), rng.random(), rng.random()) * 2.0)
+        .collect();
+    let s = (0..n).map(|_| rng.random_range(-3.0f32..5.0)).collect();
+    let h = (0..n)
+        .map(|_| {
+            if rng.random::<f32>() < 0.1 {
+                0.0
+            } else {
+                rng.random_range(0.5f32..1.5)
+            }
+        })
+        .collect();
+    Step {
+        name: format!("random{seed}"),
+        positions,
+        attributes: vec![
+            Attribute {
+                name: "s".into(),
+                values: s,
+            },
+            Attribute {
+                name: "h".into(),
+                values: h,
+            },
+        ],
+    }
+}
+
+/// A radius map that is 0 below t = 0.2 (on the 256-sample table grid, so the GPU's table and
+/// the CPU's exact map agree).
+fn radius_map_with_zeros() -> RadiusMap {
+    RadiusMap("0:0,0.2:0,0.6:1,1:0.5".parse().unwrap())
+}
+
+fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
+    StepInput {
+        step,
+        field,
+        cluster: ClusterSize::new(k).unwrap(),
+        series_bounds: step.bounds(),
+        series_range: None,
+    }
+}
+
+#[test]
+fn device_has_ray_tracing_and_validation_when_installed() {
+    let Some(b) = backend() else { return };
+    let caps = b.capabilities();
+    assert_eq!(caps.name, "ash");
+    assert!(caps.hardware_rt);
+    eprintln!("device: {}", caps.device);
+    let ctx = ash_rt::context::shared().unwrap();
+    let layer =
+        std::path::Path::new("/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json");
+    if layer.exists() && std::env::var("AARBF_VK_VALIDATION").as_deref() != Ok("0") {
+        assert!(
+            ctx.validation,
+            "the validation layer is installed and this build has debug assertions"
+        );
+    }
+    // Nothing uploaded: errors, not panics.
+    let mut b = b;
+    assert!(b.query(&[DVec3::ZERO]).is_err());
+    assert!(b.image().is_err());
+    assert!(b.build().is_err());
+    assert!(b.refit(&FieldSettings::new(None, 1.0)).is_err());
+    // More particles than the device's storage-buffer limit: a clear error naming the limit.
+    let step = random_step(10, 1);
+    let field = FieldSettings::new(Some("s"), 0.1);
+    b.reserve(1 << 40);
+    let e = b.upload(&input(&step, &field, 1)).unwrap_err().to_string();
+    assert!(e.contains("maxStorageBufferRange"), "{e}");
+    // An empty step uploads, builds and queries to zero.
+    let mut b = backend().unwrap();
+    let empty = Step {
+        name: "empty".into(),
+        positions: vec![],
+        attributes: vec![Attribute {
+            name: "s".into(),
+            values: vec![],
+        }],
+    };
+    b.upload(&input(&empty, &field, 4)).unwrap();
+    b.build().unwrap();
+    assert_eq!(b.query(&[DVec3::ZERO]).unwrap(), vec![(0.0, [0.0; 3])]);
+    assert_no_validation_messages();
+}
+
+/// The box kernel's boxes contain the CPU's (f64, outward-rounded) cluster boxes and exceed
+/// them by no more than the padding; clusters whose particles all have radius 0 get a
+/// degenerate box at their first particle; clusters past the step are NaN.
+#[test]
+fn boxes_match_the_cpu_cluster_boxes() {
+    let Some(mut b) = backend() else { return };
+    let step = random_step(1237, 1);
+    let mut field = FieldSettings::new(Some("s"), 0.05);
+    field.radius_map = radius_map_with_zeros();
+    field.radius_attribute = Some("h".into());
+    for k in [1, 4, 16] {
+        b.reserve(1500);
+        b.upload(&input(&step, &field, k)).unwrap();
+        b.build().unwrap();
+        let reference = ReferenceField::of_step(
+            &step,
+            &field,
+            ClusterSize::new(k).unwrap(),
+            step.bounds(),
+            None,
+        )
+        .unwrap();
+        let cpu: &ClusterBoxes = &reference.boxes;
+        let gpu = b.read_boxes().unwrap();
+        let origin = b.origin().unwrap();
+        let clusters = cpu.len();
+        assert_eq!(gpu.len(), ClusterSize::new(k).unwrap().clusters_for(1500));
+        let mut degenerate = 0;
+        for (c, g) in gpu.iter().enumerate() {
+            if c >= clusters {
+                assert!(
+                    g.iter().all(|v| v.is_nan()),
+                    "K = {k}, box {c} past the step: {g:?}"
+                );
+                continue;
+            }
+            let lo = DVec3::new(g[0].into(), g[1].into(), g[2].into()) + origin;
+            let hi = DVec3::new(g[3].into(), g[4].into(), g[5].into()) + origin;
+            let want: Bounds = cpu.boxes[c];
+            if want.is_empty() {
+                degenerate += 1;
+                let first = reference.particles.centers[c * k as usize];
+                assert_eq!(lo, hi, "K = {k}, box {c}: degenerate");
+                assert!((lo - first).abs().max_element() < 1e-4, "K = {k}, box {c}");
+                continue;
+            }
+            // The f32 local box against the f64 box: the GPU's may be larger by its padding
+            // plus the rounding of local coordinates (~1e-4 of the 2-unit extent at 1000).
+            let (wlo, whi) = (want.min.as_dvec3(), want.max.as_dvec3());
+            let slack = 2e-4;
+            assert!(
+                lo.cmple(wlo + slack).all() && hi.cmpge(whi - slack).all(),
+                "K = {k}, box {c}: GPU {lo}..{hi} does not contain CPU {wlo}..{whi}"
+            );
+            assert!(
+                lo.cmpge(wlo - slack).all() && hi.cmple(whi + slack).all(),
+                "K = {k}, box {c}: GPU {lo}..{hi} much larger than CPU {wlo}..{whi}"
+            );
+        }
+        assert!(
+            k > 4 || degenerate > 0,
+            "K = {k}: the scene has clusters of zero-radius particles"
+        );
+    }
+    assert_no_validation_messages();
+}
+
+/// Compares GPU sums with the f64 reference at `points`: Phi and each Theta-numerator
+/// component within `1e-4 Phi + 1e-6`. Where that budget goes: f32 local coordinates of
+/// particles and queries (d²/r² to ~5e-6 relative, so a term's exp to ~2e-5), f32 sums, and
+/// for pre-classification the colour map's 256-sample table, which the GPU interpolates where
+/// the reference evaluates the map exactly (measured ≤ 6e-5 for viridis; Phi itself agrees to
+/// ~3e-6). A query within 1e-5 r of some particle's radius boundary may legitimately differ by
+/// a whole term (f32 decides in or out there); such queries are excused, and must be rare
+/// (≤ 0.5%). Returns the largest relative error seen.
+fn compare_sums(
+    reference: &ReferenceField,
+    points: &[DVec3],
+    got: &[(f64, [f64; 3])],
+    what: &str,
+) -> f64 {
+    assert_eq!(got.len(), points.len());
+    let p = &reference.particles;
+    let mut worst: f64 = 0.0;
+    let mut excused = 0;
+    let mut non_zero = 0;
+    for (i, (&x, g)) in points.iter().zip(got).enumerate() {
+        let (phi, num) = reference.eval_sums(x);
+        if phi > 0.0 {
+            non_zero += 1;
+        }
+        assert!(
+            g.0.is_finite() && g.1.iter().all(|v| v.is_finite()),
+            "{what}: query {i} at {x}: not finite (unwritten?): {g:?}"
+        );
+        let tol = 1e-4 * phi + 1e-6;
+        let err = (g.0 - phi)
+            .abs()
+            .max((0..3).map(|c| (g.1[c] - num[c]).abs()).fold(0.0, f64::max));
+        if err > tol {
+            let near_boundary = (0..p.len()).any(|j| {
+                let r = p.radii[j];
+                r > 0.0 && ((x - p.centers[j]).length() - r).abs() <= 1e-5 * r.max(1e-3)
+            });
+            assert!(
+                near_boundary,
+                "{what}: query {i} at {x}: GPU {g:?}, CPU ({phi}, {num:?}), error {err:e} > {tol:e}"
+            );
+            excused += 1;
+            continue;
+        }
+        worst = worst.max(err / phi.max(1e-30));
+    }
+    assert!(
+        excused * 200 <= points.len(),
+        "{what}: {excused} of {} queries differ near a radius boundary",
+        points.len()
+    );
+    assert!(
+        non_zero * 2 > points.len(),
+        "{what}: most queries see particles ({non_zero} of {})",
+        points.len()
+    );
+    worst
+}
+
+/// Query points: every particle centre and as many random points in the bounds.
+fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let b = step.bounds();
+    let mut q: Vec<DVec3> = step.positions.iter().map(|p| p.as_dvec3()).collect();
+    for _ in 0..step.len() {
+        let t = DVec3::new(rng.random(), rng.random(), rng.random());
+        q.push(b.min.as_dvec3() + t * (b.max - b.min).as_dvec3());
+    }
+    q
+}
+
+#[test]
+fn queries_match_the_f64_reference_for_every_cluster_size() {
+    let Some(mut b) = backend() else { return };
+    let step = random_step(1500, 2);
+    let points = queries(&step, 3);
+    let mut worst: f64 = 0.0;
+    for k in [1, 2, 4, 8, 16] {
+        for classification in [Classification::Post, Classification::Pre] {
+            let mut field = FieldSettings::new(Some("s"), 0.2);
+            field.classification = classification;
+            field.radius_map = radius_map_with_zeros();
+            if classification == Classification::Post {
+                // Per-particle radii (with zeros) and a varying density map.
+                field.radius_attribute = Some("h".into());
+                field.density_map = DensityMap("0:0.5,1:1".parse().unwrap());
+            }
+            b.upload(&input(&step, &field, k)).unwrap();
+            b.build().unwrap();
+            let got = b.query(&points).unwrap();
+            let reference = ReferenceField::of_step(
+                &step,
+                &field,
+                ClusterSize::new(k).unwrap(),
+                step.bounds(),
+                None,
+            )
+            .unwrap();
+            let what = format!("K = {k}, {classification:?}");
+            let e = compare_sums(&reference, &points, &got, &what);
+            eprintln!("{what}: max relative error {e:.2e}");
+            worst = worst.max(e);
+        }
+    }
+    eprintln!("worst relative error over all: {worst:.2e}");
+    assert_no_validation_messages();
+}
+
+/// A refit after a radius change (global radius, radius map with zeros moving, radius attribute
+/// switched on) gives the field a fresh build gives, and both match the reference.
+#[test]
+fn refit_after_a_radius_change_equals_a_fresh_build() {
+    let Some(mut refitted) = backend() else {
+        return;
+    };
+    let Some(mut fresh) = backend() else { return };
+    let step = random_step(1400, 4);
+    let points = queries(&step, 5);
+    let k = 4;
+    let mut before = FieldSettings::new(Some("s"), 0.15);
+    before.radius_map = radius_map_with_zeros();
+    refitted.upload(&input(&step, &before, k)).unwrap();
+    refitted.build().unwrap();
+    let build_time = refitted.timings().build;
+    // Particles with t < 0.2 had radius 0 (degenerate boxes); now those with t > 0.8 have.
+    let mut after = before.clone();
+    after.radius = 0.21;
+    // Continuous and on the table grid (a jump would fall between two table samples).
+    after.radius_map = RadiusMap("0:1,0.6:0.6,0.8:0,1:0".parse().unwrap());
+    after.radius_attribute = Some("h".into());
+    refitted.refit(&after).unwrap();
+    let t = refitted.structure_timings();
+    assert!(t.refit && refitted.timings().refit > std::time::Duration::ZERO);
+    eprintln!(
+        "build {build_time:?}, refit {:?} (BLAS {:?})",
+        refitted.timings().refit,
+        t.blas
+    );
+    fresh.upload(&input(&step, &after, k)).unwrap();
+    fresh.build().unwrap();
+    let a = refitted.query(&points).unwrap();
+    let b = fresh.query(&points).unwrap();
+    let mut worst: f64 = 0.0;
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        // Same terms, possibly summed in another order (the refitted tree's shape differs).
+        let tol = 1e-5 * x.0.abs().max(y.0.abs()) + 1e-7;
+        let err = (x.0 - y.0)
+            .abs()
+            .max((0..3).map(|c| (x.1[c] - y.1[c]).abs()).fold(0.0, f64::max));
+        assert!(err <= tol, "query {i}: refit {x:?} vs fresh {y:?}");
+        worst = worst.max(err / x.0.abs().max(1e-30));
+    }
+    eprintln!("refit vs fresh build: max relative difference {worst:.2e}");
+    let reference = ReferenceField::of_step(
+        &step,
+        &after,
+        ClusterSize::new(k).unwrap(),
+        step.bounds(),
+        None,
+    )
+    .unwrap();
+    compare_sums(&reference, &points, &a, "refitted");
+    // Refit back to the first radii: equal to the first build's field again.
+    refitted.refit(&before).unwrap();
+    let reference = ReferenceField::of_step(
+        &step,
+        &before,
+        ClusterSize::new(k).unwrap(),
+        step.bounds(),
+        None,
+    )
+    .unwrap();
+    compare_sums(
+        &reference,
+        &points,
+        &refitted.query(&points).unwrap(),
+        "refitted back",
+    );
+    // Bad radii are errors, and leave the backend usable.
+    let mut bad = after.clone();
+    bad.radius = -1.0;
+    assert!(refitted.refit(&bad).is_err());
+    bad.radius = 0.1;
+    bad.radius_attribute = Some("nonexistent".into());
+    assert!(refitted.refit(&bad).is_err());
+    assert!(refitted.query(&points[..10]).is_ok());
+    assert_no_validation_messages();
+}
+
+fn dambreak() -> aarbf::scene::TimeSeries {
+    use aarbf::scene::synth::Generator;
+    aarbf::scene::TimeSeries::from_steps(Generator::DambreakDemo.generate(3000, 8, 1))
+}
+
+/// A view close to the fluid, so most pixels see it.
+fn close_view(series: &aarbf::scene::TimeSeries) -> aarbf::render::Camera {
+    let b = series.bounds();
+    aarbf::render::Camera {
+        eye: DVec3::new(0.9, 0.45, 1.1),
+        at: DVec3::new(0.55, 0.12, 0.5 * f64::from(b.max.z)),
+        up: DVec3::Y,
+        fovy: 35.0,
+    }
+}
+
+/// Mean FLIP between two images (sRGB 8-bit, default viewing distance).
+fn flip(reference: &Image, test: &Image) -> (f32, nv_flip::FlipImageFloat) {
+    let rgb =
+        |i: &Image| nv_flip::FlipImageRgb8::with_data(i.width, i.height, &i.to_srgb8().into_raw());
+    let error = nv_flip::flip(
+        rgb(reference),
+        rgb(test),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    let mean = nv_flip::FlipPool::from_image(&error).mean();
+    (mean, error)
+}
+
+/// Writes `<name>-actual.png`, `-expected.png` and `-difference.png` (FLIP error through the
+/// magma map) under the target directory, and returns where.
+fn write_failure(
+    name: &str,
+    expected: &Image,
+    actual: &Image,
+    error: &nv_flip::FlipImageFloat,
+) -> String {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("ash-images");
+    std::fs::create_dir_all(&dir).unwrap();
+    actual
+        .save_png(&dir.join(format!("{name}-actual.png")), true)
+        .unwrap();
+    expected
+        .save_png(&dir.join(format!("{name}-expected.png")), true)
+        .unwrap();
+    let diff = error.apply_color_lut(&nv_flip::magma_lut());
+    image::RgbImage::from_raw(diff.width(), diff.height(), diff.to_vec())
+        .unwrap()
+        .save(dir.join(format!("{name}-difference.png")))
+        .unwrap();
+    dir.display().to_string()
+}
+
+/// Compares `actual` with `expected` by RMSE and mean FLIP; on failure writes the images.
+fn assert_images_close(name: &str, expected: &Image, actual: &Image, max_rmse: f64, max_flip: f32) {
+    assert!(
+        actual
+            .pixels
+            .iter()
+            .all(|p| p.iter().all(|v| v.is_finite())),
+        "{name}: non-finite pixels (unwritten?)"
+    );
+    let rmse = actual.rmse(expected);
+    let (mean_flip, error) = flip(expected, actual);
+    eprintln!("{name}: RMSE {rmse:.2e}, mean FLIP {mean_flip:.2e}");
+    if rmse > max_rmse || mean_flip > max_flip {
+        let dir = write_failure(name, expected, actual, &error);
+        panic!(
+            "{name}: RMSE {rmse:.3e} (limit {max_rmse:.1e}), mean FLIP {mean_flip:.3e} (limit {max_flip:.1e}); images in {dir}"
+        );
+    }
+}
+
+/// The ash backend's images against the CPU backend's at equal spp and seed, per integrator.
+#[test]
+fn renders_match_the_cpu_backend() {
+    use aarbf::backend::{self, BackendKind};
+    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    if backend().is_none() {
+        return;
+    }
+    let series = dambreak();
+    let mut field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());
+    let k = ClusterSize::new(4).unwrap();
+    let mut cpu = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
+    let mut gpu = RenderSession::new(backend::create(BackendKind::Ash).unwrap(), &series);
+    assert_eq!(gpu.backend().capabilities().name, "ash");
+    // (integrator, noise, classification, frames, blur, RMSE limit, FLIP limit). EA and
+    // stochastic marching make the same decisions from the same random numbers on both, so
+    // f32-versus-f64 rounding is all that differs (measured: RMSE < 1e-6, FLIP < 1e-4). Delta
+    // tracking on the CPU skips empty space between particle boxes (the same distribution from
+    // other random numbers per pixel), so it is compared at 64 spp through a 1-pixel Gaussian
+    // blur, where what is left is Monte Carlo noise (measured: RMSE ~3e-3).
+    let cases = [
+        (
+            Integrator::Ea,
+            NoiseKind::Stbn,
+            Classification::Post,
+            2,
+            false,
+            1e-4,
+            1e-3,
+        ),
+        (
+            Integrator::Ea,
+            NoiseKind::White,
+            Classification::Pre,
+            2,
+            false,
+            1e-4,
+            1e-3,
+        ),
+        (
+            Integrator::Marching,
+            NoiseKind::Stbn,
+            Classification::Post,
+            2,
+            false,
+            1e-3,
+            5e-3,
+        ),
+        (
+            Integrator::Delta,
+            NoiseKind::White,
+            Classification::Post,
+            64,
+            true,
+            1e-2,
+            4e-2,
+        ),
+    ];
+    for (integrator, noise, classification, frames, blur, max_rmse, max_flip) in cases {
+        field.classification = classification;
+        let settings = RenderSettings {
+            width: 64,
+            height: 48,
+            integrator,
+            noise,
+            seed: 3,
+            camera: Some(close_view(&series)),
+            ..RenderSettings::default()
+        };
+        cpu.show(&series, 7, &field, k).unwrap();
+        gpu.show(&series, 7, &field, k).unwrap();
+        let expected = cpu.render(&settings, frames).unwrap();
+        let actual = gpu.render(&settings, frames).unwrap();
+        let covered = expected.pixels.iter().filter(|p| p[3] > 0.0).count();
+        assert!(
+            covered > 600,
+            "the fluid covers much of the image: {covered} pixels"
+        );
+        let name = format!("{integrator:?}-{noise:?}-{classification:?}").to_lowercase();
+        let (expected, actual) = if blur {
+            (expected.blurred(1.0), actual.blurred(1.0))
+        } else {
+            (expected, actual)
+        };
+        assert_images_close(&name, &expected, &actual, max_rmse, max_flip);
+    }
+    assert_no_validation_messages();
+}
+
+/// A step with fewer particles than the buffers hold (NaN boxes past its clusters) renders and
+/// queries like the same step loaded alone.
+#[test]
+fn a_smaller_step_renders_like_that_step_alone() {
+    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    let (Some(mut shared), Some(mut alone)) = (backend(), backend()) else {
+        return;
+    };
+    let series = dambreak();
+    let field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());
+    let k = 2;
+    let (big, small) = (series.step(7).unwrap(), series.step(3).unwrap());
+    // The demo's steps hold different counts; pad the difference in any case.
+    let max = series.max_count() + 100;
+    assert!(small.len() < max);
+    let range = series
+        .attribute("velocity")
+        .map(|a| (f64::from(a.min), f64::from(a.max)));
+    let input = |step| StepInput {
+        series_bounds: series.bounds(),
+        series_range: range,
+        ..input(step, &field, k)
+    };
+    shared.reserve(max);
+    shared.upload(&input(&*big)).unwrap();
+    shared.build().unwrap();
+    shared.upload(&input(&*small)).unwrap();
+    shared.build().unwrap();
+    alone.upload(&input(&*small)).unwrap();
+    alone.build().unwrap();
+    assert!(shared.blas_boxes() > alone.blas_boxes());
+    assert_eq!(shared.blas_active_boxes(), alone.blas_active_boxes());
+    // Frame constants from a CPU session over the same step (any will do, as long as both
+    // backends get the same).
+    let mut session = RenderSession::new(
+        aarbf::backend::create(aarbf::backend::BackendKind::Cpu).unwrap(),
+        &series,
+    );
+    session
+        .show(&series, 3, &field, ClusterSize::new(k).unwrap())
+        .unwrap();
+    for integrator in [Integrator::Ea, Integrator::Marching] {
+        let settings = RenderSettings {
+            width: 48,
+            height: 48,
+            integrator,
+            noise: NoiseKind::Stbn,
+            ..RenderSettings::default()
+        };
+        shared.reset();
+        alone.reset();
+        for frame in 0..2 {
+            let params = session.frame_params(&settings, frame).unwrap();
+            shared.render(&params).unwrap();
+            alone.render(&params).unwrap();
+        }
+        let (a, b) = (shared.image().unwrap(), alone.image().unwrap());
+        assert!(a.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())));
+        let visible = a.pixels.iter().filter(|p| p[3] > 0.0).count();
+        assert!(
+            visible > 50,
+            "{integrator:?}: {visible} pixels see the fluid"
+        );
+        assert_eq!(a, b, "{integrator:?}: the image with NaN boxes differs");
+    }
+    let points = queries(&small, 9);
+    assert_eq!(
+        shared.query(&points).unwrap(),
+        alone.query(&points).unwrap()
+    );
+    assert_no_validation_messages();
+}
+
+/// The software traversal on the same device (the LBVH compute pipeline, Fig. 10a's other
+/// side) gives the RT pipeline's field and images: same particles, RBF code and integrators.
+#[test]
+fn lbvh_traversal_on_the_same_device_matches_the_rt_pipeline() {
+    use aarbf::backend::ash_rt::Traversal;
+    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    let Some(mut b) = backend() else { return };
+    let step = random_step(1300, 6);
+    let points = queries(&step, 7);
+    for (k, classification) in [
+        (1, Classification::Post),
+        (4, Classification::Pre),
+        (16, Classification::Post),
+    ] {
+        let mut field = FieldSettings::new(Some("s"), 0.2);
+        field.classification = classification;
+        field.radius_map = radius_map_with_zeros();
+        field.radius_attribute = Some("h".into());
+        b.set_traversal(Traversal::RtPipeline);
+        b.upload(&input(&step, &field, k)).unwrap();
+        b.build().unwrap();
+        let rt = b.query(&points).unwrap();
+        b.set_traversal(Traversal::Lbvh);
+        let lbvh = b.query(&points).unwrap();
+        assert!(b.lbvh_depth().unwrap() > 0);
+        let reference = ReferenceField::of_step(
+            &step,
+            &field,
+            ClusterSize::new(k).unwrap(),
+            step.bounds(),
+            None,
+        )
+        .unwrap();
+        let what = format!("LBVH, K = {k}, {classification:?}");
+        compare_sums(&reference, &points, &lbvh, &what);
+        for (i, (a, c)) in rt.iter().zip(&lbvh).enumerate() {
+            let tol = 1e-5 * a.0 + 1e-7;
+            assert!(
+                (a.0 - c.0).abs() <= tol && (0..3).all(|j| (a.1[j] - c.1[j]).abs() <= tol),
+                "{what}: query {i}: RT {a:?} vs LBVH {c:?}"
+            );
+        }
+        // A refit invalidates the LBVH, which is rebuilt on the next query.
+        let mut wider = field.clone();
+        wider.radius = 0.25;
+        b.refit(&wider).unwrap();
+        let reference = ReferenceField::of_step(
+            &step,
+            &wider,
+            ClusterSize::new(k).unwrap(),
+            step.bounds(),
+            None,
+        )
+        .unwrap();
+        compare_sums(
+            &reference,
+            &points,
+            &b.query(&points).unwrap(),
+            "LBVH after a refit",
+        );
+    }
+    // Frames: the RT pipeline and the LBVH kernel through the same session.
+    let series = dambreak();
+    let field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());
+    let mut session = RenderSession::new(Box::new(backend().unwrap()), &series);
+    session
+        .show(&series, 7, &field, ClusterSize::new(4).unwrap())
+        .unwrap();
+    let settings = RenderSettings {
+        width: 48,
+        height: 40,
+        integrator: Integrator::Marching,
+        noise: NoiseKind::Stbn,
+        camera: Some(close_view(&series)),
+        ..RenderSettings::default()
+    };
+    let frames: Vec<_> = (0..2)
+        .map(|f| session.frame_params(&settings, f).unwrap())
+        .collect();
+    let mut b = backend().unwrap();
+    let range = series
+        .attribute("velocity")
+        .map(|a| (f64::from(a.min), f64::from(a.max)));
+    let step = series.step(7).unwrap();
+    b.upload(&StepInput {
+        series_bounds: series.bounds(),
+        series_range: range,
+        ..input(&step, &field, 4)
+    })
+    .unwrap();
+    b.build().unwrap();
+    let mut render = |traversal| {
+        b.set_traversal(traversal);
+        b.reset();
+        for f in &frames {
+            b.render(f).unwrap();
+        }
+        b.image().unwrap()
+    };
+    let rt = render(Traversal::RtPipeline);
+    let lbvh = render(Traversal::Lbvh);
+    assert_images_close("lbvh-vs-rt-marching", &rt, &lbvh, 1e-4, 1e-3);
+    assert_no_validation_messages();
+}
+
+/// The ash backend's images against the wgpu backend's (the same shared GLSL integrators over
+/// an LBVH) at equal spp and seed: the same decisions from the same random numbers, for every
+/// integrator, so only f32 summation order differs.
+#[test]
+fn renders_match_the_wgpu_backend() {
+    use aarbf::backend::{self, BackendKind};
+    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    if backend().is_none() {
+        return;
+    }
+    let wgpu = match backend::create(BackendKind::Wgpu) {
+        Ok(b) => b,
+        Err(e) if std::env::var_os("CI").is_some() => {
+            panic!("CI is set, but the wgpu backend is unavailable: {e}")
+        }
+        Err(e) => {
+            eprintln!("SKIPPED (no wgpu adapter): {e}");
+            return;
+        }
+    };
+    let series = dambreak();
+    let field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());
+    let k = ClusterSize::new(4).unwrap();
+    let mut other = RenderSession::new(wgpu, &series);
+    let mut gpu = RenderSession::new(backend::create(BackendKind::Ash).unwrap(), &series);
+    other.show(&series, 7, &field, k).unwrap();
+    gpu.show(&series, 7, &field, k).unwrap();
+    // (integrator, RMSE limit, FLIP limit); measured: RMSE ~3e-10, FLIP 0 for all three.
+    for (integrator, max_rmse, max_flip) in [
+        (Integrator::Ea, 1e-4, 1e-3),
+        (Integrator::Marching, 1e-3, 5e-3),
+        (Integrator::Delta, 1e-3, 5e-3),
+    ] {
+        let settings = RenderSettings {
+            width: 48,
+            height: 40,
+            integrator,
+            noise: NoiseKind::Stbn,
+            seed: 5,
+            camera: Some(close_view(&series)),
+            ..RenderSettings::default()
+        };
+        let expected = other.render(&settings, 2).unwrap();
+        let actual = gpu.render(&settings, 2).unwrap();
+        let name = format!("wgpu-{integrator:?}").to_lowercase();
+        assert_images_close(&name, &expected, &actual, max_rmse, max_flip);
+    }
+    assert_no_validation_messages();
+}

@@ -1,0 +1,594 @@
+//! The wgpu LBVH backend, stage by stage against its CPU twins (`aarbf::accel::lbvh`), and as a
+//! whole against the f64 reference field and the CPU backend's images.
+//!
+//! Every GPU output is poisoned (0xFF bytes) before the run that writes it, inputs are fresh
+//! random data of awkward sizes. All tests share one wgpu device (`GpuContext::shared`). With
+//! no adapter they fail when `CI` is set, and otherwise skip with a notice.
+//!
+//! Tolerances (why each is what it is):
+//! - keys, sort, hierarchy, parents, leaf count, depth: bit-exact.
+//! - cluster boxes: |gpu - cpu| <= 4e-7 (|value| + R) per coordinate (the radius-map lookup
+//!   `a + (b - a) f` may be fused into an FMA on the GPU, a rounding apart), emptiness exact.
+//! - bottom-up bounds: exactly equal (as floats) to the twin's over the GPU's own boxes (min and
+//!   max round nothing).
+//! - field queries vs the f64 reference: |dPhi| <= 3e-4 Phi + 1e-6 w_max and |dnum| <= 3e-4 Phi
+//!   (+ the colour table's interpolation error times Phi for pre-classification), from f32
+//!   positions relative to the radius (~1e-5) times the Gaussian's 4.5 d^2/r^2 slope; a query
+//!   within 1e-4 r of some particle's sphere may differ by that particle's whole contribution
+//!   (it lies on the cut-off in one precision and not the other), so those are checked
+//!   against the sum of such contributions instead.
+
+use std::sync::Arc;
+
+use aarbf::accel::ClusterSize;
+use aarbf::accel::lbvh::{self, EMPTY_KEY, GpuBox, Lbvh, NONE, RadiusRule, SENTINEL, box_is_empty};
+use aarbf::backend::wgpu_lbvh::{BuildStage, GpuContext, WgpuBackend, sort};
+use aarbf::backend::{Backend, StepInput};
+use aarbf::field::{Classification, FieldSettings, ReferenceField};
+use aarbf::scene::maps::{DensityMap, RadiusMap};
+use aarbf::scene::{Attribute, Bounds, Step};
+use glam::{DVec3, Vec3};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Validation-layer messages (wgpu-hal logs them as warnings or errors) seen in this process.
+static DRIVER_MESSAGES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+struct DriverMessages;
+
+impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for DriverMessages {
+    fn on_event(&self, event: &tracing::Event<'_>, _: tracing_subscriber::layer::Context<'_, S>) {
+        let meta = event.metadata();
+        if *meta.level() > tracing::Level::WARN {
+            return;
+        }
+        struct Text(String);
+        impl tracing::field::Visit for Text {
+            fn record_debug(&mut self, f: &tracing::field::Field, v: &dyn std::fmt::Debug) {
+                self.0.push_str(&format!("{}={v:?} ", f.name()));
+            }
+        }
+        let mut text = Text(format!("{}: ", meta.target()));
+        event.record(&mut text);
+        // wgpu's `log` records arrive with target "log" and their own in `log.target`.
+        if meta.target().starts_with("wgpu") || text.0.contains("log.target=\"wgpu") {
+            DRIVER_MESSAGES
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(text.0);
+        }
+    }
+}
+
+/// Fails if the validation layers (on in builds with debug assertions, when installed) or
+/// wgpu reported anything so far.
+fn assert_no_driver_messages() {
+    let m = DRIVER_MESSAGES
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .clone();
+    assert!(m.is_empty(), "validation / driver messages: {m:#?}");
+}
+
+/// The shared device, or None (skip) without an adapter outside CI.
+fn gpu() -> Option<Arc<GpuContext>> {
+    {
+        use tracing_subscriber::layer::SubscriberExt;
+        use tracing_subscriber::util::SubscriberInitExt;
+        // Also routes the `log` records of wgpu-hal here (tracing-log).
+        let _ = tracing_subscriber::registry()
+            .with(DriverMessages)
+            .try_init();
+    }
+    match GpuContext::shared() {
+        Ok(c) => Some(c),
+        Err(e) if std::env::var_os("CI").is_some() => {
+            panic!("no wgpu adapter under CI: {e}")
+        }
+        Err(e) => {
+            eprintln!("SKIPPED: no wgpu adapter ({e})");
+            None
+        }
+    }
+}
+
+fn rng(seed: u64) -> Pcg64 {
+    Pcg64::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15)
+}
+
+/// `n` particles: uniform in the unit cube, or (clumped) in a few tiny blobs that give many
+/// equal Morton keys; attribute `a` uniform in [0, 1], radius factor `h` in [0.5, 1.5].
+fn random_step(n: usize, seed: u64, clumped: bool) -> Step {
+    let mut r = rng(seed);
+    let centres: Vec<Vec3> = (0..5)
+        .map(|_| Vec3::new(r.random(), r.random(), r.random()))
+        .collect();
+    let positions = (0..n)
+        .map(|_| {
+            if clumped {
+                centres[r.random_range(0..centres.len())]
+                    + Vec3::new(r.random(), r.random(), r.random()) * 1e-4
+            } else {
+                Vec3::new(r.random(), r.random(), r.random())
+            }
+        })
+        .collect();
+    Step {
+        name: format!("random{n}"),
+        positions,
+        attributes: vec![
+            Attribute {
+                name: "a".into(),
+                values: (0..n).map(|_| r.random::<f32>()).collect(),
+            },
+            Attribute {
+                name: "h".into(),
+                values: (0..n).map(|_| r.random_range(0.5..1.5f32)).collect(),
+            },
+        ],
+    }
+}
+
+/// A field over `a` with radius `radius`: maps with grid-aligned control points (the baked
+/// tables hold them exactly); `zero_below` makes particles with t < 0.2 radius 0.
+fn field(radius: f64, varying_maps: bool) -> FieldSettings {
+    let mut f = FieldSettings::new(Some("a"), radius);
+    if varying_maps {
+        f.radius_map = RadiusMap::new("0:0,0.2:0,0.6:1,1:0.6".parse().unwrap()).unwrap();
+        f.density_map = DensityMap::new("0:0.5,0.6:2,1:1".parse().unwrap()).unwrap();
+    }
+    f
+}
+
+fn bounds_of(step: &Step) -> Bounds {
+    let b = step.bounds();
+    if b.is_empty() {
+        Bounds {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        }
+    } else {
+        b
+    }
+}
+
+fn upload(backend: &mut WgpuBackend, step: &Step, field: &FieldSettings, k: u32) {
+    backend
+        .upload(&StepInput {
+            step,
+            field,
+            cluster: ClusterSize::new(k).unwrap(),
+            series_bounds: bounds_of(step),
+            series_range: Some((0.0, 1.0)),
+        })
+        .unwrap();
+}
+
+/// The CPU twin's cluster boxes for what the backend holds.
+fn twin_boxes(backend: &WgpuBackend) -> Vec<GpuBox> {
+    let d = backend.step_data().unwrap();
+    let rule = RadiusRule {
+        field: d.field,
+        radius_table: d.radius_map_varies.then_some(&d.radius_table[..]),
+        radius_attribute: d.radius_attribute.as_deref(),
+    };
+    lbvh::cluster_boxes(&d.points, d.cluster.get(), &rule)
+}
+
+fn assert_boxes_close(gpu: &[GpuBox], cpu: &[GpuBox], radius: f32, what: &str) {
+    assert_eq!(gpu.len(), cpu.len(), "{what}: box count");
+    for (c, (g, e)) in gpu.iter().zip(cpu).enumerate() {
+        assert_eq!(
+            box_is_empty(g),
+            box_is_empty(e),
+            "{what}: cluster {c}: {g:?} vs {e:?}"
+        );
+        if box_is_empty(e) {
+            assert!(
+                g[0][..3].iter().all(|v| *v == f32::INFINITY)
+                    && g[1][..3].iter().all(|v| *v == f32::NEG_INFINITY),
+                "{what}: empty cluster {c} is {g:?}"
+            );
+            continue;
+        }
+        for side in 0..2 {
+            for i in 0..3 {
+                let (a, b) = (g[side][i], e[side][i]);
+                assert!(
+                    (a - b).abs() <= 4e-7 * (b.abs() + radius),
+                    "{what}: cluster {c} coordinate {side}/{i}: gpu {a} cpu {b}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn radix_sort_equals_a_stable_sort_by_key() {
+    let Some(ctx) = gpu() else { return };
+    for (i, n) in [0usize, 1, 2, 255, 256, 257, 4095, 4097, 65537, 1_000_003]
+        .into_iter()
+        .enumerate()
+    {
+        let mut r = rng(100 + i as u64);
+        let distributions: &[u32] = if n > 100_000 { &[0] } else { &[0, 1, 2] };
+        for &kind in distributions {
+            let keys: Vec<u32> = (0..n)
+                .map(|_| match kind {
+                    0 => r.random(),
+                    // Few distinct keys: stability decides the order.
+                    1 => r.random_range(0..17u32) << 9,
+                    // 30-bit keys with empty markers, as the tree sorts them.
+                    _ => {
+                        if r.random_range(0..8) == 0 {
+                            EMPTY_KEY
+                        } else {
+                            r.random_range(0..1u32 << 30)
+                        }
+                    }
+                })
+                .collect();
+            let got = sort::sort_pairs(&ctx, &keys).unwrap();
+            let expected = lbvh::sort_pairs(&keys);
+            assert!(
+                got == expected,
+                "n {n}, keys kind {kind}: the GPU sort differs from sort_by_key"
+            );
+        }
+    }
+    assert_no_driver_messages();
+}
+
+/// Builds over `step` stage by stage, comparing each stage with its twin.
+fn check_build_stages(
+    ctx: &Arc<GpuContext>,
+    step: &Step,
+    field: &FieldSettings,
+    k: u32,
+    what: &str,
+) {
+    let mut b = WgpuBackend::with_context(ctx.clone());
+    upload(&mut b, step, field, k);
+    let clusters = ClusterSize::new(k).unwrap().clusters_for(step.len());
+    let radius = field.radius as f32;
+    let grid = b.key_grid().unwrap();
+
+    // Stage 1: boxes.
+    b.poison_tree().unwrap();
+    b.build_until(BuildStage::Bounds).unwrap();
+    let s = b.snapshot().unwrap();
+    let twin = twin_boxes(&b);
+    assert_boxes_close(&s.boxes, &twin, radius, what);
+    let boxes = s.boxes;
+
+    // Stage 2: keys (unsorted), identity values, leaf count, no cluster linked yet.
+    b.poison_tree().unwrap();
+    b.build_until(BuildStage::Keys).unwrap();
+    let s = b.snapshot().unwrap();
+    assert_eq!(s.boxes, boxes, "{what}: boxes are deterministic");
+    let keys = lbvh::morton_keys(&boxes, &grid);
+    assert_eq!(s.keys, keys, "{what}: keys");
+    assert_eq!(
+        s.values,
+        (0..clusters as u32).collect::<Vec<_>>(),
+        "{what}: values"
+    );
+    let leaves = boxes.iter().filter(|b| !box_is_empty(b)).count() as u32;
+    assert_eq!(s.counters[0], leaves, "{what}: leaf count");
+    assert!(s.lbvh.leaf_parents.iter().all(|&p| p == NONE), "{what}");
+
+    // Stage 3: sorted.
+    b.poison_tree().unwrap();
+    b.build_until(BuildStage::Sort).unwrap();
+    let s = b.snapshot().unwrap();
+    let (sorted_keys, sorted_values) = lbvh::sort_pairs(&keys);
+    assert!(s.keys == sorted_keys, "{what}: sorted keys");
+    assert!(s.values == sorted_values, "{what}: sorted values");
+
+    // Stage 4: hierarchy (children, parents, header), bounds words still SENTINEL.
+    b.poison_tree().unwrap();
+    b.build_until(BuildStage::Hierarchy).unwrap();
+    let s = b.snapshot().unwrap();
+    let twin = Lbvh::hierarchy(&sorted_keys, &sorted_values);
+    assert_eq!(s.lbvh.leaves, twin.leaves, "{what}");
+    for (j, (g, e)) in s.lbvh.nodes.iter().zip(&twin.nodes).enumerate() {
+        assert_eq!([g[3], g[7]], [e[3], e[7]], "{what}: children of node {j}");
+        if j > 0 {
+            assert!(
+                [0, 1, 2, 4, 5, 6].iter().all(|&w| g[w] == SENTINEL),
+                "{what}: node {j} bounds not reset: {g:?}"
+            );
+        }
+    }
+    assert_eq!(s.lbvh.nodes.len(), twin.nodes.len(), "{what}: node count");
+    assert_eq!(
+        s.lbvh.node_parents, twin.node_parents,
+        "{what}: node parents"
+    );
+    assert_eq!(
+        s.lbvh.leaf_parents, twin.leaf_parents,
+        "{what}: leaf parents"
+    );
+
+    // Stage 5: the whole build.
+    b.poison_tree().unwrap();
+    let report = b.build_until(BuildStage::Fit).unwrap();
+    let s = b.snapshot().unwrap();
+    let mut twin = Lbvh::hierarchy(&sorted_keys, &sorted_values);
+    twin.fit(&boxes);
+    assert_eq!(report.leaves, twin.leaves, "{what}");
+    assert_eq!(report.depth, twin.depth, "{what}: depth");
+    assert_same_tree(&s.lbvh, &twin, what);
+    s.lbvh
+        .validate(&boxes, true)
+        .unwrap_or_else(|e| panic!("{what}: invalid tree: {e}"));
+}
+
+/// Same topology and bounds equal as floats (a signed zero may come out either way).
+fn assert_same_tree(gpu: &Lbvh, cpu: &Lbvh, what: &str) {
+    assert_eq!(gpu.nodes.len(), cpu.nodes.len(), "{what}: node count");
+    for j in 1..cpu.nodes.len() {
+        assert_eq!(
+            lbvh::children(&gpu.nodes[j]),
+            lbvh::children(&cpu.nodes[j]),
+            "{what}: children of node {j}"
+        );
+        assert_eq!(
+            gpu.node_box(j),
+            cpu.node_box(j),
+            "{what}: bounds of node {j}"
+        );
+    }
+    assert_eq!(gpu.root(), cpu.root(), "{what}: root");
+    assert_eq!(gpu.node_parents, cpu.node_parents, "{what}: node parents");
+    assert_eq!(gpu.leaf_parents, cpu.leaf_parents, "{what}: leaf parents");
+}
+
+#[test]
+fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
+    let Some(ctx) = gpu() else { return };
+    let radius = 0.02;
+    for (i, n) in [0usize, 1, 2, 255, 256, 257, 65537].into_iter().enumerate() {
+        let step = random_step(n, i as u64, false);
+        check_build_stages(
+            &ctx,
+            &step,
+            &field(radius, false),
+            1,
+            &format!("n {n}, K 1"),
+        );
+    }
+    // Clusters, zero radii and empty clusters (radius map 0 below t = 0.2), per-particle radii.
+    for (i, (n, k)) in [(257usize, 2u32), (4099, 4), (65537, 16), (3000, 8)]
+        .into_iter()
+        .enumerate()
+    {
+        let step = random_step(n, 50 + i as u64, false);
+        let mut f = field(radius, true);
+        if k == 8 {
+            f.radius_attribute = Some("h".into());
+        }
+        check_build_stages(&ctx, &step, &f, k, &format!("n {n}, K {k}, maps"));
+    }
+    assert_no_driver_messages();
+}
+
+#[test]
+fn a_million_particle_build_equals_its_twin() {
+    let Some(ctx) = gpu() else { return };
+    // A non-power-of-two million.
+    let step = random_step(1_000_003, 7, false);
+    check_build_stages(&ctx, &step, &field(0.004, true), 1, "1000003 particles");
+    assert_no_driver_messages();
+}
+
+#[test]
+fn bottom_up_bounds_hold_under_load_and_duplicate_keys() {
+    // Many equal keys (five tiny blobs) make deep subtrees split by index and long climbs
+    // where many threads meet at the same nodes; repeat the build and compare each time.
+    let Some(ctx) = gpu() else { return };
+    let step = random_step(300_001, 11, true);
+    let f = field(0.01, false);
+    let mut b = WgpuBackend::with_context(ctx.clone());
+    upload(&mut b, &step, &f, 1);
+    let mut first: Option<Lbvh> = None;
+    for round in 0..3 {
+        b.poison_tree().unwrap();
+        let report = b.build_until(BuildStage::Fit).unwrap();
+        let s = b.snapshot().unwrap();
+        s.lbvh
+            .validate(&s.boxes, true)
+            .unwrap_or_else(|e| panic!("round {round}: {e}"));
+        // ~60K equal keys a blob, split by index: ~16 levels under the blobs' few key bits.
+        assert!(
+            report.depth >= 18,
+            "duplicate keys make a deep tree ({})",
+            report.depth
+        );
+        let twin = Lbvh::build(&s.boxes, &b.key_grid().unwrap());
+        assert_same_tree(&s.lbvh, &twin, &format!("round {round}"));
+        match &first {
+            None => first = Some(s.lbvh),
+            Some(f) => assert_same_tree(&s.lbvh, f, "rebuild"),
+        }
+    }
+    assert_no_driver_messages();
+}
+
+#[test]
+fn refit_equals_a_fresh_build() {
+    let Some(ctx) = gpu() else { return };
+    let step = random_step(20_011, 21, false);
+    for k in [1u32, 4] {
+        let what = format!("K {k}");
+        let mut f = field(0.02, true);
+        let mut b = WgpuBackend::with_context(ctx.clone());
+        upload(&mut b, &step, &f, k);
+        b.build().unwrap();
+        let built = b.snapshot().unwrap();
+
+        // A new global radius: the same boxes up to scale, the same topology.
+        // (The refit's reset pass writes SENTINEL, a NaN, into every bound it recomputes, so
+        // a bound it missed fails `validate`.)
+        f.radius = 0.03;
+        b.refit(&f).unwrap();
+        let refit = b.snapshot().unwrap();
+        refit.lbvh.validate(&refit.boxes, true).unwrap();
+        let mut twin = built.lbvh.clone();
+        assert!(twin.refit(&refit.boxes), "{what}");
+        assert_same_tree(&refit.lbvh, &twin, &format!("{what}: refit vs twin refit"));
+        assert_boxes_close(&refit.boxes, &twin_boxes(&b), 0.03, &what);
+
+        // A fresh build with the new radius: the same leaf boxes; where the keys (box centres)
+        // did not move, the same tree node for node.
+        let mut fresh = WgpuBackend::with_context(ctx.clone());
+        upload(&mut fresh, &step, &f, k);
+        fresh.build().unwrap();
+        let fresh = fresh.snapshot().unwrap();
+        assert_eq!(fresh.boxes, refit.boxes, "{what}: leaf boxes");
+        assert_eq!(
+            refit.lbvh.node_box(1),
+            fresh.lbvh.node_box(1),
+            "{what}: root bounds"
+        );
+        let grid = b.key_grid().unwrap();
+        if lbvh::morton_keys(&built.boxes, &grid) == lbvh::morton_keys(&refit.boxes, &grid) {
+            assert_same_tree(&refit.lbvh, &fresh.lbvh, &format!("{what}: refit vs build"));
+        }
+
+        // A radius map that empties more clusters: refit, no rebuild needed.
+        f.radius_map = RadiusMap::new("0:0,0.4:0,0.6:1,1:1".parse().unwrap()).unwrap();
+        b.refit(&f).unwrap();
+        let s = b.snapshot().unwrap();
+        assert_eq!(s.counters[2], 0, "{what}: no rebuild");
+        s.lbvh.validate(&s.boxes, false).unwrap();
+        assert!(s.lbvh.leaves > s.boxes.iter().filter(|b| !box_is_empty(b)).count() as u32);
+
+        // And back to a map with no zeros: clusters outside the tree hold particles again, so
+        // the refit rebuilds.
+        f.radius_map = RadiusMap::default();
+        b.refit(&f).unwrap();
+        let s = b.snapshot().unwrap();
+        s.lbvh.validate(&s.boxes, true).unwrap();
+        assert_eq!(
+            s.lbvh.leaves as usize,
+            s.boxes.len(),
+            "{what}: every cluster a leaf"
+        );
+    }
+    assert_no_driver_messages();
+}
+
+/// Queries at random points and at particle centres, compared with the f64 reference.
+fn check_queries(ctx: &Arc<GpuContext>, step: &Step, f: &FieldSettings, k: u32, what: &str) {
+    let cluster = ClusterSize::new(k).unwrap();
+    let mut b = WgpuBackend::with_context(ctx.clone());
+    upload(&mut b, step, f, k);
+    b.build().unwrap();
+    let reference =
+        ReferenceField::of_step(step, f, cluster, bounds_of(step), Some((0.0, 1.0))).unwrap();
+    let mut r = rng(u64::from(k) * 7 + 3);
+    let mut points: Vec<DVec3> = (0..6000)
+        .map(|_| DVec3::new(r.random(), r.random(), r.random()) * 1.1 - DVec3::splat(0.05))
+        .collect();
+    points.extend(step.positions.iter().step_by(7).map(|p| p.as_dvec3()));
+    let got = b.query(&points).unwrap();
+    assert_eq!(got.len(), points.len());
+    let p = &reference.particles;
+    let w_max = p.weights.iter().fold(0.0f64, |m, w| m.max(*w));
+    // The colour table's interpolation error (pre-classification's theta is C(t)).
+    let colour_error = if f.classification == Classification::Pre {
+        let table = aarbf::render::tables::bake_colour(&f.color_map);
+        (0..=4000)
+            .map(|i| {
+                let t = f64::from(i) / 4000.0;
+                let a = aarbf::render::tables::lookup_colour(&table, t);
+                let e = f.color_map.linear_rgb(t);
+                (0..3).map(|c| (a[c] - e[c]).abs()).fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max)
+            + 1e-6
+    } else {
+        0.0
+    };
+    let mut nonzero = 0;
+    let mut ambiguous = 0;
+    for (x, (phi, num)) in points.iter().zip(&got) {
+        let (rphi, rnum) = reference.eval_sums(*x);
+        if rphi > 0.0 {
+            nonzero += 1;
+        }
+        let tol_phi = 3e-4 * rphi + 1e-6 * w_max;
+        let tol_num = (3e-4 + colour_error) * rphi + 1e-6 * w_max;
+        let ok =
+            (phi - rphi).abs() <= tol_phi && (0..3).all(|c| (num[c] - rnum[c]).abs() <= tol_num);
+        if ok {
+            continue;
+        }
+        // On a sphere's edge in one precision and not the other: bound by those particles.
+        let edge: f64 = (0..p.len())
+            .filter(|&i| {
+                let d = (*x - p.centers[i]).length();
+                p.radii[i] > 0.0 && (d - p.radii[i]).abs() <= 1e-4 * p.radii[i]
+            })
+            .map(|i| p.weights[i] * (-4.5f64).exp() * 1.01)
+            .sum();
+        assert!(
+            edge > 0.0 && (phi - rphi).abs() <= tol_phi + edge,
+            "{what}: at {x}: gpu ({phi}, {num:?}) vs reference ({rphi}, {rnum:?})"
+        );
+        ambiguous += 1;
+    }
+    if !step.is_empty() {
+        assert!(
+            nonzero > points.len() / 4,
+            "{what}: most queries see particles ({nonzero})"
+        );
+    }
+    assert!(
+        ambiguous < points.len() / 100,
+        "{what}: {ambiguous} edge cases"
+    );
+}
+
+#[test]
+fn queries_equal_the_f64_reference_for_every_cluster_size() {
+    let Some(ctx) = gpu() else { return };
+    let step = random_step(20_000, 31, false);
+    // About 30 particles within reach of a point.
+    let radius = 0.07;
+    for k in [1u32, 2, 4, 8, 16] {
+        check_queries(
+            &ctx,
+            &step,
+            &field(radius, true),
+            k,
+            &format!("post, maps, K {k}"),
+        );
+    }
+    let mut pre = field(radius, false);
+    pre.classification = Classification::Pre;
+    check_queries(&ctx, &step, &pre, 4, "pre-classification");
+    let mut density = FieldSettings::new(None, radius);
+    density.radius_attribute = Some("h".into());
+    check_queries(&ctx, &step, &density, 2, "density only, radius attribute");
+    let empty = random_step(0, 1, false);
+    check_queries(&ctx, &empty, &field(radius, false), 1, "no particles");
+    assert_no_driver_messages();
+}
+
+#[test]
+fn misuse_is_an_error_not_a_panic() {
+    let Some(ctx) = gpu() else { return };
+    let mut b = WgpuBackend::with_context(ctx.clone());
+    assert!(b.query(&[DVec3::ZERO]).is_err());
+    assert!(b.build().is_err());
+    assert!(b.image().is_err());
+    let step = random_step(100, 2, false);
+    upload(&mut b, &step, &field(0.1, false), 1);
+    assert!(b.query(&[DVec3::ZERO]).is_err(), "uploaded but not built");
+    b.build().unwrap();
+    assert!(b.refit(&field(-1.0, false)).is_err(), "a negative radius");
+    assert!(b.query(&[]).unwrap().is_empty());
+    assert_no_driver_messages();
+}

@@ -1,0 +1,244 @@
+//! The wgpu backend's images against the CPU backend's at equal settings, samples and seed,
+//! through a RenderSession as a user drives it. Shares one wgpu device (the process-wide
+//! `GpuContext`); without an adapter it fails under `CI` and skips otherwise.
+//!
+//! Tolerances: the two backends run the same integrator code (GLSL twin of the Rust), f32 on
+//! the GPU against f64 on the CPU, so emission–absorption and stochastic marching agree pixel
+//! for pixel up to rounding, except where rounding flips a free-flight decision (a few pixels).
+//! Delta tracking on the CPU skips empty space (the same distribution, different random
+//! numbers per pixel), so it is compared after a 1.5-pixel blur at more samples. Each case
+//! states its RMSE (linear RGB) and mean FLIP bounds; on failure the GPU image and the FLIP
+//! error map are written to the target directory as `*-actual.png` / `*-difference.png`.
+
+use aarbf::accel::ClusterSize;
+use aarbf::backend::wgpu_lbvh::{GpuContext, WgpuBackend};
+use aarbf::backend::{self, BackendKind};
+use aarbf::field::{Classification, FieldSettings};
+use aarbf::render::image::Image;
+use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::scene::TimeSeries;
+use aarbf::scene::synth::Generator;
+
+/// Validation-layer messages (wgpu-hal logs them as warnings or errors) seen in this process.
+static DRIVER_MESSAGES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+struct DriverMessages;
+
+impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for DriverMessages {
+    fn on_event(&self, event: &tracing::Event<'_>, _: tracing_subscriber::layer::Context<'_, S>) {
+        let meta = event.metadata();
+        if *meta.level() > tracing::Level::WARN {
+            return;
+        }
+        struct Text(String);
+        impl tracing::field::Visit for Text {
+            fn record_debug(&mut self, f: &tracing::field::Field, v: &dyn std::fmt::Debug) {
+                self.0.push_str(&format!("{}={v:?} ", f.name()));
+            }
+        }
+        let mut text = Text(format!("{}: ", meta.target()));
+        event.record(&mut text);
+        // wgpu's `log` records arrive with target "log" and their own in `log.target`.
+        if meta.target().starts_with("wgpu") || text.0.contains("log.target=\"wgpu") {
+            DRIVER_MESSAGES
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(text.0);
+        }
+    }
+}
+
+/// Fails if the validation layers (on in builds with debug assertions, when installed) or
+/// wgpu reported anything so far.
+fn assert_no_driver_messages() {
+    let m = DRIVER_MESSAGES
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .clone();
+    assert!(m.is_empty(), "validation / driver messages: {m:#?}");
+}
+
+fn gpu() -> Option<std::sync::Arc<GpuContext>> {
+    {
+        use tracing_subscriber::layer::SubscriberExt;
+        use tracing_subscriber::util::SubscriberInitExt;
+        // Also routes the `log` records of wgpu-hal here (tracing-log).
+        let _ = tracing_subscriber::registry()
+            .with(DriverMessages)
+            .try_init();
+    }
+    match GpuContext::shared() {
+        Ok(c) => Some(c),
+        Err(e) if std::env::var_os("CI").is_some() => panic!("no wgpu adapter under CI: {e}"),
+        Err(e) => {
+            eprintln!("SKIPPED: no wgpu adapter ({e})");
+            None
+        }
+    }
+}
+
+fn demo() -> TimeSeries {
+    TimeSeries::from_steps(Generator::DambreakDemo.generate(3000, 8, 1))
+}
+
+fn field(series: &TimeSeries) -> FieldSettings {
+    FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal())
+}
+
+fn close_view(series: &TimeSeries) -> aarbf::render::Camera {
+    let b = series.bounds();
+    aarbf::render::Camera {
+        eye: glam::DVec3::new(0.9, 0.45, 1.1),
+        at: glam::DVec3::new(0.55, 0.12, 0.5 * f64::from(b.max.z)),
+        up: glam::DVec3::Y,
+        fovy: 35.0,
+    }
+}
+
+fn srgb8(image: &Image) -> Vec<u8> {
+    image.to_srgb8().into_raw()
+}
+
+/// Mean FLIP between two images (sRGB 8-bit, default viewing conditions).
+fn flip(reference: &Image, test: &Image) -> (f32, nv_flip::FlipImageFloat) {
+    let r = nv_flip::FlipImageRgb8::with_data(reference.width, reference.height, &srgb8(reference));
+    let t = nv_flip::FlipImageRgb8::with_data(test.width, test.height, &srgb8(test));
+    let err = nv_flip::flip(r, t, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    let mean = nv_flip::FlipPool::from_image(&err).mean();
+    (mean, err)
+}
+
+fn compare(name: &str, cpu: &Image, gpu: &Image, max_rmse: f64, max_flip: f32) {
+    assert!(
+        gpu.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())),
+        "{name}: finite"
+    );
+    let rmse = gpu.rmse(cpu);
+    let (mean_flip, err) = flip(cpu, gpu);
+    eprintln!(
+        "{name}: RMSE {rmse:.5} (bound {max_rmse}), mean FLIP {mean_flip:.5} (bound {max_flip})"
+    );
+    if rmse > max_rmse || mean_flip > max_flip {
+        let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
+        let _ = gpu.to_srgb8().save(dir.join(format!("{name}-actual.png")));
+        let _ = cpu
+            .to_srgb8()
+            .save(dir.join(format!("{name}-expected.png")));
+        let diff = err.apply_color_lut(&nv_flip::magma_lut());
+        let _ = image::RgbImage::from_raw(diff.width(), diff.height(), diff.to_vec())
+            .map(|d| d.save(dir.join(format!("{name}-difference.png"))));
+        panic!(
+            "{name}: RMSE {rmse} (bound {max_rmse}), mean FLIP {mean_flip} (bound {max_flip}); \
+             images in {}",
+            dir.display()
+        );
+    }
+}
+
+fn session(kind: BackendKind, series: &TimeSeries, field: &FieldSettings) -> RenderSession {
+    let backend = match kind {
+        BackendKind::Wgpu => Box::new(WgpuBackend::new().unwrap()) as Box<dyn backend::Backend>,
+        k => backend::create(k).unwrap(),
+    };
+    let mut s = RenderSession::new(backend, series);
+    s.show(series, 5, field, ClusterSize::new(4).unwrap())
+        .unwrap();
+    s
+}
+
+#[test]
+fn images_match_the_cpu_backend_at_equal_samples_and_seed() {
+    if gpu().is_none() {
+        return;
+    }
+    let series = demo();
+    let f = field(&series);
+    let mut cpu = session(BackendKind::Cpu, &series, &f);
+    let mut wgpu = session(BackendKind::Wgpu, &series, &f);
+    let camera = Some(close_view(&series));
+    // (integrator, noise, spp, blur, RMSE bound, FLIP bound)
+    let cases = [
+        // Measured on lavapipe: RMSE < 5e-6 and FLIP < 1e-4 for EA, marching and the SS
+        // reference; delta tracking 0.0026 / 0.033 after the blur.
+        (Integrator::Ea, NoiseKind::Stbn, 2, 0.0, 1e-4, 1e-3),
+        (Integrator::Ea, NoiseKind::White, 2, 0.0, 1e-4, 1e-3),
+        (Integrator::Marching, NoiseKind::Stbn, 4, 0.0, 5e-3, 0.01),
+        (Integrator::SsReference, NoiseKind::Stbn, 1, 0.0, 1e-4, 1e-3),
+        (Integrator::Delta, NoiseKind::Stbn, 32, 1.5, 0.008, 0.06),
+    ];
+    for (integrator, noise, spp, blur, max_rmse, max_flip) in cases {
+        let settings = RenderSettings {
+            width: 64,
+            height: 48,
+            integrator,
+            noise,
+            seed: 3,
+            camera,
+            ..RenderSettings::default()
+        };
+        let a = cpu.render(&settings, spp).unwrap();
+        let b = wgpu.render(&settings, spp).unwrap();
+        let (a, b) = if blur > 0.0 {
+            (a.blurred(blur), b.blurred(blur))
+        } else {
+            (a, b)
+        };
+        compare(
+            &format!("wgpu-{integrator:?}-{noise:?}-{spp}spp").to_lowercase(),
+            &a,
+            &b,
+            max_rmse,
+            max_flip,
+        );
+    }
+    assert_no_driver_messages();
+}
+
+#[test]
+fn sessions_refit_restart_and_reproduce_on_wgpu() {
+    if gpu().is_none() {
+        return;
+    }
+    let series = demo();
+    let mut f = field(&series);
+    let settings = RenderSettings {
+        width: 32,
+        height: 32,
+        integrator: Integrator::Ea,
+        noise: NoiseKind::White,
+        ..RenderSettings::default()
+    };
+    let mut s = session(BackendKind::Wgpu, &series, &f);
+    let base = s.render(&settings, 2).unwrap();
+    assert_eq!(s.frames(), 2);
+    assert_eq!(
+        base,
+        s.render(&settings, 0).unwrap(),
+        "no new frames, same image"
+    );
+    // The same seed and settings give the same image bit for bit.
+    let mut again = session(BackendKind::Wgpu, &series, &f);
+    assert_eq!(base, again.render(&settings, 2).unwrap());
+    // A radius change refits (timed) and restarts accumulation.
+    f.radius *= 1.5;
+    s.show(&series, 5, &f, ClusterSize::new(4).unwrap())
+        .unwrap();
+    let wider = s.render(&settings, 1).unwrap();
+    assert_eq!(s.frames(), 1);
+    assert!(s.backend().timings().refit > std::time::Duration::ZERO);
+    assert_ne!(base, wider);
+    // Pre-classification: a new upload.
+    f.classification = Classification::Pre;
+    s.show(&series, 5, &f, ClusterSize::new(4).unwrap())
+        .unwrap();
+    let pre = s.render(&settings, 1).unwrap();
+    assert_ne!(pre, wider);
+    // Another step and cluster size: upload and build into the same buffers.
+    s.show(&series, 6, &f, ClusterSize::new(16).unwrap())
+        .unwrap();
+    let other = s.render(&settings, 1).unwrap();
+    assert_ne!(other, pre);
+    let m = s.backend().memory();
+    assert!(m.particle_bytes > 0 && m.structure_bytes > 0 && m.image_bytes == 32 * 32 * 16);
+    assert_no_driver_messages();
+}
