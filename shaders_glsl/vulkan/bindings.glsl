@@ -5,6 +5,14 @@
 //
 // Binding 0 (the TLAS) is declared by the ray-generation shaders only, and bindings 6..11 by
 // the kernels that use them.
+//
+// The per-particle and per-box arrays are reached by device address (push constants), not
+// through descriptors: a binding is capped at maxStorageBufferRange (128 MiB on lavapipe, 8M
+// particles), an address only by the allocation, so a step larger than one binding is still
+// one buffer and one index space. Ray tracing needs bufferDeviceAddress anyway.
+
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
 
 #include "shared/params.glsl"
 
@@ -13,12 +21,16 @@ layout(std140, set = 0, binding = 1) uniform Params {
     Field field_params;
 };
 
-// Per particle, in Hilbert order: xyz local position, w the normalised attribute t. (Named
-// as shared/lbvh.glsl expects it.)
-layout(std430, set = 0, binding = 2) readonly buffer Particles { vec4 particles[]; };
-// Per particle: the radius attribute h (read only when HAS_RADIUS_ATTRIBUTE is 1).
-layout(std430, set = 0, binding = 3) readonly buffer RadiusAttribute { float radius_attr[]; };
 layout(std430, set = 0, binding = 4) readonly buffer MapTables { float map_tables[]; };
+
+// Per particle, in Hilbert order: xyz local position, w the normalised attribute t.
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer ParticleArray {
+    vec4 v[];
+};
+// Per particle: the radius attribute h (read only when HAS_RADIUS_ATTRIBUTE is 1).
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer FloatArray {
+    float v[];
+};
 
 const uint STBN_WIDTH = 128u;
 const uint STBN_HEIGHT = 128u;
@@ -30,10 +42,17 @@ layout(push_constant) uniform Push {
     uint width;        // row width of a 2D launch over a 1D array
     uint first_frame;  // 1: the frame replaces the accumulation
     uint unused;
+    uvec2 particle_address;  // ParticleArray of the step
+    uvec2 radius_address;    // FloatArray of radius attributes (0 when there are none)
+    uvec2 boxes_address;     // the BLAS input boxes, 6 floats each (boxes.comp writes them)
+    uvec2 unused_address;
 } push;
 
+// `particles[i]`, as shared/lbvh.glsl and the RT stages index it.
+#define particles (ParticleArray(push.particle_address).v)
+
 float radius_attribute(uint particle) {
-    return radius_attr[particle];
+    return FloatArray(push.radius_address).v[particle];
 }
 
 #include "shared/maps.glsl"

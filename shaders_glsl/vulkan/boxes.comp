@@ -15,7 +15,9 @@
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 64) in;
-layout(std430, set = 0, binding = 9) writeonly buffer Boxes { float boxes[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer BoxArray {
+    float v[];
+};
 
 void main() {
     uint c = gl_GlobalInvocationID.y * push.width + gl_GlobalInvocationID.x;
@@ -49,10 +51,11 @@ void main() {
             hi = lo;
         }
     }
-    boxes[6u * c + 0u] = lo.x;
-    boxes[6u * c + 1u] = lo.y;
-    boxes[6u * c + 2u] = lo.z;
-    boxes[6u * c + 3u] = hi.x;
-    boxes[6u * c + 4u] = hi.y;
-    boxes[6u * c + 5u] = hi.z;
+    BoxArray boxes = BoxArray(push.boxes_address);
+    boxes.v[6u * c + 0u] = lo.x;
+    boxes.v[6u * c + 1u] = lo.y;
+    boxes.v[6u * c + 2u] = lo.z;
+    boxes.v[6u * c + 3u] = hi.x;
+    boxes.v[6u * c + 4u] = hi.y;
+    boxes.v[6u * c + 5u] = hi.z;
 }

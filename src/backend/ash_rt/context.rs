@@ -113,6 +113,9 @@ pub struct DeviceInfo {
     pub scratch_alignment: u64,
     pub max_primitive_count: u64,
     pub max_storage_buffer_range: u64,
+    /// The largest single allocation (maxMemoryAllocationSize): what bounds the particle and
+    /// box buffers, which shaders reach by device address rather than through a binding.
+    pub max_allocation: u64,
     pub max_workgroup_count: [u32; 3],
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period: Option<f64>,
@@ -466,10 +469,12 @@ impl Context {
         let mut rt = vk::PhysicalDeviceRayTracingPipelinePropertiesKHR::default();
         let mut accel = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
         let mut driver = vk::PhysicalDeviceDriverProperties::default();
+        let mut maintenance3 = vk::PhysicalDeviceMaintenance3Properties::default();
         let mut props = vk::PhysicalDeviceProperties2::default()
             .push_next(&mut rt)
             .push_next(&mut accel)
-            .push_next(&mut driver);
+            .push_next(&mut driver)
+            .push_next(&mut maintenance3);
         // SAFETY: valid chain, pd from this instance.
         unsafe { instance.get_physical_device_properties2(pd, &mut props) };
         let p = props.properties;
@@ -493,6 +498,7 @@ impl Context {
             scratch_alignment: u64::from(accel.min_acceleration_structure_scratch_offset_alignment),
             max_primitive_count: accel.max_primitive_count,
             max_storage_buffer_range: u64::from(p.limits.max_storage_buffer_range),
+            max_allocation: maintenance3.max_memory_allocation_size,
             max_workgroup_count: p.limits.max_compute_work_group_count,
             timestamp_period: (bits > 0).then_some(f64::from(p.limits.timestamp_period)),
             timestamp_mask: if bits >= 64 {

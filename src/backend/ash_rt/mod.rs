@@ -124,6 +124,18 @@ struct Buffers {
     lbvh_boxes: Buffer,
 }
 
+/// A buffer the shaders reach by device address (so its size is bound by the allocation
+/// limit, not by maxStorageBufferRange).
+fn addressed(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer, BackendError> {
+    Buffer::new(
+        ctx,
+        name,
+        size,
+        vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+        MemoryLocation::GpuOnly,
+    )
+}
+
 fn storage(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer, BackendError> {
     Buffer::new(
         ctx,
@@ -193,8 +205,8 @@ impl AshBackend {
                 vk::BufferUsageFlags::UNIFORM_BUFFER,
                 MemoryLocation::GpuOnly,
             )?,
-            points: storage(&ctx, "particles", 16)?,
-            radius: storage(&ctx, "radius attribute", 16)?,
+            points: addressed(&ctx, "particles", 16)?,
+            radius: addressed(&ctx, "radius attribute", 16)?,
             tables: storage(&ctx, "map tables", (6 * TABLE_SIZE * 4) as u64)?,
             stbn: storage(&ctx, "blue-noise mask", (words.len() * 4) as u64)?,
             accum: storage(&ctx, "accumulation", 16)?,
@@ -243,14 +255,17 @@ impl AshBackend {
                 return Err(context::vk_error("allocating a descriptor set", e));
             }
         };
-        let range = ctx.info.max_storage_buffer_range;
         let capabilities = Capabilities {
             name: NAME,
             device: ctx.describe(),
             hardware_rt: true,
             software: ctx.info.software,
-            // The box buffer (24 bytes per box at K = 1) is the largest storage binding.
-            max_particles: Some((range / BOX_BYTES) as usize),
+            // At K = 1 the box buffer (24 bytes per box) is the largest addressed buffer, and
+            // one BLAS holds at most max_primitive_count boxes (the BLAS itself may run out of
+            // memory first; that is reported when it is allocated).
+            max_particles: Some(
+                (ctx.info.max_allocation / BOX_BYTES).min(ctx.info.max_primitive_count) as usize,
+            ),
         };
         let mut backend = AshBackend {
             ctx,
@@ -332,14 +347,11 @@ impl AshBackend {
         let b = &self.buffers;
         let infos: Vec<(u32, vk::DescriptorType, [vk::DescriptorBufferInfo; 1])> = [
             (binding::PARAMS, &b.params),
-            (binding::POINTS, &b.points),
-            (binding::RADIUS, &b.radius),
             (binding::TABLES, &b.tables),
             (binding::STBN, &b.stbn),
             (binding::ACCUM, &b.accum),
             (binding::QUERY_POINTS, &b.query_points),
             (binding::QUERY_RESULTS, &b.query_results),
-            (binding::BOXES, &b.boxes),
             (binding::LBVH_NODES, &b.lbvh_nodes),
             (binding::LBVH_BOXES, &b.lbvh_boxes),
         ]
@@ -386,18 +398,24 @@ impl AshBackend {
     /// Grows the particle buffers to hold `n` particles (and what was reserved), and makes the
     /// structure match the box count for cluster size `k`.
     fn ensure_capacity(&mut self, n: usize, k: ClusterSize) -> Result<(), BackendError> {
-        let range = self.ctx.info.max_storage_buffer_range;
+        let limit = self.ctx.info.max_allocation;
         let want = n.max(self.reserved).max(1);
         let boxes = k.clusters_for(want) as u64;
-        if (want as u64).saturating_mul(16) > range || boxes.saturating_mul(BOX_BYTES) > range {
+        let blas_limit = self.ctx.info.max_primitive_count;
+        if (want as u64).saturating_mul(16) > limit
+            || boxes.saturating_mul(BOX_BYTES) > limit
+            || boxes > blas_limit
+        {
             return Err(device_error(
                 "uploading the step",
                 format!(
-                    "{want} particles (K = {k}) exceed this device's storage-buffer limit \
-                     (maxStorageBufferRange = {} MiB: at most {} particles at K = 1, {} at K = 16)",
-                    range >> 20,
-                    range / BOX_BYTES,
-                    (range / 16).min(range / BOX_BYTES * 16)
+                    "{want} particles (K = {k}: {boxes} boxes) need a {} MiB particle buffer and \
+                     a {} MiB box buffer; this device allocates at most {} MiB at once and \
+                     builds BLASes of at most {blas_limit} boxes (a larger cluster size needs \
+                     fewer boxes)",
+                    (want as u64 * 16) >> 20,
+                    (boxes * BOX_BYTES) >> 20,
+                    limit >> 20,
                 ),
             ));
         }
@@ -407,12 +425,12 @@ impl AshBackend {
                 want
             } else {
                 want.max(self.capacity + self.capacity / 4)
-                    .min((range / BOX_BYTES) as usize)
+                    .min((limit / BOX_BYTES) as usize)
                     .max(want)
             };
             self.structure = None;
-            self.buffers.points = storage(&self.ctx, "particles", grown as u64 * 16)?;
-            self.buffers.radius = storage(&self.ctx, "radius attribute", grown as u64 * 4)?;
+            self.buffers.points = addressed(&self.ctx, "particles", grown as u64 * 16)?;
+            self.buffers.radius = addressed(&self.ctx, "radius attribute", grown as u64 * 4)?;
             self.buffers.boxes = boxes_buffer(&self.ctx, grown as u64)?;
             self.capacity = grown;
             self.write_descriptors();
@@ -506,6 +524,12 @@ impl AshBackend {
         pipeline: vk::Pipeline,
         push: Push,
     ) {
+        let push = Push {
+            particle_address: self.buffers.points.address,
+            radius_address: self.buffers.radius.address,
+            boxes_address: self.buffers.boxes.address,
+            ..push
+        };
         let device = &self.ctx.device;
         // SAFETY: recording; the set matches the pipeline layout.
         unsafe {

@@ -46,29 +46,25 @@ const LBVH_QUERY: &[u8] = spirv!("lbvh_query.comp");
 const LBVH_RENDER: &[u8] = spirv!("lbvh_render.comp");
 
 /// Descriptor bindings (set 0); `shaders_glsl/vulkan/bindings.glsl` declares the same.
+/// Bindings 2, 3 and 9 (particles, radius attributes, boxes) are gone: those arrays grow with
+/// the step and are reached by device address (`Push`), so no binding limit applies.
 pub mod binding {
     pub const TLAS: u32 = 0;
     pub const PARAMS: u32 = 1;
-    pub const POINTS: u32 = 2;
-    pub const RADIUS: u32 = 3;
     pub const TABLES: u32 = 4;
     pub const STBN: u32 = 5;
     pub const ACCUM: u32 = 6;
     pub const QUERY_POINTS: u32 = 7;
     pub const QUERY_RESULTS: u32 = 8;
-    pub const BOXES: u32 = 9;
     pub const LBVH_NODES: u32 = 10;
     pub const LBVH_BOXES: u32 = 11;
     /// Storage buffers: every binding but the TLAS and the uniform block.
-    pub const STORAGE: [u32; 10] = [
-        POINTS,
-        RADIUS,
+    pub const STORAGE: [u32; 7] = [
         TABLES,
         STBN,
         ACCUM,
         QUERY_POINTS,
         QUERY_RESULTS,
-        BOXES,
         LBVH_NODES,
         LBVH_BOXES,
     ];
@@ -85,6 +81,12 @@ pub struct Push {
     /// 1: the frame replaces the accumulation instead of adding to it.
     pub first_frame: u32,
     pub unused: u32,
+    /// Device addresses of the step's particles, radius attributes and BLAS input boxes
+    /// (filled in by the backend when it records a dispatch).
+    pub particle_address: u64,
+    pub radius_address: u64,
+    pub boxes_address: u64,
+    pub unused_address: u64,
 }
 
 /// The descriptor-set layout and pipeline layout every pipeline uses.
