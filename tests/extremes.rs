@@ -11,11 +11,14 @@ use aarbf::scene::{Attribute, Step, TimeSeries};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 
+mod common;
+
 /// The backends under test and their relative tolerance against the f64 reference (those the
 /// backends' own tests state: f64 agrees to rounding; the GPUs compute in f32 and look colours
 /// up in a 256-entry table). A GPU backend that cannot start fails the test under `CI` and is
 /// skipped with a notice otherwise.
 fn backends() -> Vec<(BackendKind, f64)> {
+    common::capture_driver_messages();
     let mut out = vec![(BackendKind::Cpu, 1e-9)];
     for (kind, tolerance) in [(BackendKind::Wgpu, 5e-4), (BackendKind::Ash, 5e-4)] {
         match backend::create(kind) {
@@ -225,6 +228,11 @@ fn extremes_matrix() {
         }
     }
     eprintln!("{}", times.join("\n"));
+    // Extreme data must not provoke API misuse either: wgpu's validation and the Khronos
+    // layer on the ash backend (both on in builds with debug assertions) stayed silent.
+    common::assert_no_driver_messages();
+    let ash_messages = aarbf::backend::ash_rt::validation_messages();
+    assert!(ash_messages.is_empty(), "{ash_messages:#?}");
 }
 
 fn check_case(kind: BackendKind, tolerance: f64, case: &Case, classification: Classification) {
