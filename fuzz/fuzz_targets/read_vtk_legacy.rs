@@ -4,6 +4,8 @@
 
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| {
+mod contained_panics;
+
+fuzz_target!(init: contained_panics::contain_vtkio_panics(), |data: &[u8]| {
     let _ = aarbf::io::read_bytes(aarbf::io::Format::Vtk, data);
 });
