@@ -1,7 +1,50 @@
 //! Every input a fuzzer ever found trouble with (tests/fuzz_regressions/<target>/*), and the
-//! seed corpus, read again: each must give a step or an error naming the problem, never a panic.
+//! seed corpus, read again: each must give a step or an error naming the problem, never a
+//! panic, and never an allocation the input does not justify (what `-malloc_limit_mb` checks
+//! under the fuzzer: here a counting allocator records the largest single request).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use aarbf::io::{Format, read_bytes};
+
+/// The system allocator, remembering the largest allocation since the last reset.
+struct Largest;
+
+static LARGEST: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged.
+unsafe impl GlobalAlloc for Largest {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        LARGEST.fetch_max(layout.size(), Ordering::Relaxed);
+        // SAFETY: the caller's contract, passed on.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: as above.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        LARGEST.fetch_max(layout.size(), Ordering::Relaxed);
+        // SAFETY: as above.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        LARGEST.fetch_max(new_size, Ordering::Relaxed);
+        // SAFETY: as above.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Largest = Largest;
+
+/// The most one read may allocate at once for an input of `len` bytes: a fixed allowance for
+/// buffers and tables, plus what decoding the input could honestly need (text numbers become
+/// f32 columns, compressed VTK arrays inflate).
+fn allowance(len: usize) -> usize {
+    (16 << 20) + 256 * len
+}
 
 fn format_of(target: &str) -> Option<Format> {
     Some(match target {
@@ -31,8 +74,16 @@ fn fuzz_findings_and_seeds_never_panic() {
             });
             for file in std::fs::read_dir(target.path()).unwrap().flatten() {
                 let data = std::fs::read(file.path()).unwrap();
+                LARGEST.store(0, Ordering::Relaxed);
                 let result =
                     std::panic::catch_unwind(|| read_bytes(format, &data).map(|s| s.len()));
+                let largest = LARGEST.load(Ordering::Relaxed);
+                assert!(
+                    largest <= allowance(data.len()),
+                    "{}: one allocation of {largest} bytes for a {}-byte input",
+                    file.path().display(),
+                    data.len()
+                );
                 match result {
                     Ok(Ok(_)) => {}
                     Ok(Err(e)) => assert!(!e.to_string().is_empty()),

@@ -25,11 +25,47 @@ impl Matrix {
     }
 }
 
+/// Refuses a header longer than the file before npyz allocates a buffer of that length (a
+/// version 2/3 header declares it as a u32: a hostile 10-byte file could ask for 4 GiB).
+fn check_header_length(
+    at: At<'_>,
+    reader: &mut (impl Read + Seek),
+    size: u64,
+) -> Result<(), DataError> {
+    let mut prefix = Vec::with_capacity(12);
+    reader
+        .by_ref()
+        .take(12)
+        .read_to_end(&mut prefix)
+        .map_err(|e| at.io(e))?;
+    reader.rewind().map_err(|e| at.io(e))?;
+    let got = prefix.len();
+    if got < 10 || &prefix[..6] != b"\x93NUMPY" {
+        // npyz reports a short or foreign file itself.
+        return Ok(());
+    }
+    let (len, prefix_len) = match prefix[6] {
+        1 => (u64::from(u16::from_le_bytes([prefix[8], prefix[9]])), 10),
+        _ if got >= 12 => (
+            u64::from(u32::from_le_bytes([prefix[8], prefix[9], prefix[10], prefix[11]])),
+            12,
+        ),
+        _ => return Ok(()),
+    };
+    if prefix_len + len > size {
+        return Err(at.malformed(format!(
+            "the .npy header claims {len} bytes but the file holds {size}"
+        )));
+    }
+    Ok(())
+}
+
 /// Reads a 2-D numeric array of any element type as f64 (a 1-D array of length 3 is one row).
 pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
     let file = File::open(at.file).map_err(|e| at.io(e))?;
     let size = file_len(at, &file)?;
     let mut reader = BufReader::new(file);
+    check_header_length(at, &mut reader, size)?;
     let header = npyz::NpyHeader::from_reader(&mut reader)
         .map_err(|e| at.malformed(format!("not a valid .npy file: {e}")))?;
     let data_start = reader.stream_position().map_err(|e| at.io(e))?;
