@@ -295,6 +295,14 @@ fn bad_input_gives_clear_errors() {
         e.contains("missing.vtp") && e.contains("no such file"),
         "{e}"
     );
+    let truncated = d.join("short.raw");
+    std::fs::write(&truncated, [0u8; 20]).unwrap();
+    let e = fails(&["info", s(&truncated)]);
+    assert_eq!(
+        e.matches("file is truncated").count(),
+        1,
+        "the problem is said once: {e}"
+    );
     let e = fails(&["info", s(&d.join("u/uniform.particles_0000"))]);
     assert!(e.contains("unknown format"), "{e}");
 }

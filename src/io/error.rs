@@ -23,8 +23,9 @@ impl fmt::Display for Location {
 /// What is wrong with the data.
 #[derive(Debug, thiserror::Error)]
 pub enum Problem {
+    // No `#[from]`/`#[source]`: the message includes the I/O error (see DataError).
     #[error("cannot read: {0}")]
-    Io(#[from] std::io::Error),
+    Io(std::io::Error),
     #[error("file is truncated: {what} needs {needed} bytes but the file has {available}")]
     Truncated {
         what: String,
@@ -52,12 +53,18 @@ pub enum Problem {
     Malformed(String),
 }
 
+impl From<std::io::Error> for Problem {
+    fn from(e: std::io::Error) -> Problem {
+        Problem::Io(e)
+    }
+}
+
 /// A problem together with where it was found.
 #[derive(Debug, thiserror::Error)]
 #[error("{location}: {problem}")]
 pub struct DataError {
     pub location: Location,
-    #[source]
+    // Not a `#[source]`: the message already includes it, and `{:#}` would print it twice.
     pub problem: Problem,
 }
 

@@ -9,12 +9,9 @@ use std::path::Path;
 pub enum OutputError {
     #[error("{0} exists; pass --force to overwrite it")]
     Exists(String),
-    #[error("cannot write {path}: {source}")]
-    Io {
-        path: String,
-        #[source]
-        source: std::io::Error,
-    },
+    // `error`, not `source`: the message includes it, and a source would print it twice.
+    #[error("cannot write {path}: {error}")]
+    Io { path: String, error: std::io::Error },
 }
 
 /// Fails if `path` exists and `force` is not set.
@@ -33,9 +30,9 @@ pub fn write_atomically(
     write: impl FnOnce(&Path) -> std::io::Result<()>,
 ) -> Result<(), OutputError> {
     check_writable(path, force)?;
-    let io = |source| OutputError::Io {
+    let io = |error| OutputError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     };
     let dir = path
         .parent()

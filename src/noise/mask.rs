@@ -37,7 +37,7 @@ pub enum NoiseError {
     #[error("{origin}: cannot read or write: {error}")]
     Io {
         origin: String,
-        #[source]
+        // Not a `#[source]`: the message includes it.
         error: std::io::Error,
     },
     #[error("{origin}: not a blue-noise mask: the magic is {found:?}, expected \"STBN\"")]
