@@ -75,8 +75,17 @@ fn fuzz_findings_and_seeds_never_panic() {
             for file in std::fs::read_dir(target.path()).unwrap().flatten() {
                 let data = std::fs::read(file.path()).unwrap();
                 LARGEST.store(0, Ordering::Relaxed);
+                let started = std::time::Instant::now();
                 let result =
                     std::panic::catch_unwind(|| read_bytes(format, &data).map(|s| s.len()));
+                // Not a performance check: a bound far above any honest read of a small file
+                // (the fuzzer's -timeout is 10 s), so a pathological parse or a loop fails.
+                assert!(
+                    started.elapsed().as_secs() < 5,
+                    "{}: reading took {:.1} s",
+                    file.path().display(),
+                    started.elapsed().as_secs_f64()
+                );
                 let largest = LARGEST.load(Ordering::Relaxed);
                 assert!(
                     largest <= allowance(data.len()),

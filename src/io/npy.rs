@@ -25,13 +25,15 @@ impl Matrix {
     }
 }
 
+/// How deeply a .npy header's Python literal may nest brackets. Real headers nest two deep
+/// (`{'shape': (n, 3)}`), structured dtypes a few more; npyz's literal parser backtracks
+/// exponentially in the depth (a 235-byte header of `[[[[...` took over 10 s).
+const MAX_HEADER_NESTING: usize = 16;
+
 /// Refuses a header longer than the file before npyz allocates a buffer of that length (a
-/// version 2/3 header declares it as a u32: a hostile 10-byte file could ask for 4 GiB).
-fn check_header_length(
-    at: At<'_>,
-    reader: &mut (impl Read + Seek),
-    size: u64,
-) -> Result<(), DataError> {
+/// version 2/3 header declares it as a u32: a hostile 10-byte file could ask for 4 GiB), and
+/// one nested deeper than [`MAX_HEADER_NESTING`] before npyz parses it.
+fn check_header(at: At<'_>, reader: &mut (impl Read + Seek), size: u64) -> Result<(), DataError> {
     let mut prefix = Vec::with_capacity(12);
     reader
         .by_ref()
@@ -47,7 +49,9 @@ fn check_header_length(
     let (len, prefix_len) = match prefix[6] {
         1 => (u64::from(u16::from_le_bytes([prefix[8], prefix[9]])), 10),
         _ if got >= 12 => (
-            u64::from(u32::from_le_bytes([prefix[8], prefix[9], prefix[10], prefix[11]])),
+            u64::from(u32::from_le_bytes([
+                prefix[8], prefix[9], prefix[10], prefix[11],
+            ])),
             12,
         ),
         _ => return Ok(()),
@@ -57,6 +61,31 @@ fn check_header_length(
             "the .npy header claims {len} bytes but the file holds {size}"
         )));
     }
+    let mut header = Vec::with_capacity(len as usize);
+    reader
+        .seek(std::io::SeekFrom::Start(prefix_len))
+        .map_err(|e| at.io(e))?;
+    reader
+        .by_ref()
+        .take(len)
+        .read_to_end(&mut header)
+        .map_err(|e| at.io(e))?;
+    reader.rewind().map_err(|e| at.io(e))?;
+    let mut depth = 0usize;
+    for &c in &header {
+        match c {
+            b'(' | b'[' | b'{' => {
+                depth += 1;
+                if depth > MAX_HEADER_NESTING {
+                    return Err(at.malformed(format!(
+                        "the .npy header nests brackets more than {MAX_HEADER_NESTING} deep"
+                    )));
+                }
+            }
+            b')' | b']' | b'}' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
     Ok(())
 }
 
@@ -65,7 +94,7 @@ pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
     let file = File::open(at.file).map_err(|e| at.io(e))?;
     let size = file_len(at, &file)?;
     let mut reader = BufReader::new(file);
-    check_header_length(at, &mut reader, size)?;
+    check_header(at, &mut reader, size)?;
     let header = npyz::NpyHeader::from_reader(&mut reader)
         .map_err(|e| at.malformed(format!("not a valid .npy file: {e}")))?;
     let data_start = reader.stream_position().map_err(|e| at.io(e))?;

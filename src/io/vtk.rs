@@ -168,10 +168,16 @@ fn appended_raw_to_base64(bytes: &[u8]) -> Result<Option<Vec<u8>>, String> {
         4
     };
     let compressed = head.contains("compressor=\"vtk");
+    // Every offset and length below comes from the file: all arithmetic on them is checked
+    // (a hostile offset near usize::MAX must be "truncated", not an overflow).
+    let span = |start: usize, len: usize, what: &str| -> Result<&[u8], String> {
+        start
+            .checked_add(len)
+            .and_then(|end| raw.get(start..end))
+            .ok_or_else(|| format!("appended data is truncated ({what} lies past the end)"))
+    };
     let int_at = |pos: usize| -> Result<usize, String> {
-        let b = raw
-            .get(pos..pos + header_bytes)
-            .ok_or("appended data is truncated (an array header lies past the end)")?;
+        let b = span(pos, header_bytes, "an array header")?;
         let v = if header_bytes == 8 {
             u64::from_le_bytes(b.try_into().unwrap())
         } else {
@@ -213,25 +219,24 @@ fn appended_raw_to_base64(bytes: &[u8]) -> Result<Option<Vec<u8>>, String> {
                 .checked_add(3)
                 .and_then(|n| n.checked_mul(header_bytes))
                 .ok_or("an appended array header overflows")?;
+            // The header (and so the block count) must lie inside the file before its block
+            // sizes are read one by one.
+            let header = span(off, header_len, "a compressed array header")?;
             let mut data_len = 0usize;
             for b in 0..blocks {
                 data_len = data_len
                     .checked_add(int_at(off + (3 + b) * header_bytes)?)
                     .ok_or("appended block sizes overflow")?;
             }
-            let header = raw
-                .get(off..off + header_len)
-                .ok_or("appended data is truncated")?;
-            let data = raw
-                .get(off + header_len..off + header_len + data_len)
-                .ok_or("appended data is truncated (compressed blocks lie past the end)")?;
+            let data = span(off + header_len, data_len, "compressed blocks")?;
             encoded.push_str(&b64(header));
             encoded.push_str(&b64(data));
         } else {
             let len = int_at(off)?;
-            let block = raw
-                .get(off..off + header_bytes + len)
-                .ok_or("appended data is truncated (an array lies past the end)")?;
+            let total = len
+                .checked_add(header_bytes)
+                .ok_or("an appended array size overflows")?;
+            let block = span(off, total, "an array")?;
             encoded.push_str(&b64(block));
         }
     }

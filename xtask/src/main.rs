@@ -271,7 +271,13 @@ fn cargo() -> Command {
 
 fn test(extra: &[String]) -> Result<()> {
     setup()?;
-    run(cargo()
+    let mut cmd = cargo();
+    // Set-up has just made a Vulkan device visible, so a GPU test that finds no adapter is
+    // a failure here, never a skip: the tests treat CI as "every backend must run".
+    if std::env::var_os("CI").is_none() {
+        cmd.env("CI", "1");
+    }
+    run(cmd
         .args(["test", "--workspace", "--profile", PROFILE])
         .args(extra))
 }
@@ -325,6 +331,11 @@ fn fuzz(args: &[String]) -> Result<()> {
         for seed in std::fs::read_dir(fuzz_dir.join("seeds").join(target))?.flatten() {
             std::fs::copy(seed.path(), corpus.join(seed.file_name()))?;
         }
+        let artifacts_dir = fuzz_dir.join("artifacts").join(target);
+        let artifacts_before: std::collections::HashSet<std::ffi::OsString> =
+            std::fs::read_dir(&artifacts_dir)
+                .map(|d| d.flatten().map(|a| a.file_name()).collect())
+                .unwrap_or_default();
         step(&format!("fuzzing {target} for {seconds} s"));
         let output = cargo()
             .current_dir(&fuzz_dir)
@@ -363,12 +374,15 @@ fn fuzz(args: &[String]) -> Result<()> {
                     .map(str::to_owned)
             })
             .unwrap_or_else(|| "?".into());
-        // Findings become regression tests.
+        // This run's findings (not earlier runs') become regression tests.
         let mut findings = Vec::new();
-        if let Ok(artifacts) = std::fs::read_dir(fuzz_dir.join("artifacts").join(target)) {
+        if let Ok(artifacts) = std::fs::read_dir(&artifacts_dir) {
             let regressions = root.join("tests").join("fuzz_regressions").join(target);
             std::fs::create_dir_all(&regressions)?;
-            for a in artifacts.flatten() {
+            for a in artifacts
+                .flatten()
+                .filter(|a| !artifacts_before.contains(&a.file_name()))
+            {
                 let name = a.file_name().to_string_lossy().into_owned();
                 std::fs::copy(a.path(), regressions.join(&name))?;
                 findings.push(name);
