@@ -8,15 +8,15 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 layout(std140, set = 0, binding = 0) uniform FrameBlock { Frame frame; };
 layout(std140, set = 0, binding = 1) uniform FieldBlock { Field field_params; };
-layout(std430, set = 0, binding = 2) readonly buffer Particles { vec4 particles[]; };
 layout(std430, set = 0, binding = 3) readonly buffer MapTables { float map_tables[]; };
 layout(std430, set = 0, binding = 4) readonly buffer RadiusAttributes { float radius_attributes[]; };
-layout(std430, set = 0, binding = 5) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
-layout(std430, set = 0, binding = 6) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
 layout(std430, set = 0, binding = 7) readonly buffer StbnMask { uint stbn_words[]; };
 layout(std430, set = 0, binding = 8) buffer Accumulation { vec4 accumulation[]; };
 // x: 8x8 tiles per row, y: tiles, z: blocks B, w: tiles per block S (see main).
 layout(std140, set = 0, binding = 9) uniform TilingBlock { uvec4 tiling; };
+// Particles, nodes and boxes, each in up to 4 parts (bindings 10..21).
+#include "wgpu/split.glsl"
+#include "wgpu/split_tree.glsl"
 
 const uint STBN_WIDTH = 128u;
 const uint STBN_HEIGHT = 128u;
