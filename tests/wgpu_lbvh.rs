@@ -634,13 +634,15 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
     let n = 40_000;
     let step = random_step(n, 77, false);
     let cases = [
-        // 640,000 B of particles in 2 parts; 1,280,000 B of nodes and boxes in 3.
-        (1u32, 480_000u64, (2usize, 3usize)),
-        // 640,000 B of particles in 4 parts; 320,000 B of nodes and boxes in 2.
-        (4, 200_000, (4, 2)),
+        // 640,000 B of particles in 2 parts; 1,280,000 B of nodes and boxes in 3; the
+        // image's accumulation in 1.
+        (1u32, 480_000u64, (2usize, 3usize), (48, 40)),
+        // 640,000 B of particles in 4 parts; 320,000 B of nodes and boxes in 2; a 128x100
+        // image's 204,800 B of accumulation in 2.
+        (4, 200_000, (4, 2), (128, 100)),
     ];
     let radius = 0.055;
-    for (k, limit, parts) in cases {
+    for (k, limit, parts, (width, height)) in cases {
         let what = format!("split, K {k}, limit {limit}");
         let mut f = field(radius, true);
         if k == 4 {
@@ -655,24 +657,35 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
         // The same image, bit for bit, as from a backend with one binding per array.
         let series = aarbf::scene::TimeSeries::from_steps(vec![step.clone()]);
         let settings = aarbf::render::RenderSettings {
-            width: 48,
-            height: 40,
+            width,
+            height,
             seed: 5,
             ..aarbf::render::RenderSettings::default()
         };
-        let render = |b: WgpuBackend| {
+        let session = |b: WgpuBackend| {
             let mut s = aarbf::render::RenderSession::new(Box::new(b), &series);
             s.show(&series, 0, &f, ClusterSize::new(k).unwrap())
                 .unwrap();
-            s.render(&settings, 2).unwrap()
+            s
         };
-        let split = render(backend(&ctx, Some(limit)));
-        let whole = render(backend(&ctx, None));
+        let mut split_session = session(backend(&ctx, Some(limit)));
+        let split = split_session.render(&settings, 2).unwrap();
+        let whole = session(backend(&ctx, None)).render(&settings, 2).unwrap();
         assert!(
             split.pixels.iter().any(|p| p[3] > 0.0),
             "{what}: the image shows the particles"
         );
         assert!(split == whole, "{what}: split and unsplit images differ");
+
+        // An image beyond 4 parts of accumulation: an error naming the need and the limit.
+        let big = aarbf::render::RenderSettings {
+            width: 400,
+            height: 400,
+            ..settings
+        };
+        let e = split_session.render(&big, 1).unwrap_err().to_string();
+        let need = format!("needs 2560000 bytes of accumulation, more than 4 x {limit}");
+        assert!(e.contains(&need), "{what}: error {e:?} lacks {need:?}");
     }
 
     // Beyond 4 parts: a clear error naming the step, the need and the limit.

@@ -108,7 +108,8 @@ struct Accumulation {
     width: u32,
     height: u32,
     frames: u32,
-    sums: wgpu::Buffer,
+    /// f32 RGBA sums per pixel, split like the particles (16 bytes per pixel).
+    sums: SplitBuffer,
     clear: bool,
 }
 
@@ -170,7 +171,7 @@ impl WgpuBackend {
             dummy: storage(&ctx, "unused radius attribute", 16),
             optical: vec![0.0; TABLE_SIZE],
             frame_uniform: uniform(&ctx, "frame", std::mem::size_of::<GpuFrame>() as u64),
-            tiling_uniform: uniform(&ctx, "tiling", 16),
+            tiling_uniform: uniform(&ctx, "tiling", 32),
             max_binding,
             ctx,
             timings: Timings::default(),
@@ -669,12 +670,12 @@ impl Backend for WgpuBackend {
         self.built_scene()?;
         let (w, h) = (frame.width, frame.height);
         let bytes = u64::from(w) * u64::from(h) * 16;
-        if bytes > self.max_binding {
-            // Not split (yet): 16 bytes per pixel reach the limit at ~8M pixels on lavapipe.
+        let pixels = u64::from(w) * u64::from(h);
+        if parts_needed(pixels, 16, self.max_binding) > PARTS {
             return Err(device_error(format!(
-                "a {w}x{h} image needs {bytes} bytes of accumulation in one binding; {} binds \
-                 at most {}",
-                ctx.info.name, self.max_binding
+                "a {w}x{h} image needs {bytes} bytes of accumulation, more than {PARTS} x {}; \
+                 {} binds at most {} bytes per storage buffer",
+                self.max_binding, ctx.info.name, self.max_binding
             )));
         }
         if self
@@ -683,9 +684,12 @@ impl Backend for WgpuBackend {
             .is_none_or(|a| a.width != w || a.height != h)
         {
             self.accumulation = None;
-            let sums = ctx.scoped("accumulation buffer", || {
-                storage(&ctx, "accumulation", bytes)
-            })?;
+            let max_binding = self.max_binding;
+            let sums = ctx
+                .scoped(&format!("accumulation buffer ({bytes} bytes)"), || {
+                    SplitBuffer::new(&ctx, "accumulation", pixels, 16, max_binding)
+                })?
+                .ok_or_else(|| device_error("the accumulation does not fit its parts"))?;
             self.accumulation = Some(Accumulation {
                 width: w,
                 height: h,
@@ -725,10 +729,14 @@ impl Backend for WgpuBackend {
         let tiles_x = w.div_ceil(8);
         let tiles = tiles_x * h.div_ceil(8);
         let (blocks, per_block, dispatched) = util::interleave(tiles);
+        let acc_part = self
+            .accumulation
+            .as_ref()
+            .map_or(u32::MAX, |a| a.sums.part_len(16));
         write(
             &ctx,
             &self.tiling_uniform,
-            bytemuck::cast_slice(&[tiles_x, tiles, blocks, per_block]),
+            bytemuck::cast_slice(&[tiles_x, tiles, blocks, per_block, acc_part, 0, 0, 0]),
         );
         let acc = self.accumulation.as_mut().expect("made above");
         let stbn = self.stbn.as_ref().expect("made above");
@@ -747,15 +755,15 @@ impl Backend for WgpuBackend {
                         .as_entire_binding(),
                 ),
                 (7, stbn.as_entire_binding()),
-                (8, acc.sums.as_entire_binding()),
                 (9, self.tiling_uniform.as_entire_binding()),
             ];
             entries.extend(scene.particles.entries(10));
             entries.extend(tree.nodes.entries(14));
             entries.extend(tree.boxes.entries(18));
+            entries.extend(acc.sums.entries(22));
             let bg = bind(&ctx, &pipeline, &entries);
             if acc.clear {
-                encoder.clear_buffer(&acc.sums, 0, None);
+                acc.sums.clear(&mut encoder);
                 acc.frames = 0;
                 acc.clear = false;
             }
@@ -789,7 +797,7 @@ impl Backend for WgpuBackend {
         let bytes = if acc.clear || acc.frames == 0 {
             vec![0u8; pixels * 16]
         } else {
-            util::read(&self.ctx, &acc.sums, 0, pixels as u64 * 16)?
+            acc.sums.read(&self.ctx, pixels as u64 * 16)?
         };
         let sums: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
         let n = acc.frames.max(1) as f32;

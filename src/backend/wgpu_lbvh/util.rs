@@ -313,6 +313,13 @@ impl SplitBuffer {
         Ok(out)
     }
 
+    /// Encodes zeroing every part.
+    pub fn clear(&self, encoder: &mut wgpu::CommandEncoder) {
+        for b in &self.parts {
+            encoder.clear_buffer(b, 0, None);
+        }
+    }
+
     /// Fills every part with 0xFF (tests).
     pub fn poison(&self, ctx: &GpuContext) {
         for b in &self.parts {
