@@ -4,7 +4,11 @@
 //! - **Upload**: a step prepared by [`GpuStepData`] (Hilbert-sorted particles in local
 //!   coordinates, maps baked to tables) goes into buffers kept for the largest step seen (or
 //!   [`Backend::reserve`]d for the series' maximum count); the radius-attribute buffer exists
-//!   only when the scene has one.
+//!   only when the scene has one. The arrays of 16-byte elements that outgrow one storage
+//!   binding first (particles, LBVH nodes, cluster boxes, the accumulation) live in up to
+//!   `util::PARTS` = 4 buffers each (`util::SplitBuffer`, `shaders_glsl/wgpu/split.glsl`);
+//!   a step beyond that, or one whose 4-byte arrays (sort keys, parents, radius attribute)
+//!   outgrow one binding, is refused with an error naming the step, the need and the limit.
 //! - **Build**, every stage a compute pass: cluster boxes (`shaders_glsl/wgpu/lbvh_bounds.comp`),
 //!   Morton keys (`shaders_wgsl/lbvh_keys.wgsl`), a portable LSD radix sort
 //!   (`radix_sort.wgsl`), Karras' hierarchy (`lbvh_hierarchy.wgsl`) and bottom-up bounds
