@@ -25,7 +25,7 @@ layout(std430, set = 0, binding = 21) buffer ClusterBoxes3 { vec4 cluster_boxes3
 // Stores vec4 number v of the boxes in its part (split.glsl's lbvh_box reads it back).
 void store_box(uint v, vec4 value) {
     uint len = field_params.counts.w;
-    if (v < len) {
+    if (SPLIT_ARRAYS == 0u || v < len) {
         cluster_boxes0[v] = value;
         return;
     }

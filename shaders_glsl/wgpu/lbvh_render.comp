@@ -18,6 +18,9 @@ layout(std140, set = 0, binding = 9) uniform TilingBlock {
     uvec4 tiling;
     uvec4 accumulation_parts;
 };
+// Particles, nodes and boxes, each in up to 4 parts (bindings 10..21).
+#include "wgpu/split.glsl"
+#include "wgpu/split_tree.glsl"
 // The accumulation (16 bytes per pixel: 8M pixels, a 4K image, fill lavapipe's 128 MiB
 // binding) in up to 4 parts, as split.glsl splits the particles.
 layout(std430, set = 0, binding = 22) buffer Accumulation0 { vec4 accumulation0[]; };
@@ -28,7 +31,7 @@ layout(std430, set = 0, binding = 25) buffer Accumulation3 { vec4 accumulation3[
 // Adds c to pixel i's sums, in its part (the branch is uniform when there is one part).
 void accumulate(uint i, vec4 c) {
     uint len = accumulation_parts.x;
-    if (i < len) {
+    if (SPLIT_ARRAYS == 0u || i < len) {
         accumulation0[i] += c;
         return;
     }
@@ -44,9 +47,6 @@ void accumulate(uint i, vec4 c) {
     }
     accumulation3[i - len] += c;
 }
-// Particles, nodes and boxes, each in up to 4 parts (bindings 10..21).
-#include "wgpu/split.glsl"
-#include "wgpu/split_tree.glsl"
 
 const uint STBN_WIDTH = 128u;
 const uint STBN_HEIGHT = 128u;

@@ -6,9 +6,13 @@
 //     z: particles per part   (bindings 10..13)
 //     w: vec4s per part of the LBVH nodes (bindings 14..17) and of the cluster boxes (18..21);
 //        both have 32 bytes per cluster, so their parts have the same length.
-// When one part holds a whole array its length is 0xffffffff: every branch below then takes
-// its first arm in every thread (uniform), the unused parts are tiny placeholder buffers, and
-// the single-binding case costs one compare per load.
+// When one part holds a whole array its length is 0xffffffff (every branch below then takes
+// its first arm) and the unused parts are tiny placeholder buffers. When no array a kernel
+// reads is split, the host also sets SPLIT_ARRAYS to 0, and the part selection compiles away:
+// measured on lavapipe, the runtime compare alone (uniform as it is) cost ~20% of the query
+// rate at K >= 4, where it sits in the per-particle loop, since llvmpipe runs both arms of a
+// branch under a mask.
+layout(constant_id = 7) const uint SPLIT_ARRAYS = 1u;
 //
 // The includer declares field_params (params.glsl's Field) first. This file declares the
 // particle parts; wgpu/split_tree.glsl the nodes and boxes, read-only (the bounds kernel,
@@ -22,7 +26,7 @@ layout(std430, set = 0, binding = 13) readonly buffer Particles3 { vec4 particle
 // Particle k: xyz local position, w the normalised attribute.
 vec4 lbvh_particle(uint k) {
     uint len = field_params.counts.z;
-    if (k < len) {
+    if (SPLIT_ARRAYS == 0u || k < len) {
         return particles0[k];
     }
     k -= len;

@@ -12,7 +12,7 @@ layout(std430, set = 0, binding = 21) readonly buffer LbvhBoxes3 { vec4 lbvh_box
 // vec4 number v of the nodes (node j is vec4s 2j and 2j + 1).
 vec4 lbvh_node(uint v) {
     uint len = field_params.counts.w;
-    if (v < len) {
+    if (SPLIT_ARRAYS == 0u || v < len) {
         return lbvh_nodes0[v];
     }
     v -= len;
@@ -29,7 +29,7 @@ vec4 lbvh_node(uint v) {
 // vec4 number v of the cluster boxes (cluster c's box is vec4s 2c and 2c + 1).
 vec4 lbvh_box(uint v) {
     uint len = field_params.counts.w;
-    if (v < len) {
+    if (SPLIT_ARRAYS == 0u || v < len) {
         return lbvh_boxes0[v];
     }
     v -= len;

@@ -94,8 +94,18 @@ impl Scene {
         }
     }
 
-    fn variant(&self, integrator: Integrator, colour: ColourMode, noise: NoiseKind) -> [u32; 7] {
-        SpecConstants {
+    /// The GLSL kernels' specialisation constants; `split`: some array the kernel reads is in
+    /// more than one part (SPLIT_ARRAYS of `shaders_glsl/wgpu/split.glsl`: at 0 the accessors'
+    /// part selection compiles away, and the unsplit case runs the code it ran before the
+    /// split existed).
+    fn variant(
+        &self,
+        integrator: Integrator,
+        colour: ColourMode,
+        noise: NoiseKind,
+        split: bool,
+    ) -> [u32; 8] {
+        let v = SpecConstants {
             integrator: SpecConstants::integrator_id(integrator),
             colour_mode: SpecConstants::colour_id(colour),
             noise_kind: SpecConstants::noise_id(noise),
@@ -104,7 +114,8 @@ impl Scene {
             density_map_varies: u32::from(self.data.density_map_varies),
             has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
         }
-        .values()
+        .values();
+        [v[0], v[1], v[2], v[3], v[4], v[5], v[6], u32::from(split)]
     }
 }
 
@@ -236,8 +247,13 @@ impl WgpuBackend {
         tree.snapshot(&self.ctx, scene.clusters() as usize)
     }
 
-    fn bindings<'a>(scene: &'a Scene, dummy: &'a wgpu::Buffer) -> SceneBindings<'a> {
-        let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn);
+    fn bindings<'a>(
+        scene: &'a Scene,
+        tree: &GpuTree,
+        dummy: &'a wgpu::Buffer,
+    ) -> SceneBindings<'a> {
+        let split = scene.particles.parts_used() > 1 || tree.boxes.parts_used() > 1;
+        let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn, split);
         // Only what the bounds kernel reads varies its pipeline.
         let mut v = variant;
         v[0] = 0;
@@ -261,7 +277,7 @@ impl WgpuBackend {
         let started = Instant::now();
         let report = tree.build(
             &self.ctx,
-            &Self::bindings(scene, &self.dummy),
+            &Self::bindings(scene, tree, &self.dummy),
             &scene.grid,
             scene.clusters(),
             until,
@@ -542,7 +558,7 @@ impl Backend for WgpuBackend {
         };
         let report = tree.refit(
             &ctx,
-            &Self::bindings(scene, &self.dummy),
+            &Self::bindings(scene, tree, &self.dummy),
             &scene.grid,
             scene.clusters(),
         )?;
@@ -596,7 +612,12 @@ impl Backend for WgpuBackend {
             self.query_buffers.as_ref().expect("made above");
         let pipeline = ctx.pipeline(
             Kernel::Query,
-            Some(scene.variant(Integrator::Ea, scene.colour_mode(), NoiseKind::Stbn)),
+            Some(scene.variant(
+                Integrator::Ea,
+                scene.colour_mode(),
+                NoiseKind::Stbn,
+                scene.particles.parts_used() > 1 || tree.nodes.parts_used() > 1,
+            )),
         )?;
         let bg = ctx.scoped("query bind group", || {
             let mut entries = vec![
@@ -728,7 +749,19 @@ impl Backend for WgpuBackend {
         );
         let pipeline = ctx.pipeline(
             Kernel::Render,
-            Some(scene.variant(frame.integrator, frame.colour, frame.noise)),
+            Some(
+                scene.variant(
+                    frame.integrator,
+                    frame.colour,
+                    frame.noise,
+                    scene.particles.parts_used() > 1
+                        || tree.nodes.parts_used() > 1
+                        || self
+                            .accumulation
+                            .as_ref()
+                            .is_some_and(|a| a.sums.parts_used() > 1),
+                ),
+            ),
         )?;
         let tiles_x = w.div_ceil(8);
         let tiles = tiles_x * h.div_ceil(8);
