@@ -28,8 +28,10 @@ struct TreeParams {
     clusters: u32,
     // 7: bounds and heights (build); 6: bounds only (refit).
     components: u32,
-    pad0: u32,
-    pad1: u32,
+    // Per part of the split boxes and nodes (see box_at, node_exchange): vec4s and words
+    // (0xffffffff when one part holds the whole array).
+    part_vec4s: u32,
+    part_words: u32,
 }
 
 const NONE: u32 = 0xffffffffu;
@@ -37,14 +39,81 @@ const ROOT_LEAF: u32 = 0xfffffffeu;
 const SENTINEL: u32 = 0xffffffffu;
 
 @group(0) @binding(0) var<uniform> params: TreeParams;
-@group(0) @binding(1) var<storage, read> boxes: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read_write> nodes: array<atomic<u32>>;
 @group(0) @binding(3) var<storage, read> node_parents: array<u32>;
 @group(0) @binding(4) var<storage, read> leaf_parents: array<u32>;
 @group(0) @binding(5) var<storage, read_write> heights: array<atomic<u32>>;
 // [0] leaves, [1] depth (the root's height), [2] set when a refit finds a cluster that was
 // left out of the tree (empty at the build) holding particles: the tree must be rebuilt.
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>>;
+// The cluster boxes in up to 4 parts (src/backend/wgpu_lbvh/util.rs, SplitBuffer): an array
+// may outgrow one storage binding. Unsplit, part_vec4s is 0xffffffff and every thread takes
+// the first branch of box_at.
+@group(0) @binding(18) var<storage, read> boxes0: array<vec4<f32>>;
+@group(0) @binding(19) var<storage, read> boxes1: array<vec4<f32>>;
+@group(0) @binding(20) var<storage, read> boxes2: array<vec4<f32>>;
+@group(0) @binding(21) var<storage, read> boxes3: array<vec4<f32>>;
+
+// vec4 number v of the boxes (cluster c's box is 2c and 2c + 1).
+fn box_at(v: u32) -> vec4<f32> {
+    let len = params.part_vec4s;
+    var i = v;
+    if i < len {
+        return boxes0[i];
+    }
+    i -= len;
+    if i < len {
+        return boxes1[i];
+    }
+    i -= len;
+    if i < len {
+        return boxes2[i];
+    }
+    return boxes3[i - len];
+}
+
+// The nodes (8 words each) in up to 4 parts likewise. Each word's atomics go to one location
+// in one part whatever the split, so the meet-at-the-word argument above holds unchanged.
+@group(0) @binding(14) var<storage, read_write> nodes0: array<atomic<u32>>;
+@group(0) @binding(15) var<storage, read_write> nodes1: array<atomic<u32>>;
+@group(0) @binding(16) var<storage, read_write> nodes2: array<atomic<u32>>;
+@group(0) @binding(17) var<storage, read_write> nodes3: array<atomic<u32>>;
+
+fn node_exchange(w: u32, v: u32) -> u32 {
+    let len = params.part_words;
+    var i = w;
+    if i < len {
+        return atomicExchange(&nodes0[i], v);
+    }
+    i -= len;
+    if i < len {
+        return atomicExchange(&nodes1[i], v);
+    }
+    i -= len;
+    if i < len {
+        return atomicExchange(&nodes2[i], v);
+    }
+    return atomicExchange(&nodes3[i - len], v);
+}
+
+fn node_store(w: u32, v: u32) {
+    let len = params.part_words;
+    var i = w;
+    if i < len {
+        atomicStore(&nodes0[i], v);
+        return;
+    }
+    i -= len;
+    if i < len {
+        atomicStore(&nodes1[i], v);
+        return;
+    }
+    i -= len;
+    if i < len {
+        atomicStore(&nodes2[i], v);
+        return;
+    }
+    atomicStore(&nodes3[i - len], v);
+}
 
 // The two children of a node meet at each of its words: each exchanges its value `v` into
 // word `w`. The first to arrive reads SENTINEL and drops out; the second reads its sibling's
@@ -55,7 +124,7 @@ struct Meet {
 }
 
 fn meet(w: u32, v: f32, is_max: bool) -> Meet {
-    let old = atomicExchange(&nodes[w], bitcast<u32>(v));
+    let old = node_exchange(w, bitcast<u32>(v));
     if old == SENTINEL {
         return Meet(false, v);
     }
@@ -63,7 +132,7 @@ fn meet(w: u32, v: f32, is_max: bool) -> Meet {
     if is_max {
         c = max(v, bitcast<f32>(old));
     }
-    atomicStore(&nodes[w], bitcast<u32>(c));
+    node_store(w, bitcast<u32>(c));
     return Meet(true, c);
 }
 
@@ -77,8 +146,8 @@ fn climb(
     if c >= params.clusters {
         return;
     }
-    let lo = boxes[2u * c].xyz;
-    let hi = boxes[2u * c + 1u].xyz;
+    let lo = box_at(2u * c).xyz;
+    let hi = box_at(2u * c + 1u).xyz;
     let parent = leaf_parents[c];
     if parent == NONE {
         if lo.x <= hi.x {
@@ -148,10 +217,10 @@ fn reset(
         return;
     }
     let base = node * 8u;
-    atomicStore(&nodes[base + 0u], SENTINEL);
-    atomicStore(&nodes[base + 1u], SENTINEL);
-    atomicStore(&nodes[base + 2u], SENTINEL);
-    atomicStore(&nodes[base + 4u], SENTINEL);
-    atomicStore(&nodes[base + 5u], SENTINEL);
-    atomicStore(&nodes[base + 6u], SENTINEL);
+    node_store(base + 0u, SENTINEL);
+    node_store(base + 1u, SENTINEL);
+    node_store(base + 2u, SENTINEL);
+    node_store(base + 4u, SENTINEL);
+    node_store(base + 5u, SENTINEL);
+    node_store(base + 6u, SENTINEL);
 }

@@ -11,14 +11,51 @@ const NONE: u32 = 0xffffffffu;
 const ROOT_LEAF: u32 = 0xfffffffeu;
 const SENTINEL: u32 = 0xffffffffu;
 
+struct TreeParams {
+    key_lo: vec4<f32>,
+    key_scale: vec4<f32>,
+    clusters: u32,
+    components: u32,
+    // Words per part of the split nodes (0xffffffff when one part holds them all).
+    part_vec4s: u32,
+    part_words: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: TreeParams;
 @group(0) @binding(1) var<storage, read> keys: array<u32>;
 @group(0) @binding(2) var<storage, read> clusters: array<u32>;
-@group(0) @binding(3) var<storage, read_write> nodes: array<u32>;
 @group(0) @binding(4) var<storage, read_write> node_parents: array<u32>;
 @group(0) @binding(5) var<storage, read_write> leaf_parents: array<u32>;
 @group(0) @binding(6) var<storage, read_write> heights: array<u32>;
 // [0] leaves (from the keys pass).
 @group(0) @binding(7) var<storage, read> counters: array<u32>;
+// The nodes (8 words each) in up to 4 parts (src/backend/wgpu_lbvh/util.rs, SplitBuffer): the
+// array may outgrow one storage binding. Unsplit, part_words is 0xffffffff and every thread
+// takes the first branch of node_store.
+@group(0) @binding(14) var<storage, read_write> nodes0: array<u32>;
+@group(0) @binding(15) var<storage, read_write> nodes1: array<u32>;
+@group(0) @binding(16) var<storage, read_write> nodes2: array<u32>;
+@group(0) @binding(17) var<storage, read_write> nodes3: array<u32>;
+
+fn node_store(w: u32, v: u32) {
+    let len = params.part_words;
+    var i = w;
+    if i < len {
+        nodes0[i] = v;
+        return;
+    }
+    i -= len;
+    if i < len {
+        nodes1[i] = v;
+        return;
+    }
+    i -= len;
+    if i < len {
+        nodes2[i] = v;
+        return;
+    }
+    nodes3[i - len] = v;
+}
 
 // Common prefix length of the extended keys at sorted positions i and j; -1 outside 0..n.
 fn delta(i: i32, j: i32, n: i32) -> i32 {
@@ -51,10 +88,10 @@ fn main(
             node_parents[1] = NONE;
         }
         for (var w = 0u; w < 8u; w++) {
-            nodes[w] = 0u;
+            node_store(w, 0u);
         }
-        nodes[3] = root;
-        nodes[7] = NONE;
+        node_store(3u, root);
+        node_store(7u, NONE);
         node_parents[0] = NONE;
     }
     let i = i32(index);
@@ -110,13 +147,13 @@ fn main(
         node_parents[right] = node;
     }
     let base = node * 8u;
-    nodes[base + 0u] = SENTINEL;
-    nodes[base + 1u] = SENTINEL;
-    nodes[base + 2u] = SENTINEL;
-    nodes[base + 3u] = left;
-    nodes[base + 4u] = SENTINEL;
-    nodes[base + 5u] = SENTINEL;
-    nodes[base + 6u] = SENTINEL;
-    nodes[base + 7u] = right;
+    node_store(base + 0u, SENTINEL);
+    node_store(base + 1u, SENTINEL);
+    node_store(base + 2u, SENTINEL);
+    node_store(base + 3u, left);
+    node_store(base + 4u, SENTINEL);
+    node_store(base + 5u, SENTINEL);
+    node_store(base + 6u, SENTINEL);
+    node_store(base + 7u, right);
     heights[node] = SENTINEL;
 }

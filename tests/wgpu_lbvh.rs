@@ -239,6 +239,15 @@ fn radix_sort_equals_a_stable_sort_by_key() {
     assert_no_driver_messages();
 }
 
+/// A backend on the shared device; with `limit`, binding at most that many bytes per storage
+/// buffer (so that small steps split their arrays over several bindings).
+fn backend(ctx: &Arc<GpuContext>, limit: Option<u64>) -> WgpuBackend {
+    match limit {
+        Some(l) => WgpuBackend::with_max_binding(ctx.clone(), l),
+        None => WgpuBackend::with_context(ctx.clone()),
+    }
+}
+
 /// Builds over `step` stage by stage, comparing each stage with its twin.
 fn check_build_stages(
     ctx: &Arc<GpuContext>,
@@ -246,8 +255,9 @@ fn check_build_stages(
     field: &FieldSettings,
     k: u32,
     what: &str,
+    limit: Option<u64>,
 ) {
-    let mut b = WgpuBackend::with_context(ctx.clone());
+    let mut b = backend(ctx, limit);
     upload(&mut b, step, field, k);
     let clusters = ClusterSize::new(k).unwrap().clusters_for(step.len());
     let radius = field.radius as f32;
@@ -356,6 +366,7 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
             &field(radius, false),
             1,
             &format!("n {n}, K 1"),
+            None,
         );
     }
     // Clusters, zero radii and empty clusters (radius map 0 below t = 0.2), per-particle radii.
@@ -368,7 +379,7 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
         if k == 8 {
             f.radius_attribute = Some("h".into());
         }
-        check_build_stages(&ctx, &step, &f, k, &format!("n {n}, K {k}, maps"));
+        check_build_stages(&ctx, &step, &f, k, &format!("n {n}, K {k}, maps"), None);
     }
     assert_no_driver_messages();
 }
@@ -378,7 +389,14 @@ fn a_million_particle_build_equals_its_twin() {
     let Some(ctx) = gpu() else { return };
     // A non-power-of-two million.
     let step = random_step(1_000_003, 7, false);
-    check_build_stages(&ctx, &step, &field(0.004, true), 1, "1000003 particles");
+    check_build_stages(
+        &ctx,
+        &step,
+        &field(0.004, true),
+        1,
+        "1000003 particles",
+        None,
+    );
     assert_no_driver_messages();
 }
 
@@ -480,9 +498,16 @@ fn refit_equals_a_fresh_build() {
 }
 
 /// Queries at random points and at particle centres, compared with the f64 reference.
-fn check_queries(ctx: &Arc<GpuContext>, step: &Step, f: &FieldSettings, k: u32, what: &str) {
+fn check_queries(
+    ctx: &Arc<GpuContext>,
+    step: &Step,
+    f: &FieldSettings,
+    k: u32,
+    what: &str,
+    limit: Option<u64>,
+) {
     let cluster = ClusterSize::new(k).unwrap();
-    let mut b = WgpuBackend::with_context(ctx.clone());
+    let mut b = backend(ctx, limit);
     upload(&mut b, step, f, k);
     b.build().unwrap();
     let reference =
@@ -564,16 +589,24 @@ fn queries_equal_the_f64_reference_for_every_cluster_size() {
             &field(radius, true),
             k,
             &format!("post, maps, K {k}"),
+            None,
         );
     }
     let mut pre = field(radius, false);
     pre.classification = Classification::Pre;
-    check_queries(&ctx, &step, &pre, 4, "pre-classification");
+    check_queries(&ctx, &step, &pre, 4, "pre-classification", None);
     let mut density = FieldSettings::new(None, radius);
     density.radius_attribute = Some("h".into());
-    check_queries(&ctx, &step, &density, 2, "density only, radius attribute");
+    check_queries(
+        &ctx,
+        &step,
+        &density,
+        2,
+        "density only, radius attribute",
+        None,
+    );
     let empty = random_step(0, 1, false);
-    check_queries(&ctx, &empty, &field(radius, false), 1, "no particles");
+    check_queries(&ctx, &empty, &field(radius, false), 1, "no particles", None);
     assert_no_driver_messages();
 }
 
@@ -590,5 +623,90 @@ fn misuse_is_an_error_not_a_panic() {
     b.build().unwrap();
     assert!(b.refit(&field(-1.0, false)).is_err(), "a negative radius");
     assert!(b.query(&[]).unwrap().is_empty());
+    assert_no_driver_messages();
+}
+
+#[test]
+fn steps_larger_than_one_binding_are_split_over_parts() {
+    // The binding limit lowered so that a small step needs 2-4 parts (of at most 4) for its
+    // particles (16 B each), nodes and boxes (32 B per cluster): (K, limit, expected parts).
+    let Some(ctx) = gpu() else { return };
+    let n = 40_000;
+    let step = random_step(n, 77, false);
+    let cases = [
+        // 640,000 B of particles in 2 parts; 1,280,000 B of nodes and boxes in 3; the
+        // image's accumulation in 1.
+        (1u32, 480_000u64, (2usize, 3usize), (48, 40)),
+        // 640,000 B of particles in 4 parts; 320,000 B of nodes and boxes in 2; a 128x100
+        // image's 204,800 B of accumulation in 2.
+        (4, 200_000, (4, 2), (128, 100)),
+    ];
+    let radius = 0.055;
+    for (k, limit, parts, (width, height)) in cases {
+        let what = format!("split, K {k}, limit {limit}");
+        let mut f = field(radius, true);
+        if k == 4 {
+            f.radius_attribute = Some("h".into());
+        }
+        let mut b = backend(&ctx, Some(limit));
+        upload(&mut b, &step, &f, k);
+        assert_eq!(b.split_parts(), Some((parts.0, parts.1)), "{what}");
+        check_build_stages(&ctx, &step, &f, k, &what, Some(limit));
+        check_queries(&ctx, &step, &f, k, &what, Some(limit));
+
+        // The same image, bit for bit, as from a backend with one binding per array.
+        let series = aarbf::scene::TimeSeries::from_steps(vec![step.clone()]);
+        let settings = aarbf::render::RenderSettings {
+            width,
+            height,
+            seed: 5,
+            ..aarbf::render::RenderSettings::default()
+        };
+        let session = |b: WgpuBackend| {
+            let mut s = aarbf::render::RenderSession::new(Box::new(b), &series);
+            s.show(&series, 0, &f, ClusterSize::new(k).unwrap())
+                .unwrap();
+            s
+        };
+        let mut split_session = session(backend(&ctx, Some(limit)));
+        let split = split_session.render(&settings, 2).unwrap();
+        let whole = session(backend(&ctx, None)).render(&settings, 2).unwrap();
+        assert!(
+            split.pixels.iter().any(|p| p[3] > 0.0),
+            "{what}: the image shows the particles"
+        );
+        assert!(split == whole, "{what}: split and unsplit images differ");
+
+        // An image beyond 4 parts of accumulation: an error naming the need and the limit.
+        let big = aarbf::render::RenderSettings {
+            width: 400,
+            height: 400,
+            ..settings
+        };
+        let e = split_session.render(&big, 1).unwrap_err().to_string();
+        let need = format!("needs 2560000 bytes of accumulation, more than 4 x {limit}");
+        assert!(e.contains(&need), "{what}: error {e:?} lacks {need:?}");
+    }
+
+    // Beyond 4 parts: a clear error naming the step, the need and the limit.
+    let mut b = backend(&ctx, Some(100_000));
+    let e = b
+        .upload(&StepInput {
+            step: &step,
+            field: &field(radius, false),
+            cluster: ClusterSize::new(1).unwrap(),
+            series_bounds: bounds_of(&step),
+            series_range: Some((0.0, 1.0)),
+        })
+        .unwrap_err()
+        .to_string();
+    for part in [
+        "step 'random40000'",
+        "the particles need 640000 bytes, more than 4 x 100000",
+        "at most 100000 bytes per storage buffer",
+    ] {
+        assert!(e.contains(part), "error {e:?} lacks {part:?}");
+    }
+    assert!(b.build().is_err(), "nothing uploaded after the refusal");
     assert_no_driver_messages();
 }

@@ -3,18 +3,20 @@
 // backend's kernels and by the Vulkan backend's compute-traversal comparison.
 //
 // Node layout (8 words, 2 vec4 per node):
-//     lbvh_nodes[2j]     = (min.xyz, uintBitsToFloat(left child))
-//     lbvh_nodes[2j + 1] = (max.xyz, uintBitsToFloat(right child))
-// A child pointer is LBVH_LEAF | c for cluster c, whose box is lbvh_boxes[2c] (min.xyz) and
-// lbvh_boxes[2c + 1] (max.xyz), else the index of an internal node. Node 0 is a header: the
-// w of lbvh_nodes[0] holds the root pointer (LBVH_NONE for an empty tree). Cluster c holds
+//     lbvh_node(2j)     = (min.xyz, uintBitsToFloat(left child))
+//     lbvh_node(2j + 1) = (max.xyz, uintBitsToFloat(right child))
+// A child pointer is LBVH_LEAF | c for cluster c, whose box is lbvh_box(2c) (min.xyz) and
+// lbvh_box(2c + 1) (max.xyz), else the index of an internal node. Node 0 is a header: the
+// w of lbvh_node(0) holds the root pointer (LBVH_NONE for an empty tree). Cluster c holds
 // particles c * CLUSTER_SIZE .. min((c + 1) * CLUSTER_SIZE, field_params.counts.x).
 //
-// The includer declares, before this file (after rbf.glsl, whose particle_radius and
-// rbf_accumulate it calls):
-//     layout(std430, set = S, binding = B) readonly buffer Particles { vec4 particles[]; };
-//     layout(std430, set = S, binding = B) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
-//     layout(std430, set = S, binding = B) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
+// The includer defines, before this file (after rbf.glsl, whose particle_radius and
+// rbf_accumulate it calls), the accessors of the arrays (functions rather than buffer names so
+// that the wgpu backend can split an array too large for one binding over several: see
+// wgpu/split.glsl; the Vulkan kernels read one buffer each):
+//     vec4 lbvh_particle(uint k);  // particle k
+//     vec4 lbvh_node(uint v);      // vec4 number v of the nodes
+//     vec4 lbvh_box(uint v);       // vec4 number v of the cluster boxes
 //
 // The stack holds at most one entry per internal node on the path from the root; a Karras
 // tree over 30-bit keys extended by a 32-bit index is at most 62 internal nodes deep, so 64
@@ -33,7 +35,7 @@ void lbvh_visit_cluster(uint c, vec3 x, inout vec4 acc) {
     uint first = c * CLUSTER_SIZE;
     uint end = min(first + CLUSTER_SIZE, field_params.counts.x);
     for (uint k = first; k < end; k++) {
-        vec4 p = particles[k];
+        vec4 p = lbvh_particle(k);
         rbf_accumulate(acc, x, p, particle_radius(p, k));
     }
 }
@@ -42,7 +44,7 @@ void lbvh_visit_cluster(uint c, vec3 x, inout vec4 acc) {
 // particles, whose own sphere test costs no more than the box test.
 void lbvh_visit_leaf(uint ptr, vec3 x, inout vec4 acc) {
     uint c = ptr & ~LBVH_LEAF;
-    if (CLUSTER_SIZE == 1u || lbvh_contains(lbvh_boxes[2u * c], lbvh_boxes[2u * c + 1u], x)) {
+    if (CLUSTER_SIZE == 1u || lbvh_contains(lbvh_box(2u * c), lbvh_box(2u * c + 1u), x)) {
         lbvh_visit_cluster(c, x, acc);
     }
 }
@@ -55,7 +57,7 @@ void lbvh_visit_leaf(uint ptr, vec3 x, inout vec4 acc) {
 // demo scene, whose samples mostly lie inside the fluid.)
 vec4 lbvh_field(vec3 x) {
     vec4 acc = vec4(0.0);
-    uint ptr = floatBitsToUint(lbvh_nodes[0].w);
+    uint ptr = floatBitsToUint(lbvh_node(0u).w);
     if (ptr == LBVH_NONE) {
         return acc;
     }
@@ -65,8 +67,8 @@ vec4 lbvh_field(vec3 x) {
         if ((ptr & LBVH_LEAF) != 0u) {
             lbvh_visit_leaf(ptr, x, acc);
         } else {
-            vec4 lo = lbvh_nodes[2u * ptr];
-            vec4 hi = lbvh_nodes[2u * ptr + 1u];
+            vec4 lo = lbvh_node(2u * ptr);
+            vec4 hi = lbvh_node(2u * ptr + 1u);
             if (lbvh_contains(lo, hi, x)) {
                 stack[sp] = floatBitsToUint(hi.w);
                 sp++;

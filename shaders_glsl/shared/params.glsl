@@ -20,7 +20,8 @@ struct Frame {
 struct Field {
     vec4 radius;     // x = global radius R, y = the radius map's value if constant,
                      // z = the density map's value if constant, w unused
-    uvec4 counts;    // x = particles, y = clusters, zw unused
+    uvec4 counts;    // x = particles, y = clusters, zw: the wgpu backend's part lengths
+                     // (wgpu/split.glsl; unused by the Vulkan kernels)
 };
 
 // Specialisation constants (wgpu: pipeline overrides; Vulkan: VkSpecializationInfo): one

@@ -12,10 +12,35 @@ layout(local_size_x = 64) in;
 #include "shared/params.glsl"
 
 layout(std140, set = 0, binding = 0) uniform FieldBlock { Field field_params; };
-layout(std430, set = 0, binding = 1) readonly buffer Particles { vec4 particles[]; };
 layout(std430, set = 0, binding = 2) readonly buffer MapTables { float map_tables[]; };
 layout(std430, set = 0, binding = 3) readonly buffer RadiusAttributes { float radius_attributes[]; };
-layout(std430, set = 0, binding = 4) buffer ClusterBoxes { vec4 cluster_boxes[]; };
+// The particles in up to 4 parts (bindings 10..13), and the boxes likewise (18..21, the
+// bindings split_tree.glsl reads them at): see wgpu/split.glsl.
+#include "wgpu/split.glsl"
+layout(std430, set = 0, binding = 18) buffer ClusterBoxes0 { vec4 cluster_boxes0[]; };
+layout(std430, set = 0, binding = 19) buffer ClusterBoxes1 { vec4 cluster_boxes1[]; };
+layout(std430, set = 0, binding = 20) buffer ClusterBoxes2 { vec4 cluster_boxes2[]; };
+layout(std430, set = 0, binding = 21) buffer ClusterBoxes3 { vec4 cluster_boxes3[]; };
+
+// Stores vec4 number v of the boxes in its part (split.glsl's lbvh_box reads it back).
+void store_box(uint v, vec4 value) {
+    uint len = field_params.counts.w;
+    if (SPLIT_ARRAYS == 0u || v < len) {
+        cluster_boxes0[v] = value;
+        return;
+    }
+    v -= len;
+    if (v < len) {
+        cluster_boxes1[v] = value;
+        return;
+    }
+    v -= len;
+    if (v < len) {
+        cluster_boxes2[v] = value;
+        return;
+    }
+    cluster_boxes3[v - len] = value;
+}
 
 #include "shared/maps.glsl"
 
@@ -36,13 +61,13 @@ void main() {
     uint first = c * CLUSTER_SIZE;
     uint end = min(first + CLUSTER_SIZE, field_params.counts.x);
     for (uint k = first; k < end; k++) {
-        vec4 p = particles[k];
+        vec4 p = lbvh_particle(k);
         float r = particle_radius(p, k);
         if (r > 0.0) {
             lo = min(lo, p.xyz - vec3(r));
             hi = max(hi, p.xyz + vec3(r));
         }
     }
-    cluster_boxes[2u * c] = vec4(lo, 0.0);
-    cluster_boxes[2u * c + 1u] = vec4(hi, 0.0);
+    store_box(2u * c, vec4(lo, 0.0));
+    store_box(2u * c + 1u, vec4(hi, 0.0));
 }

@@ -9,13 +9,13 @@ layout(local_size_x = 64) in;
 // x: queries, y: workgroups of 64 queries, z: blocks B, w: workgroups per block S.
 layout(std140, set = 0, binding = 0) uniform QueryBlock { uvec4 query_count; };
 layout(std140, set = 0, binding = 1) uniform FieldBlock { Field field_params; };
-layout(std430, set = 0, binding = 2) readonly buffer Particles { vec4 particles[]; };
 layout(std430, set = 0, binding = 3) readonly buffer MapTables { float map_tables[]; };
 layout(std430, set = 0, binding = 4) readonly buffer RadiusAttributes { float radius_attributes[]; };
-layout(std430, set = 0, binding = 5) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
-layout(std430, set = 0, binding = 6) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
 layout(std430, set = 0, binding = 7) readonly buffer QueryPoints { vec4 query_points[]; };
 layout(std430, set = 0, binding = 8) buffer QueryResults { vec4 query_results[]; };
+// Particles, nodes and boxes, each in up to 4 parts (bindings 10..21).
+#include "wgpu/split.glsl"
+#include "wgpu/split_tree.glsl"
 
 #include "shared/maps.glsl"
 

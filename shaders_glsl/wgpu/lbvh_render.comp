@@ -8,15 +8,45 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 layout(std140, set = 0, binding = 0) uniform FrameBlock { Frame frame; };
 layout(std140, set = 0, binding = 1) uniform FieldBlock { Field field_params; };
-layout(std430, set = 0, binding = 2) readonly buffer Particles { vec4 particles[]; };
 layout(std430, set = 0, binding = 3) readonly buffer MapTables { float map_tables[]; };
 layout(std430, set = 0, binding = 4) readonly buffer RadiusAttributes { float radius_attributes[]; };
-layout(std430, set = 0, binding = 5) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
-layout(std430, set = 0, binding = 6) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
 layout(std430, set = 0, binding = 7) readonly buffer StbnMask { uint stbn_words[]; };
-layout(std430, set = 0, binding = 8) buffer Accumulation { vec4 accumulation[]; };
-// x: 8x8 tiles per row, y: tiles, z: blocks B, w: tiles per block S (see main).
-layout(std140, set = 0, binding = 9) uniform TilingBlock { uvec4 tiling; };
+// tiling: x 8x8 tiles per row, y tiles, z blocks B, w tiles per block S (see main).
+// accumulation_parts: x pixels per part of the accumulation (0xffffffff when one part holds
+// the image; see accumulate), yzw unused.
+layout(std140, set = 0, binding = 9) uniform TilingBlock {
+    uvec4 tiling;
+    uvec4 accumulation_parts;
+};
+// Particles, nodes and boxes, each in up to 4 parts (bindings 10..21).
+#include "wgpu/split.glsl"
+#include "wgpu/split_tree.glsl"
+// The accumulation (16 bytes per pixel: 8M pixels, a 4K image, fill lavapipe's 128 MiB
+// binding) in up to 4 parts, as split.glsl splits the particles.
+layout(std430, set = 0, binding = 22) buffer Accumulation0 { vec4 accumulation0[]; };
+layout(std430, set = 0, binding = 23) buffer Accumulation1 { vec4 accumulation1[]; };
+layout(std430, set = 0, binding = 24) buffer Accumulation2 { vec4 accumulation2[]; };
+layout(std430, set = 0, binding = 25) buffer Accumulation3 { vec4 accumulation3[]; };
+
+// Adds c to pixel i's sums, in its part (the branch is uniform when there is one part).
+void accumulate(uint i, vec4 c) {
+    uint len = accumulation_parts.x;
+    if (SPLIT_ARRAYS == 0u || i < len) {
+        accumulation0[i] += c;
+        return;
+    }
+    i -= len;
+    if (i < len) {
+        accumulation1[i] += c;
+        return;
+    }
+    i -= len;
+    if (i < len) {
+        accumulation2[i] += c;
+        return;
+    }
+    accumulation3[i - len] += c;
+}
 
 const uint STBN_WIDTH = 128u;
 const uint STBN_HEIGHT = 128u;
@@ -53,5 +83,5 @@ void main() {
         return;
     }
     uint i = pixel.y * frame.image.x + pixel.x;
-    accumulation[i] += render_pixel(pixel);
+    accumulate(i, render_pixel(pixel));
 }

@@ -36,6 +36,14 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
         "shared/lbvh.glsl",
         include_str!("../../shaders_glsl/shared/lbvh.glsl"),
     ),
+    (
+        "wgpu/split.glsl",
+        include_str!("../../shaders_glsl/wgpu/split.glsl"),
+    ),
+    (
+        "wgpu/split_tree.glsl",
+        include_str!("../../shaders_glsl/wgpu/split_tree.glsl"),
+    ),
 ];
 
 /// `source` with its `#include "shared/..."` lines replaced by the shared files.
@@ -103,7 +111,8 @@ impl GpuFrame {
 pub struct GpuField {
     /// Global radius R, constant radius-map value, constant density-map value, unused.
     pub radius: [f32; 4],
-    /// Particles, clusters, unused, unused.
+    /// Particles, clusters; the wgpu backend's part lengths (`shaders_glsl/wgpu/split.glsl`;
+    /// it sets them when it writes the uniform, the Vulkan kernels ignore them).
     pub counts: [u32; 4],
 }
 

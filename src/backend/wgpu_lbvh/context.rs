@@ -107,8 +107,9 @@ impl ShaderFile {
     }
 }
 
-/// The specialisation-constant values of a GLSL kernel variant (constant_id order), or none.
-pub type Variant = Option<[u32; 7]>;
+/// The specialisation-constant values of a GLSL kernel variant (constant_id order), or none:
+/// params.glsl's seven, then wgpu/split.glsl's SPLIT_ARRAYS.
+pub type Variant = Option<[u32; 8]>;
 
 /// A wgpu adapter, as `aarbf info --devices` lists it.
 #[derive(Clone, Debug)]
@@ -336,8 +337,8 @@ impl GpuContext {
             return Ok(p.clone());
         }
         let module = self.module(kernel.file())?;
-        // naga names an override by its constant_id when it has one: the keys are "0".."6".
-        let keys = ["0", "1", "2", "3", "4", "5", "6"];
+        // naga names an override by its constant_id when it has one: the keys are "0".."7".
+        let keys = ["0", "1", "2", "3", "4", "5", "6", "7"];
         let constants: Vec<(&str, f64)> = variant
             .map(|v| {
                 keys.iter()

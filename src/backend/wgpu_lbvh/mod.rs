@@ -4,7 +4,11 @@
 //! - **Upload**: a step prepared by [`GpuStepData`] (Hilbert-sorted particles in local
 //!   coordinates, maps baked to tables) goes into buffers kept for the largest step seen (or
 //!   [`Backend::reserve`]d for the series' maximum count); the radius-attribute buffer exists
-//!   only when the scene has one.
+//!   only when the scene has one. The arrays of 16-byte elements that outgrow one storage
+//!   binding first (particles, LBVH nodes, cluster boxes, the accumulation) live in up to
+//!   `util::PARTS` = 4 buffers each (`util::SplitBuffer`, `shaders_glsl/wgpu/split.glsl`);
+//!   a step beyond that, or one whose 4-byte arrays (sort keys, parents, radius attribute)
+//!   outgrow one binding, is refused with an error naming the step, the need and the limit.
 //! - **Build**, every stage a compute pass: cluster boxes (`shaders_glsl/wgpu/lbvh_bounds.comp`),
 //!   Morton keys (`shaders_wgsl/lbvh_keys.wgsl`), a portable LSD radix sort
 //!   (`radix_sort.wgsl`), Karras' hierarchy (`lbvh_hierarchy.wgsl`) and bottom-up bounds
@@ -46,12 +50,18 @@ use crate::scene::{Bounds, Step};
 use crate::shaders::{GpuFrame, SpecConstants, pack_map_tables};
 use context::device_error;
 use tree::{GpuTree, SceneBindings};
-use util::{bind, dispatch, grid, storage, uniform, write};
+use util::{PARTS, SplitBuffer, bind, dispatch, grid, parts_needed, storage, uniform, write};
 
-/// Bytes per particle the buffers bind (vec4 position + attribute).
+/// Bytes per particle the buffers bind (vec4 position + attribute); split over up to
+/// [`PARTS`] bindings.
 const PARTICLE_BYTES: u64 = 16;
-/// Bytes per cluster of the largest per-cluster buffers (nodes, boxes).
+/// Bytes per cluster of the largest per-cluster buffers (nodes, boxes); split over up to
+/// [`PARTS`] bindings.
 const CLUSTER_BYTES: u64 = 32;
+/// Bytes per element of the arrays kept in one binding: per cluster the sort keys and values
+/// (and their scratch), parents and heights; per particle the radius attribute. They reach the
+/// limit only at 4x the count of the split arrays (at K = 1: twice that of the nodes' split).
+const WORD_BYTES: u64 = 4;
 /// Queries per dispatch (the points and results buffers are 16 MiB each).
 const QUERY_CHUNK: usize = 1 << 20;
 
@@ -64,7 +74,7 @@ struct Scene {
     series_range: Option<(f64, f64)>,
     data: GpuStepData,
     grid: KeyGrid,
-    particles: wgpu::Buffer,
+    particles: SplitBuffer,
     particle_capacity: usize,
     radius_attribute: Option<wgpu::Buffer>,
     maps: wgpu::Buffer,
@@ -84,8 +94,18 @@ impl Scene {
         }
     }
 
-    fn variant(&self, integrator: Integrator, colour: ColourMode, noise: NoiseKind) -> [u32; 7] {
-        SpecConstants {
+    /// The GLSL kernels' specialisation constants; `split`: some array the kernel reads is in
+    /// more than one part (SPLIT_ARRAYS of `shaders_glsl/wgpu/split.glsl`: at 0 the accessors'
+    /// part selection compiles away, and the unsplit case runs the code it ran before the
+    /// split existed).
+    fn variant(
+        &self,
+        integrator: Integrator,
+        colour: ColourMode,
+        noise: NoiseKind,
+        split: bool,
+    ) -> [u32; 8] {
+        let v = SpecConstants {
             integrator: SpecConstants::integrator_id(integrator),
             colour_mode: SpecConstants::colour_id(colour),
             noise_kind: SpecConstants::noise_id(noise),
@@ -94,7 +114,8 @@ impl Scene {
             density_map_varies: u32::from(self.data.density_map_varies),
             has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
         }
-        .values()
+        .values();
+        [v[0], v[1], v[2], v[3], v[4], v[5], v[6], u32::from(split)]
     }
 }
 
@@ -102,7 +123,8 @@ struct Accumulation {
     width: u32,
     height: u32,
     frames: u32,
-    sums: wgpu::Buffer,
+    /// f32 RGBA sums per pixel, split like the particles (16 bytes per pixel).
+    sums: SplitBuffer,
     clear: bool,
 }
 
@@ -121,6 +143,8 @@ pub struct WgpuBackend {
     optical: Vec<f32>,
     frame_uniform: wgpu::Buffer,
     tiling_uniform: wgpu::Buffer,
+    /// The largest storage binding this backend uses: the device's, or lower (tests).
+    max_binding: u64,
     timings: Timings,
 }
 
@@ -132,14 +156,25 @@ impl WgpuBackend {
 
     pub fn with_context(ctx: Arc<GpuContext>) -> WgpuBackend {
         let max_binding = ctx.max_binding();
+        WgpuBackend::with_max_binding(ctx, max_binding)
+    }
+
+    /// A backend that binds at most `max_binding` bytes per storage buffer (at most the
+    /// device's limit; at least 32): with a low limit, small steps exercise the split of
+    /// particles, nodes and boxes over several bindings (tests).
+    pub fn with_max_binding(ctx: Arc<GpuContext>, max_binding: u64) -> WgpuBackend {
+        let max_binding = max_binding.min(ctx.max_binding()).max(CLUSTER_BYTES);
         WgpuBackend {
             capabilities: Capabilities {
                 name: "wgpu",
                 device: ctx.describe(),
                 hardware_rt: false,
                 software: ctx.info.device_type == wgpu::DeviceType::Cpu,
-                // At K = 1 the nodes and boxes (32 B per cluster) bind the fewest particles.
-                max_particles: Some((max_binding / CLUSTER_BYTES) as usize),
+                // At K = 1 the nodes and boxes (32 B per cluster, split over PARTS bindings)
+                // hold the fewest particles; a larger K holds more (see `check_fits`).
+                max_particles: Some(
+                    (util::part_limit(max_binding) / CLUSTER_BYTES * PARTS) as usize,
+                ),
             },
             reserved: 0,
             scene: None,
@@ -151,7 +186,8 @@ impl WgpuBackend {
             dummy: storage(&ctx, "unused radius attribute", 16),
             optical: vec![0.0; TABLE_SIZE],
             frame_uniform: uniform(&ctx, "frame", std::mem::size_of::<GpuFrame>() as u64),
-            tiling_uniform: uniform(&ctx, "tiling", 16),
+            tiling_uniform: uniform(&ctx, "tiling", 32),
+            max_binding,
             ctx,
             timings: Timings::default(),
         }
@@ -174,6 +210,13 @@ impl WgpuBackend {
     /// What the last build or refit reported (None before a build).
     pub fn tree_report(&self) -> Option<TreeReport> {
         self.built
+    }
+
+    /// Parts the uploaded step's particles and its nodes (and boxes) are split over (tests).
+    pub fn split_parts(&self) -> Option<(usize, usize)> {
+        let scene = self.scene.as_ref()?;
+        let tree = self.tree.as_ref()?;
+        Some((scene.particles.parts_used(), tree.nodes.parts_used()))
     }
 
     /// Frames accumulated since the last reset.
@@ -204,8 +247,13 @@ impl WgpuBackend {
         tree.snapshot(&self.ctx, scene.clusters() as usize)
     }
 
-    fn bindings<'a>(scene: &'a Scene, dummy: &'a wgpu::Buffer) -> SceneBindings<'a> {
-        let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn);
+    fn bindings<'a>(
+        scene: &'a Scene,
+        tree: &GpuTree,
+        dummy: &'a wgpu::Buffer,
+    ) -> SceneBindings<'a> {
+        let split = scene.particles.parts_used() > 1 || tree.boxes.parts_used() > 1;
+        let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn, split);
         // Only what the bounds kernel reads varies its pipeline.
         let mut v = variant;
         v[0] = 0;
@@ -229,7 +277,7 @@ impl WgpuBackend {
         let started = Instant::now();
         let report = tree.build(
             &self.ctx,
-            &Self::bindings(scene, &self.dummy),
+            &Self::bindings(scene, tree, &self.dummy),
             &scene.grid,
             scene.clusters(),
             until,
@@ -262,8 +310,15 @@ impl WgpuBackend {
         Ok(report)
     }
 
-    /// Writes the map tables (with the last frame's optical-density table) and field constants.
-    fn write_maps(ctx: &GpuContext, scene: &Scene, optical: &[f32], colour: &[[f32; 3]]) {
+    /// Writes the map tables (with the last frame's optical-density table) and field constants
+    /// (with the part lengths of the split arrays, `shaders_glsl/wgpu/split.glsl`).
+    fn write_maps(
+        ctx: &GpuContext,
+        scene: &Scene,
+        tree: Option<&GpuTree>,
+        optical: &[f32],
+        colour: &[[f32; 3]],
+    ) {
         let tables = pack_map_tables(
             &scene.data.density_table,
             &scene.data.radius_table,
@@ -271,11 +326,10 @@ impl WgpuBackend {
             colour,
         );
         write(ctx, &scene.maps, bytemuck::cast_slice(&tables));
-        write(
-            ctx,
-            &scene.field_uniform,
-            bytemuck::bytes_of(&scene.data.field),
-        );
+        let mut field = scene.data.field;
+        field.counts[2] = scene.particles.part_len(PARTICLE_BYTES);
+        field.counts[3] = tree.map_or(u32::MAX, |t| t.boxes.part_len(16));
+        write(ctx, &scene.field_uniform, bytemuck::bytes_of(&field));
     }
 
     fn write_radius_attribute(ctx: &GpuContext, scene: &mut Scene) -> Result<(), BackendError> {
@@ -308,6 +362,44 @@ impl WgpuBackend {
     }
 }
 
+/// Whether a step of `n` particles in `clusters` clusters fits bindings of `max_binding`
+/// bytes: the particles, nodes and boxes in at most [`PARTS`] parts each, the 4-byte arrays in
+/// one. Err names what does not fit and what it needs.
+fn check_fits(
+    n: usize,
+    clusters: usize,
+    has_radius_attribute: bool,
+    max_binding: u64,
+) -> Result<(), String> {
+    let (n, c) = (n as u64, clusters as u64);
+    let split = [
+        ("the particles", n, PARTICLE_BYTES),
+        ("the LBVH nodes", c, CLUSTER_BYTES),
+        ("the cluster boxes", c, CLUSTER_BYTES),
+    ];
+    for (what, count, bytes) in split {
+        if parts_needed(count, bytes, max_binding) > PARTS {
+            return Err(format!(
+                "{what} need {} bytes, more than {PARTS} x {max_binding}",
+                count * bytes
+            ));
+        }
+    }
+    let mut single = vec![("the per-cluster sort keys", c)];
+    if has_radius_attribute {
+        single.push(("the radius attribute", n));
+    }
+    for (what, count) in single {
+        if count * WORD_BYTES > max_binding {
+            return Err(format!(
+                "{what} need {} bytes in one binding, more than {max_binding}",
+                count * WORD_BYTES
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl Backend for WgpuBackend {
     fn capabilities(&self) -> &Capabilities {
         &self.capabilities
@@ -322,22 +414,33 @@ impl Backend for WgpuBackend {
         let data = GpuStepData::prepare(input)?;
         let n = data.points.len();
         let clusters = data.field.counts[1] as usize;
-        let max_binding = self.ctx.max_binding();
-        if n as u64 * PARTICLE_BYTES > max_binding || clusters as u64 * CLUSTER_BYTES > max_binding
-        {
+        let has_radius = data.radius_attribute.is_some();
+        let max_binding = self.max_binding;
+        if let Err(what) = check_fits(n, clusters, has_radius, max_binding) {
             return Err(device_error(format!(
-                "step '{}' holds {n} particles in {clusters} clusters of {}; {} binds at most \
-                 {} particles and {} clusters (a larger cluster size fits more)",
-                input.step.name,
-                input.cluster,
-                self.ctx.info.name,
-                max_binding / PARTICLE_BYTES,
-                max_binding / CLUSTER_BYTES
+                "step '{}' ({n} particles in {clusters} clusters of {}): {what}; {} binds at \
+                 most {max_binding} bytes per storage buffer, and this backend splits the \
+                 particles, nodes and boxes over at most {PARTS} (a larger cluster size needs \
+                 fewer clusters)",
+                input.step.name, input.cluster, self.ctx.info.name,
             )));
         }
         let ctx = self.ctx.clone();
-        // Keep buffers for the largest step seen (or reserved): a series allocates once.
-        let capacity = n.max(self.reserved.min((max_binding / PARTICLE_BYTES) as usize));
+        // Keep buffers for the largest step seen (or reserved, when that fits): a series
+        // allocates once.
+        let reserved = self.reserved.max(n);
+        let capacity = if check_fits(
+            reserved,
+            input.cluster.clusters_for(reserved),
+            has_radius,
+            max_binding,
+        )
+        .is_ok()
+        {
+            reserved
+        } else {
+            n
+        };
         let old = self.scene.take();
         let (particles, particle_capacity, maps, field_uniform, radius_attribute) = match old {
             Some(s) if s.particle_capacity >= n => (
@@ -347,15 +450,36 @@ impl Backend for WgpuBackend {
                 s.field_uniform,
                 s.radius_attribute,
             ),
-            _ => ctx.scoped("particle buffers", || {
-                (
-                    storage(&ctx, "particles", capacity as u64 * PARTICLE_BYTES),
-                    capacity,
-                    storage(&ctx, "map tables", 6 * TABLE_SIZE as u64 * 4),
-                    uniform(&ctx, "field", 32),
-                    None,
+            _ => {
+                let need = capacity as u64 * PARTICLE_BYTES;
+                ctx.scoped(
+                    &format!(
+                        "step '{}': particle buffers ({need} bytes for {capacity} particles)",
+                        input.step.name
+                    ),
+                    || {
+                        (
+                            SplitBuffer::new(
+                                &ctx,
+                                "particles",
+                                capacity as u64,
+                                PARTICLE_BYTES,
+                                max_binding,
+                            ),
+                            capacity,
+                            storage(&ctx, "map tables", 6 * TABLE_SIZE as u64 * 4),
+                            uniform(&ctx, "field", 32),
+                            None,
+                        )
+                    },
                 )
-            })?,
+                .and_then(|(p, c, m, f, r)| {
+                    let p = p.ok_or_else(|| {
+                        device_error(format!("{capacity} particles do not fit {PARTS} parts"))
+                    })?;
+                    Ok((p, c, m, f, r))
+                })?
+            }
         };
         let mut scene = Scene {
             step: input.step.clone(),
@@ -371,18 +495,25 @@ impl Backend for WgpuBackend {
             maps,
             field_uniform,
         };
-        write(
-            &ctx,
-            &scene.particles,
-            bytemuck::cast_slice(&scene.data.points),
-        );
+        scene
+            .particles
+            .write(&ctx, bytemuck::cast_slice(&scene.data.points));
         Self::write_radius_attribute(&ctx, &mut scene)?;
-        Self::write_maps(&ctx, &scene, &self.optical, &scene.data.colour_table);
         let cluster_capacity = input.cluster.clusters_for(scene.particle_capacity);
         if self.tree.as_ref().is_none_or(|t| t.capacity < clusters) {
             self.tree = None;
-            self.tree = Some(GpuTree::new(&ctx, cluster_capacity)?);
+            self.tree = Some(
+                GpuTree::new(&ctx, cluster_capacity.max(clusters), max_binding)
+                    .map_err(|e| device_error(format!("step '{}': {e}", input.step.name)))?,
+            );
         }
+        Self::write_maps(
+            &ctx,
+            &scene,
+            self.tree.as_ref(),
+            &self.optical,
+            &scene.data.colour_table,
+        );
         self.scene = Some(scene);
         self.built = None;
         self.timings.upload = started.elapsed();
@@ -421,13 +552,13 @@ impl Backend for WgpuBackend {
         }
         scene.field = field.clone();
         let colour = scene.data.colour_table.clone();
-        Self::write_maps(&ctx, scene, &self.optical, &colour);
+        Self::write_maps(&ctx, scene, self.tree.as_ref(), &self.optical, &colour);
         let (Some(scene), Some(tree)) = (&self.scene, &self.tree) else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
         let report = tree.refit(
             &ctx,
-            &Self::bindings(scene, &self.dummy),
+            &Self::bindings(scene, tree, &self.dummy),
             &scene.grid,
             scene.clusters(),
         )?;
@@ -448,7 +579,7 @@ impl Backend for WgpuBackend {
         scene.data.set_maps(field);
         scene.field = field.clone();
         let colour = scene.data.colour_table.clone();
-        Self::write_maps(&self.ctx, scene, &self.optical, &colour);
+        Self::write_maps(&self.ctx, scene, self.tree.as_ref(), &self.optical, &colour);
         Ok(())
     }
 
@@ -460,7 +591,7 @@ impl Backend for WgpuBackend {
             return Ok(Vec::new());
         }
         let chunk = QUERY_CHUNK
-            .min((ctx.max_binding() / 16) as usize)
+            .min((self.max_binding / 16) as usize)
             .min(points.len());
         if self.query_buffers.as_ref().is_none_or(|q| q.0 < chunk) {
             self.query_buffers = Some(ctx.scoped("query buffers", || {
@@ -481,31 +612,33 @@ impl Backend for WgpuBackend {
             self.query_buffers.as_ref().expect("made above");
         let pipeline = ctx.pipeline(
             Kernel::Query,
-            Some(scene.variant(Integrator::Ea, scene.colour_mode(), NoiseKind::Stbn)),
+            Some(scene.variant(
+                Integrator::Ea,
+                scene.colour_mode(),
+                NoiseKind::Stbn,
+                scene.particles.parts_used() > 1 || tree.nodes.parts_used() > 1,
+            )),
         )?;
         let bg = ctx.scoped("query bind group", || {
-            bind(
-                &ctx,
-                &pipeline,
-                &[
-                    (0, count_buffer.as_entire_binding()),
-                    (1, scene.field_uniform.as_entire_binding()),
-                    (2, scene.particles.as_entire_binding()),
-                    (3, scene.maps.as_entire_binding()),
-                    (
-                        4,
-                        scene
-                            .radius_attribute
-                            .as_ref()
-                            .unwrap_or(&self.dummy)
-                            .as_entire_binding(),
-                    ),
-                    (5, tree.nodes.as_entire_binding()),
-                    (6, tree.boxes.as_entire_binding()),
-                    (7, points_buffer.as_entire_binding()),
-                    (8, results_buffer.as_entire_binding()),
-                ],
-            )
+            let mut entries = vec![
+                (0, count_buffer.as_entire_binding()),
+                (1, scene.field_uniform.as_entire_binding()),
+                (3, scene.maps.as_entire_binding()),
+                (
+                    4,
+                    scene
+                        .radius_attribute
+                        .as_ref()
+                        .unwrap_or(&self.dummy)
+                        .as_entire_binding(),
+                ),
+                (7, points_buffer.as_entire_binding()),
+                (8, results_buffer.as_entire_binding()),
+            ];
+            entries.extend(scene.particles.entries(10));
+            entries.extend(tree.nodes.entries(14));
+            entries.extend(tree.boxes.entries(18));
+            bind(&ctx, &pipeline, &entries)
         })?;
         let mut out = Vec::with_capacity(points.len());
         let mut bytes = Vec::new();
@@ -562,11 +695,12 @@ impl Backend for WgpuBackend {
         self.built_scene()?;
         let (w, h) = (frame.width, frame.height);
         let bytes = u64::from(w) * u64::from(h) * 16;
-        if bytes > ctx.max_binding() {
+        let pixels = u64::from(w) * u64::from(h);
+        if parts_needed(pixels, 16, self.max_binding) > PARTS {
             return Err(device_error(format!(
-                "a {w}x{h} image needs {bytes} bytes of accumulation; {} binds at most {}",
-                ctx.info.name,
-                ctx.max_binding()
+                "a {w}x{h} image needs {bytes} bytes of accumulation, more than {PARTS} x {}; \
+                 {} binds at most {} bytes per storage buffer",
+                self.max_binding, ctx.info.name, self.max_binding
             )));
         }
         if self
@@ -575,9 +709,12 @@ impl Backend for WgpuBackend {
             .is_none_or(|a| a.width != w || a.height != h)
         {
             self.accumulation = None;
-            let sums = ctx.scoped("accumulation buffer", || {
-                storage(&ctx, "accumulation", bytes)
-            })?;
+            let max_binding = self.max_binding;
+            let sums = ctx
+                .scoped(&format!("accumulation buffer ({bytes} bytes)"), || {
+                    SplitBuffer::new(&ctx, "accumulation", pixels, 16, max_binding)
+                })?
+                .ok_or_else(|| device_error("the accumulation does not fit its parts"))?;
             self.accumulation = Some(Accumulation {
                 width: w,
                 height: h,
@@ -604,7 +741,7 @@ impl Backend for WgpuBackend {
         let scene = self.scene.as_ref().expect("checked above");
         let tree = self.tree.as_ref().expect("built");
         self.optical = frame.optical_table.to_vec();
-        Self::write_maps(&ctx, scene, &self.optical, &frame.colour_table);
+        Self::write_maps(&ctx, scene, Some(tree), &self.optical, &frame.colour_table);
         write(
             &ctx,
             &self.frame_uniform,
@@ -612,45 +749,58 @@ impl Backend for WgpuBackend {
         );
         let pipeline = ctx.pipeline(
             Kernel::Render,
-            Some(scene.variant(frame.integrator, frame.colour, frame.noise)),
+            Some(
+                scene.variant(
+                    frame.integrator,
+                    frame.colour,
+                    frame.noise,
+                    scene.particles.parts_used() > 1
+                        || tree.nodes.parts_used() > 1
+                        || self
+                            .accumulation
+                            .as_ref()
+                            .is_some_and(|a| a.sums.parts_used() > 1),
+                ),
+            ),
         )?;
         let tiles_x = w.div_ceil(8);
         let tiles = tiles_x * h.div_ceil(8);
         let (blocks, per_block, dispatched) = util::interleave(tiles);
+        let acc_part = self
+            .accumulation
+            .as_ref()
+            .map_or(u32::MAX, |a| a.sums.part_len(16));
         write(
             &ctx,
             &self.tiling_uniform,
-            bytemuck::cast_slice(&[tiles_x, tiles, blocks, per_block]),
+            bytemuck::cast_slice(&[tiles_x, tiles, blocks, per_block, acc_part, 0, 0, 0]),
         );
         let acc = self.accumulation.as_mut().expect("made above");
         let stbn = self.stbn.as_ref().expect("made above");
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         ctx.scoped("render", || {
-            let bg = bind(
-                &ctx,
-                &pipeline,
-                &[
-                    (0, self.frame_uniform.as_entire_binding()),
-                    (1, scene.field_uniform.as_entire_binding()),
-                    (2, scene.particles.as_entire_binding()),
-                    (3, scene.maps.as_entire_binding()),
-                    (
-                        4,
-                        scene
-                            .radius_attribute
-                            .as_ref()
-                            .unwrap_or(&self.dummy)
-                            .as_entire_binding(),
-                    ),
-                    (5, tree.nodes.as_entire_binding()),
-                    (6, tree.boxes.as_entire_binding()),
-                    (7, stbn.as_entire_binding()),
-                    (8, acc.sums.as_entire_binding()),
-                    (9, self.tiling_uniform.as_entire_binding()),
-                ],
-            );
+            let mut entries = vec![
+                (0, self.frame_uniform.as_entire_binding()),
+                (1, scene.field_uniform.as_entire_binding()),
+                (3, scene.maps.as_entire_binding()),
+                (
+                    4,
+                    scene
+                        .radius_attribute
+                        .as_ref()
+                        .unwrap_or(&self.dummy)
+                        .as_entire_binding(),
+                ),
+                (7, stbn.as_entire_binding()),
+                (9, self.tiling_uniform.as_entire_binding()),
+            ];
+            entries.extend(scene.particles.entries(10));
+            entries.extend(tree.nodes.entries(14));
+            entries.extend(tree.boxes.entries(18));
+            entries.extend(acc.sums.entries(22));
+            let bg = bind(&ctx, &pipeline, &entries);
             if acc.clear {
-                encoder.clear_buffer(&acc.sums, 0, None);
+                acc.sums.clear(&mut encoder);
                 acc.frames = 0;
                 acc.clear = false;
             }
@@ -684,7 +834,7 @@ impl Backend for WgpuBackend {
         let bytes = if acc.clear || acc.frames == 0 {
             vec![0u8; pixels * 16]
         } else {
-            util::read(&self.ctx, &acc.sums, 0, pixels as u64 * 16)?
+            acc.sums.read(&self.ctx, pixels as u64 * 16)?
         };
         let sums: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
         let n = acc.frames.max(1) as f32;

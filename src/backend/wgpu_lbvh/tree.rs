@@ -3,9 +3,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::context::{GpuContext, Kernel, Variant};
+use super::context::{GpuContext, Kernel, Variant, device_error};
 use super::sort::RadixSort;
-use super::util::{bind, dispatch, grid, poison, read, read_u32, storage, write};
+use super::util::PARTS;
+use super::util::{SplitBuffer, bind, dispatch, grid, poison, read_u32, storage, write};
 use crate::accel::lbvh::{GpuBox, KeyGrid, Lbvh, NODE_WORDS};
 use crate::backend::BackendError;
 
@@ -27,7 +28,9 @@ pub struct TreeParams {
     pub key_scale: [f32; 4],
     pub clusters: u32,
     pub components: u32,
-    pub pad: [u32; 2],
+    /// Per part of the split boxes and nodes: vec4s and words (u32::MAX unsplit).
+    pub part_vec4s: u32,
+    pub part_words: u32,
 }
 
 /// What a build or refit reports back (the counters buffer).
@@ -44,7 +47,7 @@ pub struct TreeReport {
 /// The scene's buffers a tree pass reads.
 pub struct SceneBindings<'a> {
     pub field: &'a wgpu::Buffer,
-    pub particles: &'a wgpu::Buffer,
+    pub particles: &'a SplitBuffer,
     pub maps: &'a wgpu::Buffer,
     pub radius_attribute: &'a wgpu::Buffer,
     /// The bounds kernel's specialisation constants.
@@ -55,13 +58,15 @@ pub struct SceneBindings<'a> {
 pub struct GpuTree {
     pub capacity: usize,
     params: wgpu::Buffer,
-    pub boxes: wgpu::Buffer,
+    /// Cluster boxes and nodes (32 bytes per cluster each): the largest per-cluster arrays,
+    /// split over up to `PARTS` buffers; their parts have equal lengths.
+    pub boxes: SplitBuffer,
     pub keys: wgpu::Buffer,
     pub values: wgpu::Buffer,
     /// Sort scratch; after the sort, the bottom-up pass's height words.
     pub keys_tmp: wgpu::Buffer,
     pub values_tmp: wgpu::Buffer,
-    pub nodes: wgpu::Buffer,
+    pub nodes: SplitBuffer,
     pub node_parents: wgpu::Buffer,
     pub leaf_parents: wgpu::Buffer,
     pub counters: wgpu::Buffer,
@@ -69,22 +74,42 @@ pub struct GpuTree {
 }
 
 impl GpuTree {
-    pub fn new(ctx: &GpuContext, capacity: usize) -> Result<GpuTree, BackendError> {
+    /// Buffers for `capacity` clusters with no binding larger than `max_binding` bytes. The
+    /// caller has checked that the boxes and nodes fit in `PARTS` parts and the 4-byte arrays
+    /// in one binding.
+    pub fn new(
+        ctx: &GpuContext,
+        capacity: usize,
+        max_binding: u64,
+    ) -> Result<GpuTree, BackendError> {
         let c = capacity.max(1) as u64;
-        ctx.scoped("tree buffers", || GpuTree {
-            capacity,
-            params: super::util::uniform(ctx, "tree params", 48),
-            boxes: storage(ctx, "cluster boxes", c * 32),
-            keys: storage(ctx, "keys", c * 4),
-            values: storage(ctx, "values", c * 4),
-            keys_tmp: storage(ctx, "keys scratch / heights", c * 4),
-            values_tmp: storage(ctx, "values scratch", c * 4),
-            nodes: storage(ctx, "nodes", c * 32),
-            node_parents: storage(ctx, "node parents", c * 4),
-            leaf_parents: storage(ctx, "leaf parents", c * 4),
-            counters: storage(ctx, "counters", 16),
-            sort: RadixSort::new(ctx, capacity),
-        })
+        let split = |label: &str| {
+            SplitBuffer::new(ctx, label, c, 32, max_binding).ok_or_else(|| {
+                device_error(format!(
+                    "{c} clusters need {} bytes of {label}, more than {PARTS} storage bindings \
+                     of {max_binding} bytes",
+                    c * 32
+                ))
+            })
+        };
+        let need = c * (32 * 2 + 4 * 6);
+        let tree = ctx.scoped(&format!("tree buffers ({need} bytes)"), || {
+            Ok::<_, BackendError>(GpuTree {
+                capacity,
+                params: super::util::uniform(ctx, "tree params", 48),
+                boxes: split("cluster boxes")?,
+                keys: storage(ctx, "keys", c * 4),
+                values: storage(ctx, "values", c * 4),
+                keys_tmp: storage(ctx, "keys scratch / heights", c * 4),
+                values_tmp: storage(ctx, "values scratch", c * 4),
+                nodes: split("nodes")?,
+                node_parents: storage(ctx, "node parents", c * 4),
+                leaf_parents: storage(ctx, "leaf parents", c * 4),
+                counters: storage(ctx, "counters", 16),
+                sort: RadixSort::new(ctx, capacity),
+            })
+        })??;
+        Ok(tree)
     }
 
     /// Bytes of scratch (sort buffers), beside the structure proper.
@@ -96,13 +121,13 @@ impl GpuTree {
 
     /// Fills every tree buffer with 0xFF (tests: unwritten elements show).
     pub fn poison(&self, ctx: &GpuContext) {
+        self.boxes.poison(ctx);
+        self.nodes.poison(ctx);
         for b in [
-            &self.boxes,
             &self.keys,
             &self.values,
             &self.keys_tmp,
             &self.values_tmp,
-            &self.nodes,
             &self.node_parents,
             &self.leaf_parents,
             &self.counters,
@@ -117,7 +142,8 @@ impl GpuTree {
             key_scale: [grid_.scale[0], grid_.scale[1], grid_.scale[2], 0.0],
             clusters,
             components,
-            pad: [0; 2],
+            part_vec4s: self.boxes.part_len(16),
+            part_words: self.boxes.part_len(4),
         };
         write(ctx, &self.params, bytemuck::bytes_of(&p));
     }
@@ -130,17 +156,14 @@ impl GpuTree {
         clusters: u32,
     ) -> Result<(), BackendError> {
         let pipeline = ctx.pipeline(Kernel::Bounds, scene.variant)?;
-        let bg = bind(
-            ctx,
-            &pipeline,
-            &[
-                (0, scene.field.as_entire_binding()),
-                (1, scene.particles.as_entire_binding()),
-                (2, scene.maps.as_entire_binding()),
-                (3, scene.radius_attribute.as_entire_binding()),
-                (4, self.boxes.as_entire_binding()),
-            ],
-        );
+        let mut entries = vec![
+            (0, scene.field.as_entire_binding()),
+            (2, scene.maps.as_entire_binding()),
+            (3, scene.radius_attribute.as_entire_binding()),
+        ];
+        entries.extend(scene.particles.entries(10));
+        entries.extend(self.boxes.entries(18));
+        let bg = bind(ctx, &pipeline, &entries);
         dispatch(
             encoder,
             "lbvh bounds",
@@ -158,19 +181,16 @@ impl GpuTree {
         clusters: u32,
     ) -> Result<(), BackendError> {
         let pipeline = ctx.pipeline(Kernel::FitClimb, None)?;
-        let bg = bind(
-            ctx,
-            &pipeline,
-            &[
-                (0, self.params.as_entire_binding()),
-                (1, self.boxes.as_entire_binding()),
-                (2, self.nodes.as_entire_binding()),
-                (3, self.node_parents.as_entire_binding()),
-                (4, self.leaf_parents.as_entire_binding()),
-                (5, self.keys_tmp.as_entire_binding()),
-                (6, self.counters.as_entire_binding()),
-            ],
-        );
+        let mut entries = vec![
+            (0, self.params.as_entire_binding()),
+            (3, self.node_parents.as_entire_binding()),
+            (4, self.leaf_parents.as_entire_binding()),
+            (5, self.keys_tmp.as_entire_binding()),
+            (6, self.counters.as_entire_binding()),
+        ];
+        entries.extend(self.boxes.entries(18));
+        entries.extend(self.nodes.entries(14));
+        let bg = bind(ctx, &pipeline, &entries);
         dispatch(
             encoder,
             "lbvh climb",
@@ -199,18 +219,15 @@ impl GpuTree {
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             if until >= BuildStage::Keys {
                 let pipeline = ctx.pipeline(Kernel::Keys, None)?;
-                let bg = bind(
-                    ctx,
-                    &pipeline,
-                    &[
-                        (0, self.params.as_entire_binding()),
-                        (1, self.boxes.as_entire_binding()),
-                        (2, self.keys.as_entire_binding()),
-                        (3, self.values.as_entire_binding()),
-                        (4, self.leaf_parents.as_entire_binding()),
-                        (5, self.counters.as_entire_binding()),
-                    ],
-                );
+                let mut entries = vec![
+                    (0, self.params.as_entire_binding()),
+                    (2, self.keys.as_entire_binding()),
+                    (3, self.values.as_entire_binding()),
+                    (4, self.leaf_parents.as_entire_binding()),
+                    (5, self.counters.as_entire_binding()),
+                ];
+                entries.extend(self.boxes.entries(18));
+                let bg = bind(ctx, &pipeline, &entries);
                 dispatch(
                     &mut encoder,
                     "lbvh keys",
@@ -232,19 +249,17 @@ impl GpuTree {
             }
             if until >= BuildStage::Hierarchy {
                 let pipeline = ctx.pipeline(Kernel::Hierarchy, None)?;
-                let bg = bind(
-                    ctx,
-                    &pipeline,
-                    &[
-                        (1, self.keys.as_entire_binding()),
-                        (2, self.values.as_entire_binding()),
-                        (3, self.nodes.as_entire_binding()),
-                        (4, self.node_parents.as_entire_binding()),
-                        (5, self.leaf_parents.as_entire_binding()),
-                        (6, self.keys_tmp.as_entire_binding()),
-                        (7, self.counters.as_entire_binding()),
-                    ],
-                );
+                let mut entries = vec![
+                    (0, self.params.as_entire_binding()),
+                    (1, self.keys.as_entire_binding()),
+                    (2, self.values.as_entire_binding()),
+                    (4, self.node_parents.as_entire_binding()),
+                    (5, self.leaf_parents.as_entire_binding()),
+                    (6, self.keys_tmp.as_entire_binding()),
+                    (7, self.counters.as_entire_binding()),
+                ];
+                entries.extend(self.nodes.entries(14));
+                let bg = bind(ctx, &pipeline, &entries);
                 // Thread 0 writes the header even for zero or one leaf.
                 dispatch(
                     &mut encoder,
@@ -276,14 +291,12 @@ impl GpuTree {
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             encoder.clear_buffer(&self.counters, 8, Some(4));
             let pipeline = ctx.pipeline(Kernel::FitReset, None)?;
-            let bg = bind(
-                ctx,
-                &pipeline,
-                &[
-                    (2, self.nodes.as_entire_binding()),
-                    (6, self.counters.as_entire_binding()),
-                ],
-            );
+            let mut entries = vec![
+                (0, self.params.as_entire_binding()),
+                (6, self.counters.as_entire_binding()),
+            ];
+            entries.extend(self.nodes.entries(14));
+            let bg = bind(ctx, &pipeline, &entries);
             dispatch(
                 &mut encoder,
                 "lbvh reset",
@@ -321,9 +334,9 @@ impl GpuTree {
         let counters = read_u32(ctx, &self.counters, 4)?;
         let leaves = counters[0] as usize;
         let node_count = if leaves <= clusters { leaves.max(1) } else { 1 };
-        let boxes_raw = read(ctx, &self.boxes, 0, clusters as u64 * 32)?;
+        let boxes_raw = self.boxes.read(ctx, clusters as u64 * 32)?;
         let boxes: Vec<GpuBox> = bytemuck::pod_collect_to_vec(&boxes_raw);
-        let nodes_raw = read(ctx, &self.nodes, 0, (node_count * NODE_WORDS * 4) as u64)?;
+        let nodes_raw = self.nodes.read(ctx, (node_count * NODE_WORDS * 4) as u64)?;
         let nodes: Vec<[u32; NODE_WORDS]> = bytemuck::pod_collect_to_vec(&nodes_raw);
         Ok(TreeSnapshot {
             boxes,

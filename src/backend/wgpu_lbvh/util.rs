@@ -180,3 +180,150 @@ pub fn submit_and_wait(
     })?;
     ctx.wait()
 }
+
+/// Parts an array may be split into ([`SplitBuffer`]); the shaders bind this many buffers per
+/// split array (`shaders_glsl/wgpu/split.glsl`, `shaders_wgsl/lbvh_{keys,hierarchy,fit}.wgsl`).
+pub const PARTS: u64 = 4;
+
+/// The largest part a split array uses: the binding limit, capped at 2 GiB so that every word
+/// index of a 4-part array fits a u32 in the shaders.
+pub fn part_limit(max_binding: u64) -> u64 {
+    max_binding.min(1 << 31)
+}
+
+/// The parts an array of `elems` elements of `elem_bytes` bytes needs under a binding limit of
+/// `max_binding` bytes (at least 1; may exceed [`PARTS`], which the caller refuses).
+pub fn parts_needed(elems: u64, elem_bytes: u64, max_binding: u64) -> u64 {
+    let per_part = part_limit(max_binding) / elem_bytes;
+    if per_part == 0 {
+        return u64::MAX;
+    }
+    elems.div_ceil(per_part).max(1)
+}
+
+/// An array that may be larger than one storage-buffer binding: up to [`PARTS`] buffers of
+/// whole elements, each at most the binding limit, bound at consecutive bindings; the shaders
+/// pick the part with a compare against the part length (`part_len`). Every part is its own
+/// buffer even when unused (16 bytes then): a placeholder shared between arrays would be bound
+/// read-only and read-write in one dispatch, which wgpu refuses.
+pub struct SplitBuffer {
+    parts: Vec<wgpu::Buffer>,
+    /// Bytes per part (all but the last used part are full).
+    part_bytes: u64,
+    /// Parts holding data (the rest are placeholders).
+    used: usize,
+    /// Bytes of data the parts hold.
+    bytes: u64,
+}
+
+impl SplitBuffer {
+    /// Room for `elems` elements of `elem_bytes` bytes in parts of at most `max_binding` bytes;
+    /// None when that takes more than [`PARTS`] parts. Call inside [`GpuContext::scoped`].
+    pub fn new(
+        ctx: &GpuContext,
+        label: &str,
+        elems: u64,
+        elem_bytes: u64,
+        max_binding: u64,
+    ) -> Option<SplitBuffer> {
+        let needed = parts_needed(elems, elem_bytes, max_binding);
+        if needed > PARTS {
+            return None;
+        }
+        let part_bytes = part_limit(max_binding) / elem_bytes * elem_bytes;
+        let bytes = elems * elem_bytes;
+        let parts = (0..PARTS)
+            .map(|i| {
+                let size = if i < needed {
+                    bytes.saturating_sub(i * part_bytes).min(part_bytes)
+                } else {
+                    16
+                };
+                storage(ctx, &format!("{label} (part {i})"), size)
+            })
+            .collect();
+        Some(SplitBuffer {
+            parts,
+            part_bytes,
+            used: needed as usize,
+            bytes,
+        })
+    }
+
+    /// Elements of `unit_bytes` bytes (16: vec4, 4: u32) per part, for the shaders;
+    /// 0xFFFFFFFF when one part holds everything (their first branch is then always taken).
+    pub fn part_len(&self, unit_bytes: u64) -> u32 {
+        if self.used <= 1 {
+            u32::MAX
+        } else {
+            u32::try_from(self.part_bytes / unit_bytes).unwrap_or(u32::MAX)
+        }
+    }
+
+    /// Parts holding data.
+    pub fn parts_used(&self) -> usize {
+        self.used
+    }
+
+    /// Bytes of data the buffer has room for.
+    pub fn size(&self) -> u64 {
+        self.bytes
+    }
+
+    /// The [`PARTS`] bind-group entries from binding `first` on.
+    pub fn entries(&self, first: u32) -> Vec<(u32, wgpu::BindingResource<'_>)> {
+        self.parts
+            .iter()
+            .zip(first..)
+            .map(|(b, i)| (i, b.as_entire_binding()))
+            .collect()
+    }
+
+    /// The (part, offset in it, length) pieces of bytes `start .. start + len`.
+    fn pieces(&self, start: u64, len: u64) -> Vec<(usize, u64, u64)> {
+        let mut out = Vec::new();
+        let (mut at, end) = (start, start + len);
+        while at < end {
+            let part = (at / self.part_bytes) as usize;
+            let offset = at % self.part_bytes;
+            let n = (self.part_bytes - offset).min(end - at);
+            out.push((part, offset, n));
+            at += n;
+        }
+        out
+    }
+
+    /// Writes `data` from byte 0 on (at most [`Self::size`] bytes).
+    pub fn write(&self, ctx: &GpuContext, data: &[u8]) {
+        let mut from = 0usize;
+        for (part, offset, n) in self.pieces(0, data.len() as u64) {
+            let n = n as usize;
+            ctx.queue
+                .write_buffer(&self.parts[part], offset, &data[from..from + n]);
+            from += n;
+        }
+    }
+
+    /// Reads bytes `0 .. bytes` (at most [`Self::size`]).
+    pub fn read(&self, ctx: &GpuContext, bytes: u64) -> Result<Vec<u8>, BackendError> {
+        let mut out = Vec::with_capacity(bytes as usize);
+        for (part, offset, n) in self.pieces(0, bytes) {
+            read_into(ctx, None, &self.parts[part], offset, n, &mut out)?;
+        }
+        Ok(out)
+    }
+
+    /// Encodes zeroing every part.
+    pub fn clear(&self, encoder: &mut wgpu::CommandEncoder) {
+        for b in &self.parts {
+            encoder.clear_buffer(b, 0, None);
+        }
+    }
+
+    /// Fills every part with 0xFF (tests).
+    pub fn poison(&self, ctx: &GpuContext) {
+        for b in &self.parts {
+            poison(ctx, b);
+        }
+    }
+}
