@@ -86,6 +86,30 @@ fn check_header(at: At<'_>, reader: &mut (impl Read + Seek), size: u64) -> Resul
             _ => {}
         }
     }
+    // npyz multiplies the shape's dimensions unchecked (a panic with debug assertions, a
+    // wrapped count without): a shape whose element count overflows is refused here.
+    let text = String::from_utf8_lossy(&header);
+    if let Some(dims) = text
+        .split("'shape'")
+        .nth(1)
+        .and_then(|r| r.split('(').nth(1))
+        .and_then(|r| r.split(')').next())
+    {
+        let product = dims
+            .split(',')
+            .map(str::trim)
+            .filter(|d| !d.is_empty())
+            .try_fold(1u64, |acc, d| {
+                d.parse::<u64>()
+                    .ok()
+                    .map_or(Some(acc), |v| acc.checked_mul(v))
+            });
+        if product.is_none() {
+            return Err(at.malformed(format!(
+                "the .npy shape ({dims}) has more elements than a 64-bit count holds"
+            )));
+        }
+    }
     Ok(())
 }
 

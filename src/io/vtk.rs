@@ -26,6 +26,10 @@ pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
     } else {
         Some(appended_raw_to_base64(&bytes).map_err(|e| at.malformed(e))?)
     };
+    if let Some(text) = &xml {
+        check_inflation(text.as_deref().unwrap_or(&bytes), bytes.len())
+            .map_err(|e| at.malformed(e))?;
+    }
     // vtkio is not hardened against every hostile input; a panic inside it becomes an error.
     let parsed = std::panic::catch_unwind(|| match xml {
         None => Vtk::parse_legacy_be(&bytes[..]),
@@ -135,6 +139,97 @@ pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
         positions,
         attributes,
     })
+}
+
+/// The most a compressed VTK array may inflate: zlib (VTK's default) tops out near 1032:1 and
+/// LZ4 near 255:1; LZMA on constant data goes further, so this leaves it room.
+const MAX_INFLATION: usize = 4096;
+
+/// Refuses compressed arrays whose headers declare more uncompressed bytes than the file could
+/// inflate to, before vtkio allocates the declared size (a 1 KB file could ask for 4 GB).
+/// Reads the first three header integers (blocks, block size, last block size) of every
+/// binary or appended DataArray; the data must already be base64 (see
+/// [`appended_raw_to_base64`]).
+fn check_inflation(text: &[u8], file_len: usize) -> Result<(), String> {
+    use base64::Engine;
+    let find = |hay: &[u8], needle: &[u8], from: usize| {
+        hay.get(from..)?
+            .windows(needle.len())
+            .position(|w| w == needle)
+            .map(|p| p + from)
+    };
+    let Some(root) = find(text, b"<VTKFile", 0) else {
+        return Ok(());
+    };
+    let root_end = find(text, b">", root).unwrap_or(text.len());
+    let root_tag = &text[root..root_end];
+    if find(root_tag, b"compressor=\"vtk", 0).is_none() {
+        return Ok(());
+    }
+    let header_bytes = if find(root_tag, b"header_type=\"UInt64\"", 0).is_some() {
+        8
+    } else {
+        4
+    };
+    let limit = file_len
+        .saturating_mul(MAX_INFLATION)
+        .saturating_add(1 << 20);
+    let appended = find(text, b"<AppendedData", 0)
+        .and_then(|t| find(text, b"_", t))
+        .map(|u| &text[u + 1..]);
+    let mut at = 0;
+    while let Some(tag) = find(text, b"<DataArray", at) {
+        let tag_end = find(text, b">", tag).unwrap_or(text.len());
+        at = tag_end;
+        let tag_text = String::from_utf8_lossy(&text[tag..tag_end]);
+        let data: &[u8] = if tag_text.contains("format=\"binary\"") {
+            &text[(tag_end + 1).min(text.len())..]
+        } else if tag_text.contains("format=\"appended\"") {
+            let offset = tag_text
+                .split("offset=\"")
+                .nth(1)
+                .and_then(|r| r.split('"').next())
+                .and_then(|v| v.trim().parse::<usize>().ok());
+            match (appended, offset) {
+                (Some(a), Some(o)) if o <= a.len() => &a[o..],
+                _ => continue,
+            }
+        } else {
+            continue;
+        };
+        let chars: Vec<u8> = data
+            .iter()
+            .copied()
+            .filter(|c| !c.is_ascii_whitespace())
+            .take(4 * header_bytes)
+            .collect();
+        let Ok(head) = base64::engine::general_purpose::STANDARD.decode(&chars) else {
+            continue; // vtkio reports bad base64 itself
+        };
+        if head.len() < 3 * header_bytes {
+            continue;
+        }
+        let int = |i: usize| -> u64 {
+            let b = &head[i * header_bytes..(i + 1) * header_bytes];
+            if header_bytes == 8 {
+                u64::from_le_bytes(b.try_into().unwrap_or_default())
+            } else {
+                u64::from(u32::from_le_bytes(b.try_into().unwrap_or_default()))
+            }
+        };
+        let (blocks, block_size, last) = (int(0), int(1), int(2));
+        let declared = block_size
+            .checked_mul(blocks.saturating_sub(1))
+            .and_then(|v| v.checked_add(last));
+        if declared.is_none_or(|d| d > limit as u64) {
+            return Err(format!(
+                "a compressed DataArray declares {} uncompressed bytes ({blocks} blocks of \
+                 {block_size}), more than this {file_len}-byte file can inflate to",
+                declared.map_or_else(|| "overflowing".to_owned(), |d| d.to_string())
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// vtkio reads appended data only base64-encoded, while VTK and ParaView write it raw by

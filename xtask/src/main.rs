@@ -345,6 +345,12 @@ fn fuzz(args: &[String]) -> Result<()> {
             .args([
                 "--",
                 &format!("-max_total_time={seconds}"),
+                // Fork mode: a finding is saved and the run goes on, so one run spends its
+                // whole budget and reports every kind of trouble it meets, not just the first.
+                "-fork=1",
+                "-ignore_crashes=1",
+                "-ignore_ooms=1",
+                "-ignore_timeouts=1",
                 "-malloc_limit_mb=512",
                 "-rss_limit_mb=2048",
                 "-timeout=10",
@@ -355,25 +361,27 @@ fn fuzz(args: &[String]) -> Result<()> {
             .with_context(|| format!("cannot run cargo fuzz for {target}"))?;
         let log = String::from_utf8_lossy(&output.stderr).into_owned();
         std::fs::write(fuzz_dir.join(format!("{target}.log")), &log)?;
-        let stat = |key: &str| -> String {
-            log.lines()
-                .rev()
-                .find_map(|l| {
-                    l.strip_prefix(&format!("stat::{key}:"))
-                        .map(|v| v.trim().to_owned())
-                })
-                .unwrap_or_else(|| "?".into())
-        };
-        let coverage = log
+        // Fork mode's progress lines: "#EXECS: cov: C ft: F corp: N exec/s: E
+        // oom/timeout/crash: a/b/c time: Ts ..."; the last one sums up the run.
+        let last = log
             .lines()
             .rev()
-            .find_map(|l| {
-                l.split("cov: ")
-                    .nth(1)
-                    .and_then(|r| r.split_whitespace().next())
-                    .map(str::to_owned)
-            })
-            .unwrap_or_else(|| "?".into());
+            .find(|l| l.starts_with('#') && l.contains("exec/s:"))
+            .unwrap_or_default();
+        let field = |key: &str| -> String {
+            last.split(key)
+                .nth(1)
+                .and_then(|r| r.split_whitespace().next())
+                .unwrap_or("?")
+                .to_owned()
+        };
+        let executions = last
+            .strip_prefix('#')
+            .and_then(|r| r.split(':').next())
+            .unwrap_or("?")
+            .to_owned();
+        let coverage = field("cov: ");
+        let rate = field("exec/s: ");
         // This run's findings (not earlier runs') become regression tests.
         let mut findings = Vec::new();
         if let Ok(artifacts) = std::fs::read_dir(&artifacts_dir) {
@@ -395,9 +403,7 @@ fn fuzz(args: &[String]) -> Result<()> {
             );
         }
         rows.push(format!(
-            "| {target} | {seconds} | {} | {} | {coverage} | {} |",
-            stat("number_of_executed_units"),
-            stat("average_exec_per_sec"),
+            "| {target} | {seconds} | {executions} | {rate} | {coverage} | {} |",
             if findings.is_empty() {
                 "none".to_owned()
             } else {
