@@ -31,55 +31,12 @@ use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-/// Validation-layer messages (wgpu-hal logs them as warnings or errors) seen in this process.
-static DRIVER_MESSAGES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
-
-struct DriverMessages;
-
-impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for DriverMessages {
-    fn on_event(&self, event: &tracing::Event<'_>, _: tracing_subscriber::layer::Context<'_, S>) {
-        let meta = event.metadata();
-        if *meta.level() > tracing::Level::WARN {
-            return;
-        }
-        struct Text(String);
-        impl tracing::field::Visit for Text {
-            fn record_debug(&mut self, f: &tracing::field::Field, v: &dyn std::fmt::Debug) {
-                self.0.push_str(&format!("{}={v:?} ", f.name()));
-            }
-        }
-        let mut text = Text(format!("{}: ", meta.target()));
-        event.record(&mut text);
-        // wgpu's `log` records arrive with target "log" and their own in `log.target`.
-        if meta.target().starts_with("wgpu") || text.0.contains("log.target=\"wgpu") {
-            DRIVER_MESSAGES
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .push(text.0);
-        }
-    }
-}
-
-/// Fails if the validation layers (on in builds with debug assertions, when installed) or
-/// wgpu reported anything so far.
-fn assert_no_driver_messages() {
-    let m = DRIVER_MESSAGES
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .clone();
-    assert!(m.is_empty(), "validation / driver messages: {m:#?}");
-}
+mod common;
+use common::assert_no_driver_messages;
 
 /// The shared device, or None (skip) without an adapter outside CI.
 fn gpu() -> Option<Arc<GpuContext>> {
-    {
-        use tracing_subscriber::layer::SubscriberExt;
-        use tracing_subscriber::util::SubscriberInitExt;
-        // Also routes the `log` records of wgpu-hal here (tracing-log).
-        let _ = tracing_subscriber::registry()
-            .with(DriverMessages)
-            .try_init();
-    }
+    common::capture_driver_messages();
     match GpuContext::shared() {
         Ok(c) => Some(c),
         Err(e) if std::env::var_os("CI").is_some() => {
