@@ -28,7 +28,7 @@ impl Matrix {
 /// How deeply a .npy header's Python literal may nest brackets. Real headers nest two deep
 /// (`{'shape': (n, 3)}`), structured dtypes a few more; npyz's literal parser backtracks
 /// exponentially in the depth (a 235-byte header of `[[[[...` took over 10 s).
-const MAX_HEADER_NESTING: usize = 16;
+const MAX_HEADER_NESTING: usize = 6;
 
 /// Refuses a header longer than the file before npyz allocates a buffer of that length (a
 /// version 2/3 header declares it as a u32: a hostile 10-byte file could ask for 4 GiB), and
