@@ -1,0 +1,257 @@
+//! "Model only what a scene requires", measured: what each optional feature costs in bytes and
+//! time on every backend, side by side in one run, so a feature a scene does not use is seen
+//! to cost nothing. Results go to docs/benchmarks.md.
+//!
+//! cargo bench --bench feature_costs -- [N] [--frame-size S]
+//!     (defaults: N = 1000000 particles for the memory and build tables, S = 256)
+//!
+//! - Memory and build/refit per feature at N uniform particles, K = 1: colouring by density
+//!   (no attribute), the attribute post- and pre-classified, a varying radius map, a varying
+//!   density map, a per-particle radius attribute.
+//! - Boxes and structure bytes per cluster size K (N / K boxes).
+//! - Frame time per feature on the demo scene (dam break step 14, 20K particles): emission-
+//!   absorption against single scattering (shadow rays), and each map feature on or off.
+//!
+//! Rows marked "+" add one feature to the post-classified baseline (not to the row above).
+
+use std::time::Duration;
+
+use aarbf::accel::ClusterSize;
+use aarbf::backend::{self, Backend, BackendKind, StepInput};
+use aarbf::field::{Classification, FieldSettings};
+use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::scene::maps::{DensityMap, RadiusMap};
+use aarbf::scene::synth::Generator;
+use aarbf::scene::{Attribute, Bounds, Step, TimeSeries};
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+
+const BACKENDS: [BackendKind; 3] = [BackendKind::Cpu, BackendKind::Wgpu, BackendKind::Ash];
+
+fn uniform_step(n: usize, seed: u64) -> Step {
+    let mut r = rand_pcg::Pcg64::seed_from_u64(seed);
+    Step {
+        name: format!("uniform{n}"),
+        positions: (0..n)
+            .map(|_| Vec3::new(r.random(), r.random(), r.random()))
+            .collect(),
+        attributes: vec![
+            Attribute {
+                name: "a".into(),
+                values: (0..n).map(|_| r.random::<f32>()).collect(),
+            },
+            Attribute {
+                name: "h".into(),
+                values: (0..n).map(|_| r.random_range(0.5f32..1.5)).collect(),
+            },
+        ],
+    }
+}
+
+/// A scene feature: its name and how it changes the field settings.
+struct Feature {
+    name: &'static str,
+    apply: fn(&mut FieldSettings, &str),
+}
+
+fn features() -> Vec<Feature> {
+    vec![
+        Feature {
+            name: "density only (no attribute)",
+            apply: |f, _| f.attribute = None,
+        },
+        Feature {
+            name: "attribute, post-classified",
+            apply: |_, _| {},
+        },
+        Feature {
+            name: "attribute, pre-classified",
+            apply: |f, _| f.classification = Classification::Pre,
+        },
+        Feature {
+            name: "+ varying radius map",
+            apply: |f, _| f.radius_map = RadiusMap("0:0.5,1:1".parse().unwrap()),
+        },
+        Feature {
+            name: "+ varying density map",
+            apply: |f, _| f.density_map = DensityMap("0:0.2,1:1".parse().unwrap()),
+        },
+        Feature {
+            name: "+ per-particle radius",
+            apply: |f, h| f.radius_attribute = Some(h.to_owned()),
+        },
+    ]
+}
+
+fn field_for(feature: &Feature, attribute: &str, radius: f64, h: &str) -> FieldSettings {
+    let mut f = FieldSettings::new(Some(attribute), radius);
+    (feature.apply)(&mut f, h);
+    f
+}
+
+fn median(mut v: Vec<Duration>) -> f64 {
+    v.sort();
+    v[v.len() / 2].as_secs_f64()
+}
+
+fn mb(bytes: usize) -> String {
+    format!("{:.1}", bytes as f64 / 1e6)
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
+    let mut n = 1_000_000usize;
+    let mut frame_size = 256u32;
+    while let Some(a) = args.next() {
+        if a == "--frame-size" {
+            frame_size = args
+                .next()
+                .and_then(|v| v.parse().ok())
+                .expect("--frame-size S");
+        } else {
+            n = a.parse().expect("N: a particle count");
+        }
+    }
+    let mut backends: Vec<(BackendKind, Box<dyn Backend>)> = Vec::new();
+    for kind in BACKENDS {
+        match backend::create(kind) {
+            Ok(b) => {
+                println!("{kind}: {}", b.capabilities().device);
+                backends.push((kind, b));
+            }
+            Err(e) => println!("{kind}: unavailable ({e})"),
+        }
+    }
+
+    // Bytes and build times per feature.
+    let step = uniform_step(n, 7);
+    let unit = Bounds {
+        min: Vec3::ZERO,
+        max: Vec3::ONE,
+    };
+    let radius = (30.0 * 3.0 / (4.0 * std::f64::consts::PI * n as f64)).cbrt();
+    println!("\n### Bytes and build times per feature ({n} uniform particles, K = 1)\n");
+    println!(
+        "| feature | backend | particle bytes (MB) | B / particle | structure (MB) | upload (ms) | build (ms) | refit (ms) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for feature in features() {
+        let field = field_for(&feature, "a", radius, "h");
+        for (kind, b) in &mut backends {
+            let input = StepInput {
+                step: &step,
+                field: &field,
+                cluster: ClusterSize::new(1).unwrap(),
+                series_bounds: unit,
+                series_range: Some((0.0, 1.0)),
+            };
+            b.upload(&input).unwrap();
+            let upload = b.timings().upload.as_secs_f64();
+            let mut builds = Vec::new();
+            for _ in 0..3 {
+                b.build().unwrap();
+                builds.push(b.timings().build);
+            }
+            let mut refits = Vec::new();
+            let mut f = field.clone();
+            for i in 0..3 {
+                f.radius = radius * if i % 2 == 0 { 1.1 } else { 1.0 };
+                b.refit(&f).unwrap();
+                refits.push(b.timings().refit);
+            }
+            let m = b.memory();
+            println!(
+                "| {} | {kind} | {} | {:.1} | {} | {:.0} | {:.1} | {:.1} |",
+                feature.name,
+                mb(m.particle_bytes),
+                m.particle_bytes as f64 / n as f64,
+                mb(m.structure_bytes),
+                upload * 1e3,
+                median(builds) * 1e3,
+                median(refits) * 1e3,
+            );
+        }
+    }
+
+    // Boxes per cluster size.
+    println!("\n### Structure per cluster size ({n} particles, attribute post-classified)\n");
+    println!("| K | boxes (N / K) | backend | structure (MB) | structure B / particle |");
+    println!("|---|---|---|---|---|");
+    let field = FieldSettings::new(Some("a"), radius);
+    for k in [1u32, 2, 4, 8, 16] {
+        let cluster = ClusterSize::new(k).unwrap();
+        for (kind, b) in &mut backends {
+            b.upload(&StepInput {
+                step: &step,
+                field: &field,
+                cluster,
+                series_bounds: unit,
+                series_range: Some((0.0, 1.0)),
+            })
+            .unwrap();
+            b.build().unwrap();
+            let m = b.memory();
+            println!(
+                "| {k} | {} | {kind} | {} | {:.2} |",
+                cluster.clusters_for(n),
+                mb(m.structure_bytes),
+                m.structure_bytes as f64 / n as f64
+            );
+        }
+    }
+    drop(step);
+
+    // Frame time per feature and integrator on the demo scene.
+    let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(20_000, 15, 1));
+    let demo_radius = 0.015 * series.bounds().diagonal();
+    println!(
+        "\n### Frame time per feature ({frame_size}x{frame_size}, 1 spp, STBN, dam break step 14, 20K particles, K = 4; median of 3 after a warm-up)\n"
+    );
+    println!("| feature | integrator | cpu (ms) | wgpu (ms) | ash (ms) |");
+    println!("|---|---|---|---|---|");
+    let mut sessions: Vec<(BackendKind, RenderSession)> = BACKENDS
+        .iter()
+        .filter_map(|&k| Some((k, RenderSession::new(backend::create(k).ok()?, &series))))
+        .collect();
+    for feature in features() {
+        // The demo data has no smoothing length: its own attribute stands in as h.
+        let field = field_for(&feature, "velocity", demo_radius, "velocity");
+        // EA against the single-scattering reference, which is the same march plus one shadow
+        // ray per sample: the difference is what shadow rays cost, and EA does not pay it.
+        for integrator in [
+            Integrator::Ea,
+            Integrator::SsReference,
+            Integrator::Marching,
+        ] {
+            let settings = RenderSettings {
+                width: frame_size,
+                height: frame_size,
+                integrator,
+                noise: NoiseKind::Stbn,
+                colour_by_density: field.attribute.is_none(),
+                ..RenderSettings::default()
+            };
+            let mut row = format!("| {} | {integrator:?} |", feature.name);
+            for kind in BACKENDS {
+                let Some((_, s)) = sessions.iter_mut().find(|(k, _)| *k == kind) else {
+                    row.push_str(" – |");
+                    continue;
+                };
+                s.show(&series, 14, &field, ClusterSize::new(4).unwrap())
+                    .unwrap();
+                s.render(&settings, 1).unwrap();
+                let mut frames = Vec::new();
+                for _ in 0..3 {
+                    s.render(&settings, 1).unwrap();
+                    frames.push(s.backend().timings().frame);
+                }
+                row.push_str(&format!(" {:.0} |", median(frames) * 1e3));
+            }
+            println!("{row}");
+        }
+    }
+    println!(
+        "\n{} rayon threads. Builds and refits are medians of 3; GPU times include submission and the wait for the device.",
+        rayon::current_num_threads()
+    );
+}
