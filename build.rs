@@ -72,8 +72,14 @@ fn main() {
         });
         validate(&module, &path, &source);
     }
+    // WGSL has no includes either: `#include "shared/x.wgsl"` lines name files under
+    // shaders_wgsl/shared/, resolved by the same code (src/shaders/include.rs).
+    let shared_wgsl =
+        |name: &str| std::fs::read_to_string(Path::new("shaders_wgsl").join(name)).ok();
     for path in files("shaders_wgsl", &["wgsl"]) {
-        let source = std::fs::read_to_string(&path)
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+        let source = resolve_includes(&text, &shared_wgsl)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
         let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
             fail(format!(

@@ -22,54 +22,19 @@
 // between different locations is assumed anywhere. The traversal and the host read the words
 // in later dispatches, which wgpu orders after this one (a barrier between dispatches).
 
-struct TreeParams {
-    key_lo: vec4<f32>,
-    key_scale: vec4<f32>,
-    clusters: u32,
-    // 7: bounds and heights (build); 6: bounds only (refit).
-    components: u32,
-    // Per part of the split boxes and nodes (see box_at, node_exchange): vec4s and words
-    // (0xffffffff when one part holds the whole array).
-    part_vec4s: u32,
-    part_words: u32,
-}
+#include "shared/tree_params.wgsl"
 
 const NONE: u32 = 0xffffffffu;
 const ROOT_LEAF: u32 = 0xfffffffeu;
 const SENTINEL: u32 = 0xffffffffu;
 
-@group(0) @binding(0) var<uniform> params: TreeParams;
 @group(0) @binding(3) var<storage, read> node_parents: array<u32>;
 @group(0) @binding(4) var<storage, read> leaf_parents: array<u32>;
 @group(0) @binding(5) var<storage, read_write> heights: array<atomic<u32>>;
 // [0] leaves, [1] depth (the root's height), [2] set when a refit finds a cluster that was
 // left out of the tree (empty at the build) holding particles: the tree must be rebuilt.
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>>;
-// The cluster boxes in up to 4 parts (src/backend/wgpu_lbvh/util.rs, SplitBuffer): an array
-// may outgrow one storage binding. Unsplit, part_vec4s is 0xffffffff and every thread takes
-// the first branch of box_at.
-@group(0) @binding(18) var<storage, read> boxes0: array<vec4<f32>>;
-@group(0) @binding(19) var<storage, read> boxes1: array<vec4<f32>>;
-@group(0) @binding(20) var<storage, read> boxes2: array<vec4<f32>>;
-@group(0) @binding(21) var<storage, read> boxes3: array<vec4<f32>>;
-
-// vec4 number v of the boxes (cluster c's box is 2c and 2c + 1).
-fn box_at(v: u32) -> vec4<f32> {
-    let len = params.part_vec4s;
-    var i = v;
-    if i < len {
-        return boxes0[i];
-    }
-    i -= len;
-    if i < len {
-        return boxes1[i];
-    }
-    i -= len;
-    if i < len {
-        return boxes2[i];
-    }
-    return boxes3[i - len];
-}
+#include "shared/split_boxes.wgsl"
 
 // The nodes (8 words each) in up to 4 parts likewise. Each word's atomics go to one location
 // in one part whatever the split, so the meet-at-the-word argument above holds unchanged.

@@ -11,17 +11,8 @@ const NONE: u32 = 0xffffffffu;
 const ROOT_LEAF: u32 = 0xfffffffeu;
 const SENTINEL: u32 = 0xffffffffu;
 
-struct TreeParams {
-    key_lo: vec4<f32>,
-    key_scale: vec4<f32>,
-    clusters: u32,
-    components: u32,
-    // Words per part of the split nodes (0xffffffff when one part holds them all).
-    part_vec4s: u32,
-    part_words: u32,
-}
+#include "shared/tree_params.wgsl"
 
-@group(0) @binding(0) var<uniform> params: TreeParams;
 @group(0) @binding(1) var<storage, read> keys: array<u32>;
 @group(0) @binding(2) var<storage, read> clusters: array<u32>;
 @group(0) @binding(4) var<storage, read_write> node_parents: array<u32>;

@@ -46,6 +46,29 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
     ),
 ];
 
+/// The shared WGSL files of the LBVH build passes, by the name passes include them with.
+pub const SHARED_WGSL: &[(&str, &str)] = &[
+    (
+        "shared/tree_params.wgsl",
+        include_str!("../../shaders_wgsl/shared/tree_params.wgsl"),
+    ),
+    (
+        "shared/split_boxes.wgsl",
+        include_str!("../../shaders_wgsl/shared/split_boxes.wgsl"),
+    ),
+];
+
+/// WGSL `source` with its `#include "shared/..."` lines replaced by the shared files.
+pub fn wgsl_with_includes(source: &str) -> String {
+    resolve_includes(source, &|name| {
+        SHARED_WGSL
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, s)| (*s).to_owned())
+    })
+    .expect("build.rs validated every include")
+}
+
 /// `source` with its `#include "shared/..."` lines replaced by the shared files.
 pub fn glsl_with_includes(source: &str) -> String {
     resolve_includes(source, &|name| {

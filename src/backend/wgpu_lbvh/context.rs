@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::backend::BackendError;
-use crate::shaders::glsl_with_includes;
+use crate::shaders::{glsl_with_includes, wgsl_with_includes};
 
 pub(crate) fn device_error(message: impl Into<String>) -> BackendError {
     BackendError::Device {
@@ -306,7 +306,7 @@ impl GpuContext {
                 stage: wgpu::naga::ShaderStage::Compute,
                 defines: &[],
             },
-            Source::Wgsl(text) => wgpu::ShaderSource::Wgsl(Cow::Borrowed(text)),
+            Source::Wgsl(text) => wgpu::ShaderSource::Wgsl(Cow::Owned(wgsl_with_includes(text))),
         };
         let module = self.scoped(&format!("shader {label}"), || {
             self.device
