@@ -51,44 +51,83 @@ fn validate(module: &naga::Module, path: &Path, source: &str) {
     }
 }
 
+/// WebGPU's default `maxStorageBuffersPerShaderStage`, which the one-part layout keeps to.
+const WEBGPU_STORAGE_BUFFERS: usize = 8;
+
+/// Fails the build when the one-part variant of a kernel declares more storage buffers than
+/// [`WEBGPU_STORAGE_BUFFERS`] (every kernel here has one entry point per concern, so the
+/// module's count bounds each entry point's).
+fn check_storage_buffers(module: &naga::Module, path: &Path, parts: u32) {
+    if parts > 1 {
+        return;
+    }
+    let count = module
+        .global_variables
+        .iter()
+        .filter(|(_, v)| matches!(v.space, naga::AddressSpace::Storage { .. }))
+        .count();
+    if count > WEBGPU_STORAGE_BUFFERS {
+        fail(format!(
+            "{}: the one-part variant declares {count} storage buffers, more than the \
+             {WEBGPU_STORAGE_BUFFERS} WebGPU guarantees per stage",
+            path.display()
+        ));
+    }
+}
+
 fn main() {
     println!("cargo::rerun-if-changed=shaders_glsl");
     println!("cargo::rerun-if-changed=shaders_wgsl");
     println!("cargo::rerun-if-changed=src/shaders/include.rs");
 
+    // Every wgpu kernel in both storage layouts (SPLIT_PARTS = 1 and 4; see
+    // shaders_glsl/wgpu/split.glsl). The one-part layout must stay within WebGPU's default of
+    // 8 storage buffers per stage, so the backend runs on any adapter for steps that fit.
     for path in files("shaders_glsl/wgpu", &["comp"]) {
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
         let source = resolve_includes(&text, &shared)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
-        let mut frontend = naga::front::glsl::Frontend::default();
-        let options = naga::front::glsl::Options::from(naga::ShaderStage::Compute);
-        let module = frontend.parse(&options, &source).unwrap_or_else(|e| {
-            fail(format!(
-                "{}: GLSL parse failed:\n{}",
-                path.display(),
-                e.emit_to_string(&source)
-            ))
-        });
-        validate(&module, &path, &source);
+        for parts in SPLIT_PARTS_VARIANTS {
+            let mut frontend = naga::front::glsl::Frontend::default();
+            let mut options = naga::front::glsl::Options::from(naga::ShaderStage::Compute);
+            options
+                .defines
+                .insert("SPLIT_PARTS".into(), parts.to_string());
+            let module = frontend.parse(&options, &source).unwrap_or_else(|e| {
+                fail(format!(
+                    "{} (SPLIT_PARTS = {parts}): GLSL parse failed:\n{}",
+                    path.display(),
+                    e.emit_to_string(&source)
+                ))
+            });
+            validate(&module, &path, &source);
+            check_storage_buffers(&module, &path, parts);
+        }
     }
     // WGSL has no includes either: `#include "shared/x.wgsl"` lines name files under
-    // shaders_wgsl/shared/, resolved by the same code (src/shaders/include.rs).
+    // shaders_wgsl/shared/, resolved by the same code (src/shaders/include.rs), and the
+    // SPLIT_PARTS blocks are selected by it too.
     let shared_wgsl =
         |name: &str| std::fs::read_to_string(Path::new("shaders_wgsl").join(name)).ok();
     for path in files("shaders_wgsl", &["wgsl"]) {
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
-        let source = resolve_includes(&text, &shared_wgsl)
+        let resolved = resolve_includes(&text, &shared_wgsl)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
-        let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
-            fail(format!(
-                "{}: WGSL parse failed:\n{}",
-                path.display(),
-                e.emit_to_string(&source)
-            ))
-        });
-        validate(&module, &path, &source);
+        for parts in SPLIT_PARTS_VARIANTS {
+            let source = select_split_parts(&resolved, parts)
+                .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+            let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
+                fail(format!(
+                    "{} (SPLIT_PARTS = {parts}): WGSL parse failed:\n{}",
+                    path.display(),
+                    e.emit_to_string(&source)
+                ))
+            });
+            validate(&module, &path, &source);
+            check_storage_buffers(&module, &path, parts);
+        }
     }
 
     let vulkan = files(

@@ -36,14 +36,18 @@ const SENTINEL: u32 = 0xffffffffu;
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>>;
 #include "shared/split_boxes.wgsl"
 
-// The nodes (8 words each) in up to 4 parts likewise. Each word's atomics go to one location
-// in one part whatever the split, so the meet-at-the-word argument above holds unchanged.
+// The nodes (8 words each) in up to SPLIT_PARTS parts likewise. Each word's atomics go to one
+// location in one part whatever the split, so the meet-at-the-word argument above holds
+// unchanged.
 @group(0) @binding(14) var<storage, read_write> nodes0: array<atomic<u32>>;
+#if SPLIT_PARTS > 1
 @group(0) @binding(15) var<storage, read_write> nodes1: array<atomic<u32>>;
 @group(0) @binding(16) var<storage, read_write> nodes2: array<atomic<u32>>;
 @group(0) @binding(17) var<storage, read_write> nodes3: array<atomic<u32>>;
+#endif
 
 fn node_exchange(w: u32, v: u32) -> u32 {
+#if SPLIT_PARTS > 1
     let len = params.part_words;
     var i = w;
     if i < len {
@@ -58,9 +62,13 @@ fn node_exchange(w: u32, v: u32) -> u32 {
         return atomicExchange(&nodes2[i], v);
     }
     return atomicExchange(&nodes3[i - len], v);
+#else
+    return atomicExchange(&nodes0[w], v);
+#endif
 }
 
 fn node_store(w: u32, v: u32) {
+#if SPLIT_PARTS > 1
     let len = params.part_words;
     var i = w;
     if i < len {
@@ -78,6 +86,9 @@ fn node_store(w: u32, v: u32) {
         return;
     }
     atomicStore(&nodes3[i - len], v);
+#else
+    atomicStore(&nodes0[w], v);
+#endif
 }
 
 // The two children of a node meet at each of its words: each exchanges its value `v` into

@@ -20,15 +20,19 @@ const SENTINEL: u32 = 0xffffffffu;
 @group(0) @binding(6) var<storage, read_write> heights: array<u32>;
 // [0] leaves (from the keys pass).
 @group(0) @binding(7) var<storage, read> counters: array<u32>;
-// The nodes (8 words each) in up to 4 parts (src/backend/wgpu_lbvh/util.rs, SplitBuffer): the
-// array may outgrow one storage binding. Unsplit, part_words is 0xffffffff and every thread
-// takes the first branch of node_store.
+// The nodes (8 words each) in up to SPLIT_PARTS parts (src/backend/wgpu_lbvh/util.rs,
+// SplitBuffer; shaders_glsl/wgpu/split.glsl explains the two variants). In the 4-part variant
+// an unsplit array has part_words 0xffffffff and every thread takes the first branch of
+// node_store.
 @group(0) @binding(14) var<storage, read_write> nodes0: array<u32>;
+#if SPLIT_PARTS > 1
 @group(0) @binding(15) var<storage, read_write> nodes1: array<u32>;
 @group(0) @binding(16) var<storage, read_write> nodes2: array<u32>;
 @group(0) @binding(17) var<storage, read_write> nodes3: array<u32>;
+#endif
 
 fn node_store(w: u32, v: u32) {
+#if SPLIT_PARTS > 1
     let len = params.part_words;
     var i = w;
     if i < len {
@@ -46,9 +50,11 @@ fn node_store(w: u32, v: u32) {
         return;
     }
     nodes3[i - len] = v;
+#else
+    nodes0[w] = v;
+#endif
 }
 
-// Common prefix length of the extended keys at sorted positions i and j; -1 outside 0..n.
 fn delta(i: i32, j: i32, n: i32) -> i32 {
     if j < 0 || j >= n {
         return -1;

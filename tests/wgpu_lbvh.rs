@@ -667,3 +667,82 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
     assert!(b.build().is_err(), "nothing uploaded after the refusal");
     assert_no_driver_messages();
 }
+
+#[test]
+fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
+    // WebGPU's default limits (8 storage buffers per shader stage, 128 MiB bindings, 16 KiB of
+    // workgroup memory) stand in for a small GPU. A step whose arrays each fit one binding runs
+    // the one-part kernels, which bind at most 8 storage buffers: it builds, refits, answers
+    // queries and renders exactly as on the full device. A step that must be split needs 4
+    // parts per array, more buffers than such a device binds: an error says so and what to do.
+    let Some(full) = gpu() else { return };
+    let limited = Arc::new(
+        GpuContext::with_limits(wgpu::Limits::default())
+            .expect("an adapter offering WebGPU's default limits"),
+    );
+    assert_eq!(limited.limits.max_storage_buffers_per_shader_stage, 8);
+    let step = random_step(3_001, 91, false);
+    let mut f = field(0.06, true);
+    f.radius_attribute = Some("h".into());
+    let k = 4;
+
+    // The build stages and queries against their twins and the f64 reference.
+    check_build_stages(&limited, &step, &f, k, "WebGPU limits", None);
+    check_queries(&limited, &step, &f, k, "WebGPU limits", None);
+
+    // Build, refit and render: the same bits as the full device.
+    let series = aarbf::scene::TimeSeries::from_steps(vec![step.clone()]);
+    let images = |ctx: &Arc<GpuContext>| {
+        let mut s = aarbf::render::RenderSession::new(
+            Box::new(WgpuBackend::with_context(ctx.clone())),
+            &series,
+        );
+        let mut field = f.clone();
+        let mut out = Vec::new();
+        for (radius, integrator) in [
+            (0.06, aarbf::render::Integrator::Ea),
+            // Only the radius changes: the refit path.
+            (0.08, aarbf::render::Integrator::Marching),
+        ] {
+            field.radius = radius;
+            s.show(&series, 0, &field, ClusterSize::new(k).unwrap())
+                .unwrap();
+            assert_eq!(
+                s.backend().timings().refit.is_zero(),
+                radius == 0.06,
+                "a refit exactly when the radius changed"
+            );
+            let settings = aarbf::render::RenderSettings {
+                width: 40,
+                height: 24,
+                seed: 3,
+                integrator,
+                ..aarbf::render::RenderSettings::default()
+            };
+            out.push(s.render(&settings, 2).unwrap());
+        }
+        out
+    };
+    let on_limited = images(&limited);
+    assert!(
+        on_limited[0].pixels.iter().any(|p| p[3] > 0.0),
+        "the particles show"
+    );
+    assert!(
+        on_limited == images(&full),
+        "the same images as on the full device"
+    );
+
+    // Split over parts: a clear error, not a crash.
+    let mut b = WgpuBackend::with_max_binding(limited.clone(), 20_000);
+    upload(&mut b, &step, &f, k);
+    let e = b.build().unwrap_err().to_string();
+    for part in [
+        "bound in 4 parts",
+        "allows 8 storage buffers per shader stage",
+        "a larger cluster size",
+    ] {
+        assert!(e.contains(part), "error {e:?} lacks {part:?}");
+    }
+    assert_no_driver_messages();
+}

@@ -14,18 +14,21 @@ layout(local_size_x = 64) in;
 layout(std140, set = 0, binding = 0) uniform FieldBlock { Field field_params; };
 layout(std430, set = 0, binding = 2) readonly buffer MapTables { float map_tables[]; };
 layout(std430, set = 0, binding = 3) readonly buffer RadiusAttributes { float radius_attributes[]; };
-// The particles in up to 4 parts (bindings 10..13), and the boxes likewise (18..21, the
-// bindings split_tree.glsl reads them at): see wgpu/split.glsl.
+// The particles in up to SPLIT_PARTS parts (bindings 10..13), and the boxes likewise
+// (18..21, the bindings split_tree.glsl reads them at): see wgpu/split.glsl.
 #include "wgpu/split.glsl"
 layout(std430, set = 0, binding = 18) buffer ClusterBoxes0 { vec4 cluster_boxes0[]; };
+#if SPLIT_PARTS > 1
 layout(std430, set = 0, binding = 19) buffer ClusterBoxes1 { vec4 cluster_boxes1[]; };
 layout(std430, set = 0, binding = 20) buffer ClusterBoxes2 { vec4 cluster_boxes2[]; };
 layout(std430, set = 0, binding = 21) buffer ClusterBoxes3 { vec4 cluster_boxes3[]; };
+#endif
 
-// Stores vec4 number v of the boxes in its part (split.glsl's lbvh_box reads it back).
+// Stores vec4 number v of the boxes in its part (split_tree.glsl's lbvh_box reads it back).
 void store_box(uint v, vec4 value) {
+#if SPLIT_PARTS > 1
     uint len = field_params.counts.w;
-    if (SPLIT_ARRAYS == 0u || v < len) {
+    if (v < len) {
         cluster_boxes0[v] = value;
         return;
     }
@@ -40,6 +43,9 @@ void store_box(uint v, vec4 value) {
         return;
     }
     cluster_boxes3[v - len] = value;
+#else
+    cluster_boxes0[v] = value;
+#endif
 }
 
 #include "shared/maps.glsl"

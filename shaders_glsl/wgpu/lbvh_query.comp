@@ -13,7 +13,7 @@ layout(std430, set = 0, binding = 3) readonly buffer MapTables { float map_table
 layout(std430, set = 0, binding = 4) readonly buffer RadiusAttributes { float radius_attributes[]; };
 layout(std430, set = 0, binding = 7) readonly buffer QueryPoints { vec4 query_points[]; };
 layout(std430, set = 0, binding = 8) buffer QueryResults { vec4 query_results[]; };
-// Particles, nodes and boxes, each in up to 4 parts (bindings 10..21).
+// Particles, nodes and boxes, each in up to SPLIT_PARTS parts (bindings 10..21).
 #include "wgpu/split.glsl"
 #include "wgpu/split_tree.glsl"
 

@@ -58,15 +58,17 @@ pub const SHARED_WGSL: &[(&str, &str)] = &[
     ),
 ];
 
-/// WGSL `source` with its `#include "shared/..."` lines replaced by the shared files.
-pub fn wgsl_with_includes(source: &str) -> String {
-    resolve_includes(source, &|name| {
+/// WGSL `source` with its `#include "shared/..."` lines replaced by the shared files, for
+/// `SPLIT_PARTS` = `split_parts` (see [`select_split_parts`]).
+pub fn wgsl_with_includes(source: &str, split_parts: u32) -> String {
+    let resolved = resolve_includes(source, &|name| {
         SHARED_WGSL
             .iter()
             .find(|(n, _)| *n == name)
             .map(|(_, s)| (*s).to_owned())
     })
-    .expect("build.rs validated every include")
+    .expect("build.rs validated every include");
+    select_split_parts(&resolved, split_parts).expect("build.rs validated every variant")
 }
 
 /// `source` with its `#include "shared/..."` lines replaced by the shared files.
@@ -217,6 +219,40 @@ pub fn pack_map_tables(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn split_parts_blocks_select_their_variant_and_refuse_what_they_cannot_do() {
+        let source = "a\n#if SPLIT_PARTS > 1\nsplit\n#else\nwhole\n#endif\nb\n#if SPLIT_PARTS > 1\nmore\n#endif\n";
+        let lines = |parts| {
+            select_split_parts(source, parts)
+                .unwrap()
+                .lines()
+                .filter(|l| !l.is_empty())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        assert_eq!(lines(1), "a whole b");
+        assert_eq!(lines(4), "a split b more");
+        // Line numbers are kept for naga's error messages.
+        assert_eq!(select_split_parts(source, 1).unwrap().lines().count(), 10);
+        for (bad, why) in [
+            (
+                "#if SPLIT_PARTS > 1\n#if SPLIT_PARTS > 1\n#endif\n#endif\n",
+                "line 2",
+            ),
+            ("#ifdef X\n#endif\n", "'#ifdef X' is not supported"),
+            ("#else\n", "line 1"),
+            ("#if SPLIT_PARTS > 1\nx\n", "without '#endif'"),
+        ] {
+            let e = select_split_parts(bad, 1).unwrap_err();
+            assert!(e.contains(why), "{bad:?}: {e}");
+        }
+        // Both variants of every WGSL pass resolve (build.rs validates them with naga).
+        for parts in SPLIT_PARTS_VARIANTS {
+            let fit = wgsl_with_includes(include_str!("../../shaders_wgsl/lbvh_fit.wgsl"), parts);
+            assert_eq!(fit.contains("nodes3"), parts > 1);
+        }
+    }
 
     #[test]
     fn includes_resolve_once_and_name_missing_files() {

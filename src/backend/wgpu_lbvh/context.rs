@@ -107,9 +107,37 @@ impl ShaderFile {
     }
 }
 
-/// The specialisation-constant values of a GLSL kernel variant (constant_id order), or none:
-/// params.glsl's seven, then wgpu/split.glsl's SPLIT_ARRAYS.
-pub type Variant = Option<[u32; 8]>;
+/// The specialisation-constant values of a GLSL kernel variant (params.glsl's seven, in
+/// constant_id order), or none.
+pub type Variant = Option<[u32; 7]>;
+
+/// How a kernel binds the arrays that can outgrow one storage binding
+/// (`shaders_glsl/wgpu/split.glsl`): each as one buffer, or in [`super::util::PARTS`] parts.
+/// The two are separate shader modules (`SPLIT_PARTS` = 1 or 4), so the whole variant binds
+/// one buffer per array and carries no part selection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Layout {
+    Whole,
+    Split,
+}
+
+impl Layout {
+    /// Split when any array the kernel binds is in more than one part.
+    pub fn of(arrays: &[&super::util::SplitBuffer]) -> Layout {
+        if arrays.iter().any(|a| a.parts_used() > 1) {
+            Layout::Split
+        } else {
+            Layout::Whole
+        }
+    }
+
+    fn split_parts(self) -> u32 {
+        match self {
+            Layout::Whole => 1,
+            Layout::Split => super::util::PARTS as u32,
+        }
+    }
+}
 
 /// A wgpu adapter, as `aarbf info --devices` lists it.
 #[derive(Clone, Debug)]
@@ -158,8 +186,8 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     pub limits: wgpu::Limits,
     lost: Arc<Mutex<Option<String>>>,
-    modules: Mutex<HashMap<ShaderFile, Arc<wgpu::ShaderModule>>>,
-    pipelines: Mutex<HashMap<(Kernel, Variant), Arc<wgpu::ComputePipeline>>>,
+    modules: Mutex<HashMap<(ShaderFile, Layout), Arc<wgpu::ShaderModule>>>,
+    pipelines: Mutex<HashMap<(Kernel, Variant, Layout), Arc<wgpu::ComputePipeline>>>,
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -181,8 +209,19 @@ impl GpuContext {
             .map_err(|e| BackendError::Unavailable("wgpu", e))
     }
 
-    /// A new device on the best adapter (`WGPU_ADAPTER_NAME` / `WGPU_BACKEND` narrow it).
+    /// A new device on the best adapter (`WGPU_ADAPTER_NAME` / `WGPU_BACKEND` narrow it),
+    /// with every limit the adapter offers.
     pub fn create() -> Result<GpuContext, String> {
+        GpuContext::create_with(None)
+    }
+
+    /// A new device on the best adapter holding to `limits` (tests: WebGPU's defaults stand in
+    /// for a small GPU, on any adapter that offers at least those).
+    pub fn with_limits(limits: wgpu::Limits) -> Result<GpuContext, String> {
+        GpuContext::create_with(Some(limits))
+    }
+
+    fn create_with(requested: Option<wgpu::Limits>) -> Result<GpuContext, String> {
         // Vulkan, Metal or DX12 first; GL only when none of them has an adapter (unless
         // WGPU_BACKEND chooses).
         let chosen = std::env::var_os("WGPU_BACKEND").is_some();
@@ -199,7 +238,7 @@ impl GpuContext {
         }
         let adapter = adapter?;
         let info = adapter.get_info();
-        let limits = adapter.limits();
+        let limits = requested.unwrap_or_else(|| adapter.limits());
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("aarbf wgpu"),
             required_features: wgpu::Features::empty(),
@@ -294,19 +333,28 @@ impl GpuContext {
         self.check_lost()
     }
 
-    fn module(&self, file: ShaderFile) -> Result<Arc<wgpu::ShaderModule>, BackendError> {
+    fn module(
+        &self,
+        file: ShaderFile,
+        layout: Layout,
+    ) -> Result<Arc<wgpu::ShaderModule>, BackendError> {
         let mut modules = self.modules.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(m) = modules.get(&file) {
+        if let Some(m) = modules.get(&(file, layout)) {
             return Ok(m.clone());
         }
-        let label = format!("{file:?}");
+        let label = format!("{file:?} {layout:?}");
+        let parts = layout.split_parts();
+        let parts_text = parts.to_string();
+        let defines = [("SPLIT_PARTS", parts_text.as_str())];
         let source = match file.source() {
             Source::Glsl(text) => wgpu::ShaderSource::Glsl {
                 shader: Cow::Owned(glsl_with_includes(text)),
                 stage: wgpu::naga::ShaderStage::Compute,
-                defines: &[],
+                defines: &defines,
             },
-            Source::Wgsl(text) => wgpu::ShaderSource::Wgsl(Cow::Owned(wgsl_with_includes(text))),
+            Source::Wgsl(text) => {
+                wgpu::ShaderSource::Wgsl(Cow::Owned(wgsl_with_includes(text, parts)))
+            }
         };
         let module = self.scoped(&format!("shader {label}"), || {
             self.device
@@ -316,29 +364,32 @@ impl GpuContext {
                 })
         })?;
         let module = Arc::new(module);
-        modules.insert(file, module.clone());
+        modules.insert((file, layout), module.clone());
         Ok(module)
     }
 
-    /// The pipeline of `kernel` (with specialisation constants `variant` for the GLSL kernels),
-    /// compiled on first use and cached for the process.
+    /// The pipeline of `kernel` (with specialisation constants `variant` for the GLSL kernels)
+    /// binding its splittable arrays as `layout` says, compiled on first use and cached for
+    /// the process.
     pub fn pipeline(
         &self,
         kernel: Kernel,
         variant: Variant,
+        layout: Layout,
     ) -> Result<Arc<wgpu::ComputePipeline>, BackendError> {
         let variant = if kernel.specialised() { variant } else { None };
+        let key = (kernel, variant, layout);
         if let Some(p) = self
             .pipelines
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .get(&(kernel, variant))
+            .get(&key)
         {
             return Ok(p.clone());
         }
-        let module = self.module(kernel.file())?;
-        // naga names an override by its constant_id when it has one: the keys are "0".."7".
-        let keys = ["0", "1", "2", "3", "4", "5", "6", "7"];
+        let module = self.module(kernel.file(), layout)?;
+        // naga names an override by its constant_id when it has one: the keys are "0".."6".
+        let keys = ["0", "1", "2", "3", "4", "5", "6"];
         let constants: Vec<(&str, f64)> = variant
             .map(|v| {
                 keys.iter()
@@ -347,7 +398,7 @@ impl GpuContext {
                     .collect()
             })
             .unwrap_or_default();
-        let label = format!("{kernel:?} {variant:?}");
+        let label = format!("{kernel:?} {variant:?} {layout:?}");
         let started = std::time::Instant::now();
         let pipeline = self.scoped(&format!("pipeline {label}"), || {
             self.device
@@ -362,6 +413,18 @@ impl GpuContext {
                     },
                     cache: None,
                 })
+        });
+        let pipeline = pipeline.map_err(|e| match layout {
+            // Most likely the layout's storage buffers are more than the adapter binds.
+            Layout::Split => device_error(format!(
+                "{e} (this step or image outgrows one storage binding, so each of its large \
+                 arrays is bound in {} parts; {} allows {} storage buffers per shader stage: a \
+                 larger cluster size or a smaller image keeps every array in one binding)",
+                super::util::PARTS,
+                self.info.name,
+                self.limits.max_storage_buffers_per_shader_stage
+            )),
+            Layout::Whole => e,
         })?;
         tracing::debug!(
             "wgpu: compiled {label} in {:.2} s",
@@ -371,7 +434,7 @@ impl GpuContext {
         self.pipelines
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .insert((kernel, variant), pipeline.clone());
+            .insert(key, pipeline.clone());
         Ok(pipeline)
     }
 }

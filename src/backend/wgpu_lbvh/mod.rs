@@ -9,6 +9,9 @@
 //!   `util::PARTS` = 4 buffers each (`util::SplitBuffer`, `shaders_glsl/wgpu/split.glsl`);
 //!   a step beyond that, or one whose 4-byte arrays (sort keys, parents, radius attribute)
 //!   outgrow one binding, is refused with an error naming the step, the need and the limit.
+//!   Every kernel exists in two layouts (`context::Layout`): the one-part layout, which a step
+//!   that fits runs, binds at most 8 storage buffers per stage (WebGPU's default, checked in
+//!   `build.rs`), so the backend runs on small GPUs; only a split step needs more.
 //! - **Build**, every stage a compute pass: cluster boxes (`shaders_glsl/wgpu/lbvh_bounds.comp`),
 //!   Morton keys (`shaders_wgsl/lbvh_keys.wgsl`), a portable LSD radix sort
 //!   (`radix_sort.wgsl`), Karras' hierarchy (`lbvh_hierarchy.wgsl`) and bottom-up bounds
@@ -33,7 +36,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-pub use context::{AdapterSummary, GpuContext, Kernel, adapters};
+pub use context::{AdapterSummary, GpuContext, Kernel, Layout, adapters};
 pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::GpuStepData;
@@ -94,18 +97,9 @@ impl Scene {
         }
     }
 
-    /// The GLSL kernels' specialisation constants; `split`: some array the kernel reads is in
-    /// more than one part (SPLIT_ARRAYS of `shaders_glsl/wgpu/split.glsl`: at 0 the accessors'
-    /// part selection compiles away, and the unsplit case runs the code it ran before the
-    /// split existed).
-    fn variant(
-        &self,
-        integrator: Integrator,
-        colour: ColourMode,
-        noise: NoiseKind,
-        split: bool,
-    ) -> [u32; 8] {
-        let v = SpecConstants {
+    /// The GLSL kernels' specialisation constants.
+    fn variant(&self, integrator: Integrator, colour: ColourMode, noise: NoiseKind) -> [u32; 7] {
+        SpecConstants {
             integrator: SpecConstants::integrator_id(integrator),
             colour_mode: SpecConstants::colour_id(colour),
             noise_kind: SpecConstants::noise_id(noise),
@@ -114,8 +108,7 @@ impl Scene {
             density_map_varies: u32::from(self.data.density_map_varies),
             has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
         }
-        .values();
-        [v[0], v[1], v[2], v[3], v[4], v[5], v[6], u32::from(split)]
+        .values()
     }
 }
 
@@ -247,13 +240,8 @@ impl WgpuBackend {
         tree.snapshot(&self.ctx, scene.clusters() as usize)
     }
 
-    fn bindings<'a>(
-        scene: &'a Scene,
-        tree: &GpuTree,
-        dummy: &'a wgpu::Buffer,
-    ) -> SceneBindings<'a> {
-        let split = scene.particles.parts_used() > 1 || tree.boxes.parts_used() > 1;
-        let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn, split);
+    fn bindings<'a>(scene: &'a Scene, dummy: &'a wgpu::Buffer) -> SceneBindings<'a> {
+        let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn);
         // Only what the bounds kernel reads varies its pipeline.
         let mut v = variant;
         v[0] = 0;
@@ -277,7 +265,7 @@ impl WgpuBackend {
         let started = Instant::now();
         let report = tree.build(
             &self.ctx,
-            &Self::bindings(scene, tree, &self.dummy),
+            &Self::bindings(scene, &self.dummy),
             &scene.grid,
             scene.clusters(),
             until,
@@ -558,7 +546,7 @@ impl Backend for WgpuBackend {
         };
         let report = tree.refit(
             &ctx,
-            &Self::bindings(scene, tree, &self.dummy),
+            &Self::bindings(scene, &self.dummy),
             &scene.grid,
             scene.clusters(),
         )?;
@@ -610,14 +598,11 @@ impl Backend for WgpuBackend {
             .ok_or(BackendError::NothingUploaded("wgpu"))?;
         let (_, count_buffer, points_buffer, results_buffer) =
             self.query_buffers.as_ref().expect("made above");
+        let layout = Layout::of(&[&scene.particles, &tree.nodes, &tree.boxes]);
         let pipeline = ctx.pipeline(
             Kernel::Query,
-            Some(scene.variant(
-                Integrator::Ea,
-                scene.colour_mode(),
-                NoiseKind::Stbn,
-                scene.particles.parts_used() > 1 || tree.nodes.parts_used() > 1,
-            )),
+            Some(scene.variant(Integrator::Ea, scene.colour_mode(), NoiseKind::Stbn)),
+            layout,
         )?;
         let bg = ctx.scoped("query bind group", || {
             let mut entries = vec![
@@ -635,9 +620,9 @@ impl Backend for WgpuBackend {
                 (7, points_buffer.as_entire_binding()),
                 (8, results_buffer.as_entire_binding()),
             ];
-            entries.extend(scene.particles.entries(10));
-            entries.extend(tree.nodes.entries(14));
-            entries.extend(tree.boxes.entries(18));
+            entries.extend(scene.particles.entries(10, layout));
+            entries.extend(tree.nodes.entries(14, layout));
+            entries.extend(tree.boxes.entries(18, layout));
             bind(&ctx, &pipeline, &entries)
         })?;
         let mut out = Vec::with_capacity(points.len());
@@ -747,21 +732,12 @@ impl Backend for WgpuBackend {
             &self.frame_uniform,
             bytemuck::bytes_of(&GpuFrame::new(frame, scene.data.origin)),
         );
+        let sums = &self.accumulation.as_ref().expect("made above").sums;
+        let layout = Layout::of(&[&scene.particles, &tree.nodes, &tree.boxes, sums]);
         let pipeline = ctx.pipeline(
             Kernel::Render,
-            Some(
-                scene.variant(
-                    frame.integrator,
-                    frame.colour,
-                    frame.noise,
-                    scene.particles.parts_used() > 1
-                        || tree.nodes.parts_used() > 1
-                        || self
-                            .accumulation
-                            .as_ref()
-                            .is_some_and(|a| a.sums.parts_used() > 1),
-                ),
-            ),
+            Some(scene.variant(frame.integrator, frame.colour, frame.noise)),
+            layout,
         )?;
         let tiles_x = w.div_ceil(8);
         let tiles = tiles_x * h.div_ceil(8);
@@ -794,10 +770,10 @@ impl Backend for WgpuBackend {
                 (7, stbn.as_entire_binding()),
                 (9, self.tiling_uniform.as_entire_binding()),
             ];
-            entries.extend(scene.particles.entries(10));
-            entries.extend(tree.nodes.entries(14));
-            entries.extend(tree.boxes.entries(18));
-            entries.extend(acc.sums.entries(22));
+            entries.extend(scene.particles.entries(10, layout));
+            entries.extend(tree.nodes.entries(14, layout));
+            entries.extend(tree.boxes.entries(18, layout));
+            entries.extend(acc.sums.entries(22, layout));
             let bg = bind(&ctx, &pipeline, &entries);
             if acc.clear {
                 acc.sums.clear(&mut encoder);

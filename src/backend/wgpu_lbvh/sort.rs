@@ -4,7 +4,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::context::{GpuContext, Kernel};
+use super::context::{GpuContext, Kernel, Layout};
 use super::util::{bind, dispatch, grid, poison, read_u32, storage, write};
 use crate::backend::BackendError;
 
@@ -80,9 +80,9 @@ impl RadixSort {
                 self.tiles_capacity * TILE
             )));
         }
-        let count_pipeline = ctx.pipeline(Kernel::SortCount, None)?;
-        let scan_pipeline = ctx.pipeline(Kernel::SortScan, None)?;
-        let scatter_pipeline = ctx.pipeline(Kernel::SortScatter, None)?;
+        let count_pipeline = ctx.pipeline(Kernel::SortCount, None, Layout::Whole)?;
+        let scan_pipeline = ctx.pipeline(Kernel::SortScan, None, Layout::Whole)?;
+        let scatter_pipeline = ctx.pipeline(Kernel::SortScatter, None, Layout::Whole)?;
         let groups = grid(u64::from(tiles), 1);
         for pass in 0..PASSES {
             let params = SortParams {

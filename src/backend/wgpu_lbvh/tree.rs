@@ -3,7 +3,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::context::{GpuContext, Kernel, Variant, device_error};
+use super::context::{GpuContext, Kernel, Layout, Variant, device_error};
 use super::sort::RadixSort;
 use super::util::PARTS;
 use super::util::{SplitBuffer, bind, dispatch, grid, poison, read_u32, storage, write};
@@ -112,6 +112,11 @@ impl GpuTree {
         Ok(tree)
     }
 
+    /// How the build passes bind the boxes and nodes (whose parts have equal lengths).
+    pub fn layout(&self) -> Layout {
+        Layout::of(&[&self.boxes, &self.nodes])
+    }
+
     /// Bytes of scratch (sort buffers), beside the structure proper.
     pub fn scratch_bytes(&self) -> usize {
         (self.keys.size() + self.values.size() + self.keys_tmp.size() + self.values_tmp.size())
@@ -155,14 +160,15 @@ impl GpuTree {
         scene: &SceneBindings<'_>,
         clusters: u32,
     ) -> Result<(), BackendError> {
-        let pipeline = ctx.pipeline(Kernel::Bounds, scene.variant)?;
+        let layout = Layout::of(&[scene.particles, &self.boxes]);
+        let pipeline = ctx.pipeline(Kernel::Bounds, scene.variant, layout)?;
         let mut entries = vec![
             (0, scene.field.as_entire_binding()),
             (2, scene.maps.as_entire_binding()),
             (3, scene.radius_attribute.as_entire_binding()),
         ];
-        entries.extend(scene.particles.entries(10));
-        entries.extend(self.boxes.entries(18));
+        entries.extend(scene.particles.entries(10, layout));
+        entries.extend(self.boxes.entries(18, layout));
         let bg = bind(ctx, &pipeline, &entries);
         dispatch(
             encoder,
@@ -180,7 +186,8 @@ impl GpuTree {
         encoder: &mut wgpu::CommandEncoder,
         clusters: u32,
     ) -> Result<(), BackendError> {
-        let pipeline = ctx.pipeline(Kernel::FitClimb, None)?;
+        let layout = self.layout();
+        let pipeline = ctx.pipeline(Kernel::FitClimb, None, layout)?;
         let mut entries = vec![
             (0, self.params.as_entire_binding()),
             (3, self.node_parents.as_entire_binding()),
@@ -188,8 +195,8 @@ impl GpuTree {
             (5, self.keys_tmp.as_entire_binding()),
             (6, self.counters.as_entire_binding()),
         ];
-        entries.extend(self.boxes.entries(18));
-        entries.extend(self.nodes.entries(14));
+        entries.extend(self.boxes.entries(18, layout));
+        entries.extend(self.nodes.entries(14, layout));
         let bg = bind(ctx, &pipeline, &entries);
         dispatch(
             encoder,
@@ -218,7 +225,7 @@ impl GpuTree {
             encoder.clear_buffer(&self.counters, 0, None);
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             if until >= BuildStage::Keys {
-                let pipeline = ctx.pipeline(Kernel::Keys, None)?;
+                let pipeline = ctx.pipeline(Kernel::Keys, None, self.layout())?;
                 let mut entries = vec![
                     (0, self.params.as_entire_binding()),
                     (2, self.keys.as_entire_binding()),
@@ -226,7 +233,7 @@ impl GpuTree {
                     (4, self.leaf_parents.as_entire_binding()),
                     (5, self.counters.as_entire_binding()),
                 ];
-                entries.extend(self.boxes.entries(18));
+                entries.extend(self.boxes.entries(18, self.layout()));
                 let bg = bind(ctx, &pipeline, &entries);
                 dispatch(
                     &mut encoder,
@@ -248,9 +255,9 @@ impl GpuTree {
                 )?;
             }
             if until >= BuildStage::Hierarchy {
-                let pipeline = ctx.pipeline(Kernel::Hierarchy, None)?;
+                let layout = self.layout();
+                let pipeline = ctx.pipeline(Kernel::Hierarchy, None, layout)?;
                 let mut entries = vec![
-                    (0, self.params.as_entire_binding()),
                     (1, self.keys.as_entire_binding()),
                     (2, self.values.as_entire_binding()),
                     (4, self.node_parents.as_entire_binding()),
@@ -258,7 +265,12 @@ impl GpuTree {
                     (6, self.keys_tmp.as_entire_binding()),
                     (7, self.counters.as_entire_binding()),
                 ];
-                entries.extend(self.nodes.entries(14));
+                entries.extend(self.nodes.entries(14, layout));
+                // Only the part selection reads the params (the leaf count is in counters);
+                // a binding the kernel does not use is not in its layout.
+                if layout == Layout::Split {
+                    entries.push((0, self.params.as_entire_binding()));
+                }
                 let bg = bind(ctx, &pipeline, &entries);
                 // Thread 0 writes the header even for zero or one leaf.
                 dispatch(
@@ -290,12 +302,14 @@ impl GpuTree {
         ctx.scoped("lbvh refit", || -> Result<(), BackendError> {
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             encoder.clear_buffer(&self.counters, 8, Some(4));
-            let pipeline = ctx.pipeline(Kernel::FitReset, None)?;
-            let mut entries = vec![
-                (0, self.params.as_entire_binding()),
-                (6, self.counters.as_entire_binding()),
-            ];
-            entries.extend(self.nodes.entries(14));
+            let layout = self.layout();
+            let pipeline = ctx.pipeline(Kernel::FitReset, None, layout)?;
+            let mut entries = vec![(6, self.counters.as_entire_binding())];
+            entries.extend(self.nodes.entries(14, layout));
+            // As in the hierarchy pass, only the part selection reads the params.
+            if layout == Layout::Split {
+                entries.push((0, self.params.as_entire_binding()));
+            }
             let bg = bind(ctx, &pipeline, &entries);
             dispatch(
                 &mut encoder,

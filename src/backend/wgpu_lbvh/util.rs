@@ -1,6 +1,6 @@
 //! Buffer and dispatch helpers.
 
-use super::context::{GpuContext, device_error};
+use super::context::{GpuContext, Layout, device_error};
 use crate::backend::BackendError;
 
 /// Workgroups for `threads` threads of `group`-sized workgroups, as a 2D grid (x at most
@@ -181,8 +181,9 @@ pub fn submit_and_wait(
     ctx.wait()
 }
 
-/// Parts an array may be split into ([`SplitBuffer`]); the shaders bind this many buffers per
-/// split array (`shaders_glsl/wgpu/split.glsl`, `shaders_wgsl/lbvh_{keys,hierarchy,fit}.wgsl`).
+/// Parts an array may be split into ([`SplitBuffer`]); the kernels' [`Layout::Split`] variant
+/// (`SPLIT_PARTS` = 4 in `shaders_glsl/wgpu/split.glsl`, `shaders_wgsl/shared/split_boxes.wgsl`,
+/// `shaders_wgsl/lbvh_{hierarchy,fit}.wgsl`) binds this many buffers per array.
 pub const PARTS: u64 = 4;
 
 /// The largest part a split array uses: the binding limit, capped at 2 GiB so that every word
@@ -202,10 +203,12 @@ pub fn parts_needed(elems: u64, elem_bytes: u64, max_binding: u64) -> u64 {
 }
 
 /// An array that may be larger than one storage-buffer binding: up to [`PARTS`] buffers of
-/// whole elements, each at most the binding limit, bound at consecutive bindings; the shaders
-/// pick the part with a compare against the part length (`part_len`). Every part is its own
-/// buffer even when unused (16 bytes then): a placeholder shared between arrays would be bound
-/// read-only and read-write in one dispatch, which wgpu refuses.
+/// whole elements, each at most the binding limit. A kernel compiled for [`Layout::Whole`]
+/// binds the first (which then holds everything); one compiled for [`Layout::Split`] binds all
+/// [`PARTS`] at consecutive bindings and picks the part with a compare against the part length
+/// (`part_len`). Every part is its own buffer even when unused (16 bytes then), since a split
+/// kernel binds an unsplit array's placeholders too, and a placeholder shared between arrays
+/// would be bound read-only and read-write in one dispatch, which wgpu refuses.
 pub struct SplitBuffer {
     parts: Vec<wgpu::Buffer>,
     /// Bytes per part (all but the last used part are full).
@@ -270,9 +273,16 @@ impl SplitBuffer {
         self.bytes
     }
 
-    /// The [`PARTS`] bind-group entries from binding `first` on.
-    pub fn entries(&self, first: u32) -> Vec<(u32, wgpu::BindingResource<'_>)> {
-        self.parts
+    /// The bind-group entries from binding `first` on: [`PARTS`] of them for a kernel
+    /// compiled for [`Layout::Split`], the one part for [`Layout::Whole`] (which only an array
+    /// in one part may be bound to).
+    pub fn entries(&self, first: u32, layout: Layout) -> Vec<(u32, wgpu::BindingResource<'_>)> {
+        debug_assert!(layout == Layout::Split || self.used <= 1);
+        let parts = match layout {
+            Layout::Whole => 1,
+            Layout::Split => self.parts.len(),
+        };
+        self.parts[..parts]
             .iter()
             .zip(first..)
             .map(|(b, i)| (i, b.as_entire_binding()))
