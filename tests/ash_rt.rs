@@ -879,3 +879,78 @@ fn a_step_larger_than_one_binding_is_not_refused() {
     );
     assert_no_validation_messages();
 }
+
+/// An image whose accumulation is larger than one storage-buffer binding (a 4K frame's f32
+/// RGBA sums pass lavapipe's 128 MiB) renders on both traversals: the render kernels reach the
+/// accumulation by device address. The accumulation is poisoned before the first frame, so an
+/// unwritten pixel would show as NaN; the data covers a small part of the view (the test stays
+/// quick), the rest must be exactly the background.
+#[test]
+fn an_image_larger_than_one_binding_is_not_refused() {
+    use aarbf::backend::ash_rt::Traversal;
+    use aarbf::render::{Camera, RenderSession, RenderSettings};
+    let Some(_) = backend() else { return };
+    let range = ash_rt::context::shared()
+        .unwrap()
+        .info
+        .max_storage_buffer_range;
+    let width = 4096u32;
+    // One row more than a binding holds, at most 2049 rows (real GPUs bind 4 GiB).
+    let height = ((range / 16 / u64::from(width)) as u32 + 1).min(2049);
+    let over = u64::from(width) * u64::from(height) * 16 > range;
+    eprintln!(
+        "{width} x {height}: {} MiB of accumulation, binding limit {} MiB{}",
+        (u64::from(width) * u64::from(height) * 16) >> 20,
+        range >> 20,
+        if over {
+            ""
+        } else {
+            " (no overflow tested on this device)"
+        }
+    );
+    let step = random_step(1300, 8);
+    let series = aarbf::scene::TimeSeries::from_steps(vec![step]);
+    let field = FieldSettings::new(Some("s"), 0.2);
+    let centre = series.bounds().center();
+    let settings = RenderSettings {
+        width,
+        height,
+        seed: 9,
+        // The data (a 2-unit cube) from 40 units away: about 1% of the pixels.
+        camera: Some(Camera {
+            eye: centre + DVec3::new(0.0, 0.0, 40.0),
+            at: centre,
+            up: DVec3::Y,
+            fovy: 30.0,
+        }),
+        ..RenderSettings::default()
+    };
+    for traversal in [Traversal::RtPipeline, Traversal::Lbvh] {
+        let mut b = backend().unwrap();
+        b.set_traversal(traversal);
+        let mut session = RenderSession::new(Box::new(b), &series);
+        session
+            .show(&series, 0, &field, ClusterSize::new(4).unwrap())
+            .unwrap();
+        let image = session.render(&settings, 1).unwrap();
+        assert_eq!((image.width, image.height), (width, height));
+        assert!(
+            image.pixels.iter().flatten().all(|v| v.is_finite()),
+            "{traversal:?}: every pixel written, none NaN"
+        );
+        let shown = image.pixels.iter().filter(|p| p[3] > 0.0).count();
+        assert!(
+            shown > 10_000 && shown < image.pixels.len() / 10,
+            "{traversal:?}: the data covers {shown} pixels"
+        );
+        let bg = settings.background;
+        for p in [&image.pixels[0], image.pixels.last().unwrap()] {
+            assert_eq!(
+                [p[0], p[1], p[2], p[3]],
+                [bg[0] as f32, bg[1] as f32, bg[2] as f32, 0.0],
+                "{traversal:?}: a corner is the background"
+            );
+        }
+    }
+    assert_no_validation_messages();
+}

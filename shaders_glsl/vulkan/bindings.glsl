@@ -3,13 +3,14 @@
 // matching layout. Including this file also includes the shared parameter, map, noise and RBF
 // code in the order their headers ask for.
 //
-// Binding 0 (the TLAS) is declared by the ray-generation shaders only, and bindings 6..11 by
+// Binding 0 (the TLAS) is declared by the ray-generation shaders only, and bindings 7..11 by
 // the kernels that use them.
 //
-// The per-particle and per-box arrays are reached by device address (push constants), not
-// through descriptors: a binding is capped at maxStorageBufferRange (128 MiB on lavapipe, 8M
-// particles), an address only by the allocation, so a step larger than one binding is still
-// one buffer and one index space. Ray tracing needs bufferDeviceAddress anyway.
+// The per-particle and per-box arrays and the image's accumulation are reached by device
+// address (push constants), not through descriptors: a binding is capped at
+// maxStorageBufferRange (128 MiB on lavapipe: 8M particles, or a 4K image's f32 RGBA sums), an
+// address only by the allocation, so a step or image larger than one binding is still one
+// buffer and one index space. Ray tracing needs bufferDeviceAddress anyway.
 
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
@@ -25,6 +26,10 @@ layout(std430, set = 0, binding = 4) readonly buffer MapTables { float map_table
 
 // Per particle, in Hilbert order: xyz local position, w the normalised attribute t.
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer ParticleArray {
+    vec4 v[];
+};
+// Per pixel: the accumulated f32 RGBA sums (the render kernels' `accum`).
+layout(buffer_reference, std430, buffer_reference_align = 16) buffer Vec4Array {
     vec4 v[];
 };
 // Per particle: the radius attribute h (read only when HAS_RADIUS_ATTRIBUTE is 1).
@@ -45,11 +50,13 @@ layout(push_constant) uniform Push {
     uvec2 particle_address;  // ParticleArray of the step
     uvec2 radius_address;    // FloatArray of radius attributes (0 when there are none)
     uvec2 boxes_address;     // the BLAS input boxes, 6 floats each (boxes.comp writes them)
-    uvec2 unused_address;
+    uvec2 accum_address;     // Vec4Array: the frame's f32 RGBA sums per pixel
 } push;
 
 // `particles[i]`, as shared/lbvh.glsl and the RT stages index it.
 #define particles (ParticleArray(push.particle_address).v)
+// `accum[i]`, pixel i's sums, as the render kernels index them.
+#define accum (Vec4Array(push.accum_address).v)
 
 float radius_attribute(uint particle) {
     return FloatArray(push.radius_address).v[particle];

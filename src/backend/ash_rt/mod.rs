@@ -209,7 +209,7 @@ impl AshBackend {
             radius: addressed(&ctx, "radius attribute", 16)?,
             tables: storage(&ctx, "map tables", (6 * TABLE_SIZE * 4) as u64)?,
             stbn: storage(&ctx, "blue-noise mask", (words.len() * 4) as u64)?,
-            accum: storage(&ctx, "accumulation", 16)?,
+            accum: addressed(&ctx, "accumulation", 16)?,
             query_points: storage(&ctx, "query points", (QUERY_BATCH * 16) as u64)?,
             query_results: storage(&ctx, "query results", (QUERY_BATCH * 16) as u64)?,
             boxes: boxes_buffer(&ctx, 1)?,
@@ -349,7 +349,6 @@ impl AshBackend {
             (binding::PARAMS, &b.params),
             (binding::TABLES, &b.tables),
             (binding::STBN, &b.stbn),
-            (binding::ACCUM, &b.accum),
             (binding::QUERY_POINTS, &b.query_points),
             (binding::QUERY_RESULTS, &b.query_results),
             (binding::LBVH_NODES, &b.lbvh_nodes),
@@ -528,6 +527,7 @@ impl AshBackend {
             particle_address: self.buffers.points.address,
             radius_address: self.buffers.radius.address,
             boxes_address: self.buffers.boxes.address,
+            accum_address: self.buffers.accum.address,
             ..push
         };
         let device = &self.ctx.device;
@@ -983,21 +983,23 @@ impl Backend for AshBackend {
                 ),
             ));
         }
-        let range = self.ctx.info.max_storage_buffer_range;
-        if invocations * 16 > range {
+        // The kernels reach the accumulation by device address, so only the allocation limit
+        // applies (not maxStorageBufferRange, which a 4K image outgrows on lavapipe).
+        let limit = self.ctx.info.max_allocation;
+        if invocations * 16 > limit {
             return Err(device_error(
                 "rendering",
                 format!(
-                    "a {w} x {h} accumulation buffer ({} MiB) exceeds this device's storage-buffer \
-                     limit (maxStorageBufferRange = {} MiB)",
+                    "a {w} x {h} accumulation buffer ({} MiB) exceeds this device's largest \
+                     allocation (maxMemoryAllocationSize = {} MiB)",
                     (invocations * 16) >> 20,
-                    range >> 20
+                    limit >> 20
                 ),
             ));
         }
         if self.accum_size != Some((w, h)) {
             self.accum_size = None;
-            self.buffers.accum = storage(&self.ctx, "accumulation", invocations * 16)?;
+            self.buffers.accum = addressed(&self.ctx, "accumulation", invocations * 16)?;
             self.write_descriptors();
             self.accum_size = Some((w, h));
             self.frames = 0;

@@ -53,16 +53,14 @@ pub mod binding {
     pub const PARAMS: u32 = 1;
     pub const TABLES: u32 = 4;
     pub const STBN: u32 = 5;
-    pub const ACCUM: u32 = 6;
     pub const QUERY_POINTS: u32 = 7;
     pub const QUERY_RESULTS: u32 = 8;
     pub const LBVH_NODES: u32 = 10;
     pub const LBVH_BOXES: u32 = 11;
     /// Storage buffers: every binding but the TLAS and the uniform block.
-    pub const STORAGE: [u32; 7] = [
+    pub const STORAGE: [u32; 6] = [
         TABLES,
         STBN,
-        ACCUM,
         QUERY_POINTS,
         QUERY_RESULTS,
         LBVH_NODES,
@@ -81,12 +79,12 @@ pub struct Push {
     /// 1: the frame replaces the accumulation instead of adding to it.
     pub first_frame: u32,
     pub unused: u32,
-    /// Device addresses of the step's particles, radius attributes and BLAS input boxes
-    /// (filled in by the backend when it records a dispatch).
+    /// Device addresses of the step's particles, radius attributes and BLAS input boxes, and
+    /// of the frame's accumulation (filled in by the backend when it records a dispatch).
     pub particle_address: u64,
     pub radius_address: u64,
     pub boxes_address: u64,
-    pub unused_address: u64,
+    pub accum_address: u64,
 }
 
 /// The descriptor-set layout and pipeline layout every pipeline uses.
