@@ -262,7 +262,11 @@ fn bad_input_gives_clear_errors() {
         args.extend_from_slice(extra);
         fails(&args)
     };
-    assert!(field(&[]).contains("--attribute is required"));
+    let e = field(&[]);
+    assert!(
+        e.contains("--attribute is required") && e.contains("(the data has: attribute)"),
+        "{e}"
+    );
     let e = field(&["--attribute", "velocity"]);
     assert!(
         e.contains("attribute 'velocity' not found") && e.contains("'attribute'"),

@@ -41,17 +41,12 @@ pub struct FieldArgs {
 pub fn run(args: FieldArgs) -> anyhow::Result<()> {
     crate::io::output::check_writable(&args.out, args.force)?;
     let resolved = resolve(&args.data, &args.field)?;
-    anyhow::ensure!(
-        resolved.field.attribute.is_some(),
-        "--attribute is required: the field carries an attribute (the data has: {})",
-        resolved
-            .series
-            .attributes()
-            .iter()
-            .map(|a| a.name.as_str())
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
+    if resolved.field.attribute.is_none() {
+        anyhow::bail!(
+            "--attribute is required: the field carries an attribute (the data has: {})",
+            resolved.series.attributes_in_data()?.join(", ")
+        );
+    }
     let queries = npy::read_matrix(At::new(&args.queries, None))?;
     anyhow::ensure!(
         queries.cols == 3,

@@ -142,6 +142,24 @@ impl TimeSeries {
         &self.attributes
     }
 
+    /// Every attribute the data holds, including those this series did not select (for
+    /// errors that tell the user what to choose from): read from the first step's file.
+    pub fn attributes_in_data(&self) -> Result<Vec<String>, DataError> {
+        let names = |step: &Step| {
+            step.attribute_names()
+                .iter()
+                .map(|n| n.to_string())
+                .collect()
+        };
+        match &self.source {
+            Source::Files { steps, .. } => match steps.first() {
+                Some(r) => Ok(names(&io::read_step(r, &AttributeSelection::All)?)),
+                None => Ok(Vec::new()),
+            },
+            Source::Memory(steps) => Ok(steps.first().map(|s| names(s)).unwrap_or_default()),
+        }
+    }
+
     pub fn attribute(&self, name: &str) -> Option<&AttributeInfo> {
         self.attributes.iter().find(|a| a.name == name)
     }
