@@ -116,6 +116,8 @@ pub struct DeviceInfo {
     /// The largest single allocation (maxMemoryAllocationSize): what bounds the particle and
     /// box buffers, which shaders reach by device address rather than through a binding.
     pub max_allocation: u64,
+    /// The size of the largest device-local memory heap: what an out-of-memory error names.
+    pub device_local_heap: u64,
     pub max_workgroup_count: [u32; 3],
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period: Option<f64>,
@@ -481,6 +483,14 @@ impl Context {
         // SAFETY: as above.
         let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
         let bits = families[family as usize].timestamp_valid_bits;
+        // SAFETY: as above.
+        let memory = unsafe { instance.get_physical_device_memory_properties(pd) };
+        let device_local_heap = memory.memory_heaps[..memory.memory_heap_count as usize]
+            .iter()
+            .filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
+            .map(|h| h.size)
+            .max()
+            .unwrap_or(0);
         let driver_name = driver
             .driver_info_as_c_str()
             .map(|n| n.to_string_lossy().into_owned())
@@ -499,6 +509,7 @@ impl Context {
             max_primitive_count: accel.max_primitive_count,
             max_storage_buffer_range: u64::from(p.limits.max_storage_buffer_range),
             max_allocation: maintenance3.max_memory_allocation_size,
+            device_local_heap,
             max_workgroup_count: p.limits.max_compute_work_group_count,
             timestamp_period: (bits > 0).then_some(f64::from(p.limits.timestamp_period)),
             timestamp_mask: if bits >= 64 {

@@ -26,14 +26,39 @@ pub struct Buffer {
     name: String,
 }
 
-fn allocation_error(name: &str, size: u64, e: gpu_allocator::AllocationError) -> BackendError {
+fn allocation_error(
+    ctx: &Context,
+    name: &str,
+    size: u64,
+    e: gpu_allocator::AllocationError,
+) -> BackendError {
     match e {
-        gpu_allocator::AllocationError::OutOfMemory => device_error(
-            &format!("allocating {} ({:.1} MiB)", name, size as f64 / 1048576.0),
-            "out of device memory (try fewer particles or a smaller image)",
-        ),
+        gpu_allocator::AllocationError::OutOfMemory => {
+            let held = ctx
+                .allocator()
+                .as_ref()
+                .map_or(0, |a| a.generate_report().total_capacity_bytes);
+            device_error(
+                &format!("allocating {name}"),
+                out_of_memory(size, ctx.info.device_local_heap, held),
+            )
+        }
         e => device_error(&format!("allocating {name}"), e),
     }
+}
+
+/// What an out-of-memory error says: the need, the device's memory and what this process
+/// already holds of it, and what to change.
+fn out_of_memory(size: u64, heap: u64, held: u64) -> String {
+    let mib = |b: u64| b as f64 / 1048576.0;
+    format!(
+        "out of device memory: {:.1} MiB needed, the device-local heap is {:.1} MiB and this \
+         process holds {:.1} MiB of device memory already (try fewer particles, a larger \
+         cluster size or a smaller image)",
+        mib(size),
+        mib(heap),
+        mib(held)
+    )
 }
 
 impl Buffer {
@@ -76,7 +101,7 @@ impl Buffer {
             Err(e) => {
                 // SAFETY: unused, unbound buffer.
                 unsafe { device.destroy_buffer(raw, None) };
-                return Err(allocation_error(name, size, e));
+                return Err(allocation_error(ctx, name, size, e));
             }
         };
         let mut buffer = Buffer {
@@ -405,4 +430,20 @@ pub fn barrier(
             &[],
         )
     };
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn out_of_memory_names_the_need_the_limit_and_the_remedy() {
+        let m = super::out_of_memory(3 << 30, 8 << 30, 6 << 30);
+        for part in [
+            "3072.0 MiB needed",
+            "device-local heap is 8192.0 MiB",
+            "holds 6144.0 MiB",
+            "a larger cluster size",
+        ] {
+            assert!(m.contains(part), "{m:?} lacks {part:?}");
+        }
+    }
 }
