@@ -50,7 +50,9 @@ fn field_and_render_run_on_wgpu_and_agree_with_cpu() {
     }
     let devices = ok(&["info", "--devices"]);
     assert!(
-        devices.contains("adapter 0:") && devices.contains("features"),
+        devices.contains("adapter 0:")
+            && devices.contains("storage buffers per stage")
+            && devices.contains("features"),
         "{devices}"
     );
 

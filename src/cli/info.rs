@@ -59,8 +59,10 @@ pub fn devices() -> String {
         );
         let _ = writeln!(
             out,
-            "  limits: storage binding {}, buffer {}, workgroup storage {} B, invocations {}",
+            "  limits: storage binding {}, {} storage buffers per stage, buffer {}, workgroup \
+             storage {} B, invocations {}",
             mib(a.limits.max_storage_buffer_binding_size as usize),
+            a.limits.max_storage_buffers_per_shader_stage,
             mib(a.limits.max_buffer_size as usize),
             a.limits.max_compute_workgroup_storage_size,
             a.limits.max_compute_invocations_per_workgroup
