@@ -37,7 +37,9 @@ fn fail(message: String) -> ! {
     std::process::exit(1);
 }
 
-fn validate(module: &naga::Module, path: &Path, source: &str) {
+/// Validates `module` (the `SPLIT_PARTS` = `parts` variant of `path`), and holds its one-part
+/// variant to WebGPU's storage-buffer limit.
+fn validate(module: &naga::Module, path: &Path, source: &str, parts: u32) {
     let mut validator = naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
         naga::valid::Capabilities::all(),
@@ -49,18 +51,17 @@ fn validate(module: &naga::Module, path: &Path, source: &str) {
             e.emit_to_string(source)
         ));
     }
+    if parts == 1 {
+        check_storage_buffers(module, path);
+    }
 }
 
 /// WebGPU's default `maxStorageBuffersPerShaderStage`, which the one-part layout keeps to.
 const WEBGPU_STORAGE_BUFFERS: usize = 8;
 
 /// Fails the build when the one-part variant of a kernel declares more storage buffers than
-/// [`WEBGPU_STORAGE_BUFFERS`] (every kernel here has one entry point per concern, so the
-/// module's count bounds each entry point's).
-fn check_storage_buffers(module: &naga::Module, path: &Path, parts: u32) {
-    if parts > 1 {
-        return;
-    }
+/// [`WEBGPU_STORAGE_BUFFERS`] (the module's count bounds each entry point's).
+fn check_storage_buffers(module: &naga::Module, path: &Path) {
     let count = module
         .global_variables
         .iter()
@@ -101,8 +102,7 @@ fn main() {
                     e.emit_to_string(&source)
                 ))
             });
-            validate(&module, &path, &source);
-            check_storage_buffers(&module, &path, parts);
+            validate(&module, &path, &source, parts);
         }
     }
     // WGSL has no includes either: `#include "shared/x.wgsl"` lines name files under
@@ -125,8 +125,7 @@ fn main() {
                     e.emit_to_string(&source)
                 ))
             });
-            validate(&module, &path, &source);
-            check_storage_buffers(&module, &path, parts);
+            validate(&module, &path, &source, parts);
         }
     }
 

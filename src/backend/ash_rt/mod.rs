@@ -999,8 +999,8 @@ impl Backend for AshBackend {
         }
         if self.accum_size != Some((w, h)) {
             self.accum_size = None;
+            // Reached through the push constants, not a descriptor: nothing to rewrite.
             self.buffers.accum = addressed(&self.ctx, "accumulation", invocations * 16)?;
-            self.write_descriptors();
             self.accum_size = Some((w, h));
             self.frames = 0;
         }

@@ -36,7 +36,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-pub use context::{AdapterSummary, GpuContext, Kernel, Layout, adapters};
+pub use context::{AdapterSummary, GpuContext, Kernel, adapters};
 pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::GpuStepData;
@@ -51,7 +51,7 @@ use crate::render::settings::{ColourMode, Integrator, NoiseKind};
 use crate::render::tables::TABLE_SIZE;
 use crate::scene::{Bounds, Step};
 use crate::shaders::{GpuFrame, SpecConstants, pack_map_tables};
-use context::device_error;
+use context::{Layout, device_error};
 use tree::{GpuTree, SceneBindings};
 use util::{PARTS, SplitBuffer, bind, dispatch, grid, parts_needed, storage, uniform, write};
 

@@ -225,7 +225,8 @@ impl GpuTree {
             encoder.clear_buffer(&self.counters, 0, None);
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             if until >= BuildStage::Keys {
-                let pipeline = ctx.pipeline(Kernel::Keys, None, self.layout())?;
+                let layout = self.layout();
+                let pipeline = ctx.pipeline(Kernel::Keys, None, layout)?;
                 let mut entries = vec![
                     (0, self.params.as_entire_binding()),
                     (2, self.keys.as_entire_binding()),
@@ -233,7 +234,7 @@ impl GpuTree {
                     (4, self.leaf_parents.as_entire_binding()),
                     (5, self.counters.as_entire_binding()),
                 ];
-                entries.extend(self.boxes.entries(18, self.layout()));
+                entries.extend(self.boxes.entries(18, layout));
                 let bg = bind(ctx, &pipeline, &entries);
                 dispatch(
                     &mut encoder,
