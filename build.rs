@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-include!("src/shaders/include.rs");
+include!("src/backend/shaders/include.rs");
 
 fn shared(name: &str) -> Option<String> {
     std::fs::read_to_string(Path::new("shaders_glsl").join(name)).ok()
@@ -79,7 +79,7 @@ fn check_storage_buffers(module: &naga::Module, path: &Path) {
 fn main() {
     println!("cargo::rerun-if-changed=shaders_glsl");
     println!("cargo::rerun-if-changed=shaders_wgsl");
-    println!("cargo::rerun-if-changed=src/shaders/include.rs");
+    println!("cargo::rerun-if-changed=src/backend/shaders/include.rs");
 
     // Every wgpu kernel in both storage layouts (SPLIT_PARTS = 1 and 4; see
     // shaders_glsl/wgpu/split.glsl). The one-part layout must stay within WebGPU's default of
@@ -106,7 +106,7 @@ fn main() {
         }
     }
     // WGSL has no includes either: `#include "shared/x.wgsl"` lines name files under
-    // shaders_wgsl/shared/, resolved by the same code (src/shaders/include.rs), and the
+    // shaders_wgsl/shared/, resolved by the same code (src/backend/shaders/include.rs), and the
     // SPLIT_PARTS blocks are selected by it too.
     let shared_wgsl =
         |name: &str| std::fs::read_to_string(Path::new("shaders_wgsl").join(name)).ok();

@@ -18,9 +18,11 @@ use aarbf::accel::ClusterSize;
 use aarbf::backend::ash_rt::{AshBackend, Traversal};
 use aarbf::backend::{Backend, StepInput};
 use aarbf::field::FieldSettings;
-use aarbf::render::{Integrator, RenderSession, RenderSettings};
+use aarbf::render::{RenderSession, RenderSettings};
+use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
-use aarbf::scene::{Attribute, Step, TimeSeries};
+use aarbf::values::Integrator;
+use aarbf::values::{Attribute, Step};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 
@@ -117,7 +119,7 @@ fn structures(b: &mut AshBackend, sizes: &[usize]) {
 }
 
 /// `m` random points in the unit cube, Hilbert-sorted (as `aarbf field` sorts its queries).
-fn query_points(m: usize, bounds: aarbf::scene::Bounds) -> Vec<DVec3> {
+fn query_points(m: usize, bounds: aarbf::values::Bounds) -> Vec<DVec3> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
     let (lo, hi) = (bounds.min.as_dvec3(), bounds.max.as_dvec3());
     let points: Vec<DVec3> = (0..m)

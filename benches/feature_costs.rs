@@ -19,10 +19,12 @@ use std::time::Duration;
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, Backend, BackendKind, StepInput};
 use aarbf::field::{Classification, FieldSettings};
-use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::render::{RenderSession, RenderSettings};
+use aarbf::scene::TimeSeries;
 use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::scene::synth::Generator;
-use aarbf::scene::{Attribute, Bounds, Step, TimeSeries};
+use aarbf::values::{Attribute, Bounds, Step};
+use aarbf::values::{Integrator, NoiseKind};
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 

@@ -10,9 +10,10 @@
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind};
 use aarbf::field::FieldSettings;
-use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
+use aarbf::values::{Integrator, NoiseKind};
 
 fn main() {
     let args: Vec<u32> = std::env::args()

@@ -13,9 +13,11 @@ use aarbf::backend::cpu::CpuBackend;
 use aarbf::backend::wgpu_lbvh::WgpuBackend;
 use aarbf::backend::{Backend, StepInput};
 use aarbf::field::FieldSettings;
-use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::render::{RenderSession, RenderSettings};
+use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
-use aarbf::scene::{Attribute, Bounds, Step, TimeSeries};
+use aarbf::values::{Attribute, Bounds, Step};
+use aarbf::values::{Integrator, NoiseKind};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 

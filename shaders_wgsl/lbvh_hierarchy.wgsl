@@ -3,7 +3,7 @@
 // sorted keys of non-empty clusters. Duplicate keys are told apart by their sorted index (the
 // key extended by the index), so every node's range and split are unique. Each thread writes
 // its node's children, sets its bounds words (and its height word) to SENTINEL for the
-// bottom-up pass, and links its children's parents. Node layout: src/accel/lbvh.rs (node 0 a
+// bottom-up pass, and links its children's parents. Node layout: src/backend/shaders/cpu/lbvh.rs (node 0 a
 // header holding the root pointer; Karras' node i is node i + 1). Twin: Lbvh::hierarchy.
 
 const LEAF: u32 = 0x80000000u;

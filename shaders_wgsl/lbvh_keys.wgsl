@@ -1,7 +1,7 @@
 // LBVH build, stage 2: a 30-bit Morton key per cluster from its box centre on a 1024^3 grid
 // over the series' bounds (EMPTY_KEY for an empty box, so empty clusters sort last), the
 // identity permutation the sort carries along, and the count of non-empty clusters (the
-// tree's leaves). Twin: aarbf::accel::lbvh::morton_key.
+// tree's leaves). Twin: backend/shaders/cpu/lbvh_keys.rs.
 
 #include "shared/tree_params.wgsl"
 

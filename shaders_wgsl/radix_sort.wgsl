@@ -1,7 +1,7 @@
 // A stable LSD radix sort of (key, value) u32 pairs: 4-bit digits, one pass per digit, each
 // pass three dispatches (count, scan, scatter). Portable: workgroup memory and barriers only,
 // no subgroup operations, so it runs on lavapipe and every wgpu backend. Twin: a stable
-// sort_by_key (aarbf::accel::lbvh::sort_pairs).
+// sort_by_key (backend/shaders/cpu/radix_sort.rs).
 //
 // A tile of TILE = THREADS * ITEMS keys belongs to one workgroup; thread t owns the ITEMS
 // consecutive keys tile * TILE + t * ITEMS ... and walks them in order, so ranking within a

@@ -2,9 +2,18 @@
 //!
 //! The method is Morrical et al., "Attribute-Aware RBFs: Interactive Visualization of Time
 //! Series Particle Volumes Using RT Core Range Queries" (IEEE VIS 2023). The modules follow the
-//! data flow: [`io`] (readers) → [`scene`] (time series, maps, scene file) → [`accel`]
-//! (Hilbert keys, clusters, CPU BVH) → [`field`] (the f64 reference field every backend is
-//! tested against) → backends and rendering → [`cli`].
+//! data flow, each using only those before it (`tests/architecture.rs` holds the code to it):
+//!
+//! - [`values`] (plain value types: bounds, steps, frames, images, map tables), [`progress`]
+//!   and [`noise`] (blue and white noise) at the bottom;
+//! - [`io`]: readers and writers;
+//! - [`scene`]: time series, maps, cameras, synthetic data;
+//! - [`accel`]: Hilbert keys, clusters, the CPU BVH;
+//! - [`field`]: the f64 reference field every backend is tested against;
+//! - [`backend`]: the `Backend` trait, its CPU, wgpu and ash implementations, and the shaders
+//!   with their CPU twins;
+//! - [`render`]: the rendering session (what each change costs, the automatic settings);
+//! - [`cli`] and [`scene_file`] (which composes all of the above) at the top.
 
 pub mod accel;
 pub mod backend;
@@ -15,4 +24,5 @@ pub mod noise;
 pub mod progress;
 pub mod render;
 pub mod scene;
-pub mod shaders;
+pub mod scene_file;
+pub mod values;

@@ -12,9 +12,9 @@ use aarbf::accel::{ClusterBoxes, ClusterSize};
 use aarbf::backend::ash_rt::{self, AshBackend};
 use aarbf::backend::{Backend, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
-use aarbf::render::image::Image;
 use aarbf::scene::maps::{DensityMap, RadiusMap};
-use aarbf::scene::{Attribute, Bounds, Step};
+use aarbf::values::Image;
+use aarbf::values::{Attribute, Bounds, Step};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 
@@ -401,9 +401,9 @@ fn dambreak() -> aarbf::scene::TimeSeries {
 }
 
 /// A view close to the fluid, so most pixels see it.
-fn close_view(series: &aarbf::scene::TimeSeries) -> aarbf::render::Camera {
+fn close_view(series: &aarbf::scene::TimeSeries) -> aarbf::scene::Camera {
     let b = series.bounds();
-    aarbf::render::Camera {
+    aarbf::scene::Camera {
         eye: DVec3::new(0.9, 0.45, 1.1),
         at: DVec3::new(0.55, 0.12, 0.5 * f64::from(b.max.z)),
         up: DVec3::Y,
@@ -434,11 +434,8 @@ fn write_failure(
 ) -> String {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("ash-images");
     std::fs::create_dir_all(&dir).unwrap();
-    actual
-        .save_png(&dir.join(format!("{name}-actual.png")), true)
-        .unwrap();
-    expected
-        .save_png(&dir.join(format!("{name}-expected.png")), true)
+    aarbf::io::output::write_png(&dir.join(format!("{name}-actual.png")), actual, true).unwrap();
+    aarbf::io::output::write_png(&dir.join(format!("{name}-expected.png")), expected, true)
         .unwrap();
     let diff = error.apply_color_lut(&nv_flip::magma_lut());
     image::RgbImage::from_raw(diff.width(), diff.height(), diff.to_vec())
@@ -472,7 +469,8 @@ fn assert_images_close(name: &str, expected: &Image, actual: &Image, max_rmse: f
 #[test]
 fn renders_match_the_cpu_backend() {
     use aarbf::backend::{self, BackendKind};
-    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    use aarbf::render::{RenderSession, RenderSettings};
+    use aarbf::values::{Integrator, NoiseKind};
     if backend().is_none() {
         return;
     }
@@ -561,7 +559,8 @@ fn renders_match_the_cpu_backend() {
 /// queries like the same step loaded alone.
 #[test]
 fn a_smaller_step_renders_like_that_step_alone() {
-    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    use aarbf::render::{RenderSession, RenderSettings};
+    use aarbf::values::{Integrator, NoiseKind};
     let (Some(mut shared), Some(mut alone)) = (backend(), backend()) else {
         return;
     };
@@ -635,7 +634,8 @@ fn a_smaller_step_renders_like_that_step_alone() {
 #[test]
 fn lbvh_traversal_on_the_same_device_matches_the_rt_pipeline() {
     use aarbf::backend::ash_rt::Traversal;
-    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    use aarbf::render::{RenderSession, RenderSettings};
+    use aarbf::values::{Integrator, NoiseKind};
     let Some(mut b) = backend() else { return };
     let step = random_step(1300, 6);
     let points = queries(&step, 7);
@@ -741,7 +741,8 @@ fn lbvh_traversal_on_the_same_device_matches_the_rt_pipeline() {
 #[test]
 fn renders_match_the_wgpu_backend() {
     use aarbf::backend::{self, BackendKind};
-    use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+    use aarbf::render::{RenderSession, RenderSettings};
+    use aarbf::values::{Integrator, NoiseKind};
     if backend().is_none() {
         return;
     }
@@ -888,7 +889,8 @@ fn a_step_larger_than_one_binding_is_not_refused() {
 #[test]
 fn an_image_larger_than_one_binding_is_not_refused() {
     use aarbf::backend::ash_rt::Traversal;
-    use aarbf::render::{Camera, RenderSession, RenderSettings};
+    use aarbf::render::{RenderSession, RenderSettings};
+    use aarbf::scene::Camera;
     let Some(_) = backend() else { return };
     let range = ash_rt::context::shared()
         .unwrap()

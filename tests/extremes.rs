@@ -5,9 +5,11 @@
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
-use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::render::{RenderSession, RenderSettings};
+use aarbf::scene::TimeSeries;
 use aarbf::scene::maps::{DensityMap, RadiusMap};
-use aarbf::scene::{Attribute, Step, TimeSeries};
+use aarbf::values::{Attribute, Step};
+use aarbf::values::{Integrator, NoiseKind};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 

@@ -2,8 +2,9 @@
 
 use aarbf::accel::ClusterSize;
 use aarbf::field::{Classification, FieldSettings, ReferenceField, Sample};
-use aarbf::scene::maps::{ColorMap, DensityMap, RadiusMap, color_space::srgb_to_linear};
-use aarbf::scene::{Attribute, Bounds, Step};
+use aarbf::scene::maps::{ColorMap, DensityMap, RadiusMap};
+use aarbf::values::color_space::srgb_to_linear;
+use aarbf::values::{Attribute, Bounds, Step};
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 

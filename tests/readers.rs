@@ -5,7 +5,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use aarbf::io::{self, AttributeSelection, Format, StepRef};
-use aarbf::scene::{Attribute, OpenOptions, Step, TimeSeries};
+use aarbf::scene::{OpenOptions, TimeSeries};
+use aarbf::values::{Attribute, Step};
 use base64::Engine;
 use glam::Vec3;
 

@@ -3,9 +3,10 @@
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind};
 use aarbf::field::{Classification, FieldSettings};
-use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
+use aarbf::values::{Integrator, NoiseKind};
 
 fn demo() -> TimeSeries {
     TimeSeries::from_steps(Generator::DambreakDemo.generate(3000, 8, 1))
@@ -87,9 +88,9 @@ fn changes_cost_only_what_they_need_and_restart_accumulation() {
 }
 
 /// A view close to the fluid, so most pixels see it.
-fn close_view(series: &TimeSeries) -> aarbf::render::Camera {
+fn close_view(series: &TimeSeries) -> aarbf::scene::Camera {
     let b = series.bounds();
-    aarbf::render::Camera {
+    aarbf::scene::Camera {
         eye: glam::DVec3::new(0.9, 0.45, 1.1),
         at: glam::DVec3::new(0.55, 0.12, 0.5 * f64::from(b.max.z)),
         up: glam::DVec3::Y,

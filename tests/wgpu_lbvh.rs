@@ -1,4 +1,4 @@
-//! The wgpu LBVH backend, stage by stage against its CPU twins (`aarbf::accel::lbvh`), and as a
+//! The wgpu LBVH backend, stage by stage against its CPU twins (`aarbf::backend::shaders::cpu`), and as a
 //! whole against the f64 reference field and the CPU backend's images.
 //!
 //! Every GPU output is poisoned (0xFF bytes) before the run that writes it, inputs are fresh
@@ -21,12 +21,16 @@
 use std::sync::Arc;
 
 use aarbf::accel::ClusterSize;
-use aarbf::accel::lbvh::{self, EMPTY_KEY, GpuBox, Lbvh, NONE, RadiusRule, SENTINEL, box_is_empty};
+use aarbf::backend::shaders::cpu::lbvh::{
+    self, EMPTY_KEY, GpuBox, Lbvh, NONE, SENTINEL, box_is_empty,
+};
+use aarbf::backend::shaders::cpu::rbf::RadiusRule;
+use aarbf::backend::shaders::cpu::{lbvh_bounds, lbvh_keys, radix_sort};
 use aarbf::backend::wgpu_lbvh::{BuildStage, GpuContext, WgpuBackend, sort};
 use aarbf::backend::{Backend, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
 use aarbf::scene::maps::{DensityMap, RadiusMap};
-use aarbf::scene::{Attribute, Bounds, Step};
+use aarbf::values::{Attribute, Bounds, Step};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -129,7 +133,7 @@ fn twin_boxes(backend: &WgpuBackend) -> Vec<GpuBox> {
         radius_table: d.radius_map_varies.then_some(&d.radius_table[..]),
         radius_attribute: d.radius_attribute.as_deref(),
     };
-    lbvh::cluster_boxes(&d.points, d.cluster.get(), &rule)
+    lbvh_bounds::cluster_boxes(&d.points, d.cluster.get(), &rule)
 }
 
 fn assert_boxes_close(gpu: &[GpuBox], cpu: &[GpuBox], radius: f32, what: &str) {
@@ -186,7 +190,7 @@ fn radix_sort_equals_a_stable_sort_by_key() {
                 })
                 .collect();
             let got = sort::sort_pairs(&ctx, &keys).unwrap();
-            let expected = lbvh::sort_pairs(&keys);
+            let expected = radix_sort::sort_pairs(&keys);
             assert!(
                 got == expected,
                 "n {n}, keys kind {kind}: the GPU sort differs from sort_by_key"
@@ -233,7 +237,7 @@ fn check_build_stages(
     b.build_until(BuildStage::Keys).unwrap();
     let s = b.snapshot().unwrap();
     assert_eq!(s.boxes, boxes, "{what}: boxes are deterministic");
-    let keys = lbvh::morton_keys(&boxes, &grid);
+    let keys = lbvh_keys::morton_keys(&boxes, &grid);
     assert_eq!(s.keys, keys, "{what}: keys");
     assert_eq!(
         s.values,
@@ -248,7 +252,7 @@ fn check_build_stages(
     b.poison_tree().unwrap();
     b.build_until(BuildStage::Sort).unwrap();
     let s = b.snapshot().unwrap();
-    let (sorted_keys, sorted_values) = lbvh::sort_pairs(&keys);
+    let (sorted_keys, sorted_values) = radix_sort::sort_pairs(&keys);
     assert!(s.keys == sorted_keys, "{what}: sorted keys");
     assert!(s.values == sorted_values, "{what}: sorted values");
 
@@ -427,7 +431,9 @@ fn refit_equals_a_fresh_build() {
             "{what}: root bounds"
         );
         let grid = b.key_grid().unwrap();
-        if lbvh::morton_keys(&built.boxes, &grid) == lbvh::morton_keys(&refit.boxes, &grid) {
+        if lbvh_keys::morton_keys(&built.boxes, &grid)
+            == lbvh_keys::morton_keys(&refit.boxes, &grid)
+        {
             assert_same_tree(&refit.lbvh, &fresh.lbvh, &format!("{what}: refit vs build"));
         }
 
@@ -480,11 +486,11 @@ fn check_queries(
     let w_max = p.weights.iter().fold(0.0f64, |m, w| m.max(*w));
     // The colour table's interpolation error (pre-classification's theta is C(t)).
     let colour_error = if f.classification == Classification::Pre {
-        let table = aarbf::render::tables::bake_colour(&f.color_map);
+        let table = f.color_map.bake();
         (0..=4000)
             .map(|i| {
                 let t = f64::from(i) / 4000.0;
-                let a = aarbf::render::tables::lookup_colour(&table, t);
+                let a = aarbf::values::tables::lookup_colour(&table, t);
                 let e = f.color_map.linear_rgb(t);
                 (0..3).map(|c| (a[c] - e[c]).abs()).fold(0.0, f64::max)
             })
@@ -700,9 +706,9 @@ fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
         let mut field = f.clone();
         let mut out = Vec::new();
         for (radius, integrator) in [
-            (0.06, aarbf::render::Integrator::Ea),
+            (0.06, aarbf::values::Integrator::Ea),
             // Only the radius changes: the refit path.
-            (0.08, aarbf::render::Integrator::Marching),
+            (0.08, aarbf::values::Integrator::Marching),
         ] {
             field.radius = radius;
             s.show(&series, 0, &field, ClusterSize::new(k).unwrap())

@@ -14,10 +14,11 @@ use aarbf::accel::ClusterSize;
 use aarbf::backend::wgpu_lbvh::{GpuContext, WgpuBackend};
 use aarbf::backend::{self, BackendKind};
 use aarbf::field::{Classification, FieldSettings};
-use aarbf::render::image::Image;
-use aarbf::render::{Integrator, NoiseKind, RenderSession, RenderSettings};
+use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
+use aarbf::values::Image;
+use aarbf::values::{Integrator, NoiseKind};
 
 mod common;
 use common::assert_no_driver_messages;
@@ -42,9 +43,9 @@ fn field(series: &TimeSeries) -> FieldSettings {
     FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal())
 }
 
-fn close_view(series: &TimeSeries) -> aarbf::render::Camera {
+fn close_view(series: &TimeSeries) -> aarbf::scene::Camera {
     let b = series.bounds();
-    aarbf::render::Camera {
+    aarbf::scene::Camera {
         eye: glam::DVec3::new(0.9, 0.45, 1.1),
         at: glam::DVec3::new(0.55, 0.12, 0.5 * f64::from(b.max.z)),
         up: glam::DVec3::Y,

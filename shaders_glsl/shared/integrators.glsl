@@ -1,4 +1,4 @@
-// The integrators, per pixel: the GLSL twin of src/render/integrator.rs (read that file's
+// The integrators, per pixel: the GLSL twin of src/backend/cpu/integrators.rs (read that file's
 // documentation; the two are kept statement for statement alike, f32 here, f64 there).
 //
 // The includer defines, before this file: `Frame frame` (params.glsl, e.g. as a uniform

@@ -1,4 +1,4 @@
-// The LBVH point query: the GLSL twin of Lbvh::for_each_cluster_at in src/accel/lbvh.rs (read
+// The LBVH point query: the GLSL twin of Lbvh::for_each_cluster_at in src/backend/shaders/cpu/lbvh.rs (read
 // that file's documentation for how the tree is built). Written once, used by the wgpu
 // backend's kernels and by the Vulkan backend's compute-traversal comparison.
 //

@@ -1,4 +1,4 @@
-// 1D maps baked into 256-sample tables: the GLSL twin of src/render/tables.rs.
+// 1D maps baked into 256-sample tables: the GLSL twin of src/values/tables.rs (twin of the f32 lookup: src/backend/shaders/cpu/maps.rs).
 //
 // The includer declares, before this file:
 //     layout(std430, set = S, binding = B) readonly buffer MapTables { float map_tables[]; };

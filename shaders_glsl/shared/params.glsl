@@ -1,5 +1,5 @@
-// The constants every GPU kernel reads: the GLSL twin of render::integrator::FrameParams and
-// of the field settings, laid out as src/shaders/mod.rs's `GpuFrame` / `GpuField` (std140 and
+// The constants every GPU kernel reads: the GLSL twin of values::FrameParams and
+// of the field settings, laid out as src/backend/shaders/mod.rs's `GpuFrame` / `GpuField` (std140 and
 // std430 agree on this all-vec4 layout). Positions are in local coordinates: the data's
 // coordinates minus the series' bounding-box centre, so f32 keeps its digits far from the
 // origin.

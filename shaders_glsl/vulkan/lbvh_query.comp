@@ -2,7 +2,7 @@
 // The software side of the paper's Fig. 10a on the same Vulkan device: field queries by the
 // shared LBVH stack traversal (shared/lbvh.glsl, the wgpu backend's) instead of the RT
 // pipeline, over the same particles, maps and RBF code. The tree is built on the CPU
-// (accel::lbvh, the wgpu build's twin) and uploaded.
+// (backend::shaders::cpu, the wgpu build's twin) and uploaded.
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 64) in;

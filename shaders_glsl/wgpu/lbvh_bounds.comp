@@ -5,7 +5,7 @@
 // The radius is rbf.glsl's particle_radius, the very function the query tests particles
 // with, so a box always holds the spheres the traversal looks for. (This stage is GLSL rather
 // than WGSL for that reason: one source for the radius; it needs no atomics.)
-// Twin: aarbf::accel::lbvh::cluster_boxes.
+// Twin: backend/shaders/cpu/lbvh_bounds.rs.
 
 layout(local_size_x = 64) in;
 

@@ -1,6 +1,6 @@
 #version 450
 // One frame of the shared integrators over the LBVH field, added to the accumulation (sums of
-// linear RGBA; the host divides by the frame count). Twin: render::integrator::render_pixel.
+// linear RGBA; the host divides by the frame count). Twin: backend::cpu::integrators::render_pixel.
 
 layout(local_size_x = 8, local_size_y = 8) in;
 

@@ -6,7 +6,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use crate::scene::Bounds;
+use crate::values::Bounds;
 
 /// Bits per axis of the keys we sort by.
 pub const HILBERT_BITS: u32 = 21;

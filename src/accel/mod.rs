@@ -4,7 +4,6 @@
 pub mod bvh;
 pub mod clusters;
 pub mod hilbert;
-pub mod lbvh;
 
 pub use bvh::ClusterBvh;
 pub use clusters::{ClusterBoxes, ClusterSize};

@@ -5,10 +5,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::StepInput;
+use super::shaders::GpuField;
 use crate::accel::{ClusterSize, hilbert_order};
 use crate::field::{FieldError, FieldInputs, FieldSettings, normalise};
-use crate::render::tables::{bake, bake_colour};
-use crate::shaders::GpuField;
 
 /// One step, ready to upload.
 #[derive(Clone, Debug, PartialEq)]
@@ -85,9 +84,9 @@ impl GpuStepData {
             ],
             counts: [n as u32, self.cluster.clusters_for(n) as u32, 0, 0],
         };
-        self.density_table = bake(&settings.density_map.0);
-        self.radius_table = bake(&settings.radius_map.0);
-        self.colour_table = bake_colour(&settings.color_map);
+        self.density_table = settings.density_map.0.bake();
+        self.radius_table = settings.radius_map.0.bake();
+        self.colour_table = settings.color_map.bake();
     }
 
     /// A query point in local coordinates.

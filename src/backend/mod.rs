@@ -10,6 +10,7 @@
 pub mod ash_rt;
 pub mod cpu;
 pub mod gpu_data;
+pub mod shaders;
 pub mod wgpu_lbvh;
 
 use std::fmt;
@@ -19,9 +20,7 @@ use glam::DVec3;
 
 use crate::accel::ClusterSize;
 use crate::field::{FieldError, FieldSettings};
-use crate::render::FrameParams;
-use crate::render::image::Image;
-use crate::scene::{Bounds, Step};
+use crate::values::{Bounds, FrameParams, Image, Step};
 
 /// Which backend.
 #[derive(
@@ -179,7 +178,7 @@ pub trait Backend: Send {
     /// map): no structure work.
     fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError>;
 
-    /// Phi and the Theta numerator at each point (see [`crate::render::FieldSampler`]).
+    /// Phi and the Theta numerator at each point (see [`cpu::integrators::FieldSampler`]).
     fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError>;
 
     /// Renders one frame and adds it to the accumulation (restarted by `reset`, or when the

@@ -11,7 +11,7 @@ use crate::accel::hilbert_order;
 use crate::backend::{self, BackendKind, StepInput};
 use crate::field::{Classification, finish_sums};
 use crate::io::{At, npy};
-use crate::scene::Bounds;
+use crate::values::Bounds;
 
 /// Queries per backend call (each call may be a GPU submission and readback).
 const QUERY_BATCH: usize = 1 << 18;
@@ -84,8 +84,7 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         .or_else(|| resolved.series_range())
         .or_else(|| {
             let a = step.attribute(resolved.field.attribute.as_deref()?)?;
-            crate::scene::step::value_range(&a.values)
-                .map(|(lo, hi)| (f64::from(lo), f64::from(hi)))
+            crate::values::value_range(&a.values).map(|(lo, hi)| (f64::from(lo), f64::from(hi)))
         })
         .unwrap_or((0.0, 0.0));
     let pre = resolved.field.classification == Classification::Pre;

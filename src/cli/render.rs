@@ -9,7 +9,9 @@ use glam::DVec3;
 
 use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::backend::{self, BackendKind};
-use crate::render::{Camera, Integrator, Light, NoiseKind, RenderSession, RenderSettings};
+use crate::render::{RenderSession, RenderSettings};
+use crate::scene::Camera;
+use crate::values::{Integrator, Light, NoiseKind};
 
 #[derive(Debug, Args)]
 pub struct RenderArgs {
@@ -229,7 +231,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         }
         let path = out_for(step);
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
-        image.expect("spp >= 1").save_png(&path, true)?;
+        crate::io::output::write_png(&path, &image.expect("spp >= 1"), true)?;
         let t = session.backend().timings();
         tracing::info!(
             "step {step}: {} ({}x{}, {spp} spp, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",

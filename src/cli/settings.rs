@@ -9,8 +9,8 @@ use crate::accel::ClusterSize;
 use crate::field::{Classification, FieldSettings};
 use crate::io::{AttributeSelection, Format};
 use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
-use crate::scene::scene_file::{MapSpec, RadiusSpec, SceneFile};
 use crate::scene::{OpenOptions, TimeSeries};
+use crate::scene_file::{MapSpec, RadiusSpec, SceneFile};
 
 /// Where the data comes from.
 #[derive(Debug, Clone, Args)]

@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::field::{Classification, ReferenceField, normalise};
-use crate::scene::maps::color_space::linear_to_srgb;
+use crate::values::color_space::linear_to_srgb;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Axis {

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::accel::{ClusterBoxes, ClusterBvh, ClusterSize, hilbert_order};
 use crate::scene::maps::{ColorMap, DensityMap, RadiusMap};
-use crate::scene::{Bounds, Step};
+use crate::values::{Bounds, Step};
 
 /// How attribute values become colour (method.md §2).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -106,9 +106,9 @@ pub enum Theta {
 /// needs before it prepares anything.
 pub struct FieldInputs<'a> {
     /// The attribute the field carries, if any.
-    pub attribute: Option<&'a crate::scene::Attribute>,
+    pub attribute: Option<&'a crate::values::Attribute>,
     /// The per-particle radius attribute, if any.
-    pub radius: Option<&'a crate::scene::Attribute>,
+    pub radius: Option<&'a crate::values::Attribute>,
     /// The range t is normalised over.
     pub range: (f64, f64),
 }
@@ -164,7 +164,7 @@ impl<'a> FieldInputs<'a> {
                 (lo, hi)
             }
             (None, Some(a)) => series_range.unwrap_or_else(|| {
-                crate::scene::step::value_range(&a.values)
+                crate::values::value_range(&a.values)
                     .map_or((0.0, 0.0), |(lo, hi)| (f64::from(lo), f64::from(hi)))
             }),
             (None, None) => (0.0, 0.0),

@@ -6,7 +6,7 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::{At, Columns, DataError, Problem};
-use crate::scene::{Attribute, Step};
+use crate::values::{Attribute, Step};
 
 const POSITION_NAMES: [[&str; 3]; 2] = [["x", "y", "z"], ["points:0", "points:1", "points:2"]];
 

@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 pub use error::{At, DataError, Location, Problem};
 
-use crate::scene::{Attribute, Step};
+use crate::values::{Attribute, Step};
 
 /// The particle file formats we read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]

@@ -9,7 +9,7 @@ use glam::Vec3;
 use npyz::{DType, NpyFile, Order, WriterBuilder};
 
 use super::{At, Columns, DataError, Problem, file_len};
-use crate::scene::Attribute;
+use crate::values::Attribute;
 
 /// A 2-D array in row-major order.
 #[derive(Clone, Debug, PartialEq)]

@@ -52,6 +52,19 @@ pub fn write_atomically(
     Ok(())
 }
 
+/// Writes `image` as an 8-bit sRGB PNG, atomically; an existing file only with `force`.
+pub fn write_png(
+    path: &Path,
+    image: &crate::values::Image,
+    force: bool,
+) -> Result<(), OutputError> {
+    let rgb = image.to_srgb8();
+    write_atomically(path, force, |tmp| {
+        rgb.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -9,7 +9,7 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use super::{At, Columns, DataError, Problem, file_len};
-use crate::scene::Step;
+use crate::values::Step;
 
 /// The name the format's single unnamed attribute gets.
 pub const ATTRIBUTE_NAME: &str = "attribute";

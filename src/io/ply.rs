@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::{At, Columns, DataError, Problem};
-use crate::scene::{Attribute, Step};
+use crate::values::{Attribute, Step};
 
 /// Largest header we accept: real headers are a few hundred bytes.
 const MAX_HEADER_BYTES: usize = 1 << 20;

@@ -6,7 +6,7 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::{At, Columns, DataError, Problem};
-use crate::scene::{Attribute, Step};
+use crate::values::{Attribute, Step};
 
 pub const ATTRIBUTE_NAME: &str = "w";
 

@@ -12,7 +12,7 @@ use vtkio::model::{
 };
 
 use super::{At, Columns, DataError, Problem, split_components};
-use crate::scene::{Attribute, Step};
+use crate::values::{Attribute, Step};
 
 /// Compression ratios above this are not believed: a header announcing more points than the
 /// file could hold even compressed is refused before anything is allocated.

@@ -1,16 +1,11 @@
-//! Rendering: cameras, render settings, the integrators (emission–absorption ray marching and
-//! single scattering with delta tracking or stochastic ray marching), progressive accumulation
-//! and image output. The integrators here are the CPU twin of `shaders_glsl/shared/`.
+//! Rendering: what a user chooses about an image ([`RenderSettings`]) and the session that
+//! drives a backend through a series, deciding what each change costs and resolving the
+//! automatic settings into the [`crate::values::FrameParams`] every backend renders. The
+//! integrators themselves are shader code (`shaders_glsl/shared/integrators.glsl`) with their
+//! CPU twin in [`crate::backend::cpu::integrators`].
 
-pub mod camera;
-pub mod image;
-pub mod integrator;
 pub mod session;
 pub mod settings;
-pub mod tables;
 
-pub use camera::Camera;
-pub use image::Accumulator;
-pub use integrator::{FieldSampler, FrameParams};
 pub use session::RenderSession;
-pub use settings::{ColourMode, Integrator, Light, NoiseKind, RenderSettings};
+pub use settings::RenderSettings;

@@ -6,17 +6,13 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
-use super::camera::Camera;
-use super::image::Image;
-use super::integrator::FrameParams;
-use super::settings::{ColourMode, RenderSettings};
-use super::tables::{bake, bake_colour};
+use super::settings::RenderSettings;
 use crate::accel::ClusterSize;
 use crate::backend::{Backend, BackendError, StepInput};
 use crate::field::{Classification, FieldSettings};
 use crate::io::DataError;
-use crate::render::camera::CameraError;
-use crate::scene::{Bounds, TimeSeries};
+use crate::scene::{Camera, CameraError, TimeSeries};
+use crate::values::{Bounds, ColourMode, FrameParams, Image};
 
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
@@ -288,8 +284,8 @@ impl RenderSession {
             integrator: settings.integrator,
             noise: settings.noise,
             colour,
-            optical_table: Arc::new(bake(&settings.optical_map)),
-            colour_table: Arc::new(bake_colour(&loaded.field.color_map)),
+            optical_table: Arc::new(settings.optical_map.bake()),
+            colour_table: Arc::new(loaded.field.color_map.bake()),
         })
     }
 

@@ -4,9 +4,9 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
-use super::step::{Bounds, Step, value_range};
 use crate::io::{self, AttributeSelection, DataError, Format, StepRef};
 use crate::progress;
+use crate::values::{Bounds, Step, value_range};
 
 /// How to open a series.
 #[derive(Clone, Debug)]
@@ -275,7 +275,7 @@ impl StepCache {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Attribute;
+    use crate::values::Attribute;
     use glam::Vec3;
 
     fn step(n: usize, v: f32) -> Arc<Step> {

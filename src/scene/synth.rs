@@ -10,7 +10,7 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;
 
-use super::{Attribute, Step};
+use crate::values::{Attribute, Step};
 
 /// The generators.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

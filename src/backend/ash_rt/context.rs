@@ -26,7 +26,7 @@ use gpu_allocator::{AllocationSizes, AllocatorDebugSettings};
 
 use super::pipelines::{ComputeKind, Layouts};
 use crate::backend::BackendError;
-use crate::shaders::SpecConstants;
+use crate::backend::shaders::SpecConstants;
 
 pub(crate) const NAME: &str = "ash";
 

@@ -17,7 +17,7 @@
 //!   (`shared/lbvh.glsl`, the wgpu backend's) in a compute pipeline on the same device, with the
 //!   same particles, maps, RBF code and integrators: the paper's Fig. 10a comparison of
 //!   hardware and software traversal on one device, one API, one integrator. Its tree is built
-//!   on the CPU ([`crate::accel::lbvh`], the twin of the wgpu backend's GPU build).
+//!   on the CPU ([`crate::backend::shaders::cpu`], the twin of the wgpu backend's GPU build).
 //!
 //! One Vulkan device serves the whole process ([`context::shared`]).
 
@@ -41,15 +41,17 @@ use self::structure::{BOX_BYTES, Structure};
 use super::gpu_data::GpuStepData;
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::accel::ClusterSize;
-use crate::accel::lbvh::{KeyGrid, Lbvh, RadiusRule, cluster_boxes};
+use crate::backend::shaders::cpu::{
+    Lbvh, lbvh_bounds::cluster_boxes, lbvh_keys::KeyGrid, rbf::RadiusRule,
+};
+use crate::backend::shaders::{GpuField, GpuFrame, SpecConstants, pack_map_tables};
 use crate::field::{Classification, FieldError, FieldSettings};
 use crate::noise::BlueNoiseMask;
-use crate::render::image::Image;
-use crate::render::integrator::FrameParams;
-use crate::render::settings::ColourMode;
-use crate::render::tables::TABLE_SIZE;
-use crate::scene::{Bounds, Step};
-use crate::shaders::{GpuField, GpuFrame, SpecConstants, pack_map_tables};
+use crate::values::ColourMode;
+use crate::values::FrameParams;
+use crate::values::Image;
+use crate::values::tables::TABLE_SIZE;
+use crate::values::{Bounds, Step};
 
 pub use self::context::{REQUIRED_EXTENSIONS, validation_messages};
 
@@ -759,7 +761,7 @@ impl AshBackend {
         };
         let boxes = cluster_boxes(&d.points, d.cluster.get(), &rule);
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
-        if tree.depth as usize > crate::accel::lbvh::STACK_SIZE {
+        if tree.depth as usize > crate::backend::shaders::cpu::lbvh::STACK_SIZE {
             return Err(device_error(
                 "building the LBVH",
                 format!("depth {} exceeds the traversal stack", tree.depth),
@@ -1067,8 +1069,8 @@ impl Backend for AshBackend {
             structure_bytes: self.structure.as_ref().map_or(0, |s| {
                 (s.total_bytes() + u64::from(s.boxes) * BOX_BYTES) as usize
             }) + self.lbvh.as_ref().map_or(0, |t| {
-                t.nodes.len() * crate::accel::lbvh::NODE_BYTES
-                    + t.leaf_parents.len() * crate::accel::lbvh::BOX_BYTES
+                t.nodes.len() * crate::backend::shaders::cpu::lbvh::NODE_BYTES
+                    + t.leaf_parents.len() * crate::backend::shaders::cpu::lbvh::BOX_BYTES
             }),
             image_bytes: self
                 .accum_size

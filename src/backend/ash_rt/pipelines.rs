@@ -28,7 +28,7 @@ use gpu_allocator::MemoryLocation;
 use super::context::{Context, device_error, vk_error};
 use super::resources::Buffer;
 use crate::backend::BackendError;
-use crate::shaders::SpecConstants;
+use crate::backend::shaders::SpecConstants;
 
 macro_rules! spirv {
     ($name:literal) => {

@@ -1,19 +1,22 @@
 //! The CPU backend: the f64 reference field (a BVH over Hilbert-sorted cluster boxes) and the
-//! integrators of `render::integrator`, rayon over image tiles. It is the reference renderer
+//! integrators of [`integrators`] (the twin of `shaders_glsl/shared/integrators.glsl`), rayon over image tiles. It is the reference renderer
 //! GPU backends are compared with, and the fallback where no GPU driver exists. It computes in
 //! f64 throughout (as fast as f32 here, and one path instead of two), and skips empty space
 //! along rays with the BVH (the image is unchanged: the field there is 0).
+
+mod accumulator;
+pub mod integrators;
 
 use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
 
+use self::accumulator::Accumulator;
+use self::integrators::{FieldSampler, render_pixel};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::field::{FieldSettings, Particles, ReferenceField};
-use crate::render::image::{Accumulator, Image};
-use crate::render::integrator::{FieldSampler, FrameParams, render_pixel};
-use crate::scene::{Bounds, Step};
+use crate::values::{Bounds, FrameParams, Image, Step};
 
 const TILE: u32 = 16;
 

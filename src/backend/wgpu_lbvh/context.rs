@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::backend::BackendError;
-use crate::shaders::{glsl_with_includes, wgsl_with_includes};
+use crate::backend::shaders::{glsl_with_includes, wgsl_with_includes};
 
 pub(crate) fn device_error(message: impl Into<String>) -> BackendError {
     BackendError::Device {

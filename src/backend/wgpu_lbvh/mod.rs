@@ -23,7 +23,7 @@
 //!   `lbvh.glsl`) through naga's GLSL front end; one pipeline per specialisation-constant
 //!   variant, cached for the process. Frames accumulate as f32 sums in a storage buffer.
 //!
-//! The CPU twin of every build stage is [`crate::accel::lbvh`]; `tests/wgpu_lbvh.rs` compares
+//! The CPU twin of every build stage is in [`crate::backend::shaders::cpu`], a file per shader; `tests/wgpu_lbvh.rs` compares
 //! them, and the backend with the CPU reference.
 
 mod context;
@@ -42,15 +42,18 @@ pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 use super::gpu_data::GpuStepData;
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::accel::ClusterSize;
-use crate::accel::lbvh::{KeyGrid, STACK_SIZE, structure_bytes};
+use crate::backend::shaders::cpu::{
+    lbvh::{STACK_SIZE, structure_bytes},
+    lbvh_keys::KeyGrid,
+};
+use crate::backend::shaders::{GpuFrame, SpecConstants, pack_map_tables};
 use crate::field::{Classification, FieldSettings};
 use crate::noise::BlueNoiseMask;
-use crate::render::image::Image;
-use crate::render::integrator::FrameParams;
-use crate::render::settings::{ColourMode, Integrator, NoiseKind};
-use crate::render::tables::TABLE_SIZE;
-use crate::scene::{Bounds, Step};
-use crate::shaders::{GpuFrame, SpecConstants, pack_map_tables};
+use crate::values::FrameParams;
+use crate::values::Image;
+use crate::values::tables::TABLE_SIZE;
+use crate::values::{Bounds, Step};
+use crate::values::{ColourMode, Integrator, NoiseKind};
 use context::{Layout, device_error};
 use tree::{GpuTree, SceneBindings};
 use util::{PARTS, SplitBuffer, bind, dispatch, grid, parts_needed, storage, uniform, write};

@@ -1,5 +1,5 @@
 //! The GPU-built LBVH: its buffers and the passes that build and refit it. Layout and stages:
-//! `src/accel/lbvh.rs` (the CPU twin).
+//! `src/backend/shaders/cpu/` (the CPU twins).
 
 use bytemuck::{Pod, Zeroable};
 
@@ -7,8 +7,10 @@ use super::context::{GpuContext, Kernel, Layout, Variant, device_error};
 use super::sort::RadixSort;
 use super::util::PARTS;
 use super::util::{SplitBuffer, bind, dispatch, grid, poison, read_u32, storage, write};
-use crate::accel::lbvh::{GpuBox, KeyGrid, Lbvh, NODE_WORDS};
 use crate::backend::BackendError;
+use crate::backend::shaders::cpu::Lbvh;
+use crate::backend::shaders::cpu::lbvh::{GpuBox, NODE_WORDS};
+use crate::backend::shaders::cpu::lbvh_keys::KeyGrid;
 
 /// How far a build goes (tests stop early to compare a stage with its twin).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]

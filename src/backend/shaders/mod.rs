@@ -5,8 +5,10 @@
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
-use crate::render::integrator::FrameParams;
-use crate::render::settings::{ColourMode, Integrator, NoiseKind};
+use crate::values::FrameParams;
+use crate::values::{ColourMode, Integrator, NoiseKind};
+
+pub mod cpu;
 
 include!("include.rs");
 
@@ -14,35 +16,35 @@ include!("include.rs");
 pub const SHARED_GLSL: &[(&str, &str)] = &[
     (
         "shared/params.glsl",
-        include_str!("../../shaders_glsl/shared/params.glsl"),
+        include_str!("../../../shaders_glsl/shared/params.glsl"),
     ),
     (
         "shared/maps.glsl",
-        include_str!("../../shaders_glsl/shared/maps.glsl"),
+        include_str!("../../../shaders_glsl/shared/maps.glsl"),
     ),
     (
         "shared/noise.glsl",
-        include_str!("../../shaders_glsl/shared/noise.glsl"),
+        include_str!("../../../shaders_glsl/shared/noise.glsl"),
     ),
     (
         "shared/rbf.glsl",
-        include_str!("../../shaders_glsl/shared/rbf.glsl"),
+        include_str!("../../../shaders_glsl/shared/rbf.glsl"),
     ),
     (
         "shared/integrators.glsl",
-        include_str!("../../shaders_glsl/shared/integrators.glsl"),
+        include_str!("../../../shaders_glsl/shared/integrators.glsl"),
     ),
     (
         "shared/lbvh.glsl",
-        include_str!("../../shaders_glsl/shared/lbvh.glsl"),
+        include_str!("../../../shaders_glsl/shared/lbvh.glsl"),
     ),
     (
         "wgpu/split.glsl",
-        include_str!("../../shaders_glsl/wgpu/split.glsl"),
+        include_str!("../../../shaders_glsl/wgpu/split.glsl"),
     ),
     (
         "wgpu/split_tree.glsl",
-        include_str!("../../shaders_glsl/wgpu/split_tree.glsl"),
+        include_str!("../../../shaders_glsl/wgpu/split_tree.glsl"),
     ),
 ];
 
@@ -50,11 +52,11 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
 pub const SHARED_WGSL: &[(&str, &str)] = &[
     (
         "shared/tree_params.wgsl",
-        include_str!("../../shaders_wgsl/shared/tree_params.wgsl"),
+        include_str!("../../../shaders_wgsl/shared/tree_params.wgsl"),
     ),
     (
         "shared/split_boxes.wgsl",
-        include_str!("../../shaders_wgsl/shared/split_boxes.wgsl"),
+        include_str!("../../../shaders_wgsl/shared/split_boxes.wgsl"),
     ),
 ];
 
@@ -201,7 +203,7 @@ pub fn pack_map_tables(
     optical: &[f32],
     colour: &[[f32; 3]],
 ) -> Vec<f32> {
-    use crate::render::tables::TABLE_SIZE;
+    use crate::values::tables::TABLE_SIZE;
     assert!(
         density.len() == TABLE_SIZE
             && radius.len() == TABLE_SIZE
@@ -249,7 +251,8 @@ mod tests {
         }
         // Both variants of every WGSL pass resolve (build.rs validates them with naga).
         for parts in SPLIT_PARTS_VARIANTS {
-            let fit = wgsl_with_includes(include_str!("../../shaders_wgsl/lbvh_fit.wgsl"), parts);
+            let fit =
+                wgsl_with_includes(include_str!("../../../shaders_wgsl/lbvh_fit.wgsl"), parts);
             assert_eq!(fit.contains("nodes3"), parts > 1);
         }
     }

@@ -17,14 +17,12 @@
 //! noise mask or the white hash. Delta tracking's further steps use white noise (dimensions
 //! 3, 4, ...), since only the first decision can keep the blue-noise structure.
 
-use std::sync::Arc;
-
 use glam::DVec3;
 
-use super::camera::CameraFrame;
-use super::settings::{ColourMode, Integrator, NoiseKind};
-use super::tables::{lookup, lookup_colour};
 use crate::noise::{BlueNoiseMask, white::white};
+use crate::values::FrameParams;
+use crate::values::frame::{ColourMode, Integrator, NoiseKind};
+use crate::values::tables::{lookup, lookup_colour};
 
 /// Below this, Phi counts as "no density": the sample has no colour (never NaN).
 pub const PHI_EPSILON: f64 = 1e-30;
@@ -47,33 +45,8 @@ pub trait FieldSampler: Sync {
     }
 }
 
-/// Everything fixed for one frame.
-#[derive(Clone, Debug)]
-pub struct FrameParams {
-    pub width: u32,
-    pub height: u32,
-    pub frame: u32,
-    pub seed: u32,
-    pub camera: CameraFrame,
-    pub box_min: DVec3,
-    pub box_max: DVec3,
-    pub dt: f64,
-    pub opacity_threshold: f64,
-    pub phi_ref: f64,
-    pub density_scale: f64,
-    /// `density_scale * max D`: bounds sigma everywhere (delta tracking's majorant).
-    pub majorant: f64,
-    pub light_dir: DVec3,
-    pub light_intensity: f64,
-    pub ambient: f64,
-    pub background: [f64; 3],
-    pub integrator: Integrator,
-    pub noise: NoiseKind,
-    pub colour: ColourMode,
-    pub optical_table: Arc<Vec<f32>>,
-    pub colour_table: Arc<Vec<[f32; 3]>>,
-}
-
+/// The integrator math on a frame (kept here, beside its only users, rather than with the
+/// plain value type).
 impl FrameParams {
     /// A random number in [0, 1) for pixel (x, y), this frame, dimension `dim`.
     pub fn random(&self, x: u32, y: u32, dim: u32) -> f64 {
@@ -298,8 +271,9 @@ pub fn render_pixel(p: &FrameParams, field: &impl FieldSampler, x: u32, y: u32) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::camera::Camera;
-    use crate::render::tables::{bake, bake_colour};
+    use std::sync::Arc;
+
+    use crate::scene::Camera;
     use crate::scene::maps::{ColorMap, PiecewiseLinear};
 
     /// A field given by a closure: Phi(x), with Theta numerator 0.5 Phi (mid attribute).
@@ -340,8 +314,8 @@ mod tests {
             integrator,
             noise: NoiseKind::White,
             colour: ColourMode::Post,
-            optical_table: Arc::new(bake(&PiecewiseLinear::ramp(0.0, 1.0))),
-            colour_table: Arc::new(bake_colour(&ColorMap::preset("grayscale").unwrap())),
+            optical_table: Arc::new(PiecewiseLinear::ramp(0.0, 1.0).bake()),
+            colour_table: Arc::new(ColorMap::preset("grayscale").unwrap().bake()),
         }
     }
 

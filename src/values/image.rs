@@ -1,8 +1,7 @@
-//! Progressive accumulation and image output.
+//! Images: the linear-light RGBA mean of accumulated frames, and the measures the tests and
+//! benchmarks compare them by.
 
-use std::path::Path;
-
-use crate::scene::maps::color_space::linear_to_srgb;
+use crate::values::color_space::linear_to_srgb;
 
 /// A linear-light RGBA image (the mean over accumulated frames).
 #[derive(Clone, Debug, PartialEq)]
@@ -28,15 +27,6 @@ impl Image {
             }));
         }
         out
-    }
-
-    /// Writes a PNG atomically (see [`crate::io::output`]); an existing file only with `force`.
-    pub fn save_png(&self, path: &Path, force: bool) -> Result<(), crate::io::output::OutputError> {
-        let rgb = self.to_srgb8();
-        crate::io::output::write_atomically(path, force, |tmp| {
-            rgb.save_with_format(tmp, image::ImageFormat::Png)
-                .map_err(std::io::Error::other)
-        })
     }
 
     /// The image blurred by a normalised Gaussian of standard deviation `sigma` pixels
@@ -92,54 +82,5 @@ impl Image {
             })
             .sum();
         (sum / (3 * self.pixels.len().max(1)) as f64).sqrt()
-    }
-}
-
-/// Sums frames per pixel; the image is their mean. Reset on any change.
-#[derive(Clone, Debug)]
-pub struct Accumulator {
-    pub width: u32,
-    pub height: u32,
-    pub frames: u32,
-    sum: Vec<[f64; 4]>,
-}
-
-impl Accumulator {
-    pub fn new(width: u32, height: u32) -> Accumulator {
-        Accumulator {
-            width,
-            height,
-            frames: 0,
-            sum: vec![[0.0; 4]; (width as usize) * (height as usize)],
-        }
-    }
-
-    pub fn reset(&mut self) {
-        self.frames = 0;
-        self.sum.fill([0.0; 4]);
-    }
-
-    /// Adds one frame's pixels (row-major).
-    pub fn add(&mut self, frame: &[[f64; 4]]) {
-        assert_eq!(frame.len(), self.sum.len());
-        for (s, f) in self.sum.iter_mut().zip(frame) {
-            for c in 0..4 {
-                s[c] += f[c];
-            }
-        }
-        self.frames += 1;
-    }
-
-    pub fn image(&self) -> Image {
-        let n = f64::from(self.frames.max(1));
-        Image {
-            width: self.width,
-            height: self.height,
-            pixels: self.sum.iter().map(|s| s.map(|v| (v / n) as f32)).collect(),
-        }
-    }
-
-    pub fn bytes(&self) -> usize {
-        self.sum.len() * std::mem::size_of::<[f64; 4]>()
     }
 }

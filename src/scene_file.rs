@@ -21,10 +21,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::maps::{MapError, PiecewiseLinear};
 use crate::accel::ClusterSize;
 use crate::field::Classification;
 use crate::io::Format;
+use crate::scene::maps::{MapError, PiecewiseLinear};
 
 /// Where the data comes from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -157,8 +157,8 @@ pub struct RenderSection {
     pub width: Option<u32>,
     pub height: Option<u32>,
     pub spp: Option<u32>,
-    pub integrator: Option<crate::render::Integrator>,
-    pub noise: Option<crate::render::NoiseKind>,
+    pub integrator: Option<crate::values::Integrator>,
+    pub noise: Option<crate::values::NoiseKind>,
     pub seed: Option<u32>,
     pub step_size: Option<f64>,
     pub density_scale: Option<f64>,
@@ -167,7 +167,7 @@ pub struct RenderSection {
     pub color_by_density: Option<bool>,
     pub background: Option<[f64; 3]>,
     pub opacity_threshold: Option<f64>,
-    pub light: Option<crate::render::Light>,
+    pub light: Option<crate::values::Light>,
 }
 
 /// A scene file.

@@ -4,7 +4,8 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::scene::Bounds;
+use crate::values::Bounds;
+use crate::values::frame::CameraFrame;
 
 /// A pinhole camera looking from `eye` at `at`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -14,16 +15,6 @@ pub struct Camera {
     pub up: DVec3,
     /// Vertical field of view in degrees.
     pub fovy: f64,
-}
-
-/// A camera's orthonormal frame, scaled for generating rays: a pixel at normalised device
-/// coordinates (sx, sy) in [-1, 1] looks along `forward + sx * right + sy * up`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CameraFrame {
-    pub eye: DVec3,
-    pub forward: DVec3,
-    pub right: DVec3,
-    pub up: DVec3,
 }
 
 /// A camera that cannot form an image.
