@@ -11,7 +11,16 @@ use std::process::Command;
 
 include!("src/backend/shaders/include.rs");
 
+/// The constants Rust and the shaders share: the library's own definitions, so the kernels
+/// validated here are given the text the library gives them.
+#[path = "src/values/shader_constants.rs"]
+#[allow(dead_code)]
+mod shader_constants;
+
 fn shared(name: &str) -> Option<String> {
+    if name == "generated/constants.glsl" {
+        return Some(shader_constants::glsl());
+    }
     std::fs::read_to_string(Path::new("shaders_glsl").join(name)).ok()
 }
 
@@ -80,6 +89,7 @@ fn main() {
     println!("cargo::rerun-if-changed=shaders_glsl");
     println!("cargo::rerun-if-changed=shaders_wgsl");
     println!("cargo::rerun-if-changed=src/backend/shaders/include.rs");
+    println!("cargo::rerun-if-changed=src/values/shader_constants.rs");
 
     // Every wgpu kernel in both storage layouts (SPLIT_PARTS = 1 and 4; see
     // shaders_glsl/wgpu/split.glsl). The one-part layout must stay within WebGPU's default of
@@ -108,8 +118,12 @@ fn main() {
     // WGSL has no includes either: `#include "shared/x.wgsl"` lines name files under
     // shaders_wgsl/shared/, resolved by the same code (src/backend/shaders/include.rs), and the
     // SPLIT_PARTS blocks are selected by it too.
-    let shared_wgsl =
-        |name: &str| std::fs::read_to_string(Path::new("shaders_wgsl").join(name)).ok();
+    let shared_wgsl = |name: &str| {
+        if name == "generated/constants.wgsl" {
+            return Some(shader_constants::wgsl());
+        }
+        std::fs::read_to_string(Path::new("shaders_wgsl").join(name)).ok()
+    };
     for path in files("shaders_wgsl", &["wgsl"]) {
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));

@@ -24,10 +24,6 @@
 
 #include "shared/tree_params.wgsl"
 
-const NONE: u32 = 0xffffffffu;
-const ROOT_LEAF: u32 = 0xfffffffeu;
-const SENTINEL: u32 = 0xffffffffu;
-
 @group(0) @binding(3) var<storage, read> node_parents: array<u32>;
 @group(0) @binding(4) var<storage, read> leaf_parents: array<u32>;
 @group(0) @binding(5) var<storage, read_write> heights: array<atomic<u32>>;
@@ -101,7 +97,7 @@ struct Meet {
 
 fn meet(w: u32, v: f32, is_max: bool) -> Meet {
     let old = node_exchange(w, bitcast<u32>(v));
-    if old == SENTINEL {
+    if old == LBVH_SENTINEL {
         return Meet(false, v);
     }
     var c = min(v, bitcast<f32>(old));
@@ -125,13 +121,13 @@ fn climb(
     let lo = box_at(2u * c).xyz;
     let hi = box_at(2u * c + 1u).xyz;
     let parent = leaf_parents[c];
-    if parent == NONE {
+    if parent == LBVH_NONE {
         if lo.x <= hi.x {
             atomicStore(&counters[2], 1u);
         }
         return;
     }
-    if parent == ROOT_LEAF {
+    if parent == LBVH_ROOT_LEAF {
         return;
     }
     // One walk up the tree carrying all seven values; `carried` holds the components this
@@ -160,7 +156,7 @@ fn climb(
         }
         if (carried & 0x40u) != 0u {
             let old = atomicExchange(&heights[node], height);
-            if old == SENTINEL {
+            if old == LBVH_SENTINEL {
                 carried &= ~0x40u;
             } else {
                 height = max(height, old) + 1u;
@@ -171,7 +167,7 @@ fn climb(
             return;
         }
         let up = node_parents[node];
-        if up == NONE {
+        if up == LBVH_NONE {
             if (carried & 0x40u) != 0u {
                 atomicStore(&counters[1], height);
             }
@@ -193,10 +189,10 @@ fn reset(
         return;
     }
     let base = node * 8u;
-    node_store(base + 0u, SENTINEL);
-    node_store(base + 1u, SENTINEL);
-    node_store(base + 2u, SENTINEL);
-    node_store(base + 4u, SENTINEL);
-    node_store(base + 5u, SENTINEL);
-    node_store(base + 6u, SENTINEL);
+    node_store(base + 0u, LBVH_SENTINEL);
+    node_store(base + 1u, LBVH_SENTINEL);
+    node_store(base + 2u, LBVH_SENTINEL);
+    node_store(base + 4u, LBVH_SENTINEL);
+    node_store(base + 5u, LBVH_SENTINEL);
+    node_store(base + 6u, LBVH_SENTINEL);
 }

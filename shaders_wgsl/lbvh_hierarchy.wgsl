@@ -6,11 +6,6 @@
 // bottom-up pass, and links its children's parents. Node layout: src/backend/shaders/cpu/lbvh.rs (node 0 a
 // header holding the root pointer; Karras' node i is node i + 1). Twin: Lbvh::hierarchy.
 
-const LEAF: u32 = 0x80000000u;
-const NONE: u32 = 0xffffffffu;
-const ROOT_LEAF: u32 = 0xfffffffeu;
-const SENTINEL: u32 = 0xffffffffu;
-
 #include "shared/tree_params.wgsl"
 
 @group(0) @binding(1) var<storage, read> keys: array<u32>;
@@ -76,20 +71,20 @@ fn main(
     let index = (wg.y * groups.x + wg.x) * 64u + lid;
     let n = i32(counters[0]);
     if index == 0u {
-        var root = NONE;
+        var root = LBVH_NONE;
         if n == 1 {
-            root = LEAF | clusters[0];
-            leaf_parents[clusters[0]] = ROOT_LEAF;
+            root = LBVH_LEAF | clusters[0];
+            leaf_parents[clusters[0]] = LBVH_ROOT_LEAF;
         } else if n > 1 {
             root = 1u;
-            node_parents[1] = NONE;
+            node_parents[1] = LBVH_NONE;
         }
         for (var w = 0u; w < 8u; w++) {
             node_store(w, 0u);
         }
         node_store(3u, root);
-        node_store(7u, NONE);
-        node_parents[0] = NONE;
+        node_store(7u, LBVH_NONE);
+        node_parents[0] = LBVH_NONE;
     }
     let i = i32(index);
     if i >= n - 1 {
@@ -131,26 +126,26 @@ fn main(
 
     var left = u32(gamma) + 1u;
     if min(i, j) == gamma {
-        left = LEAF | clusters[gamma];
+        left = LBVH_LEAF | clusters[gamma];
         leaf_parents[clusters[gamma]] = node;
     } else {
         node_parents[left] = node;
     }
     var right = u32(gamma) + 2u;
     if max(i, j) == gamma + 1 {
-        right = LEAF | clusters[gamma + 1];
+        right = LBVH_LEAF | clusters[gamma + 1];
         leaf_parents[clusters[gamma + 1]] = node;
     } else {
         node_parents[right] = node;
     }
     let base = node * 8u;
-    node_store(base + 0u, SENTINEL);
-    node_store(base + 1u, SENTINEL);
-    node_store(base + 2u, SENTINEL);
+    node_store(base + 0u, LBVH_SENTINEL);
+    node_store(base + 1u, LBVH_SENTINEL);
+    node_store(base + 2u, LBVH_SENTINEL);
     node_store(base + 3u, left);
-    node_store(base + 4u, SENTINEL);
-    node_store(base + 5u, SENTINEL);
-    node_store(base + 6u, SENTINEL);
+    node_store(base + 4u, LBVH_SENTINEL);
+    node_store(base + 5u, LBVH_SENTINEL);
+    node_store(base + 6u, LBVH_SENTINEL);
     node_store(base + 7u, right);
-    heights[node] = SENTINEL;
+    heights[node] = LBVH_SENTINEL;
 }

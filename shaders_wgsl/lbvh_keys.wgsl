@@ -1,12 +1,9 @@
 // LBVH build, stage 2: a 30-bit Morton key per cluster from its box centre on a 1024^3 grid
-// over the series' bounds (EMPTY_KEY for an empty box, so empty clusters sort last), the
+// over the series' bounds (LBVH_EMPTY_KEY for an empty box, so empty clusters sort last), the
 // identity permutation the sort carries along, and the count of non-empty clusters (the
 // tree's leaves). Twin: backend/shaders/cpu/lbvh_keys.rs.
 
 #include "shared/tree_params.wgsl"
-
-const EMPTY_KEY: u32 = 0xffffffffu;
-const NONE: u32 = 0xffffffffu;
 
 @group(0) @binding(2) var<storage, read_write> keys: array<u32>;
 @group(0) @binding(3) var<storage, read_write> values: array<u32>;
@@ -36,10 +33,10 @@ fn main(
     }
     let lo = box_at(2u * c).xyz;
     let hi = box_at(2u * c + 1u).xyz;
-    var key = EMPTY_KEY;
+    var key = LBVH_EMPTY_KEY;
     if lo.x <= hi.x {
         let centre = (lo + hi) * 0.5;
-        let q = clamp((centre - params.key_lo.xyz) * params.key_scale.xyz, vec3<f32>(0.0), vec3<f32>(1023.0));
+        let q = clamp((centre - params.key_lo.xyz) * params.key_scale.xyz, vec3<f32>(0.0), vec3<f32>(f32(MORTON_CELLS - 1u)));
         let cell = vec3<u32>(q);
         key = (expand_bits(cell.x) << 2u) | (expand_bits(cell.y) << 1u) | expand_bits(cell.z);
         atomicAdd(&counters[0], 1u);
@@ -47,5 +44,5 @@ fn main(
     keys[c] = key;
     values[c] = c;
     // The hierarchy pass links the clusters that are leaves; the rest stay out.
-    leaf_parents[c] = NONE;
+    leaf_parents[c] = LBVH_NONE;
 }

@@ -3,8 +3,8 @@
 // no subgroup operations, so it runs on lavapipe and every wgpu backend. Twin: a stable
 // sort_by_key (backend/shaders/cpu/radix_sort.rs).
 //
-// A tile of TILE = THREADS * ITEMS keys belongs to one workgroup; thread t owns the ITEMS
-// consecutive keys tile * TILE + t * ITEMS ... and walks them in order, so ranking within a
+// A tile of SORT_TILE = THREADS * ITEMS keys belongs to one workgroup; thread t owns the ITEMS
+// consecutive keys tile * SORT_TILE + t * ITEMS ... and walks them in order, so ranking within a
 // tile is stable by construction (the keys of thread t precede those of thread t + 1).
 // histogram[d * tiles + tile] counts digit d in a tile; its exclusive scan (digit-major) is
 // where the tile's first key of digit d goes.
@@ -16,10 +16,11 @@ struct SortParams {
     pad: u32,
 }
 
+#include "generated/constants.wgsl"
+
+// A tile of SORT_TILE = THREADS * ITEMS keys; SORT_RADIX digit values per 4-bit digit.
 const THREADS: u32 = 128u;
-const ITEMS: u32 = 32u;
-const TILE: u32 = 4096u;
-const RADIX: u32 = 16u;
+const ITEMS: u32 = SORT_TILE / THREADS;
 const SCAN_THREADS: u32 = 256u;
 
 @group(0) @binding(0) var<uniform> params: SortParams;
@@ -29,12 +30,12 @@ const SCAN_THREADS: u32 = 256u;
 @group(0) @binding(4) var<storage, read_write> values_out: array<u32>;
 @group(0) @binding(5) var<storage, read_write> histogram: array<u32>;
 
-var<workgroup> tile_counts: array<atomic<u32>, 16>;
-var<workgroup> offsets: array<u32, 2048>; // RADIX * THREADS, digit-major
-var<workgroup> sums: array<u32, 256>;
+var<workgroup> tile_counts: array<atomic<u32>, SORT_RADIX>;
+var<workgroup> offsets: array<u32, SORT_RADIX * THREADS>; // digit-major
+var<workgroup> sums: array<u32, SCAN_THREADS>;
 
 fn digit(key: u32) -> u32 {
-    return (key >> params.shift) & (RADIX - 1u);
+    return (key >> params.shift) & (SORT_RADIX - 1u);
 }
 
 // Pass 1: per-tile digit counts.
@@ -48,24 +49,24 @@ fn count(
     if tile >= params.tiles {
         return;
     }
-    if lid < RADIX {
+    if lid < SORT_RADIX {
         atomicStore(&tile_counts[lid], 0u);
     }
     workgroupBarrier();
-    var local: array<u32, 16>;
-    let start = tile * TILE + lid * ITEMS;
+    var local: array<u32, SORT_RADIX>;
+    let start = tile * SORT_TILE + lid * ITEMS;
     let end = min(start + ITEMS, params.count);
     for (var i = start; i < end; i++) {
         let d = digit(keys_in[i]);
         local[d] += 1u;
     }
-    for (var d = 0u; d < RADIX; d++) {
+    for (var d = 0u; d < SORT_RADIX; d++) {
         if local[d] != 0u {
             atomicAdd(&tile_counts[d], local[d]);
         }
     }
     workgroupBarrier();
-    if lid < RADIX {
+    if lid < SORT_RADIX {
         histogram[lid * params.tiles + tile] = atomicLoad(&tile_counts[lid]);
     }
 }
@@ -74,7 +75,7 @@ fn count(
 // contiguous segment serially, the segments' totals are scanned in workgroup memory.
 @compute @workgroup_size(256)
 fn scan(@builtin(local_invocation_index) lid: u32) {
-    let total = RADIX * params.tiles;
+    let total = SORT_RADIX * params.tiles;
     let per = (total + SCAN_THREADS - 1u) / SCAN_THREADS;
     let start = min(lid * per, total);
     let end = min(start + per, total);
@@ -116,21 +117,21 @@ fn scatter(
     if tile >= params.tiles {
         return;
     }
-    var local: array<u32, 16>;
-    let start = tile * TILE + lid * ITEMS;
+    var local: array<u32, SORT_RADIX>;
+    let start = tile * SORT_TILE + lid * ITEMS;
     let end = min(start + ITEMS, params.count);
     for (var i = start; i < end; i++) {
         let d = digit(keys_in[i]);
         local[d] += 1u;
     }
-    for (var d = 0u; d < RADIX; d++) {
+    for (var d = 0u; d < SORT_RADIX; d++) {
         offsets[d * THREADS + lid] = local[d];
     }
     workgroupBarrier();
     // Exclusive scan of offsets (digit-major): thread t scans entries 16t .. 16t + 15.
     var sum = 0u;
-    for (var k = 0u; k < RADIX; k++) {
-        sum += offsets[lid * RADIX + k];
+    for (var k = 0u; k < SORT_RADIX; k++) {
+        sum += offsets[lid * SORT_RADIX + k];
     }
     sums[lid] = sum;
     workgroupBarrier();
@@ -147,16 +148,16 @@ fn scatter(
     if lid > 0u {
         running = sums[lid - 1u];
     }
-    for (var k = 0u; k < RADIX; k++) {
-        let v = offsets[lid * RADIX + k];
-        offsets[lid * RADIX + k] = running;
+    for (var k = 0u; k < SORT_RADIX; k++) {
+        let v = offsets[lid * SORT_RADIX + k];
+        offsets[lid * SORT_RADIX + k] = running;
         running += v;
     }
     workgroupBarrier();
     // offsets[d * THREADS + t]: keys of the tile before thread t's first key of digit d, in
     // digit-major order; offsets[d * THREADS] counts the tile's keys of smaller digits.
     var dest: array<u32, 16>;
-    for (var d = 0u; d < RADIX; d++) {
+    for (var d = 0u; d < SORT_RADIX; d++) {
         dest[d] = histogram[d * params.tiles + tile] + offsets[d * THREADS + lid] - offsets[d * THREADS];
     }
     for (var i = start; i < end; i++) {

@@ -22,7 +22,7 @@ use std::sync::Arc;
 
 use aarbf::accel::ClusterSize;
 use aarbf::backend::shaders::cpu::lbvh::{
-    self, EMPTY_KEY, GpuBox, Lbvh, NONE, SENTINEL, box_is_empty,
+    self, GpuBox, LBVH_EMPTY_KEY, LBVH_NONE, LBVH_SENTINEL, Lbvh, box_is_empty,
 };
 use aarbf::backend::shaders::cpu::rbf::RadiusRule;
 use aarbf::backend::shaders::cpu::{lbvh_bounds, lbvh_keys, radix_sort};
@@ -182,7 +182,7 @@ fn radix_sort_equals_a_stable_sort_by_key() {
                     // 30-bit keys with empty markers, as the tree sorts them.
                     _ => {
                         if r.random_range(0..8) == 0 {
-                            EMPTY_KEY
+                            LBVH_EMPTY_KEY
                         } else {
                             r.random_range(0..1u32 << 30)
                         }
@@ -246,7 +246,10 @@ fn check_build_stages(
     );
     let leaves = boxes.iter().filter(|b| !box_is_empty(b)).count() as u32;
     assert_eq!(s.counters[0], leaves, "{what}: leaf count");
-    assert!(s.lbvh.leaf_parents.iter().all(|&p| p == NONE), "{what}");
+    assert!(
+        s.lbvh.leaf_parents.iter().all(|&p| p == LBVH_NONE),
+        "{what}"
+    );
 
     // Stage 3: sorted.
     b.poison_tree().unwrap();
@@ -256,7 +259,7 @@ fn check_build_stages(
     assert!(s.keys == sorted_keys, "{what}: sorted keys");
     assert!(s.values == sorted_values, "{what}: sorted values");
 
-    // Stage 4: hierarchy (children, parents, header), bounds words still SENTINEL.
+    // Stage 4: hierarchy (children, parents, header), bounds words still LBVH_SENTINEL.
     b.poison_tree().unwrap();
     b.build_until(BuildStage::Hierarchy).unwrap();
     let s = b.snapshot().unwrap();
@@ -266,7 +269,7 @@ fn check_build_stages(
         assert_eq!([g[3], g[7]], [e[3], e[7]], "{what}: children of node {j}");
         if j > 0 {
             assert!(
-                [0, 1, 2, 4, 5, 6].iter().all(|&w| g[w] == SENTINEL),
+                [0, 1, 2, 4, 5, 6].iter().all(|&w| g[w] == LBVH_SENTINEL),
                 "{what}: node {j} bounds not reset: {g:?}"
             );
         }
@@ -407,7 +410,7 @@ fn refit_equals_a_fresh_build() {
         let built = b.snapshot().unwrap();
 
         // A new global radius: the same boxes up to scale, the same topology.
-        // (The refit's reset pass writes SENTINEL, a NaN, into every bound it recomputes, so
+        // (The refit's reset pass writes LBVH_SENTINEL, a NaN, into every bound it recomputes, so
         // a bound it missed fails `validate`.)
         f.radius = 0.03;
         b.refit(&f).unwrap();

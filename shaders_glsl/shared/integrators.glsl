@@ -5,17 +5,8 @@
 // block member), the noise inputs (noise.glsl), and `vec4 field_query(vec3 x)` returning
 // (Phi, Theta numerator) at a local position: the only part each backend supplies.
 
-const float PHI_EPSILON = 1e-30;
-
-// Toroidal offsets of the blue-noise mask per random dimension (NOISE_OFFSETS in Rust).
-uvec2 noise_offset(uint dim) {
-    if (dim == 1u) {
-        return uvec2(61u, 29u);
-    } else if (dim == 2u) {
-        return uvec2(23u, 97u);
-    }
-    return uvec2(0u, 0u);
-}
+// PHI_EPSILON and noise_offset(dim), the blue-noise mask's offset per random dimension, come
+// with params.glsl (generated/constants.glsl).
 
 float random_number(uvec2 pixel, uint dim) {
     uint seed = frame.image.w;

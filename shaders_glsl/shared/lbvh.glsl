@@ -22,10 +22,6 @@
 // tree over 30-bit keys extended by a 32-bit index is at most 62 internal nodes deep, so 64
 // entries cannot overflow (the build also reports the depth, and the host checks it).
 
-const uint LBVH_LEAF = 0x80000000u;
-const uint LBVH_NONE = 0xffffffffu;
-const uint LBVH_STACK_SIZE = 64u;
-
 bool lbvh_contains(vec4 lo, vec4 hi, vec3 x) {
     return x.x >= lo.x && x.y >= lo.y && x.z >= lo.z && x.x <= hi.x && x.y <= hi.y && x.z <= hi.z;
 }

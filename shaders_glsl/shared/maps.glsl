@@ -5,11 +5,7 @@
 // holding, in order: the density map w (256), the radius map m (256), the optical-density map
 // D (256), the colour map as linear RGB (3 x 256, interleaved).
 
-const uint TABLE_SIZE = 256u;
-const uint TABLE_DENSITY = 0u;
-const uint TABLE_RADIUS = 256u;
-const uint TABLE_OPTICAL = 512u;
-const uint TABLE_COLOUR = 768u;
+// TABLE_SIZE and the TABLE_* offsets come with params.glsl (generated/constants.glsl).
 
 // Clamp t to [0, 1] (NaN to 0) and interpolate linearly between neighbouring samples.
 float table_position(float t, out uint i) {

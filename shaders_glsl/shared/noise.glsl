@@ -3,12 +3,9 @@
 // white_noise is bit-identical to aarbf::noise::white, stbn_value returns the same number as
 // BlueNoiseMask::get.
 //
-// GLSL 4.50, no extensions, no #include (the includer pastes this file in). The includer
-// declares, before this file:
+// GLSL 4.50, no extensions. The includer includes params.glsl (whose generated constants give
+// the mask's size, STBN_WIDTH, STBN_HEIGHT and STBN_DEPTH) and declares, before this file:
 //
-//     const uint STBN_WIDTH = 128u;   // the mask's dimensions
-//     const uint STBN_HEIGHT = 128u;
-//     const uint STBN_DEPTH = 64u;
 //     layout(std430, set = S, binding = B) readonly buffer StbnMask { uint stbn_words[]; };
 //
 // stbn_words holds the mask's u16 values packed two per u32, little-endian: value i is in word

@@ -24,20 +24,7 @@ struct Field {
                      // (wgpu/split.glsl; unused by the Vulkan kernels)
 };
 
-// Specialisation constants (wgpu: pipeline overrides; Vulkan: VkSpecializationInfo): one
-// shader source, a variant per used feature, and no runtime branch over an unused one.
-layout(constant_id = 0) const uint INTEGRATOR = 0u;        // 0 EA, 1 delta, 2 marching, 3 SS reference
-layout(constant_id = 1) const uint COLOUR_MODE = 0u;       // 0 post, 1 pre, 2 density
-layout(constant_id = 2) const uint NOISE_KIND = 0u;        // 0 STBN, 1 white
-layout(constant_id = 3) const uint CLUSTER_SIZE = 1u;      // particles per box: 1, 2, 4, 8, 16
-layout(constant_id = 4) const uint RADIUS_MAP_VARIES = 0u; // 1: look the radius map up per particle
-layout(constant_id = 5) const uint DENSITY_MAP_VARIES = 0u;// 1: look the density map up per particle
-layout(constant_id = 6) const uint HAS_RADIUS_ATTRIBUTE = 0u; // 1: per-particle radius buffer
-
-const uint INTEGRATOR_EA = 0u;
-const uint INTEGRATOR_DELTA = 1u;
-const uint INTEGRATOR_MARCHING = 2u;
-const uint INTEGRATOR_SS_REFERENCE = 3u;
-const uint COLOUR_POST = 0u;
-const uint COLOUR_PRE = 1u;
-const uint COLOUR_DENSITY = 2u;
+// The shared constants, with the specialisation constants (wgpu: pipeline overrides; Vulkan:
+// VkSpecializationInfo): one shader source, a variant per used feature, and no runtime branch
+// over an unused one. Generated from src/values/shader_constants.rs.
+#include "generated/constants.glsl"

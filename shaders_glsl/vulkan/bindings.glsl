@@ -37,9 +37,6 @@ layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Flo
     float v[];
 };
 
-const uint STBN_WIDTH = 128u;
-const uint STBN_HEIGHT = 128u;
-const uint STBN_DEPTH = 64u;
 layout(std430, set = 0, binding = 5) readonly buffer StbnMask { uint stbn_words[]; };
 
 layout(push_constant) uniform Push {

@@ -54,9 +54,6 @@ void accumulate(uint i, vec4 c) {
 #endif
 }
 
-const uint STBN_WIDTH = 128u;
-const uint STBN_HEIGHT = 128u;
-const uint STBN_DEPTH = 64u;
 
 #include "shared/maps.glsl"
 #include "shared/noise.glsl"

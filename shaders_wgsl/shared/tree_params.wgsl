@@ -1,5 +1,7 @@
 // The LBVH build passes' uniform (src/backend/wgpu_lbvh/tree.rs, TreeParams), at binding 0 of
-// every pass. Included by lbvh_keys, lbvh_hierarchy and lbvh_fit.
+// every pass. Included by lbvh_keys, lbvh_hierarchy and lbvh_fit, with the shared constants.
+
+#include "generated/constants.wgsl"
 
 struct TreeParams {
     // Key grid: cell = (centre - key_lo) * key_scale on a 1024^3 grid over the series' bounds.

@@ -7,6 +7,7 @@ pub mod bounds;
 pub mod color_space;
 pub mod frame;
 pub mod image;
+pub mod shader_constants;
 pub mod step;
 pub mod tables;
 

@@ -6,7 +6,7 @@
 //! same arithmetic (`shaders_glsl/shared/maps.glsl`), so a baked map means the same thing on
 //! every backend. Maps whose control points lie on the sample grid are represented exactly.
 
-pub const TABLE_SIZE: usize = 256;
+pub use super::shader_constants::TABLE_SIZE;
 
 /// Where `t` falls in a table: the lower sample's index and the fraction towards the next.
 #[inline]

@@ -50,7 +50,9 @@ use crate::noise::BlueNoiseMask;
 use crate::values::ColourMode;
 use crate::values::FrameParams;
 use crate::values::Image;
-use crate::values::tables::TABLE_SIZE;
+use crate::values::shader_constants::{
+    STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS, TABLE_SIZE,
+};
 use crate::values::{Bounds, Step};
 
 pub use self::context::{REQUIRED_EXTENSIONS, validation_messages};
@@ -192,7 +194,7 @@ impl AshBackend {
         let ctx = context::shared()?;
         let commands = Commands::new(&ctx, TS_COUNT)?;
         let mask = BlueNoiseMask::builtin();
-        if (mask.width, mask.height, mask.depth) != (128, 128, 64) {
+        if (mask.width, mask.height, mask.depth) != (STBN_WIDTH, STBN_HEIGHT, STBN_DEPTH) {
             return Err(device_error(
                 "blue-noise mask",
                 "the shaders expect the built-in 128 x 128 x 64 mask",
@@ -209,7 +211,7 @@ impl AshBackend {
             )?,
             points: addressed(&ctx, "particles", 16)?,
             radius: addressed(&ctx, "radius attribute", 16)?,
-            tables: storage(&ctx, "map tables", (6 * TABLE_SIZE * 4) as u64)?,
+            tables: storage(&ctx, "map tables", (TABLE_FLOATS * 4) as u64)?,
             stbn: storage(&ctx, "blue-noise mask", (words.len() * 4) as u64)?,
             accum: addressed(&ctx, "accumulation", 16)?,
             query_points: storage(&ctx, "query points", (QUERY_BATCH * 16) as u64)?,
@@ -280,7 +282,7 @@ impl AshBackend {
             uploaded: None,
             capacity: 0,
             reserved: 0,
-            tables: vec![0.0; 6 * TABLE_SIZE],
+            tables: vec![0.0; TABLE_FLOATS],
             accum_size: None,
             frames: 0,
             binding_tables: HashMap::new(),
@@ -761,7 +763,7 @@ impl AshBackend {
         };
         let boxes = cluster_boxes(&d.points, d.cluster.get(), &rule);
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
-        if tree.depth as usize > crate::backend::shaders::cpu::lbvh::STACK_SIZE {
+        if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
             return Err(device_error(
                 "building the LBVH",
                 format!("depth {} exceeds the traversal stack", tree.depth),

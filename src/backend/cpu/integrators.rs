@@ -22,14 +22,8 @@ use glam::DVec3;
 use crate::noise::{BlueNoiseMask, white::white};
 use crate::values::FrameParams;
 use crate::values::frame::{ColourMode, Integrator, NoiseKind};
+use crate::values::shader_constants::{NOISE_OFFSETS, PHI_EPSILON};
 use crate::values::tables::{lookup, lookup_colour};
-
-/// Below this, Phi counts as "no density": the sample has no colour (never NaN).
-pub const PHI_EPSILON: f64 = 1e-30;
-
-/// Toroidal offsets of the blue-noise mask per random dimension, so different decisions of a
-/// pixel read different (decorrelated) mask values.
-pub const NOISE_OFFSETS: [[u32; 2]; 3] = [[0, 0], [61, 29], [23, 97]];
 
 /// The field as an integrator sees it.
 pub trait FieldSampler: Sync {

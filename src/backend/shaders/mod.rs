@@ -6,6 +6,11 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
 use crate::values::FrameParams;
+use crate::values::shader_constants::{
+    self, COLOUR_DENSITY, COLOUR_POST, COLOUR_PRE, INTEGRATOR_DELTA, INTEGRATOR_EA,
+    INTEGRATOR_MARCHING, INTEGRATOR_SS_REFERENCE, NOISE_STBN, NOISE_WHITE, SPEC_CONSTANTS,
+    TABLE_COLOUR, TABLE_DENSITY, TABLE_FLOATS, TABLE_OPTICAL, TABLE_RADIUS, TABLE_SIZE, spec,
+};
 use crate::values::{ColourMode, Integrator, NoiseKind};
 
 pub mod cpu;
@@ -60,10 +65,14 @@ pub const SHARED_WGSL: &[(&str, &str)] = &[
     ),
 ];
 
-/// WGSL `source` with its `#include "shared/..."` lines replaced by the shared files, for
-/// `SPLIT_PARTS` = `split_parts` (see [`select_split_parts`]).
+/// WGSL `source` with its `#include "shared/..."` lines replaced by the shared files (and
+/// `generated/constants.wgsl` by [`shader_constants::wgsl`]), for `SPLIT_PARTS` =
+/// `split_parts` (see [`select_split_parts`]).
 pub fn wgsl_with_includes(source: &str, split_parts: u32) -> String {
     let resolved = resolve_includes(source, &|name| {
+        if name == "generated/constants.wgsl" {
+            return Some(shader_constants::wgsl());
+        }
         SHARED_WGSL
             .iter()
             .find(|(n, _)| *n == name)
@@ -73,9 +82,13 @@ pub fn wgsl_with_includes(source: &str, split_parts: u32) -> String {
     select_split_parts(&resolved, split_parts).expect("build.rs validated every variant")
 }
 
-/// `source` with its `#include "shared/..."` lines replaced by the shared files.
+/// `source` with its `#include "shared/..."` lines replaced by the shared files (and
+/// `generated/constants.glsl` by [`shader_constants::glsl`]).
 pub fn glsl_with_includes(source: &str) -> String {
     resolve_includes(source, &|name| {
+        if name == "generated/constants.glsl" {
+            return Some(shader_constants::glsl());
+        }
         SHARED_GLSL
             .iter()
             .find(|(n, _)| *n == name)
@@ -143,7 +156,7 @@ pub struct GpuField {
     pub counts: [u32; 4],
 }
 
-/// The specialisation constants of `params.glsl`, in constant_id order.
+/// The specialisation constants (`shader_constants::SPEC_CONSTANTS` names and numbers them).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SpecConstants {
     pub integrator: u32,
@@ -157,64 +170,65 @@ pub struct SpecConstants {
 
 impl SpecConstants {
     /// In constant_id order: Vulkan's specialisation map entries, and the keys naga 30 gives
-    /// wgpu's pipeline-overridable constants ("0" .. "6").
-    pub fn values(&self) -> [u32; 7] {
-        [
-            self.integrator,
-            self.colour_mode,
-            self.noise_kind,
-            self.cluster_size,
-            self.radius_map_varies,
-            self.density_map_varies,
-            self.has_radius_attribute,
-        ]
+    /// wgpu's pipeline-overridable constants ("0", "1", ...).
+    pub fn values(&self) -> [u32; SPEC_CONSTANTS.len()] {
+        let mut v = [0; SPEC_CONSTANTS.len()];
+        v[spec::INTEGRATOR] = self.integrator;
+        v[spec::COLOUR_MODE] = self.colour_mode;
+        v[spec::NOISE_KIND] = self.noise_kind;
+        v[spec::CLUSTER_SIZE] = self.cluster_size;
+        v[spec::RADIUS_MAP_VARIES] = self.radius_map_varies;
+        v[spec::DENSITY_MAP_VARIES] = self.density_map_varies;
+        v[spec::HAS_RADIUS_ATTRIBUTE] = self.has_radius_attribute;
+        v
     }
 
     pub fn integrator_id(i: Integrator) -> u32 {
         match i {
-            Integrator::Ea => 0,
-            Integrator::Delta => 1,
-            Integrator::Marching => 2,
-            Integrator::SsReference => 3,
+            Integrator::Ea => INTEGRATOR_EA,
+            Integrator::Delta => INTEGRATOR_DELTA,
+            Integrator::Marching => INTEGRATOR_MARCHING,
+            Integrator::SsReference => INTEGRATOR_SS_REFERENCE,
         }
     }
 
     pub fn colour_id(c: ColourMode) -> u32 {
         match c {
-            ColourMode::Post => 0,
-            ColourMode::Pre => 1,
-            ColourMode::Density => 2,
+            ColourMode::Post => COLOUR_POST,
+            ColourMode::Pre => COLOUR_PRE,
+            ColourMode::Density => COLOUR_DENSITY,
         }
     }
 
     pub fn noise_id(n: NoiseKind) -> u32 {
         match n {
-            NoiseKind::Stbn => 0,
-            NoiseKind::White => 1,
+            NoiseKind::Stbn => NOISE_STBN,
+            NoiseKind::White => NOISE_WHITE,
         }
     }
 }
 
-/// The map-table buffer of `maps.glsl`: density, radius, optical density (256 each), then
-/// the colour map as interleaved linear RGB (3 x 256).
+/// The map-table buffer of `maps.glsl`: density, radius, optical density, then the colour map
+/// as interleaved linear RGB, at the `TABLE_*` offsets of `shader_constants`.
 pub fn pack_map_tables(
     density: &[f32],
     radius: &[f32],
     optical: &[f32],
     colour: &[[f32; 3]],
 ) -> Vec<f32> {
-    use crate::values::tables::TABLE_SIZE;
     assert!(
         density.len() == TABLE_SIZE
             && radius.len() == TABLE_SIZE
             && optical.len() == TABLE_SIZE
             && colour.len() == TABLE_SIZE
     );
-    let mut out = Vec::with_capacity(6 * TABLE_SIZE);
-    out.extend_from_slice(density);
-    out.extend_from_slice(radius);
-    out.extend_from_slice(optical);
-    out.extend(colour.iter().flatten());
+    let mut out = vec![0.0; TABLE_FLOATS];
+    out[TABLE_DENSITY..TABLE_DENSITY + TABLE_SIZE].copy_from_slice(density);
+    out[TABLE_RADIUS..TABLE_RADIUS + TABLE_SIZE].copy_from_slice(radius);
+    out[TABLE_OPTICAL..TABLE_OPTICAL + TABLE_SIZE].copy_from_slice(optical);
+    for (i, rgb) in colour.iter().enumerate() {
+        out[TABLE_COLOUR + 3 * i..TABLE_COLOUR + 3 * i + 3].copy_from_slice(rgb);
+    }
     out
 }
 

@@ -43,7 +43,7 @@ use super::gpu_data::GpuStepData;
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::accel::ClusterSize;
 use crate::backend::shaders::cpu::{
-    lbvh::{STACK_SIZE, structure_bytes},
+    lbvh::{LBVH_STACK_SIZE, structure_bytes},
     lbvh_keys::KeyGrid,
 };
 use crate::backend::shaders::{GpuFrame, SpecConstants, pack_map_tables};
@@ -51,7 +51,9 @@ use crate::field::{Classification, FieldSettings};
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
 use crate::values::Image;
-use crate::values::tables::TABLE_SIZE;
+use crate::values::shader_constants::{
+    STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS, TABLE_SIZE,
+};
 use crate::values::{Bounds, Step};
 use crate::values::{ColourMode, Integrator, NoiseKind};
 use context::{Layout, device_error};
@@ -282,9 +284,9 @@ impl WgpuBackend {
                     scene.clusters()
                 )));
             }
-            if report.depth as usize > STACK_SIZE {
+            if report.depth > LBVH_STACK_SIZE {
                 return Err(device_error(format!(
-                    "the tree is {} deep, more than the traversal stack's {STACK_SIZE} entries",
+                    "the tree is {} deep, more than the traversal stack's {LBVH_STACK_SIZE} entries",
                     report.depth
                 )));
             }
@@ -458,7 +460,7 @@ impl Backend for WgpuBackend {
                                 max_binding,
                             ),
                             capacity,
-                            storage(&ctx, "map tables", 6 * TABLE_SIZE as u64 * 4),
+                            storage(&ctx, "map tables", TABLE_FLOATS as u64 * 4),
                             uniform(&ctx, "field", 32),
                             None,
                         )
@@ -713,7 +715,7 @@ impl Backend for WgpuBackend {
         }
         if self.stbn.is_none() {
             let mask = BlueNoiseMask::builtin();
-            if (mask.width, mask.height, mask.depth) != (128, 128, 64) {
+            if (mask.width, mask.height, mask.depth) != (STBN_WIDTH, STBN_HEIGHT, STBN_DEPTH) {
                 return Err(device_error(format!(
                     "the shaders expect a 128x128x64 blue-noise mask, not {}x{}x{}",
                     mask.width, mask.height, mask.depth

@@ -7,11 +7,9 @@ use bytemuck::{Pod, Zeroable};
 use super::context::{GpuContext, Kernel, Layout};
 use super::util::{bind, dispatch, grid, poison, read_u32, storage, write};
 use crate::backend::BackendError;
+use crate::values::shader_constants::{SORT_RADIX, SORT_TILE};
 
-/// Keys per workgroup tile (THREADS x ITEMS in the shader).
-pub const TILE: u32 = 4096;
-/// Digits per pass and passes.
-const RADIX: u32 = 16;
+/// Passes of 4-bit digits over 32-bit keys.
 const PASSES: u32 = 8;
 
 #[repr(C)]
@@ -34,7 +32,7 @@ pub struct RadixSort {
 impl RadixSort {
     pub fn new(ctx: &GpuContext, capacity: usize) -> RadixSort {
         let stride = u64::from(ctx.limits.min_uniform_buffer_offset_alignment).max(16);
-        let tiles_capacity = (capacity as u32).div_ceil(TILE).max(1);
+        let tiles_capacity = (capacity as u32).div_ceil(SORT_TILE).max(1);
         RadixSort {
             params: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("radix sort params"),
@@ -46,7 +44,7 @@ impl RadixSort {
             histogram: storage(
                 ctx,
                 "radix sort histogram",
-                u64::from(RADIX * tiles_capacity) * 4,
+                u64::from(SORT_RADIX * tiles_capacity) * 4,
             ),
             tiles_capacity,
         }
@@ -73,11 +71,11 @@ impl RadixSort {
         if count <= 1 {
             return Ok(());
         }
-        let tiles = count.div_ceil(TILE);
+        let tiles = count.div_ceil(SORT_TILE);
         if tiles > self.tiles_capacity {
             return Err(super::context::device_error(format!(
                 "radix sort: {count} keys exceed the {} it was made for",
-                self.tiles_capacity * TILE
+                self.tiles_capacity * SORT_TILE
             )));
         }
         let count_pipeline = ctx.pipeline(Kernel::SortCount, None, Layout::Whole)?;

@@ -3,22 +3,11 @@
 
 use super::lbvh_keys::{KeyGrid, morton_keys};
 use super::radix_sort::sort_pairs;
+pub use crate::values::shader_constants::{
+    LBVH_EMPTY_KEY, LBVH_LEAF, LBVH_NONE, LBVH_ROOT_LEAF, LBVH_SENTINEL, LBVH_STACK_SIZE,
+    MORTON_CELLS,
+};
 
-/// Cells per axis of the Morton grid (10 bits).
-pub const MORTON_CELLS: u32 = 1024;
-/// The key of an empty cluster: above every Morton key (those use 30 bits).
-pub const EMPTY_KEY: u32 = u32::MAX;
-/// A child pointer's leaf flag; the low 31 bits are the cluster index.
-pub const LEAF: u32 = 0x8000_0000;
-/// No node: a missing root, a root's parent, a cluster left out of the tree.
-pub const NONE: u32 = u32::MAX;
-/// `leaf_parents` of the only leaf of a one-leaf tree (it is in the tree, with no parent).
-pub const ROOT_LEAF: u32 = 0xFFFF_FFFE;
-/// The word a bound holds before the bottom-up pass writes it (a NaN no bound can be).
-pub const SENTINEL: u32 = u32::MAX;
-/// Entries of the traversal stack in `shared/lbvh.glsl`: at least the deepest possible tree's
-/// depth (62, see the module documentation), so it cannot overflow.
-pub const STACK_SIZE: usize = 64;
 /// Words per node.
 pub const NODE_WORDS: usize = 8;
 /// Bytes per node (nodes), per cluster box, and per parent entry.
@@ -119,16 +108,16 @@ impl Lbvh {
         mut visit: impl FnMut(u32),
     ) -> usize {
         let root = self.root();
-        if root == NONE {
+        if root == LBVH_NONE {
             return 0;
         }
-        let mut stack = [0u32; STACK_SIZE];
+        let mut stack = [0u32; LBVH_STACK_SIZE as usize];
         let mut sp = 0;
         let mut most = 0;
         let mut ptr = root;
         loop {
-            if ptr & LEAF != 0 {
-                let c = ptr & !LEAF;
+            if ptr & LBVH_LEAF != 0 {
+                let c = ptr & !LBVH_LEAF;
                 if box_contains(&boxes[c as usize], x) {
                     visit(c);
                 }
@@ -172,18 +161,18 @@ impl Lbvh {
         let mut node_seen = vec![0u32; self.nodes.len()];
         let root = self.root();
         let mut depth = 0u32;
-        if root == NONE {
+        if root == LBVH_NONE {
             if self.leaves != 0 {
                 return Err("no root but leaves".into());
             }
-        } else if root & LEAF != 0 {
-            let c = (root & !LEAF) as usize;
-            if self.leaf_parents.get(c) != Some(&ROOT_LEAF) {
-                return Err(format!("the only leaf {c} lacks the ROOT_LEAF mark"));
+        } else if root & LBVH_LEAF != 0 {
+            let c = (root & !LBVH_LEAF) as usize;
+            if self.leaf_parents.get(c) != Some(&LBVH_ROOT_LEAF) {
+                return Err(format!("the only leaf {c} lacks the LBVH_ROOT_LEAF mark"));
             }
             leaf_seen[c] += 1;
         } else {
-            if root != 1 || self.node_parents[1] != NONE {
+            if root != 1 || self.node_parents[1] != LBVH_NONE {
                 return Err(format!("root {root}, its parent {}", self.node_parents[1]));
             }
             let mut stack = vec![(root, 0u32)];
@@ -199,8 +188,8 @@ impl Lbvh {
                     return Err(format!("node {j} has an unwritten (NaN) bound: {b:?}"));
                 }
                 for c in children(&self.nodes[j]) {
-                    if c & LEAF != 0 {
-                        let cl = (c & !LEAF) as usize;
+                    if c & LBVH_LEAF != 0 {
+                        let cl = (c & !LBVH_LEAF) as usize;
                         if cl >= boxes.len() {
                             return Err(format!("node {j}: leaf {cl} out of range"));
                         }
@@ -234,7 +223,7 @@ impl Lbvh {
             return Err(format!("internal node {j} reached {} times", node_seen[j]));
         }
         for (c, b) in boxes.iter().enumerate() {
-            let in_tree = self.leaf_parents[c] != NONE;
+            let in_tree = self.leaf_parents[c] != LBVH_NONE;
             if leaf_seen[c] != u32::from(in_tree) {
                 return Err(format!(
                     "cluster {c} reached {} times (in tree: {in_tree})",
@@ -248,8 +237,10 @@ impl Lbvh {
         if depth != self.depth {
             return Err(format!("depth {} reported, {depth} found", self.depth));
         }
-        if depth as usize > STACK_SIZE {
-            return Err(format!("depth {depth} exceeds the stack ({STACK_SIZE})"));
+        if depth > LBVH_STACK_SIZE {
+            return Err(format!(
+                "depth {depth} exceeds the stack ({LBVH_STACK_SIZE})"
+            ));
         }
         Ok(())
     }

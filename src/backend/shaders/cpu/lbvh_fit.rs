@@ -1,14 +1,16 @@
 //! The CPU twin of `shaders_wgsl/lbvh_fit.wgsl`: bottom-up bounds and heights (LBVH stage 5),
 //! for builds and refits.
 
-use super::lbvh::{EMPTY_BOX, GpuBox, LEAF, Lbvh, NONE, box_is_empty, box_union, children};
+use super::lbvh::{
+    EMPTY_BOX, GpuBox, LBVH_LEAF, LBVH_NONE, Lbvh, box_is_empty, box_union, children,
+};
 
 impl Lbvh {
     /// Stage 5: every internal node's box and height, bottom up, from the cluster boxes.
     pub fn fit(&mut self, boxes: &[GpuBox]) {
         self.depth = 0;
         let root = self.root();
-        if root == NONE || root & LEAF != 0 {
+        if root == LBVH_NONE || root & LBVH_LEAF != 0 {
             return;
         }
         // Post-order over internal nodes with an explicit stack: (node, children done).
@@ -19,7 +21,7 @@ impl Lbvh {
             if !done {
                 stack.push((j, true));
                 for c in ch {
-                    if c & LEAF == 0 {
+                    if c & LBVH_LEAF == 0 {
                         stack.push((c, false));
                     }
                 }
@@ -28,8 +30,8 @@ impl Lbvh {
             let mut b = EMPTY_BOX;
             let mut h = 0;
             for (k, c) in ch.into_iter().enumerate() {
-                let (cb, ch_height) = if c & LEAF != 0 {
-                    (boxes[(c & !LEAF) as usize], 0)
+                let (cb, ch_height) = if c & LBVH_LEAF != 0 {
+                    (boxes[(c & !LBVH_LEAF) as usize], 0)
                 } else {
                     (self.node_box(c as usize), heights[c as usize])
                 };
@@ -51,7 +53,7 @@ impl Lbvh {
         !boxes
             .iter()
             .zip(&self.leaf_parents)
-            .any(|(b, &p)| p == NONE && !box_is_empty(b))
+            .any(|(b, &p)| p == LBVH_NONE && !box_is_empty(b))
     }
 }
 

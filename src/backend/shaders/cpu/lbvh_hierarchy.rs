@@ -1,6 +1,8 @@
 //! The CPU twin of `shaders_wgsl/lbvh_hierarchy.wgsl`: Karras' internal nodes (LBVH stage 4).
 
-use super::lbvh::{EMPTY_KEY, LEAF, Lbvh, NODE_WORDS, NONE, ROOT_LEAF, SENTINEL};
+use super::lbvh::{
+    LBVH_EMPTY_KEY, LBVH_LEAF, LBVH_NONE, LBVH_ROOT_LEAF, LBVH_SENTINEL, Lbvh, NODE_WORDS,
+};
 
 /// Karras' δ: the common prefix length of the extended keys of sorted positions i and j
 /// (-1 outside `0..n`).
@@ -58,23 +60,26 @@ pub fn karras_split(keys: &[u32], n: usize, i: usize) -> (usize, bool, bool) {
 
 impl Lbvh {
     /// Stage 4: the hierarchy over sorted keys and their clusters (`n_clusters` in all, the
-    /// empty ones sorted last), bounds words left at [`SENTINEL`].
+    /// empty ones sorted last), bounds words left at [`LBVH_SENTINEL`].
     pub fn hierarchy(sorted_keys: &[u32], sorted_clusters: &[u32]) -> Lbvh {
         let n_clusters = sorted_keys.len();
-        let n = sorted_keys.iter().take_while(|&&k| k != EMPTY_KEY).count();
+        let n = sorted_keys
+            .iter()
+            .take_while(|&&k| k != LBVH_EMPTY_KEY)
+            .count();
         let internal = n.saturating_sub(1);
-        let mut nodes = vec![[SENTINEL; NODE_WORDS]; internal + 1];
-        let mut node_parents = vec![NONE; internal + 1];
-        let mut leaf_parents = vec![NONE; n_clusters];
+        let mut nodes = vec![[LBVH_SENTINEL; NODE_WORDS]; internal + 1];
+        let mut node_parents = vec![LBVH_NONE; internal + 1];
+        let mut leaf_parents = vec![LBVH_NONE; n_clusters];
         let root = match n {
-            0 => NONE,
+            0 => LBVH_NONE,
             1 => {
-                leaf_parents[sorted_clusters[0] as usize] = ROOT_LEAF;
-                LEAF | sorted_clusters[0]
+                leaf_parents[sorted_clusters[0] as usize] = LBVH_ROOT_LEAF;
+                LBVH_LEAF | sorted_clusters[0]
             }
             _ => 1,
         };
-        nodes[0] = [0, 0, 0, root, 0, 0, 0, NONE];
+        nodes[0] = [0, 0, 0, root, 0, 0, 0, LBVH_NONE];
         for i in 0..internal {
             let (gamma, left_leaf, right_leaf) = karras_split(sorted_keys, n, i);
             let node = i as u32 + 1;
@@ -82,7 +87,7 @@ impl Lbvh {
                 if leaf {
                     let c = sorted_clusters[position];
                     leaf_parents[c as usize] = node;
-                    LEAF | c
+                    LBVH_LEAF | c
                 } else {
                     node_parents[position + 1] = node;
                     position as u32 + 1

@@ -2,7 +2,7 @@
 
 use glam::DVec3;
 
-use super::lbvh::{EMPTY_KEY, GpuBox, MORTON_CELLS, box_is_empty};
+use super::lbvh::{GpuBox, LBVH_EMPTY_KEY, MORTON_CELLS, box_is_empty};
 use crate::values::Bounds;
 
 /// The Morton grid over the series' bounds, in local coordinates.
@@ -50,7 +50,7 @@ pub fn expand_bits(v: u32) -> u32 {
 /// Stage 2: a cluster's key.
 pub fn morton_key(b: &GpuBox, grid: &KeyGrid) -> u32 {
     if box_is_empty(b) {
-        return EMPTY_KEY;
+        return LBVH_EMPTY_KEY;
     }
     let max = (MORTON_CELLS - 1) as f32;
     let q: [u32; 3] = std::array::from_fn(|i| {
@@ -81,6 +81,6 @@ mod tests {
         assert_eq!(morton_key(&b(0.0, 1.0, 0.0), &g), 0b010);
         assert_eq!(morton_key(&b(0.0, 0.0, 1.0), &g), 0b001);
         assert_eq!(morton_key(&b(5000.0, -3.0, 2.0), &g) >> 2 & 1, 1);
-        assert_eq!(morton_key(&EMPTY_BOX, &g), EMPTY_KEY);
+        assert_eq!(morton_key(&EMPTY_BOX, &g), LBVH_EMPTY_KEY);
     }
 }

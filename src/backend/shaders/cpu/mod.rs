@@ -15,7 +15,7 @@
 //!    (`r` = `particle_radius` of `shared/rbf.glsl`). No member left: the box is empty
 //!    (`min = +inf, max = -inf`) and the cluster stays out of the tree.
 //! 2. **Keys** (`lbvh_keys.wgsl`): a 30-bit Morton key of the box centre on a 1024^3 grid over
-//!    the series' bounds (x in the highest bit of each triple); [`EMPTY_KEY`] for an empty box,
+//!    the series' bounds (x in the highest bit of each triple); [`LBVH_EMPTY_KEY`] for an empty box,
 //!    so empty clusters sort last. The non-empty ones are counted: `n` leaves.
 //! 3. **Sort** (`radix_sort.wgsl`): a stable LSD radix sort of (key, cluster) pairs, 4-bit
 //!    digits, 8 passes: equal to a stable `sort_by_key`.
@@ -27,11 +27,11 @@
 //!
 //! # Node layout (shared with the GPU, 32 bytes a node)
 //! `nodes[j]` is 8 words: `[min.x, min.y, min.z, left, max.x, max.y, max.z, right]`, the box as
-//! f32 bits and the children as pointers: [`LEAF`]` | c` for cluster `c` (whose box is the
+//! f32 bits and the children as pointers: [`LBVH_LEAF`]` | c` for cluster `c` (whose box is the
 //! cluster box), else an internal node's index. Node 0 is a header whose word 3 holds the root
-//! pointer ([`NONE`] for an empty tree, a leaf pointer for a one-leaf tree, else 1); Karras'
-//! internal node `i` is node `i + 1`. Beside it: `node_parents[j]` (the root's is [`NONE`])
-//! and `leaf_parents[c]` ([`NONE`] for a cluster left out, [`ROOT_LEAF`] for the only leaf).
+//! pointer ([`LBVH_NONE`] for an empty tree, a leaf pointer for a one-leaf tree, else 1); Karras'
+//! internal node `i` is node `i + 1`. Beside it: `node_parents[j]` (the root's is [`LBVH_NONE`])
+//! and `leaf_parents[c]` ([`LBVH_NONE`] for a cluster left out, [`LBVH_ROOT_LEAF`] for the only leaf).
 
 pub mod lbvh;
 pub mod lbvh_bounds;

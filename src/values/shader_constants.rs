@@ -1,0 +1,157 @@
+//! The constants Rust and the shaders share, each defined once, here.
+//!
+//! The shaders never spell these numbers: they include `generated/constants.glsl` or
+//! `generated/constants.wgsl`, which [`glsl`] and [`wgsl`] write from the definitions below.
+//! `build.rs` compiles this very file (`#[path]`, so it uses nothing of the crate) to validate
+//! the kernels with that text, and the library's include resolver serves the same text at run
+//! time, so a constant cannot differ between Rust and a shader.
+
+/// Samples per baked 1D map (`values::tables`, `shaders_glsl/shared/maps.glsl`).
+pub const TABLE_SIZE: usize = 256;
+/// Where each map's table starts in the map-table buffer (floats): density, radius, optical
+/// density, then the colour map as interleaved linear RGB (3 x `TABLE_SIZE`).
+pub const TABLE_DENSITY: usize = 0;
+pub const TABLE_RADIUS: usize = TABLE_SIZE;
+pub const TABLE_OPTICAL: usize = 2 * TABLE_SIZE;
+pub const TABLE_COLOUR: usize = 3 * TABLE_SIZE;
+/// Floats in the map-table buffer.
+pub const TABLE_FLOATS: usize = 6 * TABLE_SIZE;
+
+/// The shipped blue-noise mask's size (`assets/stbn_128x128x64.bin`), which the shaders index.
+pub const STBN_WIDTH: u32 = 128;
+pub const STBN_HEIGHT: u32 = 128;
+pub const STBN_DEPTH: u32 = 64;
+/// Toroidal offsets of the blue-noise mask per random dimension, so a pixel's different
+/// decisions read different (decorrelated) mask values.
+pub const NOISE_OFFSETS: [[u32; 2]; 3] = [[0, 0], [61, 29], [23, 97]];
+
+/// Below this, Phi counts as "no density": the sample has no colour (never NaN).
+pub const PHI_EPSILON: f64 = 1e-30;
+
+/// LBVH child pointers: the leaf flag (the low 31 bits are the cluster index).
+pub const LBVH_LEAF: u32 = 0x8000_0000;
+/// No node: a missing root, a root's parent, a cluster left out of the tree.
+pub const LBVH_NONE: u32 = u32::MAX;
+/// `leaf_parents` of the only leaf of a one-leaf tree (it is in the tree, with no parent).
+pub const LBVH_ROOT_LEAF: u32 = 0xFFFF_FFFE;
+/// The word a bound holds before the bottom-up pass writes it (a NaN no bound can be).
+pub const LBVH_SENTINEL: u32 = u32::MAX;
+/// The key of an empty cluster: above every Morton key (those use 30 bits).
+pub const LBVH_EMPTY_KEY: u32 = u32::MAX;
+/// Cells per axis of the Morton grid (10 bits).
+pub const MORTON_CELLS: u32 = 1024;
+/// Entries of the traversal stack: at least the deepest possible tree's depth (30 key bits +
+/// 32 index bits = 62), so it cannot overflow.
+pub const LBVH_STACK_SIZE: u32 = 64;
+
+/// Keys per radix-sort tile (`shaders_wgsl/radix_sort.wgsl`) and digits per pass.
+pub const SORT_TILE: u32 = 4096;
+pub const SORT_RADIX: u32 = 16;
+
+/// The specialisation constants (Vulkan constant ids; wgpu's pipeline-overridable constants
+/// "0", "1", ...), in id order: their names and what their values mean.
+pub const SPEC_CONSTANTS: [(&str, &str); 7] = [
+    ("INTEGRATOR", "0 EA, 1 delta, 2 marching, 3 SS reference"),
+    ("COLOUR_MODE", "0 post, 1 pre, 2 density"),
+    ("NOISE_KIND", "0 STBN, 1 white"),
+    ("CLUSTER_SIZE", "particles per box: 1, 2, 4, 8, 16"),
+    (
+        "RADIUS_MAP_VARIES",
+        "1: look the radius map up per particle",
+    ),
+    (
+        "DENSITY_MAP_VARIES",
+        "1: look the density map up per particle",
+    ),
+    ("HAS_RADIUS_ATTRIBUTE", "1: per-particle radius buffer"),
+];
+/// Indices into [`SPEC_CONSTANTS`].
+pub mod spec {
+    pub const INTEGRATOR: usize = 0;
+    pub const COLOUR_MODE: usize = 1;
+    pub const NOISE_KIND: usize = 2;
+    pub const CLUSTER_SIZE: usize = 3;
+    pub const RADIUS_MAP_VARIES: usize = 4;
+    pub const DENSITY_MAP_VARIES: usize = 5;
+    pub const HAS_RADIUS_ATTRIBUTE: usize = 6;
+}
+
+/// Values of the `INTEGRATOR`, `COLOUR_MODE` and `NOISE_KIND` specialisation constants.
+pub const INTEGRATOR_EA: u32 = 0;
+pub const INTEGRATOR_DELTA: u32 = 1;
+pub const INTEGRATOR_MARCHING: u32 = 2;
+pub const INTEGRATOR_SS_REFERENCE: u32 = 3;
+pub const COLOUR_POST: u32 = 0;
+pub const COLOUR_PRE: u32 = 1;
+pub const COLOUR_DENSITY: u32 = 2;
+pub const NOISE_STBN: u32 = 0;
+pub const NOISE_WHITE: u32 = 1;
+
+/// The unsigned constants both languages get, with their names there.
+fn unsigned() -> Vec<(&'static str, u64)> {
+    vec![
+        ("TABLE_SIZE", TABLE_SIZE as u64),
+        ("TABLE_DENSITY", TABLE_DENSITY as u64),
+        ("TABLE_RADIUS", TABLE_RADIUS as u64),
+        ("TABLE_OPTICAL", TABLE_OPTICAL as u64),
+        ("TABLE_COLOUR", TABLE_COLOUR as u64),
+        ("STBN_WIDTH", STBN_WIDTH.into()),
+        ("STBN_HEIGHT", STBN_HEIGHT.into()),
+        ("STBN_DEPTH", STBN_DEPTH.into()),
+        ("LBVH_LEAF", LBVH_LEAF.into()),
+        ("LBVH_NONE", LBVH_NONE.into()),
+        ("LBVH_ROOT_LEAF", LBVH_ROOT_LEAF.into()),
+        ("LBVH_SENTINEL", LBVH_SENTINEL.into()),
+        ("LBVH_EMPTY_KEY", LBVH_EMPTY_KEY.into()),
+        ("MORTON_CELLS", MORTON_CELLS.into()),
+        ("LBVH_STACK_SIZE", LBVH_STACK_SIZE.into()),
+        ("SORT_TILE", SORT_TILE.into()),
+        ("SORT_RADIX", SORT_RADIX.into()),
+        ("INTEGRATOR_EA", INTEGRATOR_EA.into()),
+        ("INTEGRATOR_DELTA", INTEGRATOR_DELTA.into()),
+        ("INTEGRATOR_MARCHING", INTEGRATOR_MARCHING.into()),
+        ("INTEGRATOR_SS_REFERENCE", INTEGRATOR_SS_REFERENCE.into()),
+        ("COLOUR_POST", COLOUR_POST.into()),
+        ("COLOUR_PRE", COLOUR_PRE.into()),
+        ("COLOUR_DENSITY", COLOUR_DENSITY.into()),
+        ("NOISE_STBN", NOISE_STBN.into()),
+        ("NOISE_WHITE", NOISE_WHITE.into()),
+    ]
+}
+
+const HEADER: &str = "// Generated from src/values/shader_constants.rs (the one definition of each constant);\n// not a file on disk: edit the Rust.\n";
+
+/// The GLSL text of `generated/constants.glsl`: every constant, the specialisation-constant
+/// declarations, and `noise_offset(dim)`.
+pub fn glsl() -> String {
+    let mut out = String::from(HEADER);
+    for (name, value) in unsigned() {
+        out.push_str(&format!("const uint {name} = {value}u;\n"));
+    }
+    out.push_str(&format!("const float PHI_EPSILON = {PHI_EPSILON:e};\n"));
+    for (id, (name, meaning)) in SPEC_CONSTANTS.iter().enumerate() {
+        // CLUSTER_SIZE's default is 1 (a cluster is never empty); every other default is 0.
+        let default = u32::from(id == spec::CLUSTER_SIZE);
+        out.push_str(&format!(
+            "layout(constant_id = {id}) const uint {name} = {default}u; // {meaning}\n"
+        ));
+    }
+    out.push_str("uvec2 noise_offset(uint dim) {\n");
+    for (dim, [x, y]) in NOISE_OFFSETS.iter().enumerate().skip(1) {
+        out.push_str(&format!(
+            "    if (dim == {dim}u) {{\n        return uvec2({x}u, {y}u);\n    }}\n"
+        ));
+    }
+    let [x, y] = NOISE_OFFSETS[0];
+    out.push_str(&format!("    return uvec2({x}u, {y}u);\n}}\n"));
+    out
+}
+
+/// The WGSL text of `generated/constants.wgsl`.
+pub fn wgsl() -> String {
+    let mut out = String::from(HEADER);
+    for (name, value) in unsigned() {
+        out.push_str(&format!("const {name}: u32 = {value}u;\n"));
+    }
+    out
+}
