@@ -97,7 +97,7 @@ fn main() {
     for path in files("shaders_glsl/wgpu", &["comp"]) {
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
-        let source = resolve_includes(&text, &shared)
+        let source = resolve_includes(&text, &shared, ShaderLanguage::Glsl)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
         for parts in SPLIT_PARTS_VARIANTS {
             let mut frontend = naga::front::glsl::Frontend::default();
@@ -127,7 +127,7 @@ fn main() {
     for path in files("shaders_wgsl", &["wgsl"]) {
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
-        let resolved = resolve_includes(&text, &shared_wgsl)
+        let resolved = resolve_includes(&text, &shared_wgsl, ShaderLanguage::Wgsl)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
         for parts in SPLIT_PARTS_VARIANTS {
             let source = select_split_parts(&resolved, parts)
@@ -161,7 +161,7 @@ fn main() {
     for path in vulkan {
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
-        let source = resolve_includes(&text, &shared)
+        let source = resolve_includes(&text, &shared, ShaderLanguage::Glsl)
             .unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
         let name = path.file_name().unwrap().to_string_lossy().into_owned();
         let resolved = out_dir.join(format!("{name}.glsl"));

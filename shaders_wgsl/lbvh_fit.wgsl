@@ -35,57 +35,7 @@
 // The nodes (8 words each) in up to SPLIT_PARTS parts likewise. Each word's atomics go to one
 // location in one part whatever the split, so the meet-at-the-word argument above holds
 // unchanged.
-@group(0) @binding(14) var<storage, read_write> nodes0: array<atomic<u32>>;
-#if SPLIT_PARTS > 1
-@group(0) @binding(15) var<storage, read_write> nodes1: array<atomic<u32>>;
-@group(0) @binding(16) var<storage, read_write> nodes2: array<atomic<u32>>;
-@group(0) @binding(17) var<storage, read_write> nodes3: array<atomic<u32>>;
-#endif
-
-fn node_exchange(w: u32, v: u32) -> u32 {
-#if SPLIT_PARTS > 1
-    let len = params.part_words;
-    var i = w;
-    if i < len {
-        return atomicExchange(&nodes0[i], v);
-    }
-    i -= len;
-    if i < len {
-        return atomicExchange(&nodes1[i], v);
-    }
-    i -= len;
-    if i < len {
-        return atomicExchange(&nodes2[i], v);
-    }
-    return atomicExchange(&nodes3[i - len], v);
-#else
-    return atomicExchange(&nodes0[w], v);
-#endif
-}
-
-fn node_store(w: u32, v: u32) {
-#if SPLIT_PARTS > 1
-    let len = params.part_words;
-    var i = w;
-    if i < len {
-        atomicStore(&nodes0[i], v);
-        return;
-    }
-    i -= len;
-    if i < len {
-        atomicStore(&nodes1[i], v);
-        return;
-    }
-    i -= len;
-    if i < len {
-        atomicStore(&nodes2[i], v);
-        return;
-    }
-    atomicStore(&nodes3[i - len], v);
-#else
-    atomicStore(&nodes0[w], v);
-#endif
-}
+#split_array nodes 14 atomic<u32> read_write params.part_words exchange:node_exchange store:node_store
 
 // The two children of a node meet at each of its words: each exchanges its value `v` into
 // word `w`. The first to arrive reads SENTINEL and drops out; the second reads its sibling's
@@ -109,20 +59,15 @@ fn meet(w: u32, v: f32, is_max: bool) -> Meet {
 }
 
 @compute @workgroup_size(64)
-fn climb(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let c = (wg.y * groups.x + wg.x) * 64u + lid;
+fn climb(id: Invocation) {
+    let c = thread_index(id);
     if c >= params.clusters {
         return;
     }
-    let lo = box_at(2u * c).xyz;
-    let hi = box_at(2u * c + 1u).xyz;
+    let b = cluster_box(c);
     let parent = leaf_parents[c];
     if parent == LBVH_NONE {
-        if lo.x <= hi.x {
+        if b.lo.x <= b.hi.x {
             atomicStore(&counters[2], 1u);
         }
         return;
@@ -138,7 +83,7 @@ fn climb(
     if params.components > 6u {
         carried = 0x7fu;
     }
-    var v = array<f32, 6>(lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
+    var v = array<f32, 6>(b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
     var height = 0u;
     var node = parent;
     loop {
@@ -179,20 +124,14 @@ fn climb(
 
 // Refit, first: every internal node's bounds words back to SENTINEL (children kept).
 @compute @workgroup_size(64)
-fn reset(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let node = (wg.y * groups.x + wg.x) * 64u + lid + 1u;
+fn reset(id: Invocation) {
+    let node = thread_index(id) + 1u;
     if node >= atomicLoad(&counters[0]) {
         return;
     }
-    let base = node * 8u;
-    node_store(base + 0u, LBVH_SENTINEL);
-    node_store(base + 1u, LBVH_SENTINEL);
-    node_store(base + 2u, LBVH_SENTINEL);
-    node_store(base + 4u, LBVH_SENTINEL);
-    node_store(base + 5u, LBVH_SENTINEL);
-    node_store(base + 6u, LBVH_SENTINEL);
+    // The six bounds words (min.xyz at 0..3, max.xyz at 4..7).
+    for (var k = 0u; k < 3u; k++) {
+        node_store(node * 8u + k, LBVH_SENTINEL);
+        node_store(node * 8u + 4u + k, LBVH_SENTINEL);
+    }
 }

@@ -19,36 +19,7 @@
 // SplitBuffer; shaders_glsl/wgpu/split.glsl explains the two variants). In the 4-part variant
 // an unsplit array has part_words 0xffffffff and every thread takes the first branch of
 // node_store.
-@group(0) @binding(14) var<storage, read_write> nodes0: array<u32>;
-#if SPLIT_PARTS > 1
-@group(0) @binding(15) var<storage, read_write> nodes1: array<u32>;
-@group(0) @binding(16) var<storage, read_write> nodes2: array<u32>;
-@group(0) @binding(17) var<storage, read_write> nodes3: array<u32>;
-#endif
-
-fn node_store(w: u32, v: u32) {
-#if SPLIT_PARTS > 1
-    let len = params.part_words;
-    var i = w;
-    if i < len {
-        nodes0[i] = v;
-        return;
-    }
-    i -= len;
-    if i < len {
-        nodes1[i] = v;
-        return;
-    }
-    i -= len;
-    if i < len {
-        nodes2[i] = v;
-        return;
-    }
-    nodes3[i - len] = v;
-#else
-    nodes0[w] = v;
-#endif
-}
+#split_array nodes 14 u32 read_write params.part_words set:node_store
 
 fn delta(i: i32, j: i32, n: i32) -> i32 {
     if j < 0 || j >= n {
@@ -63,12 +34,8 @@ fn delta(i: i32, j: i32, n: i32) -> i32 {
 }
 
 @compute @workgroup_size(64)
-fn main(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let index = (wg.y * groups.x + wg.x) * 64u + lid;
+fn main(id: Invocation) {
+    let index = thread_index(id);
     let n = i32(counters[0]);
     if index == 0u {
         var root = LBVH_NONE;
@@ -138,14 +105,12 @@ fn main(
     } else {
         node_parents[right] = node;
     }
-    let base = node * 8u;
-    node_store(base + 0u, LBVH_SENTINEL);
-    node_store(base + 1u, LBVH_SENTINEL);
-    node_store(base + 2u, LBVH_SENTINEL);
-    node_store(base + 3u, left);
-    node_store(base + 4u, LBVH_SENTINEL);
-    node_store(base + 5u, LBVH_SENTINEL);
-    node_store(base + 6u, LBVH_SENTINEL);
-    node_store(base + 7u, right);
+    // The bounds words (min.xyz at 0..3, max.xyz at 4..7) wait for the bottom-up pass.
+    for (var k = 0u; k < 3u; k++) {
+        node_store(node * 8u + k, LBVH_SENTINEL);
+        node_store(node * 8u + 4u + k, LBVH_SENTINEL);
+    }
+    node_store(node * 8u + 3u, left);
+    node_store(node * 8u + 7u, right);
     heights[node] = LBVH_SENTINEL;
 }

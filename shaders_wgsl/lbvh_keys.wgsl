@@ -22,20 +22,15 @@ fn expand_bits(v: u32) -> u32 {
 }
 
 @compute @workgroup_size(64)
-fn main(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let c = (wg.y * groups.x + wg.x) * 64u + lid;
+fn main(id: Invocation) {
+    let c = thread_index(id);
     if c >= params.clusters {
         return;
     }
-    let lo = box_at(2u * c).xyz;
-    let hi = box_at(2u * c + 1u).xyz;
+    let b = cluster_box(c);
     var key = LBVH_EMPTY_KEY;
-    if lo.x <= hi.x {
-        let centre = (lo + hi) * 0.5;
+    if b.lo.x <= b.hi.x {
+        let centre = (b.lo + b.hi) * 0.5;
         let q = clamp((centre - params.key_lo.xyz) * params.key_scale.xyz, vec3<f32>(0.0), vec3<f32>(f32(MORTON_CELLS - 1u)));
         let cell = vec3<u32>(q);
         key = (expand_bits(cell.x) << 2u) | (expand_bits(cell.y) << 1u) | expand_bits(cell.z);

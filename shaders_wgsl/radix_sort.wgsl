@@ -17,6 +17,7 @@ struct SortParams {
 }
 
 #include "generated/constants.wgsl"
+#include "shared/invocation.wgsl"
 
 // A tile of SORT_TILE = THREADS * ITEMS keys; SORT_RADIX digit values per 4-bit digit.
 const THREADS: u32 = 128u;
@@ -34,25 +35,33 @@ var<workgroup> tile_counts: array<atomic<u32>, SORT_RADIX>;
 var<workgroup> offsets: array<u32, SORT_RADIX * THREADS>; // digit-major
 var<workgroup> sums: array<u32, SCAN_THREADS>;
 
+// The sum of `value` over threads 0 .. lid - 1 of the first `threads` (a Hillis–Steele scan
+// in `sums`); every thread of the workgroup calls it, with the same `threads`.
+fn exclusive_scan(lid: u32, value: u32, threads: u32) -> u32 {
+    sums[lid] = value;
+    workgroupBarrier();
+    for (var step = 1u; step < threads; step <<= 1u) {
+        var v = sums[lid];
+        if lid >= step {
+            v += sums[lid - step];
+        }
+        workgroupBarrier();
+        sums[lid] = v;
+        workgroupBarrier();
+    }
+    var running = 0u;
+    if lid > 0u {
+        running = sums[lid - 1u];
+    }
+    return running;
+}
+
 fn digit(key: u32) -> u32 {
     return (key >> params.shift) & (SORT_RADIX - 1u);
 }
 
-// Pass 1: per-tile digit counts.
-@compute @workgroup_size(128)
-fn count(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let tile = wg.y * groups.x + wg.x;
-    if tile >= params.tiles {
-        return;
-    }
-    if lid < SORT_RADIX {
-        atomicStore(&tile_counts[lid], 0u);
-    }
-    workgroupBarrier();
+// How often each digit occurs in thread lid's keys of the tile.
+fn digit_counts(tile: u32, lid: u32) -> array<u32, SORT_RADIX> {
     var local: array<u32, SORT_RADIX>;
     let start = tile * SORT_TILE + lid * ITEMS;
     let end = min(start + ITEMS, params.count);
@@ -60,6 +69,22 @@ fn count(
         let d = digit(keys_in[i]);
         local[d] += 1u;
     }
+    return local;
+}
+
+// Pass 1: per-tile digit counts.
+@compute @workgroup_size(128)
+fn count(id: Invocation) {
+    let lid = id.lid;
+    let tile = workgroup_index(id);
+    if tile >= params.tiles {
+        return;
+    }
+    if lid < SORT_RADIX {
+        atomicStore(&tile_counts[lid], 0u);
+    }
+    workgroupBarrier();
+    var local = digit_counts(tile, lid);
     for (var d = 0u; d < SORT_RADIX; d++) {
         if local[d] != 0u {
             atomicAdd(&tile_counts[d], local[d]);
@@ -83,22 +108,8 @@ fn scan(@builtin(local_invocation_index) lid: u32) {
     for (var i = start; i < end; i++) {
         sum += histogram[i];
     }
-    sums[lid] = sum;
-    workgroupBarrier();
-    // Hillis–Steele inclusive scan of the 256 totals.
-    for (var step = 1u; step < SCAN_THREADS; step <<= 1u) {
-        var v = sums[lid];
-        if lid >= step {
-            v += sums[lid - step];
-        }
-        workgroupBarrier();
-        sums[lid] = v;
-        workgroupBarrier();
-    }
-    var running = 0u;
-    if lid > 0u {
-        running = sums[lid - 1u];
-    }
+    // The exclusive prefix of the 256 totals.
+    var running = exclusive_scan(lid, sum, SCAN_THREADS);
     for (var i = start; i < end; i++) {
         let h = histogram[i];
         histogram[i] = running;
@@ -108,22 +119,13 @@ fn scan(@builtin(local_invocation_index) lid: u32) {
 
 // Pass 3: stable scatter.
 @compute @workgroup_size(128)
-fn scatter(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let tile = wg.y * groups.x + wg.x;
+fn scatter(id: Invocation) {
+    let lid = id.lid;
+    let tile = workgroup_index(id);
     if tile >= params.tiles {
         return;
     }
-    var local: array<u32, SORT_RADIX>;
-    let start = tile * SORT_TILE + lid * ITEMS;
-    let end = min(start + ITEMS, params.count);
-    for (var i = start; i < end; i++) {
-        let d = digit(keys_in[i]);
-        local[d] += 1u;
-    }
+    var local = digit_counts(tile, lid);
     for (var d = 0u; d < SORT_RADIX; d++) {
         offsets[d * THREADS + lid] = local[d];
     }
@@ -133,21 +135,7 @@ fn scatter(
     for (var k = 0u; k < SORT_RADIX; k++) {
         sum += offsets[lid * SORT_RADIX + k];
     }
-    sums[lid] = sum;
-    workgroupBarrier();
-    for (var step = 1u; step < THREADS; step <<= 1u) {
-        var v = sums[lid];
-        if lid >= step {
-            v += sums[lid - step];
-        }
-        workgroupBarrier();
-        sums[lid] = v;
-        workgroupBarrier();
-    }
-    var running = 0u;
-    if lid > 0u {
-        running = sums[lid - 1u];
-    }
+    var running = exclusive_scan(lid, sum, THREADS);
     for (var k = 0u; k < SORT_RADIX; k++) {
         let v = offsets[lid * SORT_RADIX + k];
         offsets[lid * SORT_RADIX + k] = running;
@@ -156,11 +144,12 @@ fn scatter(
     workgroupBarrier();
     // offsets[d * THREADS + t]: keys of the tile before thread t's first key of digit d, in
     // digit-major order; offsets[d * THREADS] counts the tile's keys of smaller digits.
-    var dest: array<u32, 16>;
+    var dest: array<u32, SORT_RADIX>;
     for (var d = 0u; d < SORT_RADIX; d++) {
         dest[d] = histogram[d * params.tiles + tile] + offsets[d * THREADS + lid] - offsets[d * THREADS];
     }
-    for (var i = start; i < end; i++) {
+    let start = tile * SORT_TILE + lid * ITEMS;
+    for (var i = start; i < min(start + ITEMS, params.count); i++) {
         let key = keys_in[i];
         let d = digit(key);
         keys_out[dest[d]] = key;

@@ -8,21 +8,7 @@
 layout(local_size_x = 64) in;
 layout(std430, set = 0, binding = 7) readonly buffer QueryPoints { vec4 query_points[]; };
 layout(std430, set = 0, binding = 8) writeonly buffer QueryResults { vec4 query_results[]; };
-layout(std430, set = 0, binding = 10) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
-layout(std430, set = 0, binding = 11) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
-
-// shared/lbvh.glsl's accessors: one buffer per array here (the wgpu backend splits them).
-vec4 lbvh_particle(uint k) {
-    return particles[k];
-}
-vec4 lbvh_node(uint v) {
-    return lbvh_nodes[v];
-}
-vec4 lbvh_box(uint v) {
-    return lbvh_boxes[v];
-}
-
-#include "shared/lbvh.glsl"
+#include "vulkan/lbvh.glsl"
 
 void main() {
     uint i = gl_GlobalInvocationID.y * push.width + gl_GlobalInvocationID.x;

@@ -5,21 +5,7 @@
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(std430, set = 0, binding = 10) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
-layout(std430, set = 0, binding = 11) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
-
-// shared/lbvh.glsl's accessors: one buffer per array here (the wgpu backend splits them).
-vec4 lbvh_particle(uint k) {
-    return particles[k];
-}
-vec4 lbvh_node(uint v) {
-    return lbvh_nodes[v];
-}
-vec4 lbvh_box(uint v) {
-    return lbvh_boxes[v];
-}
-
-#include "shared/lbvh.glsl"
+#include "vulkan/lbvh.glsl"
 
 vec4 field_query(vec3 x) {
     return lbvh_field(x);

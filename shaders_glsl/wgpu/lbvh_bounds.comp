@@ -17,36 +17,8 @@ layout(std430, set = 0, binding = 3) readonly buffer RadiusAttributes { float ra
 // The particles in up to SPLIT_PARTS parts (bindings 10..13), and the boxes likewise
 // (18..21, the bindings split_tree.glsl reads them at): see wgpu/split.glsl.
 #include "wgpu/split.glsl"
-layout(std430, set = 0, binding = 18) buffer ClusterBoxes0 { vec4 cluster_boxes0[]; };
-#if SPLIT_PARTS > 1
-layout(std430, set = 0, binding = 19) buffer ClusterBoxes1 { vec4 cluster_boxes1[]; };
-layout(std430, set = 0, binding = 20) buffer ClusterBoxes2 { vec4 cluster_boxes2[]; };
-layout(std430, set = 0, binding = 21) buffer ClusterBoxes3 { vec4 cluster_boxes3[]; };
-#endif
-
 // Stores vec4 number v of the boxes in its part (split_tree.glsl's lbvh_box reads it back).
-void store_box(uint v, vec4 value) {
-#if SPLIT_PARTS > 1
-    uint len = field_params.counts.w;
-    if (v < len) {
-        cluster_boxes0[v] = value;
-        return;
-    }
-    v -= len;
-    if (v < len) {
-        cluster_boxes1[v] = value;
-        return;
-    }
-    v -= len;
-    if (v < len) {
-        cluster_boxes2[v] = value;
-        return;
-    }
-    cluster_boxes3[v - len] = value;
-#else
-    cluster_boxes0[v] = value;
-#endif
-}
+#split_array cluster_boxes 18 vec4 readwrite field_params.counts.w set:store_box
 
 #include "shared/maps.glsl"
 

@@ -23,36 +23,8 @@ layout(std140, set = 0, binding = 9) uniform TilingBlock {
 #include "wgpu/split_tree.glsl"
 // The accumulation (16 bytes per pixel: 8M pixels, a 4K image, fill lavapipe's 128 MiB
 // binding) in up to SPLIT_PARTS parts, as split.glsl splits the particles.
-layout(std430, set = 0, binding = 22) buffer Accumulation0 { vec4 accumulation0[]; };
-#if SPLIT_PARTS > 1
-layout(std430, set = 0, binding = 23) buffer Accumulation1 { vec4 accumulation1[]; };
-layout(std430, set = 0, binding = 24) buffer Accumulation2 { vec4 accumulation2[]; };
-layout(std430, set = 0, binding = 25) buffer Accumulation3 { vec4 accumulation3[]; };
-#endif
-
 // Adds c to pixel i's sums, in its part.
-void accumulate(uint i, vec4 c) {
-#if SPLIT_PARTS > 1
-    uint len = accumulation_parts.x;
-    if (i < len) {
-        accumulation0[i] += c;
-        return;
-    }
-    i -= len;
-    if (i < len) {
-        accumulation1[i] += c;
-        return;
-    }
-    i -= len;
-    if (i < len) {
-        accumulation2[i] += c;
-        return;
-    }
-    accumulation3[i - len] += c;
-#else
-    accumulation0[i] += c;
-#endif
-}
+#split_array accumulation 22 vec4 readwrite accumulation_parts.x add:accumulate
 
 
 #include "shared/maps.glsl"

@@ -16,34 +16,11 @@
 //      An array that one part holds has length 0xffffffff (every branch below then takes its
 //      first arm) and tiny placeholder buffers for its other parts.
 //
+// The `#split_array` lines (expanded by src/backend/shaders/include.rs, which writes the part
+// selection once for every array and both languages) declare the parts and their accessors.
 // The includer declares field_params (params.glsl's Field) first. This file declares the
 // particle parts; wgpu/split_tree.glsl the nodes and boxes, read-only (the bounds kernel,
 // which writes the boxes, declares its own).
 
-layout(std430, set = 0, binding = 10) readonly buffer Particles0 { vec4 particles0[]; };
-#if SPLIT_PARTS > 1
-layout(std430, set = 0, binding = 11) readonly buffer Particles1 { vec4 particles1[]; };
-layout(std430, set = 0, binding = 12) readonly buffer Particles2 { vec4 particles2[]; };
-layout(std430, set = 0, binding = 13) readonly buffer Particles3 { vec4 particles3[]; };
-#endif
-
 // Particle k: xyz local position, w the normalised attribute.
-vec4 lbvh_particle(uint k) {
-#if SPLIT_PARTS > 1
-    uint len = field_params.counts.z;
-    if (k < len) {
-        return particles0[k];
-    }
-    k -= len;
-    if (k < len) {
-        return particles1[k];
-    }
-    k -= len;
-    if (k < len) {
-        return particles2[k];
-    }
-    return particles3[k - len];
-#else
-    return particles0[k];
-#endif
-}
+#split_array particles 10 vec4 readonly field_params.counts.z get:lbvh_particle

@@ -2,6 +2,7 @@
 // every pass. Included by lbvh_keys, lbvh_hierarchy and lbvh_fit, with the shared constants.
 
 #include "generated/constants.wgsl"
+#include "shared/invocation.wgsl"
 
 struct TreeParams {
     // Key grid: cell = (centre - key_lo) * key_scale on a 1024^3 grid over the series' bounds.

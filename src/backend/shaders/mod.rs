@@ -60,6 +60,10 @@ pub const SHARED_WGSL: &[(&str, &str)] = &[
         include_str!("../../../shaders_wgsl/shared/tree_params.wgsl"),
     ),
     (
+        "shared/invocation.wgsl",
+        include_str!("../../../shaders_wgsl/shared/invocation.wgsl"),
+    ),
+    (
         "shared/split_boxes.wgsl",
         include_str!("../../../shaders_wgsl/shared/split_boxes.wgsl"),
     ),
@@ -69,15 +73,19 @@ pub const SHARED_WGSL: &[(&str, &str)] = &[
 /// `generated/constants.wgsl` by [`shader_constants::wgsl`]), for `SPLIT_PARTS` =
 /// `split_parts` (see [`select_split_parts`]).
 pub fn wgsl_with_includes(source: &str, split_parts: u32) -> String {
-    let resolved = resolve_includes(source, &|name| {
-        if name == "generated/constants.wgsl" {
-            return Some(shader_constants::wgsl());
-        }
-        SHARED_WGSL
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, s)| (*s).to_owned())
-    })
+    let resolved = resolve_includes(
+        source,
+        &|name| {
+            if name == "generated/constants.wgsl" {
+                return Some(shader_constants::wgsl());
+            }
+            SHARED_WGSL
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, s)| (*s).to_owned())
+        },
+        ShaderLanguage::Wgsl,
+    )
     .expect("build.rs validated every include");
     select_split_parts(&resolved, split_parts).expect("build.rs validated every variant")
 }
@@ -85,15 +93,19 @@ pub fn wgsl_with_includes(source: &str, split_parts: u32) -> String {
 /// `source` with its `#include "shared/..."` lines replaced by the shared files (and
 /// `generated/constants.glsl` by [`shader_constants::glsl`]).
 pub fn glsl_with_includes(source: &str) -> String {
-    resolve_includes(source, &|name| {
-        if name == "generated/constants.glsl" {
-            return Some(shader_constants::glsl());
-        }
-        SHARED_GLSL
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, s)| (*s).to_owned())
-    })
+    resolve_includes(
+        source,
+        &|name| {
+            if name == "generated/constants.glsl" {
+                return Some(shader_constants::glsl());
+            }
+            SHARED_GLSL
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, s)| (*s).to_owned())
+        },
+        ShaderLanguage::Glsl,
+    )
     .expect("build.rs validated every include")
 }
 
@@ -272,16 +284,57 @@ mod tests {
     }
 
     #[test]
+    fn split_arrays_declare_every_part_and_select_it_in_the_accessor() {
+        let glsl = split_array(
+            " particles 10 vec4 readonly counts.z get:particle",
+            ShaderLanguage::Glsl,
+        )
+        .unwrap();
+        for k in 0..4 {
+            assert!(glsl.contains(&format!(
+                "binding = {}) readonly buffer Particles{k} {{ vec4 particles{k}[]; }};",
+                10 + k
+            )));
+        }
+        let one_part = select_split_parts(&glsl, 1).unwrap();
+        assert!(one_part.contains("return particles0[i];") && !one_part.contains("particles1"));
+        let four = select_split_parts(&glsl, 4).unwrap();
+        assert_eq!(four.matches("i -= len;").count(), 3);
+        assert!(four.contains("return particles3[i];"));
+        let wgsl = split_array(
+            " nodes 14 atomic<u32> read_write params.w exchange:swap store:put",
+            ShaderLanguage::Wgsl,
+        )
+        .unwrap();
+        assert!(wgsl.contains("fn swap(index: u32, value: u32) -> u32"));
+        assert!(wgsl.contains("atomicStore(&nodes3[i], value);"));
+        for (bad, why) in [
+            (" x 1 vec4 readonly len", "no accessor"),
+            (" x y vec4 readonly len get:f", "not a number"),
+            (" x 1 vec4 readonly len frob:f", "no op 'frob'"),
+            (" x 1", "expected NAME"),
+        ] {
+            let e = split_array(bad, ShaderLanguage::Glsl).unwrap_err();
+            assert!(e.contains(why), "{bad}: {e}");
+        }
+    }
+
+    #[test]
     fn includes_resolve_once_and_name_missing_files() {
         let files = |name: &str| match name {
             "a" => Some("A\n#include \"b\"\n".to_owned()),
             "b" => Some("B\n".to_owned()),
             _ => None,
         };
-        let out = resolve_includes("#include \"a\"\n#include \"b\"\nmain", &files).unwrap();
+        let out = resolve_includes(
+            "#include \"a\"\n#include \"b\"\nmain",
+            &files,
+            ShaderLanguage::Glsl,
+        )
+        .unwrap();
         assert_eq!(out.matches("\nB\n").count(), 1);
         assert!(out.trim_end().ends_with("main"));
-        let e = resolve_includes("#include \"zzz\"", &files).unwrap_err();
+        let e = resolve_includes("#include \"zzz\"", &files, ShaderLanguage::Glsl).unwrap_err();
         assert!(e.contains("zzz"));
         assert_eq!(std::mem::size_of::<GpuFrame>(), 160);
     }
