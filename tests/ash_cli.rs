@@ -7,6 +7,8 @@ use std::process::{Command, Output};
 use aarbf::io::{At, npy};
 use aarbf::scene::{OpenOptions, TimeSeries};
 
+mod common;
+
 fn aarbf(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_aarbf"))
         .args(args)
@@ -35,17 +37,13 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// Whether the ray-tracing device exists; the test fails without one.
 fn available() -> bool {
-    match aarbf::backend::ash_rt::available() {
-        Ok(_) => true,
-        Err(e) if std::env::var_os("CI").is_some() => {
-            panic!("CI is set, but the ash backend is unavailable: {e}")
-        }
-        Err(e) => {
-            eprintln!("SKIPPED (no Vulkan ray-tracing device; set CI to make this fail): {e}");
-            false
-        }
-    }
+    common::require(
+        "a Vulkan device with ray-tracing pipelines",
+        aarbf::backend::ash_rt::available(),
+    );
+    true
 }
 
 #[test]

@@ -1,10 +1,12 @@
 //! `--backend wgpu` in `aarbf field` and `aarbf render`, and `aarbf info --devices`, as a user
-//! runs them. Without a wgpu adapter: fails under `CI`, skips otherwise.
+//! runs them. Without a wgpu adapter: fails.
 
 use std::path::Path;
 use std::process::{Command, Output};
 
 use aarbf::io::{At, npy};
+
+mod common;
 
 fn aarbf(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_aarbf"))
@@ -32,15 +34,13 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// Whether a wgpu adapter exists; the test fails without one.
 fn have_adapter() -> bool {
-    match aarbf::backend::wgpu_lbvh::GpuContext::shared() {
-        Ok(_) => true,
-        Err(e) if std::env::var_os("CI").is_some() => panic!("no wgpu adapter under CI: {e}"),
-        Err(e) => {
-            eprintln!("SKIPPED: no wgpu adapter ({e})");
-            false
-        }
-    }
+    common::require(
+        "a wgpu adapter",
+        aarbf::backend::wgpu_lbvh::GpuContext::shared(),
+    );
+    true
 }
 
 #[test]

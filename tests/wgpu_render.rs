@@ -1,6 +1,6 @@
 //! The wgpu backend's images against the CPU backend's at equal settings, samples and seed,
 //! through a RenderSession as a user drives it. Shares one wgpu device (the process-wide
-//! `GpuContext`); without an adapter it fails under `CI` and skips otherwise.
+//! `GpuContext`); without an adapter it fails.
 //!
 //! Tolerances: the two backends run the same integrator code (GLSL twin of the Rust), f32 on
 //! the GPU against f64 on the CPU, so emission–absorption and stochastic marching agree pixel
@@ -23,16 +23,9 @@ use aarbf::values::{Integrator, NoiseKind};
 mod common;
 use common::assert_no_driver_messages;
 
-fn gpu() -> Option<std::sync::Arc<GpuContext>> {
+fn gpu() -> std::sync::Arc<GpuContext> {
     common::capture_driver_messages();
-    match GpuContext::shared() {
-        Ok(c) => Some(c),
-        Err(e) if std::env::var_os("CI").is_some() => panic!("no wgpu adapter under CI: {e}"),
-        Err(e) => {
-            eprintln!("SKIPPED: no wgpu adapter ({e})");
-            None
-        }
-    }
+    common::require("a wgpu adapter", GpuContext::shared())
 }
 
 fn demo() -> TimeSeries {
@@ -106,9 +99,7 @@ fn session(kind: BackendKind, series: &TimeSeries, field: &FieldSettings) -> Ren
 
 #[test]
 fn images_match_the_cpu_backend_at_equal_samples_and_seed() {
-    if gpu().is_none() {
-        return;
-    }
+    gpu();
     let series = demo();
     let f = field(&series);
     let mut cpu = session(BackendKind::Cpu, &series, &f);
@@ -154,9 +145,7 @@ fn images_match_the_cpu_backend_at_equal_samples_and_seed() {
 
 #[test]
 fn sessions_refit_restart_and_reproduce_on_wgpu() {
-    if gpu().is_none() {
-        return;
-    }
+    gpu();
     let series = demo();
     let mut f = field(&series);
     let settings = RenderSettings {

@@ -14,7 +14,7 @@
 // rbf_accumulate it calls), the accessors of the arrays (functions rather than buffer names so
 // that the wgpu backend can split an array too large for one binding over several: see
 // wgpu/split.glsl; the Vulkan kernels read one buffer each):
-//     vec4 lbvh_particle(uint k);  // particle k
+//     vec4 particle(uint k);       // particle k
 //     vec4 lbvh_node(uint v);      // vec4 number v of the nodes
 //     vec4 lbvh_box(uint v);       // vec4 number v of the cluster boxes
 //
@@ -31,7 +31,7 @@ void lbvh_visit_cluster(uint c, vec3 x, inout vec4 acc) {
     uint first = c * CLUSTER_SIZE;
     uint end = min(first + CLUSTER_SIZE, field_params.counts.x);
     for (uint k = first; k < end; k++) {
-        vec4 p = lbvh_particle(k);
+        vec4 p = particle(k);
         rbf_accumulate(acc, x, p, particle_radius(p, k));
     }
 }

@@ -55,10 +55,15 @@ layout(push_constant) uniform Push {
 // `accum[i]`, pixel i's sums, as the render kernels index them.
 #define accum (Vec4Array(push.accum_address).v)
 
-float radius_attribute(uint particle) {
-    return FloatArray(push.radius_address).v[particle];
+vec4 particle(uint k) {
+    return particles[k];
+}
+
+float radius_attribute(uint k) {
+    return FloatArray(push.radius_address).v[k];
 }
 
 #include "shared/maps.glsl"
 #include "shared/noise.glsl"
 #include "shared/rbf.glsl"
+#include "shared/cluster_box.glsl"

@@ -1,6 +1,6 @@
 #version 460
-// One AABB per cluster of CLUSTER_SIZE Hilbert-sorted particles (the GPU twin of
-// accel::ClusterBoxes::build), written as VkAabbPositionsKHR (6 floats) for the BLAS build.
+// One AABB per cluster by the shared cluster-box rule (shared/cluster_box.glsl), written as
+// VkAabbPositionsKHR (6 floats) for the BLAS build. Twin: accel::clusters::cluster_box (f32).
 //
 // - Clusters past the step's particles (the buffer holds the series' maximum) get NaN boxes,
 //   Vulkan's inactive primitives. The BLAS build takes only the step's clusters anyway
@@ -10,8 +10,6 @@
 //   particle's centre), never NaN: it stays active, so a later radius change can refit it
 //   (an update may not turn an inactive primitive active). The intersection shader reports
 //   nothing for radius 0, so the box adds no term.
-// - Boxes are padded by 2 ulp of the coordinates, so the f32 box holds every point the f32
-//   intersection test accepts.
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 64) in;
@@ -24,32 +22,12 @@ void main() {
     if (c >= push.count) {
         return;
     }
-    uint n = field_params.counts.x;
     uint first = c * CLUSTER_SIZE;
     vec3 lo = vec3(uintBitsToFloat(0x7fc00000u));
     vec3 hi = lo;
-    if (first < n) {
-        bool any = false;
-        for (uint k = 0u; k < CLUSTER_SIZE; k++) {
-            uint i = first + k;
-            if (i >= n) {
-                break;
-            }
-            vec4 p = particles[i];
-            float r = particle_radius(p, i);
-            if (r > 0.0) {
-                vec3 pad = max(abs(p.xyz), vec3(r)) * 2.4e-7;
-                vec3 a = p.xyz - vec3(r) - pad;
-                vec3 b = p.xyz + vec3(r) + pad;
-                lo = any ? min(lo, a) : a;
-                hi = any ? max(hi, b) : b;
-                any = true;
-            }
-        }
-        if (!any) {
-            lo = particles[first].xyz;
-            hi = lo;
-        }
+    if (first < field_params.counts.x && !cluster_box(c, lo, hi)) {
+        lo = particle(first).xyz;
+        hi = lo;
     }
     BoxArray boxes = BoxArray(push.boxes_address);
     boxes.v[6u * c + 0u] = lo.x;

@@ -6,9 +6,6 @@
 layout(std430, set = 0, binding = 10) readonly buffer LbvhNodes { vec4 lbvh_nodes[]; };
 layout(std430, set = 0, binding = 11) readonly buffer LbvhBoxes { vec4 lbvh_boxes[]; };
 
-vec4 lbvh_particle(uint k) {
-    return particles[k];
-}
 vec4 lbvh_node(uint v) {
     return lbvh_nodes[v];
 }

@@ -1,10 +1,8 @@
 #version 450
-// The LBVH build's first stage (the paper's bounds kernel): one box per cluster of
-// CLUSTER_SIZE consecutive particles, bounding [p - r, p + r] over the members with r > 0.
-// A cluster with no such member gets the empty box (+inf, -inf) and is left out of the tree.
-// The radius is rbf.glsl's particle_radius, the very function the query tests particles
-// with, so a box always holds the spheres the traversal looks for. (This stage is GLSL rather
-// than WGSL for that reason: one source for the radius; it needs no atomics.)
+// The LBVH build's first stage (the paper's bounds kernel): one box per cluster by the shared
+// cluster-box rule (shared/cluster_box.glsl); an empty cluster gets the empty box
+// (+inf, -inf) and is left out of the tree. (This stage is GLSL rather than WGSL for that
+// reason: one source for the rule and the radius; it needs no atomics.)
 // Twin: backend/shaders/cpu/lbvh_bounds.rs.
 
 layout(local_size_x = 64) in;
@@ -27,24 +25,19 @@ float radius_attribute(uint i) {
 }
 
 #include "shared/rbf.glsl"
+#include "shared/cluster_box.glsl"
 
 void main() {
     uint c = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64u + gl_LocalInvocationID.x;
     if (c >= field_params.counts.y) {
         return;
     }
-    float inf = uintBitsToFloat(0x7f800000u);
-    vec3 lo = vec3(inf);
-    vec3 hi = vec3(-inf);
-    uint first = c * CLUSTER_SIZE;
-    uint end = min(first + CLUSTER_SIZE, field_params.counts.x);
-    for (uint k = first; k < end; k++) {
-        vec4 p = lbvh_particle(k);
-        float r = particle_radius(p, k);
-        if (r > 0.0) {
-            lo = min(lo, p.xyz - vec3(r));
-            hi = max(hi, p.xyz + vec3(r));
-        }
+    vec3 lo;
+    vec3 hi;
+    if (!cluster_box(c, lo, hi)) {
+        float inf = uintBitsToFloat(0x7f800000u);
+        lo = vec3(inf);
+        hi = vec3(-inf);
     }
     store_box(2u * c, vec4(lo, 0.0));
     store_box(2u * c + 1u, vec4(hi, 0.0));

@@ -23,4 +23,4 @@
 // which writes the boxes, declares its own).
 
 // Particle k: xyz local position, w the normalised attribute.
-#split_array particles 10 vec4 readonly field_params.counts.z get:lbvh_particle
+#split_array particles 10 vec4 readonly field_params.counts.z get:particle

@@ -4,6 +4,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use glam::{DVec3, Vec3};
+use num_traits::Float;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -88,9 +89,38 @@ pub fn f32_up(x: f64) -> f32 {
     if f64::from(f) < x { f.next_up() } else { f }
 }
 
-/// One box per cluster of K consecutive particles, bounding every member's sphere; members
-/// with radius 0 are left out, and a cluster with no member left is empty
-/// (`Bounds::is_empty`). Boxes are rounded outward to f32, so they contain the f64 spheres.
+/// The cluster-box rule (paper §3.2.3), written once for every precision: the union of
+/// `[c - r - pad, c + r + pad]` over the members (centre, radius) with `r > 0`, where
+/// `pad = max(|c|, r) · 2ε` is two ulp of the coordinates in that precision, so the box holds
+/// every point a sphere test in that precision accepts; `None` when no member has `r > 0` (an
+/// empty cluster). At f32 it is the CPU twin of `shaders_glsl/shared/cluster_box.glsl` (same
+/// operations in the same order); the f64 reference uses it at f64.
+pub fn cluster_box<F: Float>(
+    members: impl IntoIterator<Item = ([F; 3], F)>,
+) -> Option<[[F; 3]; 2]> {
+    let pad = F::epsilon() + F::epsilon();
+    let mut out: Option<[[F; 3]; 2]> = None;
+    for (c, r) in members {
+        // Radius 0 (or NaN) leaves the member out.
+        if r.partial_cmp(&F::zero()) != Some(std::cmp::Ordering::Greater) {
+            continue;
+        }
+        let a: [F; 3] = std::array::from_fn(|i| c[i] - r - c[i].abs().max(r) * pad);
+        let b: [F; 3] = std::array::from_fn(|i| c[i] + r + c[i].abs().max(r) * pad);
+        out = Some(match out {
+            None => [a, b],
+            Some([lo, hi]) => [
+                std::array::from_fn(|i| lo[i].min(a[i])),
+                std::array::from_fn(|i| hi[i].max(b[i])),
+            ],
+        });
+    }
+    out
+}
+
+/// One box per cluster of K consecutive particles by [`cluster_box`] (a cluster with no member
+/// left is empty, `Bounds::is_empty`). Boxes are rounded outward to f32, so they contain the
+/// f64 spheres.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClusterBoxes {
     pub size: ClusterSize,
@@ -105,17 +135,15 @@ impl ClusterBoxes {
         let boxes = centers
             .par_chunks(k)
             .zip(radii.par_chunks(k))
-            .map(|(c, r)| {
-                c.iter()
-                    .zip(r)
-                    .filter(|(_, r)| **r > 0.0)
-                    .fold(Bounds::EMPTY, |b, (c, &r)| {
-                        b.union(Bounds {
-                            min: Vec3::new(f32_down(c.x - r), f32_down(c.y - r), f32_down(c.z - r)),
-                            max: Vec3::new(f32_up(c.x + r), f32_up(c.y + r), f32_up(c.z + r)),
-                        })
-                    })
-            })
+            .map(
+                |(c, r)| match cluster_box(c.iter().zip(r).map(|(c, &r)| (c.to_array(), r))) {
+                    None => Bounds::EMPTY,
+                    Some([lo, hi]) => Bounds {
+                        min: Vec3::from_array(lo.map(f32_down)),
+                        max: Vec3::from_array(hi.map(f32_up)),
+                    },
+                },
+            )
             .collect();
         ClusterBoxes { size, boxes }
     }
@@ -162,14 +190,15 @@ mod tests {
         let r = [0.5, 0.0, 0.0, 0.0, 0.25];
         let b = ClusterBoxes::build(&c, &r, ClusterSize::new(2).unwrap());
         assert_eq!(b.len(), 3);
-        assert_eq!(b.boxes[0].min, Vec3::splat(-0.5));
+        let pad = 0.5 * 2.0 * f64::EPSILON;
+        assert_eq!(b.boxes[0].min, Vec3::splat(f32_down(-0.5 - pad)));
         assert_eq!(
             b.boxes[0].max,
-            Vec3::splat(0.5),
+            Vec3::splat(f32_up(0.5 + pad)),
             "the zero-radius member adds nothing"
         );
         assert!(b.boxes[1].is_empty());
-        assert_eq!(b.boxes[2].min, Vec3::splat(0.75));
+        assert!(b.boxes[2].min.cmple(Vec3::splat(0.75)).all());
         assert_eq!(b.non_empty(), 2);
         assert_eq!(b.members(2, 5), 4..5);
         assert!(ClusterSize::new(3).is_err());

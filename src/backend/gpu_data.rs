@@ -7,7 +7,8 @@ use rayon::prelude::*;
 use super::StepInput;
 use super::shaders::GpuField;
 use crate::accel::{ClusterSize, hilbert_order};
-use crate::field::{FieldError, FieldInputs, FieldSettings, normalise};
+use crate::field::{FieldError, FieldInputs, FieldSettings, FieldTables, normalise};
+use crate::values::Step;
 
 /// One step, ready to upload.
 #[derive(Clone, Debug, PartialEq)]
@@ -26,10 +27,8 @@ pub struct GpuStepData {
     pub field: GpuField,
     pub radius_map_varies: bool,
     pub density_map_varies: bool,
-    /// The density and radius maps (256 samples each) and the colour map (linear RGB).
-    pub density_table: Vec<f32>,
-    pub radius_table: Vec<f32>,
-    pub colour_table: Vec<[f32; 3]>,
+    /// The density, radius and colour maps' tables.
+    pub tables: FieldTables,
 }
 
 impl GpuStepData {
@@ -62,31 +61,52 @@ impl GpuStepData {
             field: GpuField::default(),
             radius_map_varies: false,
             density_map_varies: false,
-            density_table: Vec::new(),
-            radius_table: Vec::new(),
-            colour_table: Vec::new(),
+            tables: FieldTables::of(settings),
         };
         data.set_maps(settings);
         Ok(data)
     }
 
+    /// Applies field settings that keep the particles (the same attribute and range): checks
+    /// them with the one check every backend makes ([`FieldInputs::check`]), gathers a new
+    /// radius attribute if it changed, and updates the maps. Returns whether the radius
+    /// attribute changed (a backend uploads it again).
+    pub fn apply_field(
+        &mut self,
+        step: &Step,
+        old: &FieldSettings,
+        new: &FieldSettings,
+        series_range: Option<(f64, f64)>,
+    ) -> Result<bool, FieldError> {
+        let inputs = FieldInputs::check(step, new, series_range)?;
+        let radius_changed = new.radius_attribute != old.radius_attribute;
+        if radius_changed {
+            self.radius_attribute = inputs.radius.map(|h| {
+                self.order
+                    .par_iter()
+                    .map(|&i| h.values[i as usize])
+                    .collect()
+            });
+        }
+        self.set_maps(new);
+        Ok(radius_changed)
+    }
+
     /// Updates everything that depends on the maps and the global radius (not the particles).
     pub fn set_maps(&mut self, settings: &FieldSettings) {
         let n = self.points.len();
+        self.tables = FieldTables::of(settings);
         self.radius_map_varies = !settings.radius_map.0.is_constant();
         self.density_map_varies = !settings.density_map.0.is_constant();
         self.field = GpuField {
             radius: [
                 settings.radius as f32,
-                settings.radius_map.0.eval(0.0) as f32,
-                settings.density_map.0.eval(0.0) as f32,
+                self.tables.radius[0],
+                self.tables.density[0],
                 0.0,
             ],
             counts: [n as u32, self.cluster.clusters_for(n) as u32, 0, 0],
         };
-        self.density_table = settings.density_map.0.bake();
-        self.radius_table = settings.radius_map.0.bake();
-        self.colour_table = settings.color_map.bake();
     }
 
     /// A query point in local coordinates.

@@ -32,7 +32,7 @@
 //! aarbf stbn --width 128 --height 128 --depth 64 --seed 1 --out assets/stbn_128x128x64.bin
 //! ```
 //!
-//! which calls [`stbn::generate`] then [`BlueNoiseMask::write`]; the ignored test
+//! which calls [`stbn::generate`] then [`BlueNoiseMask::write`]; the test
 //! `noise::stbn::tests::builtin_mask_is_reproducible` checks that the generator still
 //! reproduces the shipped file bit for bit.
 //!

@@ -25,6 +25,10 @@ pub const STBN_DEPTH: u32 = 64;
 /// decisions read different (decorrelated) mask values.
 pub const NOISE_OFFSETS: [[u32; 2]; 3] = [[0, 0], [61, 29], [23, 97]];
 
+/// Cluster boxes are padded by `max(|p|, r) · BOX_PAD` (2 ulp of an f32 coordinate), so the
+/// f32 box holds every point the f32 sphere test accepts (`accel::clusters::cluster_box`).
+pub const BOX_PAD: f32 = 2.0 * f32::EPSILON;
+
 /// Below this, Phi counts as "no density": the sample has no colour (never NaN).
 pub const PHI_EPSILON: f64 = 1e-30;
 
@@ -129,6 +133,7 @@ pub fn glsl() -> String {
         out.push_str(&format!("const uint {name} = {value}u;\n"));
     }
     out.push_str(&format!("const float PHI_EPSILON = {PHI_EPSILON:e};\n"));
+    out.push_str(&format!("const float BOX_PAD = {BOX_PAD:e};\n"));
     for (id, (name, meaning)) in SPEC_CONSTANTS.iter().enumerate() {
         // CLUSTER_SIZE's default is 1 (a cluster is never empty); every other default is 0.
         let default = u32::from(id == spec::CLUSTER_SIZE);

@@ -6,31 +6,55 @@
 //! same arithmetic (`shaders_glsl/shared/maps.glsl`), so a baked map means the same thing on
 //! every backend. Maps whose control points lie on the sample grid are represented exactly.
 
+use num_traits::Float;
+
 pub use super::shader_constants::TABLE_SIZE;
 
-/// Where `t` falls in a table: the lower sample's index and the fraction towards the next.
+/// Where `t` falls in a table of `len` samples: the lower sample's index and the fraction
+/// towards the next. Written as `maps.glsl`'s `table_position` is, in any precision: t is
+/// clamped to [0, 1] (NaN to 0).
 #[inline]
-fn position(t: f64) -> (usize, f64) {
-    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
-    let x = t * (TABLE_SIZE - 1) as f64;
-    let i = (x.floor() as usize).min(TABLE_SIZE - 2);
-    (i, x - i as f64)
+fn position<F: Float>(t: F, len: usize) -> (usize, F) {
+    let c = if t >= F::zero() {
+        t.min(F::one())
+    } else {
+        F::zero()
+    };
+    let x = c * F::from(len - 1).expect("a table size fits any float");
+    let i = x.floor().to_usize().unwrap_or(0).min(len - 2);
+    (i, x - F::from(i).expect("an index fits any float"))
 }
 
+/// The map behind `table` at `t`: linear between neighbouring samples. At f32 this is the
+/// CPU twin of `maps.glsl`'s `map_lookup` (same operations, same order); at f64 it is what the
+/// reference field and the CPU renderer use.
 #[inline]
-pub fn lookup(table: &[f32], t: f64) -> f64 {
-    let (i, f) = position(t);
-    let (a, b) = (f64::from(table[i]), f64::from(table[i + 1]));
+pub fn lookup<F: Float>(table: &[f32], t: F) -> F {
+    let (i, f) = position(t, table.len());
+    let (a, b) = (as_float::<F>(table[i]), as_float::<F>(table[i + 1]));
     a + (b - a) * f
 }
 
+/// The colour map behind `table` at `t` (`maps.glsl`'s `colour_lookup`).
 #[inline]
-pub fn lookup_colour(table: &[[f32; 3]], t: f64) -> [f64; 3] {
-    let (i, f) = position(t);
+pub fn lookup_colour<F: Float>(table: &[[f32; 3]], t: F) -> [F; 3] {
+    let (i, f) = position(t, table.len());
     std::array::from_fn(|c| {
-        let (a, b) = (f64::from(table[i][c]), f64::from(table[i + 1][c]));
+        let (a, b) = (as_float::<F>(table[i][c]), as_float::<F>(table[i + 1][c]));
         a + (b - a) * f
     })
+}
+
+/// The largest sample of a table (the map's largest value as every backend sees it).
+pub fn table_max(table: &[f32]) -> f64 {
+    table
+        .iter()
+        .fold(f64::NEG_INFINITY, |m, &v| m.max(f64::from(v)))
+}
+
+#[inline]
+fn as_float<F: Float>(v: f32) -> F {
+    F::from(v).expect("an f32 fits any float")
 }
 
 #[cfg(test)]
@@ -46,6 +70,12 @@ mod tests {
             assert!((lookup(&ramp, t) - (0.2 + 0.8 * t)).abs() < 1e-6, "{t}");
         }
         assert_eq!(lookup(&ramp, -3.0), f64::from(ramp[0]));
+        // The f32 lookup (the GPU's arithmetic) agrees with the f64 one to f32 rounding.
+        for t in [-1.0f32, 0.0, 0.3, 0.5, 0.999, 1.0, 2.0, f32::NAN] {
+            let a = lookup(&ramp, t);
+            let b = lookup(&ramp, f64::from(t));
+            assert!((f64::from(a) - b).abs() < 1e-6, "{t}: {a} {b}");
+        }
         assert_eq!(lookup(&ramp, 7.0), f64::from(ramp[TABLE_SIZE - 1]));
         assert_eq!(lookup(&ramp, f64::NAN), f64::from(ramp[0]));
     }

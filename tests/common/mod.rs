@@ -1,7 +1,20 @@
-//! What the GPU test files share: capturing the messages of wgpu and of the Vulkan validation
+//! What the GPU test files share: requiring a device (a GPU test fails without one, never
+//! passes without running), and capturing the messages of wgpu and of the Vulkan validation
 //! layers it routes through `log`, so a test can fail on any of them.
 
 #![allow(dead_code)] // each test file uses its own part
+
+/// What a GPU test needs: the device (or backend) `result` holds. Without one the test fails,
+/// saying how to get one: a test that did not run must never read as passed.
+pub fn require<T, E: std::fmt::Display>(what: &str, result: Result<T, E>) -> T {
+    result.unwrap_or_else(|e| {
+        panic!(
+            "{what} is unavailable: {e}\nGPU tests fail rather than pass without running: \
+             `cargo xtask setup` installs a Vulkan driver with ray tracing (Mesa lavapipe) \
+             where the machine has none, and `cargo xtask test` runs the suite after it"
+        )
+    })
+}
 
 /// Validation-layer messages (wgpu-hal logs them as warnings or errors) seen in this process.
 static DRIVER_MESSAGES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());

@@ -42,10 +42,10 @@ use super::gpu_data::GpuStepData;
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::accel::ClusterSize;
 use crate::backend::shaders::cpu::{
-    Lbvh, lbvh_bounds::cluster_boxes, lbvh_keys::KeyGrid, rbf::RadiusRule,
+    Lbvh, cluster_box::lbvh_bounds, lbvh_keys::KeyGrid, rbf::RadiusRule,
 };
 use crate::backend::shaders::{GpuField, GpuFrame, SpecConstants, pack_map_tables};
-use crate::field::{Classification, FieldError, FieldSettings};
+use crate::field::{Classification, FieldSettings};
 use crate::noise::BlueNoiseMask;
 use crate::values::ColourMode;
 use crate::values::FrameParams;
@@ -111,6 +111,7 @@ struct Uploaded {
     step: Step,
     field: FieldSettings,
     series_bounds: Bounds,
+    series_range: Option<(f64, f64)>,
     data: GpuStepData,
 }
 
@@ -457,14 +458,14 @@ impl AshBackend {
         let d = &up.data;
         let zeros = vec![0.0f32; TABLE_SIZE];
         let optical = frame.map_or(&zeros[..], |f| &f.optical_table[..]);
-        let colour = frame.map_or(&d.colour_table[..], |f| &f.colour_table[..]);
+        let colour = frame.map_or(&d.tables.colour[..], |f| &f.colour_table[..]);
         if optical.len() != TABLE_SIZE || colour.len() != TABLE_SIZE {
             return Err(device_error(
                 "map tables",
                 format!("expected {TABLE_SIZE} samples per table"),
             ));
         }
-        let tables = pack_map_tables(&d.density_table, &d.radius_table, optical, colour);
+        let tables = pack_map_tables(&d.tables.density, &d.tables.radius, optical, colour);
         if tables != self.tables {
             self.buffers
                 .tables
@@ -758,10 +759,10 @@ impl AshBackend {
         let d = &up.data;
         let rule = RadiusRule {
             field: d.field,
-            radius_table: d.radius_map_varies.then_some(&d.radius_table[..]),
+            radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
             radius_attribute: d.radius_attribute.as_deref(),
         };
-        let boxes = cluster_boxes(&d.points, d.cluster.get(), &rule);
+        let boxes = lbvh_bounds(&d.points, d.cluster.get(), &rule);
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
         if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
             return Err(device_error(
@@ -808,61 +809,19 @@ impl AshBackend {
         }
     }
 
-    /// The checks `field::Particles::prepare` makes on radii, without re-preparing the step.
-    fn check_radii(step: &Step, field: &FieldSettings) -> Result<(), FieldError> {
-        if !(field.radius.is_finite() && field.radius > 0.0) {
-            return Err(FieldError::BadRadius(field.radius));
-        }
-        if field.attribute.is_none() && !field.radius_map.0.is_constant() {
-            return Err(FieldError::MapNeedsAttribute("radius map"));
-        }
-        if field.attribute.is_none() && !field.density_map.0.is_constant() {
-            return Err(FieldError::MapNeedsAttribute("density map"));
-        }
-        if let Some(name) = field.radius_attribute.as_deref() {
-            let h = step
-                .attribute(name)
-                .ok_or_else(|| FieldError::MissingAttribute {
-                    step: step.name.clone(),
-                    name: name.to_owned(),
-                    available: step.attribute_names().join(", "),
-                })?;
-            if let Some((index, &value)) = h.values.iter().enumerate().find(|(_, v)| **v < 0.0) {
-                return Err(FieldError::NegativeRadius {
-                    step: step.name.clone(),
-                    name: name.to_owned(),
-                    value,
-                    index,
-                });
-            }
-        }
-        Ok(())
-    }
-
     /// Applies new maps (and radii) to the uploaded step's GPU data.
     fn apply_field(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         let up = self
             .uploaded
             .as_mut()
             .ok_or(BackendError::NothingUploaded(NAME))?;
-        Self::check_radii(&up.step, field)?;
-        if field.radius_attribute != up.field.radius_attribute {
-            up.data.radius_attribute = field
-                .radius_attribute
-                .as_deref()
-                .and_then(|a| up.step.attribute(a))
-                .map(|h| {
-                    up.data
-                        .order
-                        .iter()
-                        .map(|&i| h.values[i as usize])
-                        .collect()
-                });
-            if let Some(h) = &up.data.radius_attribute {
-                self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
-            }
+        if up
+            .data
+            .apply_field(&up.step, &up.field, field, up.series_range)?
+            && let Some(h) = &up.data.radius_attribute
+        {
+            self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
         }
-        up.data.set_maps(field);
         up.field = field.clone();
         self.write_params(None)
     }
@@ -898,6 +857,7 @@ impl Backend for AshBackend {
             step: input.step.clone(),
             field: input.field.clone(),
             series_bounds: input.series_bounds,
+            series_range: input.series_range,
             data,
         });
         self.lbvh = None;

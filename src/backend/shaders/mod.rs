@@ -40,6 +40,10 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
         include_str!("../../../shaders_glsl/shared/integrators.glsl"),
     ),
     (
+        "shared/cluster_box.glsl",
+        include_str!("../../../shaders_glsl/shared/cluster_box.glsl"),
+    ),
+    (
         "shared/lbvh.glsl",
         include_str!("../../../shaders_glsl/shared/lbvh.glsl"),
     ),

@@ -51,10 +51,10 @@ use crate::field::{Classification, FieldSettings};
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
 use crate::values::Image;
+use crate::values::Step;
 use crate::values::shader_constants::{
     STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS, TABLE_SIZE,
 };
-use crate::values::{Bounds, Step};
 use crate::values::{ColourMode, Integrator, NoiseKind};
 use context::{Layout, device_error};
 use tree::{GpuTree, SceneBindings};
@@ -78,7 +78,6 @@ struct Scene {
     step: Step,
     field: FieldSettings,
     cluster: ClusterSize,
-    series_bounds: Bounds,
     series_range: Option<(f64, f64)>,
     data: GpuStepData,
     grid: KeyGrid,
@@ -313,8 +312,8 @@ impl WgpuBackend {
         colour: &[[f32; 3]],
     ) {
         let tables = pack_map_tables(
-            &scene.data.density_table,
-            &scene.data.radius_table,
+            &scene.data.tables.density,
+            &scene.data.tables.radius,
             optical,
             colour,
         );
@@ -478,7 +477,6 @@ impl Backend for WgpuBackend {
             step: input.step.clone(),
             field: input.field.clone(),
             cluster: input.cluster,
-            series_bounds: input.series_bounds,
             series_range: input.series_range,
             grid: KeyGrid::new(input.series_bounds, data.origin),
             data,
@@ -505,7 +503,7 @@ impl Backend for WgpuBackend {
             &scene,
             self.tree.as_ref(),
             &self.optical,
-            &scene.data.colour_table,
+            &scene.data.tables.colour,
         );
         self.scene = Some(scene);
         self.built = None;
@@ -526,25 +524,14 @@ impl Backend for WgpuBackend {
         let Some(scene) = self.scene.as_mut() else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
-        if field.radius_attribute != scene.field.radius_attribute {
-            // New per-particle radii: prepare the step again (same order, same positions).
-            scene.data = GpuStepData::prepare(&StepInput {
-                step: &scene.step,
-                field,
-                cluster: scene.cluster,
-                series_bounds: scene.series_bounds,
-                series_range: scene.series_range,
-            })?;
+        if scene
+            .data
+            .apply_field(&scene.step, &scene.field, field, scene.series_range)?
+        {
             Self::write_radius_attribute(&ctx, scene)?;
-        } else {
-            // Same checks as a fresh preparation (a bad radius is refused the same way).
-            if !(field.radius.is_finite() && field.radius > 0.0) {
-                return Err(crate::field::FieldError::BadRadius(field.radius).into());
-            }
-            scene.data.set_maps(field);
         }
         scene.field = field.clone();
-        let colour = scene.data.colour_table.clone();
+        let colour = scene.data.tables.colour.clone();
         Self::write_maps(&ctx, scene, self.tree.as_ref(), &self.optical, &colour);
         let (Some(scene), Some(tree)) = (&self.scene, &self.tree) else {
             return Err(BackendError::NothingUploaded("wgpu"));
@@ -569,9 +556,14 @@ impl Backend for WgpuBackend {
         let Some(scene) = self.scene.as_mut() else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
-        scene.data.set_maps(field);
+        if scene
+            .data
+            .apply_field(&scene.step, &scene.field, field, scene.series_range)?
+        {
+            Self::write_radius_attribute(&self.ctx, scene)?;
+        }
         scene.field = field.clone();
-        let colour = scene.data.colour_table.clone();
+        let colour = scene.data.tables.colour.clone();
         Self::write_maps(&self.ctx, scene, self.tree.as_ref(), &self.optical, &colour);
         Ok(())
     }

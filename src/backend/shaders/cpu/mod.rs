@@ -33,12 +33,11 @@
 //! internal node `i` is node `i + 1`. Beside it: `node_parents[j]` (the root's is [`LBVH_NONE`])
 //! and `leaf_parents[c]` ([`LBVH_NONE`] for a cluster left out, [`LBVH_ROOT_LEAF`] for the only leaf).
 
+pub mod cluster_box;
 pub mod lbvh;
-pub mod lbvh_bounds;
 pub mod lbvh_fit;
 pub mod lbvh_hierarchy;
 pub mod lbvh_keys;
-pub mod maps;
 pub mod radix_sort;
 pub mod rbf;
 

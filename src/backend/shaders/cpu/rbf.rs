@@ -1,7 +1,7 @@
 //! The CPU twin of `shaders_glsl/shared/rbf.glsl`: the particle radius rule in f32.
 
-use super::maps::table_lookup_f32;
 use crate::backend::shaders::GpuField;
+use crate::values::tables::lookup;
 
 /// How particle radii are computed: `rbf.glsl`'s `particle_radius` in f32.
 #[derive(Clone, Copy, Debug)]
@@ -17,7 +17,7 @@ pub struct RadiusRule<'a> {
 impl RadiusRule<'_> {
     pub fn radius(&self, p: [f32; 4], index: usize) -> f32 {
         let m = match self.radius_table {
-            Some(t) => table_lookup_f32(t, p[3]),
+            Some(t) => lookup(t, p[3]),
             None => self.field.radius[1],
         };
         let mut r = self.field.radius[0] * m;
