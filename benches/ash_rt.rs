@@ -23,7 +23,7 @@ use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
 use aarbf::values::Integrator;
 use aarbf::values::{Attribute, Step};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
 const KS: [u32; 5] = [1, 2, 4, 8, 16];
@@ -44,7 +44,7 @@ fn uniform(n: usize, seed: u64) -> Step {
     Step {
         name: format!("uniform{n}"),
         positions: (0..n)
-            .map(|_| Vec3::new(rng.random(), rng.random(), rng.random()))
+            .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()))
             .collect(),
         attributes: vec![Attribute {
             name: "s".into(),
@@ -121,12 +121,11 @@ fn structures(b: &mut AshBackend, sizes: &[usize]) {
 /// `m` random points in the unit cube, Hilbert-sorted (as `aarbf field` sorts its queries).
 fn query_points(m: usize, bounds: aarbf::values::Bounds) -> Vec<DVec3> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-    let (lo, hi) = (bounds.min.as_dvec3(), bounds.max.as_dvec3());
+    let (lo, hi) = (bounds.min, bounds.max);
     let points: Vec<DVec3> = (0..m)
         .map(|_| lo + DVec3::new(rng.random(), rng.random(), rng.random()) * (hi - lo))
         .collect();
-    let as_f32: Vec<Vec3> = points.iter().map(|p| p.as_vec3()).collect();
-    let order = aarbf::accel::hilbert_order(&as_f32, bounds);
+    let order = aarbf::accel::hilbert_order(&points, bounds);
     order.iter().map(|&i| points[i as usize]).collect()
 }
 
@@ -232,9 +231,7 @@ fn frames() {
     session.show(&series, 14, &field, k).unwrap();
     let mut b = AshBackend::new().unwrap();
     let step = series.step(14).unwrap();
-    let range = series
-        .attribute("velocity")
-        .map(|a| (f64::from(a.min), f64::from(a.max)));
+    let range = series.attribute("velocity").map(|a| (a.min, a.max));
     b.upload(&StepInput {
         step: &step,
         field: &field,

@@ -25,7 +25,7 @@ use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::scene::synth::Generator;
 use aarbf::values::{Attribute, Bounds, Step};
 use aarbf::values::{Integrator, NoiseKind};
-use glam::Vec3;
+use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
 const BACKENDS: [BackendKind; 3] = [BackendKind::Cpu, BackendKind::Wgpu, BackendKind::Ash];
@@ -35,16 +35,16 @@ fn uniform_step(n: usize, seed: u64) -> Step {
     Step {
         name: format!("uniform{n}"),
         positions: (0..n)
-            .map(|_| Vec3::new(r.random(), r.random(), r.random()))
+            .map(|_| DVec3::new(r.random(), r.random(), r.random()))
             .collect(),
         attributes: vec![
             Attribute {
                 name: "a".into(),
-                values: (0..n).map(|_| r.random::<f32>()).collect(),
+                values: (0..n).map(|_| r.random::<f64>()).collect(),
             },
             Attribute {
                 name: "h".into(),
-                values: (0..n).map(|_| r.random_range(0.5f32..1.5)).collect(),
+                values: (0..n).map(|_| r.random_range(0.5f64..1.5)).collect(),
             },
         ],
     }
@@ -128,8 +128,8 @@ fn main() {
     // Bytes and build times per feature.
     let step = uniform_step(n, 7);
     let unit = Bounds {
-        min: Vec3::ZERO,
-        max: Vec3::ONE,
+        min: DVec3::ZERO,
+        max: DVec3::ONE,
     };
     let radius = (30.0 * 3.0 / (4.0 * std::f64::consts::PI * n as f64)).cbrt();
     println!("\n### Bytes and build times per feature ({n} uniform particles, K = 1)\n");

@@ -18,7 +18,7 @@ use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
 use aarbf::values::{Attribute, Bounds, Step};
 use aarbf::values::{Integrator, NoiseKind};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
 fn uniform_step(n: usize, seed: u64) -> Step {
@@ -26,11 +26,11 @@ fn uniform_step(n: usize, seed: u64) -> Step {
     Step {
         name: format!("uniform{n}"),
         positions: (0..n)
-            .map(|_| Vec3::new(r.random(), r.random(), r.random()))
+            .map(|_| DVec3::new(r.random(), r.random(), r.random()))
             .collect(),
         attributes: vec![Attribute {
             name: "a".into(),
-            values: (0..n).map(|_| r.random::<f32>()).collect(),
+            values: (0..n).map(|_| r.random::<f64>()).collect(),
         }],
     }
 }
@@ -41,8 +41,8 @@ fn radius_for(n: usize) -> f64 {
 }
 
 const UNIT: Bounds = Bounds {
-    min: Vec3::ZERO,
-    max: Vec3::ONE,
+    min: DVec3::ZERO,
+    max: DVec3::ONE,
 };
 
 fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
@@ -155,8 +155,7 @@ fn main() {
         .map(|_| DVec3::new(r.random(), r.random(), r.random()))
         .collect();
     // As `aarbf field` does: queries in Hilbert order (both backends ~2-3x faster).
-    let as_f32: Vec<Vec3> = points.iter().map(|p| p.as_vec3()).collect();
-    let sorted: Vec<DVec3> = hilbert_order(&as_f32, UNIT)
+    let sorted: Vec<DVec3> = hilbert_order(&points, UNIT)
         .iter()
         .map(|&i| points[i as usize])
         .collect();

@@ -110,10 +110,7 @@ fn render_and_field_with_the_ash_backend_match_the_cpu_backend() {
         .positions
         .iter()
         .step_by(5)
-        .flat_map(|p| {
-            let p = p.as_dvec3();
-            [p.x, p.y, p.z, p.x + 0.003, p.y - 0.002, p.z + 0.001]
-        })
+        .flat_map(|p| [p.x, p.y, p.z, p.x + 0.003, p.y - 0.002, p.z + 0.001])
         .collect();
     let rows = q.len() / 3;
     let queries = d.join("q.npy");

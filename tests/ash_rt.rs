@@ -17,7 +17,7 @@ use aarbf::field::{Classification, FieldSettings, ReferenceField};
 use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::values::Image;
 use aarbf::values::{Attribute, Bounds, Step};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
 mod common;
@@ -44,17 +44,17 @@ fn assert_no_validation_messages() {
 /// attribute `s` and a radius attribute `h` (some zeros).
 fn random_step(n: usize, seed: u64) -> Step {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
-    let centre = Vec3::new(1000.0, -50.0, 3.0);
+    let centre = DVec3::new(1000.0, -50.0, 3.0);
     let positions = (0..n)
-        .map(|_| centre + Vec3::new(rng.random(), rng.random(), rng.random()) * 2.0)
+        .map(|_| centre + DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0)
         .collect();
-    let s = (0..n).map(|_| rng.random_range(-3.0f32..5.0)).collect();
+    let s = (0..n).map(|_| rng.random_range(-3.0f64..5.0)).collect();
     let h = (0..n)
         .map(|_| {
-            if rng.random::<f32>() < 0.1 {
+            if rng.random::<f64>() < 0.1 {
                 0.0
             } else {
-                rng.random_range(0.5f32..1.5)
+                rng.random_range(0.5f64..1.5)
             }
         })
         .collect();
@@ -200,7 +200,7 @@ fn boxes_match_the_cpu_cluster_boxes() {
             }
             // The f32 local box against the f64 box: the GPU's may be larger by its padding
             // plus the rounding of local coordinates (~1e-4 of the 2-unit extent at 1000).
-            let (wlo, whi) = (want.min.as_dvec3(), want.max.as_dvec3());
+            let (wlo, whi) = (want.min, want.max);
             let slack = 2e-4;
             assert!(
                 lo.cmple(wlo + slack).all() && hi.cmpge(whi - slack).all(),
@@ -282,10 +282,10 @@ fn compare_sums(
 fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let b = step.bounds();
-    let mut q: Vec<DVec3> = step.positions.iter().map(|p| p.as_dvec3()).collect();
+    let mut q: Vec<DVec3> = step.positions.clone();
     for _ in 0..step.len() {
         let t = DVec3::new(rng.random(), rng.random(), rng.random());
-        q.push(b.min.as_dvec3() + t * (b.max - b.min).as_dvec3());
+        q.push(b.min + t * (b.max - b.min));
     }
     q
 }
@@ -416,7 +416,7 @@ fn close_view(series: &aarbf::scene::TimeSeries) -> aarbf::scene::Camera {
     let b = series.bounds();
     aarbf::scene::Camera {
         eye: DVec3::new(0.9, 0.45, 1.1),
-        at: DVec3::new(0.55, 0.12, 0.5 * f64::from(b.max.z)),
+        at: DVec3::new(0.55, 0.12, 0.5 * b.max.z),
         up: DVec3::Y,
         fovy: 35.0,
     }
@@ -577,9 +577,7 @@ fn a_smaller_step_renders_like_that_step_alone() {
     // The demo's steps hold different counts; pad the difference in any case.
     let max = series.max_count() + 100;
     assert!(small.len() < max);
-    let range = series
-        .attribute("velocity")
-        .map(|a| (f64::from(a.min), f64::from(a.max)));
+    let range = series.attribute("velocity").map(|a| (a.min, a.max));
     let input = |step| StepInput {
         series_bounds: series.bounds(),
         series_range: range,
@@ -716,9 +714,7 @@ fn lbvh_traversal_on_the_same_device_matches_the_rt_pipeline() {
         .map(|f| session.frame_params(&settings, f).unwrap())
         .collect();
     let mut b = backend();
-    let range = series
-        .attribute("velocity")
-        .map(|a| (f64::from(a.min), f64::from(a.max)));
+    let range = series.attribute("velocity").map(|a| (a.min, a.max));
     let step = series.step(7).unwrap();
     b.upload(&StepInput {
         series_bounds: series.bounds(),
@@ -808,10 +804,10 @@ fn a_step_larger_than_one_binding_is_not_refused() {
         }
     );
     let mut rng = rand_pcg::Pcg64::seed_from_u64(41);
-    let positions: Vec<Vec3> = (0..n)
-        .map(|_| Vec3::new(rng.random(), rng.random(), rng.random()))
+    let positions: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()))
         .collect();
-    let s: Vec<f32> = (0..n).map(|_| rng.random_range(0.0f32..1.0)).collect();
+    let s: Vec<f64> = (0..n).map(|_| rng.random_range(0.0f64..1.0)).collect();
     let step = Step {
         name: "large".into(),
         positions,
@@ -826,14 +822,14 @@ fn a_step_larger_than_one_binding_is_not_refused() {
     b.upload(&input(&step, &field, 1)).unwrap();
     b.build().unwrap();
     let mut points: Vec<DVec3> = (0..48)
-        .map(|_| step.positions[rng.random_range(0..n)].as_dvec3())
+        .map(|_| step.positions[rng.random_range(0..n)])
         .collect();
     points.extend((0..48).map(|_| DVec3::new(rng.random(), rng.random(), rng.random())));
     let got = b.query(&points).unwrap();
     let (lo, hi) = step.attributes[0]
         .values
         .iter()
-        .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     let mut checked = 0;
     for (x, g) in points.iter().zip(&got) {
         // (Phi, Σ t phi, whether a particle's sphere passes within f32 rounding of x).
@@ -842,7 +838,7 @@ fn a_step_larger_than_one_binding_is_not_refused() {
             .par_iter()
             .zip(&step.attributes[0].values)
             .map(|(c, &v)| {
-                let d = (*x - c.as_dvec3()).length();
+                let d = (*x - c).length();
                 if d > radius * (1.0 + 1e-5) {
                     return (0.0, 0.0, false);
                 }
@@ -852,7 +848,7 @@ fn a_step_larger_than_one_binding_is_not_refused() {
                 } else {
                     0.0
                 };
-                let t = (f64::from(v) - f64::from(lo)) / f64::from(hi - lo);
+                let t = (v - lo) / (hi - lo);
                 (phi, t * phi, edge)
             })
             .reduce(

@@ -10,7 +10,7 @@ use aarbf::scene::TimeSeries;
 use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::values::{Attribute, Step};
 use aarbf::values::{Integrator, NoiseKind};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
 mod common;
@@ -63,11 +63,11 @@ struct Case {
 
 fn uniform(n: usize, seed: u64, offset: f64, scale: f64) -> Step {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
-    let positions: Vec<Vec3> = (0..n)
-        .map(|_| (DVec3::new(rng.random(), rng.random(), rng.random()) * scale + offset).as_vec3())
+    let positions: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()) * scale + offset)
         .collect();
-    let s = (0..n).map(|_| rng.random_range(0.0..1.0f32)).collect();
-    let h = (0..n).map(|_| rng.random_range(0.5..1.5f32)).collect();
+    let s = (0..n).map(|_| rng.random_range(0.0..1.0f64)).collect();
+    let h = (0..n).map(|_| rng.random_range(0.5..1.5f64)).collect();
     Step {
         name: format!("uniform{n}"),
         positions,
@@ -84,7 +84,7 @@ fn uniform(n: usize, seed: u64, offset: f64, scale: f64) -> Step {
     }
 }
 
-fn with_attribute(mut step: Step, values: Vec<f32>) -> Step {
+fn with_attribute(mut step: Step, values: Vec<f64>) -> Step {
     step.attributes[0].values = values;
     step
 }
@@ -109,7 +109,7 @@ fn cases() -> Vec<Case> {
     let mut step = uniform(800, 2, 0.0, 1.0);
     let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
     step.attributes[1].values = (0..800)
-        .map(|_| 10f64.powf(rng.random_range(-8.0..-2.0)) as f32)
+        .map(|_| 10f64.powf(rng.random_range(-8.0..-2.0)))
         .collect();
     let mut f = settings(diag);
     f.radius_attribute = Some("h".into());
@@ -147,7 +147,7 @@ fn cases() -> Vec<Case> {
     one_point
         .positions
         .iter_mut()
-        .for_each(|p| *p = Vec3::splat(0.5));
+        .for_each(|p| *p = DVec3::splat(0.5));
     out.push(Case {
         name: "1000 particles at one point",
         step: one_point,
@@ -167,7 +167,7 @@ fn cases() -> Vec<Case> {
         step: uniform(800, 8, 0.0, 1.0),
         field: f,
     });
-    let big: Vec<f32> = (0..800)
+    let big: Vec<f64> = (0..800)
         .map(|i| if i % 2 == 0 { 1e30 } else { -1e30 })
         .collect();
     out.push(Case {
@@ -195,13 +195,13 @@ fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
     let (lo, ext) = if b.is_empty() {
         (DVec3::ZERO, DVec3::ONE)
     } else {
-        (b.min.as_dvec3(), b.extent().max(DVec3::splat(1e-3)))
+        (b.min, b.extent().max(DVec3::splat(1e-3)))
     };
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let mut q: Vec<DVec3> = (0..256)
         .map(|_| lo + DVec3::new(rng.random(), rng.random(), rng.random()) * ext)
         .collect();
-    q.extend(step.positions.iter().take(64).map(|p| p.as_dvec3()));
+    q.extend(step.positions.iter().take(64).copied());
     q
 }
 
@@ -236,9 +236,7 @@ fn check_case(kind: BackendKind, tolerance: f64, case: &Case, classification: Cl
     field.classification = classification;
     let label = format!("{kind} / {} / {classification:?}", case.name);
     let series = TimeSeries::from_steps(vec![case.step.clone()]);
-    let range = series
-        .attribute("s")
-        .map(|a| (f64::from(a.min), f64::from(a.max)));
+    let range = series.attribute("s").map(|a| (a.min, a.max));
     let cluster = ClusterSize::new(4).unwrap();
     let reference =
         ReferenceField::of_step(&case.step, &field, cluster, series.bounds(), range).unwrap();

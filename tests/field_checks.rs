@@ -8,7 +8,7 @@ use aarbf::backend::{self, Backend, BackendKind, StepInput};
 use aarbf::field::FieldSettings;
 use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::values::{Attribute, Step};
-use glam::Vec3;
+use glam::DVec3;
 
 mod common;
 
@@ -17,12 +17,12 @@ fn step() -> Step {
     Step {
         name: "checks".into(),
         positions: (0..n)
-            .map(|i| Vec3::new(i as f32 * 0.01, (i % 7) as f32 * 0.013, 0.5))
+            .map(|i| DVec3::new(f64::from(i) * 0.01, f64::from(i % 7) * 0.013, 0.5))
             .collect(),
         attributes: vec![
             Attribute {
                 name: "s".into(),
-                values: (0..n).map(|i| i as f32).collect(),
+                values: (0..n).map(f64::from).collect(),
             },
             Attribute {
                 name: "h".into(),
@@ -90,7 +90,7 @@ fn every_backend_refuses_the_same_bad_field_on_upload_refit_and_map_update() {
         // The backend still renders queries of the last good field after a refused change.
         upload(b.as_mut(), &step, &plain);
         let _ = b.refit(&varying_radius);
-        let q = b.query(&[step.positions[3].as_dvec3()]).unwrap();
+        let q = b.query(&[step.positions[3]]).unwrap();
         assert!(q[0].0 > 0.0, "{kind}: the field survives a refused refit");
         messages.push(got);
     }

@@ -6,10 +6,10 @@ use aarbf::scene::maps::{ColorMap, DensityMap, RadiusMap};
 use aarbf::values::color_space::srgb_to_linear;
 use aarbf::values::tables::lookup_colour;
 use aarbf::values::{Attribute, Bounds, Step};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use proptest::prelude::*;
 
-fn step(points: &[(Vec3, f32)]) -> Step {
+fn step(points: &[(DVec3, f64)]) -> Step {
     Step {
         name: "test".into(),
         positions: points.iter().map(|p| p.0).collect(),
@@ -37,7 +37,7 @@ fn close(a: f64, b: f64, rel: f64) -> bool {
 
 #[test]
 fn one_particle_at_the_kernel_landmarks() {
-    let s = step(&[(Vec3::new(0.25, -1.0, 3.0), 7.0)]);
+    let s = step(&[(DVec3::new(0.25, -1.0, 3.0), 7.0)]);
     let r = 0.5;
     let f = field(&s, &FieldSettings::new(Some("s"), r), 1);
     let c = DVec3::new(0.25, -1.0, 3.0);
@@ -71,7 +71,7 @@ fn one_particle_at_the_kernel_landmarks() {
 fn two_overlapping_particles_blend_by_weight() {
     // Centres 0.375 apart, radius 0.5; at x = 0.125 from the first: d1 = 0.125, d2 = 0.25
     // (all exact in binary).
-    let s = step(&[(Vec3::ZERO, 1.0), (Vec3::new(0.375, 0.0, 0.0), 3.0)]);
+    let s = step(&[(DVec3::ZERO, 1.0), (DVec3::new(0.375, 0.0, 0.0), 3.0)]);
     let f = field(&s, &FieldSettings::new(Some("s"), 0.5), 1);
     let x = DVec3::new(0.125, 0.0, 0.0);
     let p1 = (-0.5 * (3.0 * 0.125 / 0.5f64).powi(2)).exp();
@@ -131,7 +131,7 @@ fn two_overlapping_particles_blend_by_weight() {
 
 #[test]
 fn empty_space_has_zero_density_and_zero_theta() {
-    let s = step(&[(Vec3::ZERO, 1.0), (Vec3::ONE, 2.0)]);
+    let s = step(&[(DVec3::ZERO, 1.0), (DVec3::ONE, 2.0)]);
     let f = field(&s, &FieldSettings::new(Some("s"), 0.1), 4);
     let empty = f.eval(DVec3::splat(0.5));
     assert_eq!(empty, Sample::default());
@@ -145,7 +145,7 @@ fn empty_space_has_zero_density_and_zero_theta() {
 
 #[test]
 fn constant_attribute_and_co_located_particles() {
-    let s = step(&[(Vec3::splat(2.0), 5.0); 100]);
+    let s = step(&[(DVec3::splat(2.0), 5.0); 100]);
     let f = field(&s, &FieldSettings::new(Some("s"), 1.0), 16);
     let got = f.eval(DVec3::splat(2.0));
     assert!(close(got.phi, 100.0, 1e-12));
@@ -184,7 +184,7 @@ fn every_cluster_size_gives_the_same_field() {
 
 #[test]
 fn setup_errors_are_clear() {
-    let s = step(&[(Vec3::ZERO, 1.0)]);
+    let s = step(&[(DVec3::ZERO, 1.0)]);
     let prepare = |settings: &FieldSettings| {
         ReferenceField::of_step(&s, settings, ClusterSize::default(), s.bounds(), None)
             .err()
@@ -203,7 +203,7 @@ fn setup_errors_are_clear() {
     assert!(prepare(&settings).contains("radius map varies with the attribute"));
     let mut settings = FieldSettings::new(Some("s"), 0.1);
     settings.radius_attribute = Some("s".into());
-    let neg = step(&[(Vec3::ZERO, -1.0)]);
+    let neg = step(&[(DVec3::ZERO, -1.0)]);
     let e = ReferenceField::of_step(&neg, &settings, ClusterSize::default(), neg.bounds(), None)
         .err()
         .unwrap()
@@ -231,21 +231,21 @@ fn random_set(
     let mut h = Vec::new();
     for _ in 0..n {
         let p = DVec3::new(rng.random(), rng.random(), rng.random()) * extent + offset;
-        positions.push(p.as_vec3());
-        s.push(rng.random_range(-5.0..5.0f32));
+        positions.push(p);
+        s.push(rng.random_range(-5.0..5.0f64));
         let r = if rng.random_bool(0.1) {
             0.0
         } else {
             (rng.random_range(r_lo.ln()..=r_hi.ln())).exp() * extent
         };
-        h.push(r as f32);
+        h.push(r);
     }
     // Queries: near particle centres (so many hit), and uniform in the box.
     let queries = (0..200)
         .map(|i| {
             if i % 2 == 0 {
-                let c = positions[rng.random_range(0..n)].as_dvec3();
-                c + DVec3::new(rng.random(), rng.random(), rng.random()) * (h[i % n] as f64 + 1e-9)
+                let c = positions[rng.random_range(0..n)];
+                c + DVec3::new(rng.random(), rng.random(), rng.random()) * (h[i % n] + 1e-9)
             } else {
                 DVec3::new(rng.random(), rng.random(), rng.random()) * extent + offset
             }

@@ -8,7 +8,7 @@ use aarbf::io::{self, AttributeSelection, Format, StepRef};
 use aarbf::scene::{OpenOptions, TimeSeries};
 use aarbf::values::{Attribute, Step};
 use base64::Engine;
-use glam::Vec3;
+use glam::DVec3;
 
 fn b64(bytes: &[u8]) -> String {
     base64::engine::general_purpose::STANDARD.encode(bytes)
@@ -35,12 +35,12 @@ fn check_three_points(step: &Step) {
     assert_eq!(
         step.positions,
         vec![
-            Vec3::new(0.0, 1.0, 2.0),
-            Vec3::new(3.0, 4.0, 5.0),
-            Vec3::new(6.5, 7.0, -8.0)
+            DVec3::new(0.0, 1.0, 2.0),
+            DVec3::new(3.0, 4.0, 5.0),
+            DVec3::new(6.5, 7.0, -8.0)
         ]
     );
-    assert_eq!(step.attribute("mass").unwrap().values, MASS);
+    assert_eq!(step.attribute("mass").unwrap().values, MASS.map(f64::from));
 }
 
 fn check_velocity(step: &Step) {
@@ -264,13 +264,13 @@ fn vtk_unstructured_grid_and_vtp_writer_round_trip() {
     let step = Step {
         name: "s".into(),
         positions: vec![
-            Vec3::new(0.0, 1.0, 2.0),
-            Vec3::new(3.0, 4.0, 5.0),
-            Vec3::new(6.5, 7.0, -8.0),
+            DVec3::new(0.0, 1.0, 2.0),
+            DVec3::new(3.0, 4.0, 5.0),
+            DVec3::new(6.5, 7.0, -8.0),
         ],
         attributes: vec![Attribute {
             name: "mass".into(),
-            values: MASS.to_vec(),
+            values: MASS.map(f64::from).to_vec(),
         }],
     };
     let out = dir.path().join("written.vtp");
@@ -447,8 +447,8 @@ fn raw_and_npy() {
     }
     std::fs::write(&raw, &bytes).unwrap();
     let step = read(&raw).unwrap();
-    assert_eq!(step.positions[2], Vec3::new(6.5, 7.0, -8.0));
-    assert_eq!(step.attribute("w").unwrap().values, MASS);
+    assert_eq!(step.positions[2], DVec3::new(6.5, 7.0, -8.0));
+    assert_eq!(step.attribute("w").unwrap().values, MASS.map(f64::from));
     std::fs::write(&raw, &bytes[..bytes.len() - 3]).unwrap();
     let e = err_text(&raw);
     assert!(e.contains("k.raw") && e.contains("truncated"), "{e}");
@@ -467,11 +467,14 @@ fn raw_and_npy() {
         .collect();
     io::npy::write_matrix(&npy, 3, 4, &data).unwrap();
     let step = read(&npy).unwrap();
-    assert_eq!(step.positions[1], Vec3::new(3.0, 4.0, 5.0));
-    assert_eq!(step.attribute("col3").unwrap().values, MASS);
+    assert_eq!(step.positions[1], DVec3::new(3.0, 4.0, 5.0));
+    assert_eq!(step.attribute("col3").unwrap().values, MASS.map(f64::from));
     let data32: Vec<f32> = data.iter().map(|&x| x as f32).collect();
     io::npy::write_matrix(&npy, 3, 4, &data32).unwrap();
-    assert_eq!(read(&npy).unwrap().attribute("col3").unwrap().values, MASS);
+    assert_eq!(
+        read(&npy).unwrap().attribute("col3").unwrap().values,
+        MASS.map(f64::from)
+    );
 
     // Fortran order, as numpy.asfortranarray writes it: a hand-made header.
     let mut header = "{'descr': '<f8', 'fortran_order': True, 'shape': (3, 4), }".to_string();
@@ -489,8 +492,8 @@ fn raw_and_npy() {
     }
     std::fs::write(&npy, &f).unwrap();
     let step = read(&npy).unwrap();
-    assert_eq!(step.positions[2], Vec3::new(6.5, 7.0, -8.0));
-    assert_eq!(step.attribute("col3").unwrap().values, MASS);
+    assert_eq!(step.positions[2], DVec3::new(6.5, 7.0, -8.0));
+    assert_eq!(step.attribute("col3").unwrap().values, MASS.map(f64::from));
 
     // wrong dimensionality
     io::npy::write_matrix(&npy, 3, 2, &[0.0; 6]).unwrap();
@@ -618,7 +621,7 @@ fn particles_format_and_its_bad_inputs() {
         ],
     );
     let s = io::read_step(&step("nan"), &AttributeSelection::All).unwrap();
-    assert_eq!(s.positions, vec![Vec3::new(1.0, 2.0, 3.0)]);
+    assert_eq!(s.positions, vec![DVec3::new(1.0, 2.0, 3.0)]);
     assert_eq!(s.attribute("attribute").unwrap().values, [4.0]);
     write_particles_step(
         &dir.path().join("run.particles_allnan"),
@@ -745,6 +748,9 @@ fn series_from_a_directory_or_glob_sort_naturally_and_load_lazily() {
     );
 }
 
+/// Every writer's file reads back as written: bit for bit in the formats that hold doubles
+/// (VTK Float64, CSV's shortest round-trip text, PLY double, NumPy f64), to f32 in the two
+/// whose format is f32 (`.particles`, `.raw`).
 #[test]
 fn every_writer_reads_back() {
     let steps = aarbf::scene::synth::Generator::DambreakDemo.generate(300, 2, 7);
@@ -762,17 +768,27 @@ fn every_writer_reads_back() {
             .unwrap_or_else(|e| panic!("{format}: {e}"));
         assert_eq!(series.len(), 2, "{format}");
         let back = series.step(1).unwrap();
-        assert_eq!(back.positions, steps[1].positions, "{format}");
+        let f32_format = matches!(format, Format::Particles | Format::Raw);
+        let stored = |v: f64| if f32_format { f64::from(v as f32) } else { v };
+        let positions: Vec<DVec3> = steps[1]
+            .positions
+            .iter()
+            .map(|p| DVec3::from_array(p.to_array().map(stored)))
+            .collect();
+        assert_eq!(back.positions, positions, "{format}");
         let velocity = back
             .attribute("velocity")
             .or(back.attribute("attribute"))
             .or(back.attribute("w"))
             .or(back.attribute("col3"))
             .unwrap();
-        assert_eq!(
-            velocity.values,
-            steps[1].attribute("velocity").unwrap().values,
-            "{format}"
-        );
+        let expected: Vec<f64> = steps[1]
+            .attribute("velocity")
+            .unwrap()
+            .values
+            .iter()
+            .map(|&v| stored(v))
+            .collect();
+        assert_eq!(velocity.values, expected, "{format}");
     }
 }

@@ -31,7 +31,7 @@ use aarbf::backend::{Backend, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
 use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::values::{Attribute, Bounds, Step};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -52,16 +52,16 @@ fn rng(seed: u64) -> Pcg64 {
 /// equal Morton keys; attribute `a` uniform in [0, 1], radius factor `h` in [0.5, 1.5].
 fn random_step(n: usize, seed: u64, clumped: bool) -> Step {
     let mut r = rng(seed);
-    let centres: Vec<Vec3> = (0..5)
-        .map(|_| Vec3::new(r.random(), r.random(), r.random()))
+    let centres: Vec<DVec3> = (0..5)
+        .map(|_| DVec3::new(r.random(), r.random(), r.random()))
         .collect();
     let positions = (0..n)
         .map(|_| {
             if clumped {
                 centres[r.random_range(0..centres.len())]
-                    + Vec3::new(r.random(), r.random(), r.random()) * 1e-4
+                    + DVec3::new(r.random(), r.random(), r.random()) * 1e-4
             } else {
-                Vec3::new(r.random(), r.random(), r.random())
+                DVec3::new(r.random(), r.random(), r.random())
             }
         })
         .collect();
@@ -71,11 +71,11 @@ fn random_step(n: usize, seed: u64, clumped: bool) -> Step {
         attributes: vec![
             Attribute {
                 name: "a".into(),
-                values: (0..n).map(|_| r.random::<f32>()).collect(),
+                values: (0..n).map(|_| r.random::<f64>()).collect(),
             },
             Attribute {
                 name: "h".into(),
-                values: (0..n).map(|_| r.random_range(0.5..1.5f32)).collect(),
+                values: (0..n).map(|_| r.random_range(0.5..1.5f64)).collect(),
             },
         ],
     }
@@ -97,8 +97,8 @@ fn bounds_of(step: &Step) -> Bounds {
     let b = step.bounds();
     if b.is_empty() {
         Bounds {
-            min: Vec3::ZERO,
-            max: Vec3::ONE,
+            min: DVec3::ZERO,
+            max: DVec3::ONE,
         }
     } else {
         b
@@ -474,7 +474,7 @@ fn check_queries(
     let mut points: Vec<DVec3> = (0..6000)
         .map(|_| DVec3::new(r.random(), r.random(), r.random()) * 1.1 - DVec3::splat(0.05))
         .collect();
-    points.extend(step.positions.iter().step_by(7).map(|p| p.as_dvec3()));
+    points.extend(step.positions.iter().step_by(7).copied());
     let got = b.query(&points).unwrap();
     assert_eq!(got.len(), points.len());
     let p = &reference.particles;

@@ -40,7 +40,7 @@ fn close_view(series: &TimeSeries) -> aarbf::scene::Camera {
     let b = series.bounds();
     aarbf::scene::Camera {
         eye: glam::DVec3::new(0.9, 0.45, 1.1),
-        at: glam::DVec3::new(0.55, 0.12, 0.5 * f64::from(b.max.z)),
+        at: glam::DVec3::new(0.55, 0.12, 0.5 * b.max.z),
         up: glam::DVec3::Y,
         fovy: 35.0,
     }

@@ -1,4 +1,7 @@
-//! A BVH over cluster boxes (obvhs' PLOC builder) for point queries on the CPU.
+//! A BVH over cluster boxes (obvhs' PLOC builder) for point queries on the CPU. obvhs works in
+//! f32: the boxes are held relative to a local origin (their centre), rounded outward, so the
+//! tree keeps its resolution far from the data's origin and never misses a box a point lies
+//! in; the f64 tests of the particles themselves decide.
 
 use glam::{DVec3, Vec3A};
 use obvhs::{Boundable, BvhBuildParams, aabb::Aabb, bvh2::Bvh2};
@@ -16,6 +19,8 @@ impl Boundable for Leaf {
 /// A BVH whose leaves are the non-empty boxes of a [`ClusterBoxes`].
 pub struct ClusterBvh {
     bvh: Option<Bvh2>,
+    /// Leaf boxes are relative to this point.
+    origin: DVec3,
     /// BVH primitive index → cluster index.
     clusters: Vec<u32>,
     /// BVH primitive index → its box (a leaf node may hold several primitives).
@@ -24,12 +29,17 @@ pub struct ClusterBvh {
 
 impl ClusterBvh {
     pub fn build(boxes: &ClusterBoxes) -> ClusterBvh {
+        let origin = boxes
+            .boxes
+            .iter()
+            .fold(crate::values::Bounds::EMPTY, |u, b| u.union(*b))
+            .center();
         let mut clusters = Vec::new();
         let mut leaves = Vec::new();
         for (i, b) in boxes.boxes.iter().enumerate() {
             if !b.is_empty() {
                 clusters.push(i as u32);
-                leaves.push(Leaf(Aabb::new(b.min.into(), b.max.into())));
+                leaves.push(Leaf(Aabb::new(down(b.min - origin), up(b.max - origin))));
             }
         }
         let bvh = (!leaves.is_empty()).then(|| {
@@ -42,6 +52,7 @@ impl ClusterBvh {
         let leaf_boxes = leaves.into_iter().map(|l| l.0).collect();
         ClusterBvh {
             bvh,
+            origin,
             clusters,
             leaf_boxes,
         }
@@ -51,10 +62,8 @@ impl ClusterBvh {
     /// does, and possibly some within an f32 rounding of it).
     pub fn for_each_cluster_at(&self, x: DVec3, mut visit: impl FnMut(usize)) {
         let Some(bvh) = &self.bvh else { return };
-        let query = Aabb::new(
-            Vec3A::new(f32_down(x.x), f32_down(x.y), f32_down(x.z)),
-            Vec3A::new(f32_up(x.x), f32_up(x.y), f32_up(x.z)),
-        );
+        let local = x - self.origin;
+        let query = Aabb::new(down(local), up(local));
         bvh.aabb_traverse(query, |bvh, node_index| {
             let node = &bvh.nodes[node_index as usize];
             for i in node.first_index..node.first_index + node.prim_count {
@@ -68,8 +77,8 @@ impl ClusterBvh {
     }
 
     /// Appends `(t_in, t_out, cluster)` for every cluster box the ray `origin + t dir` crosses
-    /// within `[t0, t1]`, in f64 (the boxes' f32 bounds are exact in f64, so nothing is missed
-    /// to rounding).
+    /// within `[t0, t1]`, in f64 and local coordinates (the boxes' outward-rounded f32 bounds
+    /// are exact in f64, so nothing is missed to rounding).
     pub fn ray_boxes(
         &self,
         origin: DVec3,
@@ -79,6 +88,7 @@ impl ClusterBvh {
         out: &mut Vec<(f64, f64, u32)>,
     ) {
         let Some(bvh) = &self.bvh else { return };
+        let origin = origin - self.origin;
         let inv = dir.recip();
         let hit = |b: &Aabb| -> Option<(f64, f64)> {
             let lo = (b.min.as_dvec3() - origin) * inv;
@@ -116,4 +126,14 @@ impl ClusterBvh {
         }) + self.clusters.len() * 4
             + self.leaf_boxes.len() * std::mem::size_of::<Aabb>()
     }
+}
+
+/// The f32 point at or below `v` on every axis.
+fn down(v: DVec3) -> Vec3A {
+    Vec3A::new(f32_down(v.x), f32_down(v.y), f32_down(v.z))
+}
+
+/// The f32 point at or above `v` on every axis.
+fn up(v: DVec3) -> Vec3A {
+    Vec3A::new(f32_up(v.x), f32_up(v.y), f32_up(v.z))
 }

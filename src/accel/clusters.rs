@@ -3,7 +3,7 @@
 use std::fmt;
 use std::str::FromStr;
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use num_traits::Float;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -118,9 +118,8 @@ pub fn cluster_box<F: Float>(
     out
 }
 
-/// One box per cluster of K consecutive particles by [`cluster_box`] (a cluster with no member
-/// left is empty, `Bounds::is_empty`). Boxes are rounded outward to f32, so they contain the
-/// f64 spheres.
+/// One box per cluster of K consecutive particles by [`cluster_box`], in f64 (a cluster with no
+/// member left is empty, `Bounds::is_empty`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClusterBoxes {
     pub size: ClusterSize,
@@ -139,8 +138,8 @@ impl ClusterBoxes {
                 |(c, r)| match cluster_box(c.iter().zip(r).map(|(c, &r)| (c.to_array(), r))) {
                     None => Bounds::EMPTY,
                     Some([lo, hi]) => Bounds {
-                        min: Vec3::from_array(lo.map(f32_down)),
-                        max: Vec3::from_array(hi.map(f32_up)),
+                        min: DVec3::from_array(lo),
+                        max: DVec3::from_array(hi),
                     },
                 },
             )
@@ -191,14 +190,14 @@ mod tests {
         let b = ClusterBoxes::build(&c, &r, ClusterSize::new(2).unwrap());
         assert_eq!(b.len(), 3);
         let pad = 0.5 * 2.0 * f64::EPSILON;
-        assert_eq!(b.boxes[0].min, Vec3::splat(f32_down(-0.5 - pad)));
+        assert_eq!(b.boxes[0].min, DVec3::splat(-0.5 - pad));
         assert_eq!(
             b.boxes[0].max,
-            Vec3::splat(f32_up(0.5 + pad)),
+            DVec3::splat(0.5 + pad),
             "the zero-radius member adds nothing"
         );
         assert!(b.boxes[1].is_empty());
-        assert!(b.boxes[2].min.cmple(Vec3::splat(0.75)).all());
+        assert!(b.boxes[2].min.cmple(DVec3::splat(0.75)).all());
         assert_eq!(b.non_empty(), 2);
         assert_eq!(b.members(2, 5), 4..5);
         assert!(ClusterSize::new(3).is_err());

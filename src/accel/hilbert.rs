@@ -3,7 +3,7 @@
 //! Positions are quantised to 21 bits per axis over the series' bounds (so the order of a step
 //! does not depend on which other particles it holds), giving 63-bit keys.
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::values::Bounds;
@@ -72,26 +72,26 @@ impl HilbertQuantizer {
             min: if bounds.is_empty() {
                 DVec3::ZERO
             } else {
-                bounds.min.as_dvec3()
+                bounds.min
             },
             scale,
         }
     }
 
-    pub fn cell(&self, p: Vec3) -> [u32; 3] {
+    pub fn cell(&self, p: DVec3) -> [u32; 3] {
         let max = f64::from((1u32 << HILBERT_BITS) - 1);
-        let q = ((p.as_dvec3() - self.min) * self.scale).clamp(DVec3::ZERO, DVec3::splat(max));
+        let q = ((p - self.min) * self.scale).clamp(DVec3::ZERO, DVec3::splat(max));
         [q.x as u32, q.y as u32, q.z as u32]
     }
 
-    pub fn key(&self, p: Vec3) -> u64 {
+    pub fn key(&self, p: DVec3) -> u64 {
         hilbert_key(self.cell(p), HILBERT_BITS)
     }
 }
 
 /// The stable order of `positions` along the Hilbert curve over `bounds`: `order[k]` is the
 /// index of the k-th particle on the curve. Ties keep their input order.
-pub fn hilbert_order(positions: &[Vec3], bounds: Bounds) -> Vec<u32> {
+pub fn hilbert_order(positions: &[DVec3], bounds: Bounds) -> Vec<u32> {
     let quantizer = HilbertQuantizer::new(bounds);
     let keys: Vec<u64> = positions.par_iter().map(|&p| quantizer.key(p)).collect();
     let mut order: Vec<u32> = (0..positions.len() as u32).collect();
@@ -131,11 +131,11 @@ mod tests {
     #[test]
     fn order_is_stable_and_a_permutation() {
         let p = vec![
-            Vec3::ONE,
-            Vec3::ZERO,
-            Vec3::ONE,
-            Vec3::ZERO,
-            Vec3::splat(0.5),
+            DVec3::ONE,
+            DVec3::ZERO,
+            DVec3::ONE,
+            DVec3::ZERO,
+            DVec3::splat(0.5),
         ];
         let b = Bounds::of_points(&p);
         let order = hilbert_order(&p, b);

@@ -42,16 +42,19 @@ impl GpuStepData {
         let points = order
             .par_iter()
             .map(|&i| {
-                let p = step.positions[i as usize].as_dvec3() - origin;
-                let t = inputs.attribute.map_or(0.0, |a| {
-                    normalise(f64::from(a.values[i as usize]), inputs.range)
-                });
+                let p = step.positions[i as usize] - origin;
+                let t = inputs
+                    .attribute
+                    .map_or(0.0, |a| normalise(a.values[i as usize], inputs.range));
                 [p.x as f32, p.y as f32, p.z as f32, t as f32]
             })
             .collect();
-        let radius_attribute = inputs
-            .radius
-            .map(|h| order.par_iter().map(|&i| h.values[i as usize]).collect());
+        let radius_attribute = inputs.radius.map(|h| {
+            order
+                .par_iter()
+                .map(|&i| h.values[i as usize] as f32)
+                .collect()
+        });
         let mut data = GpuStepData {
             origin,
             points,
@@ -84,7 +87,7 @@ impl GpuStepData {
             self.radius_attribute = inputs.radius.map(|h| {
                 self.order
                     .par_iter()
-                    .map(|&i| h.values[i as usize])
+                    .map(|&i| h.values[i as usize] as f32)
                     .collect()
             });
         }

@@ -84,7 +84,7 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         .or_else(|| resolved.series_range())
         .or_else(|| {
             let a = step.attribute(resolved.field.attribute.as_deref()?)?;
-            crate::values::value_range(&a.values).map(|(lo, hi)| (f64::from(lo), f64::from(hi)))
+            crate::values::value_range(&a.values)
         })
         .unwrap_or((0.0, 0.0));
     let pre = resolved.field.classification == Classification::Pre;
@@ -92,11 +92,7 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     // Queries in Hilbert order (neighbouring queries share tree nodes: ~2-3x faster on every
     // backend), results returned in input order.
-    let query_bounds = points
-        .iter()
-        .fold(Bounds::EMPTY, |b, q| b.grown_by(q.as_vec3()));
-    let as_f32: Vec<glam::Vec3> = points.iter().map(|q| q.as_vec3()).collect();
-    let order = hilbert_order(&as_f32, query_bounds);
+    let order = hilbert_order(&points, Bounds::of_points(&points));
     let sorted: Vec<DVec3> = order.iter().map(|&i| points[i as usize]).collect();
     let bar = crate::progress::bar(points.len() as u64, "evaluating");
     let mut samples = vec![[0.0; 4]; points.len()];

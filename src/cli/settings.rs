@@ -90,7 +90,7 @@ impl Resolved {
     pub fn series_range(&self) -> Option<(f64, f64)> {
         let name = self.field.attribute.as_deref()?;
         let a = self.series.attribute(name)?;
-        Some((f64::from(a.min), f64::from(a.max)))
+        Some((a.min, a.max))
     }
 }
 

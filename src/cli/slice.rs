@@ -62,7 +62,7 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         resolved.series_range(),
     )?;
     let bounds = resolved.series.bounds();
-    let (lo, hi) = (bounds.min.as_dvec3(), bounds.max.as_dvec3());
+    let (lo, hi) = (bounds.min, bounds.max);
     let (normal, u, v) = match args.axis {
         Axis::X => (0, 2, 1),
         Axis::Y => (1, 0, 2),

@@ -67,10 +67,8 @@ impl<'a> FieldInputs<'a> {
                 }
                 (lo, hi)
             }
-            (None, Some(a)) => series_range.unwrap_or_else(|| {
-                crate::values::value_range(&a.values)
-                    .map_or((0.0, 0.0), |(lo, hi)| (f64::from(lo), f64::from(hi)))
-            }),
+            (None, Some(a)) => series_range
+                .unwrap_or_else(|| crate::values::value_range(&a.values).unwrap_or((0.0, 0.0))),
             (None, None) => (0.0, 0.0),
         };
 
@@ -91,10 +89,10 @@ impl<'a> FieldInputs<'a> {
         }
         let t_of = |i: usize| {
             self.attribute
-                .map_or(0.5, |a| normalise(f64::from(a.values[i]), self.range))
+                .map_or(0.5, |a| normalise(a.values[i], self.range))
         };
         let no_radius = (0..step.len()).into_par_iter().all(|i| {
-            let h = self.radius.map_or(1.0, |h| f64::from(h.values[i]));
+            let h = self.radius.map_or(1.0, |h| h.values[i]);
             settings.radius_map.0.eval(t_of(i)) * h <= 0.0
         });
         if no_radius {

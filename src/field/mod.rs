@@ -90,7 +90,7 @@ pub enum FieldError {
     NegativeRadius {
         step: String,
         name: String,
-        value: f32,
+        value: f64,
         index: usize,
     },
 }

@@ -84,10 +84,10 @@ impl Particles {
         } = FieldInputs::check(step, settings, series_range)?;
         let tables = FieldTables::of(settings);
         let order = hilbert_order(&step.positions, series_bounds);
-        let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(f64::from(a.values[i]), range));
+        let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(a.values[i], range));
         let centers = order
             .par_iter()
-            .map(|&i| step.positions[i as usize].as_dvec3())
+            .map(|&i| step.positions[i as usize])
             .collect();
         let radii: Vec<f64> = order
             .par_iter()
@@ -96,7 +96,7 @@ impl Particles {
                 particle_radius(
                     settings.radius,
                     lookup(&tables.radius, t_of(i)),
-                    per_particle_radius.map(|h| f64::from(h.values[i])),
+                    per_particle_radius.map(|h| h.values[i]),
                 )
             })
             .collect();

@@ -168,11 +168,7 @@ impl ReferenceField {
     /// visited in Hilbert order (neighbouring queries share tree nodes, about 2x faster) and
     /// the results returned in input order.
     pub fn eval_many(&self, queries: &[DVec3]) -> Vec<Sample> {
-        let bounds = queries
-            .iter()
-            .fold(Bounds::EMPTY, |b, q| b.grown_by(q.as_vec3()));
-        let as_f32: Vec<glam::Vec3> = queries.iter().map(|q| q.as_vec3()).collect();
-        let order = hilbert_order(&as_f32, bounds);
+        let order = hilbert_order(queries, Bounds::of_points(queries));
         let bar = crate::progress::bar(queries.len() as u64, "evaluating");
         let chunk = 4096;
         let sorted: Vec<Sample> = order

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use glam::Vec3;
+use glam::DVec3;
 
 use super::{At, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
@@ -45,7 +45,7 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
         .collect();
 
     let mut positions = Vec::new();
-    let mut values: Vec<Vec<f32>> = vec![Vec::new(); attribute_columns.len()];
+    let mut values: Vec<Vec<f64>> = vec![Vec::new(); attribute_columns.len()];
     let mut record = ::csv::StringRecord::new();
     let mut first = true;
     while reader
@@ -78,7 +78,7 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
                 ))
             })
         };
-        positions.push(Vec3::new(
+        positions.push(DVec3::new(
             field(position_columns[0])?,
             field(position_columns[1])?,
             field(position_columns[2])?,
@@ -101,12 +101,13 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     })
 }
 
-/// A number, or NaN for an empty field (a missing value, dropped later with a warning).
-fn parse(s: &str) -> Option<f32> {
+/// A number (parsed to the nearest f64, so 17-digit text keeps every digit), or NaN for an
+/// empty field (a missing value, dropped later with a warning).
+fn parse(s: &str) -> Option<f64> {
     if s.is_empty() {
-        return Some(f32::NAN);
+        return Some(f64::NAN);
     }
-    s.parse::<f32>().ok()
+    s.parse::<f64>().ok()
 }
 
 fn csv_error(at: At<'_>, e: ::csv::Error) -> DataError {
@@ -131,6 +132,7 @@ pub fn write_step(path: &Path, step: &Step) -> std::io::Result<()> {
     let mut header = vec!["x".to_owned(), "y".into(), "z".into()];
     header.extend(step.attributes.iter().map(|a| a.name.clone()));
     w.write_record(&header)?;
+    // Rust's shortest round-trip formatting: reading the file back gives the same f64s.
     for (i, p) in step.positions.iter().enumerate() {
         let mut row = vec![p.x.to_string(), p.y.to_string(), p.z.to_string()];
         row.extend(step.attributes.iter().map(|a| a.values[i].to_string()));

@@ -19,7 +19,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use glam::Vec3;
+use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 pub use error::{At, DataError, Location, Problem};
@@ -257,7 +257,7 @@ pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step,
 
 /// What a reader hands over: positions and named columns, not yet checked.
 pub struct Columns {
-    pub positions: Vec<Vec3>,
+    pub positions: Vec<DVec3>,
     pub attributes: Vec<Attribute>,
 }
 
@@ -405,7 +405,7 @@ pub(crate) fn split_components(name: &str, data: &[f64], components: usize) -> V
         .enumerate()
         .map(|(c, name)| Attribute {
             name,
-            values: (0..n).map(|i| data[i * components + c] as f32).collect(),
+            values: (0..n).map(|i| data[i * components + c]).collect(),
         })
         .collect();
     if components == 3 {
@@ -414,7 +414,7 @@ pub(crate) fn split_components(name: &str, data: &[f64], components: usize) -> V
             values: (0..n)
                 .map(|i| {
                     let v = &data[i * 3..i * 3 + 3];
-                    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() as f32
+                    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
                 })
                 .collect(),
         });

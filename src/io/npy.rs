@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek};
 use std::path::Path;
 
-use glam::Vec3;
+use glam::DVec3;
 use npyz::{DType, NpyFile, Order, WriterBuilder};
 
 use super::{At, Columns, DataError, Problem, file_len};
@@ -202,13 +202,13 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     let positions = (0..m.rows)
         .map(|i| {
             let r = m.row(i);
-            Vec3::new(r[0] as f32, r[1] as f32, r[2] as f32)
+            DVec3::new(r[0], r[1], r[2])
         })
         .collect();
     let attributes = (3..m.cols)
         .map(|c| Attribute {
             name: format!("col{c}"),
-            values: (0..m.rows).map(|i| m.data[i * m.cols + c] as f32).collect(),
+            values: (0..m.rows).map(|i| m.data[i * m.cols + c]).collect(),
         })
         .collect();
     Ok(Columns {

@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use glam::Vec3;
+use glam::DVec3;
 
 use super::{At, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
@@ -272,7 +272,7 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
                 "the PLY vertex element needs properties x, y and z".into(),
             )));
         };
-        let mut columns: Vec<Vec<f32>> = vec![Vec::with_capacity(n); scalars.len()];
+        let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(n); scalars.len()];
         let mut row_values = vec![0.0f64; scalars.len()];
         for row in 0..element.count {
             let mut k = 0;
@@ -291,11 +291,11 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
                 }
             }
             for (col, v) in columns.iter_mut().zip(&row_values) {
-                col.push(*v as f32);
+                col.push(*v);
             }
         }
         let positions = (0..n)
-            .map(|i| Vec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
+            .map(|i| DVec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
             .collect();
         let attributes = scalars
             .iter()
@@ -317,14 +317,18 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     )))
 }
 
-/// Writes a step as binary little-endian PLY with float properties.
+/// Writes a step as binary little-endian PLY with double properties (the precision a step
+/// holds).
 pub fn write_step(path: &Path, step: &Step) -> std::io::Result<()> {
     let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
     writeln!(out, "ply\nformat binary_little_endian 1.0")?;
     writeln!(out, "element vertex {}", step.len())?;
-    writeln!(out, "property float x\nproperty float y\nproperty float z")?;
+    writeln!(
+        out,
+        "property double x\nproperty double y\nproperty double z"
+    )?;
     for a in &step.attributes {
-        writeln!(out, "property float {}", a.name)?;
+        writeln!(out, "property double {}", a.name)?;
     }
     writeln!(out, "end_header")?;
     for (i, p) in step.positions.iter().enumerate() {

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use glam::Vec3;
+use glam::DVec3;
 
 use super::{At, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
@@ -29,8 +29,12 @@ pub(crate) fn xyzw_columns(bytes: &[u8], attribute: &str) -> Columns {
     let mut positions = Vec::with_capacity(bytes.len() / 16);
     let mut values = Vec::with_capacity(bytes.len() / 16);
     for record in bytes.chunks_exact(16) {
-        let f = |i: usize| f32::from_le_bytes(record[i * 4..i * 4 + 4].try_into().unwrap());
-        positions.push(Vec3::new(f(0), f(1), f(2)));
+        let f = |i: usize| {
+            f64::from(f32::from_le_bytes(
+                record[i * 4..i * 4 + 4].try_into().unwrap(),
+            ))
+        };
+        positions.push(DVec3::new(f(0), f(1), f(2)));
         values.push(f(3));
     }
     Columns {
@@ -42,7 +46,8 @@ pub(crate) fn xyzw_columns(bytes: &[u8], attribute: &str) -> Columns {
     }
 }
 
-/// Records of four little-endian f32 (x, y, z, `attribute`) for a step.
+/// Records of four little-endian f32 (x, y, z, `attribute`) for a step: the format holds f32,
+/// so double-precision values are rounded to it.
 pub(crate) fn xyzw_bytes(step: &Step, attribute: &str) -> std::io::Result<Vec<u8>> {
     let values = &step
         .attribute(attribute)
@@ -56,7 +61,7 @@ pub(crate) fn xyzw_bytes(step: &Step, attribute: &str) -> std::io::Result<Vec<u8
     let mut bytes = Vec::with_capacity(step.len() * 16);
     for (p, v) in step.positions.iter().zip(values) {
         for x in [p.x, p.y, p.z, *v] {
-            bytes.extend_from_slice(&x.to_le_bytes());
+            bytes.extend_from_slice(&(x as f32).to_le_bytes());
         }
     }
     Ok(bytes)

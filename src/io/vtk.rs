@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use glam::Vec3;
+use glam::DVec3;
 use vtkio::model::{
     Attribute as VtkAttribute, Attributes, ByteOrder, DataArray, DataSet, ElementType, IOBuffer,
     Piece, PieceData, PolyDataPiece, Version, VertexNumbers, Vtk,
@@ -129,11 +129,7 @@ pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
                 a.values.append(&mut p.values);
             }
         }
-        positions.extend(
-            coords
-                .chunks_exact(3)
-                .map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32)),
-        );
+        positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
     }
     Ok(Columns {
         positions,
@@ -401,9 +397,10 @@ fn precheck_counts(at: At<'_>, legacy: bool) -> Result<(), DataError> {
 
 /// Writes a step as VTK XML poly data (`.vtp`, base64 binary, zlib-compressed) with every
 /// attribute as a point-data array and one vertex cell per particle, so ParaView shows points.
+/// Points and arrays are Float64: what was read in double precision is written in it.
 pub fn write_vtp(path: &Path, step: &Step) -> std::io::Result<()> {
     let n = step.len() as u64;
-    let points: Vec<f32> = step.positions.iter().flat_map(|p| p.to_array()).collect();
+    let points: Vec<f64> = step.positions.iter().flat_map(|p| p.to_array()).collect();
     let piece = PolyDataPiece {
         points: points.into(),
         verts: Some(VertexNumbers::XML {

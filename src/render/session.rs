@@ -120,7 +120,7 @@ impl RenderSession {
                     .attribute
                     .as_deref()
                     .and_then(|a| series.attribute(a))
-                    .map(|a| (f64::from(a.min), f64::from(a.max)));
+                    .map(|a| (a.min, a.max));
                 self.backend.upload(&StepInput {
                     step: &data,
                     field,
@@ -152,12 +152,7 @@ impl RenderSession {
         let data = series.step(step)?;
         let n = data.len();
         let stride = n.div_ceil(4096).max(1);
-        let centres: Vec<DVec3> = data
-            .positions
-            .iter()
-            .step_by(stride)
-            .map(|p| p.as_dvec3())
-            .collect();
+        let centres: Vec<DVec3> = data.positions.iter().step_by(stride).copied().collect();
         let mut phi: Vec<f64> = self
             .backend
             .query(&centres)?
@@ -172,9 +167,9 @@ impl RenderSession {
             .as_deref()
             .and_then(|a| data.attribute(a));
         let (mean_h, max_h) = h.map_or((1.0, 1.0), |h| {
-            let sum: f64 = h.values.iter().map(|&v| f64::from(v)).sum();
-            let max = h.values.iter().fold(0.0f32, |m, &v| m.max(v));
-            (sum / h.values.len().max(1) as f64, f64::from(max))
+            let sum: f64 = h.values.iter().sum();
+            let max = h.values.iter().fold(0.0f64, |m, &v| m.max(v));
+            (sum / h.values.len().max(1) as f64, max)
         });
         Ok(Derived {
             phi_ref,
@@ -259,10 +254,7 @@ impl RenderSession {
         let (box_min, box_max) = if self.bounds.is_empty() {
             (DVec3::ZERO, DVec3::ZERO)
         } else {
-            (
-                self.bounds.min.as_dvec3() - grow,
-                self.bounds.max.as_dvec3() + grow,
-            )
+            (self.bounds.min - grow, self.bounds.max + grow)
         };
         Ok(FrameParams {
             width: settings.width,

@@ -149,7 +149,6 @@ impl std::str::FromStr for Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec3;
 
     #[test]
     fn frame_is_orthogonal_and_scaled_by_the_field_of_view() {
@@ -173,8 +172,8 @@ mod tests {
     #[test]
     fn benchmark_orbit_lies_on_the_upper_hemisphere_at_half_the_diagonal() {
         let b = Bounds {
-            min: Vec3::ZERO,
-            max: Vec3::new(2.0, 1.0, 1.0),
+            min: DVec3::ZERO,
+            max: DVec3::new(2.0, 1.0, 1.0),
         };
         let mut dirs = Vec::new();
         for i in 0..50 {

@@ -42,8 +42,8 @@ pub struct StepInfo {
 #[derive(Clone, Debug, PartialEq)]
 pub struct AttributeInfo {
     pub name: String,
-    pub min: f32,
-    pub max: f32,
+    pub min: f64,
+    pub max: f64,
 }
 
 enum Source {
@@ -276,12 +276,12 @@ impl StepCache {
 mod tests {
     use super::*;
     use crate::values::Attribute;
-    use glam::Vec3;
+    use glam::DVec3;
 
-    fn step(n: usize, v: f32) -> Arc<Step> {
+    fn step(n: usize, v: f64) -> Arc<Step> {
         Arc::new(Step {
             name: format!("s{n}"),
-            positions: vec![Vec3::splat(v); n],
+            positions: vec![DVec3::splat(v); n],
             attributes: vec![Attribute {
                 name: "a".into(),
                 values: vec![v; n],
@@ -313,8 +313,8 @@ mod tests {
         let s = TimeSeries::from_steps(vec![(*step(3, -1.0)).clone(), (*step(5, 2.0)).clone()]);
         assert_eq!(s.len(), 2);
         assert_eq!(s.max_count(), 5);
-        assert_eq!(s.bounds().min, Vec3::splat(-1.0));
-        assert_eq!(s.bounds().max, Vec3::splat(2.0));
+        assert_eq!(s.bounds().min, DVec3::splat(-1.0));
+        assert_eq!(s.bounds().max, DVec3::splat(2.0));
         let a = s.attribute("a").unwrap();
         assert_eq!((a.min, a.max), (-1.0, 2.0));
         assert!(s.step(2).is_err());

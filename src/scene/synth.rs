@@ -113,10 +113,10 @@ impl FromStr for Generator {
 fn static_step(points: &[DVec3], centre: DVec3) -> Step {
     Step {
         name: String::new(),
-        positions: points.iter().map(|p| p.as_vec3()).collect(),
+        positions: points.to_vec(),
         attributes: vec![Attribute {
             name: "distance".into(),
-            values: points.iter().map(|p| p.distance(centre) as f32).collect(),
+            values: points.iter().map(|p| p.distance(centre)).collect(),
         }],
     }
 }
@@ -239,9 +239,9 @@ fn gaussian_blobs(n: usize, seed: u64) -> Step {
     for i in 0..n {
         let b = i % BLOBS;
         let offset = DVec3::new(gaussian(&mut rng), gaussian(&mut rng), gaussian(&mut rng));
-        positions.push((centres[b] + offset * sigma(b)).as_vec3());
-        blob.push(b as f32);
-        distance.push(offset.length() as f32);
+        positions.push(centres[b] + offset * sigma(b));
+        blob.push(b as f64);
+        distance.push(offset.length());
     }
     Step {
         name: String::new(),
@@ -409,23 +409,23 @@ fn dambreak(n: usize, steps: usize, seed: u64) -> Vec<Step> {
             }
         }
         let grid = NeighbourGrid::new(&x, 2.0 * spacing, tank);
-        let neighbours: Vec<f32> = (0..n)
+        let neighbours: Vec<f64> = (0..n)
             .into_par_iter()
             .map(|i| {
                 let mut count = 0u32;
                 grid.for_each_near(x[i], |j| {
                     count += u32::from(j != i && x[i].distance(x[j]) < 2.0 * spacing);
                 });
-                count as f32
+                f64::from(count)
             })
             .collect();
         out.push(Step {
             name: format!("{step:04}"),
-            positions: x.iter().map(|p| p.as_vec3()).collect(),
+            positions: x.clone(),
             attributes: vec![
                 Attribute {
                     name: "velocity".into(),
-                    values: v.iter().map(|v| v.length() as f32).collect(),
+                    values: v.iter().map(|v| v.length()).collect(),
                 },
                 Attribute {
                     name: "neighbours".into(),

@@ -1,26 +1,26 @@
-//! Axis-aligned boxes in the data's coordinates.
+//! Axis-aligned boxes in the data's coordinates, in f64 (the precision positions keep).
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 /// An axis-aligned box in the data's coordinates. An empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Bounds {
-    pub min: Vec3,
-    pub max: Vec3,
+    pub min: DVec3,
+    pub max: DVec3,
 }
 
 impl Bounds {
     pub const EMPTY: Bounds = Bounds {
-        min: Vec3::splat(f32::INFINITY),
-        max: Vec3::splat(f32::NEG_INFINITY),
+        min: DVec3::splat(f64::INFINITY),
+        max: DVec3::splat(f64::NEG_INFINITY),
     };
 
-    pub fn of_points(points: &[Vec3]) -> Bounds {
+    pub fn of_points(points: &[DVec3]) -> Bounds {
         points.iter().fold(Bounds::EMPTY, |b, &p| b.grown_by(p))
     }
 
-    pub fn grown_by(self, p: Vec3) -> Bounds {
+    pub fn grown_by(self, p: DVec3) -> Bounds {
         Bounds {
             min: self.min.min(p),
             max: self.max.max(p),
@@ -42,7 +42,7 @@ impl Bounds {
         if self.is_empty() {
             DVec3::ZERO
         } else {
-            self.max.as_dvec3() - self.min.as_dvec3()
+            self.max - self.min
         }
     }
 
@@ -55,7 +55,19 @@ impl Bounds {
         if self.is_empty() {
             DVec3::ZERO
         } else {
-            (self.min.as_dvec3() + self.max.as_dvec3()) * 0.5
+            (self.min + self.max) * 0.5
+        }
+    }
+
+    /// The box grown by `margin` on every side (an empty box stays empty).
+    pub fn grown(self, margin: f64) -> Bounds {
+        if self.is_empty() {
+            self
+        } else {
+            Bounds {
+                min: self.min - DVec3::splat(margin),
+                max: self.max + DVec3::splat(margin),
+            }
         }
     }
 }

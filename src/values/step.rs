@@ -1,6 +1,7 @@
-//! One time step of particles, as it lives in memory.
+//! One time step of particles, as it lives in memory: in f64, whatever the file held, so data
+//! written in double precision keeps every digit (f32 files convert exactly).
 
-use glam::Vec3;
+use glam::DVec3;
 
 use super::Bounds;
 
@@ -8,10 +9,10 @@ use super::Bounds;
 #[derive(Clone, Debug, PartialEq)]
 pub struct Attribute {
     pub name: String,
-    pub values: Vec<f32>,
+    pub values: Vec<f64>,
 }
 
-/// One time step: positions and any number of named f32 attributes, all of equal length.
+/// One time step: positions and any number of named attributes, all of equal length.
 ///
 /// A per-particle radius (smoothing length) is one of the attributes, chosen by name where the
 /// field is set up, so a file's `h` or `radius` array needs no special treatment while reading.
@@ -19,7 +20,7 @@ pub struct Attribute {
 pub struct Step {
     /// A name for messages: the file name, or the step name in a `.particles` header.
     pub name: String,
-    pub positions: Vec<Vec3>,
+    pub positions: Vec<DVec3>,
     pub attributes: Vec<Attribute>,
 }
 
@@ -46,17 +47,17 @@ impl Step {
 
     /// Bytes this step occupies in memory (what the cache counts).
     pub fn bytes(&self) -> usize {
-        self.positions.len() * std::mem::size_of::<Vec3>()
+        self.positions.len() * std::mem::size_of::<DVec3>()
             + self
                 .attributes
                 .iter()
-                .map(|a| a.values.len() * 4)
+                .map(|a| a.values.len() * std::mem::size_of::<f64>())
                 .sum::<usize>()
     }
 }
 
 /// Minimum and maximum of `values` (ignoring nothing: callers pass finite data).
-pub fn value_range(values: &[f32]) -> Option<(f32, f32)> {
+pub fn value_range(values: &[f64]) -> Option<(f64, f64)> {
     values.iter().fold(None, |acc, &v| match acc {
         None => Some((v, v)),
         Some((lo, hi)) => Some((lo.min(v), hi.max(v))),

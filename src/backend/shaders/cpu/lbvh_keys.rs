@@ -21,7 +21,7 @@ impl KeyGrid {
         let lo = if series_bounds.is_empty() {
             DVec3::ZERO
         } else {
-            series_bounds.min.as_dvec3() - origin
+            series_bounds.min - origin
         };
         let scale = |e: f64| {
             if e > 0.0 {
