@@ -65,6 +65,7 @@ fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> 
         cluster: ClusterSize::new(k).unwrap(),
         series_bounds: step.bounds(),
         series_range: None,
+        precision: aarbf::backend::Precision::FIELD,
     }
 }
 
@@ -238,6 +239,7 @@ fn frames() {
         cluster: k,
         series_bounds: series.bounds(),
         series_range: range,
+        precision: aarbf::backend::Precision::FIELD,
     })
     .unwrap();
     b.build().unwrap();

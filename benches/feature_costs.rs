@@ -146,6 +146,7 @@ fn main() {
                 cluster: ClusterSize::new(1).unwrap(),
                 series_bounds: unit,
                 series_range: Some((0.0, 1.0)),
+                precision: aarbf::backend::Precision::FIELD,
             };
             b.upload(&input).unwrap();
             let upload = b.timings().upload.as_secs_f64();
@@ -189,6 +190,7 @@ fn main() {
                 cluster,
                 series_bounds: unit,
                 series_range: Some((0.0, 1.0)),
+                precision: aarbf::backend::Precision::FIELD,
             })
             .unwrap();
             b.build().unwrap();

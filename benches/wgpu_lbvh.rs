@@ -52,6 +52,7 @@ fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> 
         cluster: ClusterSize::new(k).unwrap(),
         series_bounds: UNIT,
         series_range: Some((0.0, 1.0)),
+        precision: aarbf::backend::Precision::FIELD,
     }
 }
 

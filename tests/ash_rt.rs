@@ -87,6 +87,7 @@ fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> 
         cluster: ClusterSize::new(k).unwrap(),
         series_bounds: step.bounds(),
         series_range: None,
+        precision: aarbf::backend::Precision::FIELD,
     }
 }
 
@@ -193,14 +194,18 @@ fn boxes_match_the_cpu_cluster_boxes() {
             let want: Bounds = cpu.boxes[c];
             if want.is_empty() {
                 degenerate += 1;
-                let first = reference.particles.centers[c * k as usize];
+                let first =
+                    reference.particles.origin + reference.particles.centers[c * k as usize];
                 assert_eq!(lo, hi, "K = {k}, box {c}: degenerate");
                 assert!((lo - first).abs().max_element() < 1e-4, "K = {k}, box {c}");
                 continue;
             }
             // The f32 local box against the f64 box: the GPU's may be larger by its padding
             // plus the rounding of local coordinates (~1e-4 of the 2-unit extent at 1000).
-            let (wlo, whi) = (want.min, want.max);
+            let (wlo, whi) = (
+                want.min + reference.particles.origin,
+                want.max + reference.particles.origin,
+            );
             let slack = 2e-4;
             assert!(
                 lo.cmple(wlo + slack).all() && hi.cmpge(whi - slack).all(),
@@ -254,7 +259,7 @@ fn compare_sums(
         if err > tol {
             let near_boundary = (0..p.len()).any(|j| {
                 let r = p.radii[j];
-                r > 0.0 && ((x - p.centers[j]).length() - r).abs() <= 1e-5 * r.max(1e-3)
+                r > 0.0 && ((x - p.origin - p.centers[j]).length() - r).abs() <= 1e-5 * r.max(1e-3)
             });
             assert!(
                 near_boundary,

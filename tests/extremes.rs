@@ -38,7 +38,7 @@ fn edge_allowance(reference: &ReferenceField, x: DVec3, origin: DVec3) -> (f64, 
     let mut theta = [0.0; 3];
     for i in 0..p.len() {
         let r = p.radii[i];
-        let d = (x - p.centers[i]).length();
+        let d = (x - p.origin - p.centers[i]).length();
         if r > 0.0 && (d - r).abs() <= 1e-4 * r + ulp {
             let w = p.weights[i] * (-4.5f64).exp() * 1.01;
             phi += w;
@@ -247,6 +247,7 @@ fn check_case(kind: BackendKind, tolerance: f64, case: &Case, classification: Cl
         cluster,
         series_bounds: series.bounds(),
         series_range: range,
+        precision: aarbf::backend::Precision::FIELD,
     })
     .unwrap();
     b.build().unwrap();

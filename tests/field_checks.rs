@@ -39,6 +39,7 @@ fn upload(b: &mut dyn Backend, step: &Step, field: &FieldSettings) {
         cluster: ClusterSize::new(4).unwrap(),
         series_bounds: step.bounds(),
         series_range: None,
+        precision: aarbf::backend::Precision::FIELD,
     })
     .unwrap();
     b.build().unwrap();
@@ -84,6 +85,7 @@ fn every_backend_refuses_the_same_bad_field_on_upload_refit_and_map_update() {
                 cluster: ClusterSize::new(4).unwrap(),
                 series_bounds: step.bounds(),
                 series_range: None,
+                precision: aarbf::backend::Precision::FIELD,
             })
             .expect_err(&format!("{kind}: upload must fail"));
         got.push(e.to_string());

@@ -113,6 +113,7 @@ fn upload(backend: &mut WgpuBackend, step: &Step, field: &FieldSettings, k: u32)
             cluster: ClusterSize::new(k).unwrap(),
             series_bounds: bounds_of(step),
             series_range: Some((0.0, 1.0)),
+            precision: aarbf::backend::Precision::FIELD,
         })
         .unwrap();
 }
@@ -496,7 +497,7 @@ fn check_queries(
         // On a sphere's edge in one precision and not the other: bound by those particles.
         let edge: f64 = (0..p.len())
             .filter(|&i| {
-                let d = (*x - p.centers[i]).length();
+                let d = (*x - p.origin - p.centers[i]).length();
                 p.radii[i] > 0.0 && (d - p.radii[i]).abs() <= 1e-4 * p.radii[i]
             })
             .map(|i| p.weights[i] * (-4.5f64).exp() * 1.01)
@@ -640,6 +641,7 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
             cluster: ClusterSize::new(1).unwrap(),
             series_bounds: bounds_of(&step),
             series_range: Some((0.0, 1.0)),
+            precision: aarbf::backend::Precision::FIELD,
         })
         .unwrap_err()
         .to_string();

@@ -1,9 +1,10 @@
 // The cluster-box rule (paper §3.2.3; method.md §3), the one GPU definition: cluster c holds
 // the CLUSTER_SIZE consecutive (Hilbert-sorted) particles c K .. min(c K + K, n); its box is
 // the union of [p - r - pad, p + r + pad] over the members with r > 0 (r = rbf.glsl's
-// particle_radius, the very rule the queries test spheres with). pad = max(|p|, r) BOX_PAD, two
+// particle_radius, the very rule the queries test spheres with). pad = max(|p|, r) BOX_PAD, four
 // ulp of the coordinates, so the f32 box holds every point the f32 sphere test accepts (a
-// point at distance r computed with rounding may lie just outside [p - r, p + r]). A cluster
+// point at distance r computed with rounding may lie just outside [p - r, p + r]), and with
+// double-single positions every rounded point whose exact position is inside. A cluster
 // with no member of r > 0 is empty: cluster_box returns false and lo, hi are unset; each
 // structure decides what an empty box is (the LBVH leaves it out, the RT BLAS keeps a
 // degenerate box so a refit can grow it).

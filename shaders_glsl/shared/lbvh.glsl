@@ -11,7 +11,7 @@
 // particles c * CLUSTER_SIZE .. min((c + 1) * CLUSTER_SIZE, field_params.counts.x).
 //
 // The includer defines, before this file (after rbf.glsl, whose particle_radius and
-// rbf_accumulate it calls), the accessors of the arrays (functions rather than buffer names so
+// rbf_accumulate it calls, and which needs particle_lo), the accessors of the arrays (functions rather than buffer names so
 // that the wgpu backend can split an array too large for one binding over several: see
 // wgpu/split.glsl; the Vulkan kernels read one buffer each):
 //     vec4 particle(uint k);       // particle k
@@ -27,31 +27,32 @@ bool lbvh_contains(vec4 lo, vec4 hi, vec3 x) {
 }
 
 // Adds every particle of cluster c to acc (those out of reach add nothing).
-void lbvh_visit_cluster(uint c, vec3 x, inout vec4 acc) {
+void lbvh_visit_cluster(uint c, vec3 x, vec3 x_lo, inout vec4 acc) {
     uint first = c * CLUSTER_SIZE;
     uint end = min(first + CLUSTER_SIZE, field_params.counts.x);
     for (uint k = first; k < end; k++) {
         vec4 p = particle(k);
-        rbf_accumulate(acc, x, p, particle_radius(p, k));
+        rbf_accumulate(acc, x, x_lo, p, k, particle_radius(p, k));
     }
 }
 
 // Visits the cluster behind leaf pointer ptr. Its box is tested first, except for single
 // particles, whose own sphere test costs no more than the box test.
-void lbvh_visit_leaf(uint ptr, vec3 x, inout vec4 acc) {
+void lbvh_visit_leaf(uint ptr, vec3 x, vec3 x_lo, inout vec4 acc) {
     uint c = ptr & ~LBVH_LEAF;
     if (CLUSTER_SIZE == 1u || lbvh_contains(lbvh_box(2u * c), lbvh_box(2u * c + 1u), x)) {
-        lbvh_visit_cluster(c, x, acc);
+        lbvh_visit_cluster(c, x, x_lo, acc);
     }
 }
 
-// (Phi, Theta numerator) at local position x: every cluster whose box contains x, its
+// (Phi, Theta numerator) at local position x (+ x_lo with double-single positions; the boxes
+// are tested with x alone, which their padding allows): every cluster whose box contains x, its
 // particles tested one by one. A node's box is tested when it is popped; inside, the left
 // child is next and the right one waits on the stack. (Measured on lavapipe and not kept:
 // testing children from their parent, so only nodes containing x are pushed, was slower for
 // K >= 4; tracking the distance to the nearest box to skip empty space gained nothing on the
 // demo scene, whose samples mostly lie inside the fluid.)
-vec4 lbvh_field(vec3 x) {
+vec4 lbvh_field(vec3 x, vec3 x_lo) {
     vec4 acc = vec4(0.0);
     uint ptr = floatBitsToUint(lbvh_node(0u).w);
     if (ptr == LBVH_NONE) {
@@ -61,7 +62,7 @@ vec4 lbvh_field(vec3 x) {
     uint sp = 0u;
     for (;;) {
         if ((ptr & LBVH_LEAF) != 0u) {
-            lbvh_visit_leaf(ptr, x, acc);
+            lbvh_visit_leaf(ptr, x, x_lo, acc);
         } else {
             vec4 lo = lbvh_node(2u * ptr);
             vec4 hi = lbvh_node(2u * ptr + 1u);

@@ -5,8 +5,16 @@
 // theta t (post-classification) or C(t) (pre-classification). A field value is a vec4:
 // x = Phi, yzw = the Theta numerator Σ theta_i phi_i.
 //
-// The includer defines, before this file, `Field field_params` (params.glsl) and, when
-// HAS_RADIUS_ATTRIBUTE is 1, `float radius_attribute(uint particle)`.
+// Positions: with POSITION_DS = 0 a particle's position is p.xyz and a query point x, f32 in
+// local coordinates. With POSITION_DS = 1 (a scene whose radii f32 cannot resolve, see
+// src/backend/gpu_data.rs) each is a double-single pair: p.xyz + particle_lo(k) and x + x_lo,
+// the hi parts f32-rounded, the lo parts the remainders. The distance is then
+// (x - p) + (x_lo - p_lo): the hi difference is exact for nearby points (Sterbenz), so d keeps
+// f32's relative precision however small the radius is against the coordinates.
+//
+// The includer defines, before this file, `Field field_params` (params.glsl), `vec4
+// particle_lo(uint k)` (read only when POSITION_DS is 1) and, when HAS_RADIUS_ATTRIBUTE is 1,
+// `float radius_attribute(uint particle)`.
 
 float particle_radius(vec4 p, uint index) {
     float m = (RADIUS_MAP_VARIES == 1u) ? map_lookup(TABLE_RADIUS, p.w) : field_params.radius.y;
@@ -42,9 +50,18 @@ void rbf_add(inout vec4 acc, float d2, float r, vec4 p) {
     acc.yzw += particle_theta(p) * phi;
 }
 
-// Adds particle p's contribution at x to acc when x lies within its radius r.
-void rbf_accumulate(inout vec4 acc, vec3 x, vec4 p, float r) {
+// The offset from particle k (p) to the query point x (+ x_lo).
+vec3 rbf_offset(vec3 x, vec3 x_lo, vec4 p, uint k) {
     vec3 d = x - p.xyz;
+    if (POSITION_DS == 1u) {
+        d += x_lo - particle_lo(k).xyz;
+    }
+    return d;
+}
+
+// Adds particle k's (p's) contribution at x (+ x_lo) to acc when x lies within its radius r.
+void rbf_accumulate(inout vec4 acc, vec3 x, vec3 x_lo, vec4 p, uint k, float r) {
+    vec3 d = rbf_offset(x, x_lo, p, k);
     float d2 = dot(d, d);
     if (rbf_inside(d2, r)) {
         rbf_add(acc, d2, r, p);

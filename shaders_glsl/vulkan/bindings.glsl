@@ -43,12 +43,17 @@ layout(push_constant) uniform Push {
     uint count;        // items to process (queries, boxes)
     uint width;        // row width of a 2D launch over a 1D array
     uint first_frame;  // 1: the frame replaces the accumulation
-    uint unused;
-    uvec2 particle_address;  // ParticleArray of the step
-    uvec2 radius_address;    // FloatArray of radius attributes (0 when there are none)
-    uvec2 boxes_address;     // the BLAS input boxes, 6 floats each (boxes.comp writes them)
-    uvec2 accum_address;     // Vec4Array: the frame's f32 RGBA sums per pixel
+    uint query_lo;     // 1: a query launch whose points carry lo parts (POSITION_DS)
+    uvec2 particle_address;     // ParticleArray of the step
+    uvec2 radius_address;       // FloatArray of radius attributes (0 when there are none)
+    uvec2 boxes_address;        // the BLAS input boxes, 6 floats each (boxes.comp writes them)
+    uvec2 accum_address;        // Vec4Array: the frame's f32 RGBA sums per pixel
+    uvec2 particle_lo_address;  // ParticleArray of the lo parts (POSITION_DS; else 0)
 } push;
+
+// Query points (query launches): one vec4 each, or with double-single positions two, hi then
+// lo; the intersection stage reads the lo part of its launch's point here.
+layout(std430, set = 0, binding = 7) readonly buffer QueryPoints { vec4 query_points[]; };
 
 // `particles[i]`, as shared/lbvh.glsl and the RT stages index it.
 #define particles (ParticleArray(push.particle_address).v)
@@ -57,6 +62,10 @@ layout(push_constant) uniform Push {
 
 vec4 particle(uint k) {
     return particles[k];
+}
+
+vec4 particle_lo(uint k) {
+    return ParticleArray(push.particle_lo_address).v[k];
 }
 
 float radius_attribute(uint k) {

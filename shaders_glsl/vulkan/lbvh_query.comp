@@ -6,7 +6,6 @@
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 64) in;
-layout(std430, set = 0, binding = 7) readonly buffer QueryPoints { vec4 query_points[]; };
 layout(std430, set = 0, binding = 8) writeonly buffer QueryResults { vec4 query_results[]; };
 #include "vulkan/lbvh.glsl"
 
@@ -15,5 +14,9 @@ void main() {
     if (i >= push.count) {
         return;
     }
-    query_results[i] = lbvh_field(query_points[i].xyz);
+    if (POSITION_DS == 1u) {
+        query_results[i] = lbvh_field(query_points[2u * i].xyz, query_points[2u * i + 1u].xyz);
+    } else {
+        query_results[i] = lbvh_field(query_points[i].xyz, vec3(0.0));
+    }
 }

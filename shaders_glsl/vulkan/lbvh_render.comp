@@ -7,8 +7,9 @@
 layout(local_size_x = 8, local_size_y = 8) in;
 #include "vulkan/lbvh.glsl"
 
+// The integrators' samples are f32 points (their lo part is 0).
 vec4 field_query(vec3 x) {
-    return lbvh_field(x);
+    return lbvh_field(x, vec3(0.0));
 }
 
 #include "shared/integrators.glsl"

@@ -1,6 +1,7 @@
 #version 450
 // Field queries: (Phi, Theta numerator) at each query point (local coordinates), by the
-// shared LBVH traversal. Twin: ReferenceField::eval_sums (f64).
+// shared LBVH traversal. Twin: ReferenceField::eval_sums (f64). With double-single positions
+// each query is two vec4s, hi then lo.
 
 layout(local_size_x = 64) in;
 
@@ -36,5 +37,9 @@ void main() {
     if (group >= query_count.y || i >= query_count.x) {
         return;
     }
-    query_results[i] = lbvh_field(query_points[i].xyz);
+    if (POSITION_DS == 1u) {
+        query_results[i] = lbvh_field(query_points[2u * i].xyz, query_points[2u * i + 1u].xyz);
+    } else {
+        query_results[i] = lbvh_field(query_points[i].xyz, vec3(0.0));
+    }
 }

@@ -37,8 +37,9 @@ float radius_attribute(uint i) {
 #include "shared/rbf.glsl"
 #include "shared/lbvh.glsl"
 
+// The integrators' samples are f32 points (their lo part is 0).
 vec4 field_query(vec3 x) {
-    return lbvh_field(x);
+    return lbvh_field(x, vec3(0.0));
 }
 
 #include "shared/integrators.glsl"

@@ -24,3 +24,5 @@
 
 // Particle k: xyz local position, w the normalised attribute.
 #split_array particles 10 vec4 readonly field_params.counts.z get:particle
+// Particle k's lo part with double-single positions (POSITION_DS; rbf.glsl): xyz, w unused.
+#split_array particle_los 26 vec4 readonly field_params.counts.z get:particle_lo

@@ -91,14 +91,15 @@ pub fn f32_up(x: f64) -> f32 {
 
 /// The cluster-box rule (paper §3.2.3), written once for every precision: the union of
 /// `[c - r - pad, c + r + pad]` over the members (centre, radius) with `r > 0`, where
-/// `pad = max(|c|, r) · 2ε` is two ulp of the coordinates in that precision, so the box holds
-/// every point a sphere test in that precision accepts; `None` when no member has `r > 0` (an
-/// empty cluster). At f32 it is the CPU twin of `shaders_glsl/shared/cluster_box.glsl` (same
-/// operations in the same order); the f64 reference uses it at f64.
+/// `pad = max(|c|, r) · 4ε` is four ulp of the coordinates in that precision, so the box holds
+/// every point a sphere test in that precision accepts (`shader_constants::BOX_PAD` says why
+/// four); `None` when no member has `r > 0` (an empty cluster). At f32 it is the CPU twin of
+/// `shaders_glsl/shared/cluster_box.glsl` (same operations in the same order); the f64
+/// reference uses it at f64.
 pub fn cluster_box<F: Float>(
     members: impl IntoIterator<Item = ([F; 3], F)>,
 ) -> Option<[[F; 3]; 2]> {
-    let pad = F::epsilon() + F::epsilon();
+    let pad = F::epsilon() * F::from(4.0).expect("4 fits any float");
     let mut out: Option<[[F; 3]; 2]> = None;
     for (c, r) in members {
         // Radius 0 (or NaN) leaves the member out.
@@ -189,7 +190,7 @@ mod tests {
         let r = [0.5, 0.0, 0.0, 0.0, 0.25];
         let b = ClusterBoxes::build(&c, &r, ClusterSize::new(2).unwrap());
         assert_eq!(b.len(), 3);
-        let pad = 0.5 * 2.0 * f64::EPSILON;
+        let pad = 0.5 * 4.0 * f64::EPSILON;
         assert_eq!(b.boxes[0].min, DVec3::splat(-0.5 - pad));
         assert_eq!(
             b.boxes[0].max,

@@ -138,6 +138,45 @@ pub struct StepInput<'a> {
     pub series_bounds: Bounds,
     /// The attribute's range over the series.
     pub series_range: Option<(f64, f64)>,
+    /// How precisely a GPU backend holds positions (the CPU backend computes in f64).
+    pub precision: Precision,
+}
+
+/// How a GPU backend holds positions (`gpu_data` explains the error f32 positions carry).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Precision {
+    /// f32 where this scene's positions and radii let it keep the relative error of Phi below
+    /// `tolerance`, double-single otherwise: what the scene needs, no more.
+    Auto { tolerance: f64 },
+    /// f32 positions in local coordinates, whatever the error.
+    F32,
+    /// Double-single positions (f32 hi + lo pairs, about 48 bits), whatever the scene.
+    DoubleSingle,
+}
+
+impl Precision {
+    /// For field values users read as numbers (`aarbf field`): 1e-5 relative.
+    pub const FIELD: Precision = Precision::Auto { tolerance: 1e-5 };
+    /// For images: 1e-3 relative, a quarter of an 8-bit step where density maps to colour
+    /// one to one, and well below the noise of a converging frame.
+    pub const RENDER: Precision = Precision::Auto { tolerance: 1e-3 };
+}
+
+/// The CLI spelling: `auto` (with the default tolerance of the command), `f32`, `ds`, or
+/// `auto:TOLERANCE`.
+pub fn parse_precision(text: &str, auto: Precision) -> Result<Precision, String> {
+    match text {
+        "auto" => Ok(auto),
+        "f32" => Ok(Precision::F32),
+        "ds" | "double-single" => Ok(Precision::DoubleSingle),
+        t => match t.strip_prefix("auto:").map(str::parse::<f64>) {
+            Some(Ok(tolerance)) if tolerance > 0.0 => Ok(Precision::Auto { tolerance }),
+            _ => Err(format!(
+                "precision '{text}': expected auto, auto:TOLERANCE (e.g. auto:1e-4), f32 or ds"
+            )),
+        },
+    }
 }
 
 /// Why a backend cannot do what was asked.
@@ -194,4 +233,34 @@ pub trait Backend: Send {
     fn timings(&self) -> Timings;
 
     fn memory(&self) -> MemoryReport;
+
+    /// How the uploaded step's positions are held (`None` before an upload).
+    fn positions(&self) -> Option<Positions>;
+}
+
+/// How a backend holds the uploaded step's positions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Positions {
+    /// f64 in data coordinates (the CPU backend).
+    F64,
+    /// f32 local coordinates; the bound on the relative Phi error that causes.
+    F32 { error_bound: f64 },
+    /// Double-single pairs; the bound f32 positions would have had.
+    DoubleSingle { f32_error_bound: f64 },
+}
+
+impl fmt::Display for Positions {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Positions::F64 => write!(f, "f64"),
+            Positions::F32 { error_bound } => write!(
+                f,
+                "f32 local coordinates (relative Phi error from position rounding at most {error_bound:.1e})"
+            ),
+            Positions::DoubleSingle { f32_error_bound } => write!(
+                f,
+                "double-single local coordinates (f32 would carry up to {f32_error_bound:.1e} relative Phi error)"
+            ),
+        }
+    }
 }

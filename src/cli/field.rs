@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::accel::hilbert_order;
-use crate::backend::{self, BackendKind, StepInput};
+use crate::backend::{self, BackendKind, Precision, StepInput, parse_precision};
 use crate::field::{Classification, finish_sums};
 use crate::io::{At, npy};
 use crate::values::Bounds;
@@ -33,6 +33,11 @@ pub struct FieldArgs {
     /// pipeline) evaluate in f32 on a GPU (or lavapipe); `auto` picks the best.
     #[arg(long, value_enum, default_value = "cpu")]
     pub backend: BackendKind,
+    /// How a GPU backend holds positions: `auto` (f32 where the scene's radii allow a Phi
+    /// error below 1e-5, double-single pairs otherwise), `auto:TOLERANCE`, `f32` or `ds`
+    /// (double-single). The CPU backend computes in f64 whatever this says.
+    #[arg(long, default_value = "auto")]
+    pub precision: String,
     /// Overwrite an existing output.
     #[arg(long)]
     pub force: bool,
@@ -74,9 +79,14 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         cluster: resolved.cluster,
         series_bounds: resolved.series.bounds(),
         series_range: resolved.series_range(),
+        precision: parse_precision(&args.precision, Precision::FIELD)
+            .map_err(anyhow::Error::msg)?,
     })?;
     backend.build()?;
     let build_time = built.elapsed();
+    if let Some(p) = backend.positions() {
+        tracing::info!("{}: positions in {p}", backend.capabilities().name);
+    }
     // The attribute's normalisation range, as the backends use it (Particles::prepare).
     let range = resolved
         .field

@@ -24,6 +24,10 @@ pub struct RenderArgs {
     pub steps: Option<String>,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendKind,
+    /// How a GPU backend holds positions: `auto` (f32 where the scene's radii allow a Phi
+    /// error below 1e-3, double-single pairs otherwise), `auto:TOLERANCE`, `f32` or `ds`.
+    #[arg(long, default_value = "auto")]
+    pub precision: String,
     #[arg(long)]
     pub width: Option<u32>,
     #[arg(long)]
@@ -213,6 +217,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         backend.capabilities().device
     );
     let mut session = RenderSession::new(backend, &resolved.series);
+    session.set_precision(
+        backend::parse_precision(&args.precision, backend::Precision::RENDER)
+            .map_err(anyhow::Error::msg)?,
+    );
     let bar = crate::progress::bar(
         (steps.len() as u64) * u64::from(spp),
         if sequence {

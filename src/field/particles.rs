@@ -22,9 +22,13 @@ pub enum Theta {
 }
 
 /// The particles of one step, prepared for the field: Hilbert-sorted, with radius, weight and
-/// theta evaluated once per particle.
+/// theta evaluated once per particle, and centres relative to a local origin (the series'
+/// centre), subtracted in f64 once: far from the data's origin, distances then keep the
+/// digits that the subtraction of two large coordinates per query would lose.
 #[derive(Clone, Debug)]
 pub struct Particles {
+    /// Data coordinates are `origin + centers[i]`.
+    pub origin: DVec3,
     pub centers: Vec<DVec3>,
     pub radii: Vec<f64>,
     pub weights: Vec<f64>,
@@ -85,9 +89,10 @@ impl Particles {
         let tables = FieldTables::of(settings);
         let order = hilbert_order(&step.positions, series_bounds);
         let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(a.values[i], range));
+        let origin = series_bounds.center();
         let centers = order
             .par_iter()
-            .map(|&i| step.positions[i as usize])
+            .map(|&i| step.positions[i as usize] - origin)
             .collect();
         let radii: Vec<f64> = order
             .par_iter()
@@ -117,6 +122,7 @@ impl Particles {
             ),
         };
         Ok(Particles {
+            origin,
             centers,
             radii,
             weights,

@@ -15,7 +15,8 @@ struct Accumulator {
 }
 
 impl Particles {
-    /// Adds particle `i`'s contribution at `x` to `acc` if `x` lies within its radius.
+    /// Adds particle `i`'s contribution at `x` (local coordinates) to `acc` if `x` lies within
+    /// its radius.
     #[inline]
     fn accumulate(&self, i: usize, x: DVec3, acc: &mut Accumulator) {
         let r = self.radii[i];
@@ -74,7 +75,8 @@ pub fn finish_sums(phi: f64, num: [f64; 3], post: bool, range: (f64, f64)) -> Sa
     Sample { phi, theta }
 }
 
-/// The reference field of one step: prepared particles, cluster boxes and their BVH.
+/// The reference field of one step: prepared particles, cluster boxes and their BVH (both in
+/// the particles' local coordinates; every method takes data coordinates).
 pub struct ReferenceField {
     pub particles: Particles,
     pub boxes: ClusterBoxes,
@@ -106,19 +108,14 @@ impl ReferenceField {
 
     /// The field at `x` through the BVH.
     pub fn eval(&self, x: DVec3) -> Sample {
-        let mut acc = Accumulator::default();
-        let n = self.particles.len();
-        self.bvh.for_each_cluster_at(x, |c| {
-            for i in self.boxes.members(c, n) {
-                self.particles.accumulate(i, x, &mut acc);
-            }
-        });
-        self.finish(acc)
+        let (phi, theta) = self.eval_sums(x);
+        self.finish(Accumulator { phi, theta })
     }
 
     /// Phi and the Theta numerator at `x` as the renderer uses them: Σ phi_i and
     /// Σ theta_i phi_i with theta_i the normalised attribute t_i (post) or linear RGB (pre).
     pub fn eval_sums(&self, x: DVec3) -> (f64, [f64; 3]) {
+        let x = x - self.particles.origin;
         let mut acc = Accumulator::default();
         let n = self.particles.len();
         self.bvh.for_each_cluster_at(x, |c| {
@@ -140,7 +137,8 @@ impl ReferenceField {
         out: &mut Vec<(f64, f64)>,
     ) {
         let mut hits = Vec::new();
-        self.bvh.ray_boxes(origin, dir, t0, t1, &mut hits);
+        self.bvh
+            .ray_boxes(origin - self.particles.origin, dir, t0, t1, &mut hits);
         hits.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
         for (a, b, _) in hits {
             match out.last_mut() {
@@ -157,6 +155,7 @@ impl ReferenceField {
 
     /// The field at `x` by visiting every particle.
     pub fn eval_brute_force(&self, x: DVec3) -> Sample {
+        let x = x - self.particles.origin;
         let mut acc = Accumulator::default();
         for i in 0..self.particles.len() {
             self.particles.accumulate(i, x, &mut acc);

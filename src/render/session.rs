@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::settings::RenderSettings;
 use crate::accel::ClusterSize;
-use crate::backend::{Backend, BackendError, StepInput};
+use crate::backend::{Backend, BackendError, Precision, StepInput};
 use crate::field::{Classification, FieldSettings};
 use crate::io::DataError;
 use crate::scene::{Camera, CameraError, TimeSeries};
@@ -49,6 +49,8 @@ pub const MAX_SAMPLES_PER_RAY: f64 = 100_000.0;
 
 pub struct RenderSession {
     backend: Box<dyn Backend>,
+    /// How GPU backends hold positions (`Precision::RENDER` unless set).
+    precision: Precision,
     bounds: Bounds,
     max_count: usize,
     loaded: Option<Loaded>,
@@ -64,6 +66,7 @@ impl RenderSession {
         backend.reserve(series.max_count());
         RenderSession {
             backend,
+            precision: Precision::RENDER,
             bounds: series.bounds(),
             max_count: series.max_count(),
             loaded: None,
@@ -71,6 +74,14 @@ impl RenderSession {
             frames: 0,
             last_frame_key: None,
             warned_coarse_step: std::sync::atomic::AtomicBool::new(false),
+        }
+    }
+
+    /// How GPU backends hold positions from the next upload on.
+    pub fn set_precision(&mut self, precision: Precision) {
+        if precision != self.precision {
+            self.precision = precision;
+            self.loaded = None;
         }
     }
 
@@ -127,6 +138,7 @@ impl RenderSession {
                     cluster,
                     series_bounds: self.bounds,
                     series_range: range,
+                    precision: self.precision,
                 })?;
                 self.backend.build()?;
                 // A new step keeps the normalisation (no flicker over time); a new field does not.

@@ -25,9 +25,12 @@ pub const STBN_DEPTH: u32 = 64;
 /// decisions read different (decorrelated) mask values.
 pub const NOISE_OFFSETS: [[u32; 2]; 3] = [[0, 0], [61, 29], [23, 97]];
 
-/// Cluster boxes are padded by `max(|p|, r) · BOX_PAD` (2 ulp of an f32 coordinate), so the
-/// f32 box holds every point the f32 sphere test accepts (`accel::clusters::cluster_box`).
-pub const BOX_PAD: f32 = 2.0 * f32::EPSILON;
+/// Cluster boxes are padded by `max(|p|, r) · BOX_PAD` (4 ulp of an f32 coordinate), so the
+/// f32 box holds every point the f32 sphere test accepts, and, with double-single positions,
+/// every f32-rounded query point whose exact position lies in the exact sphere (the rounding of
+/// the point, of the particle's hi part and of the box's own arithmetic add up to 7 · 2^-24 of
+/// `max(|p|, r)` at most; `accel::clusters::cluster_box`).
+pub const BOX_PAD: f32 = 4.0 * f32::EPSILON;
 
 /// Below this, Phi counts as "no density": the sample has no colour (never NaN).
 pub const PHI_EPSILON: f64 = 1e-30;
@@ -54,7 +57,7 @@ pub const SORT_RADIX: u32 = 16;
 
 /// The specialisation constants (Vulkan constant ids; wgpu's pipeline-overridable constants
 /// "0", "1", ...), in id order: their names and what their values mean.
-pub const SPEC_CONSTANTS: [(&str, &str); 7] = [
+pub const SPEC_CONSTANTS: [(&str, &str); 9] = [
     ("INTEGRATOR", "0 EA, 1 delta, 2 marching, 3 SS reference"),
     ("COLOUR_MODE", "0 post, 1 pre, 2 density"),
     ("NOISE_KIND", "0 STBN, 1 white"),
@@ -68,6 +71,14 @@ pub const SPEC_CONSTANTS: [(&str, &str); 7] = [
         "1: look the density map up per particle",
     ),
     ("HAS_RADIUS_ATTRIBUTE", "1: per-particle radius buffer"),
+    (
+        "POSITION_DS",
+        "1: positions as double-single (f32 hi + lo) pairs",
+    ),
+    (
+        "RT_HIT_PER_PARTICLE",
+        "ray tracing: 0 one report per cluster with its sum, 1 one per particle (the paper's)",
+    ),
 ];
 /// Indices into [`SPEC_CONSTANTS`].
 pub mod spec {
@@ -78,6 +89,8 @@ pub mod spec {
     pub const RADIUS_MAP_VARIES: usize = 4;
     pub const DENSITY_MAP_VARIES: usize = 5;
     pub const HAS_RADIUS_ATTRIBUTE: usize = 6;
+    pub const POSITION_DS: usize = 7;
+    pub const RT_HIT_PER_PARTICLE: usize = 8;
 }
 
 /// Values of the `INTEGRATOR`, `COLOUR_MODE` and `NOISE_KIND` specialisation constants.

@@ -85,6 +85,19 @@ pub struct StructureTimings {
     pub refit: bool,
 }
 
+/// How the RT pipeline reports what a box's particles add (`shaders_glsl/vulkan/particle.rint`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum HitReports {
+    /// One report per box with its particles' sum: counted exactly once on any driver (the
+    /// geometry's NO_DUPLICATE_ANY_HIT_INVOCATION promises one any-hit call per primitive).
+    #[default]
+    PerCluster,
+    /// One report per particle, as the paper does (for the traversal study). For clusters of
+    /// more than one particle a driver may call any-hit once for several reports of a box and
+    /// undercount; lavapipe does not.
+    PerParticle,
+}
+
 /// How field queries find the particles around a point.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Traversal {
@@ -118,6 +131,8 @@ struct Uploaded {
 struct Buffers {
     params: Buffer,
     points: Buffer,
+    /// The lo parts of double-single positions (a placeholder when the step has none).
+    points_lo: Buffer,
     radius: Buffer,
     tables: Buffer,
     stbn: Buffer,
@@ -163,6 +178,24 @@ fn boxes_buffer(ctx: &Arc<Context>, boxes: u64) -> Result<Buffer, BackendError> 
     )
 }
 
+/// Uploads the lo parts of double-single positions, if the step has them, into `buffer`
+/// (grown to `capacity` particles the first time a step needs them).
+fn write_points_lo(
+    ctx: &Arc<Context>,
+    buffer: &mut Buffer,
+    capacity: usize,
+    data: &GpuStepData,
+) -> Result<(), BackendError> {
+    let Some(lo) = &data.points_lo else {
+        return Ok(());
+    };
+    let need = capacity as u64 * 16;
+    if buffer.size < need {
+        *buffer = addressed(ctx, "particle lo parts", need)?;
+    }
+    buffer.write(0, bytemuck::cast_slice(lo))
+}
+
 /// The ash ray-tracing backend.
 pub struct AshBackend {
     ctx: Arc<Context>,
@@ -184,6 +217,7 @@ pub struct AshBackend {
     timings: Timings,
     structure_timings: StructureTimings,
     traversal: Traversal,
+    hit_reports: HitReports,
     /// The LBVH over the current particles and radii, when built (`Traversal::Lbvh`).
     lbvh: Option<Lbvh>,
 }
@@ -211,6 +245,7 @@ impl AshBackend {
                 MemoryLocation::GpuOnly,
             )?,
             points: addressed(&ctx, "particles", 16)?,
+            points_lo: addressed(&ctx, "particle lo parts", 16)?,
             radius: addressed(&ctx, "radius attribute", 16)?,
             tables: storage(&ctx, "map tables", (TABLE_FLOATS * 4) as u64)?,
             stbn: storage(&ctx, "blue-noise mask", (words.len() * 4) as u64)?,
@@ -290,6 +325,7 @@ impl AshBackend {
             timings: Timings::default(),
             structure_timings: StructureTimings::default(),
             traversal: Traversal::default(),
+            hit_reports: HitReports::default(),
             lbvh: None,
         };
         backend.write_descriptors();
@@ -304,6 +340,11 @@ impl AshBackend {
 
     pub fn traversal(&self) -> Traversal {
         self.traversal
+    }
+
+    /// Chooses how the RT pipeline reports hits ([`HitReports`]).
+    pub fn set_hit_reports(&mut self, reports: HitReports) {
+        self.hit_reports = reports;
     }
 
     /// The LBVH's depth (internal nodes on its longest path), once built.
@@ -498,6 +539,8 @@ impl AshBackend {
             radius_map_varies: u32::from(d.radius_map_varies),
             density_map_varies: u32::from(d.density_map_varies),
             has_radius_attribute: u32::from(d.radius_attribute.is_some()),
+            position_ds: u32::from(d.double_single()),
+            rt_hit_per_particle: u32::from(self.hit_reports == HitReports::PerParticle),
         })
     }
 
@@ -533,6 +576,7 @@ impl AshBackend {
             radius_address: self.buffers.radius.address,
             boxes_address: self.buffers.boxes.address,
             accum_address: self.buffers.accum.address,
+            particle_lo_address: self.buffers.points_lo.address,
             ..push
         };
         let device = &self.ctx.device;
@@ -815,12 +859,21 @@ impl AshBackend {
             .uploaded
             .as_mut()
             .ok_or(BackendError::NothingUploaded(NAME))?;
-        if up
+        let changed = up
             .data
-            .apply_field(&up.step, &up.field, field, up.series_range)?
+            .apply_field(&up.step, &up.field, field, up.series_range)?;
+        if changed.radius_attribute
             && let Some(h) = &up.data.radius_attribute
         {
             self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
+        }
+        if changed.positions_lo {
+            write_points_lo(
+                &self.ctx,
+                &mut self.buffers.points_lo,
+                self.capacity,
+                &up.data,
+            )?;
         }
         up.field = field.clone();
         self.write_params(None)
@@ -850,6 +903,7 @@ impl Backend for AshBackend {
         self.buffers
             .points
             .write(0, bytemuck::cast_slice(&data.points))?;
+        write_points_lo(&self.ctx, &mut self.buffers.points_lo, self.capacity, &data)?;
         if let Some(h) = &data.radius_attribute {
             self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
         }
@@ -893,18 +947,23 @@ impl Backend for AshBackend {
         self.built()?;
         self.write_params(None)?;
         let spec = self.spec(0, self.query_colour(), 0)?;
-        let origin = self.uploaded.as_ref().expect("built").data.origin;
+        let double_single = self.uploaded.as_ref().expect("built").data.double_single();
+        // The query buffer holds QUERY_BATCH vec4s: as many points, or half as many hi/lo pairs.
+        let batch = if double_single {
+            QUERY_BATCH / 2
+        } else {
+            QUERY_BATCH
+        };
         let mut out = Vec::with_capacity(points.len());
         let mut gpu_time = Duration::ZERO;
         let started = Instant::now();
-        for chunk in points.chunks(QUERY_BATCH) {
-            let local: Vec<[f32; 4]> = chunk
-                .iter()
-                .map(|&x| {
-                    let l = x - origin;
-                    [l.x as f32, l.y as f32, l.z as f32, 0.0]
-                })
-                .collect();
+        let mut local: Vec<[f32; 4]> = Vec::with_capacity(QUERY_BATCH);
+        for chunk in points.chunks(batch) {
+            local.clear();
+            let data = &self.uploaded.as_ref().expect("built").data;
+            for &x in chunk {
+                data.push_query(x, &mut local);
+            }
             self.buffers
                 .query_points
                 .write(0, bytemuck::cast_slice(&local))?;
@@ -912,6 +971,7 @@ impl Backend for AshBackend {
             let push = Push {
                 count: n,
                 width: QUERY_WIDTH,
+                query_lo: u32::from(double_single),
                 ..Push::default()
             };
             // Poison the results, so an unwritten one shows as NaN.
@@ -1020,6 +1080,10 @@ impl Backend for AshBackend {
 
     fn timings(&self) -> Timings {
         self.timings
+    }
+
+    fn positions(&self) -> Option<super::Positions> {
+        self.uploaded.as_ref().map(|u| u.data.positions())
     }
 
     fn memory(&self) -> MemoryReport {

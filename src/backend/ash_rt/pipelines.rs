@@ -29,6 +29,7 @@ use super::context::{Context, device_error, vk_error};
 use super::resources::Buffer;
 use crate::backend::BackendError;
 use crate::backend::shaders::SpecConstants;
+use crate::values::shader_constants::SPEC_CONSTANTS;
 
 macro_rules! spirv {
     ($name:literal) => {
@@ -78,13 +79,16 @@ pub struct Push {
     pub width: u32,
     /// 1: the frame replaces the accumulation instead of adding to it.
     pub first_frame: u32,
-    pub unused: u32,
-    /// Device addresses of the step's particles, radius attributes and BLAS input boxes, and
-    /// of the frame's accumulation (filled in by the backend when it records a dispatch).
+    /// 1: a query launch whose points carry lo parts (double-single positions).
+    pub query_lo: u32,
+    /// Device addresses of the step's particles, radius attributes and BLAS input boxes, of
+    /// the frame's accumulation and of the particles' lo parts (filled in by the backend when
+    /// it records a dispatch; 0 for what the step does not have).
     pub particle_address: u64,
     pub radius_address: u64,
     pub boxes_address: u64,
     pub accum_address: u64,
+    pub particle_lo_address: u64,
 }
 
 /// The descriptor-set layout and pipeline layout every pipeline uses.
@@ -190,14 +194,14 @@ impl Drop for Modules<'_> {
     }
 }
 
-const SPEC_ENTRIES: [vk::SpecializationMapEntry; 7] = {
+const SPEC_ENTRIES: [vk::SpecializationMapEntry; SPEC_CONSTANTS.len()] = {
     let mut e = [vk::SpecializationMapEntry {
         constant_id: 0,
         offset: 0,
         size: 4,
-    }; 7];
+    }; SPEC_CONSTANTS.len()];
     let mut i = 0;
-    while i < 7 {
+    while i < SPEC_CONSTANTS.len() {
         e[i].constant_id = i as u32;
         e[i].offset = 4 * i as u32;
         i += 1;

@@ -217,6 +217,10 @@ impl Backend for CpuBackend {
         self.timings
     }
 
+    fn positions(&self) -> Option<super::Positions> {
+        self.uploaded.as_ref().map(|_| super::Positions::F64)
+    }
+
     fn memory(&self) -> MemoryReport {
         let particle_bytes = self.uploaded.as_ref().map_or(0, |u| {
             let p = &u.particles;

@@ -182,6 +182,8 @@ pub struct SpecConstants {
     pub radius_map_varies: u32,
     pub density_map_varies: u32,
     pub has_radius_attribute: u32,
+    pub position_ds: u32,
+    pub rt_hit_per_particle: u32,
 }
 
 impl SpecConstants {
@@ -196,6 +198,8 @@ impl SpecConstants {
         v[spec::RADIUS_MAP_VARIES] = self.radius_map_varies;
         v[spec::DENSITY_MAP_VARIES] = self.density_map_varies;
         v[spec::HAS_RADIUS_ATTRIBUTE] = self.has_radius_attribute;
+        v[spec::POSITION_DS] = self.position_ds;
+        v[spec::RT_HIT_PER_PARTICLE] = self.rt_hit_per_particle;
         v
     }
 

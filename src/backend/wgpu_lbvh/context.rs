@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::backend::BackendError;
 use crate::backend::shaders::{glsl_with_includes, wgsl_with_includes};
+use crate::values::shader_constants::SPEC_CONSTANTS;
 
 pub(crate) fn device_error(message: impl Into<String>) -> BackendError {
     BackendError::Device {
@@ -109,7 +110,7 @@ impl ShaderFile {
 
 /// The specialisation-constant values of a GLSL kernel variant (params.glsl's seven, in
 /// constant_id order), or none.
-pub type Variant = Option<[u32; 7]>;
+pub type Variant = Option<[u32; SPEC_CONSTANTS.len()]>;
 
 /// How a kernel binds the arrays that can outgrow one storage binding
 /// (`shaders_glsl/wgpu/split.glsl`): each as one buffer, or in [`super::util::PARTS`] parts.
@@ -388,13 +389,13 @@ impl GpuContext {
             return Ok(p.clone());
         }
         let module = self.module(kernel.file(), layout)?;
-        // naga names an override by its constant_id when it has one: the keys are "0".."6".
-        let keys = ["0", "1", "2", "3", "4", "5", "6"];
+        // naga names an override by its constant_id when it has one: the keys are "0", "1", ...
+        let keys: Vec<String> = (0..SPEC_CONSTANTS.len()).map(|i| i.to_string()).collect();
         let constants: Vec<(&str, f64)> = variant
             .map(|v| {
                 keys.iter()
                     .zip(v)
-                    .map(|(k, v)| (*k, f64::from(v)))
+                    .map(|(k, v)| (k.as_str(), f64::from(v)))
                     .collect()
             })
             .unwrap_or_default();

@@ -53,7 +53,7 @@ use crate::values::FrameParams;
 use crate::values::Image;
 use crate::values::Step;
 use crate::values::shader_constants::{
-    STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS, TABLE_SIZE,
+    SPEC_CONSTANTS, STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS, TABLE_SIZE, spec,
 };
 use crate::values::{ColourMode, Integrator, NoiseKind};
 use context::{Layout, device_error};
@@ -82,6 +82,9 @@ struct Scene {
     data: GpuStepData,
     grid: KeyGrid,
     particles: SplitBuffer,
+    /// The lo parts of double-single positions, split like the particles (when the step has
+    /// them; kernels without them bind `particles` in their place, unread).
+    particles_lo: Option<SplitBuffer>,
     particle_capacity: usize,
     radius_attribute: Option<wgpu::Buffer>,
     maps: wgpu::Buffer,
@@ -102,7 +105,12 @@ impl Scene {
     }
 
     /// The GLSL kernels' specialisation constants.
-    fn variant(&self, integrator: Integrator, colour: ColourMode, noise: NoiseKind) -> [u32; 7] {
+    fn variant(
+        &self,
+        integrator: Integrator,
+        colour: ColourMode,
+        noise: NoiseKind,
+    ) -> [u32; SPEC_CONSTANTS.len()] {
         SpecConstants {
             integrator: SpecConstants::integrator_id(integrator),
             colour_mode: SpecConstants::colour_id(colour),
@@ -111,8 +119,50 @@ impl Scene {
             radius_map_varies: u32::from(self.data.radius_map_varies),
             density_map_varies: u32::from(self.data.density_map_varies),
             has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
+            position_ds: u32::from(self.data.double_single()),
+            rt_hit_per_particle: 0,
         }
         .values()
+    }
+
+    /// The bind-group entries of the particles' lo parts (bindings 26..): the lo buffer, or
+    /// the particles in its place where the kernel will not read it (no double-single).
+    fn lo_entries(&self, layout: Layout) -> Vec<(u32, wgpu::BindingResource<'_>)> {
+        self.particles_lo
+            .as_ref()
+            .unwrap_or(&self.particles)
+            .entries(26, layout)
+    }
+
+    /// Uploads the lo parts of double-single positions, making their buffer (split like the
+    /// particles) the first time a step needs them.
+    fn write_points_lo(&mut self, ctx: &GpuContext, max_binding: u64) -> Result<(), BackendError> {
+        let Some(lo) = &self.data.points_lo else {
+            return Ok(());
+        };
+        if self
+            .particles_lo
+            .as_ref()
+            .is_none_or(|b| b.size() < self.particles.size())
+        {
+            let capacity = self.particle_capacity as u64;
+            self.particles_lo = Some(
+                ctx.scoped("particle lo parts", || {
+                    SplitBuffer::new(
+                        ctx,
+                        "particle lo parts",
+                        capacity,
+                        PARTICLE_BYTES,
+                        max_binding,
+                    )
+                })?
+                .ok_or_else(|| device_error("the particles' lo parts do not fit their parts"))?,
+            );
+        }
+        if let Some(b) = &self.particles_lo {
+            b.write(ctx, bytemuck::cast_slice(lo));
+        }
+        Ok(())
     }
 }
 
@@ -246,12 +296,19 @@ impl WgpuBackend {
 
     fn bindings<'a>(scene: &'a Scene, dummy: &'a wgpu::Buffer) -> SceneBindings<'a> {
         let variant = scene.variant(Integrator::Ea, ColourMode::Post, NoiseKind::Stbn);
-        // Only what the bounds kernel reads varies its pipeline.
+        // Only what the bounds kernel reads varies its pipeline (boxes come from the hi parts
+        // of positions, which their padding allows).
         let mut v = variant;
-        v[0] = 0;
-        v[1] = 0;
-        v[2] = 0;
-        v[5] = 0;
+        for unread in [
+            spec::INTEGRATOR,
+            spec::COLOUR_MODE,
+            spec::NOISE_KIND,
+            spec::DENSITY_MAP_VARIES,
+            spec::POSITION_DS,
+            spec::RT_HIT_PER_PARTICLE,
+        ] {
+            v[unread] = 0;
+        }
         SceneBindings {
             field: &scene.field_uniform,
             particles: &scene.particles,
@@ -434,45 +491,47 @@ impl Backend for WgpuBackend {
             n
         };
         let old = self.scene.take();
-        let (particles, particle_capacity, maps, field_uniform, radius_attribute) = match old {
-            Some(s) if s.particle_capacity >= n => (
-                s.particles,
-                s.particle_capacity,
-                s.maps,
-                s.field_uniform,
-                s.radius_attribute,
-            ),
-            _ => {
-                let need = capacity as u64 * PARTICLE_BYTES;
-                ctx.scoped(
-                    &format!(
-                        "step '{}': particle buffers ({need} bytes for {capacity} particles)",
-                        input.step.name
-                    ),
-                    || {
-                        (
-                            SplitBuffer::new(
-                                &ctx,
-                                "particles",
-                                capacity as u64,
-                                PARTICLE_BYTES,
-                                max_binding,
-                            ),
-                            capacity,
-                            storage(&ctx, "map tables", TABLE_FLOATS as u64 * 4),
-                            uniform(&ctx, "field", 32),
-                            None,
-                        )
-                    },
-                )
-                .and_then(|(p, c, m, f, r)| {
-                    let p = p.ok_or_else(|| {
-                        device_error(format!("{capacity} particles do not fit {PARTS} parts"))
-                    })?;
-                    Ok((p, c, m, f, r))
-                })?
-            }
-        };
+        let (particles, particles_lo, particle_capacity, maps, field_uniform, radius_attribute) =
+            match old {
+                Some(s) if s.particle_capacity >= n => (
+                    s.particles,
+                    s.particles_lo,
+                    s.particle_capacity,
+                    s.maps,
+                    s.field_uniform,
+                    s.radius_attribute,
+                ),
+                _ => {
+                    let need = capacity as u64 * PARTICLE_BYTES;
+                    ctx.scoped(
+                        &format!(
+                            "step '{}': particle buffers ({need} bytes for {capacity} particles)",
+                            input.step.name
+                        ),
+                        || {
+                            (
+                                SplitBuffer::new(
+                                    &ctx,
+                                    "particles",
+                                    capacity as u64,
+                                    PARTICLE_BYTES,
+                                    max_binding,
+                                ),
+                                capacity,
+                                storage(&ctx, "map tables", TABLE_FLOATS as u64 * 4),
+                                uniform(&ctx, "field", 32),
+                                None,
+                            )
+                        },
+                    )
+                    .and_then(|(p, c, m, f, r)| {
+                        let p = p.ok_or_else(|| {
+                            device_error(format!("{capacity} particles do not fit {PARTS} parts"))
+                        })?;
+                        Ok((p, None, c, m, f, r))
+                    })?
+                }
+            };
         let mut scene = Scene {
             step: input.step.clone(),
             field: input.field.clone(),
@@ -481,6 +540,7 @@ impl Backend for WgpuBackend {
             grid: KeyGrid::new(input.series_bounds, data.origin),
             data,
             particles,
+            particles_lo,
             particle_capacity,
             radius_attribute,
             maps,
@@ -489,6 +549,7 @@ impl Backend for WgpuBackend {
         scene
             .particles
             .write(&ctx, bytemuck::cast_slice(&scene.data.points));
+        scene.write_points_lo(&ctx, max_binding)?;
         Self::write_radius_attribute(&ctx, &mut scene)?;
         let cluster_capacity = input.cluster.clusters_for(scene.particle_capacity);
         if self.tree.as_ref().is_none_or(|t| t.capacity < clusters) {
@@ -524,11 +585,15 @@ impl Backend for WgpuBackend {
         let Some(scene) = self.scene.as_mut() else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
-        if scene
-            .data
-            .apply_field(&scene.step, &scene.field, field, scene.series_range)?
-        {
+        let changed =
+            scene
+                .data
+                .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
+        if changed.radius_attribute {
             Self::write_radius_attribute(&ctx, scene)?;
+        }
+        if changed.positions_lo {
+            scene.write_points_lo(&ctx, self.max_binding)?;
         }
         scene.field = field.clone();
         let colour = scene.data.tables.colour.clone();
@@ -556,11 +621,15 @@ impl Backend for WgpuBackend {
         let Some(scene) = self.scene.as_mut() else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
-        if scene
-            .data
-            .apply_field(&scene.step, &scene.field, field, scene.series_range)?
-        {
+        let changed =
+            scene
+                .data
+                .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
+        if changed.radius_attribute {
             Self::write_radius_attribute(&self.ctx, scene)?;
+        }
+        if changed.positions_lo {
+            scene.write_points_lo(&self.ctx, self.max_binding)?;
         }
         scene.field = field.clone();
         let colour = scene.data.tables.colour.clone();
@@ -575,15 +644,31 @@ impl Backend for WgpuBackend {
         if points.is_empty() {
             return Ok(Vec::new());
         }
+        // A query point is one vec4, or with double-single positions two (hi, lo).
+        let per_point = if self
+            .scene
+            .as_ref()
+            .expect("checked above")
+            .data
+            .double_single()
+        {
+            2
+        } else {
+            1
+        };
         let chunk = QUERY_CHUNK
-            .min((self.max_binding / 16) as usize)
+            .min((self.max_binding / (16 * per_point as u64)) as usize)
             .min(points.len());
-        if self.query_buffers.as_ref().is_none_or(|q| q.0 < chunk) {
+        if self
+            .query_buffers
+            .as_ref()
+            .is_none_or(|q| q.0 < chunk || q.2.size() < (chunk * per_point) as u64 * 16)
+        {
             self.query_buffers = Some(ctx.scoped("query buffers", || {
                 (
                     chunk,
                     uniform(&ctx, "query count", 16),
-                    storage(&ctx, "query points", chunk as u64 * 16),
+                    storage(&ctx, "query points", (chunk * per_point) as u64 * 16),
                     storage(&ctx, "query results", chunk as u64 * 16),
                 )
             })?);
@@ -620,18 +705,17 @@ impl Backend for WgpuBackend {
             entries.extend(scene.particles.entries(10, layout));
             entries.extend(tree.nodes.entries(14, layout));
             entries.extend(tree.boxes.entries(18, layout));
+            entries.extend(scene.lo_entries(layout));
             bind(&ctx, &pipeline, &entries)
         })?;
         let mut out = Vec::with_capacity(points.len());
         let mut bytes = Vec::new();
+        let mut local: Vec<[f32; 4]> = Vec::with_capacity(chunk * per_point);
         for part in points.chunks(chunk) {
-            let local: Vec<[f32; 4]> = part
-                .iter()
-                .map(|&x| {
-                    let l = scene.data.local(x);
-                    [l[0], l[1], l[2], 0.0]
-                })
-                .collect();
+            local.clear();
+            for &x in part {
+                scene.data.push_query(x, &mut local);
+            }
             write(&ctx, points_buffer, bytemuck::cast_slice(&local));
             let groups = (part.len() as u32).div_ceil(64);
             let (blocks, per_block, dispatched) = util::interleave(groups);
@@ -771,6 +855,7 @@ impl Backend for WgpuBackend {
             entries.extend(tree.nodes.entries(14, layout));
             entries.extend(tree.boxes.entries(18, layout));
             entries.extend(acc.sums.entries(22, layout));
+            entries.extend(scene.lo_entries(layout));
             let bg = bind(&ctx, &pipeline, &entries);
             if acc.clear {
                 acc.sums.clear(&mut encoder);
@@ -820,6 +905,10 @@ impl Backend for WgpuBackend {
 
     fn timings(&self) -> Timings {
         self.timings
+    }
+
+    fn positions(&self) -> Option<super::Positions> {
+        self.scene.as_ref().map(|s| s.data.positions())
     }
 
     fn memory(&self) -> MemoryReport {
