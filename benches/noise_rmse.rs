@@ -1,11 +1,14 @@
 //! Blue (STBN) vs white noise on the demo scene: image error against a converged reference
 //! at equal samples per pixel, the paper's Fig. 10b question, on the CPU backend.
 //!
-//! cargo bench --bench noise_rmse -- [SIZE] [REFERENCE_SPP]     (defaults: 128 4096)
+//! cargo bench --bench noise_rmse -- [SIZE] [REFERENCE_SPP] [SEEDS]   (defaults: 64 16384 2)
 //!
-//! For each integrator: RMSE of 1, 4, 16 and 64 accumulated frames against a REFERENCE_SPP
-//! white-noise render, raw and seen through a 1-pixel Gaussian blur (the eye's low-pass),
-//! averaged over 4 seeds.
+//! For each integrator: RMSE of 1, 4, 16, 64, 256 and 1024 accumulated frames against a
+//! REFERENCE_SPP render, raw and seen through a 1-pixel Gaussian blur (the eye's low-pass),
+//! averaged over SEEDS seeds. The reference is blue noise of another seed: past its first 64
+//! frames every cycle reads the mask at a new shift (`BlueNoiseMask::cycle_shift`), so it
+//! converges like the estimates it judges, where a white-noise reference of the same cost
+//! would be noisier than the 1024-spp blue-noise images.
 
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind};
@@ -20,8 +23,9 @@ fn main() {
         .skip(1)
         .filter_map(|a| a.parse().ok())
         .collect();
-    let size = args.first().copied().unwrap_or(128);
-    let reference_spp = args.get(1).copied().unwrap_or(4096);
+    let size = args.first().copied().unwrap_or(64);
+    let reference_spp = args.get(1).copied().unwrap_or(16384);
+    let seeds = args.get(2).copied().unwrap_or(2);
     let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(20_000, 15, 1));
     let field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());
     let mut session = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
@@ -30,7 +34,7 @@ fn main() {
         .unwrap();
     let radius = field.radius;
     println!(
-        "demo scene (dam break, 20K particles, step 14), {size}x{size}, reference {reference_spp} spp white noise\n"
+        "demo scene (dam break, 20K particles, step 14), {size}x{size}, reference {reference_spp} spp blue noise (seed 1000), {seeds} seeds\n"
     );
     println!(
         "| integrator | spp | RMSE blue | RMSE white | blue/white | blurred RMSE blue | blurred RMSE white | blue/white |"
@@ -55,18 +59,26 @@ fn main() {
             ..RenderSettings::default()
         };
         let reference = session
-            .render(&settings(NoiseKind::White, 1000), reference_spp)
+            .render(&settings(NoiseKind::Stbn, 1000), reference_spp)
             .unwrap();
         let blurred_reference = reference.blurred(1.0);
-        for spp in [1, 4, 16, 64] {
-            let mut row = [0.0; 4];
-            for (k, noise) in [NoiseKind::Stbn, NoiseKind::White].into_iter().enumerate() {
-                for seed in 0..4 {
-                    let image = session.render(&settings(noise, seed), spp).unwrap();
-                    row[k] += image.rmse(&reference) / 4.0;
-                    row[2 + k] += image.blurred(1.0).rmse(&blurred_reference) / 4.0;
+        let spps = [1, 4, 16, 64, 256, 1024];
+        // rows[s] = [blue, white, blurred blue, blurred white] at spps[s], summed over seeds.
+        let mut rows = [[0.0f64; 4]; 6];
+        for (k, noise) in [NoiseKind::Stbn, NoiseKind::White].into_iter().enumerate() {
+            for seed in 0..seeds {
+                // One accumulation per seed, read at each spp.
+                let mut done = 0;
+                for (s, &spp) in spps.iter().enumerate() {
+                    let image = session.render(&settings(noise, seed), spp - done).unwrap();
+                    done = spp;
+                    rows[s][k] += image.rmse(&reference) / f64::from(seeds);
+                    rows[s][2 + k] +=
+                        image.blurred(1.0).rmse(&blurred_reference) / f64::from(seeds);
                 }
             }
+        }
+        for (&spp, row) in spps.iter().zip(rows) {
             println!(
                 "| {label} | {spp} | {:.5} | {:.5} | {:.2} | {:.5} | {:.5} | {:.2} |",
                 row[0],

@@ -96,8 +96,7 @@ fn data(case: &Case, seed: u64) -> (Vec<(DVec3, f64)>, Vec<DVec3>) {
         }
         if i % 4 == 0 {
             queries.push(
-                DVec3::splat(case.offset)
-                    + DVec3::new(rng.random(), rng.random(), rng.random()),
+                DVec3::splat(case.offset) + DVec3::new(rng.random(), rng.random(), rng.random()),
             );
         }
     }
@@ -108,7 +107,10 @@ fn data(case: &Case, seed: u64) -> (Vec<(DVec3, f64)>, Vec<DVec3>) {
 fn write_csv(path: &Path, particles: &[(DVec3, f64)]) {
     let mut text = String::from("x,y,z,s\n");
     for (p, s) in particles {
-        text.push_str(&format!("{:.16e},{:.16e},{:.16e},{:.16e}\n", p.x, p.y, p.z, s));
+        text.push_str(&format!(
+            "{:.16e},{:.16e},{:.16e},{:.16e}\n",
+            p.x, p.y, p.z, s
+        ));
     }
     std::fs::write(path, text).unwrap();
 }
@@ -214,7 +216,10 @@ fn field(data: &Path, queries: &Path, radius: f64, backend: &str, out: &Path) ->
     if !output.status.success() && backend != "cpu" {
         common::require::<(), _>(&format!("the {backend} backend"), Err(stderr.to_string()));
     }
-    assert!(output.status.success(), "aarbf field --backend {backend}: {stderr}");
+    assert!(
+        output.status.success(),
+        "aarbf field --backend {backend}: {stderr}"
+    );
     let m = npy::read_matrix(At::new(out, None)).unwrap();
     assert_eq!(m.cols, 2);
     (0..m.rows).map(|i| [m.row(i)[0], m.row(i)[1]]).collect()
@@ -290,7 +295,11 @@ fn double_precision_files_at_extreme_offsets_and_radii_on_every_backend() {
         // positions in f32 (local coordinates, the hi parts in double-single) or f64.
         let local = 1.0 + case.radius.min(1.0);
         let edge_f32 = 8.0 * f64::from(f32::EPSILON) * case.radius.max(local * 1e-300)
-            + if case.radius < 0.1 { 0.0 } else { 4.0 * f64::from(f32::EPSILON) * local };
+            + if case.radius < 0.1 {
+                0.0
+            } else {
+                4.0 * f64::from(f32::EPSILON) * local
+            };
         let edge_f64 = 16.0 * f64::EPSILON * (case.radius + local);
         let expected_f64: Vec<_> = queries
             .iter()
@@ -307,7 +316,11 @@ fn double_precision_files_at_extreme_offsets_and_radii_on_every_backend() {
             case.name,
             queries.len()
         );
-        let name = data_path.file_name().unwrap().to_string_lossy().into_owned();
+        let name = data_path
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         for (backend, expected, tolerance) in [
             ("cpu", &expected_f64, (1e-9, 1e-9)),
             ("wgpu", &expected_f32, (1e-5, 1e-4)),

@@ -11,9 +11,8 @@
 float random_number(uvec2 pixel, uint dim) {
     uint seed = frame.image.w;
     if (NOISE_KIND == 0u && dim < 3u) {
-        uvec2 o = noise_offset(dim);
-        uint s = seed * 0x9e3779b9u;
-        return stbn_value(pixel.x + o.x + (s & 0xffffu), pixel.y + o.y + (s >> 16u), frame.image.z);
+        uvec2 o = noise_offset(dim) + stbn_shift(seed, frame.image.z);
+        return stbn_value(pixel.x + o.x, pixel.y + o.y, frame.image.z);
     }
     return white_noise(pixel.x, pixel.y, frame.image.z, dim, seed);
 }

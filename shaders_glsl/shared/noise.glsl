@@ -33,6 +33,14 @@ float white_noise(uint pixel_x, uint pixel_y, uint frame, uint dimension, uint s
     return float(h >> 8u) * (1.0 / 16777216.0);
 }
 
+// The mask's toroidal shift for frame's cycle of STBN_DEPTH frames, new every cycle (from the
+// seed and the cycle's index), so accumulation keeps converging past one cycle: the twin of
+// BlueNoiseMask::cycle_shift.
+uvec2 stbn_shift(uint seed, uint frame) {
+    uint h = lowbias32(lowbias32(seed) ^ (frame / STBN_DEPTH));
+    return uvec2(h & 0xffffu, h >> 16u);
+}
+
 // The blue-noise mask's number in [0, 1) at pixel (x, y) of frame `frame`; all three wrap.
 float stbn_value(uint x, uint y, uint frame) {
     uint i = ((frame % STBN_DEPTH) * STBN_HEIGHT + (y % STBN_HEIGHT)) * STBN_WIDTH + (x % STBN_WIDTH);

@@ -19,6 +19,8 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use super::white::lowbias32;
+
 /// The magic bytes that open a mask file.
 pub const MAGIC: [u8; 4] = *b"STBN";
 /// Bytes before the values.
@@ -105,6 +107,17 @@ impl BlueNoiseMask {
 
     /// The mask's number at pixel (x, y) of frame `frame`, in [0, 1); all coordinates wrap.
     #[inline]
+    /// The toroidal shift of the mask for the cycle of `depth` frames that `frame` lies in: a
+    /// new one every cycle, drawn from the seed and the cycle's index. A pixel's numbers in
+    /// the next cycle are then another pixel's column of the mask (as stratified over [0, 1)
+    /// as its own), so accumulation keeps converging past one cycle, while each cycle keeps the
+    /// mask's spatiotemporal structure. The GLSL twin is `stbn_shift` in
+    /// `shaders_glsl/shared/noise.glsl`.
+    pub fn cycle_shift(seed: u32, frame: u32, depth: u32) -> [u32; 2] {
+        let h = lowbias32(lowbias32(seed) ^ (frame / depth));
+        [h & 0xffff, h >> 16]
+    }
+
     pub fn get(&self, x: u32, y: u32, frame: u32) -> f32 {
         f32::from(self.values[self.index(x, y, frame)]) * (1.0 / 65536.0)
     }

@@ -14,7 +14,8 @@
 //!
 //! Random numbers: dimension 0 drives the primary decision (the EA jitter or the free-flight
 //! xi), 1 the stochastic-marching jitter, 2 the shadow-ray jitter: each comes from the blue
-//! noise mask or the white hash. Delta tracking's further steps use white noise (dimensions
+//! noise mask (shifted per seed and per 64-frame cycle, `BlueNoiseMask::cycle_shift`, so
+//! accumulation keeps converging past a cycle) or the white hash. Delta tracking's further steps use white noise (dimensions
 //! 3, 4, ...), since only the first decision can keep the blue-noise structure.
 
 use glam::DVec3;
@@ -47,12 +48,13 @@ impl FrameParams {
         match self.noise {
             NoiseKind::Stbn if (dim as usize) < NOISE_OFFSETS.len() => {
                 let o = NOISE_OFFSETS[dim as usize];
-                // The seed shifts the mask so different seeds give different (equally blue) noise.
-                let s = self.seed.wrapping_mul(0x9e37_79b9);
                 let mask = BlueNoiseMask::builtin();
+                // A shift per seed and per cycle of the mask's depth: different seeds give
+                // different (equally blue) noise, and every cycle new numbers.
+                let s = BlueNoiseMask::cycle_shift(self.seed, self.frame, mask.depth);
                 f64::from(mask.get(
-                    x.wrapping_add(o[0]).wrapping_add(s & 0xffff),
-                    y.wrapping_add(o[1]).wrapping_add(s >> 16),
+                    x.wrapping_add(o[0]).wrapping_add(s[0]),
+                    y.wrapping_add(o[1]).wrapping_add(s[1]),
                     self.frame,
                 ))
             }
