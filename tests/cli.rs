@@ -309,6 +309,29 @@ fn bad_input_gives_clear_errors() {
     );
     let e = fails(&["info", s(&d.join("u/uniform.particles_0000"))]);
     assert!(e.contains("unknown format"), "{e}");
+    let render = |extra: &[&str]| {
+        let png = d.join("r.png");
+        let mut args = vec![
+            "render",
+            "--data",
+            header,
+            "--backend",
+            "cpu",
+            "--out",
+            s(&png),
+        ];
+        args.extend_from_slice(extra);
+        fails(&args)
+    };
+    let e = render(&["--optical-map", "0:-0.2,1:1"]);
+    assert!(
+        e.contains("optical-density map") && e.contains("extinction must be >= 0"),
+        "{e}"
+    );
+    let e = render(&["--density-scale=-2"]);
+    assert!(e.contains("density scale") && e.contains("-2"), "{e}");
+    let e = render(&["--precision", "f16"]);
+    assert!(e.contains("precision 'f16'") && e.contains("ds"), "{e}");
 }
 
 #[test]

@@ -15,7 +15,7 @@ use aarbf::backend::{self, BackendKind};
 use aarbf::field::FieldSettings;
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
-use aarbf::scene::maps::ColorMap;
+use aarbf::scene::maps::{ColorMap, OpticalDensityMap, PiecewiseLinear};
 use aarbf::values::{Attribute, FrameParams, Image, Integrator, Light, NoiseKind, Step};
 use glam::DVec3;
 
@@ -43,8 +43,8 @@ fn settings() -> RenderSettings {
         noise: NoiseKind::Stbn,
         seed: 5,
         step_size: Some(RADIUS / 6.0),
-        density_scale: Some(2.5),
         phi_ref: Some(1.0),
+        optical: OpticalDensityMap::new(PiecewiseLinear::ramp(0.0, 1.0), Some(2.5)).unwrap(),
         light: Light {
             intensity: 0.0,
             ambient: 1.0,

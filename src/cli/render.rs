@@ -138,15 +138,19 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     settings.noise = args.noise.or(r.noise).unwrap_or_default();
     settings.seed = args.seed.or(r.seed).unwrap_or(settings.seed);
     settings.step_size = args.step_size.or(r.step_size);
-    settings.density_scale = args.density_scale.or(r.density_scale);
+
     settings.phi_ref = args.phi_ref.or(r.phi_ref);
     settings.colour_by_density = args.color_by_density || r.color_by_density.unwrap_or(false);
     settings.opacity_threshold = r.opacity_threshold.unwrap_or(settings.opacity_threshold);
-    if let Some(text) = &args.optical_map {
-        settings.optical_map = text.parse()?;
-    } else if let Some(spec) = &r.optical_map {
-        settings.optical_map = spec.to_map()?;
-    }
+    let optical_map = match (&args.optical_map, &r.optical_map) {
+        (Some(text), _) => text.parse()?,
+        (None, Some(spec)) => spec.to_map()?,
+        (None, None) => crate::scene::maps::PiecewiseLinear::ramp(0.0, 1.0),
+    };
+    settings.optical = crate::scene::maps::OpticalDensityMap::new(
+        optical_map,
+        args.density_scale.or(r.density_scale),
+    )?;
     let mut light = r.light.unwrap_or_default();
     if let Some(text) = &args.light {
         let [az, el, i] = numbers::<3>("light", text)?;

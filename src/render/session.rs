@@ -12,6 +12,7 @@ use crate::backend::{Backend, BackendError, Precision, StepInput};
 use crate::field::{Classification, FieldSettings};
 use crate::io::DataError;
 use crate::scene::{Camera, CameraError, TimeSeries};
+use crate::values::tables::table_max;
 use crate::values::{Bounds, ColourMode, FrameParams, Image};
 
 #[derive(Debug, thiserror::Error)]
@@ -247,7 +248,8 @@ impl RenderSession {
                 "the particles' radius ({r:.3e}) is below the march step ({dt:.3e}, {DEFAULT_SAMPLES_PER_RAY} samples across the data): the image will miss particles; pass --step-size to march finer"
             );
         }
-        let density_scale = settings.density_scale.unwrap_or(0.4 / r);
+        let density_scale = settings.optical.scale().unwrap_or(0.4 / r);
+        let optical_table = settings.optical.map().bake();
         let phi_ref = settings.phi_ref.unwrap_or(derived.phi_ref);
         if !(phi_ref.is_finite() && phi_ref > 0.0) {
             return Err(RenderError::Settings(format!(
@@ -280,7 +282,7 @@ impl RenderSession {
             opacity_threshold: settings.opacity_threshold,
             phi_ref,
             density_scale,
-            majorant: density_scale * settings.optical_map.max_value().max(0.0),
+            majorant: density_scale * table_max(&optical_table),
             light_dir: settings.light.direction(),
             light_intensity: settings.light.intensity,
             ambient: settings.light.ambient,
@@ -288,7 +290,7 @@ impl RenderSession {
             integrator: settings.integrator,
             noise: settings.noise,
             colour,
-            optical_table: Arc::new(settings.optical_map.bake()),
+            optical_table: Arc::new(optical_table),
             colour_table: Arc::new(loaded.field.color_map.bake()),
         })
     }

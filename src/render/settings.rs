@@ -1,7 +1,7 @@
 //! What a user chooses about a rendering.
 
 use crate::scene::camera::Camera;
-use crate::scene::maps::PiecewiseLinear;
+use crate::scene::maps::OpticalDensityMap;
 use crate::values::frame::{Integrator, Light, NoiseKind};
 
 /// Everything about an image except the data and the field.
@@ -16,12 +16,11 @@ pub struct RenderSettings {
     pub camera: Option<Camera>,
     /// Ray-marching step; `None`: from the radius and the mean particle spacing.
     pub step_size: Option<f64>,
-    /// Extinction per unit length where the optical-density map is 1; `None`: 0.3 / radius.
-    pub density_scale: Option<f64>,
     /// The density normalising Phi for colour and extinction; `None`: estimated from the data.
     pub phi_ref: Option<f64>,
-    /// Optical-density map D over Phi / Phi_ref in [0, 1].
-    pub optical_map: PiecewiseLinear,
+    /// Extinction from normalised density: the optical-density map D over Phi / Phi_ref and
+    /// its scale (`None`: 0.4 / radius).
+    pub optical: OpticalDensityMap,
     /// Colour by density instead of the attribute.
     pub colour_by_density: bool,
     pub light: Light,
@@ -40,9 +39,8 @@ impl Default for RenderSettings {
             seed: 1,
             camera: None,
             step_size: None,
-            density_scale: None,
             phi_ref: None,
-            optical_map: PiecewiseLinear::ramp(0.0, 1.0),
+            optical: OpticalDensityMap::default(),
             colour_by_density: false,
             light: Light::default(),
             background: [0.0; 3],

@@ -34,7 +34,8 @@ pub trait FieldSampler: Sync {
 
     /// Appends the sub-intervals of `[t0, t1]` along `origin + t dir` where the field may be
     /// non-zero, in order. The default is the whole interval; a sampler that knows where its
-    /// particles are may skip empty space (it changes no result: the field there is 0).
+    /// particles are may leave out the rest, where Phi is 0 (the integrators skip it only when
+    /// density 0 has no extinction, see `march_intervals`).
     fn occupied(&self, _origin: DVec3, _dir: DVec3, t0: f64, t1: f64, out: &mut Vec<(f64, f64)>) {
         out.push((t0, t1));
     }
@@ -122,6 +123,26 @@ fn march(
     }
 }
 
+/// The sub-intervals of `[t0, t1]` along the ray to march: those where the field has
+/// particles, when space without particles is truly empty (the optical map's D(0) is 0);
+/// otherwise the whole interval, since extinction there is `scale · D(0)` (and its colour
+/// may show). The GPU backends march every sample; skipping changes no result where it is done.
+fn march_intervals(
+    p: &FrameParams,
+    field: &impl FieldSampler,
+    origin: DVec3,
+    dir: DVec3,
+    t0: f64,
+    t1: f64,
+    out: &mut Vec<(f64, f64)>,
+) {
+    if p.shade(0.0, [0.0; 3]).0 > 0.0 {
+        out.push((t0, t1));
+    } else {
+        field.occupied(origin, dir, t0, t1, out);
+    }
+}
+
 /// Transmittance from `x` towards the light to the march box's exit: `exp(-Σ sigma dt)`.
 fn shadow(
     p: &FrameParams,
@@ -134,7 +155,7 @@ fn shadow(
         return 1.0;
     };
     scratch.clear();
-    field.occupied(x, p.light_dir, 0.0, t_exit, scratch);
+    march_intervals(p, field, x, p.light_dir, 0.0, t_exit, scratch);
     let mut tau = 0.0;
     march(0.0, t_exit, p.dt, jitter, scratch, |t| {
         let (phi, num) = field.sample(x + p.light_dir * t);
@@ -153,7 +174,7 @@ pub fn render_pixel(p: &FrameParams, field: &impl FieldSampler, x: u32, y: u32) 
         return [bg[0], bg[1], bg[2], 0.0];
     };
     let mut intervals = Vec::new();
-    field.occupied(origin, dir, t_enter, t_exit, &mut intervals);
+    march_intervals(p, field, origin, dir, t_enter, t_exit, &mut intervals);
     let mut scratch = Vec::new();
     let radiance =
         |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, shadow_jitter: f64| {
