@@ -168,6 +168,8 @@ pub struct RenderSection {
     pub background: Option<[f64; 3]>,
     pub opacity_threshold: Option<f64>,
     pub light: Option<crate::values::Light>,
+    /// How GPU backends hold positions (`auto`, `auto:TOLERANCE`, `f32`, `ds`).
+    pub precision: Option<String>,
 }
 
 /// A scene file.
@@ -193,6 +195,17 @@ pub struct SceneFileError {
 }
 
 impl SceneFile {
+    /// Writes the scene as TOML, atomically; an existing file only with `force`.
+    pub fn save(&self, path: &Path, force: bool) -> Result<(), SceneFileError> {
+        let err = |problem: String| SceneFileError {
+            path: path.to_path_buf(),
+            problem,
+        };
+        let text = toml::to_string(self).map_err(|e| err(e.to_string()))?;
+        crate::io::output::write_atomically(path, force, |tmp| std::fs::write(tmp, &text))
+            .map_err(|e| err(e.to_string()))
+    }
+
     pub fn load(path: &Path) -> Result<SceneFile, SceneFileError> {
         let err = |problem: String| SceneFileError {
             path: path.to_path_buf(),

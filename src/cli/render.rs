@@ -25,9 +25,15 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendKind,
     /// How a GPU backend holds positions: `auto` (f32 where the scene's radii allow a Phi
-    /// error below 1e-3, double-single pairs otherwise), `auto:TOLERANCE`, `f32` or `ds`.
-    #[arg(long, default_value = "auto")]
-    pub precision: String,
+    /// error below 1e-3, double-single pairs otherwise; the default), `auto:TOLERANCE`, `f32`
+    /// or `ds`.
+    #[arg(long)]
+    pub precision: Option<String>,
+    /// Also write a scene file (TOML) holding every setting the image used, the automatic
+    /// ones resolved (Phi_ref, step size, density scale, radius, camera): `aarbf render
+    /// --scene` of it renders the same image (for a sequence: its first step).
+    #[arg(long)]
+    pub save_scene: Option<PathBuf>,
     #[arg(long)]
     pub width: Option<u32>,
     #[arg(long)]
@@ -127,6 +133,55 @@ fn parse_orbit(text: &str) -> anyhow::Result<(usize, usize)> {
     Ok((i, n))
 }
 
+fn set_or_auto(set: bool) -> &'static str {
+    if set { "set" } else { "automatic" }
+}
+
+/// Writes a scene file that renders the same image: every section filled, the automatic
+/// values as resolved.
+fn save_scene(
+    path: &Path,
+    resolved: &super::settings::Resolved,
+    settings: &RenderSettings,
+    used: &crate::render::Resolved,
+    camera: Camera,
+    spp: u32,
+    precision: &str,
+) -> anyhow::Result<()> {
+    use crate::scene_file::{CameraSection, MapSpec, RenderSection, SceneFile};
+    let (data, field) = resolved.scene_sections();
+    let scene = SceneFile {
+        data,
+        field,
+        camera: CameraSection {
+            eye: Some(camera.eye.to_array()),
+            at: Some(camera.at.to_array()),
+            up: Some(camera.up.to_array()),
+            fovy: Some(camera.fovy),
+            orbit: None,
+        },
+        render: RenderSection {
+            width: Some(settings.width),
+            height: Some(settings.height),
+            spp: Some(spp),
+            integrator: Some(settings.integrator),
+            noise: Some(settings.noise),
+            seed: Some(settings.seed),
+            step_size: Some(used.step_size),
+            density_scale: Some(used.density_scale),
+            phi_ref: Some(used.phi_ref),
+            optical_map: Some(MapSpec::Points(settings.optical.map().points().to_vec())),
+            color_by_density: Some(settings.colour_by_density),
+            background: Some(settings.background),
+            opacity_threshold: Some(settings.opacity_threshold),
+            light: Some(settings.light),
+            precision: Some(precision.to_owned()),
+        },
+    };
+    scene.save(path, true)?;
+    Ok(())
+}
+
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let resolved = resolve(&args.data, &args.field)?;
     let scene = &resolved.scene;
@@ -214,6 +269,16 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     for step in steps.clone() {
         crate::io::output::check_writable(&out_for(step), args.force)?;
     }
+    if let Some(path) = &args.save_scene {
+        crate::io::output::check_writable(path, args.force)?;
+    }
+    let precision_text = args
+        .precision
+        .clone()
+        .or(r.precision.clone())
+        .unwrap_or_else(|| "auto".into());
+    let precision = backend::parse_precision(&precision_text, backend::Precision::RENDER)
+        .map_err(anyhow::Error::msg)?;
     let backend = backend::create(args.backend)?;
     tracing::info!(
         "backend: {} ({})",
@@ -221,10 +286,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         backend.capabilities().device
     );
     let mut session = RenderSession::new(backend, &resolved.series);
-    session.set_precision(
-        backend::parse_precision(&args.precision, backend::Precision::RENDER)
-            .map_err(anyhow::Error::msg)?,
-    );
+    session.set_precision(precision);
     let bar = crate::progress::bar(
         (steps.len() as u64) * u64::from(spp),
         if sequence {
@@ -233,9 +295,40 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             "rendering"
         },
     );
+    let first = steps.start;
     for step in steps {
         let started = Instant::now();
         session.show(&resolved.series, step, &resolved.field, resolved.cluster)?;
+        if step == first {
+            // Series-wide values: the same for every step, so printed (and saved) once.
+            let used = session.resolve(&settings)?;
+            tracing::info!(
+                "settings used: phi_ref {} ({}), step size {} ({}), density scale {} ({}), radius {}, march box margin {}",
+                used.phi_ref,
+                set_or_auto(settings.phi_ref.is_some()),
+                used.step_size,
+                set_or_auto(settings.step_size.is_some()),
+                used.density_scale,
+                set_or_auto(settings.optical.scale().is_some()),
+                resolved.field.radius,
+                used.margin
+            );
+            if let Some(path) = &args.save_scene {
+                let camera = settings
+                    .camera
+                    .unwrap_or_else(|| Camera::default_for(bounds));
+                save_scene(
+                    path,
+                    &resolved,
+                    &settings,
+                    &used,
+                    camera,
+                    spp,
+                    &precision_text,
+                )?;
+                tracing::info!("wrote {}", path.display());
+            }
+        }
         let mut image = None;
         for _ in 0..spp {
             image = Some(session.render(&settings, 1)?);

@@ -10,7 +10,7 @@ use crate::field::{Classification, FieldSettings};
 use crate::io::{AttributeSelection, Format};
 use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
 use crate::scene::{OpenOptions, TimeSeries};
-use crate::scene_file::{MapSpec, RadiusSpec, SceneFile};
+use crate::scene_file::{DataSection, FieldSection, MapSpec, RadiusSpec, SceneFile};
 
 /// Where the data comes from.
 #[derive(Debug, Clone, Args)]
@@ -83,6 +83,44 @@ pub struct Resolved {
     pub step: usize,
     pub field: FieldSettings,
     pub cluster: ClusterSize,
+    /// Where the data came from, and how it was spelled, for writing a scene file back.
+    pub data_path: PathBuf,
+    pub format: Option<Format>,
+    pub colormap: Option<String>,
+}
+
+impl Resolved {
+    /// The data and field sections of a scene file that reproduces these settings: the data
+    /// path absolute, the radius in data units, the maps as their control points.
+    pub fn scene_sections(&self) -> (DataSection, FieldSection) {
+        let f = &self.field;
+        (
+            DataSection {
+                path: Some(std::path::absolute(&self.data_path).unwrap_or(self.data_path.clone())),
+                format: self.format,
+                step: Some(self.step),
+                attribute: f.attribute.clone(),
+                attribute_range: f.attribute_range.map(|(a, b)| [a, b]),
+                radius_attribute: f.radius_attribute.clone(),
+            },
+            FieldSection {
+                radius: Some(RadiusSpec::Absolute(f.radius)),
+                radius_map: Some(MapSpec::Points(f.radius_map.0.points().to_vec())),
+                density_map: Some(MapSpec::Points(f.density_map.0.points().to_vec())),
+                colormap: self.colormap.as_ref().map(|c| {
+                    if c.ends_with(".json") {
+                        std::path::absolute(c)
+                            .map(|p| p.to_string_lossy().into_owned())
+                            .unwrap_or(c.clone())
+                    } else {
+                        c.clone()
+                    }
+                }),
+                classification: Some(f.classification),
+                cluster: Some(self.cluster),
+            },
+        )
+    }
 }
 
 impl Resolved {
@@ -150,7 +188,8 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
         .map(DensityMap::new)
         .transpose()?
         .unwrap_or_default();
-    let color_map = match options.colormap.as_ref().or(scene.field.colormap.as_ref()) {
+    let colormap = options.colormap.clone().or(scene.field.colormap.clone());
+    let color_map = match &colormap {
         Some(spec) => ColorMap::from_name_or_file(spec)?,
         None => ColorMap::default(),
     };
@@ -176,10 +215,13 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
     };
     let cluster = options.cluster.or(scene.field.cluster).unwrap_or_default();
     Ok(Resolved {
+        format: data.format.or(scene.data.format),
         scene,
         series,
         step,
         field,
         cluster,
+        data_path: path,
+        colormap,
     })
 }

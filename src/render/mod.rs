@@ -4,8 +4,10 @@
 //! integrators themselves are shader code (`shaders_glsl/shared/integrators.glsl`) with their
 //! CPU twin in [`crate::backend::cpu::integrators`].
 
+pub mod auto;
 pub mod session;
 pub mod settings;
 
-pub use session::RenderSession;
+pub use auto::AutoValues;
+pub use session::{RenderSession, Resolved};
 pub use settings::RenderSettings;

@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
+use super::auto::AutoValues;
 use super::settings::RenderSettings;
 use crate::accel::ClusterSize;
 use crate::backend::{Backend, BackendError, Precision, StepInput};
@@ -35,12 +36,15 @@ struct Loaded {
     cluster: ClusterSize,
 }
 
-/// Values derived once per field (not per step, so a time series keeps one normalisation).
-#[derive(Clone, Copy)]
-struct Derived {
-    phi_ref: f64,
-    typical_radius: f64,
-    max_radius: f64,
+/// The automatic values of a frame as they were resolved: what a user did not set, and what
+/// a saved scene records so the frame can be reproduced exactly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Resolved {
+    pub phi_ref: f64,
+    pub step_size: f64,
+    pub density_scale: f64,
+    /// The march box's margin around the series' bounds (twice the largest radius).
+    pub margin: f64,
 }
 
 /// The default march never takes more samples than this across the data's box.
@@ -55,7 +59,8 @@ pub struct RenderSession {
     bounds: Bounds,
     max_count: usize,
     loaded: Option<Loaded>,
-    derived: Option<Derived>,
+    /// The automatic values of the series under the loaded field ([`AutoValues`]).
+    auto: Option<(FieldSettings, AutoValues)>,
     frames: u32,
     last_frame_key: Option<(RenderSettings, Loaded)>,
     warned_coarse_step: std::sync::atomic::AtomicBool,
@@ -71,7 +76,7 @@ impl RenderSession {
             bounds: series.bounds(),
             max_count: series.max_count(),
             loaded: None,
-            derived: None,
+            auto: None,
             frames: 0,
             last_frame_key: None,
             warned_coarse_step: std::sync::atomic::AtomicBool::new(false),
@@ -124,7 +129,6 @@ impl RenderSession {
                 } else {
                     self.backend.refit(field)?;
                 }
-                self.derived = None;
             }
             _ => {
                 let data = series.step(step)?;
@@ -142,86 +146,39 @@ impl RenderSession {
                     precision: self.precision,
                 })?;
                 self.backend.build()?;
-                // A new step keeps the normalisation (no flicker over time); a new field does not.
-                if self.loaded.as_ref().is_some_and(|l| l.field != *field) {
-                    self.derived = None;
-                }
             }
         }
         self.loaded = Some(want);
-        if self.derived.is_none() {
-            self.derived = Some(self.derive(series, step, field)?);
+        // Properties of the series and the field, never of the step: a new step keeps them.
+        if self
+            .auto
+            .as_ref()
+            .is_none_or(|(f, _)| !AutoValues::same_for(f, field))
+        {
+            self.auto = Some((field.clone(), AutoValues::of(series, field)?));
         }
         Ok(())
     }
 
-    /// Phi_ref (95th percentile of Phi at up to 4096 particle centres) and radii.
-    fn derive(
-        &mut self,
-        series: &TimeSeries,
-        step: usize,
-        field: &FieldSettings,
-    ) -> Result<Derived, RenderError> {
-        let data = series.step(step)?;
-        let n = data.len();
-        let stride = n.div_ceil(4096).max(1);
-        let centres: Vec<DVec3> = data.positions.iter().step_by(stride).copied().collect();
-        let mut phi: Vec<f64> = self
-            .backend
-            .query(&centres)?
-            .into_iter()
-            .map(|(p, _)| p)
-            .filter(|p| *p > 0.0)
-            .collect();
-        phi.sort_by(f64::total_cmp);
-        let phi_ref = phi.get(phi.len() * 95 / 100).copied().unwrap_or(1.0);
-        let h = field
-            .radius_attribute
-            .as_deref()
-            .and_then(|a| data.attribute(a));
-        let (mean_h, max_h) = h.map_or((1.0, 1.0), |h| {
-            let sum: f64 = h.values.iter().sum();
-            let max = h.values.iter().fold(0.0f64, |m, &v| m.max(v));
-            (sum / h.values.len().max(1) as f64, max)
-        });
-        Ok(Derived {
-            phi_ref,
-            typical_radius: field.radius * field.radius_map.0.max_value() * mean_h,
-            max_radius: field.radius * field.radius_map.0.max_value() * max_h,
-        })
+    /// The automatic values of the loaded field over the series.
+    pub fn auto_values(&self) -> Option<AutoValues> {
+        self.auto.as_ref().map(|(_, a)| *a)
     }
 
-    /// The frame constants for `settings`, frame number `frame`.
-    pub fn frame_params(
-        &self,
-        settings: &RenderSettings,
-        frame: u32,
-    ) -> Result<FrameParams, RenderError> {
-        let (Some(loaded), Some(derived)) = (&self.loaded, &self.derived) else {
+    /// What `settings` leaves automatic, resolved for the loaded field (the step size, the
+    /// density scale and Phi_ref, from the series' automatic values unless set).
+    pub fn resolve(&self, settings: &RenderSettings) -> Result<Resolved, RenderError> {
+        let Some((_, auto)) = &self.auto else {
             return Err(BackendError::NothingUploaded("session").into());
         };
-        if settings.width == 0
-            || settings.height == 0
-            || settings.width > 16384
-            || settings.height > 16384
-        {
-            return Err(RenderError::Settings(format!(
-                "image size {}x{} must lie in 1..=16384",
-                settings.width, settings.height
-            )));
-        }
-        let camera = settings
-            .camera
-            .unwrap_or_else(|| Camera::default_for(self.bounds));
-        let grow = DVec3::splat(2.0 * derived.max_radius);
-        let r = derived.typical_radius.max(1e-30);
+        let r = auto.typical_radius.max(1e-30);
         let spacing = (self.bounds.extent().max(DVec3::splat(r)).element_product()
             / self.max_count.max(1) as f64)
             .cbrt();
         // Work per pixel stays bounded: at most MAX_SAMPLES_PER_RAY samples across the march
         // box. The default resolves the kernel (R / 3) and the particle spacing, but never
         // finer than the box's diagonal / DEFAULT_SAMPLES_PER_RAY.
-        let box_diagonal = (self.bounds.extent() + 4.0 * derived.max_radius).length();
+        let box_diagonal = (self.bounds.extent() + 4.0 * auto.max_radius).length();
         let dt = settings.step_size.unwrap_or_else(|| {
             (r / 3.0)
                 .min(0.5 * spacing)
@@ -248,14 +205,46 @@ impl RenderSession {
                 "the particles' radius ({r:.3e}) is below the march step ({dt:.3e}, {DEFAULT_SAMPLES_PER_RAY} samples across the data): the image will miss particles; pass --step-size to march finer"
             );
         }
-        let density_scale = settings.optical.scale().unwrap_or(0.4 / r);
-        let optical_table = settings.optical.map().bake();
-        let phi_ref = settings.phi_ref.unwrap_or(derived.phi_ref);
+        let phi_ref = settings.phi_ref.unwrap_or(auto.phi_ref);
         if !(phi_ref.is_finite() && phi_ref > 0.0) {
             return Err(RenderError::Settings(format!(
                 "Phi_ref {phi_ref} must be positive"
             )));
         }
+        Ok(Resolved {
+            phi_ref,
+            step_size: dt,
+            density_scale: settings.optical.scale().unwrap_or(0.4 / r),
+            margin: 2.0 * auto.max_radius,
+        })
+    }
+
+    /// The frame constants for `settings`, frame number `frame`.
+    pub fn frame_params(
+        &self,
+        settings: &RenderSettings,
+        frame: u32,
+    ) -> Result<FrameParams, RenderError> {
+        let Some(loaded) = &self.loaded else {
+            return Err(BackendError::NothingUploaded("session").into());
+        };
+        let resolved = self.resolve(settings)?;
+        if settings.width == 0
+            || settings.height == 0
+            || settings.width > 16384
+            || settings.height > 16384
+        {
+            return Err(RenderError::Settings(format!(
+                "image size {}x{} must lie in 1..=16384",
+                settings.width, settings.height
+            )));
+        }
+        let camera = settings
+            .camera
+            .unwrap_or_else(|| Camera::default_for(self.bounds));
+        let grow = DVec3::splat(resolved.margin);
+        let density_scale = resolved.density_scale;
+        let optical_table = settings.optical.map().bake();
         let colour = if settings.colour_by_density || loaded.field.attribute.is_none() {
             ColourMode::Density
         } else if loaded.field.classification == Classification::Pre {
@@ -278,9 +267,9 @@ impl RenderSession {
             camera: camera.frame(settings.width, settings.height)?,
             box_min,
             box_max,
-            dt,
+            dt: resolved.step_size,
             opacity_threshold: settings.opacity_threshold,
-            phi_ref,
+            phi_ref: resolved.phi_ref,
             density_scale,
             majorant: density_scale * table_max(&optical_table),
             light_dir: settings.light.direction(),

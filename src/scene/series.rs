@@ -38,12 +38,15 @@ pub struct StepInfo {
     pub bytes: usize,
 }
 
-/// An attribute and its range over the whole series.
+/// An attribute's range and mean over the whole series (every particle of every step).
 #[derive(Clone, Debug, PartialEq)]
 pub struct AttributeInfo {
     pub name: String,
     pub min: f64,
     pub max: f64,
+    pub mean: f64,
+    /// Values the mean is over.
+    pub count: usize,
 }
 
 enum Source {
@@ -220,15 +223,24 @@ fn merge_ranges(ranges: &mut Vec<AttributeInfo>, step: &Step) {
         let Some((lo, hi)) = value_range(&a.values) else {
             continue;
         };
+        let (n, mean) = (
+            a.values.len(),
+            a.values.iter().sum::<f64>() / a.values.len() as f64,
+        );
         match ranges.iter_mut().find(|r| r.name == a.name) {
             Some(r) => {
                 r.min = r.min.min(lo);
                 r.max = r.max.max(hi);
+                let total = r.count + n;
+                r.mean = (r.mean * r.count as f64 + mean * n as f64) / total as f64;
+                r.count = total;
             }
             None => ranges.push(AttributeInfo {
                 name: a.name.clone(),
                 min: lo,
                 max: hi,
+                mean,
+                count: n,
             }),
         }
     }
@@ -317,6 +329,7 @@ mod tests {
         assert_eq!(s.bounds().max, DVec3::splat(2.0));
         let a = s.attribute("a").unwrap();
         assert_eq!((a.min, a.max), (-1.0, 2.0));
+        assert_eq!((a.mean, a.count), ((-3.0 + 5.0 * 2.0) / 8.0, 8));
         assert!(s.step(2).is_err());
     }
 }

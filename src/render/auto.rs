@@ -1,0 +1,252 @@
+//! The settings a user may leave to the renderer, as properties of the series and the field,
+//! never of the step being rendered: a frame of a sequence equals the same step rendered alone,
+//! a sequence rendered in chunks has no seams, and the values are printed and written into a
+//! saved scene so a frame can be reproduced exactly.
+//!
+//! - **Radii**: the largest radius any particle of the series can have
+//!   (`R · max m · max h`, h over the whole series), which sets the march box's margin, and
+//!   the typical one (`R · max m · mean h`), which sets the default step and density scale.
+//! - **Phi_ref**, the density that maps to 1 for colour and extinction: the 95th percentile of
+//!   Phi at up to [`PHI_REF_SAMPLES`] particle centres of the series' first step, computed in
+//!   f64 on the CPU from the field's own rules (the maps' tables, the radius rule), so it is
+//!   the same number on every backend. Neighbours are found with a grid of cells as wide as
+//!   the largest radius, built once per series and step 0 and kept while only the maps change.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::session::RenderError;
+use crate::field::{FieldSettings, FieldTables, normalise, particle_radius};
+use crate::scene::TimeSeries;
+use crate::values::Step;
+use crate::values::tables::{lookup, table_max};
+
+/// Particle centres Phi_ref is estimated at, at most.
+pub const PHI_REF_SAMPLES: usize = 4096;
+/// The most particle-sample pairs the estimate visits: beyond it (radii spanning the data) it
+/// uses fewer samples, at least [`PHI_REF_MIN_SAMPLES`].
+const PHI_REF_WORK: usize = 50_000_000;
+const PHI_REF_MIN_SAMPLES: usize = 64;
+
+/// The values derived from the series and the field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AutoValues {
+    pub phi_ref: f64,
+    pub typical_radius: f64,
+    pub max_radius: f64,
+}
+
+impl AutoValues {
+    /// Whether two fields have the same automatic values (a change of colour map or
+    /// classification keeps them).
+    pub fn same_for(a: &FieldSettings, b: &FieldSettings) -> bool {
+        a.attribute == b.attribute
+            && a.attribute_range == b.attribute_range
+            && a.radius == b.radius
+            && a.radius_attribute == b.radius_attribute
+            && a.radius_map == b.radius_map
+            && a.density_map == b.density_map
+    }
+
+    /// The values for `field` over `series`.
+    pub fn of(series: &TimeSeries, field: &FieldSettings) -> Result<AutoValues, RenderError> {
+        let tables = FieldTables::of(field);
+        let m_max = table_max(&tables.radius);
+        let h = field
+            .radius_attribute
+            .as_deref()
+            .and_then(|a| series.attribute(a));
+        let (mean_h, max_h) = h.map_or((1.0, 1.0), |h| (h.mean, h.max));
+        let typical_radius = field.radius * m_max * mean_h;
+        let max_radius = field.radius * m_max * max_h;
+        let phi_ref = if series.is_empty() {
+            1.0
+        } else {
+            let step = series.step(0)?;
+            let range = field
+                .attribute_range
+                .or_else(|| {
+                    let a = series.attribute(field.attribute.as_deref()?)?;
+                    Some((a.min, a.max))
+                })
+                .unwrap_or((0.0, 0.0));
+            phi_ref(&step, field, &tables, range, max_radius)
+        };
+        Ok(AutoValues {
+            phi_ref,
+            typical_radius,
+            max_radius,
+        })
+    }
+}
+
+/// The 95th percentile of Phi (positive values) at every k-th particle centre of `step`.
+fn phi_ref(
+    step: &Step,
+    field: &FieldSettings,
+    tables: &FieldTables,
+    range: (f64, f64),
+    max_radius: f64,
+) -> f64 {
+    let n = step.len();
+    if n == 0 || max_radius.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return 1.0;
+    }
+    let grid = Grid::new(&step.positions, max_radius);
+    let attribute = field.attribute.as_deref().and_then(|a| step.attribute(a));
+    let h = field
+        .radius_attribute
+        .as_deref()
+        .and_then(|a| step.attribute(a));
+    let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(a.values[i], range));
+    // Fewer samples where every sample meets most of the step (radii spanning the data).
+    let per_sample = grid.mean_candidates().max(1.0);
+    let samples = ((PHI_REF_WORK as f64 / per_sample) as usize)
+        .clamp(PHI_REF_MIN_SAMPLES, PHI_REF_SAMPLES)
+        .min(n);
+    let stride = n.div_ceil(samples).max(1);
+    let centres: Vec<usize> = (0..n).step_by(stride).collect();
+    let mut phi: Vec<f64> = centres
+        .par_iter()
+        .map(|&j| {
+            let x = step.positions[j];
+            let mut sum = 0.0;
+            grid.for_each_near(x, |i| {
+                let t = t_of(i);
+                let r = particle_radius(
+                    field.radius,
+                    lookup(&tables.radius, t),
+                    h.map(|h| h.values[i]),
+                );
+                let d2 = (x - step.positions[i]).length_squared();
+                if r > 0.0 && d2 <= r * r {
+                    sum += lookup(&tables.density, t) * (-4.5 * d2 / (r * r)).exp();
+                }
+            });
+            sum
+        })
+        .filter(|p| *p > 0.0)
+        .collect();
+    phi.sort_by(f64::total_cmp);
+    phi.get(phi.len() * 95 / 100).copied().unwrap_or(1.0)
+}
+
+/// Particles bucketed in cubic cells of side `cell` (sorted by cell key), for finding every
+/// particle within `cell` of a point in the 27 cells around it.
+struct Grid {
+    origin: DVec3,
+    cell: f64,
+    /// (cell key, particle index), sorted.
+    entries: Vec<(u64, u32)>,
+}
+
+impl Grid {
+    fn new(positions: &[DVec3], cell: f64) -> Grid {
+        let origin = positions.iter().fold(DVec3::INFINITY, |m, p| m.min(*p));
+        let extent = positions.iter().fold(DVec3::NEG_INFINITY, |m, p| m.max(*p)) - origin;
+        // At most 2^20 cells per axis (keys of 60 bits); larger radii need fewer.
+        let cell = cell
+            .max(extent.max_element() / f64::from(1u32 << 20))
+            .max(1e-300);
+        let grid = Grid {
+            origin,
+            cell,
+            entries: Vec::new(),
+        };
+        let mut entries: Vec<(u64, u32)> = positions
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| (grid.key(grid.cell_of(*p)), i as u32))
+            .collect();
+        entries.par_sort_unstable();
+        Grid { entries, ..grid }
+    }
+
+    fn cell_of(&self, p: DVec3) -> [i64; 3] {
+        let c = ((p - self.origin) / self.cell).floor();
+        [c.x as i64, c.y as i64, c.z as i64]
+    }
+
+    fn key(&self, c: [i64; 3]) -> u64 {
+        let k = |v: i64| (v.clamp(0, (1 << 20) - 1)) as u64;
+        (k(c[0]) << 40) | (k(c[1]) << 20) | k(c[2])
+    }
+
+    /// Calls `visit(i)` for every particle in the 27 cells around `x` (every one within a
+    /// cell's side of it, and some farther).
+    fn for_each_near(&self, x: DVec3, mut visit: impl FnMut(usize)) {
+        let c = self.cell_of(x);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let n = [c[0] + dx, c[1] + dy, c[2] + dz];
+                    if n.iter().any(|&v| !(0..1 << 20).contains(&v)) {
+                        continue;
+                    }
+                    let key = self.key(n);
+                    let start = self.entries.partition_point(|e| e.0 < key);
+                    for e in self.entries[start..].iter().take_while(|e| e.0 == key) {
+                        visit(e.1 as usize);
+                    }
+                }
+            }
+        }
+    }
+
+    /// About how many particles the 27 cells around a particle hold, on average (what one
+    /// sample of Phi costs): a particle's own cell holds Σ n² / N particles on average (n per
+    /// occupied cell), its neighbourhood about 27 cells' worth at that density.
+    fn mean_candidates(&self) -> f64 {
+        let mut squares = 0f64;
+        let mut run = 0usize;
+        for (k, e) in self.entries.iter().enumerate() {
+            run += 1;
+            if self.entries.get(k + 1).is_none_or(|next| next.0 != e.0) {
+                squares += (run * run) as f64;
+                run = 0;
+            }
+        }
+        27.0 * squares / self.entries.len().max(1) as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::ReferenceField;
+    use crate::scene::synth::Generator;
+
+    #[test]
+    fn phi_ref_is_the_reference_fields_95th_percentile_at_the_first_steps_centres() {
+        let steps = Generator::DambreakDemo.generate(3000, 4, 2);
+        let series = TimeSeries::from_steps(steps.clone());
+        let mut field = FieldSettings::new(Some("velocity"), 0.02 * series.bounds().diagonal());
+        field.density_map =
+            crate::scene::maps::DensityMap::new("0:0.3,0.7:1,1:0.2".parse().unwrap()).unwrap();
+        let auto = AutoValues::of(&series, &field).unwrap();
+        let range = series.attribute("velocity").map(|a| (a.min, a.max));
+        let reference = ReferenceField::of_step(
+            &steps[0],
+            &field,
+            crate::accel::ClusterSize::new(4).unwrap(),
+            series.bounds(),
+            range,
+        )
+        .unwrap();
+        let mut phi: Vec<f64> = steps[0]
+            .positions
+            .iter()
+            .map(|&x| reference.eval(x).phi)
+            .filter(|p| *p > 0.0)
+            .collect();
+        phi.sort_by(f64::total_cmp);
+        let expected = phi[phi.len() * 95 / 100];
+        assert!(
+            (auto.phi_ref - expected).abs() <= 1e-9 * expected,
+            "{} vs {expected}",
+            auto.phi_ref
+        );
+        // A property of the series: the same whatever step is shown later.
+        assert_eq!(AutoValues::of(&series, &field).unwrap(), auto);
+    }
+}
