@@ -332,6 +332,37 @@ fn queries_match_the_f64_reference_for_every_cluster_size() {
     assert_no_validation_messages();
 }
 
+/// The paper's per-particle hit reports (selectable for the traversal study) give what the
+/// default per-cluster sums give, on a driver (lavapipe) that calls any-hit for every report
+/// of a box; double-single positions in both.
+#[test]
+fn per_particle_hit_reports_match_per_cluster_sums() {
+    use aarbf::backend::ash_rt::HitReports;
+    let mut b = backend();
+    let step = random_step(1200, 21);
+    let points = queries(&step, 22);
+    for k in [1, 4, 16] {
+        let mut field = FieldSettings::new(Some("s"), 0.2);
+        field.radius_map = radius_map_with_zeros();
+        b.upload(&input(&step, &field, k)).unwrap();
+        b.build().unwrap();
+        b.set_hit_reports(HitReports::PerCluster);
+        let sums = b.query(&points).unwrap();
+        b.set_hit_reports(HitReports::PerParticle);
+        let each = b.query(&points).unwrap();
+        b.set_hit_reports(HitReports::PerCluster);
+        for (i, (a, e)) in sums.iter().zip(&each).enumerate() {
+            // The same terms summed in another order (f32).
+            assert!(
+                (a.0 - e.0).abs() <= 1e-5 * a.0.max(1e-30)
+                    && (0..3).all(|c| (a.1[c] - e.1[c]).abs() <= 1e-5 * a.0.max(1e-30)),
+                "K = {k}, query {i}: per cluster {a:?}, per particle {e:?}"
+            );
+        }
+    }
+    assert_no_validation_messages();
+}
+
 /// A refit after a radius change (global radius, radius map with zeros moving, radius attribute
 /// switched on) gives the field a fresh build gives, and both match the reference.
 #[test]

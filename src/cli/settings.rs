@@ -214,6 +214,22 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             .unwrap_or_default(),
     };
     let cluster = options.cluster.or(scene.field.cluster).unwrap_or_default();
+    // Every backend uses a map through its table; say so where that changes it visibly.
+    for (what, map) in [
+        ("radius map", &field.radius_map.0),
+        ("density map", &field.density_map.0),
+    ] {
+        let e = map.table_error();
+        if e > 1e-3 * map.max_value().abs().max(1e-300) {
+            tracing::info!(
+                "{what}: control points between the {}-sample table's points are rounded onto them; \
+                 the map as used differs from them by up to {e:.2e} (points on multiples of 1/{} \
+                 are exact)",
+                crate::values::tables::TABLE_SIZE,
+                crate::values::tables::TABLE_SIZE - 1
+            );
+        }
+    }
     Ok(Resolved {
         format: data.format.or(scene.data.format),
         scene,

@@ -69,6 +69,20 @@ impl PiecewiseLinear {
             .collect()
     }
 
+    /// How far the map as every backend uses it (its [`bake`](Self::bake)d table) is from its
+    /// control points: the largest |f(x) - table(x)| over [0, 1]. Between two table samples
+    /// with no control point between them both are linear and agree at the samples (to f32
+    /// rounding), so the largest gap is at a control point that falls between samples.
+    pub fn table_error(&self) -> f64 {
+        let table = self.bake();
+        let rounding =
+            self.points.iter().map(|p| p[1].abs()).fold(0.0, f64::max) * f64::from(f32::EPSILON);
+        self.points
+            .iter()
+            .map(|p| (self.eval(p[0]) - crate::values::tables::lookup(&table, p[0])).abs())
+            .fold(rounding, f64::max)
+    }
+
     pub fn points(&self) -> &[[f64; 2]] {
         &self.points
     }
@@ -174,6 +188,25 @@ impl FromStr for PiecewiseLinear {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn table_error_is_zero_on_the_grid_and_bounds_off_grid_points() {
+        let on_grid: PiecewiseLinear = "0:0,0.2:1,1:0".parse().unwrap();
+        assert!(on_grid.table_error() < 1e-6, "{}", on_grid.table_error());
+        let off: PiecewiseLinear = "0:0,0.333:1,0.71:0.2,1:1".parse().unwrap();
+        let e = off.table_error();
+        let table = off.bake();
+        let worst = (0..=100_000)
+            .map(|i| {
+                let x = f64::from(i) / 100_000.0;
+                (off.eval(x) - crate::values::tables::lookup(&table, x)).abs()
+            })
+            .fold(0.0, f64::max);
+        assert!(
+            e > 1e-4 && worst <= e * 1.0001 + 1e-9,
+            "bound {e}, found {worst}"
+        );
+    }
 
     #[test]
     fn piecewise_linear_interpolates_and_clamps() {
