@@ -96,10 +96,16 @@ vec4 render_pixel(uvec2 pixel) {
     float t_exit = span.y;
     float dt = frame.box_min.w;
 
-    if (INTEGRATOR == INTEGRATOR_EA || INTEGRATOR == INTEGRATOR_SS_REFERENCE) {
+    if (INTEGRATOR != INTEGRATOR_DELTA) {
+        // One march for the three marching integrators: emission-absorption composites every
+        // sample (the SS reference with a shadow ray each); stochastic marching sums optical
+        // depth until it passes the free-flight threshold -ln(1 - xi) and scatters there.
         bool scatter = INTEGRATOR == INTEGRATOR_SS_REFERENCE;
-        float jitter = random_number(pixel, scatter ? 1u : 0u);
+        bool stochastic = INTEGRATOR == INTEGRATOR_MARCHING;
+        float jitter = random_number(pixel, (scatter || stochastic) ? 1u : 0u);
         float shadow_jitter = random_number(pixel, 2u);
+        float target_tau = stochastic ? -log(1.0 - random_number(pixel, 0u)) : 0.0;
+        float tau = 0.0;
         vec3 colour = vec3(0.0);
         float transmittance = 1.0;
         for (float k = first_sample(t_enter, t_enter, dt, jitter);; k += 1.0) {
@@ -109,6 +115,13 @@ vec4 render_pixel(uvec2 pixel) {
             }
             vec3 at = origin + dir * t;
             vec4 s = shade(field_query(at));
+            if (stochastic) {
+                tau += s.w * dt;
+                if (tau > target_tau) {
+                    return vec4(scattered(at, s.rgb, shadow_jitter), 1.0);
+                }
+                continue;
+            }
             if (s.w <= 0.0) {
                 continue;
             }
@@ -120,25 +133,10 @@ vec4 render_pixel(uvec2 pixel) {
                 break;
             }
         }
-        return vec4(colour + transmittance * bg, 1.0 - transmittance);
-    } else if (INTEGRATOR == INTEGRATOR_MARCHING) {
-        float xi = random_number(pixel, 0u);
-        float jitter = random_number(pixel, 1u);
-        float target_tau = -log(1.0 - xi);
-        float tau = 0.0;
-        for (float k = first_sample(t_enter, t_enter, dt, jitter);; k += 1.0) {
-            float t = t_enter + (k + jitter) * dt;
-            if (t >= t_exit) {
-                break;
-            }
-            vec3 at = origin + dir * t;
-            vec4 s = shade(field_query(at));
-            tau += s.w * dt;
-            if (tau > target_tau) {
-                return vec4(scattered(at, s.rgb, random_number(pixel, 2u)), 1.0);
-            }
+        if (stochastic) {
+            return vec4(bg, 0.0);
         }
-        return vec4(bg, 0.0);
+        return vec4(colour + transmittance * bg, 1.0 - transmittance);
     } else {
         float majorant = frame.shading.z;
         if (majorant <= 0.0) {

@@ -153,17 +153,25 @@ impl BlueNoiseMask {
                 origin: origin.to_owned(),
                 size: bytes.len() as u64,
             })?;
-        let (width, height, depth) = parse_header(header, bytes.len() as u64, origin)?;
-        let values = bytes[HEADER_LEN as usize..]
-            .chunks_exact(2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-            .collect();
-        Ok(BlueNoiseMask {
+        let dims = parse_header(header, bytes.len() as u64, origin)?;
+        Ok(BlueNoiseMask::from_values(
+            dims,
+            &bytes[HEADER_LEN as usize..],
+        ))
+    }
+
+    /// A mask of `(width, height, depth)` from its values' little-endian bytes (checked
+    /// against the dimensions by the caller).
+    fn from_values((width, height, depth): (u32, u32, u32), bytes: &[u8]) -> BlueNoiseMask {
+        BlueNoiseMask {
             width,
             height,
             depth,
-            values,
-        })
+            values: bytes
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect(),
+        }
     }
 
     /// Writes the mask to `path` in the asset format.
@@ -195,19 +203,10 @@ impl BlueNoiseMask {
         }
         let mut header = [0u8; HEADER_LEN as usize];
         file.read_exact(&mut header).map_err(io)?;
-        let (width, height, depth) = parse_header(&header, size, &origin)?;
+        let dims = parse_header(&header, size, &origin)?;
         let mut bytes = vec![0u8; (size - HEADER_LEN) as usize];
         file.read_exact(&mut bytes).map_err(io)?;
-        let values = bytes
-            .chunks_exact(2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-            .collect();
-        Ok(BlueNoiseMask {
-            width,
-            height,
-            depth,
-            values,
-        })
+        Ok(BlueNoiseMask::from_values(dims, &bytes))
     }
 
     fn check_len(&self, origin: &str) -> Result<(), NoiseError> {

@@ -125,13 +125,37 @@ impl Scene {
         .values()
     }
 
-    /// The bind-group entries of the particles' lo parts (bindings 26..): the lo buffer, or
-    /// the particles in its place where the kernel will not read it (no double-single).
-    fn lo_entries(&self, layout: Layout) -> Vec<(u32, wgpu::BindingResource<'_>)> {
-        self.particles_lo
-            .as_ref()
-            .unwrap_or(&self.particles)
-            .entries(26, layout)
+    /// The bind-group entries every kernel that traverses the tree shares: the field uniform
+    /// (1), the maps (3), the radius attribute (4, `dummy` without one), the particles (10..),
+    /// the tree's nodes (14..) and boxes (18..), and the particles' lo parts (26..: the
+    /// particles themselves in their place, unread, without double-single positions).
+    fn traversal_entries<'a>(
+        &'a self,
+        tree: &'a GpuTree,
+        dummy: &'a wgpu::Buffer,
+        layout: Layout,
+    ) -> Vec<(u32, wgpu::BindingResource<'a>)> {
+        let mut entries = vec![
+            (1, self.field_uniform.as_entire_binding()),
+            (3, self.maps.as_entire_binding()),
+            (
+                4,
+                self.radius_attribute
+                    .as_ref()
+                    .unwrap_or(dummy)
+                    .as_entire_binding(),
+            ),
+        ];
+        entries.extend(self.particles.entries(10, layout));
+        entries.extend(tree.nodes.entries(14, layout));
+        entries.extend(tree.boxes.entries(18, layout));
+        entries.extend(
+            self.particles_lo
+                .as_ref()
+                .unwrap_or(&self.particles)
+                .entries(26, layout),
+        );
+        entries
     }
 
     /// Uploads the lo parts of double-single positions, making their buffer (split like the
@@ -687,25 +711,12 @@ impl Backend for WgpuBackend {
             layout,
         )?;
         let bg = ctx.scoped("query bind group", || {
-            let mut entries = vec![
+            let mut entries = scene.traversal_entries(tree, &self.dummy, layout);
+            entries.extend([
                 (0, count_buffer.as_entire_binding()),
-                (1, scene.field_uniform.as_entire_binding()),
-                (3, scene.maps.as_entire_binding()),
-                (
-                    4,
-                    scene
-                        .radius_attribute
-                        .as_ref()
-                        .unwrap_or(&self.dummy)
-                        .as_entire_binding(),
-                ),
                 (7, points_buffer.as_entire_binding()),
                 (8, results_buffer.as_entire_binding()),
-            ];
-            entries.extend(scene.particles.entries(10, layout));
-            entries.extend(tree.nodes.entries(14, layout));
-            entries.extend(tree.boxes.entries(18, layout));
-            entries.extend(scene.lo_entries(layout));
+            ]);
             bind(&ctx, &pipeline, &entries)
         })?;
         let mut out = Vec::with_capacity(points.len());
@@ -836,26 +847,13 @@ impl Backend for WgpuBackend {
         let stbn = self.stbn.as_ref().expect("made above");
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         ctx.scoped("render", || {
-            let mut entries = vec![
+            let mut entries = scene.traversal_entries(tree, &self.dummy, layout);
+            entries.extend([
                 (0, self.frame_uniform.as_entire_binding()),
-                (1, scene.field_uniform.as_entire_binding()),
-                (3, scene.maps.as_entire_binding()),
-                (
-                    4,
-                    scene
-                        .radius_attribute
-                        .as_ref()
-                        .unwrap_or(&self.dummy)
-                        .as_entire_binding(),
-                ),
                 (7, stbn.as_entire_binding()),
                 (9, self.tiling_uniform.as_entire_binding()),
-            ];
-            entries.extend(scene.particles.entries(10, layout));
-            entries.extend(tree.nodes.entries(14, layout));
-            entries.extend(tree.boxes.entries(18, layout));
+            ]);
             entries.extend(acc.sums.entries(22, layout));
-            entries.extend(scene.lo_entries(layout));
             let bg = bind(&ctx, &pipeline, &entries);
             if acc.clear {
                 acc.sums.clear(&mut encoder);

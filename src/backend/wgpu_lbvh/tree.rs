@@ -6,7 +6,7 @@ use bytemuck::{Pod, Zeroable};
 use super::context::{GpuContext, Kernel, Layout, Variant, device_error};
 use super::sort::RadixSort;
 use super::util::PARTS;
-use super::util::{SplitBuffer, bind, dispatch, grid, poison, read_u32, storage, write};
+use super::util::{SplitBuffer, encode_pass, grid, poison, read_u32, storage, write};
 use crate::backend::BackendError;
 use crate::backend::shaders::cpu::Lbvh;
 use crate::backend::shaders::cpu::lbvh::{GpuBox, NODE_WORDS};
@@ -143,6 +143,20 @@ impl GpuTree {
         }
     }
 
+    /// The nodes' bind-group entries for the hierarchy and reset passes, with the params
+    /// only where the part selection reads them (the leaf count is in the counters; a binding
+    /// a kernel does not use is not in its layout).
+    fn node_entries<'a>(
+        &'a self,
+        layout: Layout,
+        entries: &mut Vec<(u32, wgpu::BindingResource<'a>)>,
+    ) {
+        entries.extend(self.nodes.entries(14, layout));
+        if layout == Layout::Split {
+            entries.push((0, self.params.as_entire_binding()));
+        }
+    }
+
     fn write_params(&self, ctx: &GpuContext, grid_: &KeyGrid, clusters: u32, components: u32) {
         let p = TreeParams {
             key_lo: [grid_.lo[0], grid_.lo[1], grid_.lo[2], 0.0],
@@ -163,7 +177,6 @@ impl GpuTree {
         clusters: u32,
     ) -> Result<(), BackendError> {
         let layout = Layout::of(&[scene.particles, &self.boxes]);
-        let pipeline = ctx.pipeline(Kernel::Bounds, scene.variant, layout)?;
         let mut entries = vec![
             (0, scene.field.as_entire_binding()),
             (2, scene.maps.as_entire_binding()),
@@ -171,15 +184,16 @@ impl GpuTree {
         ];
         entries.extend(scene.particles.entries(10, layout));
         entries.extend(self.boxes.entries(18, layout));
-        let bg = bind(ctx, &pipeline, &entries);
-        dispatch(
+        encode_pass(
+            ctx,
             encoder,
             "lbvh bounds",
-            &pipeline,
-            &bg,
+            Kernel::Bounds,
+            scene.variant,
+            layout,
+            &entries,
             grid(u64::from(clusters), 64),
-        );
-        Ok(())
+        )
     }
 
     fn encode_climb(
@@ -189,7 +203,6 @@ impl GpuTree {
         clusters: u32,
     ) -> Result<(), BackendError> {
         let layout = self.layout();
-        let pipeline = ctx.pipeline(Kernel::FitClimb, None, layout)?;
         let mut entries = vec![
             (0, self.params.as_entire_binding()),
             (3, self.node_parents.as_entire_binding()),
@@ -199,15 +212,16 @@ impl GpuTree {
         ];
         entries.extend(self.boxes.entries(18, layout));
         entries.extend(self.nodes.entries(14, layout));
-        let bg = bind(ctx, &pipeline, &entries);
-        dispatch(
+        encode_pass(
+            ctx,
             encoder,
             "lbvh climb",
-            &pipeline,
-            &bg,
+            Kernel::FitClimb,
+            None,
+            layout,
+            &entries,
             grid(u64::from(clusters), 64),
-        );
-        Ok(())
+        )
     }
 
     /// Encodes a build over `clusters` clusters up to `until`, and submits it; returns the
@@ -228,7 +242,6 @@ impl GpuTree {
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             if until >= BuildStage::Keys {
                 let layout = self.layout();
-                let pipeline = ctx.pipeline(Kernel::Keys, None, layout)?;
                 let mut entries = vec![
                     (0, self.params.as_entire_binding()),
                     (2, self.keys.as_entire_binding()),
@@ -237,14 +250,16 @@ impl GpuTree {
                     (5, self.counters.as_entire_binding()),
                 ];
                 entries.extend(self.boxes.entries(18, layout));
-                let bg = bind(ctx, &pipeline, &entries);
-                dispatch(
+                encode_pass(
+                    ctx,
                     &mut encoder,
                     "lbvh keys",
-                    &pipeline,
-                    &bg,
+                    Kernel::Keys,
+                    None,
+                    layout,
+                    &entries,
                     grid(u64::from(clusters), 64),
-                );
+                )?;
             }
             if until >= BuildStage::Sort {
                 self.sort.encode(
@@ -259,7 +274,6 @@ impl GpuTree {
             }
             if until >= BuildStage::Hierarchy {
                 let layout = self.layout();
-                let pipeline = ctx.pipeline(Kernel::Hierarchy, None, layout)?;
                 let mut entries = vec![
                     (1, self.keys.as_entire_binding()),
                     (2, self.values.as_entire_binding()),
@@ -268,21 +282,18 @@ impl GpuTree {
                     (6, self.keys_tmp.as_entire_binding()),
                     (7, self.counters.as_entire_binding()),
                 ];
-                entries.extend(self.nodes.entries(14, layout));
-                // Only the part selection reads the params (the leaf count is in counters);
-                // a binding the kernel does not use is not in its layout.
-                if layout == Layout::Split {
-                    entries.push((0, self.params.as_entire_binding()));
-                }
-                let bg = bind(ctx, &pipeline, &entries);
+                self.node_entries(layout, &mut entries);
                 // Thread 0 writes the header even for zero or one leaf.
-                dispatch(
+                encode_pass(
+                    ctx,
                     &mut encoder,
                     "lbvh hierarchy",
-                    &pipeline,
-                    &bg,
+                    Kernel::Hierarchy,
+                    None,
+                    layout,
+                    &entries,
                     grid(u64::from(clusters.max(1)), 64),
-                );
+                )?;
             }
             if until >= BuildStage::Fit {
                 self.encode_climb(ctx, &mut encoder, clusters)?;
@@ -306,21 +317,18 @@ impl GpuTree {
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             encoder.clear_buffer(&self.counters, 8, Some(4));
             let layout = self.layout();
-            let pipeline = ctx.pipeline(Kernel::FitReset, None, layout)?;
             let mut entries = vec![(6, self.counters.as_entire_binding())];
-            entries.extend(self.nodes.entries(14, layout));
-            // As in the hierarchy pass, only the part selection reads the params.
-            if layout == Layout::Split {
-                entries.push((0, self.params.as_entire_binding()));
-            }
-            let bg = bind(ctx, &pipeline, &entries);
-            dispatch(
+            self.node_entries(layout, &mut entries);
+            encode_pass(
+                ctx,
                 &mut encoder,
                 "lbvh reset",
-                &pipeline,
-                &bg,
+                Kernel::FitReset,
+                None,
+                layout,
+                &entries,
                 grid(u64::from(clusters), 64),
-            );
+            )?;
             self.encode_climb(ctx, &mut encoder, clusters)
         })??;
         self.report(ctx, encoder)

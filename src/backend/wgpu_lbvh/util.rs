@@ -94,6 +94,25 @@ pub fn dispatch(
     pass.dispatch_workgroups(groups.0, groups.1, 1);
 }
 
+/// Encodes one pass of `kernel` (its pipeline for `variant` and `layout`, compiled on first
+/// use) bound to `entries`, dispatching `groups` workgroups.
+#[allow(clippy::too_many_arguments)]
+pub fn encode_pass(
+    ctx: &GpuContext,
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    kernel: super::context::Kernel,
+    variant: super::context::Variant,
+    layout: Layout,
+    entries: &[(u32, wgpu::BindingResource<'_>)],
+    groups: (u32, u32),
+) -> Result<(), BackendError> {
+    let pipeline = ctx.pipeline(kernel, variant, layout)?;
+    let bind_group = bind(ctx, &pipeline, entries);
+    dispatch(encoder, label, &pipeline, &bind_group, groups);
+    Ok(())
+}
+
 /// Reads `bytes` bytes from `offset` of `buffer` (which needs COPY_SRC), waiting for the
 /// device.
 pub fn read(
