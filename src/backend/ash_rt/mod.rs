@@ -20,8 +20,18 @@
 //!   on the CPU ([`crate::backend::shaders::cpu`], the twin of the wgpu backend's GPU build).
 //!
 //! One Vulkan device serves the whole process ([`context::shared`]).
+//!
+//! Files: `context` (instance, device, its limits and the validation messenger), `resources`
+//! (buffers, command submission, timestamps), `pipelines` (descriptor layout, RT and compute
+//! pipelines, binding table), `buffers` (the backend's buffers, descriptors and parameter
+//! block), `structure` (BLAS and TLAS), `build` (box kernel, build and refit, the LBVH for the
+//! software traversal), `launch` (specialisation, push constants, one timed launch), and here
+//! the backend itself.
 
+mod buffers;
+mod build;
 pub mod context;
+mod launch;
 pub mod pipelines;
 pub mod resources;
 pub mod structure;
@@ -34,25 +44,21 @@ use ash::vk;
 use glam::DVec3;
 use gpu_allocator::MemoryLocation;
 
+use self::buffers::{Buffers, addressed, boxes_buffer, storage, write_points_lo};
 use self::context::{Context, NAME, device_error};
-use self::pipelines::{BindingTable, ComputeKind, Push, binding};
-use self::resources::{Buffer, Commands, barrier};
+use self::launch::Launch;
+use self::pipelines::{BindingTable, Push, binding};
+use self::resources::{Buffer, Commands};
 use self::structure::{BOX_BYTES, Structure};
 use super::gpu_data::GpuStepData;
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
-use crate::accel::ClusterSize;
-use crate::backend::shaders::cpu::{
-    Lbvh, cluster_box::lbvh_bounds, lbvh_keys::KeyGrid, rbf::RadiusRule,
-};
-use crate::backend::shaders::{GpuField, GpuFrame, SpecConstants, pack_map_tables};
-use crate::field::{Classification, FieldSettings};
+use crate::backend::shaders::cpu::Lbvh;
+use crate::backend::shaders::{GpuField, GpuFrame, SpecConstants};
+use crate::field::FieldSettings;
 use crate::noise::BlueNoiseMask;
-use crate::values::ColourMode;
 use crate::values::FrameParams;
 use crate::values::Image;
-use crate::values::shader_constants::{
-    STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS, TABLE_SIZE,
-};
+use crate::values::shader_constants::{STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS};
 use crate::values::{Bounds, Step};
 
 pub use self::context::{REQUIRED_EXTENSIONS, validation_messages};
@@ -60,16 +66,16 @@ pub use self::context::{REQUIRED_EXTENSIONS, validation_messages};
 /// Queries per launch (the query buffers hold this many points).
 const QUERY_BATCH: usize = 1 << 18;
 /// Row width of query launches and of the box kernel's 2D dispatch.
-const QUERY_WIDTH: u32 = 1024;
-const BOX_GROUP: u32 = 64;
-const BOX_ROW: u32 = BOX_GROUP * 1024;
+pub(super) const QUERY_WIDTH: u32 = 1024;
+pub(super) const BOX_GROUP: u32 = 64;
+pub(super) const BOX_ROW: u32 = BOX_GROUP * 1024;
 
 /// Timestamp slots: a build or refit uses all four, a query or render launch the first two.
-const TS_START: u32 = 0;
-const TS_BOXES: u32 = 1;
-const TS_END: u32 = 1;
-const TS_BLAS: u32 = 2;
-const TS_TLAS: u32 = 3;
+pub(super) const TS_START: u32 = 0;
+pub(super) const TS_BOXES: u32 = 1;
+pub(super) const TS_END: u32 = 1;
+pub(super) const TS_BLAS: u32 = 2;
+pub(super) const TS_TLAS: u32 = 3;
 const TS_COUNT: u32 = 4;
 
 /// GPU time of the last structure build or refit, by stage.
@@ -108,12 +114,6 @@ pub enum Traversal {
     Lbvh,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Launch {
-    Query,
-    Render,
-}
-
 /// Whether this machine has a Vulkan device with ray-tracing pipelines (probes once).
 pub fn available() -> Result<String, BackendError> {
     context::shared().map(|c| c.describe())
@@ -126,74 +126,6 @@ struct Uploaded {
     series_bounds: Bounds,
     series_range: Option<(f64, f64)>,
     data: GpuStepData,
-}
-
-struct Buffers {
-    params: Buffer,
-    points: Buffer,
-    /// The lo parts of double-single positions (a placeholder when the step has none).
-    points_lo: Buffer,
-    radius: Buffer,
-    tables: Buffer,
-    stbn: Buffer,
-    accum: Buffer,
-    query_points: Buffer,
-    query_results: Buffer,
-    boxes: Buffer,
-    lbvh_nodes: Buffer,
-    lbvh_boxes: Buffer,
-}
-
-/// A buffer the shaders reach by device address (so its size is bound by the allocation
-/// limit, not by maxStorageBufferRange).
-fn addressed(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer, BackendError> {
-    Buffer::new(
-        ctx,
-        name,
-        size,
-        vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
-        MemoryLocation::GpuOnly,
-    )
-}
-
-fn storage(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer, BackendError> {
-    Buffer::new(
-        ctx,
-        name,
-        size,
-        vk::BufferUsageFlags::STORAGE_BUFFER,
-        MemoryLocation::GpuOnly,
-    )
-}
-
-fn boxes_buffer(ctx: &Arc<Context>, boxes: u64) -> Result<Buffer, BackendError> {
-    Buffer::new(
-        ctx,
-        "cluster boxes",
-        boxes * BOX_BYTES,
-        vk::BufferUsageFlags::STORAGE_BUFFER
-            | vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR
-            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
-        MemoryLocation::GpuOnly,
-    )
-}
-
-/// Uploads the lo parts of double-single positions, if the step has them, into `buffer`
-/// (grown to `capacity` particles the first time a step needs them).
-fn write_points_lo(
-    ctx: &Arc<Context>,
-    buffer: &mut Buffer,
-    capacity: usize,
-    data: &GpuStepData,
-) -> Result<(), BackendError> {
-    let Some(lo) = &data.points_lo else {
-        return Ok(());
-    };
-    let need = capacity as u64 * 16;
-    if buffer.size < need {
-        *buffer = addressed(ctx, "particle lo parts", need)?;
-    }
-    buffer.write(0, bytemuck::cast_slice(lo))
 }
 
 /// The ash ray-tracing backend.
@@ -387,463 +319,6 @@ impl AshBackend {
             .chunks_exact(6)
             .map(|c| [c[0], c[1], c[2], c[3], c[4], c[5]])
             .collect())
-    }
-
-    fn write_descriptors(&mut self) {
-        let b = &self.buffers;
-        let infos: Vec<(u32, vk::DescriptorType, [vk::DescriptorBufferInfo; 1])> = [
-            (binding::PARAMS, &b.params),
-            (binding::TABLES, &b.tables),
-            (binding::STBN, &b.stbn),
-            (binding::QUERY_POINTS, &b.query_points),
-            (binding::QUERY_RESULTS, &b.query_results),
-            (binding::LBVH_NODES, &b.lbvh_nodes),
-            (binding::LBVH_BOXES, &b.lbvh_boxes),
-        ]
-        .into_iter()
-        .map(|(i, buf)| {
-            let ty = if i == binding::PARAMS {
-                vk::DescriptorType::UNIFORM_BUFFER
-            } else {
-                vk::DescriptorType::STORAGE_BUFFER
-            };
-            (i, ty, [buf.descriptor()])
-        })
-        .collect();
-        let writes: Vec<vk::WriteDescriptorSet> = infos
-            .iter()
-            .map(|(i, ty, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(self.set)
-                    .dst_binding(*i)
-                    .descriptor_type(*ty)
-                    .buffer_info(info)
-            })
-            .collect();
-        // SAFETY: the set is not in use by a pending submission (all are waited for).
-        unsafe { self.ctx.device.update_descriptor_sets(&writes, &[]) };
-    }
-
-    fn write_tlas_descriptor(&self) {
-        let Some(s) = &self.structure else { return };
-        let tlas = [s.tlas()];
-        let mut accel = vk::WriteDescriptorSetAccelerationStructureKHR::default()
-            .acceleration_structures(&tlas);
-        // ash leaves descriptor_count at 0 when the buffer info is chained: set it.
-        let mut write = vk::WriteDescriptorSet::default()
-            .dst_set(self.set)
-            .dst_binding(binding::TLAS)
-            .descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
-            .push_next(&mut accel);
-        write.descriptor_count = 1;
-        // SAFETY: as in write_descriptors.
-        unsafe { self.ctx.device.update_descriptor_sets(&[write], &[]) };
-    }
-
-    /// Grows the particle buffers to hold `n` particles (and what was reserved), and makes the
-    /// structure match the box count for cluster size `k`.
-    fn ensure_capacity(&mut self, n: usize, k: ClusterSize) -> Result<(), BackendError> {
-        let limit = self.ctx.info.max_allocation;
-        let want = n.max(self.reserved).max(1);
-        let boxes = k.clusters_for(want) as u64;
-        let blas_limit = self.ctx.info.max_primitive_count;
-        if (want as u64).saturating_mul(16) > limit
-            || boxes.saturating_mul(BOX_BYTES) > limit
-            || boxes > blas_limit
-        {
-            return Err(device_error(
-                "uploading the step",
-                format!(
-                    "{want} particles (K = {k}: {boxes} boxes) need a {} MiB particle buffer and \
-                     a {} MiB box buffer; this device allocates at most {} MiB at once and \
-                     builds BLASes of at most {blas_limit} boxes (a larger cluster size needs \
-                     fewer boxes)",
-                    (want as u64 * 16) >> 20,
-                    (boxes * BOX_BYTES) >> 20,
-                    limit >> 20,
-                ),
-            ));
-        }
-        if want > self.capacity {
-            // Grow by at least a quarter, so a series whose counts creep up reallocates rarely.
-            let grown = if self.capacity == 0 {
-                want
-            } else {
-                want.max(self.capacity + self.capacity / 4)
-                    .min((limit / BOX_BYTES) as usize)
-                    .max(want)
-            };
-            self.structure = None;
-            self.buffers.points = addressed(&self.ctx, "particles", grown as u64 * 16)?;
-            self.buffers.radius = addressed(&self.ctx, "radius attribute", grown as u64 * 4)?;
-            self.buffers.boxes = boxes_buffer(&self.ctx, grown as u64)?;
-            self.capacity = grown;
-            self.write_descriptors();
-        }
-        let boxes = k.clusters_for(self.capacity) as u32;
-        if self.structure.as_ref().is_none_or(|s| s.boxes != boxes) {
-            self.structure = None;
-            self.structure = Some(Structure::new(&self.ctx, boxes)?);
-            self.write_tlas_descriptor();
-        }
-        Ok(())
-    }
-
-    /// Writes the map tables (density, radius and colour from the step, optical density and
-    /// colour from `frame` when given) and the parameter block.
-    fn write_params(&mut self, frame: Option<&FrameParams>) -> Result<(), BackendError> {
-        let up = self
-            .uploaded
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded(NAME))?;
-        let d = &up.data;
-        let zeros = vec![0.0f32; TABLE_SIZE];
-        let optical = frame.map_or(&zeros[..], |f| &f.optical_table[..]);
-        let colour = frame.map_or(&d.tables.colour[..], |f| &f.colour_table[..]);
-        if optical.len() != TABLE_SIZE || colour.len() != TABLE_SIZE {
-            return Err(device_error(
-                "map tables",
-                format!("expected {TABLE_SIZE} samples per table"),
-            ));
-        }
-        let tables = pack_map_tables(&d.tables.density, &d.tables.radius, optical, colour);
-        if tables != self.tables {
-            self.buffers
-                .tables
-                .write(0, bytemuck::cast_slice(&tables))?;
-            self.tables = tables;
-        }
-        let gpu_frame = frame.map_or(GpuFrame::default(), |f| GpuFrame::new(f, d.origin));
-        let mut bytes = bytemuck::bytes_of(&gpu_frame).to_vec();
-        bytes.extend_from_slice(bytemuck::bytes_of(&d.field));
-        self.buffers.params.write(0, &bytes)
-    }
-
-    /// The specialisation constants for the uploaded step and the given frame settings.
-    fn spec(
-        &self,
-        integrator: u32,
-        colour: u32,
-        noise: u32,
-    ) -> Result<SpecConstants, BackendError> {
-        let up = self
-            .uploaded
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded(NAME))?;
-        let d = &up.data;
-        Ok(SpecConstants {
-            integrator,
-            colour_mode: colour,
-            noise_kind: noise,
-            cluster_size: d.cluster.get() as u32,
-            radius_map_varies: u32::from(d.radius_map_varies),
-            density_map_varies: u32::from(d.density_map_varies),
-            has_radius_attribute: u32::from(d.radius_attribute.is_some()),
-            position_ds: u32::from(d.double_single()),
-            rt_hit_per_particle: u32::from(self.hit_reports == HitReports::PerParticle),
-        })
-    }
-
-    /// The colour mode a query uses: what Theta's numerator sums for this field.
-    fn query_colour(&self) -> u32 {
-        let field = self.uploaded.as_ref().map(|u| &u.field);
-        SpecConstants::colour_id(match field {
-            Some(f) if f.attribute.is_none() => ColourMode::Density,
-            Some(f) if f.classification == Classification::Pre => ColourMode::Pre,
-            _ => ColourMode::Post,
-        })
-    }
-
-    /// The RT pipeline and binding table for `spec`.
-    fn rt(&mut self, spec: SpecConstants) -> Result<(vk::Pipeline, &BindingTable), BackendError> {
-        let pipeline = pipelines::rt_pipeline(&self.ctx, spec)?;
-        if !self.binding_tables.contains_key(&spec) {
-            let table = BindingTable::new(&self.ctx, pipeline)?;
-            self.binding_tables.insert(spec, table);
-        }
-        Ok((pipeline, &self.binding_tables[&spec]))
-    }
-
-    fn bind(
-        &self,
-        cb: vk::CommandBuffer,
-        point: vk::PipelineBindPoint,
-        pipeline: vk::Pipeline,
-        push: Push,
-    ) {
-        let push = Push {
-            particle_address: self.buffers.points.address,
-            radius_address: self.buffers.radius.address,
-            boxes_address: self.buffers.boxes.address,
-            accum_address: self.buffers.accum.address,
-            particle_lo_address: self.buffers.points_lo.address,
-            ..push
-        };
-        let device = &self.ctx.device;
-        // SAFETY: recording; the set matches the pipeline layout.
-        unsafe {
-            device.cmd_bind_pipeline(cb, point, pipeline);
-            device.cmd_bind_descriptor_sets(
-                cb,
-                point,
-                self.ctx.layouts.pipeline,
-                0,
-                &[self.set],
-                &[],
-            );
-            device.cmd_push_constants(
-                cb,
-                self.ctx.layouts.pipeline,
-                vk::ShaderStageFlags::ALL,
-                0,
-                bytemuck::bytes_of(&push),
-            );
-        }
-    }
-
-    /// Writes the boxes, then builds (or refits) the BLAS and builds the TLAS, timed.
-    fn build_structure(&mut self, update: bool) -> Result<(), BackendError> {
-        let spec = self.spec(0, 0, 0)?;
-        let boxes_pipeline = pipelines::compute_pipeline(&self.ctx, ComputeKind::Boxes, spec)?;
-        let boxes_address = self.buffers.boxes.address;
-        let structure = self
-            .structure
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded(NAME))?;
-        // The kernel writes every box of the buffer (NaN past the step); the build takes the
-        // step's clusters only (see `structure`).
-        let count = structure.boxes;
-        let up = self
-            .uploaded
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded(NAME))?;
-        let active = up.data.cluster.clusters_for(up.data.points.len()) as u32;
-        let started = Instant::now();
-        let cb = self.commands.begin()?;
-        self.commands.timestamp(TS_START);
-        self.bind(
-            cb,
-            vk::PipelineBindPoint::COMPUTE,
-            boxes_pipeline,
-            Push {
-                count,
-                width: BOX_ROW,
-                ..Push::default()
-            },
-        );
-        let groups = count.div_ceil(BOX_GROUP);
-        // SAFETY: recording with the pipeline and set bound.
-        unsafe {
-            self.ctx.device.cmd_dispatch(
-                cb,
-                groups.min(BOX_ROW / BOX_GROUP),
-                count.div_ceil(BOX_ROW).max(1),
-                1,
-            )
-        };
-        barrier(
-            &self.ctx,
-            cb,
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_WRITE,
-            ),
-            (
-                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
-                vk::AccessFlags::SHADER_READ | vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR,
-            ),
-        );
-        self.commands.timestamp(TS_BOXES);
-        let commands = &self.commands;
-        let structure = self.structure.as_mut().expect("checked above");
-        if !update {
-            structure.built = false;
-        }
-        structure.record(cb, boxes_address, active, update, || {
-            commands.timestamp(TS_BLAS)
-        })?;
-        self.commands.timestamp(TS_TLAS);
-        self.commands.submit_and_wait()?;
-        let structure = self.structure.as_mut().expect("checked above");
-        structure.built = true;
-        let wall = started.elapsed();
-        let c = &self.commands;
-        self.structure_timings = StructureTimings {
-            boxes: c.elapsed(TS_START, TS_BOXES).unwrap_or_default(),
-            blas: c.elapsed(TS_BOXES, TS_BLAS).unwrap_or_default(),
-            tlas: c.elapsed(TS_BLAS, TS_TLAS).unwrap_or_default(),
-            refit: update,
-        };
-        let total = c.elapsed(TS_START, TS_TLAS).unwrap_or(wall);
-        if update {
-            self.timings.refit = total;
-        } else {
-            self.timings.build = total;
-        }
-        Ok(())
-    }
-
-    /// Records and runs one query or render launch over `size` (queries: a count laid out in
-    /// rows of `QUERY_WIDTH`; frames: pixels) with the current traversal, after filling
-    /// `poison` (buffer, bytes; 0 for none) with NaN. Returns the launch's GPU time.
-    fn launch(
-        &mut self,
-        launch: Launch,
-        spec: SpecConstants,
-        push: Push,
-        poison: (vk::Buffer, u64),
-        size: (u32, u32),
-    ) -> Result<Duration, BackendError> {
-        let (w, h) = match launch {
-            Launch::Query => (size.0.min(QUERY_WIDTH), size.0.div_ceil(QUERY_WIDTH)),
-            Launch::Render => size,
-        };
-        enum Work {
-            Rays(vk::Pipeline, [vk::StridedDeviceAddressRegionKHR; 3]),
-            Compute(vk::Pipeline, [u32; 2]),
-        }
-        let work = match self.traversal {
-            Traversal::RtPipeline => {
-                let (pipeline, table) = self.rt(spec)?;
-                let raygen = match launch {
-                    Launch::Query => table.query,
-                    Launch::Render => table.render,
-                };
-                Work::Rays(pipeline, [raygen, table.miss, table.hit])
-            }
-            Traversal::Lbvh => {
-                self.ensure_lbvh()?;
-                let (kind, group) = match launch {
-                    Launch::Query => (ComputeKind::LbvhQuery, [64, 1]),
-                    Launch::Render => (ComputeKind::LbvhRender, [8, 8]),
-                };
-                let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
-                Work::Compute(pipeline, [w.div_ceil(group[0]), h.div_ceil(group[1])])
-            }
-        };
-        let (stage, point) = match work {
-            Work::Rays(..) => (
-                vk::PipelineStageFlags::RAY_TRACING_SHADER_KHR,
-                vk::PipelineBindPoint::RAY_TRACING_KHR,
-            ),
-            Work::Compute(..) => (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineBindPoint::COMPUTE,
-            ),
-        };
-        let cb = self.commands.begin()?;
-        if poison.1 > 0 {
-            // SAFETY: recording; the buffer is alive and at least that large.
-            unsafe {
-                self.ctx
-                    .device
-                    .cmd_fill_buffer(cb, poison.0, 0, poison.1, f32::NAN.to_bits())
-            };
-            barrier(
-                &self.ctx,
-                cb,
-                (
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::AccessFlags::TRANSFER_WRITE,
-                ),
-                (
-                    stage,
-                    vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-                ),
-            );
-        }
-        self.commands.timestamp(TS_START);
-        match work {
-            Work::Rays(pipeline, [raygen, miss, hit]) => {
-                self.bind(cb, point, pipeline, push);
-                // SAFETY: recording with the pipeline, set and push constants bound.
-                unsafe {
-                    self.ctx.rt.cmd_trace_rays(
-                        cb,
-                        &raygen,
-                        &miss,
-                        &hit,
-                        &vk::StridedDeviceAddressRegionKHR::default(),
-                        w,
-                        h,
-                        1,
-                    )
-                };
-            }
-            Work::Compute(pipeline, groups) => {
-                self.bind(cb, point, pipeline, push);
-                // SAFETY: as above.
-                unsafe { self.ctx.device.cmd_dispatch(cb, groups[0], groups[1], 1) };
-            }
-        }
-        self.commands.timestamp(TS_END);
-        barrier(
-            &self.ctx,
-            cb,
-            (stage, vk::AccessFlags::SHADER_WRITE),
-            (
-                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::HOST,
-                vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::HOST_READ,
-            ),
-        );
-        self.commands.submit_and_wait()?;
-        Ok(self.commands.elapsed(TS_START, TS_END).unwrap_or_default())
-    }
-
-    /// Builds the LBVH over the uploaded particles and current radii (on the CPU, with the
-    /// wgpu backend's twin build) and uploads it, unless it is current.
-    fn ensure_lbvh(&mut self) -> Result<(), BackendError> {
-        if self.lbvh.is_some() {
-            return Ok(());
-        }
-        let up = self
-            .uploaded
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded(NAME))?;
-        let d = &up.data;
-        let rule = RadiusRule {
-            field: d.field,
-            radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
-            radius_attribute: d.radius_attribute.as_deref(),
-        };
-        let boxes = lbvh_bounds(&d.points, d.cluster.get(), &rule);
-        let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
-        if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
-            return Err(device_error(
-                "building the LBVH",
-                format!("depth {} exceeds the traversal stack", tree.depth),
-            ));
-        }
-        let nodes: &[u8] = bytemuck::cast_slice(&tree.nodes);
-        let box_bytes: &[u8] = bytemuck::cast_slice(&boxes);
-        let range = self.ctx.info.max_storage_buffer_range;
-        if nodes.len().max(box_bytes.len()) as u64 > range {
-            return Err(device_error(
-                "building the LBVH",
-                format!(
-                    "{} clusters exceed this device's storage-buffer limit \
-                     (maxStorageBufferRange = {} MiB); use a larger cluster size",
-                    boxes.len(),
-                    range >> 20
-                ),
-            ));
-        }
-        let mut rebind = false;
-        if nodes.len() as u64 > self.buffers.lbvh_nodes.size {
-            self.buffers.lbvh_nodes = storage(&self.ctx, "LBVH nodes", nodes.len() as u64)?;
-            rebind = true;
-        }
-        if box_bytes.len() as u64 > self.buffers.lbvh_boxes.size {
-            self.buffers.lbvh_boxes = storage(&self.ctx, "LBVH boxes", box_bytes.len() as u64)?;
-            rebind = true;
-        }
-        self.buffers.lbvh_nodes.write(0, nodes)?;
-        self.buffers.lbvh_boxes.write(0, box_bytes)?;
-        if rebind {
-            self.write_descriptors();
-        }
-        self.lbvh = Some(tree);
-        Ok(())
     }
 
     fn built(&self) -> Result<(), BackendError> {

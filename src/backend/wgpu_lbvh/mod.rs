@@ -23,10 +23,18 @@
 //!   `lbvh.glsl`) through naga's GLSL front end; one pipeline per specialisation-constant
 //!   variant, cached for the process. Frames accumulate as f32 sums in a storage buffer.
 //!
+//! Files: `context` (device, limits, shader modules and pipelines), `util` (buffers, split
+//! arrays, passes), `scene` (the uploaded step's buffers and bindings), `tree` (the LBVH
+//! build and refit passes), `sort` (the radix sort), `query` and `render` (the two traversal
+//! kernels), and here the backend itself.
+//!
 //! The CPU twin of every build stage is in [`crate::backend::shaders::cpu`], a file per shader; `tests/wgpu_lbvh.rs` compares
 //! them, and the backend with the CPU reference.
 
 mod context;
+mod query;
+mod render;
+mod scene;
 pub mod sort;
 pub mod tree;
 mod util;
@@ -41,24 +49,20 @@ pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::GpuStepData;
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
-use crate::accel::ClusterSize;
+use crate::backend::shaders::GpuFrame;
 use crate::backend::shaders::cpu::{
     lbvh::{LBVH_STACK_SIZE, structure_bytes},
     lbvh_keys::KeyGrid,
 };
-use crate::backend::shaders::{GpuFrame, SpecConstants, pack_map_tables};
-use crate::field::{Classification, FieldSettings};
-use crate::noise::BlueNoiseMask;
+use crate::field::FieldSettings;
 use crate::values::FrameParams;
 use crate::values::Image;
-use crate::values::Step;
-use crate::values::shader_constants::{
-    SPEC_CONSTANTS, STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS, TABLE_SIZE, spec,
-};
+use crate::values::shader_constants::{TABLE_FLOATS, TABLE_SIZE, spec};
 use crate::values::{ColourMode, Integrator, NoiseKind};
-use context::{Layout, device_error};
+use context::device_error;
+use scene::{Scene, check_fits};
 use tree::{GpuTree, SceneBindings};
-use util::{PARTS, SplitBuffer, bind, dispatch, grid, parts_needed, storage, uniform, write};
+use util::{PARTS, SplitBuffer, storage, uniform};
 
 /// Bytes per particle the buffers bind (vec4 position + attribute); split over up to
 /// [`PARTS`] bindings.
@@ -72,123 +76,6 @@ const CLUSTER_BYTES: u64 = 32;
 const WORD_BYTES: u64 = 4;
 /// Queries per dispatch (the points and results buffers are 16 MiB each).
 const QUERY_CHUNK: usize = 1 << 20;
-
-/// The uploaded step and its buffers.
-struct Scene {
-    step: Step,
-    field: FieldSettings,
-    cluster: ClusterSize,
-    series_range: Option<(f64, f64)>,
-    data: GpuStepData,
-    grid: KeyGrid,
-    particles: SplitBuffer,
-    /// The lo parts of double-single positions, split like the particles (when the step has
-    /// them; kernels without them bind `particles` in their place, unread).
-    particles_lo: Option<SplitBuffer>,
-    particle_capacity: usize,
-    radius_attribute: Option<wgpu::Buffer>,
-    maps: wgpu::Buffer,
-    field_uniform: wgpu::Buffer,
-}
-
-impl Scene {
-    fn clusters(&self) -> u32 {
-        self.data.field.counts[1]
-    }
-
-    fn colour_mode(&self) -> ColourMode {
-        match (&self.field.attribute, self.field.classification) {
-            (None, _) => ColourMode::Density,
-            (Some(_), Classification::Post) => ColourMode::Post,
-            (Some(_), Classification::Pre) => ColourMode::Pre,
-        }
-    }
-
-    /// The GLSL kernels' specialisation constants.
-    fn variant(
-        &self,
-        integrator: Integrator,
-        colour: ColourMode,
-        noise: NoiseKind,
-    ) -> [u32; SPEC_CONSTANTS.len()] {
-        SpecConstants {
-            integrator: SpecConstants::integrator_id(integrator),
-            colour_mode: SpecConstants::colour_id(colour),
-            noise_kind: SpecConstants::noise_id(noise),
-            cluster_size: self.cluster.get() as u32,
-            radius_map_varies: u32::from(self.data.radius_map_varies),
-            density_map_varies: u32::from(self.data.density_map_varies),
-            has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
-            position_ds: u32::from(self.data.double_single()),
-            rt_hit_per_particle: 0,
-        }
-        .values()
-    }
-
-    /// The bind-group entries every kernel that traverses the tree shares: the field uniform
-    /// (1), the maps (3), the radius attribute (4, `dummy` without one), the particles (10..),
-    /// the tree's nodes (14..) and boxes (18..), and the particles' lo parts (26..: the
-    /// particles themselves in their place, unread, without double-single positions).
-    fn traversal_entries<'a>(
-        &'a self,
-        tree: &'a GpuTree,
-        dummy: &'a wgpu::Buffer,
-        layout: Layout,
-    ) -> Vec<(u32, wgpu::BindingResource<'a>)> {
-        let mut entries = vec![
-            (1, self.field_uniform.as_entire_binding()),
-            (3, self.maps.as_entire_binding()),
-            (
-                4,
-                self.radius_attribute
-                    .as_ref()
-                    .unwrap_or(dummy)
-                    .as_entire_binding(),
-            ),
-        ];
-        entries.extend(self.particles.entries(10, layout));
-        entries.extend(tree.nodes.entries(14, layout));
-        entries.extend(tree.boxes.entries(18, layout));
-        entries.extend(
-            self.particles_lo
-                .as_ref()
-                .unwrap_or(&self.particles)
-                .entries(26, layout),
-        );
-        entries
-    }
-
-    /// Uploads the lo parts of double-single positions, making their buffer (split like the
-    /// particles) the first time a step needs them.
-    fn write_points_lo(&mut self, ctx: &GpuContext, max_binding: u64) -> Result<(), BackendError> {
-        let Some(lo) = &self.data.points_lo else {
-            return Ok(());
-        };
-        if self
-            .particles_lo
-            .as_ref()
-            .is_none_or(|b| b.size() < self.particles.size())
-        {
-            let capacity = self.particle_capacity as u64;
-            self.particles_lo = Some(
-                ctx.scoped("particle lo parts", || {
-                    SplitBuffer::new(
-                        ctx,
-                        "particle lo parts",
-                        capacity,
-                        PARTICLE_BYTES,
-                        max_binding,
-                    )
-                })?
-                .ok_or_else(|| device_error("the particles' lo parts do not fit their parts"))?,
-            );
-        }
-        if let Some(b) = &self.particles_lo {
-            b.write(ctx, bytemuck::cast_slice(lo));
-        }
-        Ok(())
-    }
-}
 
 struct Accumulation {
     width: u32,
@@ -383,94 +270,12 @@ impl WgpuBackend {
         Ok(report)
     }
 
-    /// Writes the map tables (with the last frame's optical-density table) and field constants
-    /// (with the part lengths of the split arrays, `shaders_glsl/wgpu/split.glsl`).
-    fn write_maps(
-        ctx: &GpuContext,
-        scene: &Scene,
-        tree: Option<&GpuTree>,
-        optical: &[f32],
-        colour: &[[f32; 3]],
-    ) {
-        let tables = pack_map_tables(
-            &scene.data.tables.density,
-            &scene.data.tables.radius,
-            optical,
-            colour,
-        );
-        write(ctx, &scene.maps, bytemuck::cast_slice(&tables));
-        let mut field = scene.data.field;
-        field.counts[2] = scene.particles.part_len(PARTICLE_BYTES);
-        field.counts[3] = tree.map_or(u32::MAX, |t| t.boxes.part_len(16));
-        write(ctx, &scene.field_uniform, bytemuck::bytes_of(&field));
-    }
-
-    fn write_radius_attribute(ctx: &GpuContext, scene: &mut Scene) -> Result<(), BackendError> {
-        match &scene.data.radius_attribute {
-            Some(h) => {
-                let needed = (scene.particle_capacity.max(h.len()) * 4) as u64;
-                if scene
-                    .radius_attribute
-                    .as_ref()
-                    .is_none_or(|b| b.size() < needed)
-                {
-                    scene.radius_attribute = Some(ctx.scoped("radius attribute buffer", || {
-                        storage(ctx, "radius attribute", needed)
-                    })?);
-                }
-                if let Some(b) = &scene.radius_attribute {
-                    write(ctx, b, bytemuck::cast_slice(h));
-                }
-            }
-            None => scene.radius_attribute = None,
-        }
-        Ok(())
-    }
-
     fn built_scene(&self) -> Result<&Scene, BackendError> {
         match (&self.scene, self.built) {
             (Some(s), Some(_)) => Ok(s),
             _ => Err(BackendError::NothingUploaded("wgpu")),
         }
     }
-}
-
-/// Whether a step of `n` particles in `clusters` clusters fits bindings of `max_binding`
-/// bytes: the particles, nodes and boxes in at most [`PARTS`] parts each, the 4-byte arrays in
-/// one. Err names what does not fit and what it needs.
-fn check_fits(
-    n: usize,
-    clusters: usize,
-    has_radius_attribute: bool,
-    max_binding: u64,
-) -> Result<(), String> {
-    let (n, c) = (n as u64, clusters as u64);
-    let split = [
-        ("the particles", n, PARTICLE_BYTES),
-        ("the LBVH nodes", c, CLUSTER_BYTES),
-        ("the cluster boxes", c, CLUSTER_BYTES),
-    ];
-    for (what, count, bytes) in split {
-        if parts_needed(count, bytes, max_binding) > PARTS {
-            return Err(format!(
-                "{what} need {} bytes, more than {PARTS} x {max_binding}",
-                count * bytes
-            ));
-        }
-    }
-    let mut single = vec![("the per-cluster sort keys", c)];
-    if has_radius_attribute {
-        single.push(("the radius attribute", n));
-    }
-    for (what, count) in single {
-        if count * WORD_BYTES > max_binding {
-            return Err(format!(
-                "{what} need {} bytes in one binding, more than {max_binding}",
-                count * WORD_BYTES
-            ));
-        }
-    }
-    Ok(())
 }
 
 impl Backend for WgpuBackend {
@@ -574,7 +379,7 @@ impl Backend for WgpuBackend {
             .particles
             .write(&ctx, bytemuck::cast_slice(&scene.data.points));
         scene.write_points_lo(&ctx, max_binding)?;
-        Self::write_radius_attribute(&ctx, &mut scene)?;
+        scene.write_radius_attribute(&ctx)?;
         let cluster_capacity = input.cluster.clusters_for(scene.particle_capacity);
         if self.tree.as_ref().is_none_or(|t| t.capacity < clusters) {
             self.tree = None;
@@ -583,9 +388,8 @@ impl Backend for WgpuBackend {
                     .map_err(|e| device_error(format!("step '{}': {e}", input.step.name)))?,
             );
         }
-        Self::write_maps(
+        scene.write_maps(
             &ctx,
-            &scene,
             self.tree.as_ref(),
             &self.optical,
             &scene.data.tables.colour,
@@ -614,14 +418,14 @@ impl Backend for WgpuBackend {
                 .data
                 .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
         if changed.radius_attribute {
-            Self::write_radius_attribute(&ctx, scene)?;
+            scene.write_radius_attribute(&ctx)?;
         }
         if changed.positions_lo {
             scene.write_points_lo(&ctx, self.max_binding)?;
         }
         scene.field = field.clone();
         let colour = scene.data.tables.colour.clone();
-        Self::write_maps(&ctx, scene, self.tree.as_ref(), &self.optical, &colour);
+        scene.write_maps(&ctx, self.tree.as_ref(), &self.optical, &colour);
         let (Some(scene), Some(tree)) = (&self.scene, &self.tree) else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
@@ -650,228 +454,23 @@ impl Backend for WgpuBackend {
                 .data
                 .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
         if changed.radius_attribute {
-            Self::write_radius_attribute(&self.ctx, scene)?;
+            scene.write_radius_attribute(&self.ctx)?;
         }
         if changed.positions_lo {
             scene.write_points_lo(&self.ctx, self.max_binding)?;
         }
         scene.field = field.clone();
         let colour = scene.data.tables.colour.clone();
-        Self::write_maps(&self.ctx, scene, self.tree.as_ref(), &self.optical, &colour);
+        scene.write_maps(&self.ctx, self.tree.as_ref(), &self.optical, &colour);
         Ok(())
     }
 
     fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
-        let started = Instant::now();
-        let ctx = self.ctx.clone();
-        self.built_scene()?;
-        if points.is_empty() {
-            return Ok(Vec::new());
-        }
-        // A query point is one vec4, or with double-single positions two (hi, lo).
-        let per_point = if self
-            .scene
-            .as_ref()
-            .expect("checked above")
-            .data
-            .double_single()
-        {
-            2
-        } else {
-            1
-        };
-        let chunk = QUERY_CHUNK
-            .min((self.max_binding / (16 * per_point as u64)) as usize)
-            .min(points.len());
-        if self
-            .query_buffers
-            .as_ref()
-            .is_none_or(|q| q.0 < chunk || q.2.size() < (chunk * per_point) as u64 * 16)
-        {
-            self.query_buffers = Some(ctx.scoped("query buffers", || {
-                (
-                    chunk,
-                    uniform(&ctx, "query count", 16),
-                    storage(&ctx, "query points", (chunk * per_point) as u64 * 16),
-                    storage(&ctx, "query results", chunk as u64 * 16),
-                )
-            })?);
-        }
-        let scene = self.scene.as_ref().expect("checked above");
-        let tree = self
-            .tree
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded("wgpu"))?;
-        let (_, count_buffer, points_buffer, results_buffer) =
-            self.query_buffers.as_ref().expect("made above");
-        let layout = Layout::of(&[&scene.particles, &tree.nodes, &tree.boxes]);
-        let pipeline = ctx.pipeline(
-            Kernel::Query,
-            Some(scene.variant(Integrator::Ea, scene.colour_mode(), NoiseKind::Stbn)),
-            layout,
-        )?;
-        let bg = ctx.scoped("query bind group", || {
-            let mut entries = scene.traversal_entries(tree, &self.dummy, layout);
-            entries.extend([
-                (0, count_buffer.as_entire_binding()),
-                (7, points_buffer.as_entire_binding()),
-                (8, results_buffer.as_entire_binding()),
-            ]);
-            bind(&ctx, &pipeline, &entries)
-        })?;
-        let mut out = Vec::with_capacity(points.len());
-        let mut bytes = Vec::new();
-        let mut local: Vec<[f32; 4]> = Vec::with_capacity(chunk * per_point);
-        for part in points.chunks(chunk) {
-            local.clear();
-            for &x in part {
-                scene.data.push_query(x, &mut local);
-            }
-            write(&ctx, points_buffer, bytemuck::cast_slice(&local));
-            let groups = (part.len() as u32).div_ceil(64);
-            let (blocks, per_block, dispatched) = util::interleave(groups);
-            write(
-                &ctx,
-                count_buffer,
-                bytemuck::cast_slice(&[part.len() as u32, groups, blocks, per_block]),
-            );
-            let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            ctx.scoped("query", || {
-                dispatch(
-                    &mut encoder,
-                    "lbvh query",
-                    &pipeline,
-                    &bg,
-                    grid(u64::from(dispatched), 1),
-                );
-            })?;
-            bytes.clear();
-            util::read_into(
-                &ctx,
-                Some(encoder),
-                results_buffer,
-                0,
-                part.len() as u64 * 16,
-                &mut bytes,
-            )?;
-            let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
-            out.extend(values.iter().map(|v| {
-                (
-                    f64::from(v[0]),
-                    [f64::from(v[1]), f64::from(v[2]), f64::from(v[3])],
-                )
-            }));
-        }
-        self.timings.query = started.elapsed();
-        Ok(out)
+        self.run_query(points)
     }
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
-        let started = Instant::now();
-        let ctx = self.ctx.clone();
-        self.built_scene()?;
-        let (w, h) = (frame.width, frame.height);
-        let bytes = u64::from(w) * u64::from(h) * 16;
-        let pixels = u64::from(w) * u64::from(h);
-        if parts_needed(pixels, 16, self.max_binding) > PARTS {
-            return Err(device_error(format!(
-                "a {w}x{h} image needs {bytes} bytes of accumulation, more than {PARTS} x {}; \
-                 {} binds at most {} bytes per storage buffer",
-                self.max_binding, ctx.info.name, self.max_binding
-            )));
-        }
-        if self
-            .accumulation
-            .as_ref()
-            .is_none_or(|a| a.width != w || a.height != h)
-        {
-            self.accumulation = None;
-            let max_binding = self.max_binding;
-            let sums = ctx
-                .scoped(&format!("accumulation buffer ({bytes} bytes)"), || {
-                    SplitBuffer::new(&ctx, "accumulation", pixels, 16, max_binding)
-                })?
-                .ok_or_else(|| device_error("the accumulation does not fit its parts"))?;
-            self.accumulation = Some(Accumulation {
-                width: w,
-                height: h,
-                frames: 0,
-                sums,
-                clear: true,
-            });
-        }
-        if self.stbn.is_none() {
-            let mask = BlueNoiseMask::builtin();
-            if (mask.width, mask.height, mask.depth) != (STBN_WIDTH, STBN_HEIGHT, STBN_DEPTH) {
-                return Err(device_error(format!(
-                    "the shaders expect a 128x128x64 blue-noise mask, not {}x{}x{}",
-                    mask.width, mask.height, mask.depth
-                )));
-            }
-            let words = mask.packed_words();
-            let buffer = ctx.scoped("blue-noise mask", || {
-                storage(&ctx, "stbn mask", words.len() as u64 * 4)
-            })?;
-            write(&ctx, &buffer, bytemuck::cast_slice(&words));
-            self.stbn = Some(buffer);
-        }
-        let scene = self.scene.as_ref().expect("checked above");
-        let tree = self.tree.as_ref().expect("built");
-        self.optical = frame.optical_table.to_vec();
-        Self::write_maps(&ctx, scene, Some(tree), &self.optical, &frame.colour_table);
-        write(
-            &ctx,
-            &self.frame_uniform,
-            bytemuck::bytes_of(&GpuFrame::new(frame, scene.data.origin)),
-        );
-        let sums = &self.accumulation.as_ref().expect("made above").sums;
-        let layout = Layout::of(&[&scene.particles, &tree.nodes, &tree.boxes, sums]);
-        let pipeline = ctx.pipeline(
-            Kernel::Render,
-            Some(scene.variant(frame.integrator, frame.colour, frame.noise)),
-            layout,
-        )?;
-        let tiles_x = w.div_ceil(8);
-        let tiles = tiles_x * h.div_ceil(8);
-        let (blocks, per_block, dispatched) = util::interleave(tiles);
-        let acc_part = self
-            .accumulation
-            .as_ref()
-            .map_or(u32::MAX, |a| a.sums.part_len(16));
-        write(
-            &ctx,
-            &self.tiling_uniform,
-            bytemuck::cast_slice(&[tiles_x, tiles, blocks, per_block, acc_part, 0, 0, 0]),
-        );
-        let acc = self.accumulation.as_mut().expect("made above");
-        let stbn = self.stbn.as_ref().expect("made above");
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        ctx.scoped("render", || {
-            let mut entries = scene.traversal_entries(tree, &self.dummy, layout);
-            entries.extend([
-                (0, self.frame_uniform.as_entire_binding()),
-                (7, stbn.as_entire_binding()),
-                (9, self.tiling_uniform.as_entire_binding()),
-            ]);
-            entries.extend(acc.sums.entries(22, layout));
-            let bg = bind(&ctx, &pipeline, &entries);
-            if acc.clear {
-                acc.sums.clear(&mut encoder);
-                acc.frames = 0;
-                acc.clear = false;
-            }
-            dispatch(
-                &mut encoder,
-                "lbvh render",
-                &pipeline,
-                &bg,
-                grid(u64::from(dispatched), 1),
-            );
-        })?;
-        util::submit_and_wait(&ctx, "render", encoder)?;
-        acc.frames += 1;
-        self.timings.frame = started.elapsed();
-        Ok(())
+        self.run_render(frame)
     }
 
     fn reset(&mut self) {

@@ -1,0 +1,158 @@
+//! Building the ash backend's structures: the box kernel, then the BLAS build or refit and
+//! the TLAS (timed per stage), and the LBVH for the software traversal (built on the CPU by
+//! the wgpu build's twin and uploaded).
+
+use std::time::Instant;
+
+use ash::vk;
+
+use super::StructureTimings;
+use super::buffers::storage;
+use super::context::{NAME, device_error};
+use super::pipelines::{self, ComputeKind, Push};
+use super::resources::barrier;
+use super::{AshBackend, BOX_GROUP, BOX_ROW, TS_BLAS, TS_BOXES, TS_START, TS_TLAS};
+use crate::backend::BackendError;
+use crate::backend::shaders::cpu::{
+    Lbvh, cluster_box::lbvh_bounds, lbvh_keys::KeyGrid, rbf::RadiusRule,
+};
+
+impl AshBackend {
+    /// Writes the boxes, then builds (or refits) the BLAS and builds the TLAS, timed.
+    pub(super) fn build_structure(&mut self, update: bool) -> Result<(), BackendError> {
+        let spec = self.spec(0, 0, 0)?;
+        let boxes_pipeline = pipelines::compute_pipeline(&self.ctx, ComputeKind::Boxes, spec)?;
+        let boxes_address = self.buffers.boxes.address;
+        let structure = self
+            .structure
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded(NAME))?;
+        // The kernel writes every box of the buffer (NaN past the step); the build takes the
+        // step's clusters only (see `structure`).
+        let count = structure.boxes;
+        let up = self
+            .uploaded
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded(NAME))?;
+        let active = up.data.cluster.clusters_for(up.data.points.len()) as u32;
+        let started = Instant::now();
+        let cb = self.commands.begin()?;
+        self.commands.timestamp(TS_START);
+        self.bind(
+            cb,
+            vk::PipelineBindPoint::COMPUTE,
+            boxes_pipeline,
+            Push {
+                count,
+                width: BOX_ROW,
+                ..Push::default()
+            },
+        );
+        let groups = count.div_ceil(BOX_GROUP);
+        // SAFETY: recording with the pipeline and set bound.
+        unsafe {
+            self.ctx.device.cmd_dispatch(
+                cb,
+                groups.min(BOX_ROW / BOX_GROUP),
+                count.div_ceil(BOX_ROW).max(1),
+                1,
+            )
+        };
+        barrier(
+            &self.ctx,
+            cb,
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
+                vk::AccessFlags::SHADER_READ | vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR,
+            ),
+        );
+        self.commands.timestamp(TS_BOXES);
+        let commands = &self.commands;
+        let structure = self.structure.as_mut().expect("checked above");
+        if !update {
+            structure.built = false;
+        }
+        structure.record(cb, boxes_address, active, update, || {
+            commands.timestamp(TS_BLAS)
+        })?;
+        self.commands.timestamp(TS_TLAS);
+        self.commands.submit_and_wait()?;
+        let structure = self.structure.as_mut().expect("checked above");
+        structure.built = true;
+        let wall = started.elapsed();
+        let c = &self.commands;
+        self.structure_timings = StructureTimings {
+            boxes: c.elapsed(TS_START, TS_BOXES).unwrap_or_default(),
+            blas: c.elapsed(TS_BOXES, TS_BLAS).unwrap_or_default(),
+            tlas: c.elapsed(TS_BLAS, TS_TLAS).unwrap_or_default(),
+            refit: update,
+        };
+        let total = c.elapsed(TS_START, TS_TLAS).unwrap_or(wall);
+        if update {
+            self.timings.refit = total;
+        } else {
+            self.timings.build = total;
+        }
+        Ok(())
+    }
+
+    /// Builds the LBVH over the uploaded particles and current radii (on the CPU, with the
+    /// wgpu backend's twin build) and uploads it, unless it is current.
+    pub(super) fn ensure_lbvh(&mut self) -> Result<(), BackendError> {
+        if self.lbvh.is_some() {
+            return Ok(());
+        }
+        let up = self
+            .uploaded
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded(NAME))?;
+        let d = &up.data;
+        let rule = RadiusRule {
+            field: d.field,
+            radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
+            radius_attribute: d.radius_attribute.as_deref(),
+        };
+        let boxes = lbvh_bounds(&d.points, d.cluster.get(), &rule);
+        let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
+        if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
+            return Err(device_error(
+                "building the LBVH",
+                format!("depth {} exceeds the traversal stack", tree.depth),
+            ));
+        }
+        let nodes: &[u8] = bytemuck::cast_slice(&tree.nodes);
+        let box_bytes: &[u8] = bytemuck::cast_slice(&boxes);
+        let range = self.ctx.info.max_storage_buffer_range;
+        if nodes.len().max(box_bytes.len()) as u64 > range {
+            return Err(device_error(
+                "building the LBVH",
+                format!(
+                    "{} clusters exceed this device's storage-buffer limit \
+                     (maxStorageBufferRange = {} MiB); use a larger cluster size",
+                    boxes.len(),
+                    range >> 20
+                ),
+            ));
+        }
+        let mut rebind = false;
+        if nodes.len() as u64 > self.buffers.lbvh_nodes.size {
+            self.buffers.lbvh_nodes = storage(&self.ctx, "LBVH nodes", nodes.len() as u64)?;
+            rebind = true;
+        }
+        if box_bytes.len() as u64 > self.buffers.lbvh_boxes.size {
+            self.buffers.lbvh_boxes = storage(&self.ctx, "LBVH boxes", box_bytes.len() as u64)?;
+            rebind = true;
+        }
+        self.buffers.lbvh_nodes.write(0, nodes)?;
+        self.buffers.lbvh_boxes.write(0, box_bytes)?;
+        if rebind {
+            self.write_descriptors();
+        }
+        self.lbvh = Some(tree);
+        Ok(())
+    }
+}

@@ -1,0 +1,215 @@
+//! Running the ash backend's kernels: specialisation constants, pipelines and binding tables,
+//! push constants, and one timed launch of the RT pipeline or a compute kernel.
+
+use std::time::Duration;
+
+use ash::vk;
+
+use super::context::NAME;
+use super::pipelines::{self, BindingTable, ComputeKind, Push};
+use super::resources::barrier;
+use super::{AshBackend, HitReports, QUERY_WIDTH, TS_END, TS_START, Traversal};
+use crate::backend::BackendError;
+use crate::backend::shaders::SpecConstants;
+use crate::field::Classification;
+use crate::values::ColourMode;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Launch {
+    Query,
+    Render,
+}
+
+impl AshBackend {
+    /// The specialisation constants for the uploaded step and the given frame settings.
+    pub(super) fn spec(
+        &self,
+        integrator: u32,
+        colour: u32,
+        noise: u32,
+    ) -> Result<SpecConstants, BackendError> {
+        let up = self
+            .uploaded
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded(NAME))?;
+        let d = &up.data;
+        Ok(SpecConstants {
+            integrator,
+            colour_mode: colour,
+            noise_kind: noise,
+            cluster_size: d.cluster.get() as u32,
+            radius_map_varies: u32::from(d.radius_map_varies),
+            density_map_varies: u32::from(d.density_map_varies),
+            has_radius_attribute: u32::from(d.radius_attribute.is_some()),
+            position_ds: u32::from(d.double_single()),
+            rt_hit_per_particle: u32::from(self.hit_reports == HitReports::PerParticle),
+        })
+    }
+
+    /// The colour mode a query uses: what Theta's numerator sums for this field.
+    pub(super) fn query_colour(&self) -> u32 {
+        let field = self.uploaded.as_ref().map(|u| &u.field);
+        SpecConstants::colour_id(match field {
+            Some(f) if f.attribute.is_none() => ColourMode::Density,
+            Some(f) if f.classification == Classification::Pre => ColourMode::Pre,
+            _ => ColourMode::Post,
+        })
+    }
+
+    /// The RT pipeline and binding table for `spec`.
+    pub(super) fn rt(
+        &mut self,
+        spec: SpecConstants,
+    ) -> Result<(vk::Pipeline, &BindingTable), BackendError> {
+        let pipeline = pipelines::rt_pipeline(&self.ctx, spec)?;
+        if !self.binding_tables.contains_key(&spec) {
+            let table = BindingTable::new(&self.ctx, pipeline)?;
+            self.binding_tables.insert(spec, table);
+        }
+        Ok((pipeline, &self.binding_tables[&spec]))
+    }
+
+    pub(super) fn bind(
+        &self,
+        cb: vk::CommandBuffer,
+        point: vk::PipelineBindPoint,
+        pipeline: vk::Pipeline,
+        push: Push,
+    ) {
+        let push = Push {
+            particle_address: self.buffers.points.address,
+            radius_address: self.buffers.radius.address,
+            boxes_address: self.buffers.boxes.address,
+            accum_address: self.buffers.accum.address,
+            particle_lo_address: self.buffers.points_lo.address,
+            ..push
+        };
+        let device = &self.ctx.device;
+        // SAFETY: recording; the set matches the pipeline layout.
+        unsafe {
+            device.cmd_bind_pipeline(cb, point, pipeline);
+            device.cmd_bind_descriptor_sets(
+                cb,
+                point,
+                self.ctx.layouts.pipeline,
+                0,
+                &[self.set],
+                &[],
+            );
+            device.cmd_push_constants(
+                cb,
+                self.ctx.layouts.pipeline,
+                vk::ShaderStageFlags::ALL,
+                0,
+                bytemuck::bytes_of(&push),
+            );
+        }
+    }
+
+    /// Records and runs one query or render launch over `size` (queries: a count laid out in
+    /// rows of `QUERY_WIDTH`; frames: pixels) with the current traversal, after filling
+    /// `poison` (buffer, bytes; 0 for none) with NaN. Returns the launch's GPU time.
+    pub(super) fn launch(
+        &mut self,
+        launch: Launch,
+        spec: SpecConstants,
+        push: Push,
+        poison: (vk::Buffer, u64),
+        size: (u32, u32),
+    ) -> Result<Duration, BackendError> {
+        let (w, h) = match launch {
+            Launch::Query => (size.0.min(QUERY_WIDTH), size.0.div_ceil(QUERY_WIDTH)),
+            Launch::Render => size,
+        };
+        enum Work {
+            Rays(vk::Pipeline, [vk::StridedDeviceAddressRegionKHR; 3]),
+            Compute(vk::Pipeline, [u32; 2]),
+        }
+        let work = match self.traversal {
+            Traversal::RtPipeline => {
+                let (pipeline, table) = self.rt(spec)?;
+                let raygen = match launch {
+                    Launch::Query => table.query,
+                    Launch::Render => table.render,
+                };
+                Work::Rays(pipeline, [raygen, table.miss, table.hit])
+            }
+            Traversal::Lbvh => {
+                self.ensure_lbvh()?;
+                let (kind, group) = match launch {
+                    Launch::Query => (ComputeKind::LbvhQuery, [64, 1]),
+                    Launch::Render => (ComputeKind::LbvhRender, [8, 8]),
+                };
+                let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
+                Work::Compute(pipeline, [w.div_ceil(group[0]), h.div_ceil(group[1])])
+            }
+        };
+        let (stage, point) = match work {
+            Work::Rays(..) => (
+                vk::PipelineStageFlags::RAY_TRACING_SHADER_KHR,
+                vk::PipelineBindPoint::RAY_TRACING_KHR,
+            ),
+            Work::Compute(..) => (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineBindPoint::COMPUTE,
+            ),
+        };
+        let cb = self.commands.begin()?;
+        if poison.1 > 0 {
+            // SAFETY: recording; the buffer is alive and at least that large.
+            unsafe {
+                self.ctx
+                    .device
+                    .cmd_fill_buffer(cb, poison.0, 0, poison.1, f32::NAN.to_bits())
+            };
+            barrier(
+                &self.ctx,
+                cb,
+                (
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::AccessFlags::TRANSFER_WRITE,
+                ),
+                (
+                    stage,
+                    vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                ),
+            );
+        }
+        self.commands.timestamp(TS_START);
+        match work {
+            Work::Rays(pipeline, [raygen, miss, hit]) => {
+                self.bind(cb, point, pipeline, push);
+                // SAFETY: recording with the pipeline, set and push constants bound.
+                unsafe {
+                    self.ctx.rt.cmd_trace_rays(
+                        cb,
+                        &raygen,
+                        &miss,
+                        &hit,
+                        &vk::StridedDeviceAddressRegionKHR::default(),
+                        w,
+                        h,
+                        1,
+                    )
+                };
+            }
+            Work::Compute(pipeline, groups) => {
+                self.bind(cb, point, pipeline, push);
+                // SAFETY: as above.
+                unsafe { self.ctx.device.cmd_dispatch(cb, groups[0], groups[1], 1) };
+            }
+        }
+        self.commands.timestamp(TS_END);
+        barrier(
+            &self.ctx,
+            cb,
+            (stage, vk::AccessFlags::SHADER_WRITE),
+            (
+                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::HOST,
+                vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::HOST_READ,
+            ),
+        );
+        self.commands.submit_and_wait()?;
+        Ok(self.commands.elapsed(TS_START, TS_END).unwrap_or_default())
+    }
+}

@@ -1,0 +1,221 @@
+//! The uploaded step and its buffers: particles (and their lo parts) split over bindings as
+//! they need, the radius attribute, the maps and field constants, and what each kernel binds
+//! of them.
+
+use super::context::{GpuContext, Layout, device_error};
+use super::tree::GpuTree;
+use super::util::{PARTS, SplitBuffer, parts_needed, storage, write};
+use super::{CLUSTER_BYTES, PARTICLE_BYTES, WORD_BYTES};
+use crate::accel::ClusterSize;
+use crate::backend::BackendError;
+use crate::backend::gpu_data::GpuStepData;
+use crate::backend::shaders::cpu::lbvh_keys::KeyGrid;
+use crate::backend::shaders::{SpecConstants, pack_map_tables};
+use crate::field::{Classification, FieldSettings};
+use crate::values::shader_constants::SPEC_CONSTANTS;
+use crate::values::{ColourMode, Integrator, NoiseKind, Step};
+
+/// The uploaded step and its buffers.
+pub(super) struct Scene {
+    pub(super) step: Step,
+    pub(super) field: FieldSettings,
+    pub(super) cluster: ClusterSize,
+    pub(super) series_range: Option<(f64, f64)>,
+    pub(super) data: GpuStepData,
+    pub(super) grid: KeyGrid,
+    pub(super) particles: SplitBuffer,
+    /// The lo parts of double-single positions, split like the particles (when the step has
+    /// them; kernels without them bind `particles` in their place, unread).
+    pub(super) particles_lo: Option<SplitBuffer>,
+    pub(super) particle_capacity: usize,
+    pub(super) radius_attribute: Option<wgpu::Buffer>,
+    pub(super) maps: wgpu::Buffer,
+    pub(super) field_uniform: wgpu::Buffer,
+}
+
+impl Scene {
+    pub(super) fn clusters(&self) -> u32 {
+        self.data.field.counts[1]
+    }
+
+    pub(super) fn colour_mode(&self) -> ColourMode {
+        match (&self.field.attribute, self.field.classification) {
+            (None, _) => ColourMode::Density,
+            (Some(_), Classification::Post) => ColourMode::Post,
+            (Some(_), Classification::Pre) => ColourMode::Pre,
+        }
+    }
+
+    /// The GLSL kernels' specialisation constants.
+    pub(super) fn variant(
+        &self,
+        integrator: Integrator,
+        colour: ColourMode,
+        noise: NoiseKind,
+    ) -> [u32; SPEC_CONSTANTS.len()] {
+        SpecConstants {
+            integrator: SpecConstants::integrator_id(integrator),
+            colour_mode: SpecConstants::colour_id(colour),
+            noise_kind: SpecConstants::noise_id(noise),
+            cluster_size: self.cluster.get() as u32,
+            radius_map_varies: u32::from(self.data.radius_map_varies),
+            density_map_varies: u32::from(self.data.density_map_varies),
+            has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
+            position_ds: u32::from(self.data.double_single()),
+            rt_hit_per_particle: 0,
+        }
+        .values()
+    }
+
+    /// The bind-group entries every kernel that traverses the tree shares: the field uniform
+    /// (1), the maps (3), the radius attribute (4, `dummy` without one), the particles (10..),
+    /// the tree's nodes (14..) and boxes (18..), and the particles' lo parts (26..: the
+    /// particles themselves in their place, unread, without double-single positions).
+    pub(super) fn traversal_entries<'a>(
+        &'a self,
+        tree: &'a GpuTree,
+        dummy: &'a wgpu::Buffer,
+        layout: Layout,
+    ) -> Vec<(u32, wgpu::BindingResource<'a>)> {
+        let mut entries = vec![
+            (1, self.field_uniform.as_entire_binding()),
+            (3, self.maps.as_entire_binding()),
+            (
+                4,
+                self.radius_attribute
+                    .as_ref()
+                    .unwrap_or(dummy)
+                    .as_entire_binding(),
+            ),
+        ];
+        entries.extend(self.particles.entries(10, layout));
+        entries.extend(tree.nodes.entries(14, layout));
+        entries.extend(tree.boxes.entries(18, layout));
+        entries.extend(
+            self.particles_lo
+                .as_ref()
+                .unwrap_or(&self.particles)
+                .entries(26, layout),
+        );
+        entries
+    }
+
+    /// Uploads the lo parts of double-single positions, making their buffer (split like the
+    /// particles) the first time a step needs them.
+    pub(super) fn write_points_lo(
+        &mut self,
+        ctx: &GpuContext,
+        max_binding: u64,
+    ) -> Result<(), BackendError> {
+        let Some(lo) = &self.data.points_lo else {
+            return Ok(());
+        };
+        if self
+            .particles_lo
+            .as_ref()
+            .is_none_or(|b| b.size() < self.particles.size())
+        {
+            let capacity = self.particle_capacity as u64;
+            self.particles_lo = Some(
+                ctx.scoped("particle lo parts", || {
+                    SplitBuffer::new(
+                        ctx,
+                        "particle lo parts",
+                        capacity,
+                        PARTICLE_BYTES,
+                        max_binding,
+                    )
+                })?
+                .ok_or_else(|| device_error("the particles' lo parts do not fit their parts"))?,
+            );
+        }
+        if let Some(b) = &self.particles_lo {
+            b.write(ctx, bytemuck::cast_slice(lo));
+        }
+        Ok(())
+    }
+}
+
+/// Whether a step of `n` particles in `clusters` clusters fits bindings of `max_binding`
+/// bytes: the particles, nodes and boxes in at most [`PARTS`] parts each, the 4-byte arrays in
+/// one. Err names what does not fit and what it needs.
+pub(super) fn check_fits(
+    n: usize,
+    clusters: usize,
+    has_radius_attribute: bool,
+    max_binding: u64,
+) -> Result<(), String> {
+    let (n, c) = (n as u64, clusters as u64);
+    let split = [
+        ("the particles", n, PARTICLE_BYTES),
+        ("the LBVH nodes", c, CLUSTER_BYTES),
+        ("the cluster boxes", c, CLUSTER_BYTES),
+    ];
+    for (what, count, bytes) in split {
+        if parts_needed(count, bytes, max_binding) > PARTS {
+            return Err(format!(
+                "{what} need {} bytes, more than {PARTS} x {max_binding}",
+                count * bytes
+            ));
+        }
+    }
+    let mut single = vec![("the per-cluster sort keys", c)];
+    if has_radius_attribute {
+        single.push(("the radius attribute", n));
+    }
+    for (what, count) in single {
+        if count * WORD_BYTES > max_binding {
+            return Err(format!(
+                "{what} need {} bytes in one binding, more than {max_binding}",
+                count * WORD_BYTES
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl Scene {
+    /// Writes the map tables (with the last frame's optical-density table) and field constants
+    /// (with the part lengths of the split arrays, `shaders_glsl/wgpu/split.glsl`).
+    pub(super) fn write_maps(
+        &self,
+        ctx: &GpuContext,
+        tree: Option<&GpuTree>,
+        optical: &[f32],
+        colour: &[[f32; 3]],
+    ) {
+        let tables = pack_map_tables(
+            &self.data.tables.density,
+            &self.data.tables.radius,
+            optical,
+            colour,
+        );
+        write(ctx, &self.maps, bytemuck::cast_slice(&tables));
+        let mut field = self.data.field;
+        field.counts[2] = self.particles.part_len(PARTICLE_BYTES);
+        field.counts[3] = tree.map_or(u32::MAX, |t| t.boxes.part_len(16));
+        write(ctx, &self.field_uniform, bytemuck::bytes_of(&field));
+    }
+
+    pub(super) fn write_radius_attribute(&mut self, ctx: &GpuContext) -> Result<(), BackendError> {
+        match &self.data.radius_attribute {
+            Some(h) => {
+                let needed = (self.particle_capacity.max(h.len()) * 4) as u64;
+                if self
+                    .radius_attribute
+                    .as_ref()
+                    .is_none_or(|b| b.size() < needed)
+                {
+                    self.radius_attribute = Some(ctx.scoped("radius attribute buffer", || {
+                        storage(ctx, "radius attribute", needed)
+                    })?);
+                }
+                if let Some(b) = &self.radius_attribute {
+                    write(ctx, b, bytemuck::cast_slice(h));
+                }
+            }
+            None => self.radius_attribute = None,
+        }
+        Ok(())
+    }
+}
