@@ -218,14 +218,7 @@ fn ranks_with(
     // Phase 1: ranks count-1 .. 0, removing the tightest cluster.
     let mut ranks = vec![u32::MAX; n];
     for (done, rank) in (0..count).rev().enumerate() {
-        if balanced && (rank / wh) as u32 != state.cluster_above {
-            // A new band: only columns still holding more than `band` points may give one.
-            state.cluster_above = (rank / wh) as u32;
-            clusters = MinTree::build(n, |i| state.cluster_key(i));
-        }
-        let cluster = MinTree::index(clusters.best());
-        state.splat(cluster, false);
-        clusters.update(&state.dirty, |i| state.cluster_key(i));
+        let cluster = state.place(&mut clusters, rank, false);
         ranks[cluster] = rank as u32;
         if (done + 1).is_multiple_of(report_every) {
             progress(done + 1, n);
@@ -238,14 +231,7 @@ fn ranks_with(
     state.set = initial_set;
     state.column_count = initial_counts;
     for rank in count..n {
-        if balanced && (rank / wh) as u32 != state.void_max {
-            // A new band: only columns holding at most `band` points may take one.
-            state.void_max = (rank / wh) as u32;
-            voids = MinTree::build(n, |i| state.void_key(i));
-        }
-        let void = MinTree::index(voids.best());
-        state.splat(void, true);
-        voids.update(&state.dirty, |i| state.void_key(i));
+        let void = state.place(&mut voids, rank, true);
         ranks[void] = rank as u32;
         if (rank + 1).is_multiple_of(report_every) {
             progress(rank + 1, n);
@@ -372,6 +358,39 @@ struct State {
 }
 
 impl State {
+    /// Gives `rank` to the best pixel of `tree` and updates it: with `fill`, the largest void
+    /// of the voids tree gets a point; without, the tightest cluster of the clusters tree
+    /// loses one. With column balance, a new band of W·H ranks first rebuilds the tree, since
+    /// which columns may give (more than `band` points left) or take (at most `band` points)
+    /// changes with the band.
+    fn place(&mut self, tree: &mut MinTree, rank: usize, fill: bool) -> usize {
+        let key = |s: &State, i: usize| {
+            if fill {
+                s.void_key(i)
+            } else {
+                s.cluster_key(i)
+            }
+        };
+        let band = (rank / (self.w * self.h)) as u32;
+        let current = if fill {
+            self.void_max
+        } else {
+            self.cluster_above
+        };
+        if self.balanced && band != current {
+            if fill {
+                self.void_max = band;
+            } else {
+                self.cluster_above = band;
+            }
+            *tree = MinTree::build(self.set.len(), |i| key(self, i));
+        }
+        let best = MinTree::index(tree.best());
+        self.splat(best, fill);
+        tree.update(&self.dirty, |i| key(self, i));
+        best
+    }
+
     fn new(w: usize, h: usize, d: usize, sigma: f64, balanced: bool) -> State {
         let kernel = Kernel::new(w, h, d, sigma);
         let n = w * h * d;

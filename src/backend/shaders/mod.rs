@@ -73,21 +73,36 @@ pub const SHARED_WGSL: &[(&str, &str)] = &[
     ),
 ];
 
+/// The text of an included file: a shared shader file, or the generated constants.
+fn shared_file(name: &str, language: ShaderLanguage) -> Option<String> {
+    let (generated, text, files) = match language {
+        ShaderLanguage::Glsl => (
+            "generated/constants.glsl",
+            shader_constants::glsl as fn() -> String,
+            SHARED_GLSL,
+        ),
+        ShaderLanguage::Wgsl => (
+            "generated/constants.wgsl",
+            shader_constants::wgsl as fn() -> String,
+            SHARED_WGSL,
+        ),
+    };
+    if name == generated {
+        return Some(text());
+    }
+    files
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, s)| (*s).to_owned())
+}
+
 /// WGSL `source` with its `#include "shared/..."` lines replaced by the shared files (and
 /// `generated/constants.wgsl` by [`shader_constants::wgsl`]), for `SPLIT_PARTS` =
 /// `split_parts` (see [`select_split_parts`]).
 pub fn wgsl_with_includes(source: &str, split_parts: u32) -> String {
     let resolved = resolve_includes(
         source,
-        &|name| {
-            if name == "generated/constants.wgsl" {
-                return Some(shader_constants::wgsl());
-            }
-            SHARED_WGSL
-                .iter()
-                .find(|(n, _)| *n == name)
-                .map(|(_, s)| (*s).to_owned())
-        },
+        &|name| shared_file(name, ShaderLanguage::Wgsl),
         ShaderLanguage::Wgsl,
     )
     .expect("build.rs validated every include");
@@ -99,15 +114,7 @@ pub fn wgsl_with_includes(source: &str, split_parts: u32) -> String {
 pub fn glsl_with_includes(source: &str) -> String {
     resolve_includes(
         source,
-        &|name| {
-            if name == "generated/constants.glsl" {
-                return Some(shader_constants::glsl());
-            }
-            SHARED_GLSL
-                .iter()
-                .find(|(n, _)| *n == name)
-                .map(|(_, s)| (*s).to_owned())
-        },
+        &|name| shared_file(name, ShaderLanguage::Glsl),
         ShaderLanguage::Glsl,
     )
     .expect("build.rs validated every include")

@@ -270,6 +270,28 @@ impl WgpuBackend {
         Ok(report)
     }
 
+    /// Applies field settings that keep the particles (`GpuStepData::apply_field`, the one
+    /// check every backend makes) and uploads what they change.
+    fn apply_field(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
+        let Some(scene) = self.scene.as_mut() else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        let changed =
+            scene
+                .data
+                .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
+        if changed.radius_attribute {
+            scene.write_radius_attribute(&self.ctx)?;
+        }
+        if changed.positions_lo {
+            scene.write_points_lo(&self.ctx, self.max_binding)?;
+        }
+        scene.field = field.clone();
+        let colour = scene.data.tables.colour.clone();
+        scene.write_maps(&self.ctx, self.tree.as_ref(), &self.optical, &colour);
+        Ok(())
+    }
+
     fn built_scene(&self) -> Result<&Scene, BackendError> {
         match (&self.scene, self.built) {
             (Some(s), Some(_)) => Ok(s),
@@ -410,22 +432,7 @@ impl Backend for WgpuBackend {
             return Err(BackendError::NothingUploaded("wgpu"));
         }
         let ctx = self.ctx.clone();
-        let Some(scene) = self.scene.as_mut() else {
-            return Err(BackendError::NothingUploaded("wgpu"));
-        };
-        let changed =
-            scene
-                .data
-                .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
-        if changed.radius_attribute {
-            scene.write_radius_attribute(&ctx)?;
-        }
-        if changed.positions_lo {
-            scene.write_points_lo(&ctx, self.max_binding)?;
-        }
-        scene.field = field.clone();
-        let colour = scene.data.tables.colour.clone();
-        scene.write_maps(&ctx, self.tree.as_ref(), &self.optical, &colour);
+        self.apply_field(field)?;
         let (Some(scene), Some(tree)) = (&self.scene, &self.tree) else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
@@ -446,23 +453,7 @@ impl Backend for WgpuBackend {
     }
 
     fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
-        let Some(scene) = self.scene.as_mut() else {
-            return Err(BackendError::NothingUploaded("wgpu"));
-        };
-        let changed =
-            scene
-                .data
-                .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
-        if changed.radius_attribute {
-            scene.write_radius_attribute(&self.ctx)?;
-        }
-        if changed.positions_lo {
-            scene.write_points_lo(&self.ctx, self.max_binding)?;
-        }
-        scene.field = field.clone();
-        let colour = scene.data.tables.colour.clone();
-        scene.write_maps(&self.ctx, self.tree.as_ref(), &self.optical, &colour);
-        Ok(())
+        self.apply_field(field)
     }
 
     fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
