@@ -17,6 +17,7 @@
 use std::time::Duration;
 
 use aarbf::accel::ClusterSize;
+use aarbf::backend::Precision;
 use aarbf::backend::{self, Backend, BackendKind, StepInput};
 use aarbf::field::{Classification, FieldSettings};
 use aarbf::render::{RenderSession, RenderSettings};
@@ -146,7 +147,7 @@ fn main() {
                 cluster: ClusterSize::new(1).unwrap(),
                 series_bounds: unit,
                 series_range: Some((0.0, 1.0)),
-                precision: aarbf::backend::Precision::FIELD,
+                precision: Precision::F32,
             };
             b.upload(&input).unwrap();
             let upload = b.timings().upload.as_secs_f64();
@@ -190,7 +191,7 @@ fn main() {
                 cluster,
                 series_bounds: unit,
                 series_range: Some((0.0, 1.0)),
-                precision: aarbf::backend::Precision::FIELD,
+                precision: Precision::F32,
             })
             .unwrap();
             b.build().unwrap();
@@ -203,6 +204,59 @@ fn main() {
             );
         }
     }
+
+    // What double-single positions cost a scene that needs them (and what f32 saves one that
+    // does not): the same step, both precisions forced, on the GPU backends.
+    let queries = 200_000;
+    let mut r = rand_pcg::Pcg64::seed_from_u64(11);
+    let points: Vec<DVec3> = (0..queries)
+        .map(|_| DVec3::new(r.random(), r.random(), r.random()))
+        .collect();
+    let points: Vec<DVec3> = aarbf::accel::hilbert_order(&points, unit)
+        .iter()
+        .map(|&i| points[i as usize])
+        .collect();
+    println!(
+        "\n### Positions: f32 against double-single ({n} particles, K = 1 and 16, {queries} Hilbert-ordered queries; median of 3)\n"
+    );
+    println!(
+        "| K | backend | positions | particle bytes (MB) | B / particle | build (ms) | queries/s |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for k in [1u32, 16] {
+        for (kind, b) in &mut backends {
+            if *kind == BackendKind::Cpu {
+                continue;
+            }
+            for precision in [Precision::F32, Precision::DoubleSingle] {
+                b.upload(&StepInput {
+                    step: &step,
+                    field: &field,
+                    cluster: ClusterSize::new(k).unwrap(),
+                    series_bounds: unit,
+                    series_range: Some((0.0, 1.0)),
+                    precision,
+                })
+                .unwrap();
+                b.build().unwrap();
+                let build = b.timings().build;
+                b.query(&points[..1000]).unwrap();
+                let mut times = Vec::new();
+                for _ in 0..3 {
+                    b.query(&points).unwrap();
+                    times.push(b.timings().query);
+                }
+                let m = b.memory();
+                println!(
+                    "| {k} | {kind} | {precision:?} | {} | {:.1} | {:.1} | {:.2} M |",
+                    mb(m.particle_bytes),
+                    m.particle_bytes as f64 / n as f64,
+                    build.as_secs_f64() * 1e3,
+                    queries as f64 / median(times) / 1e6
+                );
+            }
+        }
+    }
     drop(step);
 
     // Frame time per feature and integrator on the demo scene.
@@ -213,6 +267,48 @@ fn main() {
     );
     println!("| feature | integrator | cpu (ms) | wgpu (ms) | ash (ms) |");
     println!("|---|---|---|---|---|");
+    // Frame time with each precision forced on the GPU backends.
+    println!(
+        "\n### Frame time with f32 or double-single positions ({frame_size}x{frame_size}, 1 spp, dam break step 14, K = 4; median of 3 after a warm-up)\n"
+    );
+    println!("| integrator | backend | f32 (ms) | double-single (ms) | ds / f32 |");
+    println!("|---|---|---|---|---|");
+    let field = FieldSettings::new(Some("velocity"), demo_radius);
+    for integrator in [Integrator::Ea, Integrator::Marching] {
+        let settings = RenderSettings {
+            width: frame_size,
+            height: frame_size,
+            integrator,
+            noise: NoiseKind::Stbn,
+            ..RenderSettings::default()
+        };
+        for kind in [BackendKind::Wgpu, BackendKind::Ash] {
+            let Ok(b) = backend::create(kind) else {
+                continue;
+            };
+            let mut s = RenderSession::new(b, &series);
+            let mut ms = Vec::new();
+            for precision in [Precision::F32, Precision::DoubleSingle] {
+                s.set_precision(precision);
+                s.show(&series, 14, &field, ClusterSize::new(4).unwrap())
+                    .unwrap();
+                s.render(&settings, 1).unwrap();
+                let mut frames = Vec::new();
+                for _ in 0..3 {
+                    s.render(&settings, 1).unwrap();
+                    frames.push(s.backend().timings().frame);
+                }
+                ms.push(median(frames) * 1e3);
+            }
+            println!(
+                "| {integrator:?} | {kind} | {:.0} | {:.0} | {:.2} |",
+                ms[0],
+                ms[1],
+                ms[1] / ms[0]
+            );
+        }
+    }
+
     let mut sessions: Vec<(BackendKind, RenderSession)> = BACKENDS
         .iter()
         .filter_map(|&k| Some((k, RenderSession::new(backend::create(k).ok()?, &series))))

@@ -34,6 +34,7 @@ struct Loaded {
     step: usize,
     field: FieldSettings,
     cluster: ClusterSize,
+    precision: Precision,
 }
 
 /// The automatic values of a frame as they were resolved: what a user did not set, and what
@@ -83,12 +84,10 @@ impl RenderSession {
         }
     }
 
-    /// How GPU backends hold positions from the next upload on.
+    /// How GPU backends hold positions from the next upload on (the next [`show`](Self::show)
+    /// uploads the step again).
     pub fn set_precision(&mut self, precision: Precision) {
-        if precision != self.precision {
-            self.precision = precision;
-            self.loaded = None;
-        }
+        self.precision = precision;
     }
 
     pub fn backend(&self) -> &dyn Backend {
@@ -116,12 +115,14 @@ impl RenderSession {
             step,
             field: field.clone(),
             cluster,
+            precision: self.precision,
         };
         match &self.loaded {
             Some(have) if *have == want => return Ok(()),
             Some(have)
                 if have.step == step
                     && have.cluster == cluster
+                    && have.precision == self.precision
                     && same_particles(&have.field, field) =>
             {
                 if same_radii(&have.field, field) {
