@@ -12,6 +12,7 @@
 //! Results go to docs/benchmarks.md. On a machine without a GPU, Mesa lavapipe runs all of
 //! it on the CPU: the numbers say nothing about RT-hardware speed-ups.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use aarbf::accel::ClusterSize;
@@ -58,7 +59,7 @@ fn radius_for_30(n: usize) -> f64 {
     (30.0 * 3.0 / (4.0 * std::f64::consts::PI * n as f64)).cbrt()
 }
 
-fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
+fn input<'a>(step: &'a Arc<Step>, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
     StepInput {
         step,
         field,
@@ -80,7 +81,7 @@ fn structures(b: &mut AshBackend, sizes: &[usize]) {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for &n in sizes {
-        let step = uniform(n, 7);
+        let step = Arc::new(uniform(n, 7));
         let radius = radius_for_30(n);
         let field = FieldSettings::new(Some("s"), radius);
         let mut wider = field.clone();
@@ -105,7 +106,7 @@ fn structures(b: &mut AshBackend, sizes: &[usize]) {
             println!(
                 "| {n} | {k} | {} | {:.0} | {:.2} | {:.1} | {:.1} | {:.3} | {:.1} | {:.1} | {} |",
                 b.blas_boxes(),
-                ms(b.timings().upload),
+                ms(b.timings().prepare + b.timings().upload),
                 ms(median(kernel)),
                 ms(median(build)),
                 ms(median(refit)),
@@ -158,6 +159,7 @@ fn queries(b: &mut AshBackend, m: usize) {
         ("dam break (step 14)", demo, "velocity", 0.0),
     ];
     for (name, step, attribute, radius) in sets {
+        let step = Arc::new(step);
         let radius = if radius > 0.0 {
             radius
         } else {

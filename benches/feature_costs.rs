@@ -127,7 +127,7 @@ fn main() {
     }
 
     // Bytes and build times per feature.
-    let step = uniform_step(n, 7);
+    let step = std::sync::Arc::new(uniform_step(n, 7));
     let unit = Bounds {
         min: DVec3::ZERO,
         max: DVec3::ONE,
@@ -150,7 +150,7 @@ fn main() {
                 precision: Precision::F32,
             };
             b.upload(&input).unwrap();
-            let upload = b.timings().upload.as_secs_f64();
+            let upload = (b.timings().prepare + b.timings().upload).as_secs_f64();
             let mut builds = Vec::new();
             for _ in 0..3 {
                 b.build().unwrap();

@@ -45,7 +45,7 @@ const UNIT: Bounds = Bounds {
     max: DVec3::ONE,
 };
 
-fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
+fn input<'a>(step: &'a std::sync::Arc<Step>, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
     StepInput {
         step,
         field,
@@ -66,9 +66,14 @@ fn ms(s: f64) -> String {
 }
 
 /// Upload once, then the median of 3 builds and of 3 refits (radius alternating by 10%).
-fn build_and_refit(b: &mut dyn Backend, step: &Step, field: &FieldSettings, k: u32) -> [f64; 3] {
+fn build_and_refit(
+    b: &mut dyn Backend,
+    step: &std::sync::Arc<Step>,
+    field: &FieldSettings,
+    k: u32,
+) -> [f64; 3] {
     b.upload(&input(step, field, k)).unwrap();
-    let upload = b.timings().upload.as_secs_f64();
+    let upload = (b.timings().prepare + b.timings().upload).as_secs_f64();
     let mut builds = Vec::new();
     for _ in 0..3 {
         b.build().unwrap();
@@ -113,7 +118,7 @@ fn main() {
 
     // Warm-up: compile every pipeline the runs below use (lavapipe JIT-compiles on creation).
     {
-        let step = uniform_step(10_000, 9);
+        let step = std::sync::Arc::new(uniform_step(10_000, 9));
         let f = FieldSettings::new(Some("a"), radius_for(10_000));
         for k in [1, 4, 16] {
             build_and_refit(&mut wgpu, &step, &f, k);
@@ -129,7 +134,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|");
     for &n in &sizes {
-        let step = uniform_step(n, 1);
+        let step = std::sync::Arc::new(uniform_step(n, 1));
         let f = FieldSettings::new(Some("a"), radius_for(n));
         let c = build_and_refit(&mut cpu, &step, &f, 1);
         let g = build_and_refit(&mut wgpu, &step, &f, 1);
@@ -149,7 +154,7 @@ fn main() {
         .iter()
         .min_by_key(|&&s| s.abs_diff(1_000_000))
         .unwrap();
-    let step = uniform_step(n, 2);
+    let step = std::sync::Arc::new(uniform_step(n, 2));
     let f = FieldSettings::new(Some("a"), radius_for(n));
     let mut r = rand_pcg::Pcg64::seed_from_u64(3);
     let points: Vec<DVec3> = (0..queries)

@@ -7,6 +7,8 @@
 //! - The validation layer is on (the `checked` profile has debug assertions) when installed,
 //!   and every test ends by asserting that it reported nothing.
 
+use std::sync::Arc;
+
 use aarbf::accel::{ClusterBoxes, ClusterSize};
 use aarbf::backend::ash_rt::{self, AshBackend};
 use aarbf::backend::gpu_data::GpuStepData;
@@ -80,7 +82,7 @@ fn radius_map_with_zeros() -> RadiusMap {
     RadiusMap("0:0,0.2:0,0.6:1,1:0.5".parse().unwrap())
 }
 
-fn input<'a>(step: &'a Step, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
+fn input<'a>(step: &'a Arc<Step>, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
     StepInput {
         step,
         field,
@@ -114,7 +116,7 @@ fn device_has_ray_tracing_and_validation_when_installed() {
     assert!(b.build().is_err());
     assert!(b.refit(&FieldSettings::new(None, 1.0)).is_err());
     // More particles than the device can allocate: a clear error naming need and limit.
-    let step = random_step(10, 1);
+    let step = std::sync::Arc::new(random_step(10, 1));
     let field = FieldSettings::new(Some("s"), 0.1);
     b.reserve(1 << 40);
     let e = b.upload(&input(&step, &field, 1)).unwrap_err().to_string();
@@ -124,14 +126,14 @@ fn device_has_ray_tracing_and_validation_when_installed() {
     );
     // An empty step uploads, builds and queries to zero.
     let mut b = backend();
-    let empty = Step {
+    let empty = Arc::new(Step {
         name: "empty".into(),
         positions: vec![],
         attributes: vec![Attribute {
             name: "s".into(),
             values: vec![],
         }],
-    };
+    });
     b.upload(&input(&empty, &field, 4)).unwrap();
     b.build().unwrap();
     assert_eq!(b.query(&[DVec3::ZERO]).unwrap(), vec![(0.0, [0.0; 3])]);
@@ -145,7 +147,7 @@ fn device_has_ray_tracing_and_validation_when_installed() {
 #[test]
 fn boxes_match_the_cpu_cluster_boxes() {
     let mut b = backend();
-    let step = random_step(1237, 1);
+    let step = std::sync::Arc::new(random_step(1237, 1));
     let mut field = FieldSettings::new(Some("s"), 0.05);
     field.radius_map = radius_map_with_zeros();
     field.radius_attribute = Some("h".into());
@@ -298,7 +300,7 @@ fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
 #[test]
 fn queries_match_the_f64_reference_for_every_cluster_size() {
     let mut b = backend();
-    let step = random_step(1500, 2);
+    let step = std::sync::Arc::new(random_step(1500, 2));
     let points = queries(&step, 3);
     let mut worst: f64 = 0.0;
     for k in [1, 2, 4, 8, 16] {
@@ -339,7 +341,7 @@ fn queries_match_the_f64_reference_for_every_cluster_size() {
 fn per_particle_hit_reports_match_per_cluster_sums() {
     use aarbf::backend::ash_rt::HitReports;
     let mut b = backend();
-    let step = random_step(1200, 21);
+    let step = std::sync::Arc::new(random_step(1200, 21));
     let points = queries(&step, 22);
     for k in [1, 4, 16] {
         let mut field = FieldSettings::new(Some("s"), 0.2);
@@ -369,7 +371,7 @@ fn per_particle_hit_reports_match_per_cluster_sums() {
 fn refit_after_a_radius_change_equals_a_fresh_build() {
     let mut refitted = backend();
     let mut fresh = backend();
-    let step = random_step(1400, 4);
+    let step = std::sync::Arc::new(random_step(1400, 4));
     let points = queries(&step, 5);
     let k = 4;
     let mut before = FieldSettings::new(Some("s"), 0.15);
@@ -620,11 +622,11 @@ fn a_smaller_step_renders_like_that_step_alone() {
         ..input(step, &field, k)
     };
     shared.reserve(max);
-    shared.upload(&input(&*big)).unwrap();
+    shared.upload(&input(&big)).unwrap();
     shared.build().unwrap();
-    shared.upload(&input(&*small)).unwrap();
+    shared.upload(&input(&small)).unwrap();
     shared.build().unwrap();
-    alone.upload(&input(&*small)).unwrap();
+    alone.upload(&input(&small)).unwrap();
     alone.build().unwrap();
     assert!(shared.blas_boxes() > alone.blas_boxes());
     assert_eq!(shared.blas_active_boxes(), alone.blas_active_boxes());
@@ -677,7 +679,7 @@ fn lbvh_traversal_on_the_same_device_matches_the_rt_pipeline() {
     use aarbf::render::{RenderSession, RenderSettings};
     use aarbf::values::{Integrator, NoiseKind};
     let mut b = backend();
-    let step = random_step(1300, 6);
+    let step = std::sync::Arc::new(random_step(1300, 6));
     let points = queries(&step, 7);
     for (k, classification) in [
         (1, Classification::Post),
@@ -844,14 +846,14 @@ fn a_step_larger_than_one_binding_is_not_refused() {
         .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()))
         .collect();
     let s: Vec<f64> = (0..n).map(|_| rng.random_range(0.0f64..1.0)).collect();
-    let step = Step {
+    let step = Arc::new(Step {
         name: "large".into(),
         positions,
         attributes: vec![Attribute {
             name: "s".into(),
             values: s,
         }],
-    };
+    });
     // ~35 particles within reach of a point.
     let radius = 0.01;
     let field = FieldSettings::new(Some("s"), radius);

@@ -242,7 +242,7 @@ fn check_case(kind: BackendKind, tolerance: f64, case: &Case, classification: Cl
         ReferenceField::of_step(&case.step, &field, cluster, series.bounds(), range).unwrap();
     let mut b = backend::create(kind).unwrap();
     b.upload(&StepInput {
-        step: &case.step,
+        step: &series.step(0).unwrap(),
         field: &field,
         cluster,
         series_bounds: series.bounds(),

@@ -32,7 +32,7 @@ fn step() -> Step {
     }
 }
 
-fn upload(b: &mut dyn Backend, step: &Step, field: &FieldSettings) {
+fn upload(b: &mut dyn Backend, step: &std::sync::Arc<Step>, field: &FieldSettings) {
     b.upload(&StepInput {
         step,
         field,
@@ -48,7 +48,7 @@ fn upload(b: &mut dyn Backend, step: &Step, field: &FieldSettings) {
 #[test]
 fn every_backend_refuses_the_same_bad_field_on_upload_refit_and_map_update() {
     common::capture_driver_messages();
-    let step = step();
+    let step = std::sync::Arc::new(step());
     let plain = FieldSettings::new(None, 0.05);
     let mut varying_radius = plain.clone();
     varying_radius.radius_map = RadiusMap::new("0:0.2,1:1".parse().unwrap()).unwrap();

@@ -105,7 +105,7 @@ fn bounds_of(step: &Step) -> Bounds {
     }
 }
 
-fn upload(backend: &mut WgpuBackend, step: &Step, field: &FieldSettings, k: u32) {
+fn upload(backend: &mut WgpuBackend, step: &Arc<Step>, field: &FieldSettings, k: u32) {
     backend
         .upload(&StepInput {
             step,
@@ -205,7 +205,7 @@ fn backend(ctx: &Arc<GpuContext>, limit: Option<u64>) -> WgpuBackend {
 /// Builds over `step` stage by stage, comparing each stage with its twin.
 fn check_build_stages(
     ctx: &Arc<GpuContext>,
-    step: &Step,
+    step: &Arc<Step>,
     field: &FieldSettings,
     k: u32,
     what: &str,
@@ -316,7 +316,7 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
     let ctx = gpu();
     let radius = 0.02;
     for (i, n) in [0usize, 1, 2, 255, 256, 257, 65537].into_iter().enumerate() {
-        let step = random_step(n, i as u64, false);
+        let step = std::sync::Arc::new(random_step(n, i as u64, false));
         check_build_stages(
             &ctx,
             &step,
@@ -331,7 +331,7 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
         .into_iter()
         .enumerate()
     {
-        let step = random_step(n, 50 + i as u64, false);
+        let step = std::sync::Arc::new(random_step(n, 50 + i as u64, false));
         let mut f = field(radius, true);
         if k == 8 {
             f.radius_attribute = Some("h".into());
@@ -345,7 +345,7 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
 fn a_million_particle_build_equals_its_twin() {
     let ctx = gpu();
     // A non-power-of-two million.
-    let step = random_step(1_000_003, 7, false);
+    let step = std::sync::Arc::new(random_step(1_000_003, 7, false));
     check_build_stages(
         &ctx,
         &step,
@@ -362,7 +362,7 @@ fn bottom_up_bounds_hold_under_load_and_duplicate_keys() {
     // Many equal keys (five tiny blobs) make deep subtrees split by index and long climbs
     // where many threads meet at the same nodes; repeat the build and compare each time.
     let ctx = gpu();
-    let step = random_step(300_001, 11, true);
+    let step = std::sync::Arc::new(random_step(300_001, 11, true));
     let f = field(0.01, false);
     let mut b = WgpuBackend::with_context(ctx.clone());
     upload(&mut b, &step, &f, 1);
@@ -393,7 +393,7 @@ fn bottom_up_bounds_hold_under_load_and_duplicate_keys() {
 #[test]
 fn refit_equals_a_fresh_build() {
     let ctx = gpu();
-    let step = random_step(20_011, 21, false);
+    let step = std::sync::Arc::new(random_step(20_011, 21, false));
     for k in [1u32, 4] {
         let what = format!("K {k}");
         let mut f = field(0.02, true);
@@ -459,7 +459,7 @@ fn refit_equals_a_fresh_build() {
 /// Queries at random points and at particle centres, compared with the f64 reference.
 fn check_queries(
     ctx: &Arc<GpuContext>,
-    step: &Step,
+    step: &Arc<Step>,
     f: &FieldSettings,
     k: u32,
     what: &str,
@@ -523,7 +523,7 @@ fn check_queries(
 #[test]
 fn queries_equal_the_f64_reference_for_every_cluster_size() {
     let ctx = gpu();
-    let step = random_step(20_000, 31, false);
+    let step = std::sync::Arc::new(random_step(20_000, 31, false));
     // About 30 particles within reach of a point.
     let radius = 0.07;
     for k in [1u32, 2, 4, 8, 16] {
@@ -549,7 +549,7 @@ fn queries_equal_the_f64_reference_for_every_cluster_size() {
         "density only, radius attribute",
         None,
     );
-    let empty = random_step(0, 1, false);
+    let empty = std::sync::Arc::new(random_step(0, 1, false));
     check_queries(&ctx, &empty, &field(radius, false), 1, "no particles", None);
     assert_no_driver_messages();
 }
@@ -561,7 +561,7 @@ fn misuse_is_an_error_not_a_panic() {
     assert!(b.query(&[DVec3::ZERO]).is_err());
     assert!(b.build().is_err());
     assert!(b.image().is_err());
-    let step = random_step(100, 2, false);
+    let step = std::sync::Arc::new(random_step(100, 2, false));
     upload(&mut b, &step, &field(0.1, false), 1);
     assert!(b.query(&[DVec3::ZERO]).is_err(), "uploaded but not built");
     b.build().unwrap();
@@ -576,7 +576,7 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
     // particles (16 B each), nodes and boxes (32 B per cluster): (K, limit, expected parts).
     let ctx = gpu();
     let n = 40_000;
-    let step = random_step(n, 77, false);
+    let step = std::sync::Arc::new(random_step(n, 77, false));
     let cases = [
         // 640,000 B of particles in 2 parts; 1,280,000 B of nodes and boxes in 3; the
         // image's accumulation in 1.
@@ -599,7 +599,7 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
         check_queries(&ctx, &step, &f, k, &what, Some(limit));
 
         // The same image, bit for bit, as from a backend with one binding per array.
-        let series = aarbf::scene::TimeSeries::from_steps(vec![step.clone()]);
+        let series = aarbf::scene::TimeSeries::from_steps(vec![(*step).clone()]);
         let settings = aarbf::render::RenderSettings {
             width,
             height,
@@ -669,7 +669,7 @@ fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
             .expect("an adapter offering WebGPU's default limits"),
     );
     assert_eq!(limited.limits.max_storage_buffers_per_shader_stage, 8);
-    let step = random_step(3_001, 91, false);
+    let step = std::sync::Arc::new(random_step(3_001, 91, false));
     let mut f = field(0.06, true);
     f.radius_attribute = Some("h".into());
     let k = 4;
@@ -679,7 +679,7 @@ fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
     check_queries(&limited, &step, &f, k, "WebGPU limits", None);
 
     // Build, refit and render: the same bits as the full device.
-    let series = aarbf::scene::TimeSeries::from_steps(vec![step.clone()]);
+    let series = aarbf::scene::TimeSeries::from_steps(vec![(*step).clone()]);
     let images = |ctx: &Arc<GpuContext>| {
         let mut s = aarbf::render::RenderSession::new(
             Box::new(WgpuBackend::with_context(ctx.clone())),

@@ -111,6 +111,10 @@ pub struct Capabilities {
 /// Time spent in each stage, for the last time each ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Timings {
+    /// CPU work on a new step before anything moves to the device: checks, Hilbert sort,
+    /// gather, conversion (the whole upload for the CPU backend).
+    pub prepare: Duration,
+    /// Moving the prepared step to the device (excluding `prepare`).
     pub upload: Duration,
     pub build: Duration,
     pub refit: Duration,
@@ -131,7 +135,8 @@ pub struct MemoryReport {
 
 /// One step as a backend receives it.
 pub struct StepInput<'a> {
-    pub step: &'a Step,
+    /// Shared with the series' cache: a backend keeps the step by reference, never a copy.
+    pub step: &'a std::sync::Arc<Step>,
     pub field: &'a FieldSettings,
     pub cluster: ClusterSize,
     /// The series' bounds (Hilbert grid, local coordinates).

@@ -96,7 +96,7 @@ fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
 }
 
 /// Parses `a..b` / `a..=b`.
-fn step_range(text: &str, len: usize) -> anyhow::Result<std::ops::Range<usize>> {
+pub(super) fn step_range(text: &str, len: usize) -> anyhow::Result<std::ops::Range<usize>> {
     let (a, b, inclusive) = if let Some((a, b)) = text.split_once("..=") {
         (a, b, true)
     } else if let Some((a, b)) = text.split_once("..") {
@@ -329,14 +329,13 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 tracing::info!("wrote {}", path.display());
             }
         }
-        let mut image = None;
         for _ in 0..spp {
-            image = Some(session.render(&settings, 1)?);
+            session.accumulate(&settings, 1)?;
             bar.inc(1);
         }
         let path = out_for(step);
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
-        crate::io::output::write_png(&path, &image.expect("spp >= 1"), true)?;
+        crate::io::output::write_png(&path, &session.image()?, true)?;
         let t = session.backend().timings();
         tracing::info!(
             "step {step}: {} ({}x{}, {spp} spp, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",

@@ -81,55 +81,82 @@ impl Particles {
         series_bounds: Bounds,
         series_range: Option<(f64, f64)>,
     ) -> Result<Particles, FieldError> {
+        // Checked before the sort, so bad input costs no work.
+        FieldInputs::check(step, settings, series_range)?;
+        let mut particles = Particles::sorted(step, series_bounds);
+        particles.apply_field(step, settings, series_range)?;
+        Ok(particles)
+    }
+
+    /// The step's particles in Hilbert order, in local coordinates, before any field is
+    /// applied (radius 0, weight 0, no theta).
+    pub fn sorted(step: &Step, series_bounds: Bounds) -> Particles {
+        let order = hilbert_order(&step.positions, series_bounds);
+        let origin = series_bounds.center();
+        let centers = order
+            .par_iter()
+            .map(|&i| step.positions[i as usize] - origin)
+            .collect();
+        Particles {
+            origin,
+            centers,
+            radii: Vec::new(),
+            weights: Vec::new(),
+            theta: Theta::None,
+            range: (0.0, 0.0),
+            order,
+        }
+    }
+
+    /// Evaluates radius, weight and theta per particle under `settings` (the order and the
+    /// centres stay: a map or radius change never sorts again). `step` is the step these
+    /// particles were sorted from. On an error nothing changes.
+    pub fn apply_field(
+        &mut self,
+        step: &Step,
+        settings: &FieldSettings,
+        series_range: Option<(f64, f64)>,
+    ) -> Result<(), FieldError> {
         let FieldInputs {
             attribute,
             radius: per_particle_radius,
             range,
         } = FieldInputs::check(step, settings, series_range)?;
         let tables = FieldTables::of(settings);
-        let order = hilbert_order(&step.positions, series_bounds);
         let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(a.values[i], range));
-        let origin = series_bounds.center();
-        let centers = order
-            .par_iter()
-            .map(|&i| step.positions[i as usize] - origin)
-            .collect();
-        let radii: Vec<f64> = order
-            .par_iter()
-            .map(|&i| {
-                let i = i as usize;
-                particle_radius(
-                    settings.radius,
-                    lookup(&tables.radius, t_of(i)),
-                    per_particle_radius.map(|h| h.values[i]),
-                )
-            })
-            .collect();
-        let weights = order
-            .par_iter()
-            .map(|&i| lookup(&tables.density, t_of(i as usize)))
-            .collect();
-        let theta = match (attribute, settings.classification) {
+        let order = &self.order;
+        let radius_of = |i: usize| {
+            particle_radius(
+                settings.radius,
+                lookup(&tables.radius, t_of(i)),
+                per_particle_radius.map(|h| h.values[i]),
+            )
+        };
+        refill(&mut self.radii, order, radius_of);
+        refill(&mut self.weights, order, |i| {
+            lookup(&tables.density, t_of(i))
+        });
+        self.theta = match (attribute, settings.classification) {
             (None, _) => Theta::None,
             (Some(_), Classification::Post) => {
-                Theta::Scalar(order.par_iter().map(|&i| t_of(i as usize)).collect())
+                let mut t = match std::mem::replace(&mut self.theta, Theta::None) {
+                    Theta::Scalar(v) => v,
+                    _ => Vec::new(),
+                };
+                refill(&mut t, order, t_of);
+                Theta::Scalar(t)
             }
-            (Some(_), Classification::Pre) => Theta::Rgb(
-                order
-                    .par_iter()
-                    .map(|&i| lookup_colour(&tables.colour, t_of(i as usize)))
-                    .collect(),
-            ),
+            (Some(_), Classification::Pre) => {
+                let mut c = match std::mem::replace(&mut self.theta, Theta::None) {
+                    Theta::Rgb(v) => v,
+                    _ => Vec::new(),
+                };
+                refill(&mut c, order, |i| lookup_colour(&tables.colour, t_of(i)));
+                Theta::Rgb(c)
+            }
         };
-        Ok(Particles {
-            origin,
-            centers,
-            radii,
-            weights,
-            theta,
-            range,
-            order,
-        })
+        self.range = range;
+        Ok(())
     }
 
     pub fn len(&self) -> usize {
@@ -139,4 +166,13 @@ impl Particles {
     pub fn is_empty(&self) -> bool {
         self.centers.is_empty()
     }
+}
+
+/// `out[k] = value(order[k])` for every sorted particle, reusing `out`'s allocation.
+fn refill<T: Send>(out: &mut Vec<T>, order: &[u32], value: impl Fn(usize) -> T + Sync) {
+    out.clear();
+    order
+        .par_iter()
+        .map(|&i| value(i as usize))
+        .collect_into_vec(out);
 }

@@ -288,6 +288,23 @@ impl RenderSession {
     /// Renders `frames` more frames into the accumulation (restarted if anything changed since
     /// the last call) and returns the image.
     pub fn render(&mut self, settings: &RenderSettings, frames: u32) -> Result<Image, RenderError> {
+        self.accumulate(settings, frames)?;
+        self.image()
+    }
+
+    /// The mean of the frames accumulated so far, read back from the backend: the one copy
+    /// of the image a batch render makes, when it writes the image.
+    pub fn image(&mut self) -> Result<Image, RenderError> {
+        Ok(self.backend.image()?)
+    }
+
+    /// Renders `frames` more frames into the accumulation (restarted if anything changed since
+    /// the last call), on the device: nothing is read back.
+    pub fn accumulate(
+        &mut self,
+        settings: &RenderSettings,
+        frames: u32,
+    ) -> Result<(), RenderError> {
         let loaded = self
             .loaded
             .clone()
@@ -303,7 +320,7 @@ impl RenderSession {
             self.backend.render(&params)?;
             self.frames += 1;
         }
-        Ok(self.backend.image()?)
+        Ok(())
     }
 }
 

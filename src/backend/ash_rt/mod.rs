@@ -121,7 +121,7 @@ pub fn available() -> Result<String, BackendError> {
 
 /// The uploaded step, kept to refit and to re-read a radius attribute.
 struct Uploaded {
-    step: Step,
+    step: std::sync::Arc<Step>,
     field: FieldSettings,
     series_bounds: Bounds,
     series_range: Option<(f64, f64)>,
@@ -370,6 +370,7 @@ impl Backend for AshBackend {
     fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError> {
         let started = Instant::now();
         let data = GpuStepData::prepare(input)?;
+        self.timings.prepare = started.elapsed();
         self.uploaded = None;
         self.ensure_capacity(data.points.len(), data.cluster)?;
         if let Some(s) = &mut self.structure {
@@ -391,7 +392,7 @@ impl Backend for AshBackend {
         });
         self.lbvh = None;
         self.write_params(None)?;
-        self.timings.upload = started.elapsed();
+        self.timings.upload = started.elapsed() - self.timings.prepare;
         Ok(())
     }
 

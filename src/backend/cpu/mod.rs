@@ -7,6 +7,7 @@
 mod accumulator;
 pub mod integrators;
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -16,24 +17,47 @@ use self::accumulator::Accumulator;
 use self::integrators::{FieldSampler, render_pixel};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::field::{FieldSettings, Particles, ReferenceField};
-use crate::values::{Bounds, FrameParams, Image, Step};
+use crate::values::{FrameParams, Image, Step};
 
 const TILE: u32 = 16;
 
-/// The uploaded step, kept to re-prepare its particles when radii or maps change.
+/// The uploaded step (shared with the series' cache, never copied), kept to re-evaluate its
+/// particles' radii and maps when those change.
 struct Uploaded {
-    step: Step,
+    step: Arc<Step>,
     field: FieldSettings,
     cluster: crate::accel::ClusterSize,
-    series_bounds: Bounds,
     series_range: Option<(f64, f64)>,
-    particles: Particles,
+}
+
+/// The particles, sorted once per upload, before and after the structure is built over them
+/// (one of them at a time, so the size difference costs nothing).
+#[allow(clippy::large_enum_variant)]
+enum Prepared {
+    Sorted(Particles),
+    Built(ReferenceField),
+}
+
+impl Prepared {
+    fn particles_mut(&mut self) -> &mut Particles {
+        match self {
+            Prepared::Sorted(p) => p,
+            Prepared::Built(f) => &mut f.particles,
+        }
+    }
+
+    fn into_particles(self) -> Particles {
+        match self {
+            Prepared::Sorted(p) => p,
+            Prepared::Built(f) => f.particles,
+        }
+    }
 }
 
 pub struct CpuBackend {
     capabilities: Capabilities,
     uploaded: Option<Uploaded>,
-    field: Option<ReferenceField>,
+    prepared: Option<Prepared>,
     accumulator: Option<Accumulator>,
     timings: Timings,
 }
@@ -55,25 +79,30 @@ impl CpuBackend {
                 max_particles: None,
             },
             uploaded: None,
-            field: None,
+            prepared: None,
             accumulator: None,
             timings: Timings::default(),
         }
     }
 
     fn field(&self) -> Result<&ReferenceField, BackendError> {
-        self.field
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded("cpu"))
+        match &self.prepared {
+            Some(Prepared::Built(f)) => Ok(f),
+            _ => Err(BackendError::NothingUploaded("cpu")),
+        }
     }
 
-    fn prepare(up: &Uploaded, field: &FieldSettings) -> Result<Particles, BackendError> {
-        Ok(Particles::prepare(
-            &up.step,
-            field,
-            up.series_bounds,
-            up.series_range,
-        )?)
+    /// Re-evaluates the particles under `field` (checked first: on an error nothing changes),
+    /// returning them with the uploaded step.
+    fn apply_field(&mut self, field: &FieldSettings) -> Result<&mut Uploaded, BackendError> {
+        let (Some(up), Some(prepared)) = (self.uploaded.as_mut(), self.prepared.as_mut()) else {
+            return Err(BackendError::NothingUploaded("cpu"));
+        };
+        prepared
+            .particles_mut()
+            .apply_field(&up.step, field, up.series_range)?;
+        up.field = field.clone();
+        Ok(up)
     }
 }
 
@@ -94,61 +123,55 @@ impl Backend for CpuBackend {
 
     fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError> {
         let started = Instant::now();
-        let up = Uploaded {
+        let particles = Particles::prepare(
+            input.step,
+            input.field,
+            input.series_bounds,
+            input.series_range,
+        )?;
+        self.uploaded = Some(Uploaded {
             step: input.step.clone(),
             field: input.field.clone(),
             cluster: input.cluster,
-            series_bounds: input.series_bounds,
             series_range: input.series_range,
-            particles: Particles::prepare(
-                input.step,
-                input.field,
-                input.series_bounds,
-                input.series_range,
-            )?,
-        };
-        self.uploaded = Some(up);
-        self.field = None;
-        self.timings.upload = started.elapsed();
+        });
+        self.prepared = Some(Prepared::Sorted(particles));
+        // Nothing moves to a device: preparing is the whole upload.
+        self.timings.prepare = started.elapsed();
+        self.timings.upload = std::time::Duration::ZERO;
         Ok(())
     }
 
     fn build(&mut self) -> Result<(), BackendError> {
-        let up = self
-            .uploaded
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded("cpu"))?;
+        let (Some(up), Some(prepared)) = (&self.uploaded, self.prepared.take()) else {
+            return Err(BackendError::NothingUploaded("cpu"));
+        };
         let started = Instant::now();
-        self.field = Some(ReferenceField::new(up.particles.clone(), up.cluster));
+        self.prepared = Some(Prepared::Built(ReferenceField::new(
+            prepared.into_particles(),
+            up.cluster,
+        )));
         self.timings.build = started.elapsed();
         Ok(())
     }
 
     fn refit(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
-        let up = self
-            .uploaded
-            .as_mut()
-            .ok_or(BackendError::NothingUploaded("cpu"))?;
         let started = Instant::now();
-        up.particles = Self::prepare(up, field)?;
-        up.field = field.clone();
+        let cluster = self.apply_field(field)?.cluster;
         // Boxes change with the radii; the CPU BVH is rebuilt over them (obvhs builds in tens of
         // milliseconds per million boxes, and clusters that became empty leave the tree).
-        self.field = Some(ReferenceField::new(up.particles.clone(), up.cluster));
+        let particles = self
+            .prepared
+            .take()
+            .expect("applied above")
+            .into_particles();
+        self.prepared = Some(Prepared::Built(ReferenceField::new(particles, cluster)));
         self.timings.refit = started.elapsed();
         Ok(())
     }
 
     fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
-        let up = self
-            .uploaded
-            .as_mut()
-            .ok_or(BackendError::NothingUploaded("cpu"))?;
-        up.particles = Self::prepare(up, field)?;
-        up.field = field.clone();
-        if let Some(f) = &mut self.field {
-            f.particles = up.particles.clone();
-        }
+        self.apply_field(field)?;
         Ok(())
     }
 
@@ -162,10 +185,7 @@ impl Backend for CpuBackend {
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
         let started = Instant::now();
-        let field = self
-            .field
-            .as_ref()
-            .ok_or(BackendError::NothingUploaded("cpu"))?;
+        let field = self.field()?;
         let (w, h) = (frame.width, frame.height);
         let tiles_x = w.div_ceil(TILE);
         let tiles: Vec<Vec<[f64; 4]>> = (0..tiles_x * h.div_ceil(TILE))
@@ -222,8 +242,12 @@ impl Backend for CpuBackend {
     }
 
     fn memory(&self) -> MemoryReport {
-        let particle_bytes = self.uploaded.as_ref().map_or(0, |u| {
-            let p = &u.particles;
+        let particles = match &self.prepared {
+            Some(Prepared::Sorted(p)) => Some(p),
+            Some(Prepared::Built(f)) => Some(&f.particles),
+            None => None,
+        };
+        let particle_bytes = particles.map_or(0, |p| {
             p.len() * (24 + 8 + 8 + 4)
                 + match &p.theta {
                     crate::field::Theta::None => 0,
@@ -233,10 +257,7 @@ impl Backend for CpuBackend {
         });
         MemoryReport {
             particle_bytes,
-            structure_bytes: self
-                .field
-                .as_ref()
-                .map_or(0, ReferenceField::structure_bytes),
+            structure_bytes: self.field().map_or(0, ReferenceField::structure_bytes),
             image_bytes: self.accumulator.as_ref().map_or(0, Accumulator::bytes),
         }
     }

@@ -312,6 +312,7 @@ impl Backend for WgpuBackend {
     fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError> {
         let started = Instant::now();
         let data = GpuStepData::prepare(input)?;
+        self.timings.prepare = started.elapsed();
         let n = data.points.len();
         let clusters = data.field.counts[1] as usize;
         let has_radius = data.radius_attribute.is_some();
@@ -418,7 +419,7 @@ impl Backend for WgpuBackend {
         );
         self.scene = Some(scene);
         self.built = None;
-        self.timings.upload = started.elapsed();
+        self.timings.upload = started.elapsed() - self.timings.prepare;
         Ok(())
     }
 

@@ -17,7 +17,7 @@ use crate::values::{ColourMode, Integrator, NoiseKind, Step};
 
 /// The uploaded step and its buffers.
 pub(super) struct Scene {
-    pub(super) step: Step,
+    pub(super) step: std::sync::Arc<Step>,
     pub(super) field: FieldSettings,
     pub(super) cluster: ClusterSize,
     pub(super) series_range: Option<(f64, f64)>,
