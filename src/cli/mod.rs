@@ -1,5 +1,6 @@
 //! The `aarbf` command line: argument definitions and the commands behind them.
 
+mod bench;
 mod field;
 mod generate;
 mod info;
@@ -10,6 +11,7 @@ mod stbn;
 
 use clap::{Parser, Subcommand};
 
+pub use bench::BenchArgs;
 pub use field::FieldArgs;
 pub use generate::GenerateArgs;
 pub use info::InfoArgs;
@@ -47,6 +49,9 @@ pub enum Command {
     Stbn(StbnArgs),
     /// Write a synthetic data set (uniform, random, clusters, dambreak-demo).
     Generate(GenerateArgs),
+    /// Measure this machine on your data: `aarbf bench playback` plays a series and says where
+    /// each step's time goes.
+    Bench(BenchArgs),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -57,5 +62,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Slice(a) => slice::run(a),
         Command::Stbn(a) => stbn::run(a),
         Command::Generate(a) => generate::run(a),
+        Command::Bench(a) => bench::run(a),
     }
 }

@@ -27,6 +27,10 @@ pub struct DataArgs {
     /// The time step to use (0-based).
     #[arg(long)]
     pub step: Option<usize>,
+    /// The most memory, in MiB, that steps read from disk are kept in (the least recently
+    /// used go first; a series larger than this plays with memory bounded by it).
+    #[arg(long, default_value_t = 2048)]
+    pub cache_mib: usize,
 }
 
 /// How the field is defined.
@@ -159,7 +163,7 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
         &OpenOptions {
             format: data.format.or(scene.data.format),
             attributes: selection,
-            ..OpenOptions::default()
+            cache_bytes: data.cache_mib << 20,
         },
     )?;
     let step = data.step.or(scene.data.step).unwrap_or(0);

@@ -2,7 +2,9 @@
 //! sets.
 
 pub mod camera;
+pub mod index;
 pub mod maps;
+pub mod prefetch;
 pub mod series;
 pub mod synth;
 

@@ -1,12 +1,17 @@
 //! A time series of steps, loaded lazily from disk and cached up to a size bound.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::Path;
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
+use rayon::prelude::*;
+
+use super::index::{FileStamp, SeriesIndex, StepStats};
 use crate::io::{self, AttributeSelection, DataError, Format, StepRef};
 use crate::progress;
-use crate::values::{Bounds, Step, value_range};
+use crate::values::{Bounds, Step};
 
 /// How to open a series.
 #[derive(Clone, Debug)]
@@ -57,58 +62,138 @@ enum Source {
     Memory(Vec<Arc<Step>>),
 }
 
-/// A time series of particle steps. Opening scans every step once for the series' bounds,
-/// counts and attribute ranges; later reads come from a bounded cache or from disk.
+/// A time series of particle steps. Opening learns the series' bounds, counts and attribute
+/// ranges (from the index beside the data, or by reading each step once); later reads come
+/// from a bounded cache or from disk.
 pub struct TimeSeries {
     source: Source,
     steps: Vec<StepInfo>,
     attributes: Vec<AttributeInfo>,
     bounds: Bounds,
     cache: Mutex<StepCache>,
+    /// Signalled when a step being read (`StepCache::loading`) arrives.
+    loaded: Condvar,
+    /// Steps decoded from their files so far (opening, and reads the cache missed).
+    decoded: AtomicUsize,
 }
 
 impl TimeSeries {
     /// Opens the series at `path` (a file, a directory or a glob).
+    ///
+    /// The series' bounds, counts and attribute ranges come from the index beside the data
+    /// ([`super::index`]) for every step file it knows unchanged; the other steps are read
+    /// (in parallel, each kept in the cache while it fits) and the index updated, so the next
+    /// open reads nothing. Either way the values are the same, bit for bit.
     pub fn open(path: &Path, options: &OpenOptions) -> Result<TimeSeries, DataError> {
         let refs = io::list_steps(path, options.format)?;
-        let mut cache = StepCache::new(options.cache_bytes);
-        let mut selection = options.attributes.clone();
-        let mut infos = Vec::with_capacity(refs.len());
-        let mut ranges: Vec<AttributeInfo> = Vec::new();
-        let bar = progress::bar(refs.len() as u64, "scanning steps");
-        for (i, r) in refs.iter().enumerate() {
-            let step = io::read_step(r, &selection)?;
-            if i == 0 {
-                // Every later step must carry the first step's attributes.
-                selection = AttributeSelection::Only(
-                    step.attributes.iter().map(|a| a.name.clone()).collect(),
-                );
+        let mut index = SeriesIndex::load(&refs);
+        let cache = Mutex::new(StepCache::new(options.cache_bytes));
+        let decoded = AtomicUsize::new(0);
+        // Reads one step for its statistics, keeping it in the cache.
+        let scan = |i: usize, selection: &AttributeSelection| {
+            let r = &refs[i];
+            let stamp = FileStamp::of(&r.path);
+            let step = io::read_step(r, selection)?;
+            decoded.fetch_add(1, Ordering::Relaxed);
+            let stats = StepStats::of(&step, selection);
+            cache.lock().unwrap().insert(i, Arc::new(step));
+            Ok::<_, DataError>((stats, stamp))
+        };
+        let Some(first) = refs.first() else {
+            // A `.particles` header that names no steps.
+            return Ok(TimeSeries::assemble(
+                Source::Files {
+                    steps: refs,
+                    selection: options.attributes.clone(),
+                },
+                Vec::new(),
+                Vec::new(),
+                StepCache::new(0),
+            ));
+        };
+        // Every later step must carry the first step's attributes.
+        let first_stats = match index.get(first, &options.attributes) {
+            Some(stats) => stats,
+            None => {
+                let (stats, stamp) = scan(0, &options.attributes)?;
+                index.insert(first, stamp, &stats);
+                stats
             }
-            merge_ranges(&mut ranges, &step);
-            infos.push(info_of(&step));
-            cache.insert(i, Arc::new(step));
-            bar.inc(1);
-        }
+        };
+        let selection = AttributeSelection::Only(
+            first_stats
+                .attributes
+                .iter()
+                .map(|a| a.name.clone())
+                .collect(),
+        );
+        let known: Vec<Option<StepStats>> =
+            refs[1..].iter().map(|r| index.get(r, &selection)).collect();
+        let missing = known.iter().filter(|k| k.is_none()).count();
+        let bar = progress::bar(missing as u64, "scanning steps");
+        let scanned: Vec<(usize, StepStats, Option<FileStamp>)> = known
+            .par_iter()
+            .enumerate()
+            .filter(|(_, k)| k.is_none())
+            .map(|(k, _)| {
+                let (stats, stamp) = scan(k + 1, &selection)?;
+                bar.inc(1);
+                Ok((k + 1, stats, stamp))
+            })
+            .collect::<Result<_, DataError>>()?;
         bar.finish_and_clear();
-        Ok(TimeSeries::assemble(
+        let mut stats: Vec<Option<StepStats>> =
+            std::iter::once(Some(first_stats)).chain(known).collect();
+        for (i, s, stamp) in scanned {
+            index.insert(&refs[i], stamp, &s);
+            stats[i] = Some(s);
+        }
+        index.save();
+        let stats: Vec<StepStats> = stats
+            .into_iter()
+            .map(|s| s.expect("every step known or scanned"))
+            .collect();
+        let infos = refs
+            .iter()
+            .zip(&stats)
+            .map(|(r, s)| StepInfo {
+                name: r.name.clone(),
+                count: s.count,
+                bounds: s.bounds,
+                bytes: s.bytes,
+            })
+            .collect();
+        let ranges = series_ranges(&stats);
+        let mut series = TimeSeries::assemble(
             Source::Files {
                 steps: refs,
                 selection,
             },
             infos,
             ranges,
-            cache,
-        ))
+            cache.into_inner().unwrap(),
+        );
+        series.decoded = decoded;
+        Ok(series)
     }
 
     /// A series held in memory (generated data, tests). Steps may be empty.
     pub fn from_steps(steps: Vec<Step>) -> TimeSeries {
-        let mut ranges = Vec::new();
-        let mut infos = Vec::with_capacity(steps.len());
-        for s in &steps {
-            merge_ranges(&mut ranges, s);
-            infos.push(info_of(s));
-        }
+        let stats: Vec<StepStats> = steps
+            .iter()
+            .map(|s| StepStats::of(s, &AttributeSelection::All))
+            .collect();
+        let infos = steps
+            .iter()
+            .zip(&stats)
+            .map(|(step, s)| StepInfo {
+                name: step.name.clone(),
+                count: s.count,
+                bounds: s.bounds,
+                bytes: s.bytes,
+            })
+            .collect();
+        let ranges = series_ranges(&stats);
         let steps = steps.into_iter().map(Arc::new).collect();
         TimeSeries::assemble(Source::Memory(steps), infos, ranges, StepCache::new(0))
     }
@@ -126,6 +211,8 @@ impl TimeSeries {
             attributes,
             bounds,
             cache: Mutex::new(cache),
+            loaded: Condvar::new(),
+            decoded: AtomicUsize::new(0),
         }
     }
 
@@ -193,14 +280,79 @@ impl TimeSeries {
         match &self.source {
             Source::Memory(steps) => Ok(steps[index].clone()),
             Source::Files { steps, selection } => {
-                if let Some(s) = self.cache.lock().unwrap().get(index) {
-                    return Ok(s);
+                // A step another thread (the prefetcher) is reading is waited for, not read twice.
+                let mut cache = self.cache.lock().unwrap();
+                loop {
+                    if let Some(s) = cache.get(index) {
+                        return Ok(s);
+                    }
+                    if cache.loading.insert(index) {
+                        break;
+                    }
+                    cache = self.loaded.wait(cache).unwrap();
                 }
-                let step = Arc::new(io::read_step(&steps[index], selection)?);
-                self.cache.lock().unwrap().insert(index, step.clone());
-                Ok(step)
+                drop(cache);
+                let started = Instant::now();
+                let read = io::read_step(&steps[index], selection).map(Arc::new);
+                let mut cache = self.cache.lock().unwrap();
+                cache.loading.remove(&index);
+                if let Ok(step) = &read {
+                    self.decoded.fetch_add(1, Ordering::Relaxed);
+                    cache.read_times.insert(index, started.elapsed());
+                    cache.insert(index, step.clone());
+                }
+                self.loaded.notify_all();
+                read
             }
         }
+    }
+
+    /// How long the last read of step `index` from its file took (reading and decoding, on
+    /// whichever thread read it), if it was read from a file.
+    pub fn read_time(&self, index: usize) -> Option<Duration> {
+        self.cache.lock().unwrap().read_times.get(&index).copied()
+    }
+
+    /// The file step `index` is read from (`None` for a series held in memory).
+    pub fn step_file(&self, index: usize) -> Option<&Path> {
+        match &self.source {
+            Source::Files { steps, .. } => steps.get(index).map(|r| r.path.as_path()),
+            Source::Memory(_) => None,
+        }
+    }
+
+    /// Whether step `index` is held in memory now (a step read from memory always is).
+    pub fn is_cached(&self, index: usize) -> bool {
+        match &self.source {
+            Source::Memory(_) => true,
+            Source::Files { .. } => self.cache.lock().unwrap().contains(index),
+        }
+    }
+
+    /// Drops every cached step (steps in use elsewhere live on until they are dropped there).
+    pub fn clear_cache(&self) {
+        let mut cache = self.cache.lock().unwrap();
+        cache.entries.clear();
+        cache.bytes = 0;
+    }
+
+    /// Marks the cached steps among `indices` as just used, in this order: the cache drops
+    /// the least recently used first, so these stay while older steps go.
+    pub fn touch(&self, indices: &[usize]) {
+        let mut cache = self.cache.lock().unwrap();
+        for &i in indices {
+            cache.get(i);
+        }
+    }
+
+    /// The most bytes of steps the cache keeps.
+    pub fn cache_limit(&self) -> usize {
+        self.cache.lock().unwrap().limit
+    }
+
+    /// Steps decoded from files so far, by the open and by reads the cache missed.
+    pub fn steps_decoded(&self) -> usize {
+        self.decoded.load(Ordering::Relaxed)
     }
 
     /// Bytes of steps held in the cache now.
@@ -209,41 +361,31 @@ impl TimeSeries {
     }
 }
 
-fn info_of(step: &Step) -> StepInfo {
-    StepInfo {
-        name: step.name.clone(),
-        count: step.len(),
-        bounds: step.bounds(),
-        bytes: step.bytes(),
-    }
-}
-
-fn merge_ranges(ranges: &mut Vec<AttributeInfo>, step: &Step) {
-    for a in &step.attributes {
-        let Some((lo, hi)) = value_range(&a.values) else {
-            continue;
-        };
-        let (n, mean) = (
-            a.values.len(),
-            a.values.iter().sum::<f64>() / a.values.len() as f64,
-        );
-        match ranges.iter_mut().find(|r| r.name == a.name) {
-            Some(r) => {
-                r.min = r.min.min(lo);
-                r.max = r.max.max(hi);
-                let total = r.count + n;
-                r.mean = (r.mean * r.count as f64 + mean * n as f64) / total as f64;
-                r.count = total;
+/// The series-wide range and mean of each attribute, merged from the steps' statistics in
+/// step order (so the same statistics, scanned or from the index, give the same values).
+fn series_ranges(steps: &[StepStats]) -> Vec<AttributeInfo> {
+    let mut ranges: Vec<AttributeInfo> = Vec::new();
+    for step in steps {
+        for a in &step.attributes {
+            match ranges.iter_mut().find(|r| r.name == a.name) {
+                Some(r) => {
+                    r.min = r.min.min(a.min);
+                    r.max = r.max.max(a.max);
+                    let total = r.count + a.count;
+                    r.mean = (r.mean * r.count as f64 + a.mean * a.count as f64) / total as f64;
+                    r.count = total;
+                }
+                None => ranges.push(AttributeInfo {
+                    name: a.name.clone(),
+                    min: a.min,
+                    max: a.max,
+                    mean: a.mean,
+                    count: a.count,
+                }),
             }
-            None => ranges.push(AttributeInfo {
-                name: a.name.clone(),
-                min: lo,
-                max: hi,
-                mean,
-                count: n,
-            }),
         }
     }
+    ranges
 }
 
 /// Least-recently-used steps, bounded in bytes. The step last inserted is always kept, even
@@ -252,6 +394,9 @@ struct StepCache {
     limit: usize,
     bytes: usize,
     entries: VecDeque<(usize, Arc<Step>)>,
+    /// Steps some thread is reading now.
+    loading: HashSet<usize>,
+    read_times: HashMap<usize, Duration>,
 }
 
 impl StepCache {
@@ -260,6 +405,8 @@ impl StepCache {
             limit,
             bytes: 0,
             entries: VecDeque::new(),
+            loading: HashSet::new(),
+            read_times: HashMap::new(),
         }
     }
 
@@ -269,6 +416,10 @@ impl StepCache {
         let step = entry.1.clone();
         self.entries.push_back(entry);
         Some(step)
+    }
+
+    fn contains(&self, index: usize) -> bool {
+        self.entries.iter().any(|(i, _)| *i == index)
     }
 
     fn insert(&mut self, index: usize, step: Arc<Step>) {

@@ -347,7 +347,9 @@ fn dambreak(n: usize, steps: usize, seed: u64) -> Vec<Step> {
     let hi = tank - radius;
 
     let mut out = Vec::with_capacity(steps);
+    let bar = crate::progress::bar(steps as u64, "simulating");
     for step in 0..steps {
+        bar.inc(1);
         if step > 0 {
             for _ in 0..substeps {
                 let mut p: Vec<DVec3> = x
@@ -434,5 +436,6 @@ fn dambreak(n: usize, steps: usize, seed: u64) -> Vec<Step> {
             ],
         });
     }
+    bar.finish_and_clear();
     out
 }

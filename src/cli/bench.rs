@@ -1,0 +1,422 @@
+//! `aarbf bench`: measurements a user runs on their own data and machine.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+
+use super::render::step_range;
+use super::settings::{DataArgs, FieldOptions, resolve};
+use crate::backend::{self, BackendKind};
+use crate::render::{RenderSession, RenderSettings};
+use crate::scene::TimeSeries;
+use crate::scene::prefetch::Prefetcher;
+use crate::values::Step;
+
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub what: BenchCommand,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Play a series step by step as a viewer does (the next steps read ahead on a worker
+    /// thread) and write where each step's time goes: a CSV with one row per step and stage,
+    /// and a Markdown summary with steps per second, each stage's share, the floors (copying
+    /// a step in memory, reading its file from the page cache) and peak memory.
+    Playback(PlaybackArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct PlaybackArgs {
+    #[command(flatten)]
+    pub data: DataArgs,
+    #[command(flatten)]
+    pub field: FieldOptions,
+    /// The steps to play, `a..b` or `a..=b` (default: all).
+    #[arg(long)]
+    pub steps: Option<String>,
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendKind,
+    /// Preview size, WxH.
+    #[arg(long, default_value = "256x256", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Frames per step.
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Where playback.csv and playback.md are written (created if missing).
+    #[arg(long, default_value = "playback")]
+    pub out: PathBuf,
+    /// Overwrite existing results.
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{text}' is not WxH"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&v| (1..=16384).contains(&v))
+            .ok_or_else(|| format!("'{text}': sizes are 1..=16384"))
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+    match args.what {
+        BenchCommand::Playback(a) => playback(a),
+    }
+}
+
+/// The stages of a step change, in the order a step goes through them.
+const STAGES: [&str; 6] = [
+    "read+decode",
+    "wait for step",
+    "prepare (cpu)",
+    "upload",
+    "build",
+    "frame",
+];
+
+struct StepTimes {
+    step: usize,
+    particles: usize,
+    bytes: usize,
+    /// Seconds per stage of `STAGES`, and the whole step as the player saw it.
+    stages: [f64; 6],
+    total: f64,
+    /// Whether the worker had read the step before the player asked for it.
+    prefetched: bool,
+}
+
+fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
+    let csv = args.out.join("playback.csv");
+    let md = args.out.join("playback.md");
+    for p in [&csv, &md] {
+        crate::io::output::check_writable(p, args.force)?;
+    }
+    let opened = Instant::now();
+    let resolved = resolve(&args.data, &args.field)?;
+    let open_time = opened.elapsed();
+    let series = &resolved.series;
+    let open_decoded = series.steps_decoded();
+    let steps: Vec<usize> = match &args.steps {
+        Some(text) => step_range(text, series.len())?.collect(),
+        None => (0..series.len()).collect(),
+    };
+    anyhow::ensure!(!steps.is_empty(), "no steps to play");
+    let backend = backend::create(args.backend)?;
+    let device = format!(
+        "{} ({})",
+        backend.capabilities().name,
+        backend.capabilities().device
+    );
+    tracing::info!("backend: {device}");
+    let mut session = RenderSession::new(backend, series);
+    let settings = RenderSettings {
+        width: args.size.0,
+        height: args.size.1,
+        ..RenderSettings::default()
+    };
+    // Played as a series opened with its index is: nothing in memory yet, every step read
+    // (ahead) during playback.
+    series.clear_cache();
+    let bar = crate::progress::bar(steps.len() as u64, "playing");
+    let played = Instant::now();
+    let times = std::thread::scope(|scope| -> anyhow::Result<Vec<StepTimes>> {
+        let prefetcher = Prefetcher::spawn(scope, series);
+        let mut times = Vec::with_capacity(steps.len());
+        for (k, &step) in steps.iter().enumerate() {
+            let started = Instant::now();
+            let prefetched = series.is_cached(step);
+            prefetcher.plan(step, steps[k + 1..].iter().copied());
+            let data = series.step(step)?;
+            let wait = started.elapsed();
+            session.show(series, step, &resolved.field, resolved.cluster)?;
+            let t = session.backend().timings();
+            let frame = Instant::now();
+            session.accumulate(&settings, args.spp)?;
+            let frame = frame.elapsed();
+            times.push(StepTimes {
+                step,
+                particles: data.len(),
+                bytes: data.bytes(),
+                stages: [
+                    series.read_time(step).unwrap_or_default(),
+                    wait,
+                    t.prepare,
+                    t.upload,
+                    t.build,
+                    frame,
+                ]
+                .map(|d| d.as_secs_f64()),
+                total: started.elapsed().as_secs_f64(),
+                prefetched,
+            });
+            bar.inc(1);
+        }
+        Ok(times)
+    })?;
+    let play_time = played.elapsed();
+    bar.finish_and_clear();
+    // The image is read back once, as a batch render writes it, and kept for the record.
+    let image = session.image()?;
+    let peak = peak_resident_bytes();
+    let floors = floors(series, &steps)?;
+
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let mut rows = String::from("step,particles,bytes,stage,seconds\n");
+    for t in &times {
+        for (stage, s) in STAGES.iter().zip(t.stages) {
+            writeln!(
+                rows,
+                "{},{},{},{stage},{s:.6}",
+                t.step, t.particles, t.bytes
+            )?;
+        }
+        writeln!(
+            rows,
+            "{},{},{},step,{:.6}",
+            t.step, t.particles, t.bytes, t.total
+        )?;
+    }
+    for (step, f) in steps.iter().zip(&floors) {
+        let (n, bytes) = (series.steps()[*step].count, series.steps()[*step].bytes);
+        writeln!(
+            rows,
+            "{step},{n},{bytes},floor: copy in memory,{:.6}",
+            f.copy
+        )?;
+        if let Some(r) = f.page_cache {
+            writeln!(
+                rows,
+                "{step},{n},{bytes},floor: read from page cache,{r:.6}"
+            )?;
+        }
+    }
+    crate::io::output::write_atomically(&csv, true, |p| std::fs::write(p, &rows))?;
+
+    let summary = summarise(&Summary {
+        args: &args,
+        device: &device,
+        series,
+        times: &times,
+        floors: &floors,
+        open_time,
+        open_decoded,
+        play_time,
+        peak,
+        backend_bytes: {
+            let m = session.backend().memory();
+            m.particle_bytes + m.structure_bytes + m.image_bytes
+        },
+        image_mean: image.pixels.iter().map(|p| p[3]).sum::<f32>() / image.pixels.len() as f32,
+    });
+    crate::io::output::write_atomically(&md, true, |p| std::fs::write(p, &summary))?;
+    println!("{summary}");
+    tracing::info!("wrote {} and {}", csv.display(), md.display());
+    Ok(())
+}
+
+struct Floor {
+    /// Copying the step's bytes into memory that is already allocated.
+    copy: f64,
+    /// Reading the step's file (from the page cache: it was just read), if it has one.
+    page_cache: Option<f64>,
+}
+
+fn floors(series: &TimeSeries, steps: &[usize]) -> anyhow::Result<Vec<Floor>> {
+    let mut out = Vec::with_capacity(steps.len());
+    let mut positions = Vec::new();
+    let mut values = Vec::new();
+    for &i in steps {
+        let step = series.step(i)?;
+        let copy = best_of(3, || copy_step(&step, &mut positions, &mut values));
+        let page_cache = match series.step_file(i) {
+            Some(path) => {
+                let mut buffer = Vec::new();
+                Some(best_of(3, || read_file(path, &mut buffer)))
+            }
+            None => None,
+        };
+        out.push(Floor { copy, page_cache });
+    }
+    Ok(out)
+}
+
+fn best_of(n: usize, mut f: impl FnMut()) -> f64 {
+    (0..n)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn copy_step(step: &Step, positions: &mut Vec<glam::DVec3>, values: &mut Vec<f64>) {
+    positions.clear();
+    positions.extend_from_slice(&step.positions);
+    values.clear();
+    for a in &step.attributes {
+        values.extend_from_slice(&a.values);
+    }
+    std::hint::black_box((positions, values));
+}
+
+fn read_file(path: &Path, buffer: &mut Vec<u8>) {
+    use std::io::Read;
+    buffer.clear();
+    if let Ok(mut f) = std::fs::File::open(path) {
+        let _ = f.read_to_end(buffer);
+    }
+    std::hint::black_box(buffer);
+}
+
+/// The process's peak resident memory (Linux: VmHWM), if the system reports it.
+fn peak_resident_bytes() -> Option<usize> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+struct Summary<'a> {
+    args: &'a PlaybackArgs,
+    device: &'a str,
+    series: &'a TimeSeries,
+    times: &'a [StepTimes],
+    floors: &'a [Floor],
+    open_time: Duration,
+    open_decoded: usize,
+    play_time: Duration,
+    peak: Option<usize>,
+    backend_bytes: usize,
+    image_mean: f32,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn summarise(s: &Summary<'_>) -> String {
+    let mut out = String::new();
+    let n = s.times.len();
+    // The first step also creates pipelines and buffers and computes the series' automatic
+    // values: the rates are over the steps after it (all of them if only one was played).
+    let steady = if n > 1 { &s.times[1..] } else { s.times };
+    let steady_total: f64 = steady.iter().map(|t| t.total).sum();
+    let mib = |b: usize| b as f64 / 1048576.0;
+    let max_step = s.series.steps().iter().map(|i| i.bytes).max().unwrap_or(0);
+    let _ = writeln!(out, "# Playback: {}\n", s.series.steps()[0].name);
+    let _ = writeln!(
+        out,
+        "{n} steps of up to {} particles ({:.1} MiB per step in memory), {}x{} at {} spp, \
+         backend {}.\n",
+        s.series.max_count(),
+        mib(max_step),
+        s.args.size.0,
+        s.args.size.1,
+        s.args.spp,
+        s.device
+    );
+    let _ = writeln!(
+        out,
+        "- opening the series: {:.3} s, {} of {} steps decoded (the rest from the index)",
+        s.open_time.as_secs_f64(),
+        s.open_decoded,
+        s.series.len()
+    );
+    let _ = writeln!(
+        out,
+        "- playback: {:.2} steps/s over steps 2..{n} ({:.3} s per step; {:.2} s in all, the \
+         first step included); {} of {n} steps were read ahead before the player needed them",
+        steady.len() as f64 / steady_total,
+        steady_total / steady.len() as f64,
+        s.play_time.as_secs_f64(),
+        s.times.iter().filter(|t| t.prefetched).count()
+    );
+    let _ = writeln!(
+        out,
+        "\n| stage | median (ms) | mean (ms) | share of a step |"
+    );
+    let _ = writeln!(out, "|---|---|---|---|");
+    for (k, stage) in STAGES.iter().enumerate() {
+        let v: Vec<f64> = steady.iter().map(|t| t.stages[k]).collect();
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let share = if k == 0 {
+            // Reading happens on the worker, overlapped with rendering; what it costs the
+            // player is the wait.
+            "(worker, overlapped)".to_string()
+        } else {
+            format!("{:.0}%", 100.0 * v.iter().sum::<f64>() / steady_total)
+        };
+        let _ = writeln!(
+            out,
+            "| {stage} | {:.2} | {:.2} | {share} |",
+            1e3 * median(v.clone()),
+            1e3 * mean
+        );
+    }
+    let _ = writeln!(
+        out,
+        "| whole step | {:.2} | {:.2} | 100% |",
+        1e3 * median(steady.iter().map(|t| t.total).collect()),
+        1e3 * steady_total / steady.len() as f64
+    );
+    let copy = median(s.floors.iter().map(|f| f.copy).collect());
+    let _ = writeln!(out, "\nFloors, per step (median, best of 3 each):\n");
+    let _ = writeln!(
+        out,
+        "- copying the step's bytes in memory: {:.2} ms; CPU work per step change \
+         (prepare + upload) is {:.1}x that",
+        1e3 * copy,
+        median(steady.iter().map(|t| t.stages[2] + t.stages[3]).collect()) / copy
+    );
+    let page: Vec<f64> = s.floors.iter().filter_map(|f| f.page_cache).collect();
+    if !page.is_empty() {
+        let _ = writeln!(
+            out,
+            "- reading the step's file from the page cache: {:.2} ms; reading and decoding it \
+             is {:.1}x that",
+            1e3 * median(page.clone()),
+            median(steady.iter().map(|t| t.stages[0]).collect()) / median(page)
+        );
+    }
+    let bound = s.series.cache_limit();
+    match s.peak {
+        Some(peak) => {
+            let _ = writeln!(
+                out,
+                "\nPeak resident memory: {:.0} MiB (the step cache's bound {:.0} MiB + the \
+                 largest step {:.1} MiB + the backend's buffers {:.1} MiB = {:.0} MiB).",
+                mib(peak),
+                mib(bound),
+                mib(max_step),
+                mib(s.backend_bytes),
+                mib(bound + max_step + s.backend_bytes)
+            );
+        }
+        None => {
+            let _ = writeln!(out, "\nPeak resident memory: not reported by this system.");
+        }
+    }
+    let _ = writeln!(
+        out,
+        "\nLast frame's mean opacity: {:.4} (a check that frames were drawn).",
+        s.image_mean
+    );
+    out
+}
