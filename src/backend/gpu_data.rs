@@ -263,3 +263,90 @@ pub fn f32_phi_error(largest: f64, r_min: f64, r_max: f64) -> f64 {
     let delta = 3f64.sqrt() * f64::from(f32::EPSILON) * 0.5 * (2.0 * largest + r_max);
     9.0 * delta / r_min
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use glam::DVec3;
+    use rand::{Rng, SeedableRng};
+
+    use super::*;
+    use crate::values::{Attribute, Bounds};
+
+    /// `n` particles uniform in a cube of side `side` centred at `offset`, written as f64 the
+    /// way a simulation would (no f32-exact coordinates).
+    fn cube(n: usize, side: f64, offset: f64) -> Arc<Step> {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let positions: Vec<DVec3> = (0..n)
+            .map(|_| {
+                DVec3::new(rng.random(), rng.random(), rng.random()) * side + DVec3::splat(offset)
+            })
+            .collect();
+        let values = (0..n).map(|_| rng.random::<f64>()).collect();
+        Arc::new(Step {
+            name: "cube".into(),
+            positions,
+            attributes: vec![Attribute {
+                name: "s".into(),
+                values,
+            }],
+        })
+    }
+
+    fn prepared(step: &Arc<Step>, radius: f64, precision: Precision) -> GpuStepData {
+        let field = FieldSettings::new(Some("s"), radius);
+        GpuStepData::prepare(&StepInput {
+            step,
+            field: &field,
+            cluster: ClusterSize::new(1).unwrap(),
+            series_bounds: Bounds::of_points(&step.positions),
+            series_range: Some((0.0, 1.0)),
+            precision,
+        })
+        .unwrap()
+    }
+
+    /// A scene pays for double-single positions only when its radii and extent need them: an
+    /// image of a unit-cube scene at a radius of 2% of the domain stays in f32 (16 B a
+    /// particle), the same scene asked for field values at 1e-5 needs the pairs, and so does
+    /// an image whose radii are 1e-6 of the domain, or whose domain lies at 1e6 with radii
+    /// of 1e-4 (offsets alone cost nothing: local coordinates remove them).
+    #[test]
+    fn auto_precision_pays_for_pairs_only_where_the_scene_needs_them() {
+        let unit = cube(2000, 1.0, 0.0);
+        let image = prepared(&unit, 0.02, Precision::RENDER);
+        assert!(!image.double_single(), "bound {}", image.f32_error_bound);
+        assert_eq!(image.particle_bytes(), 2000 * 16);
+        let field = prepared(&unit, 0.02, Precision::FIELD);
+        assert!(field.double_single(), "bound {}", field.f32_error_bound);
+        assert_eq!(field.particle_bytes(), 2000 * 32);
+        assert!(prepared(&unit, 1e-6, Precision::RENDER).double_single());
+
+        let far = cube(2000, 1.0, 1e6);
+        let far_image = prepared(&far, 0.02, Precision::RENDER);
+        assert!(!far_image.double_single(), "an offset alone needs no pairs");
+        assert!(
+            (far_image.f32_error_bound - image.f32_error_bound).abs()
+                < 1e-3 * image.f32_error_bound,
+            "the bound depends on the local extent, not the offset: {} vs {}",
+            far_image.f32_error_bound,
+            image.f32_error_bound
+        );
+        assert!(prepared(&far, 1e-4, Precision::RENDER).double_single());
+
+        // The pairs hold what f32 loses: hi + lo equals the f64 local position to ~48 bits.
+        let pairs = prepared(&far, 1e-4, Precision::RENDER);
+        let lo = pairs.points_lo.as_ref().unwrap();
+        for (k, &i) in pairs.order.iter().enumerate().step_by(97) {
+            let local = far.positions[i as usize] - pairs.origin;
+            for a in 0..3 {
+                let sum = f64::from(pairs.points[k][a]) + f64::from(lo[k][a]);
+                assert!((sum - local[a]).abs() <= 1e-13, "{sum} vs {}", local[a]);
+            }
+        }
+        // Forced precisions are obeyed either way.
+        assert!(!prepared(&unit, 1e-6, Precision::F32).double_single());
+        assert!(prepared(&unit, 0.5, Precision::DoubleSingle).double_single());
+    }
+}
