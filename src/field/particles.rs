@@ -123,35 +123,57 @@ impl Particles {
             range,
         } = FieldInputs::check(step, settings, series_range)?;
         let tables = FieldTables::of(settings);
-        let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(a.values[i], range));
         let order = &self.order;
-        let radius_of = |i: usize| {
-            particle_radius(
+        // One pass over the sorted particles reads each one's attribute and radius once (the
+        // reads go through `order`, so they are the cost) and writes radius, weight and theta
+        // together, into the buffers of the last call.
+        let evaluate = |i: u32| {
+            let i = i as usize;
+            let t = attribute.map_or(0.5, |a| normalise(a.values[i], range));
+            let r = particle_radius(
                 settings.radius,
-                lookup(&tables.radius, t_of(i)),
+                lookup(&tables.radius, t),
                 per_particle_radius.map(|h| h.values[i]),
-            )
+            );
+            (t, (r, lookup(&tables.density, t)))
         };
-        refill(&mut self.radii, order, radius_of);
-        refill(&mut self.weights, order, |i| {
-            lookup(&tables.density, t_of(i))
-        });
+        let n = order.len();
+        // Sized once and overwritten in place (a step of the same size allocates nothing).
+        self.radii.resize(n, 0.0);
+        self.weights.resize(n, 0.0);
+        let (radii, weights) = (&mut self.radii[..], &mut self.weights[..]);
+        let old_theta = std::mem::replace(&mut self.theta, Theta::None);
         self.theta = match (attribute, settings.classification) {
-            (None, _) => Theta::None,
+            (None, _) => {
+                (order, radii, weights)
+                    .into_par_iter()
+                    .for_each(|(&i, r, w)| (_, (*r, *w)) = evaluate(i));
+                Theta::None
+            }
             (Some(_), Classification::Post) => {
-                let mut t = match std::mem::replace(&mut self.theta, Theta::None) {
+                let mut t = match old_theta {
                     Theta::Scalar(v) => v,
                     _ => Vec::new(),
                 };
-                refill(&mut t, order, t_of);
+                t.resize(n, 0.0);
+                (order, radii, weights, &mut t[..])
+                    .into_par_iter()
+                    .for_each(|(&i, r, w, t)| (*t, (*r, *w)) = evaluate(i));
                 Theta::Scalar(t)
             }
             (Some(_), Classification::Pre) => {
-                let mut c = match std::mem::replace(&mut self.theta, Theta::None) {
+                let mut c = match old_theta {
                     Theta::Rgb(v) => v,
                     _ => Vec::new(),
                 };
-                refill(&mut c, order, |i| lookup_colour(&tables.colour, t_of(i)));
+                c.resize(n, [0.0; 3]);
+                (order, radii, weights, &mut c[..])
+                    .into_par_iter()
+                    .for_each(|(&i, r, w, c)| {
+                        let t;
+                        (t, (*r, *w)) = evaluate(i);
+                        *c = lookup_colour(&tables.colour, t);
+                    });
                 Theta::Rgb(c)
             }
         };
@@ -166,13 +188,4 @@ impl Particles {
     pub fn is_empty(&self) -> bool {
         self.centers.is_empty()
     }
-}
-
-/// `out[k] = value(order[k])` for every sorted particle, reusing `out`'s allocation.
-fn refill<T: Send>(out: &mut Vec<T>, order: &[u32], value: impl Fn(usize) -> T + Sync) {
-    out.clear();
-    order
-        .par_iter()
-        .map(|&i| value(i as usize))
-        .collect_into_vec(out);
 }
