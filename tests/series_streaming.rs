@@ -224,3 +224,77 @@ fn prefetched_playback_reads_each_step_once_within_the_bound_and_in_order() {
         );
     }
 }
+
+fn open_in_background(dir: &Path) -> TimeSeries {
+    TimeSeries::open(
+        dir,
+        &OpenOptions {
+            background_scan: true,
+            ..OpenOptions::default()
+        },
+    )
+    .unwrap()
+}
+
+/// A background open returns once the files are listed and the first step is read: it does
+/// not wait for the other steps (a broken later step is the scan's error, not the open's),
+/// reports its values as provisional until the scan ends, and ends with exactly the values,
+/// bit for bit, a waiting open gives, each step decoded once.
+#[test]
+fn a_background_open_does_not_wait_for_the_steps_and_ends_with_the_same_values() {
+    let dir = tempfile::tempdir().unwrap();
+    write_series(dir.path(), 12);
+    // A step the scan cannot read, so it stops there: the open must not.
+    std::fs::write(dir.path().join("snap_9.csv"), "x,y,z,density,h\n1,2\n").unwrap();
+    let waiting = TimeSeries::open(dir.path(), &OpenOptions::default());
+    let e = waiting
+        .err()
+        .expect("a waiting open reads every step")
+        .to_string();
+    assert!(e.contains("snap_9.csv"), "{e}");
+    std::fs::remove_file(dir.path().join(INDEX_FILE)).ok();
+
+    let series = open_in_background(dir.path());
+    assert_eq!(series.len(), 12, "every step is listed at once");
+    let e = series.wait_for_scan().unwrap_err().to_string();
+    assert!(
+        e.contains("snap_9.csv"),
+        "the scan's error names the file: {e}"
+    );
+    let values = series.values();
+    assert!(values.is_provisional(), "a step could not be scanned");
+    assert!(!values.steps[9].scanned && values.steps[9].count == 0);
+    assert_eq!(values.scanned, 11);
+    assert!(
+        values
+            .error
+            .as_deref()
+            .is_some_and(|e| e.contains("snap_9.csv"))
+    );
+    drop(series);
+
+    // Repaired, a background open scans only what the index lacks and ends final.
+    write_step(dir.path(), 9, 0.0);
+    let series = open_in_background(dir.path());
+    series.wait_for_scan().unwrap();
+    assert!(!series.values().is_provisional());
+    assert_eq!(series.steps_decoded(), 1, "only the repaired step is read");
+    std::fs::remove_file(dir.path().join(INDEX_FILE)).unwrap();
+    let fresh = open_in_background(dir.path());
+    fresh.wait_for_scan().unwrap();
+    assert_eq!(
+        fresh.steps_decoded(),
+        12,
+        "each step decoded once, by the open or the scan"
+    );
+    let reference = open(dir.path(), AttributeSelection::All);
+    assert_eq!(summary(&fresh), summary(&reference));
+    assert_eq!(fresh.values(), reference.values());
+
+    // Dropping a series mid-scan stops the scan (and never hangs); what it read is indexed.
+    std::fs::remove_file(dir.path().join(INDEX_FILE)).unwrap();
+    drop(open_in_background(dir.path()));
+    let after = open(dir.path(), AttributeSelection::All);
+    assert!(after.steps_decoded() <= 12);
+    assert_eq!(summary(&after), summary(&reference));
+}

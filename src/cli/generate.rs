@@ -15,7 +15,8 @@ pub struct GenerateArgs {
     /// The directory to write into (created if missing).
     #[arg(long)]
     pub out: PathBuf,
-    /// Particles per step (default: 60K for uniform/random, 100K clusters, 20K dambreak-demo).
+    /// Particles per step (default: 60K for uniform/random, 100K clusters, 20K dambreak-demo;
+    /// a dam break above 100K simulates 100K and the rest ride with them).
     #[arg(long)]
     pub count: Option<usize>,
     /// Time steps (default: 48 for dambreak-demo, 1 otherwise).

@@ -164,6 +164,8 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             format: data.format.or(scene.data.format),
             attributes: selection,
             cache_bytes: data.cache_mib << 20,
+            // A batch frame uses the final series values, never provisional ones.
+            background_scan: false,
         },
     )?;
     let step = data.step.or(scene.data.step).unwrap_or(0);

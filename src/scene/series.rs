@@ -2,8 +2,8 @@
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex, RwLock};
 use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
@@ -22,6 +22,12 @@ pub struct OpenOptions {
     pub attributes: AttributeSelection,
     /// The most bytes of loaded steps kept in memory; older steps are dropped first.
     pub cache_bytes: usize,
+    /// Return as soon as the files are listed and the first step is known, scanning the rest
+    /// on a background thread (the viewer; the series-wide values are provisional until the
+    /// scan ends). Otherwise `open` waits for the scan, so the values are final and an
+    /// unreadable step is `open`'s error (batch commands, whose frames must not depend on
+    /// when they started).
+    pub background_scan: bool,
 }
 
 impl Default for OpenOptions {
@@ -30,6 +36,7 @@ impl Default for OpenOptions {
             format: None,
             attributes: AttributeSelection::All,
             cache_bytes: 2 << 30,
+            background_scan: false,
         }
     }
 }
@@ -41,6 +48,30 @@ pub struct StepInfo {
     pub count: usize,
     pub bounds: Bounds,
     pub bytes: usize,
+    /// Whether count, bounds and bytes come from the step's data (from the index or a scan);
+    /// a step not scanned yet has count 0, empty bounds and its file's size as `bytes`.
+    pub scanned: bool,
+}
+
+impl StepInfo {
+    fn of(step: &StepRef, stats: Option<&StepStats>) -> StepInfo {
+        match stats {
+            Some(s) => StepInfo {
+                name: step.name.clone(),
+                count: s.count,
+                bounds: s.bounds,
+                bytes: s.bytes,
+                scanned: true,
+            },
+            None => StepInfo {
+                name: step.name.clone(),
+                count: 0,
+                bounds: Bounds::EMPTY,
+                bytes: std::fs::metadata(&step.path).map_or(0, |m| m.len() as usize),
+                scanned: false,
+            },
+        }
+    }
 }
 
 /// An attribute's range and mean over the whole series (every particle of every step).
@@ -62,43 +93,91 @@ enum Source {
     Memory(Vec<Arc<Step>>),
 }
 
-/// A time series of particle steps. Opening learns the series' bounds, counts and attribute
-/// ranges (from the index beside the data, or by reading each step once); later reads come
-/// from a bounded cache or from disk.
-pub struct TimeSeries {
+/// The series-wide values (bounds, counts, attribute ranges) as far as the steps scanned so far
+/// tell them. While a scan is running they are *provisional*: a frame rendered from them says
+/// so, and keeps them (they are printed and written into a saved scene) rather than changing
+/// when the scan finishes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SeriesValues {
+    /// Per step; a step not scanned yet has `scanned: false`, count 0, empty bounds and its
+    /// file's size as `bytes`.
+    pub steps: Vec<StepInfo>,
+    pub attributes: Vec<AttributeInfo>,
+    /// Bounds over the scanned steps.
+    pub bounds: Bounds,
+    /// Steps whose statistics are known.
+    pub scanned: usize,
+    /// Why the scan stopped, if a step could not be read.
+    pub error: Option<String>,
+}
+
+impl SeriesValues {
+    fn of(steps: Vec<StepInfo>, stats: &[Option<StepStats>]) -> SeriesValues {
+        let known: Vec<&StepStats> = stats.iter().flatten().collect();
+        SeriesValues {
+            bounds: known.iter().fold(Bounds::EMPTY, |b, s| b.union(s.bounds)),
+            attributes: series_ranges(known.iter().copied()),
+            scanned: known.len(),
+            steps,
+            error: None,
+        }
+    }
+
+    /// Whether some steps are not scanned yet (or could not be), so that the values may
+    /// still change.
+    pub fn is_provisional(&self) -> bool {
+        self.scanned < self.steps.len()
+    }
+
+    pub fn attribute(&self, name: &str) -> Option<&AttributeInfo> {
+        self.attributes.iter().find(|a| a.name == name)
+    }
+
+    /// The largest particle count of any scanned step.
+    pub fn max_count(&self) -> usize {
+        self.steps.iter().map(|s| s.count).max().unwrap_or(0)
+    }
+}
+
+/// What the series and its background scan share.
+struct Shared {
     source: Source,
-    steps: Vec<StepInfo>,
-    attributes: Vec<AttributeInfo>,
-    bounds: Bounds,
+    values: RwLock<SeriesValues>,
+    /// Signalled when the scan finishes.
+    scan_finished: Condvar,
+    scan_running: Mutex<bool>,
+    cancel: AtomicBool,
     cache: Mutex<StepCache>,
     /// Signalled when a step being read (`StepCache::loading`) arrives.
     loaded: Condvar,
-    /// Steps decoded from their files so far (opening, and reads the cache missed).
+    /// Steps decoded from their files so far (opening, the scan, and reads the cache missed).
     decoded: AtomicUsize,
+    /// The scan's error, for the first caller of `wait_for_scan` (later ones get its text).
+    scan_error: Mutex<Option<DataError>>,
+}
+
+/// A time series of particle steps. Opening lists the step files and reads at most the first
+/// step; the series-wide bounds, counts and attribute ranges come from the index beside the
+/// data ([`super::index`]) for every file it knows unchanged, and the other steps are scanned
+/// on a background thread, which updates the index so the next open scans nothing. Later
+/// reads come from a bounded cache or from disk.
+pub struct TimeSeries {
+    shared: Arc<Shared>,
+    len: usize,
+    scanner: Option<std::thread::JoinHandle<()>>,
 }
 
 impl TimeSeries {
-    /// Opens the series at `path` (a file, a directory or a glob).
-    ///
-    /// The series' bounds, counts and attribute ranges come from the index beside the data
-    /// ([`super::index`]) for every step file it knows unchanged; the other steps are read
-    /// (in parallel, each kept in the cache while it fits) and the index updated, so the next
-    /// open reads nothing. Either way the values are the same, bit for bit.
+    /// Opens the series at `path` (a file, a directory or a glob), returning once the files
+    /// are listed and the first step's attributes known (the first step read, unless the index
+    /// knows it). Steps the index does not know are scanned in the background: until
+    /// [`TimeSeries::wait_for_scan`] returns, [`TimeSeries::values`] are provisional. The final
+    /// values are the same, bit for bit, however the statistics were gathered.
     pub fn open(path: &Path, options: &OpenOptions) -> Result<TimeSeries, DataError> {
         let refs = io::list_steps(path, options.format)?;
         let mut index = SeriesIndex::load(&refs);
-        let cache = Mutex::new(StepCache::new(options.cache_bytes));
-        let decoded = AtomicUsize::new(0);
-        // Reads one step for its statistics, keeping it in the cache.
-        let scan = |i: usize, selection: &AttributeSelection| {
-            let r = &refs[i];
-            let stamp = FileStamp::of(&r.path);
-            let step = io::read_step(r, selection)?;
-            decoded.fetch_add(1, Ordering::Relaxed);
-            let stats = StepStats::of(&step, selection);
-            cache.lock().unwrap().insert(i, Arc::new(step));
-            Ok::<_, DataError>((stats, stamp))
-        };
+        let mut cache = StepCache::new(options.cache_bytes);
+        let mut decoded = 0;
         let Some(first) = refs.first() else {
             // A `.particles` header that names no steps.
             return Ok(TimeSeries::assemble(
@@ -115,7 +194,11 @@ impl TimeSeries {
         let first_stats = match index.get(first, &options.attributes) {
             Some(stats) => stats,
             None => {
-                let (stats, stamp) = scan(0, &options.attributes)?;
+                let stamp = FileStamp::of(&first.path);
+                let step = io::read_step(first, &options.attributes)?;
+                decoded += 1;
+                let stats = StepStats::of(&step, &options.attributes);
+                cache.insert(0, Arc::new(step));
                 index.insert(first, stamp, &stats);
                 stats
             }
@@ -127,53 +210,36 @@ impl TimeSeries {
                 .map(|a| a.name.clone())
                 .collect(),
         );
-        let known: Vec<Option<StepStats>> =
-            refs[1..].iter().map(|r| index.get(r, &selection)).collect();
-        let missing = known.iter().filter(|k| k.is_none()).count();
-        let bar = progress::bar(missing as u64, "scanning steps");
-        let scanned: Vec<(usize, StepStats, Option<FileStamp>)> = known
-            .par_iter()
-            .enumerate()
-            .filter(|(_, k)| k.is_none())
-            .map(|(k, _)| {
-                let (stats, stamp) = scan(k + 1, &selection)?;
-                bar.inc(1);
-                Ok((k + 1, stats, stamp))
-            })
-            .collect::<Result<_, DataError>>()?;
-        bar.finish_and_clear();
-        let mut stats: Vec<Option<StepStats>> =
-            std::iter::once(Some(first_stats)).chain(known).collect();
-        for (i, s, stamp) in scanned {
-            index.insert(&refs[i], stamp, &s);
-            stats[i] = Some(s);
-        }
-        index.save();
-        let stats: Vec<StepStats> = stats
-            .into_iter()
-            .map(|s| s.expect("every step known or scanned"))
+        let stats: Vec<Option<StepStats>> = std::iter::once(Some(first_stats))
+            .chain(refs[1..].iter().map(|r| index.get(r, &selection)))
             .collect();
         let infos = refs
             .iter()
             .zip(&stats)
-            .map(|(r, s)| StepInfo {
-                name: r.name.clone(),
-                count: s.count,
-                bounds: s.bounds,
-                bytes: s.bytes,
-            })
+            .map(|(r, s)| StepInfo::of(r, s.as_ref()))
             .collect();
-        let ranges = series_ranges(&stats);
-        let mut series = TimeSeries::assemble(
+        let missing: Vec<usize> = (0..stats.len()).filter(|&i| stats[i].is_none()).collect();
+        let mut series = TimeSeries::assemble_with(
             Source::Files {
                 steps: refs,
                 selection,
             },
-            infos,
-            ranges,
-            cache.into_inner().unwrap(),
+            SeriesValues::of(infos, &stats),
+            cache,
         );
-        series.decoded = decoded;
+        series.shared.decoded.store(decoded, Ordering::Relaxed);
+        if missing.is_empty() {
+            index.save();
+        } else {
+            *series.shared.scan_running.lock().unwrap() = true;
+            let shared = series.shared.clone();
+            series.scanner = Some(std::thread::spawn(move || {
+                scan(&shared, stats, &missing, index);
+            }));
+            if !options.background_scan {
+                series.wait_for_scan()?;
+            }
+        }
         Ok(series)
     }
 
@@ -191,9 +257,10 @@ impl TimeSeries {
                 count: s.count,
                 bounds: s.bounds,
                 bytes: s.bytes,
+                scanned: true,
             })
             .collect();
-        let ranges = series_ranges(&stats);
+        let ranges = series_ranges(stats.iter());
         let steps = steps.into_iter().map(Arc::new).collect();
         TimeSeries::assemble(Source::Memory(steps), infos, ranges, StepCache::new(0))
     }
@@ -204,32 +271,97 @@ impl TimeSeries {
         attributes: Vec<AttributeInfo>,
         cache: StepCache,
     ) -> TimeSeries {
-        let bounds = steps.iter().fold(Bounds::EMPTY, |b, s| b.union(s.bounds));
-        TimeSeries {
-            source,
+        let values = SeriesValues {
+            bounds: steps.iter().fold(Bounds::EMPTY, |b, s| b.union(s.bounds)),
+            scanned: steps.len(),
             steps,
             attributes,
-            bounds,
-            cache: Mutex::new(cache),
-            loaded: Condvar::new(),
-            decoded: AtomicUsize::new(0),
+            error: None,
+        };
+        TimeSeries::assemble_with(source, values, cache)
+    }
+
+    fn assemble_with(source: Source, values: SeriesValues, cache: StepCache) -> TimeSeries {
+        let len = values.steps.len();
+        TimeSeries {
+            shared: Arc::new(Shared {
+                source,
+                values: RwLock::new(values),
+                scan_finished: Condvar::new(),
+                scan_running: Mutex::new(false),
+                cancel: AtomicBool::new(false),
+                cache: Mutex::new(cache),
+                loaded: Condvar::new(),
+                decoded: AtomicUsize::new(0),
+                scan_error: Mutex::new(None),
+            }),
+            len,
+            scanner: None,
         }
     }
 
     pub fn len(&self) -> usize {
-        self.steps.len()
+        self.len
     }
 
     pub fn is_empty(&self) -> bool {
-        self.steps.is_empty()
+        self.len == 0
     }
 
-    pub fn steps(&self) -> &[StepInfo] {
-        &self.steps
+    /// The series-wide values as known now (provisional while the scan runs).
+    pub fn values(&self) -> SeriesValues {
+        self.shared.values.read().unwrap().clone()
     }
 
-    pub fn attributes(&self) -> &[AttributeInfo] {
-        &self.attributes
+    /// Whether a background scan is still gathering the series-wide values.
+    pub fn is_scanning(&self) -> bool {
+        *self.shared.scan_running.lock().unwrap()
+    }
+
+    /// Waits for the background scan (showing its progress when it takes long), so the values
+    /// are final; an unreadable step is the error.
+    pub fn wait_for_scan(&self) -> Result<(), DataError> {
+        let mut running = self.shared.scan_running.lock().unwrap();
+        if *running {
+            let values = self.values();
+            let bar = progress::bar(values.steps.len() as u64, "scanning steps");
+            while *running {
+                bar.set_position(self.shared.values.read().unwrap().scanned as u64);
+                running = self
+                    .shared
+                    .scan_finished
+                    .wait_timeout(running, Duration::from_millis(100))
+                    .unwrap()
+                    .0;
+            }
+            bar.finish_and_clear();
+        }
+        drop(running);
+        if let Some(e) = self.shared.scan_error.lock().unwrap().take() {
+            return Err(e);
+        }
+        match &self.shared.values.read().unwrap().error {
+            None => Ok(()),
+            Some(e) => Err(DataError::new(
+                "<series>",
+                None,
+                io::Problem::Malformed(e.clone()),
+            )),
+        }
+    }
+
+    /// Per-step information (see [`SeriesValues::steps`]).
+    pub fn steps(&self) -> Vec<StepInfo> {
+        self.shared.values.read().unwrap().steps.clone()
+    }
+
+    /// One step's information.
+    pub fn step_info(&self, index: usize) -> Option<StepInfo> {
+        self.shared.values.read().unwrap().steps.get(index).cloned()
+    }
+
+    pub fn attributes(&self) -> Vec<AttributeInfo> {
+        self.shared.values.read().unwrap().attributes.clone()
     }
 
     /// Every attribute the data holds, including those this series did not select (for
@@ -241,7 +373,7 @@ impl TimeSeries {
                 .map(|n| n.to_string())
                 .collect()
         };
-        match &self.source {
+        match &self.shared.source {
             Source::Files { steps, .. } => match steps.first() {
                 Some(r) => Ok(names(&io::read_step(r, &AttributeSelection::All)?)),
                 None => Ok(Vec::new()),
@@ -250,38 +382,38 @@ impl TimeSeries {
         }
     }
 
-    pub fn attribute(&self, name: &str) -> Option<&AttributeInfo> {
-        self.attributes.iter().find(|a| a.name == name)
+    pub fn attribute(&self, name: &str) -> Option<AttributeInfo> {
+        self.shared.values.read().unwrap().attribute(name).cloned()
     }
 
-    /// Bounds over all steps.
+    /// Bounds over all steps (the scanned ones while scanning).
     pub fn bounds(&self) -> Bounds {
-        self.bounds
+        self.shared.values.read().unwrap().bounds
     }
 
     /// The largest particle count of any step (what GPU buffers are sized for).
     pub fn max_count(&self) -> usize {
-        self.steps.iter().map(|s| s.count).max().unwrap_or(0)
+        self.shared.values.read().unwrap().max_count()
     }
 
     /// Step `index`, from the cache or from disk.
     pub fn step(&self, index: usize) -> Result<Arc<Step>, DataError> {
-        if index >= self.steps.len() {
+        if index >= self.len {
             return Err(DataError::new(
                 "<series>",
                 None,
                 io::Problem::Malformed(format!(
                     "step {index} does not exist; the series has {} steps (0..{})",
-                    self.steps.len(),
-                    self.steps.len().saturating_sub(1)
+                    self.len,
+                    self.len.saturating_sub(1)
                 )),
             ));
         }
-        match &self.source {
+        match &self.shared.source {
             Source::Memory(steps) => Ok(steps[index].clone()),
             Source::Files { steps, selection } => {
                 // A step another thread (the prefetcher) is reading is waited for, not read twice.
-                let mut cache = self.cache.lock().unwrap();
+                let mut cache = self.shared.cache.lock().unwrap();
                 loop {
                     if let Some(s) = cache.get(index) {
                         return Ok(s);
@@ -289,19 +421,19 @@ impl TimeSeries {
                     if cache.loading.insert(index) {
                         break;
                     }
-                    cache = self.loaded.wait(cache).unwrap();
+                    cache = self.shared.loaded.wait(cache).unwrap();
                 }
                 drop(cache);
                 let started = Instant::now();
                 let read = io::read_step(&steps[index], selection).map(Arc::new);
-                let mut cache = self.cache.lock().unwrap();
+                let mut cache = self.shared.cache.lock().unwrap();
                 cache.loading.remove(&index);
                 if let Ok(step) = &read {
-                    self.decoded.fetch_add(1, Ordering::Relaxed);
+                    self.shared.decoded.fetch_add(1, Ordering::Relaxed);
                     cache.read_times.insert(index, started.elapsed());
                     cache.insert(index, step.clone());
                 }
-                self.loaded.notify_all();
+                self.shared.loaded.notify_all();
                 read
             }
         }
@@ -310,12 +442,18 @@ impl TimeSeries {
     /// How long the last read of step `index` from its file took (reading and decoding, on
     /// whichever thread read it), if it was read from a file.
     pub fn read_time(&self, index: usize) -> Option<Duration> {
-        self.cache.lock().unwrap().read_times.get(&index).copied()
+        self.shared
+            .cache
+            .lock()
+            .unwrap()
+            .read_times
+            .get(&index)
+            .copied()
     }
 
     /// The file step `index` is read from (`None` for a series held in memory).
     pub fn step_file(&self, index: usize) -> Option<&Path> {
-        match &self.source {
+        match &self.shared.source {
             Source::Files { steps, .. } => steps.get(index).map(|r| r.path.as_path()),
             Source::Memory(_) => None,
         }
@@ -323,15 +461,15 @@ impl TimeSeries {
 
     /// Whether step `index` is held in memory now (a step read from memory always is).
     pub fn is_cached(&self, index: usize) -> bool {
-        match &self.source {
+        match &self.shared.source {
             Source::Memory(_) => true,
-            Source::Files { .. } => self.cache.lock().unwrap().contains(index),
+            Source::Files { .. } => self.shared.cache.lock().unwrap().contains(index),
         }
     }
 
     /// Drops every cached step (steps in use elsewhere live on until they are dropped there).
     pub fn clear_cache(&self) {
-        let mut cache = self.cache.lock().unwrap();
+        let mut cache = self.shared.cache.lock().unwrap();
         cache.entries.clear();
         cache.bytes = 0;
     }
@@ -339,7 +477,7 @@ impl TimeSeries {
     /// Marks the cached steps among `indices` as just used, in this order: the cache drops
     /// the least recently used first, so these stay while older steps go.
     pub fn touch(&self, indices: &[usize]) {
-        let mut cache = self.cache.lock().unwrap();
+        let mut cache = self.shared.cache.lock().unwrap();
         for &i in indices {
             cache.get(i);
         }
@@ -347,45 +485,116 @@ impl TimeSeries {
 
     /// The most bytes of steps the cache keeps.
     pub fn cache_limit(&self) -> usize {
-        self.cache.lock().unwrap().limit
+        self.shared.cache.lock().unwrap().limit
     }
 
     /// Steps decoded from files so far, by the open and by reads the cache missed.
     pub fn steps_decoded(&self) -> usize {
-        self.decoded.load(Ordering::Relaxed)
+        self.shared.decoded.load(Ordering::Relaxed)
     }
 
     /// Bytes of steps held in the cache now.
     pub fn cached_bytes(&self) -> usize {
-        self.cache.lock().unwrap().bytes
+        self.shared.cache.lock().unwrap().bytes
     }
+}
+
+impl Drop for TimeSeries {
+    /// Stops the background scan (what it learned so far is written to the index).
+    fn drop(&mut self) {
+        self.shared.cancel.store(true, Ordering::Relaxed);
+        if let Some(scanner) = self.scanner.take() {
+            let _ = scanner.join();
+        }
+    }
+}
+
+/// The background scan: reads the `missing` steps (in parallel, each kept in the cache while
+/// it fits), publishing the values after each, then writes the index.
+fn scan(
+    shared: &Shared,
+    mut stats: Vec<Option<StepStats>>,
+    missing: &[usize],
+    mut index: SeriesIndex,
+) {
+    let Source::Files { steps, selection } = &shared.source else {
+        unreachable!("only a series of files is scanned")
+    };
+    let failed = Mutex::new(None::<DataError>);
+    let found = Mutex::new(Vec::with_capacity(missing.len()));
+    missing.par_iter().for_each(|&i| {
+        // A step that cannot be read does not stop the others: their values are still known.
+        if shared.cancel.load(Ordering::Relaxed) {
+            return;
+        }
+        let r = &steps[i];
+        let stamp = FileStamp::of(&r.path);
+        match io::read_step(r, selection) {
+            Ok(step) => {
+                shared.decoded.fetch_add(1, Ordering::Relaxed);
+                let step_stats = StepStats::of(&step, selection);
+                shared.cache.lock().unwrap().insert(i, Arc::new(step));
+                shared.loaded.notify_all();
+                let mut values = shared.values.write().unwrap();
+                values.steps[i] = StepInfo::of(r, Some(&step_stats));
+                values.scanned += 1;
+                values.bounds = values.bounds.union(step_stats.bounds);
+                // Provisional until the end, where they are merged again in step order.
+                merge_ranges(&mut values.attributes, &step_stats);
+                found.lock().unwrap().push((i, step_stats, stamp));
+            }
+            Err(e) => {
+                failed.lock().unwrap().get_or_insert(e);
+            }
+        }
+    });
+    for (i, s, stamp) in found.into_inner().unwrap() {
+        index.insert(&steps[i], stamp, &s);
+        stats[i] = Some(s);
+    }
+    index.save();
+    // The ranges merged in step order, whatever order the steps were read in.
+    {
+        let mut values = shared.values.write().unwrap();
+        values.attributes = series_ranges(stats.iter().flatten());
+        let failed = failed.into_inner().unwrap();
+        values.error = failed.as_ref().map(ToString::to_string);
+        *shared.scan_error.lock().unwrap() = failed;
+    }
+    *shared.scan_running.lock().unwrap() = false;
+    shared.scan_finished.notify_all();
 }
 
 /// The series-wide range and mean of each attribute, merged from the steps' statistics in
 /// step order (so the same statistics, scanned or from the index, give the same values).
-fn series_ranges(steps: &[StepStats]) -> Vec<AttributeInfo> {
+fn series_ranges<'a>(steps: impl Iterator<Item = &'a StepStats>) -> Vec<AttributeInfo> {
     let mut ranges: Vec<AttributeInfo> = Vec::new();
     for step in steps {
-        for a in &step.attributes {
-            match ranges.iter_mut().find(|r| r.name == a.name) {
-                Some(r) => {
-                    r.min = r.min.min(a.min);
-                    r.max = r.max.max(a.max);
-                    let total = r.count + a.count;
-                    r.mean = (r.mean * r.count as f64 + a.mean * a.count as f64) / total as f64;
-                    r.count = total;
-                }
-                None => ranges.push(AttributeInfo {
-                    name: a.name.clone(),
-                    min: a.min,
-                    max: a.max,
-                    mean: a.mean,
-                    count: a.count,
-                }),
-            }
-        }
+        merge_ranges(&mut ranges, step);
     }
     ranges
+}
+
+/// Adds one step's attribute statistics to series-wide ranges.
+fn merge_ranges(ranges: &mut Vec<AttributeInfo>, step: &StepStats) {
+    for a in &step.attributes {
+        match ranges.iter_mut().find(|r| r.name == a.name) {
+            Some(r) => {
+                r.min = r.min.min(a.min);
+                r.max = r.max.max(a.max);
+                let total = r.count + a.count;
+                r.mean = (r.mean * r.count as f64 + a.mean * a.count as f64) / total as f64;
+                r.count = total;
+            }
+            None => ranges.push(AttributeInfo {
+                name: a.name.clone(),
+                min: a.min,
+                max: a.max,
+                mean: a.mean,
+                count: a.count,
+            }),
+        }
+    }
 }
 
 /// Least-recently-used steps, bounded in bytes. The step last inserted is always kept, even
