@@ -429,3 +429,114 @@ fn render_writes_images_and_sequences() {
     ]);
     assert!(e.contains("eye and target coincide"), "{e}");
 }
+
+/// `aarbf field --grid` gives what `--queries` gives at the same points (the grid's cell
+/// centres over the series' bounds, x fastest), and refuses malformed grids by name.
+#[test]
+fn a_grid_export_equals_point_queries_at_its_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = ok(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        s(&d.join("db")),
+        "--count",
+        "2500",
+        "--steps",
+        "2",
+    ]);
+    let header = header.trim();
+    let series = TimeSeries::open(Path::new(header), &OpenOptions::default()).unwrap();
+    let b = series.bounds();
+    let grid = aarbf::field::RegularGrid::cell_centred(b.min, b.max, [17, 11, 6]);
+    let points: Vec<f64> = (0..grid.len())
+        .flat_map(|p| {
+            grid.point([p % 17, (p / 17) % 11, p / (17 * 11)])
+                .to_array()
+        })
+        .collect();
+    let q = d.join("grid_points.npy");
+    npy::write_matrix(&q, grid.len(), 3, &points).unwrap();
+    let run = |how: &[&str], name: &str| {
+        let out = d.join(name);
+        let mut args = vec![
+            "field",
+            "--data",
+            header,
+            "--step",
+            "1",
+            "--attribute",
+            "attribute",
+            "--radius",
+            "4%",
+            "--classification",
+            "pre",
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(how);
+        ok(&args);
+        npy::read_matrix(At::new(&out, None)).unwrap()
+    };
+    let scattered = run(&["--grid", "17x11x6"], "scattered.npy");
+    let queried = run(&["--queries", s(&q)], "queried.npy");
+    assert_eq!((scattered.rows, scattered.cols), (17 * 11 * 6, 4));
+    let mut inside = 0;
+    for i in 0..scattered.rows {
+        let (a, e) = (scattered.row(i), queried.row(i));
+        assert!(
+            (a[0] - e[0]).abs() <= 1e-12 * e[0],
+            "point {i}: {a:?} vs {e:?}"
+        );
+        for c in 1..4 {
+            assert!((a[c] - e[c]).abs() <= 1e-11, "point {i}: {a:?} vs {e:?}");
+        }
+        inside += usize::from(e[0] > 0.0);
+    }
+    assert!(inside > 100, "{inside} points see the fluid");
+
+    let out = d.join("bad.npy");
+    for (grid, says) in [
+        ("0x3x3", "1..=4096"),
+        ("3x3", "NXxNYxNZ"),
+        ("ax3x3", "positive integers"),
+    ] {
+        let e = fails(&[
+            "field",
+            "--data",
+            header,
+            "--attribute",
+            "attribute",
+            "--grid",
+            grid,
+            "--out",
+            s(&out),
+        ]);
+        assert!(e.contains(says), "--grid {grid}: {e}");
+    }
+    let e = fails(&[
+        "field",
+        "--data",
+        header,
+        "--attribute",
+        "attribute",
+        "--grid",
+        "4",
+        "--queries",
+        s(&q),
+        "--out",
+        s(&out),
+    ]);
+    assert!(e.contains("cannot be used with"), "{e}");
+    let e = fails(&[
+        "field",
+        "--data",
+        header,
+        "--attribute",
+        "attribute",
+        "--out",
+        s(&out),
+    ]);
+    assert!(e.contains("--queries") && e.contains("--grid"), "{e}");
+}

@@ -157,3 +157,64 @@ fn field_and_render_run_on_wgpu_and_agree_with_cpu() {
         "the fluid shows"
     );
 }
+
+/// `aarbf field --grid` (a volume export): the CPU backend scatters particles onto the grid,
+/// wgpu queries each point; the two agree as point queries do.
+#[test]
+fn a_grid_export_agrees_between_cpu_and_wgpu() {
+    if !have_adapter() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = ok(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        s(&d.join("db")),
+        "--count",
+        "3001",
+        "--steps",
+        "2",
+    ]);
+    let run = |backend: &str| {
+        let out = d.join(format!("grid_{backend}.npy"));
+        ok(&[
+            "field",
+            "--data",
+            header.trim(),
+            "--step",
+            "1",
+            "--attribute",
+            "attribute",
+            "--radius",
+            "3%",
+            "--grid",
+            "23x13x7",
+            "--out",
+            s(&out),
+            "--backend",
+            backend,
+        ]);
+        npy::read_matrix(At::new(&out, None)).unwrap()
+    };
+    let (cpu, gpu) = (run("cpu"), run("wgpu"));
+    assert_eq!((cpu.rows, cpu.cols), (23 * 13 * 7, 2));
+    assert_eq!((gpu.rows, gpu.cols), (cpu.rows, cpu.cols));
+    let mut inside = 0;
+    for i in 0..cpu.rows {
+        let (a, b) = (cpu.row(i), gpu.row(i));
+        assert!(
+            (a[0] - b[0]).abs() <= 3e-4 * a[0] + 1e-6,
+            "point {i}: {a:?} vs {b:?}"
+        );
+        if a[0] > 1e-3 {
+            inside += 1;
+            assert!(
+                (a[1] - b[1]).abs() <= 1e-3 * (1.0 + a[1].abs()),
+                "point {i}: {a:?} vs {b:?}"
+            );
+        }
+    }
+    assert!(inside > 100, "{inside} grid points inside the fluid");
+}

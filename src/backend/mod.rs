@@ -225,6 +225,29 @@ pub trait Backend: Send {
     /// Phi and the Theta numerator at each point (see [`cpu::integrators::FieldSampler`]).
     fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError>;
 
+    /// Phi and the Theta numerator at every point of a regular grid, in the grid's order.
+    /// By default a query per point (in Hilbert order, batched); the CPU backend scatters the
+    /// particles onto the grid instead ([`crate::field::ReferenceField::eval_grid_sums`]).
+    fn query_grid(
+        &mut self,
+        grid: &crate::field::RegularGrid,
+    ) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
+        const BATCH: usize = 1 << 18;
+        let [nx, ny, _] = grid.dims;
+        let points: Vec<DVec3> = (0..grid.len())
+            .map(|p| grid.point([p % nx, (p / nx) % ny, p / (nx * ny)]))
+            .collect();
+        let order = crate::accel::hilbert_order(&points, crate::values::Bounds::of_points(&points));
+        let mut out = vec![(0.0, [0.0; 3]); points.len()];
+        for indices in order.chunks(BATCH) {
+            let batch: Vec<DVec3> = indices.iter().map(|&i| points[i as usize]).collect();
+            for (&i, sums) in indices.iter().zip(self.query(&batch)?) {
+                out[i as usize] = sums;
+            }
+        }
+        Ok(out)
+    }
+
     /// Renders one frame and adds it to the accumulation (restarted by `reset`, or when the
     /// frame's size differs from the accumulated one's).
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError>;

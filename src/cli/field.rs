@@ -9,7 +9,7 @@ use glam::DVec3;
 use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::accel::hilbert_order;
 use crate::backend::{self, BackendKind, Precision, StepInput, parse_precision};
-use crate::field::{Classification, finish_sums};
+use crate::field::{Classification, RegularGrid, finish_sums};
 use crate::io::{At, npy};
 use crate::values::Bounds;
 
@@ -17,6 +17,7 @@ use crate::values::Bounds;
 const QUERY_BATCH: usize = 1 << 18;
 
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("where").required(true).args(["queries", "grid"])))]
 pub struct FieldArgs {
     #[command(flatten)]
     pub data: DataArgs,
@@ -24,7 +25,13 @@ pub struct FieldArgs {
     pub field: FieldOptions,
     /// Query points: an M x 3 .npy array (float32 or float64).
     #[arg(long)]
-    pub queries: PathBuf,
+    pub queries: Option<PathBuf>,
+    /// Instead of query points, a regular grid over the series' bounds: `NXxNYxNZ` (or `N` for
+    /// N^3) cell-centred points, x fastest (NumPy: `reshape(NZ, NY, NX, -1)`), as yt's covering
+    /// grids sample. The CPU backend scatters each particle onto the points it reaches rather
+    /// than querying point by point.
+    #[arg(long, value_parser = parse_grid)]
+    pub grid: Option<[usize; 3]>,
     /// Output .npy, float64: M x 2 (Phi, Theta) for post-classification, M x 4 (Phi, r, g, b)
     /// for pre-classification. Theta is in the attribute's units; 0 where Phi is 0.
     #[arg(long)]
@@ -52,23 +59,22 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
             resolved.series.attributes_in_data()?.join(", ")
         );
     }
-    let queries = npy::read_matrix(At::new(&args.queries, None))?;
-    anyhow::ensure!(
-        queries.cols == 3,
-        "{}: queries must be an M x 3 array, found {} columns",
-        args.queries.display(),
-        queries.cols
-    );
-    let points: Vec<DVec3> = (0..queries.rows)
-        .map(|i| DVec3::from_slice(queries.row(i)))
-        .collect();
-    if let Some(i) = points.iter().position(|p| !p.is_finite()) {
-        anyhow::bail!(
-            "{}: query {i} is not finite: {}",
-            args.queries.display(),
-            points[i]
-        );
-    }
+    let queries = match (&args.queries, args.grid) {
+        (Some(path), _) => Queries::Points(read_queries(path)?),
+        (None, Some(dims)) => {
+            let b = resolved.series.bounds();
+            tracing::info!(
+                "grid of {}x{}x{} cell-centred points over {:?}..{:?}",
+                dims[0],
+                dims[1],
+                dims[2],
+                b.min.to_array(),
+                b.max.to_array()
+            );
+            Queries::Grid(RegularGrid::cell_centred(b.min, b.max, dims))
+        }
+        (None, None) => anyhow::bail!("--queries or --grid is required"),
+    };
 
     let step = resolved.series.step(resolved.step)?;
     let mut backend = backend::create(args.backend)?;
@@ -100,19 +106,30 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
     let pre = resolved.field.classification == Classification::Pre;
 
     let started = Instant::now();
-    // Queries in Hilbert order (neighbouring queries share tree nodes: ~2-3x faster on every
-    // backend), results returned in input order.
-    let order = hilbert_order(&points, Bounds::of_points(&points));
-    let sorted: Vec<DVec3> = order.iter().map(|&i| points[i as usize]).collect();
-    let bar = crate::progress::bar(points.len() as u64, "evaluating");
-    let mut samples = vec![[0.0; 4]; points.len()];
-    for (batch, indices) in sorted.chunks(QUERY_BATCH).zip(order.chunks(QUERY_BATCH)) {
-        let sums = backend.query(batch)?;
-        for (&i, (phi, num)) in indices.iter().zip(sums) {
-            let f = finish_sums(phi, num, !pre, range);
-            samples[i as usize] = [f.phi, f.theta[0], f.theta[1], f.theta[2]];
+    let bar = crate::progress::bar(queries.len() as u64, "evaluating");
+    let mut samples = vec![[0.0; 4]; queries.len()];
+    let mut finish = |i: usize, (phi, num): (f64, [f64; 3])| {
+        let f = finish_sums(phi, num, !pre, range);
+        samples[i] = [f.phi, f.theta[0], f.theta[1], f.theta[2]];
+    };
+    match &queries {
+        Queries::Points(points) => {
+            // Queries in Hilbert order (neighbouring queries share tree nodes: ~2-3x faster
+            // on every backend), results returned in input order.
+            let order = hilbert_order(points, Bounds::of_points(points));
+            let sorted: Vec<DVec3> = order.iter().map(|&i| points[i as usize]).collect();
+            for (batch, indices) in sorted.chunks(QUERY_BATCH).zip(order.chunks(QUERY_BATCH)) {
+                for (&i, sums) in indices.iter().zip(backend.query(batch)?) {
+                    finish(i as usize, sums);
+                }
+                bar.inc(batch.len() as u64);
+            }
         }
-        bar.inc(batch.len() as u64);
+        Queries::Grid(grid) => {
+            for (i, sums) in backend.query_grid(grid)?.into_iter().enumerate() {
+                finish(i, sums);
+            }
+        }
     }
     bar.finish_and_clear();
     let eval_time = started.elapsed();
@@ -130,10 +147,64 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         backend.capabilities().name,
         resolved.cluster,
         resolved.field.radius,
-        points.len(),
+        queries.len(),
         build_time.as_secs_f64(),
         eval_time.as_secs_f64(),
-        points.len() as f64 / eval_time.as_secs_f64().max(1e-9) / 1e6
+        queries.len() as f64 / eval_time.as_secs_f64().max(1e-9) / 1e6
     );
     Ok(())
+}
+
+/// Where the field is evaluated.
+enum Queries {
+    Points(Vec<DVec3>),
+    Grid(RegularGrid),
+}
+
+impl Queries {
+    fn len(&self) -> usize {
+        match self {
+            Queries::Points(p) => p.len(),
+            Queries::Grid(g) => g.len(),
+        }
+    }
+}
+
+/// The query points of an M x 3 `.npy` file, checked finite.
+fn read_queries(path: &std::path::Path) -> anyhow::Result<Vec<DVec3>> {
+    let queries = npy::read_matrix(At::new(path, None))?;
+    anyhow::ensure!(
+        queries.cols == 3,
+        "{}: queries must be an M x 3 array, found {} columns",
+        path.display(),
+        queries.cols
+    );
+    let points: Vec<DVec3> = (0..queries.rows)
+        .map(|i| DVec3::from_slice(queries.row(i)))
+        .collect();
+    if let Some(i) = points.iter().position(|p| !p.is_finite()) {
+        anyhow::bail!("{}: query {i} is not finite: {}", path.display(), points[i]);
+    }
+    Ok(points)
+}
+
+/// `NXxNYxNZ` or `N` (a cube), each from 1 to 4096.
+fn parse_grid(text: &str) -> Result<[usize; 3], String> {
+    let parts: Vec<&str> = text.split(['x', 'X']).collect();
+    let numbers: Vec<usize> = parts
+        .iter()
+        .map(|p| p.trim().parse::<usize>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{text}' is not NXxNYxNZ or N (positive integers)"))?;
+    let dims = match numbers[..] {
+        [n] => [n; 3],
+        [x, y, z] => [x, y, z],
+        _ => return Err(format!("'{text}' is not NXxNYxNZ or N")),
+    };
+    if dims.iter().any(|&d| !(1..=4096).contains(&d)) {
+        return Err(format!(
+            "grid dimensions must lie in 1..=4096, got '{text}'"
+        ));
+    }
+    Ok(dims)
 }

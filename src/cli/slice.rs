@@ -7,7 +7,7 @@ use clap::Args;
 use glam::DVec3;
 
 use super::settings::{DataArgs, FieldOptions, resolve};
-use crate::field::{Classification, ReferenceField, normalise};
+use crate::field::{Classification, ReferenceField, RegularGrid, normalise};
 use crate::values::color_space::linear_to_srgb;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -72,18 +72,19 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
     let width = args.width as usize;
     let height =
         ((width as f64 * extent[v] / extent[u].max(1e-30)).round() as usize).clamp(1, 16384);
-    let mut points = Vec::with_capacity(width * height);
-    for y in 0..height {
-        for x in 0..width {
-            let mut p = DVec3::ZERO;
-            p[normal] = lo[normal] + args.position * extent[normal];
-            p[u] = lo[u] + (x as f64 + 0.5) / width as f64 * extent[u];
-            // Image rows go down; the v axis goes up.
-            p[v] = hi[v] - (y as f64 + 0.5) / height as f64 * extent[v];
-            points.push(p);
-        }
-    }
-    let samples = field.eval_many(&points);
+    // Pixel centres, rows going down while the v axis goes up; the field is scattered onto
+    // them (each particle onto the pixels it reaches), not queried pixel by pixel.
+    let mut origin = DVec3::ZERO;
+    origin[normal] = lo[normal] + args.position * extent[normal];
+    origin[u] = lo[u] + 0.5 / width as f64 * extent[u];
+    origin[v] = hi[v] - 0.5 / height as f64 * extent[v];
+    let grid = RegularGrid {
+        origin,
+        axes: [u, v, normal],
+        spacing: [extent[u] / width as f64, -extent[v] / height as f64, 0.0],
+        dims: [width, height, 1],
+    };
+    let samples = field.eval_grid(&grid);
 
     // Brightness: 1 - exp(-2 Phi / Phi_ref), Phi_ref the 95th percentile of non-zero Phi.
     let mut nonzero: Vec<f64> = samples.iter().map(|s| s.phi).filter(|p| *p > 0.0).collect();

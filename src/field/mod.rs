@@ -13,12 +13,14 @@
 //! with theta_i = s_i (post-classification; reported in the attribute's own units) or the
 //! linear-light colour C(t_i) (pre-classification).
 
+mod grid;
 mod inputs;
 mod particles;
 mod reference;
 
 use serde::{Deserialize, Serialize};
 
+pub use grid::RegularGrid;
 pub use inputs::{FieldInputs, normalise};
 pub use particles::{FieldTables, Particles, Theta, particle_radius};
 pub use reference::{ReferenceField, Sample, finish_sums};

@@ -9,16 +9,16 @@ use crate::accel::{ClusterBoxes, ClusterBvh, ClusterSize, hilbert_order};
 use crate::values::{Bounds, Step};
 
 #[derive(Default)]
-struct Accumulator {
-    phi: f64,
-    theta: [f64; 3],
+pub(super) struct Accumulator {
+    pub(super) phi: f64,
+    pub(super) theta: [f64; 3],
 }
 
 impl Particles {
     /// Adds particle `i`'s contribution at `x` (local coordinates) to `acc` if `x` lies within
     /// its radius.
     #[inline]
-    fn accumulate(&self, i: usize, x: DVec3, acc: &mut Accumulator) {
+    pub(super) fn accumulate(&self, i: usize, x: DVec3, acc: &mut Accumulator) {
         let r = self.radii[i];
         if r <= 0.0 {
             return;
@@ -186,7 +186,7 @@ impl ReferenceField {
         out
     }
 
-    fn finish(&self, acc: Accumulator) -> Sample {
+    pub(super) fn finish(&self, acc: Accumulator) -> Sample {
         let post = matches!(self.particles.theta, Theta::Scalar(_));
         finish_sums(acc.phi, acc.theta, post, self.particles.range)
     }

@@ -183,6 +183,16 @@ impl Backend for CpuBackend {
         Ok(out)
     }
 
+    fn query_grid(
+        &mut self,
+        grid: &crate::field::RegularGrid,
+    ) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
+        let started = Instant::now();
+        let out = self.field()?.eval_grid_sums(grid);
+        self.timings.query = started.elapsed();
+        Ok(out)
+    }
+
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
         let started = Instant::now();
         let field = self.field()?;
