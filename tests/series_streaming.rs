@@ -298,3 +298,28 @@ fn a_background_open_does_not_wait_for_the_steps_and_ends_with_the_same_values()
     assert!(after.steps_decoded() <= 12);
     assert_eq!(summary(&after), summary(&reference));
 }
+
+/// `rescan` reads every step whatever the index says, and gives the same values.
+#[test]
+fn a_rescan_reads_every_step_again_and_agrees_with_the_index() {
+    let dir = tempfile::tempdir().unwrap();
+    write_series(dir.path(), 5);
+    let indexed = open(dir.path(), AttributeSelection::All);
+    let again = open(dir.path(), AttributeSelection::All);
+    assert_eq!(again.steps_decoded(), 0);
+    let rescanned = TimeSeries::open(
+        dir.path(),
+        &OpenOptions {
+            rescan: true,
+            ..OpenOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(rescanned.steps_decoded(), 5);
+    assert_eq!(summary(&rescanned), summary(&indexed));
+    assert_eq!(
+        open(dir.path(), AttributeSelection::All).steps_decoded(),
+        0,
+        "the index is rewritten"
+    );
+}

@@ -31,6 +31,11 @@ pub struct DataArgs {
     /// used go first; a series larger than this plays with memory bounded by it).
     #[arg(long, default_value_t = 2048)]
     pub cache_mib: usize,
+    /// Read every step again for the series' bounds and ranges, whatever the index beside the
+    /// data says (for files rewritten within the file system's time resolution with the same
+    /// size); the index is rewritten.
+    #[arg(long)]
+    pub rescan: bool,
 }
 
 /// How the field is defined.
@@ -166,6 +171,7 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             cache_bytes: data.cache_mib << 20,
             // A batch frame uses the final series values, never provisional ones.
             background_scan: false,
+            rescan: data.rescan,
         },
     )?;
     let step = data.step.or(scene.data.step).unwrap_or(0);

@@ -174,6 +174,12 @@ impl SeriesIndex {
         }
     }
 
+    /// Drops every entry, so every step is scanned again (and the index rewritten).
+    pub fn forget(&mut self) {
+        self.file.entries.clear();
+        self.changed = true;
+    }
+
     fn key(&self, step: &StepRef) -> String {
         let p = step.path.strip_prefix(&self.dir).unwrap_or(&step.path);
         p.to_string_lossy().into_owned()

@@ -28,6 +28,8 @@ pub struct OpenOptions {
     /// unreadable step is `open`'s error (batch commands, whose frames must not depend on
     /// when they started).
     pub background_scan: bool,
+    /// Scan every step whatever the index says (and rewrite it).
+    pub rescan: bool,
 }
 
 impl Default for OpenOptions {
@@ -37,6 +39,7 @@ impl Default for OpenOptions {
             attributes: AttributeSelection::All,
             cache_bytes: 2 << 30,
             background_scan: false,
+            rescan: false,
         }
     }
 }
@@ -176,6 +179,9 @@ impl TimeSeries {
     pub fn open(path: &Path, options: &OpenOptions) -> Result<TimeSeries, DataError> {
         let refs = io::list_steps(path, options.format)?;
         let mut index = SeriesIndex::load(&refs);
+        if options.rescan {
+            index.forget();
+        }
         let mut cache = StepCache::new(options.cache_bytes);
         let mut decoded = 0;
         let Some(first) = refs.first() else {
