@@ -792,3 +792,53 @@ fn every_writer_reads_back() {
         assert_eq!(velocity.values, expected, "{format}");
     }
 }
+
+/// A read of some attributes decodes only those, and gives them exactly as a read of all:
+/// in every format that holds several; a missing one is named with everything the file holds,
+/// decoded or not; and a column that is not selected is not looked at (a text cell in it is
+/// no error).
+#[test]
+fn a_selection_decodes_only_its_attributes_and_names_the_rest() {
+    let steps = aarbf::scene::synth::Generator::DambreakDemo.generate(211, 1, 4);
+    for (format, second) in [
+        (Format::VtkXml, "neighbours"),
+        (Format::Csv, "neighbours"),
+        (Format::Ply, "neighbours"),
+        (Format::Npy, "col4"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = io::write_series(dir.path(), "db", &steps, format, "velocity").unwrap();
+        let refs = io::list_steps(&path, None).unwrap();
+        let all = io::read_step(&refs[0], &AttributeSelection::All).unwrap();
+        assert!(all.attributes.len() >= 2, "{format}");
+        let only = AttributeSelection::Only(vec![second.to_owned()]);
+        let some = io::read_step(&refs[0], &only).unwrap();
+        assert_eq!(some.positions, all.positions, "{format}");
+        assert_eq!(some.attributes.len(), 1, "{format}");
+        assert_eq!(
+            Some(&some.attributes[0]),
+            all.attribute(second),
+            "{format}: the selected attribute as a full read gives it"
+        );
+        let e = io::read_step(&refs[0], &AttributeSelection::Only(vec!["nope".into()]))
+            .unwrap_err()
+            .to_string();
+        for a in &all.attributes {
+            assert!(e.contains(&format!("'{}'", a.name)), "{format}: {e}");
+        }
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("labels.csv");
+    std::fs::write(&csv, "x,y,z,s,note\n0,0,0,1,2\n1,0,0,2,3\n2,0,0,3,n/a\n").unwrap();
+    let refs = io::list_steps(&csv, None).unwrap();
+    let s = io::read_step(&refs[0], &AttributeSelection::Only(vec!["s".into()])).unwrap();
+    assert_eq!(s.attributes[0].values, [1.0, 2.0, 3.0]);
+    let e = io::read_step(&refs[0], &AttributeSelection::All)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 4, column 'note': 'n/a' is not a number"),
+        "{e}"
+    );
+}

@@ -5,12 +5,12 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::{At, Columns, DataError, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
 
 const POSITION_NAMES: [[&str; 3]; 2] = [["x", "y", "z"], ["points:0", "points:1", "points:2"]];
 
-pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let mut reader = ::csv::ReaderBuilder::new()
         .has_headers(true)
         .trim(::csv::Trim::All)
@@ -40,9 +40,10 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
                 headers.join(", ")
             )))
         })?;
-    let mut attribute_columns: Vec<usize> = (0..headers.len())
+    // Only the selected columns are parsed (the text of the others is not looked at).
+    let (mut attribute_columns, skipped): (Vec<usize>, Vec<usize>) = (0..headers.len())
         .filter(|c| !position_columns.contains(c))
-        .collect();
+        .partition(|&c| selection.keeps(&headers[c]));
 
     let mut positions = Vec::new();
     let mut values: Vec<Vec<f64>> = vec![Vec::new(); attribute_columns.len()];
@@ -98,6 +99,7 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     Ok(Columns {
         positions,
         attributes,
+        skipped: skipped.into_iter().map(|c| headers[c].clone()).collect(),
     })
 }
 

@@ -118,6 +118,16 @@ pub enum AttributeSelection {
     Only(Vec<String>),
 }
 
+impl AttributeSelection {
+    /// Whether an attribute of this name is kept (readers skip decoding the others).
+    pub fn keeps(&self, name: &str) -> bool {
+        match self {
+            AttributeSelection::All => true,
+            AttributeSelection::Only(names) => names.iter().any(|n| n == name),
+        }
+    }
+}
+
 /// One step of a series on disk: the file it lives in, and its name.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct StepRef {
@@ -244,13 +254,13 @@ pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, D
 pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step, DataError> {
     let at = step.at();
     let columns = match step.format {
-        Format::Particles => particles::read_step(at)?,
-        Format::VtkXml => vtk::read_step(at, false)?,
-        Format::Vtk => vtk::read_step(at, true)?,
-        Format::Csv => csv::read_step(at)?,
-        Format::Ply => ply::read_step(at)?,
-        Format::Raw => raw::read_step(at)?,
-        Format::Npy => npy::read_step(at)?,
+        Format::Particles => particles::read_step(at, selection)?,
+        Format::VtkXml => vtk::read_step(at, false, selection)?,
+        Format::Vtk => vtk::read_step(at, true, selection)?,
+        Format::Csv => csv::read_step(at, selection)?,
+        Format::Ply => ply::read_step(at, selection)?,
+        Format::Raw => raw::read_step(at, selection)?,
+        Format::Npy => npy::read_step(at, selection)?,
     };
     finish_step(at, &step.name, columns, selection)
 }
@@ -258,7 +268,11 @@ pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step,
 /// What a reader hands over: positions and named columns, not yet checked.
 pub struct Columns {
     pub positions: Vec<DVec3>,
+    /// The selected attributes (a reader decodes only what the selection keeps).
     pub attributes: Vec<Attribute>,
+    /// The names of the attributes the file holds that were not decoded (for errors that
+    /// say what there is to choose from).
+    pub skipped: Vec<String>,
 }
 
 /// Checks and cleans a reader's output: equal lengths, the selected attributes present (and
@@ -273,6 +287,7 @@ pub fn finish_step(
     let Columns {
         positions,
         mut attributes,
+        skipped,
     } = columns;
     let n = positions.len();
     for a in &attributes {
@@ -290,7 +305,7 @@ pub fn finish_step(
             if !attributes.iter().any(|a| &a.name == w) {
                 return Err(at.err(Problem::MissingAttribute {
                     name: w.clone(),
-                    available: available_list(&attributes),
+                    available: available_list(&attributes, &skipped),
                 }));
             }
         }
@@ -367,13 +382,15 @@ fn filter<T: Copy>(values: &[T], keep: &[bool]) -> Vec<T> {
         .collect()
 }
 
-fn available_list(attributes: &[Attribute]) -> String {
-    if attributes.is_empty() {
+fn available_list(attributes: &[Attribute], skipped: &[String]) -> String {
+    let mut names: Vec<&str> = attributes.iter().map(|a| a.name.as_str()).collect();
+    names.extend(skipped.iter().map(String::as_str));
+    if names.is_empty() {
         "no attributes".into()
     } else {
-        attributes
+        names
             .iter()
-            .map(|a| format!("'{}'", a.name))
+            .map(|n| format!("'{n}'"))
             .collect::<Vec<_>>()
             .join(", ")
     }
@@ -396,6 +413,19 @@ pub(crate) fn component_names(name: &str, components: usize) -> Vec<String> {
     }
 }
 
+/// Every attribute an array of `components` per particle becomes (see [`split_components`]).
+pub(crate) fn array_attribute_names(name: &str, components: usize) -> Vec<String> {
+    let mut names = component_names(name, components);
+    if components == 3 {
+        names.push(magnitude_name(name));
+    }
+    names
+}
+
+fn magnitude_name(name: &str) -> String {
+    format!("{name}_magnitude")
+}
+
 /// Splits an interleaved array of `components` per particle into named attributes; three
 /// components also give their magnitude (`<name>_magnitude`), what users colour by most.
 pub(crate) fn split_components(name: &str, data: &[f64], components: usize) -> Vec<Attribute> {
@@ -410,7 +440,7 @@ pub(crate) fn split_components(name: &str, data: &[f64], components: usize) -> V
         .collect();
     if components == 3 {
         out.push(Attribute {
-            name: format!("{name}_magnitude"),
+            name: magnitude_name(name),
             values: (0..n)
                 .map(|i| {
                     let v = &data[i * 3..i * 3 + 3];

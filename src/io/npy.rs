@@ -8,7 +8,7 @@ use std::path::Path;
 use glam::DVec3;
 use npyz::{DType, NpyFile, Order, WriterBuilder};
 
-use super::{At, Columns, DataError, Problem, file_len};
+use super::{At, AttributeSelection, Columns, DataError, Problem, file_len};
 use crate::values::Attribute;
 
 /// A 2-D array in row-major order.
@@ -191,7 +191,7 @@ fn read_as_f64<R: Read>(npy: NpyFile<R>) -> Result<Vec<f64>, String> {
     try_types!(npy, f64, f32, i32, u32, i16, u16, i8, u8)
 }
 
-pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let m = read_matrix(at)?;
     if m.cols < 3 {
         return Err(at.err(Problem::Dimensionality(format!(
@@ -205,7 +205,10 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
             DVec3::new(r[0], r[1], r[2])
         })
         .collect();
-    let attributes = (3..m.cols)
+    let (kept, skipped): (Vec<usize>, Vec<usize>) =
+        (3..m.cols).partition(|c| selection.keeps(&format!("col{c}")));
+    let attributes = kept
+        .into_iter()
         .map(|c| Attribute {
             name: format!("col{c}"),
             values: (0..m.rows).map(|i| m.data[i * m.cols + c]).collect(),
@@ -214,6 +217,7 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     Ok(Columns {
         positions,
         attributes,
+        skipped: skipped.into_iter().map(|c| format!("col{c}")).collect(),
     })
 }
 

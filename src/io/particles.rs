@@ -8,7 +8,7 @@ use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use super::{At, Columns, DataError, Problem, file_len};
+use super::{At, AttributeSelection, Columns, DataError, Problem, file_len};
 use crate::values::Step;
 
 /// The name the format's single unnamed attribute gets.
@@ -44,7 +44,7 @@ pub fn step_path(header: &Path, name: &str) -> PathBuf {
     PathBuf::from(s)
 }
 
-pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let mut file = File::open(at.file).map_err(|e| at.io(e))?;
     let size = file_len(at, &file)?;
     if size < 8 {
@@ -68,7 +68,7 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
     }
     let mut bytes = vec![0u8; n * RECORD_BYTES as usize];
     file.read_exact(&mut bytes).map_err(|e| at.io(e))?;
-    Ok(super::raw::xyzw_columns(&bytes, ATTRIBUTE_NAME))
+    Ok(super::raw::xyzw_columns(&bytes, ATTRIBUTE_NAME, selection))
 }
 
 /// Writes a series as a `.particles` header and one file per step, carrying `attribute`.

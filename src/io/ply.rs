@@ -6,7 +6,7 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::{At, Columns, DataError, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
 
 /// Largest header we accept: real headers are a few hundred bytes.
@@ -213,7 +213,7 @@ impl Body<'_> {
     }
 }
 
-pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
     let header = parse_header(at, &bytes)?;
     let body_len = (bytes.len() - header.body_start) as u64;
@@ -272,7 +272,16 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
                 "the PLY vertex element needs properties x, y and z".into(),
             )));
         };
-        let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(n); scalars.len()];
+        // Positions and the selected properties are stored; the others are stepped over.
+        let stored: Vec<bool> = scalars
+            .iter()
+            .enumerate()
+            .map(|(k, (name, _))| [ix, iy, iz].contains(&k) || selection.keeps(name))
+            .collect();
+        let mut columns: Vec<Vec<f64>> = stored
+            .iter()
+            .map(|&s| Vec::with_capacity(if s { n } else { 0 }))
+            .collect();
         let mut row_values = vec![0.0f64; scalars.len()];
         for row in 0..element.count {
             let mut k = 0;
@@ -290,26 +299,37 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
                     }
                 }
             }
-            for (col, v) in columns.iter_mut().zip(&row_values) {
+            for ((col, v), _) in columns
+                .iter_mut()
+                .zip(&row_values)
+                .zip(&stored)
+                .filter(|(_, s)| **s)
+            {
                 col.push(*v);
             }
         }
         let positions = (0..n)
             .map(|i| DVec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
             .collect();
-        let attributes = scalars
-            .iter()
-            .zip(columns)
-            .enumerate()
-            .filter(|(k, _)| ![ix, iy, iz].contains(k))
-            .map(|(_, ((name, _), values))| Attribute {
-                name: (*name).to_owned(),
-                values,
-            })
-            .collect();
+        let mut attributes = Vec::new();
+        let mut skipped = Vec::new();
+        for (k, ((name, _), values)) in scalars.iter().zip(columns).enumerate() {
+            if [ix, iy, iz].contains(&k) {
+                continue;
+            }
+            if stored[k] {
+                attributes.push(Attribute {
+                    name: (*name).to_owned(),
+                    values,
+                });
+            } else {
+                skipped.push((*name).to_owned());
+            }
+        }
         return Ok(Columns {
             positions,
             attributes,
+            skipped,
         });
     }
     Err(at.err(Problem::Dimensionality(

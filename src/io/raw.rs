@@ -5,12 +5,12 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::{At, Columns, DataError, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
 
 pub const ATTRIBUTE_NAME: &str = "w";
 
-pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
+pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
     if bytes.len() % 16 != 0 {
         let n = bytes.len() / 16;
@@ -20,29 +20,42 @@ pub fn read_step(at: At<'_>) -> Result<Columns, DataError> {
             available: bytes.len() as u64,
         }));
     }
-    Ok(xyzw_columns(&bytes, ATTRIBUTE_NAME))
+    Ok(xyzw_columns(&bytes, ATTRIBUTE_NAME, selection))
 }
 
 /// Columns from little-endian records of four f32 (x, y, z, attribute): the body of both
 /// `.raw` files and `.particles` step files.
-pub(crate) fn xyzw_columns(bytes: &[u8], attribute: &str) -> Columns {
-    let mut positions = Vec::with_capacity(bytes.len() / 16);
-    let mut values = Vec::with_capacity(bytes.len() / 16);
-    for record in bytes.chunks_exact(16) {
-        let f = |i: usize| {
-            f64::from(f32::from_le_bytes(
-                record[i * 4..i * 4 + 4].try_into().unwrap(),
-            ))
-        };
-        positions.push(DVec3::new(f(0), f(1), f(2)));
-        values.push(f(3));
-    }
+pub(crate) fn xyzw_columns(
+    bytes: &[u8],
+    attribute: &str,
+    selection: &AttributeSelection,
+) -> Columns {
+    let f = |record: &[u8], i: usize| {
+        f64::from(f32::from_le_bytes(
+            record[i * 4..i * 4 + 4].try_into().unwrap(),
+        ))
+    };
+    let records = bytes.chunks_exact(16);
+    let positions = records
+        .clone()
+        .map(|r| DVec3::new(f(r, 0), f(r, 1), f(r, 2)))
+        .collect();
+    let (attributes, skipped) = if selection.keeps(attribute) {
+        let values = records.map(|r| f(r, 3)).collect();
+        (
+            vec![Attribute {
+                name: attribute.into(),
+                values,
+            }],
+            Vec::new(),
+        )
+    } else {
+        (Vec::new(), vec![attribute.to_owned()])
+    };
     Columns {
         positions,
-        attributes: vec![Attribute {
-            name: attribute.into(),
-            values,
-        }],
+        attributes,
+        skipped,
     }
 }
 

@@ -11,14 +11,20 @@ use vtkio::model::{
     Piece, PieceData, PolyDataPiece, Version, VertexNumbers, Vtk,
 };
 
-use super::{At, Columns, DataError, Problem, split_components};
+use super::{
+    At, AttributeSelection, Columns, DataError, Problem, array_attribute_names, split_components,
+};
 use crate::values::{Attribute, Step};
 
 /// Compression ratios above this are not believed: a header announcing more points than the
 /// file could hold even compressed is refused before anything is allocated.
 const MAX_COMPRESSION_RATIO: u64 = 1100;
 
-pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
+pub fn read_step(
+    at: At<'_>,
+    legacy: bool,
+    selection: &AttributeSelection,
+) -> Result<Columns, DataError> {
     precheck_counts(at, legacy)?;
     let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
     let xml = if legacy {
@@ -77,6 +83,7 @@ pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
 
     let mut positions = Vec::new();
     let mut attributes: Vec<Attribute> = Vec::new();
+    let mut skipped: Vec<String> = Vec::new();
     for (index, (points, data)) in pieces.into_iter().enumerate() {
         let coords = points
             .cast_into::<f64>()
@@ -101,6 +108,14 @@ pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
             };
             for (name, components, data) in arrays {
                 let components = components.max(1) as usize;
+                // An array none of whose attributes is selected is not converted.
+                let names = array_attribute_names(&name, components);
+                if !names.iter().any(|n| selection.keeps(n)) {
+                    if index == 0 {
+                        skipped.extend(names);
+                    }
+                    continue;
+                }
                 let values = data.cast_into::<f64>().ok_or_else(|| {
                     at.malformed(format!("point-data array '{name}' is not numeric"))
                 })?;
@@ -134,6 +149,7 @@ pub fn read_step(at: At<'_>, legacy: bool) -> Result<Columns, DataError> {
     Ok(Columns {
         positions,
         attributes,
+        skipped,
     })
 }
 
