@@ -316,6 +316,22 @@ pub fn finish_step(
         return Err(at.err(Problem::EmptyStep(String::new())));
     }
 
+    // Simulation output is almost always finite: one parallel pass says so, and only data
+    // with a non-finite value pays for the per-particle bookkeeping below.
+    {
+        use rayon::prelude::*;
+        if positions.par_iter().all(|p| p.is_finite())
+            && attributes
+                .iter()
+                .all(|a| a.values.par_iter().all(|v| v.is_finite()))
+        {
+            return Ok(Step {
+                name: name.to_owned(),
+                positions,
+                attributes,
+            });
+        }
+    }
     let mut keep = vec![true; n];
     let mut bad_positions = 0usize;
     for (k, p) in keep.iter_mut().zip(&positions) {

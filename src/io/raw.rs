@@ -35,7 +35,8 @@ pub(crate) fn xyzw_columns(
             record[i * 4..i * 4 + 4].try_into().unwrap(),
         ))
     };
-    let records = bytes.chunks_exact(16);
+    use rayon::prelude::*;
+    let records = bytes.par_chunks_exact(16);
     let positions = records
         .clone()
         .map(|r| DVec3::new(f(r, 0), f(r, 1), f(r, 2)))
