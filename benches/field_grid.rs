@@ -11,7 +11,6 @@ use std::time::Instant;
 use aarbf::accel::ClusterSize;
 use aarbf::field::{FieldSettings, ReferenceField, RegularGrid};
 use aarbf::scene::synth::Generator;
-use glam::DVec3;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -41,9 +40,7 @@ fn main() {
         ReferenceField::of_step(&step, &settings, ClusterSize::new(4).unwrap(), bounds, None)
             .unwrap();
     let grid = RegularGrid::cell_centred(bounds.min, bounds.max, [g, g, g]);
-    let points: Vec<DVec3> = (0..grid.len())
-        .map(|p| grid.point([p % g, (p / g) % g, p / (g * g)]))
-        .collect();
+    let points = grid.points();
 
     let (mut per_point, mut scattered) = (Vec::new(), Vec::new());
     let mut agree = 0.0f64;

@@ -450,12 +450,7 @@ fn a_grid_export_equals_point_queries_at_its_points() {
     let series = TimeSeries::open(Path::new(header), &OpenOptions::default()).unwrap();
     let b = series.bounds();
     let grid = aarbf::field::RegularGrid::cell_centred(b.min, b.max, [17, 11, 6]);
-    let points: Vec<f64> = (0..grid.len())
-        .flat_map(|p| {
-            grid.point([p % 17, (p / 17) % 11, p / (17 * 11)])
-                .to_array()
-        })
-        .collect();
+    let points: Vec<f64> = grid.points().iter().flat_map(|p| p.to_array()).collect();
     let q = d.join("grid_points.npy");
     npy::write_matrix(&q, grid.len(), 3, &points).unwrap();
     let run = |how: &[&str], name: &str| {

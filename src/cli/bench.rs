@@ -219,7 +219,8 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
         )?;
     }
     for (step, f) in steps.iter().zip(&floors) {
-        let (n, bytes) = (series.steps()[*step].count, series.steps()[*step].bytes);
+        let info = series.step_info(*step).expect("a step of the series");
+        let (n, bytes) = (info.count, info.bytes);
         writeln!(
             rows,
             "{step},{n},{bytes},floor: copy in memory,{:.6}",

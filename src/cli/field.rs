@@ -7,14 +7,9 @@ use clap::Args;
 use glam::DVec3;
 
 use super::settings::{DataArgs, FieldOptions, resolve};
-use crate::accel::hilbert_order;
 use crate::backend::{self, BackendKind, Precision, StepInput, parse_precision};
 use crate::field::{Classification, RegularGrid, finish_sums};
 use crate::io::{At, npy};
-use crate::values::Bounds;
-
-/// Queries per backend call (each call may be a GPU submission and readback).
-const QUERY_BATCH: usize = 1 << 18;
 
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("where").required(true).args(["queries", "grid"])))]
@@ -108,30 +103,17 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let bar = crate::progress::bar(queries.len() as u64, "evaluating");
     let mut samples = vec![[0.0; 4]; queries.len()];
-    let mut finish = |i: usize, (phi, num): (f64, [f64; 3])| {
-        let f = finish_sums(phi, num, !pre, range);
-        samples[i] = [f.phi, f.theta[0], f.theta[1], f.theta[2]];
-    };
-    match &queries {
+    let sums = match &queries {
         Queries::Points(points) => {
-            // Queries in Hilbert order (neighbouring queries share tree nodes: ~2-3x faster
-            // on every backend), results returned in input order.
-            let order = hilbert_order(points, Bounds::of_points(points));
-            let sorted: Vec<DVec3> = order.iter().map(|&i| points[i as usize]).collect();
-            for (batch, indices) in sorted.chunks(QUERY_BATCH).zip(order.chunks(QUERY_BATCH)) {
-                for (&i, sums) in indices.iter().zip(backend.query(batch)?) {
-                    finish(i as usize, sums);
-                }
-                bar.inc(batch.len() as u64);
-            }
+            backend::query_in_hilbert_order(backend.as_mut(), points, |n| bar.inc(n as u64))?
         }
-        Queries::Grid(grid) => {
-            for (i, sums) in backend.query_grid(grid)?.into_iter().enumerate() {
-                finish(i, sums);
-            }
-        }
-    }
+        Queries::Grid(grid) => backend.query_grid(grid)?,
+    };
     bar.finish_and_clear();
+    for (s, (phi, num)) in samples.iter_mut().zip(sums) {
+        let f = finish_sums(phi, num, !pre, range);
+        *s = [f.phi, f.theta[0], f.theta[1], f.theta[2]];
+    }
     let eval_time = started.elapsed();
     let cols = if pre { 4 } else { 2 };
     let mut out = Vec::with_capacity(samples.len() * cols);

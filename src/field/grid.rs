@@ -50,6 +50,14 @@ impl RegularGrid {
         self.len() == 0
     }
 
+    /// Every point's data coordinates, in the grid's order (i fastest).
+    pub fn points(&self) -> Vec<DVec3> {
+        let [nx, ny, _] = self.dims;
+        (0..self.len())
+            .map(|p| self.point([p % nx, (p / nx) % ny, p / (nx * ny)]))
+            .collect()
+    }
+
     /// The data coordinates of grid point (i, j, k).
     #[inline]
     pub fn point(&self, index: [usize; 3]) -> DVec3 {

@@ -79,7 +79,7 @@ fn prefetch(series: &TimeSeries, plan: &(Mutex<Plan>, Condvar)) {
             }
             (p.current, p.upcoming.clone(), p.generation)
         };
-        let bytes = |i: usize| series.steps().get(i).map_or(0, |s| s.bytes);
+        let bytes = |i: usize| series.step_info(i).map_or(0, |s| s.bytes);
         let mut held = bytes(current);
         // The current step and those read for later, most recently used: making room for the
         // next drops steps already shown.

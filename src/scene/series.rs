@@ -319,11 +319,6 @@ impl TimeSeries {
         self.shared.values.read().unwrap().clone()
     }
 
-    /// Whether a background scan is still gathering the series-wide values.
-    pub fn is_scanning(&self) -> bool {
-        *self.shared.scan_running.lock().unwrap()
-    }
-
     /// Waits for the background scan (showing its progress when it takes long), so the values
     /// are final; an unreadable step is the error.
     pub fn wait_for_scan(&self) -> Result<(), DataError> {
