@@ -436,17 +436,25 @@ fn render_writes_images_and_sequences() {
 fn a_grid_export_equals_point_queries_at_its_points() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let header = ok(&[
-        "generate",
-        "dambreak-demo",
-        "--out",
-        s(&d.join("db")),
-        "--count",
-        "2500",
-        "--steps",
-        "2",
-    ]);
-    let header = header.trim();
+    // Two steps as post-processing writes them: CSV with 17 significant digits, positions
+    // far from the origin, a count that is not a power of two.
+    let series_dir = d.join("csv");
+    std::fs::create_dir(&series_dir).unwrap();
+    for step in 0..2 {
+        let mut text = String::from("x,y,z,attribute\n");
+        for i in 0..2500 {
+            let t = (i * 7919 + step * 31) as f64 * 0.618_033_988_749_894_9;
+            text.push_str(&format!(
+                "{:.16e},{:.16e},{:.16e},{:.16e}\n",
+                1.0e4 + 2.0 * t.fract(),
+                -3.0e3 + (1.3 * t).sin().abs(),
+                0.7 * (0.77 * t).cos().abs(),
+                250.0 + 40.0 * (0.1 * t).sin(),
+            ));
+        }
+        std::fs::write(series_dir.join(format!("snap_{step}.csv")), text).unwrap();
+    }
+    let header = s(&series_dir);
     let series = TimeSeries::open(Path::new(header), &OpenOptions::default()).unwrap();
     let b = series.bounds();
     let grid = aarbf::field::RegularGrid::cell_centred(b.min, b.max, [17, 11, 6]);
