@@ -13,7 +13,7 @@
 //! - [`backend`]: the `Backend` trait, its CPU, wgpu and ash implementations, and the shaders
 //!   with their CPU twins;
 //! - [`render`]: the rendering session (what each change costs, the automatic settings);
-//! - [`cli`] and [`scene_file`] (which composes all of the above) at the top.
+//! - [`cli`], [`viewer`] and [`scene_file`] (which composes all of the above) at the top.
 
 pub mod accel;
 pub mod backend;
@@ -26,3 +26,4 @@ pub mod render;
 pub mod scene;
 pub mod scene_file;
 pub mod values;
+pub mod viewer;

@@ -8,11 +8,11 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 
 use super::render::step_range;
-use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::backend::{self, BackendKind};
 use crate::render::{RenderSession, RenderSettings};
 use crate::scene::prefetch::Prefetcher;
 use crate::scene::{OpenOptions, TimeSeries};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::values::Step;
 
 #[derive(Debug, Args)]

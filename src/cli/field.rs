@@ -6,10 +6,10 @@ use std::time::Instant;
 use clap::Args;
 use glam::DVec3;
 
-use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::backend::{self, BackendKind, Precision, StepInput, parse_precision};
 use crate::field::{Classification, RegularGrid, finish_sums};
 use crate::io::{At, npy};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("where").required(true).args(["queries", "grid"])))]

@@ -5,9 +5,9 @@ mod field;
 mod generate;
 mod info;
 mod render;
-pub mod settings;
 mod slice;
 mod stbn;
+mod view;
 
 use clap::{Parser, Subcommand};
 
@@ -18,6 +18,7 @@ pub use info::InfoArgs;
 pub use render::RenderArgs;
 pub use slice::SliceArgs;
 pub use stbn::StbnArgs;
+pub use view::ViewArgs;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -49,6 +50,9 @@ pub enum Command {
     Stbn(StbnArgs),
     /// Write a synthetic data set (uniform, random, clusters, dambreak-demo).
     Generate(GenerateArgs),
+    /// The interactive viewer: orbit, play the series, edit the maps, switch backends, save
+    /// the state as a scene file `aarbf render --scene` renders to the same image.
+    View(ViewArgs),
     /// Measure this machine on your data: `aarbf bench playback` plays a series and says where
     /// each step's time goes.
     Bench(BenchArgs),
@@ -63,5 +67,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Stbn(a) => stbn::run(a),
         Command::Generate(a) => generate::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::View(a) => view::run(a),
     }
 }

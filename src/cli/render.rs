@@ -5,12 +5,12 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use glam::DVec3;
 
-use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::backend::{self, BackendKind};
-use crate::render::{RenderSession, RenderSettings};
+use crate::render::RenderSession;
 use crate::scene::Camera;
+use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
 
 #[derive(Debug, Args)]
@@ -122,90 +122,35 @@ pub(super) fn step_range(text: &str, len: usize) -> anyhow::Result<std::ops::Ran
     Ok(a..b)
 }
 
-fn parse_orbit(text: &str) -> anyhow::Result<(usize, usize)> {
-    let (i, n) = text
-        .split_once('/')
-        .with_context(|| format!("orbit '{text}': expected i/n"))?;
-    let (i, n): (usize, usize) = (i.trim().parse()?, n.trim().parse()?);
-    if n == 0 || i >= n {
-        bail!("orbit '{text}': need 0 <= i < n");
-    }
-    Ok((i, n))
-}
-
 fn set_or_auto(set: bool) -> &'static str {
     if set { "set" } else { "automatic" }
 }
 
-/// Writes a scene file that renders the same image: every section filled, the automatic
-/// values as resolved.
-fn save_scene(
-    path: &Path,
-    resolved: &super::settings::Resolved,
-    settings: &RenderSettings,
-    used: &crate::render::Resolved,
-    camera: Camera,
-    spp: u32,
-    precision: &str,
-) -> anyhow::Result<()> {
-    use crate::scene_file::{CameraSection, MapSpec, RenderSection, SceneFile};
-    let (data, field) = resolved.scene_sections();
-    let scene = SceneFile {
-        data,
-        field,
-        camera: CameraSection {
-            eye: Some(camera.eye.to_array()),
-            at: Some(camera.at.to_array()),
-            up: Some(camera.up.to_array()),
-            fovy: Some(camera.fovy),
-            orbit: None,
-        },
-        render: RenderSection {
-            width: Some(settings.width),
-            height: Some(settings.height),
-            spp: Some(spp),
-            integrator: Some(settings.integrator),
-            noise: Some(settings.noise),
-            seed: Some(settings.seed),
-            step_size: Some(used.step_size),
-            density_scale: Some(used.density_scale),
-            phi_ref: Some(used.phi_ref),
-            optical_map: Some(MapSpec::Points(settings.optical.map().points().to_vec())),
-            color_by_density: Some(settings.colour_by_density),
-            background: Some(settings.background),
-            opacity_threshold: Some(settings.opacity_threshold),
-            light: Some(settings.light),
-            precision: Some(precision.to_owned()),
-        },
-    };
-    scene.save(path, true)?;
-    Ok(())
-}
-
-pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    let resolved = resolve(&args.data, &args.field)?;
-    let scene = &resolved.scene;
-    let r = &scene.render;
-    let mut settings = RenderSettings::default();
-    settings.width = args.width.or(r.width).unwrap_or(settings.width);
-    settings.height = args.height.or(r.height).unwrap_or(settings.height);
-    settings.integrator = args.integrator.or(r.integrator).unwrap_or_default();
-    settings.noise = args.noise.or(r.noise).unwrap_or_default();
-    settings.seed = args.seed.or(r.seed).unwrap_or(settings.seed);
-    settings.step_size = args.step_size.or(r.step_size);
-
-    settings.phi_ref = args.phi_ref.or(r.phi_ref);
-    settings.colour_by_density = args.color_by_density || r.color_by_density.unwrap_or(false);
-    settings.opacity_threshold = r.opacity_threshold.unwrap_or(settings.opacity_threshold);
-    let optical_map = match (&args.optical_map, &r.optical_map) {
-        (Some(text), _) => text.parse()?,
-        (None, Some(spec)) => spec.to_map()?,
-        (None, None) => crate::scene::maps::PiecewiseLinear::ramp(0.0, 1.0),
-    };
-    settings.optical = crate::scene::maps::OpticalDensityMap::new(
-        optical_map,
-        args.density_scale.or(r.density_scale),
-    )?;
+/// Writes the flags over the scene file's `[render]` and `[camera]` sections (flags win), so
+/// one reading of the scene ([`SceneFile::render_settings`]) serves flags and files alike.
+fn apply_flags(args: &RenderArgs, scene: &mut SceneFile) -> anyhow::Result<()> {
+    fn over<T: Clone>(file: &mut Option<T>, flag: &Option<T>) {
+        if flag.is_some() {
+            file.clone_from(flag);
+        }
+    }
+    let r = &mut scene.render;
+    over(&mut r.width, &args.width);
+    over(&mut r.height, &args.height);
+    over(&mut r.spp, &args.spp);
+    over(&mut r.integrator, &args.integrator);
+    over(&mut r.noise, &args.noise);
+    over(&mut r.seed, &args.seed);
+    over(&mut r.step_size, &args.step_size);
+    over(&mut r.phi_ref, &args.phi_ref);
+    over(&mut r.density_scale, &args.density_scale);
+    over(&mut r.precision, &args.precision);
+    if let Some(text) = &args.optical_map {
+        r.optical_map = Some(MapSpec::Text(text.clone()));
+    }
+    if args.color_by_density {
+        r.color_by_density = Some(true);
+    }
     let mut light = r.light.unwrap_or_default();
     if let Some(text) = &args.light {
         let [az, el, i] = numbers::<3>("light", text)?;
@@ -217,35 +162,27 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         };
     }
     light.ambient = args.ambient.unwrap_or(light.ambient);
-    settings.light = light;
+    r.light = Some(light);
     if let Some(text) = &args.background {
-        settings.background = numbers::<3>("background", text)?;
-    } else if let Some(bg) = r.background {
-        settings.background = bg;
+        r.background = Some(numbers::<3>("background", text)?);
     }
+    if let Some(camera) = args.camera {
+        scene.camera = CameraSection::of(camera);
+    } else if let Some(orbit) = &args.orbit {
+        scene.camera.orbit = Some(orbit.clone());
+    }
+    Ok(())
+}
+
+pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    let mut resolved = resolve(&args.data, &args.field)?;
+    apply_flags(&args, &mut resolved.scene)?;
     let bounds = resolved.series.bounds();
-    let c = &scene.camera;
-    settings.camera = if let Some(camera) = args.camera {
-        Some(camera)
-    } else if let Some(orbit) = args.orbit.as_ref().or(c.orbit.as_ref()) {
-        let (i, n) = parse_orbit(orbit)?;
-        Some(Camera::benchmark_orbit(
-            bounds,
-            i,
-            n,
-            c.fovy.unwrap_or(40.0),
-        ))
-    } else if let (Some(eye), Some(at)) = (c.eye, c.at) {
-        Some(Camera {
-            eye: DVec3::from(eye),
-            at: DVec3::from(at),
-            up: DVec3::from(c.up.unwrap_or([0.0, 1.0, 0.0])),
-            fovy: c.fovy.unwrap_or(40.0),
-        })
-    } else {
-        None
-    };
-    let spp = args.spp.or(r.spp).unwrap_or(16);
+    let settings = resolved
+        .scene
+        .render_settings(bounds)
+        .map_err(anyhow::Error::msg)?;
+    let spp = resolved.scene.spp();
     anyhow::ensure!(spp > 0, "--spp must be at least 1");
 
     let steps = match &args.steps {
@@ -272,10 +209,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.save_scene {
         crate::io::output::check_writable(path, args.force)?;
     }
-    let precision_text = args
+    let precision_text = resolved
+        .scene
+        .render
         .precision
         .clone()
-        .or(r.precision.clone())
         .unwrap_or_else(|| "auto".into());
     let precision = backend::parse_precision(&precision_text, backend::Precision::RENDER)
         .map_err(anyhow::Error::msg)?;
@@ -317,15 +255,17 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 let camera = settings
                     .camera
                     .unwrap_or_else(|| Camera::default_for(bounds));
-                save_scene(
-                    path,
-                    &resolved,
+                let (data, field) = resolved.scene_sections();
+                SceneFile::reproducing(
+                    data,
+                    field,
                     &settings,
-                    &used,
+                    Some(&used),
                     camera,
                     spp,
                     &precision_text,
-                )?;
+                )
+                .save(path, true)?;
                 tracing::info!("wrote {}", path.display());
             }
         }

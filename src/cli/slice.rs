@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use clap::Args;
 use glam::DVec3;
 
-use super::settings::{DataArgs, FieldOptions, resolve};
 use crate::field::{Classification, ReferenceField, RegularGrid, normalise};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::values::color_space::linear_to_srgb;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

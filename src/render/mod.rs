@@ -9,5 +9,5 @@ pub mod session;
 pub mod settings;
 
 pub use auto::AutoValues;
-pub use session::{RenderSession, Resolved};
+pub use session::{RenderError, RenderSession, Resolved, StepChange};
 pub use settings::RenderSettings;

@@ -37,6 +37,19 @@ struct Loaded {
     precision: Precision,
 }
 
+/// What making the backend hold a step and field took: the cheapest work that does it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StepChange {
+    /// Already held.
+    None,
+    /// Only the density or colour maps changed: tables uploaded again.
+    Maps,
+    /// Radii changed: the structure refit (topology kept).
+    Refit,
+    /// A new step or particle data: uploaded and built.
+    Build,
+}
+
 /// The automatic values of a frame as they were resolved: what a user did not set, and what
 /// a saved scene records so the frame can be reproduced exactly.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -103,22 +116,23 @@ impl RenderSession {
         self.frames
     }
 
-    /// Makes the backend hold step `step` under `field`, doing only the work the change needs.
+    /// Makes the backend hold step `step` under `field`, doing only the work the change needs,
+    /// and says which work that was.
     pub fn show(
         &mut self,
         series: &TimeSeries,
         step: usize,
         field: &FieldSettings,
         cluster: ClusterSize,
-    ) -> Result<(), RenderError> {
+    ) -> Result<StepChange, RenderError> {
         let want = Loaded {
             step,
             field: field.clone(),
             cluster,
             precision: self.precision,
         };
-        match &self.loaded {
-            Some(have) if *have == want => return Ok(()),
+        let change = match &self.loaded {
+            Some(have) if *have == want => return Ok(StepChange::None),
             Some(have)
                 if have.step == step
                     && have.cluster == cluster
@@ -127,8 +141,10 @@ impl RenderSession {
             {
                 if same_radii(&have.field, field) {
                     self.backend.update_maps(field)?;
+                    StepChange::Maps
                 } else {
                     self.backend.refit(field)?;
+                    StepChange::Refit
                 }
             }
             _ => {
@@ -147,8 +163,9 @@ impl RenderSession {
                     precision: self.precision,
                 })?;
                 self.backend.build()?;
+                StepChange::Build
             }
-        }
+        };
         self.loaded = Some(want);
         // Properties of the series and the field, never of the step: a new step keeps them.
         if self
@@ -158,7 +175,7 @@ impl RenderSession {
         {
             self.auto = Some((field.clone(), AutoValues::of(series, field)?));
         }
-        Ok(())
+        Ok(change)
     }
 
     /// The automatic values of the loaded field over the series.

@@ -19,12 +19,14 @@ use anyhow::{Context, Result, bail};
 const PROFILE: &str = "checked";
 const BACKPORTS_FILE: &str = "/etc/apt/sources.list.d/bookworm-backports.sources";
 const MIN_MESA_MAJOR: u32 = 25;
-/// Debian packages the build and tests need besides the driver.
-const TOOL_PACKAGES: [&str; 4] = [
+/// Debian packages the build and tests need besides the driver (xvfb: the viewer's window
+/// test opens a real X11 window on a virtual display).
+const TOOL_PACKAGES: [&str; 5] = [
     "libvulkan1",
     "vulkan-tools",
     "vulkan-validationlayers",
     "glslc",
+    "xvfb",
 ];
 
 fn main() -> ExitCode {

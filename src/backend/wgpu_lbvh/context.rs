@@ -165,14 +165,20 @@ fn instance() -> wgpu::Instance {
     instance_for(None)
 }
 
-/// An instance over `backends` (None: `WGPU_BACKEND`, else all). Validation layers follow the
-/// build (on with debug assertions, as in the tests) unless WGPU_VALIDATION says otherwise.
-/// Shader debug information stays off unless WGPU_DEBUG=1: with it naga tags WGSL modules with
-/// a SPIR-V source language (WGSL, 10) that Debian's validation layers (1.3.239) reject as
-/// invalid SPIR-V, a false alarm that would hide real messages.
+/// The flags of every wgpu instance the program makes (the backend's and the viewer
+/// window's). Validation layers follow the build (on with debug assertions, as in the tests)
+/// unless WGPU_VALIDATION says otherwise. Shader debug information stays off unless
+/// WGPU_DEBUG=1: with it naga tags WGSL modules with a SPIR-V source language (WGSL, 10) that
+/// Debian's validation layers (1.3.239) reject as invalid SPIR-V, a false alarm that would
+/// hide real messages.
+pub fn instance_flags() -> wgpu::InstanceFlags {
+    (wgpu::InstanceFlags::from_build_config() - wgpu::InstanceFlags::DEBUG).with_env()
+}
+
+/// An instance over `backends` (None: `WGPU_BACKEND`, else all), with [`instance_flags`].
 fn instance_for(backends: Option<wgpu::Backends>) -> wgpu::Instance {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-    desc.flags = (wgpu::InstanceFlags::from_build_config() - wgpu::InstanceFlags::DEBUG).with_env();
+    desc.flags = instance_flags();
     if let Some(b) = backends {
         desc.backends = b;
     }

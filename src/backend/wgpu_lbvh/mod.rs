@@ -44,7 +44,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-pub use context::{AdapterSummary, GpuContext, Kernel, adapters};
+pub use context::{AdapterSummary, GpuContext, Kernel, adapters, instance_flags};
 pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::GpuStepData;

@@ -17,14 +17,21 @@
 //! cluster = 4
 //! ```
 
+pub mod resolve;
+
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use glam::DVec3;
+
 use crate::accel::ClusterSize;
 use crate::field::Classification;
 use crate::io::Format;
-use crate::scene::maps::{MapError, PiecewiseLinear};
+use crate::render::{RenderSettings, Resolved};
+use crate::scene::Camera;
+use crate::scene::maps::{MapError, OpticalDensityMap, PiecewiseLinear};
+use crate::values::Bounds;
 
 /// Where the data comes from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -194,7 +201,127 @@ pub struct SceneFileError {
     pub problem: String,
 }
 
+/// Samples per pixel when neither the scene nor a flag says.
+pub const DEFAULT_SPP: u32 = 16;
+
+/// Parses `i/n`: camera i of the n-camera benchmark orbit.
+pub fn parse_orbit(text: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("orbit '{text}': expected i/n with 0 <= i < n");
+    let (i, n) = text.split_once('/').ok_or_else(bad)?;
+    let (i, n): (usize, usize) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if n == 0 || i >= n {
+        return Err(bad());
+    }
+    Ok((i, n))
+}
+
+impl CameraSection {
+    /// The camera this section states over data with `bounds`: an orbit position (which wins),
+    /// an explicit eye and target, or `None` (a default view of the data).
+    pub fn camera(&self, bounds: Bounds) -> Result<Option<Camera>, String> {
+        let fovy = self.fovy.unwrap_or(40.0);
+        if let Some(orbit) = &self.orbit {
+            let (i, n) = parse_orbit(orbit)?;
+            return Ok(Some(Camera::benchmark_orbit(bounds, i, n, fovy)));
+        }
+        Ok(match (self.eye, self.at) {
+            (Some(eye), Some(at)) => Some(Camera {
+                eye: DVec3::from(eye),
+                at: DVec3::from(at),
+                up: DVec3::from(self.up.unwrap_or([0.0, 1.0, 0.0])),
+                fovy,
+            }),
+            (None, None) => None,
+            _ => return Err("camera: eye and at go together".into()),
+        })
+    }
+
+    /// A look-at camera, exactly.
+    pub fn of(camera: Camera) -> CameraSection {
+        CameraSection {
+            eye: Some(camera.eye.to_array()),
+            at: Some(camera.at.to_array()),
+            up: Some(camera.up.to_array()),
+            fovy: Some(camera.fovy),
+            orbit: None,
+        }
+    }
+}
+
 impl SceneFile {
+    /// The render settings the scene states, over data with `bounds`, defaults where it is
+    /// silent: the one reading of `[render]` and `[camera]` for the batch renderer and the
+    /// viewer.
+    pub fn render_settings(&self, bounds: Bounds) -> Result<RenderSettings, String> {
+        let r = &self.render;
+        let d = RenderSettings::default();
+        let optical_map = match &r.optical_map {
+            Some(spec) => spec.to_map().map_err(|e| e.to_string())?,
+            None => PiecewiseLinear::ramp(0.0, 1.0),
+        };
+        Ok(RenderSettings {
+            width: r.width.unwrap_or(d.width),
+            height: r.height.unwrap_or(d.height),
+            integrator: r.integrator.unwrap_or(d.integrator),
+            noise: r.noise.unwrap_or(d.noise),
+            seed: r.seed.unwrap_or(d.seed),
+            camera: self.camera.camera(bounds)?,
+            step_size: r.step_size,
+            phi_ref: r.phi_ref,
+            optical: OpticalDensityMap::new(optical_map, r.density_scale)
+                .map_err(|e| e.to_string())?,
+            colour_by_density: r.color_by_density.unwrap_or(d.colour_by_density),
+            light: r.light.unwrap_or(d.light),
+            background: r.background.unwrap_or(d.background),
+            opacity_threshold: r.opacity_threshold.unwrap_or(d.opacity_threshold),
+        })
+    }
+
+    /// The samples per pixel the scene asks for.
+    pub fn spp(&self) -> u32 {
+        self.render.spp.unwrap_or(DEFAULT_SPP)
+    }
+
+    /// A scene that renders the image of `settings` at `spp` samples per pixel: every section
+    /// filled, the camera explicit. With `used`, the automatic values as it resolved them, so
+    /// the image is reproduced exactly whatever later changes to the data's statistics;
+    /// without, what `settings` left automatic stays automatic.
+    pub fn reproducing(
+        data: DataSection,
+        field: FieldSection,
+        settings: &RenderSettings,
+        used: Option<&Resolved>,
+        camera: Camera,
+        spp: u32,
+        precision: &str,
+    ) -> SceneFile {
+        SceneFile {
+            data,
+            field,
+            camera: CameraSection::of(camera),
+            render: RenderSection {
+                width: Some(settings.width),
+                height: Some(settings.height),
+                spp: Some(spp),
+                integrator: Some(settings.integrator),
+                noise: Some(settings.noise),
+                seed: Some(settings.seed),
+                step_size: used.map(|u| u.step_size).or(settings.step_size),
+                density_scale: used.map(|u| u.density_scale).or(settings.optical.scale()),
+                phi_ref: used.map(|u| u.phi_ref).or(settings.phi_ref),
+                optical_map: Some(MapSpec::Points(settings.optical.map().points().to_vec())),
+                color_by_density: Some(settings.colour_by_density),
+                background: Some(settings.background),
+                opacity_threshold: Some(settings.opacity_threshold),
+                light: Some(settings.light),
+                precision: Some(precision.to_owned()),
+            },
+        }
+    }
+
     /// Writes the scene as TOML, atomically; an existing file only with `force`.
     pub fn save(&self, path: &Path, force: bool) -> Result<(), SceneFileError> {
         let err = |problem: String| SceneFileError {

@@ -1,16 +1,17 @@
-//! Data and field options shared by the commands, merged with a scene file (flags win).
+//! Data and field options shared by the commands and the viewer, merged with a scene file
+//! (flags win), and resolved into an open series and its field.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
 
+use super::{DataSection, FieldSection, MapSpec, RadiusSpec, SceneFile};
 use crate::accel::ClusterSize;
 use crate::field::{Classification, FieldSettings};
 use crate::io::{AttributeSelection, Format};
 use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
 use crate::scene::{OpenOptions, TimeSeries};
-use crate::scene_file::{DataSection, FieldSection, MapSpec, RadiusSpec, SceneFile};
 
 /// Where the data comes from.
 #[derive(Debug, Clone, Args)]
@@ -39,7 +40,7 @@ pub struct DataArgs {
 }
 
 /// How the field is defined.
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, Default, Args)]
 pub struct FieldOptions {
     /// The attribute the field carries (its colour).
     #[arg(long)]
@@ -99,37 +100,56 @@ pub struct Resolved {
 }
 
 impl Resolved {
-    /// The data and field sections of a scene file that reproduces these settings: the data
-    /// path absolute, the radius in data units, the maps as their control points.
+    /// The data and field sections of a scene file that reproduces these settings.
     pub fn scene_sections(&self) -> (DataSection, FieldSection) {
-        let f = &self.field;
-        (
-            DataSection {
-                path: Some(std::path::absolute(&self.data_path).unwrap_or(self.data_path.clone())),
-                format: self.format,
-                step: Some(self.step),
-                attribute: f.attribute.clone(),
-                attribute_range: f.attribute_range.map(|(a, b)| [a, b]),
-                radius_attribute: f.radius_attribute.clone(),
-            },
-            FieldSection {
-                radius: Some(RadiusSpec::Absolute(f.radius)),
-                radius_map: Some(MapSpec::Points(f.radius_map.0.points().to_vec())),
-                density_map: Some(MapSpec::Points(f.density_map.0.points().to_vec())),
-                colormap: self.colormap.as_ref().map(|c| {
-                    if c.ends_with(".json") {
-                        std::path::absolute(c)
-                            .map(|p| p.to_string_lossy().into_owned())
-                            .unwrap_or(c.clone())
-                    } else {
-                        c.clone()
-                    }
-                }),
-                classification: Some(f.classification),
-                cluster: Some(self.cluster),
-            },
+        scene_sections(
+            &self.data_path,
+            self.format,
+            self.step,
+            &self.field,
+            self.cluster,
+            self.colormap.as_deref(),
         )
     }
+}
+
+/// The data and field sections of a scene file that reproduces a field of the data at
+/// `data_path`: the path absolute, the radius in data units, the maps as their control points.
+pub fn scene_sections(
+    data_path: &std::path::Path,
+    format: Option<Format>,
+    step: usize,
+    f: &FieldSettings,
+    cluster: ClusterSize,
+    colormap: Option<&str>,
+) -> (DataSection, FieldSection) {
+    let absolute = |p: &std::path::Path| std::path::absolute(p).unwrap_or(p.to_path_buf());
+    (
+        DataSection {
+            path: Some(absolute(data_path)),
+            format,
+            step: Some(step),
+            attribute: f.attribute.clone(),
+            attribute_range: f.attribute_range.map(|(a, b)| [a, b]),
+            radius_attribute: f.radius_attribute.clone(),
+        },
+        FieldSection {
+            radius: Some(RadiusSpec::Absolute(f.radius)),
+            radius_map: Some(MapSpec::Points(f.radius_map.0.points().to_vec())),
+            density_map: Some(MapSpec::Points(f.density_map.0.points().to_vec())),
+            colormap: colormap.map(|c| {
+                if c.ends_with(".json") {
+                    absolute(std::path::Path::new(c))
+                        .to_string_lossy()
+                        .into_owned()
+                } else {
+                    c.to_owned()
+                }
+            }),
+            classification: Some(f.classification),
+            cluster: Some(cluster),
+        },
+    )
 }
 
 impl Resolved {

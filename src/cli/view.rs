@@ -1,0 +1,79 @@
+//! `aarbf view`: the interactive viewer on a data set or a scene file.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::backend::BackendKind;
+use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::viewer::{ViewOptions, WindowOptions};
+
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub data: DataArgs,
+    #[command(flatten)]
+    pub field: FieldOptions,
+    /// The backend to start with (switchable in the window). `auto` picks the CPU backend
+    /// where the only GPU is a software one, as `aarbf render` does.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendKind,
+    /// Samples per pixel to accumulate once the view stops changing (default: the scene's,
+    /// else 16).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Window size in points, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x800", value_parser = parse_size)]
+    pub window: [f32; 2],
+    /// Write a screenshot of the whole window to this PNG once the image has converged, then
+    /// close the window.
+    #[arg(long)]
+    pub window_screenshot: Option<PathBuf>,
+}
+
+fn parse_size(text: &str) -> Result<[f32; 2], String> {
+    let (w, h) = text
+        .split_once('x')
+        .ok_or_else(|| format!("'{text}' is not WIDTHxHEIGHT"))?;
+    let parse = |v: &str| -> Result<f32, String> {
+        match v.trim().parse::<f32>() {
+            Ok(x) if (64.0..=16384.0).contains(&x) => Ok(x),
+            _ => Err(format!(
+                "'{text}': each side must be a number in 64..=16384"
+            )),
+        }
+    };
+    Ok([parse(w)?, parse(h)?])
+}
+
+pub fn run(args: ViewArgs) -> anyhow::Result<()> {
+    let mut loaded = resolve(&args.data, &args.field)?;
+    if let Some(spp) = args.spp {
+        anyhow::ensure!(spp > 0, "--spp must be at least 1");
+        loaded.scene.render.spp = Some(spp);
+    }
+    let backend = match args.backend {
+        // The viewer switches backends by name; auto resolves to one now.
+        BackendKind::Auto => {
+            let b = crate::backend::create(BackendKind::Auto)?;
+            match b.capabilities().name {
+                "ash" => BackendKind::Ash,
+                "wgpu" => BackendKind::Wgpu,
+                _ => BackendKind::Cpu,
+            }
+        }
+        kind => kind,
+    };
+    crate::viewer::run(
+        loaded,
+        backend,
+        ViewOptions {
+            cache_mib: args.data.cache_mib,
+        },
+        WindowOptions {
+            size: args.window,
+            screenshot: args.window_screenshot,
+        },
+    )?;
+    Ok(())
+}

@@ -1,0 +1,834 @@
+//! The viewer's window: the render in the centre, the controls on the left, what things cost
+//! at the bottom. The window only edits a [`ViewState`] and shows what the render worker
+//! publishes; it never waits for a frame.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use egui::{Color32, ColorImage, Sense, TextureHandle, TextureOptions};
+
+use super::map_editor::map_editor;
+use super::navigation::{self, AxisView};
+use super::state::{DataSource, ViewState, view_bounds};
+use super::worker::{Interaction, RenderWorker, ShownImage};
+use crate::accel::ClusterSize;
+use crate::backend::BackendKind;
+use crate::field::Classification;
+use crate::render::StepChange;
+use crate::scene::maps::{ColorMap, DensityMap, OpticalDensityMap, PRESETS, RadiusMap};
+use crate::scene::{Camera, TimeSeries};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, Resolved as Loaded, resolve};
+use crate::values::{Integrator, NoiseKind};
+
+/// How long after the last wheel event the view still counts as moving.
+const SCROLL_SETTLE: Duration = Duration::from_millis(250);
+/// The backends a user may pick.
+const BACKENDS: [BackendKind; 3] = [BackendKind::Cpu, BackendKind::Wgpu, BackendKind::Ash];
+
+/// Where the attribute is normalised over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RangeMode {
+    /// Its range over the whole series (the default).
+    Series,
+    /// Its range in the shown step, fixed when chosen.
+    Step,
+    /// A range the user types.
+    Fixed,
+}
+
+/// Options the viewer was started with that are not part of a scene.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// The cache bound for steps read from disk, MiB.
+    pub cache_mib: usize,
+}
+
+pub struct ViewerApp {
+    ctx: egui::Context,
+    options: ViewOptions,
+    source: DataSource,
+    series: Arc<TimeSeries>,
+    attributes_in_data: Vec<String>,
+    pub state: ViewState,
+    generation: u64,
+    sent: Option<(ViewState, Interaction)>,
+    worker: RenderWorker,
+    texture: Option<TextureHandle>,
+    texture_of: Option<Arc<ShownImage>>,
+    /// Playback: the direction while playing, whether it wraps, steps per second.
+    playing: Option<bool>,
+    looping: bool,
+    rate: f64,
+    last_step_at: Instant,
+    last_scroll: Option<Instant>,
+    log_y: bool,
+    range_mode: RangeMode,
+    /// The paths typed into the state panel.
+    pub scene_path: String,
+    pub screenshot_path: String,
+    paraview_path: String,
+    messages: Vec<String>,
+}
+
+impl ViewerApp {
+    pub fn new(
+        ctx: &egui::Context,
+        loaded: Loaded,
+        backend: BackendKind,
+        options: ViewOptions,
+    ) -> Result<ViewerApp, String> {
+        let state = ViewState::of(&loaded, backend)?;
+        let attributes_in_data = loaded
+            .series
+            .attributes_in_data()
+            .map_err(|e| e.to_string())?;
+        let source = DataSource {
+            path: loaded.data_path.clone(),
+            format: loaded.format,
+        };
+        let series = Arc::new(loaded.series);
+        let worker = spawn_worker(ctx, &series);
+        let range_mode = if state.field.attribute_range.is_some() {
+            RangeMode::Fixed
+        } else {
+            RangeMode::Series
+        };
+        let scene_path = std::env::current_dir()
+            .unwrap_or_default()
+            .join("aarbf-view.toml");
+        Ok(ViewerApp {
+            ctx: ctx.clone(),
+            options,
+            source,
+            series,
+            attributes_in_data,
+            state,
+            generation: 0,
+            sent: None,
+            worker,
+            texture: None,
+            texture_of: None,
+            playing: None,
+            looping: true,
+            rate: 10.0,
+            last_step_at: Instant::now(),
+            last_scroll: None,
+            log_y: true,
+            range_mode,
+            screenshot_path: scene_path.with_extension("png").display().to_string(),
+            scene_path: scene_path.display().to_string(),
+            paraview_path: String::new(),
+            messages: Vec::new(),
+        })
+    }
+
+    pub fn worker(&self) -> &RenderWorker {
+        &self.worker
+    }
+
+    /// The generation of the state last sent to the worker (what [`super::worker::Shown`]
+    /// images carry).
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    pub fn messages(&self) -> &[String] {
+        &self.messages
+    }
+
+    fn say(&mut self, message: String) {
+        tracing::info!("{message}");
+        self.messages.push(message);
+        let excess = self.messages.len().saturating_sub(6);
+        self.messages.drain(..excess);
+    }
+
+    /// The whole window, inside `ui` (eframe's root, or a test harness's).
+    pub fn ui(&mut self, ui: &mut egui::Ui) {
+        let (news, reverted) = self.worker.take_news();
+        for m in news {
+            self.say(m);
+        }
+        if let Some(state) = reverted {
+            self.state = *state;
+        }
+        self.advance_playback(ui.ctx());
+        egui::Panel::bottom("status").show(ui, |ui| self.status_bar(ui));
+        egui::Panel::left("controls")
+            .resizable(true)
+            .default_size(320.0)
+            .show(ui, |ui| {
+                egui::ScrollArea::vertical().show(ui, |ui| self.controls(ui));
+            });
+        egui::CentralPanel::default()
+            .frame(egui::Frame::NONE.fill(Color32::BLACK))
+            .show(ui, |ui| self.view(ui));
+        self.send(ui.ctx());
+    }
+
+    /// Sends the state to the worker when it or the way the user moves changed.
+    fn send(&mut self, ctx: &egui::Context) {
+        let scrolling = self
+            .last_scroll
+            .is_some_and(|t| t.elapsed() < SCROLL_SETTLE);
+        let dragging = ctx.dragged_id().is_some();
+        let interaction = Interaction {
+            interacting: dragging || scrolling,
+            playing: self.playing,
+            looping: self.looping,
+        };
+        if scrolling {
+            // Settle to full resolution once the wheel stops, without further input.
+            ctx.request_repaint_after(SCROLL_SETTLE);
+        }
+        if self.sent.as_ref() != Some(&(self.state.clone(), interaction)) {
+            if self.sent.as_ref().is_none_or(|(s, _)| *s != self.state) {
+                self.generation += 1;
+            }
+            self.worker.show(&self.state, self.generation, interaction);
+            self.sent = Some((self.state.clone(), interaction));
+        }
+    }
+
+    fn advance_playback(&mut self, ctx: &egui::Context) {
+        let Some(forward) = self.playing else {
+            return;
+        };
+        let len = self.series.len();
+        let interval = Duration::from_secs_f64(1.0 / self.rate.max(0.01));
+        let shown = self.worker.shown();
+        // A step is shown once its frame is out: playback never outruns the renderer.
+        let current_shown =
+            shown.generation == self.generation && shown.step == Some(self.state.step);
+        if current_shown && self.last_step_at.elapsed() >= interval {
+            let next = match (forward, self.state.step) {
+                (true, s) if s + 1 < len => Some(s + 1),
+                (true, _) if self.looping => Some(0),
+                (false, 0) if self.looping => Some(len - 1),
+                (false, s) if s > 0 => Some(s - 1),
+                _ => None,
+            };
+            match next {
+                Some(s) => self.state.step = s,
+                None => self.playing = None,
+            }
+            self.last_step_at = Instant::now();
+        }
+        ctx.request_repaint_after(interval / 4);
+    }
+
+    fn status_bar(&mut self, ui: &mut egui::Ui) {
+        let s = self.worker.shown();
+        ui.horizontal_wrapped(|ui| {
+            if let Some(busy) = &s.busy {
+                ui.spinner();
+                ui.label(busy);
+            }
+            let (w, h) = s.full_size;
+            let res = match &s.image {
+                Some(i) if !s.full_resolution => {
+                    format!("preview {}x{} of {w}x{h}", i.width, i.height)
+                }
+                Some(_) => format!("{w}x{h}"),
+                None => "no image yet".into(),
+            };
+            ui.label(format!(
+                "{res} · {} spp{} · {:.2} s",
+                s.spp,
+                if s.converged { " (done)" } else { "" },
+                s.since_change.as_secs_f64()
+            ));
+            ui.separator();
+            ui.label(format!(
+                "frame {:.1} ms · readback {:.1} ms",
+                ms(s.frame_time),
+                ms(s.readback)
+            ));
+            if let Some((change, took)) = s.step_change {
+                let what = match change {
+                    StepChange::Build => "build",
+                    StepChange::Refit => "refit",
+                    StepChange::Maps => "maps",
+                    StepChange::None => "none",
+                };
+                ui.separator();
+                ui.label(format!("{what} {:.1} ms", ms(took)));
+            }
+        });
+        // The newest message on a line of its own that is always there, so a message never
+        // changes the view's size (and with it the image); the others on hover.
+        let newest = self.messages.last().cloned().unwrap_or_default();
+        let line = ui.colored_label(ui.visuals().warn_fg_color, newest);
+        if self.messages.len() > 1 {
+            line.on_hover_text(self.messages.join("\n"));
+        }
+    }
+
+    fn view(&mut self, ui: &mut egui::Ui) {
+        let size = ui.available_size();
+        let ppp = ui.ctx().pixels_per_point();
+        let width = ((size.x * ppp).round() as u32).clamp(1, 16384);
+        let height = ((size.y * ppp).round() as u32).clamp(1, 16384);
+        self.state.settings.width = width;
+        self.state.settings.height = height;
+        let (rect, response) = ui.allocate_exact_size(size, Sense::click_and_drag());
+        response.widget_info(|| egui::WidgetInfo::labeled(egui::Role::Image, true, "render view"));
+        let shown = self.worker.shown();
+        if let Some(image) = &shown.image
+            && self
+                .texture_of
+                .as_ref()
+                .is_none_or(|t| !Arc::ptr_eq(t, image))
+        {
+            let colour = ColorImage::from_rgba_unmultiplied(
+                [image.width as usize, image.height as usize],
+                &image.rgba,
+            );
+            match &mut self.texture {
+                Some(t) => t.set(colour, TextureOptions::LINEAR),
+                None => {
+                    self.texture = Some(ui.ctx().load_texture(
+                        "render",
+                        colour,
+                        TextureOptions::LINEAR,
+                    ));
+                }
+            }
+            self.texture_of = Some(image.clone());
+        }
+        if let Some(t) = &self.texture {
+            ui.painter().image(
+                t.id(),
+                rect,
+                egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
+                Color32::WHITE,
+            );
+        }
+        let camera = self.state.camera();
+        let delta = response.drag_delta() * ppp;
+        let (dx, dy) = (f64::from(delta.x), f64::from(delta.y));
+        let pan = response.dragged_by(egui::PointerButton::Secondary)
+            || response.dragged_by(egui::PointerButton::Middle)
+            || (response.dragged_by(egui::PointerButton::Primary)
+                && ui.input(|i| i.modifiers.shift));
+        let mut moved = camera;
+        if (dx, dy) != (0.0, 0.0) {
+            moved = if pan {
+                navigation::pan(camera, dx, dy, f64::from(height))
+            } else {
+                navigation::orbit(camera, dx, dy)
+            };
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                moved = navigation::dolly(moved, f64::from(scroll));
+                self.last_scroll = Some(Instant::now());
+            }
+        }
+        if moved != camera {
+            self.state.settings.camera = Some(moved);
+        }
+    }
+
+    fn controls(&mut self, ui: &mut egui::Ui) {
+        egui::CollapsingHeader::new("Data and time")
+            .default_open(true)
+            .show(ui, |ui| self.time_controls(ui));
+        egui::CollapsingHeader::new("Transfer functions")
+            .default_open(true)
+            .show(ui, |ui| self.map_controls(ui));
+        egui::CollapsingHeader::new("Camera")
+            .default_open(false)
+            .show(ui, |ui| self.camera_controls(ui));
+        egui::CollapsingHeader::new("Lighting and quality")
+            .default_open(true)
+            .show(ui, |ui| self.quality_controls(ui));
+        egui::CollapsingHeader::new("Backend")
+            .default_open(true)
+            .show(ui, |ui| self.backend_controls(ui));
+        egui::CollapsingHeader::new("State")
+            .default_open(true)
+            .show(ui, |ui| self.state_controls(ui));
+    }
+
+    fn time_controls(&mut self, ui: &mut egui::Ui) {
+        ui.label(self.source.path.display().to_string());
+        let len = self.series.len();
+        let count = self
+            .series
+            .step_info(self.state.step)
+            .map_or(0, |i| i.count);
+        ui.label(format!("{len} steps · {count} particles in this step"));
+        ui.add_enabled(
+            len > 1,
+            egui::Slider::new(&mut self.state.step, 0..=len.saturating_sub(1)).text("step"),
+        );
+        ui.horizontal(|ui| {
+            if ui.button("previous").clicked() && self.state.step > 0 {
+                self.state.step -= 1;
+            }
+            let play_label = if self.playing.is_some() {
+                "pause"
+            } else {
+                "play"
+            };
+            if ui.button(play_label).clicked() {
+                self.playing = match self.playing {
+                    Some(_) => None,
+                    None => Some(true),
+                };
+                self.last_step_at = Instant::now();
+            }
+            if ui.button("next").clicked() && self.state.step + 1 < len {
+                self.state.step += 1;
+            }
+            ui.checkbox(&mut self.looping, "loop");
+        });
+        ui.add(
+            egui::Slider::new(&mut self.rate, 0.5..=60.0)
+                .logarithmic(true)
+                .text("steps / s"),
+        );
+        ui.separator();
+        let mut attribute = self.state.field.attribute.clone();
+        egui::ComboBox::new("attribute", "attribute")
+            .selected_text(attribute.clone().unwrap_or_else(|| "(density only)".into()))
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut attribute, None, "(density only)");
+                for a in &self.attributes_in_data {
+                    ui.selectable_value(&mut attribute, Some(a.clone()), a);
+                }
+            });
+        if attribute != self.state.field.attribute {
+            self.change_attribute(attribute);
+        }
+        let previous = self.range_mode;
+        ui.horizontal(|ui| {
+            ui.label("range");
+            ui.radio_value(&mut self.range_mode, RangeMode::Series, "series");
+            ui.radio_value(&mut self.range_mode, RangeMode::Step, "this step");
+            ui.radio_value(&mut self.range_mode, RangeMode::Fixed, "fixed");
+        });
+        let shown = self.worker.shown();
+        match self.range_mode {
+            RangeMode::Series => self.state.field.attribute_range = None,
+            RangeMode::Step => {
+                if let Some(h) = &shown.histogram
+                    && (previous != RangeMode::Step || self.state.field.attribute_range.is_none())
+                {
+                    self.state.field.attribute_range = Some(h.step_range);
+                }
+            }
+            RangeMode::Fixed => {
+                let series_range = self
+                    .state
+                    .field
+                    .attribute
+                    .as_deref()
+                    .and_then(|a| self.series.attribute(a))
+                    .map_or((0.0, 1.0), |a| (a.min, a.max));
+                let (mut lo, mut hi) = self.state.field.attribute_range.unwrap_or(series_range);
+                ui.horizontal(|ui| {
+                    let speed = ((hi - lo).abs() * 0.002).max(1e-9);
+                    let from = ui.label("from").id;
+                    ui.add(egui::DragValue::new(&mut lo).speed(speed))
+                        .labelled_by(from);
+                    let to = ui.label("to").id;
+                    ui.add(egui::DragValue::new(&mut hi).speed(speed))
+                        .labelled_by(to);
+                });
+                if lo < hi {
+                    self.state.field.attribute_range = Some((lo, hi));
+                }
+            }
+        }
+    }
+
+    fn map_controls(&mut self, ui: &mut egui::Ui) {
+        let shown = self.worker.shown();
+        let histogram = shown.histogram.as_deref();
+        let mut colormap = self.state.colormap.clone();
+        ui.horizontal(|ui| {
+            egui::ComboBox::new("colormap", "colour map")
+                .selected_text(&colormap)
+                .show_ui(ui, |ui| {
+                    for p in PRESETS {
+                        ui.selectable_value(&mut colormap, p.to_owned(), p);
+                    }
+                });
+        });
+        ui.horizontal(|ui| {
+            let label = ui.label("ParaView .json").id;
+            ui.add(egui::TextEdit::singleline(&mut self.paraview_path).desired_width(130.0))
+                .labelled_by(label);
+            if ui.button("import").clicked() {
+                colormap = self.paraview_path.clone();
+            }
+        });
+        if colormap != self.state.colormap {
+            match ColorMap::from_name_or_file(&colormap) {
+                Ok(map) => {
+                    self.state.field.color_map = map;
+                    self.state.colormap = colormap;
+                }
+                Err(e) => self.say(format!("colour map {colormap}: {e}")),
+            }
+        }
+        let has_attribute = self.state.field.attribute.is_some();
+        ui.add_enabled_ui(has_attribute, |ui| {
+            ui.horizontal(|ui| {
+                ui.label("classification");
+                ui.radio_value(
+                    &mut self.state.field.classification,
+                    Classification::Post,
+                    "post",
+                );
+                ui.radio_value(
+                    &mut self.state.field.classification,
+                    Classification::Pre,
+                    "pre",
+                );
+            });
+            ui.checkbox(
+                &mut self.state.settings.colour_by_density,
+                "colour by density",
+            );
+            ui.checkbox(&mut self.log_y, "histogram log scale");
+            ui.label("density map w(t)");
+            let mut density = self.state.field.density_map.0.clone();
+            let top = density.max_value().max(1.0);
+            if map_editor(ui, "density map", &mut density, top, histogram, self.log_y) {
+                match DensityMap::new(density) {
+                    Ok(m) => self.state.field.density_map = m,
+                    Err(e) => self.say(e.to_string()),
+                }
+            }
+            ui.label("radius map m(t)");
+            let mut radius = self.state.field.radius_map.0.clone();
+            if map_editor(ui, "radius map", &mut radius, 1.0, histogram, self.log_y) {
+                match RadiusMap::new(radius) {
+                    Ok(m) => self.state.field.radius_map = m,
+                    Err(e) => self.say(e.to_string()),
+                }
+            }
+        });
+        let diagonal = view_bounds(self.series.bounds()).diagonal();
+        ui.add(
+            egui::Slider::new(
+                &mut self.state.field.radius,
+                diagonal * 1e-5..=diagonal * 0.2,
+            )
+            .logarithmic(true)
+            .text("radius"),
+        );
+        ui.label("optical density D(Phi / Phi_ref)");
+        let mut optical = self.state.settings.optical.map().clone();
+        let top = optical.max_value().max(1.0);
+        let changed = map_editor(ui, "optical density map", &mut optical, top, None, false);
+        let used_scale = shown.used.map(|u| u.density_scale);
+        let mut scale = self.state.settings.optical.scale();
+        ui.horizontal(|ui| {
+            let mut automatic = scale.is_none();
+            let label = ui.checkbox(&mut automatic, "automatic scale").id;
+            if automatic {
+                scale = None;
+                if let Some(s) = used_scale {
+                    ui.label(format!("{s:.3e}"));
+                }
+            } else {
+                let mut v = scale.or(used_scale).unwrap_or(1.0);
+                let speed = v * 0.01;
+                ui.add(
+                    egui::DragValue::new(&mut v)
+                        .speed(speed)
+                        .range(1e-12..=1e12),
+                )
+                .labelled_by(label);
+                scale = Some(v);
+            }
+        });
+        if changed || scale != self.state.settings.optical.scale() {
+            match OpticalDensityMap::new(optical, scale) {
+                Ok(m) => self.state.settings.optical = m,
+                Err(e) => self.say(e.to_string()),
+            }
+        }
+    }
+
+    fn camera_controls(&mut self, ui: &mut egui::Ui) {
+        let bounds = view_bounds(self.series.bounds());
+        let mut camera = self.state.camera();
+        ui.horizontal_wrapped(|ui| {
+            if ui.button("reset").clicked() {
+                camera = Camera {
+                    fovy: camera.fovy,
+                    ..Camera::default_for(bounds)
+                };
+            }
+            for v in AxisView::ALL {
+                if ui.button(v.label()).clicked() {
+                    camera = v.camera(bounds, camera.fovy);
+                }
+            }
+        });
+        ui.add(egui::Slider::new(&mut camera.fovy, 5.0..=120.0).text("field of view °"));
+        ui.label("drag: rotate · right drag or shift-drag: pan · wheel: zoom");
+        if camera != self.state.camera() {
+            self.state.settings.camera = Some(camera);
+        }
+    }
+
+    fn quality_controls(&mut self, ui: &mut egui::Ui) {
+        let s = &mut self.state.settings;
+        egui::ComboBox::new("integrator", "integrator")
+            .selected_text(integrator_name(s.integrator))
+            .show_ui(ui, |ui| {
+                for i in [
+                    Integrator::Ea,
+                    Integrator::Delta,
+                    Integrator::Marching,
+                    Integrator::SsReference,
+                ] {
+                    ui.selectable_value(&mut s.integrator, i, integrator_name(i));
+                }
+            });
+        let scattering = s.integrator != Integrator::Ea;
+        ui.add_enabled_ui(scattering, |ui| {
+            ui.add(egui::Slider::new(&mut s.light.azimuth, -180.0..=180.0).text("light azimuth °"));
+            ui.add(
+                egui::Slider::new(&mut s.light.elevation, -90.0..=90.0).text("light elevation °"),
+            );
+            ui.add(egui::Slider::new(&mut s.light.intensity, 0.0..=10.0).text("light intensity"));
+            ui.add(egui::Slider::new(&mut s.light.ambient, 0.0..=2.0).text("ambient"));
+        });
+        ui.horizontal(|ui| {
+            ui.label("noise");
+            ui.radio_value(&mut s.noise, NoiseKind::Stbn, "blue (STBN)");
+            ui.radio_value(&mut s.noise, NoiseKind::White, "white");
+        });
+        let used_step = self.worker.shown().used.map(|u| u.step_size);
+        ui.horizontal(|ui| {
+            let mut automatic = s.step_size.is_none();
+            let label = ui.checkbox(&mut automatic, "automatic step").id;
+            if automatic {
+                s.step_size = None;
+                if let Some(dt) = used_step {
+                    ui.label(format!("{dt:.3e}"));
+                }
+            } else {
+                let mut dt = s.step_size.or(used_step).unwrap_or(1e-2);
+                let speed = dt * 0.01;
+                ui.add(
+                    egui::DragValue::new(&mut dt)
+                        .speed(speed)
+                        .range(1e-12..=1e12),
+                )
+                .labelled_by(label);
+                s.step_size = Some(dt);
+            }
+        });
+        ui.add(
+            egui::Slider::new(&mut self.state.spp, 1..=4096)
+                .logarithmic(true)
+                .text("spp target"),
+        );
+        let mut k = self.state.cluster;
+        egui::ComboBox::new("cluster", "cluster size K")
+            .selected_text(k.to_string())
+            .show_ui(ui, |ui| {
+                for c in ClusterSize::ALL {
+                    ui.selectable_value(&mut k, c, c.to_string());
+                }
+            });
+        self.state.cluster = k;
+    }
+
+    fn backend_controls(&mut self, ui: &mut egui::Ui) {
+        let mut kind = self.state.backend;
+        egui::ComboBox::new("backend", "backend")
+            .selected_text(kind.to_string())
+            .show_ui(ui, |ui| {
+                for b in BACKENDS {
+                    ui.selectable_value(&mut kind, b, b.to_string());
+                }
+            });
+        self.state.backend = kind;
+        let s = self.worker.shown();
+        if let Some((name, device)) = &s.backend {
+            ui.label(format!("{name} on {device}"));
+        }
+        if let Some(p) = &s.positions {
+            ui.label(format!("positions: {p}"));
+        }
+        let t = s.timings;
+        ui.label(format!(
+            "prepare {:.1} ms · upload {:.1} ms · build {:.1} ms · refit {:.1} ms",
+            ms(t.prepare),
+            ms(t.upload),
+            ms(t.build),
+            ms(t.refit)
+        ));
+        let m = s.memory;
+        ui.label(format!(
+            "memory: particles {:.1} MiB · structure {:.1} MiB · image {:.1} MiB",
+            mib(m.particle_bytes),
+            mib(m.structure_bytes),
+            mib(m.image_bytes)
+        ));
+        ui.label(format!(
+            "image to window: {:.1} ms per update (readback and conversion)",
+            ms(s.readback)
+        ));
+    }
+
+    fn state_controls(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            let label = ui.label("scene file").id;
+            ui.add(egui::TextEdit::singleline(&mut self.scene_path).desired_width(150.0))
+                .labelled_by(label);
+            if ui.button("save").clicked() {
+                let path = PathBuf::from(&self.scene_path);
+                if let Err(e) = self.save_scene(&path) {
+                    self.say(e);
+                }
+            }
+            if ui.button("load").clicked() {
+                let path = PathBuf::from(&self.scene_path);
+                if let Err(e) = self.load_scene(&path) {
+                    self.say(e);
+                }
+            }
+        });
+        ui.horizontal(|ui| {
+            let label = ui.label("image file").id;
+            ui.add(egui::TextEdit::singleline(&mut self.screenshot_path).desired_width(150.0))
+                .labelled_by(label);
+            if ui.button("screenshot").clicked() {
+                self.worker.screenshot(PathBuf::from(&self.screenshot_path));
+            }
+        });
+        if let Some(last) = self.worker.shown().screenshots.last() {
+            ui.label(format!("wrote {}", last.display()));
+        }
+    }
+
+    /// Writes the state as a scene file `aarbf render --scene` renders to the same image.
+    pub fn save_scene(&mut self, path: &Path) -> Result<(), String> {
+        let shown = self.worker.shown();
+        let used = shown
+            .used
+            .filter(|_| shown.generation == self.generation)
+            .ok_or("save: the current state has not been rendered yet; try again in a moment")?;
+        self.state
+            .scene_file(&self.source, Some(&used))
+            .save(path, true)
+            .map_err(|e| e.to_string())?;
+        self.say(format!("saved {}", path.display()));
+        Ok(())
+    }
+
+    /// Replaces the state (and the data, if the scene names other data) by a scene file's.
+    pub fn load_scene(&mut self, path: &Path) -> Result<(), String> {
+        let data = DataArgs {
+            scene: Some(path.to_path_buf()),
+            data: None,
+            format: None,
+            step: None,
+            cache_mib: self.options.cache_mib,
+            rescan: false,
+        };
+        self.reload(&data, &FieldOptions::default())?;
+        self.say(format!("loaded {}", path.display()));
+        Ok(())
+    }
+
+    /// A new attribute is a new selection of the data: opened again, with the rest of the
+    /// state kept (through a scene file of it, as any reload).
+    fn change_attribute(&mut self, attribute: Option<String>) {
+        let dir = match tempfile::tempdir() {
+            Ok(d) => d,
+            Err(e) => return self.say(format!("cannot change the attribute: {e}")),
+        };
+        let path = dir.path().join("state.toml");
+        let mut scene = self.state.scene_file(&self.source, None);
+        scene.data.attribute = attribute;
+        // The range belonged to the old attribute.
+        scene.data.attribute_range = None;
+        self.range_mode = RangeMode::Series;
+        let result = scene
+            .save(&path, true)
+            .map_err(|e| e.to_string())
+            .and_then(|()| {
+                let data = DataArgs {
+                    scene: Some(path.clone()),
+                    data: None,
+                    format: None,
+                    step: None,
+                    cache_mib: self.options.cache_mib,
+                    rescan: false,
+                };
+                self.reload(&data, &FieldOptions::default())
+            });
+        if let Err(e) = result {
+            self.say(format!("cannot change the attribute: {e}"));
+        }
+    }
+
+    fn reload(&mut self, data: &DataArgs, field: &FieldOptions) -> Result<(), String> {
+        let loaded = resolve(data, field).map_err(|e| format!("{e:#}"))?;
+        let mut state = ViewState::of(&loaded, self.state.backend)?;
+        // The window's size is the window's, not the file's.
+        state.settings.width = self.state.settings.width;
+        state.settings.height = self.state.settings.height;
+        let same_data = loaded.data_path == self.source.path
+            && loaded.format == self.source.format
+            && loaded.series.len() == self.series.len()
+            && loaded.field.attribute == self.state.field.attribute
+            && loaded.field.radius_attribute == self.state.field.radius_attribute;
+        if !same_data {
+            self.attributes_in_data = loaded
+                .series
+                .attributes_in_data()
+                .map_err(|e| e.to_string())?;
+            self.source = DataSource {
+                path: loaded.data_path.clone(),
+                format: loaded.format,
+            };
+            self.series = Arc::new(loaded.series);
+            self.worker = spawn_worker(&self.ctx, &self.series);
+            self.sent = None;
+            self.texture_of = None;
+        }
+        self.range_mode = if state.field.attribute_range.is_some() {
+            RangeMode::Fixed
+        } else {
+            RangeMode::Series
+        };
+        self.state = state;
+        Ok(())
+    }
+}
+
+fn spawn_worker(ctx: &egui::Context, series: &Arc<TimeSeries>) -> RenderWorker {
+    let repaint = ctx.clone();
+    RenderWorker::spawn(series.clone(), Box::new(move || repaint.request_repaint()))
+}
+
+fn integrator_name(i: Integrator) -> &'static str {
+    match i {
+        Integrator::Ea => "emission-absorption",
+        Integrator::Delta => "single scattering, delta tracking",
+        Integrator::Marching => "single scattering, stochastic marching",
+        Integrator::SsReference => "single scattering, reference",
+    }
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn mib(bytes: usize) -> f64 {
+    bytes as f64 / f64::from(1u32 << 20)
+}

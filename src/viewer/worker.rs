@@ -1,0 +1,563 @@
+//! The render worker: a thread that owns the backend and the rendering session, so the window
+//! never waits for a frame. The window sends the state it wants shown; the worker renders it
+//! progressively and publishes the latest image with what it cost.
+//!
+//! While the user drags (or the series plays), the worker renders at a reduced resolution it
+//! chooses after every frame so frames take about [`INTERACTIVE_FRAME`] on this backend, one
+//! sample each; when input stops it renders at full resolution and accumulates up to the
+//! state's spp (OSPRay Studio's and ParaView's level of detail do the same).
+
+use std::path::PathBuf;
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use super::state::ViewState;
+use crate::backend::{self, BackendKind, MemoryReport, Precision, Timings};
+use crate::field::{FieldInputs, normalise};
+use crate::render::{RenderError, RenderSession, Resolved, StepChange};
+use crate::scene::TimeSeries;
+use crate::scene::prefetch::Prefetcher;
+
+/// The frame time interactive rendering aims for (20 frames per second).
+pub const INTERACTIVE_FRAME: Duration = Duration::from_millis(50);
+/// Interactive images are never smaller than this fraction of the full image's side.
+const MIN_SCALE: f64 = 1.0 / 16.0;
+/// While accumulating at full resolution, the image is read back at most this often (each
+/// readback copies the whole accumulation).
+const PUBLISH_INTERVAL: Duration = Duration::from_millis(150);
+/// Bins of the attribute histogram behind the map editors.
+pub const HISTOGRAM_BINS: usize = 64;
+
+/// How the user is moving the view.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Interaction {
+    /// A drag or scroll is under way: render fast, at reduced resolution.
+    pub interacting: bool,
+    /// The series plays forward (`Some(true)`) or backward; the worker reads ahead that way.
+    pub playing: Option<bool>,
+    /// Playback wraps around at the ends.
+    pub looping: bool,
+}
+
+enum Request {
+    Show {
+        state: Box<ViewState>,
+        generation: u64,
+        interaction: Interaction,
+    },
+    Screenshot(PathBuf),
+    Quit,
+}
+
+/// An sRGB image the window can show.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShownImage {
+    pub width: u32,
+    pub height: u32,
+    /// RGBA, 8 bits a channel, sRGB, opaque.
+    pub rgba: Vec<u8>,
+}
+
+/// The distribution of the field's attribute in the shown step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Histogram {
+    /// Particles per bin of the normalised attribute t over [0, 1] (outside values clamp to
+    /// the end bins).
+    pub counts: Vec<u32>,
+    /// The attribute's range in this step (for "range: this step").
+    pub step_range: (f64, f64),
+}
+
+/// What the worker has to show: the latest image and what it cost.
+#[derive(Clone, Debug, Default)]
+pub struct Shown {
+    /// The state generation the image and figures belong to.
+    pub generation: u64,
+    pub image: Option<Arc<ShownImage>>,
+    /// Frames accumulated in the image.
+    pub spp: u32,
+    pub full_resolution: bool,
+    /// The state's full image size (what `image` is a reduced version of while interacting).
+    pub full_size: (u32, u32),
+    /// Time from the state's change to this image.
+    pub since_change: Duration,
+    /// The last frame's render time.
+    pub frame_time: Duration,
+    /// Reading the accumulation back and converting it for the window, per published image:
+    /// the copy that brings a GPU backend's image to the window.
+    pub readback: Duration,
+    /// The backend's name and device.
+    pub backend: Option<(String, String)>,
+    pub timings: Timings,
+    pub memory: MemoryReport,
+    /// The step shown, after its build (or refit), and what that took.
+    pub step: Option<usize>,
+    pub step_change: Option<(StepChange, Duration)>,
+    pub positions: Option<String>,
+    /// The automatic values as resolved for the state (what a saved scene records).
+    pub used: Option<Resolved>,
+    pub histogram: Option<Arc<Histogram>>,
+    /// Problems and fallbacks, newest last; the window shows them.
+    pub messages: Vec<String>,
+    /// When the worker refused a state, the one it went back to (the window adopts it).
+    pub reverted: Option<Box<ViewState>>,
+    /// Work in progress that blocks frames (a backend starting, a step building).
+    pub busy: Option<String>,
+    /// Screenshots written, in order.
+    pub screenshots: Vec<PathBuf>,
+    /// The state and the accumulation are complete: the worker waits for a change.
+    pub converged: bool,
+}
+
+/// The handle the window holds.
+pub struct RenderWorker {
+    requests: Sender<Request>,
+    shown: Arc<Mutex<Shown>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl RenderWorker {
+    /// Starts a worker over `series`; `notify` is called whenever there is something new to
+    /// show (the window asks egui to repaint).
+    pub fn spawn(series: Arc<TimeSeries>, notify: Box<dyn Fn() + Send>) -> RenderWorker {
+        let (requests, incoming) = mpsc::channel();
+        let shown = Arc::new(Mutex::new(Shown::default()));
+        let published = shown.clone();
+        let thread = std::thread::Builder::new()
+            .name("aarbf-render".into())
+            .spawn(move || {
+                let mut worker = Worker {
+                    series: &series,
+                    session: None,
+                    out: Outbox {
+                        shown: published,
+                        notify,
+                    },
+                    scale: 0.5,
+                    applied: None,
+                    last_good: None,
+                    histogram: None,
+                };
+                worker.run(&incoming);
+            })
+            .expect("cannot start the render thread");
+        RenderWorker {
+            requests,
+            shown,
+            thread: Some(thread),
+        }
+    }
+
+    /// Asks for `state` to be shown; `generation` identifies it in [`Shown`].
+    pub fn show(&self, state: &ViewState, generation: u64, interaction: Interaction) {
+        let _ = self.requests.send(Request::Show {
+            state: Box::new(state.clone()),
+            generation,
+            interaction,
+        });
+    }
+
+    /// Writes the current accumulation at full resolution to `path` (PNG) once it has at
+    /// least one full-resolution frame.
+    pub fn screenshot(&self, path: PathBuf) {
+        let _ = self.requests.send(Request::Screenshot(path));
+    }
+
+    /// A copy of what there is to show.
+    pub fn shown(&self) -> Shown {
+        self.shown.lock().unwrap().clone()
+    }
+
+    /// Takes the messages and the reverted state out (each is shown once).
+    pub fn take_news(&self) -> (Vec<String>, Option<Box<ViewState>>) {
+        let mut s = self.shown.lock().unwrap();
+        (std::mem::take(&mut s.messages), s.reverted.take())
+    }
+
+    /// Waits until `done` holds for what is shown, or `timeout` passes; returns the last.
+    pub fn wait_for(&self, timeout: Duration, done: impl Fn(&Shown) -> bool) -> Shown {
+        let start = Instant::now();
+        loop {
+            let s = self.shown();
+            if done(&s) || start.elapsed() > timeout {
+                return s;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+impl Drop for RenderWorker {
+    fn drop(&mut self) {
+        let _ = self.requests.send(Request::Quit);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Where the worker publishes, and how it tells the window.
+struct Outbox {
+    shown: Arc<Mutex<Shown>>,
+    notify: Box<dyn Fn() + Send>,
+}
+
+impl Outbox {
+    fn publish(&self, f: impl FnOnce(&mut Shown)) {
+        f(&mut self.shown.lock().unwrap());
+        (self.notify)();
+    }
+
+    fn say(&self, message: String) {
+        tracing::warn!("{message}");
+        self.publish(|s| s.messages.push(message));
+    }
+}
+
+/// What a histogram depends on: the step, the attribute and the range it is normalised over.
+type HistogramKey = (usize, Option<String>, Option<(f64, f64)>);
+
+struct Worker<'a> {
+    series: &'a TimeSeries,
+    session: Option<(BackendKind, RenderSession)>,
+    out: Outbox,
+    /// The side of interactive images as a fraction of the full image's.
+    scale: f64,
+    /// The state the session holds, and its generation.
+    applied: Option<(ViewState, u64)>,
+    last_good: Option<ViewState>,
+    /// The histogram of the shown step's attribute, and what it was made for.
+    histogram: Option<(HistogramKey, Option<Arc<Histogram>>)>,
+}
+
+/// What the worker is asked for now.
+struct Wanted {
+    state: ViewState,
+    generation: u64,
+    interaction: Interaction,
+    changed_at: Instant,
+}
+
+impl Worker<'_> {
+    fn run(&mut self, incoming: &Receiver<Request>) {
+        std::thread::scope(|scope| {
+            let prefetcher = Prefetcher::spawn(scope, self.series);
+            let mut wanted: Option<Wanted> = None;
+            let mut screenshots: Vec<PathBuf> = Vec::new();
+            let mut idle = true;
+            let mut last_publish = Instant::now();
+            loop {
+                // Take every request there is; wait for one only when there is nothing to do.
+                let mut next = if idle {
+                    match incoming.recv() {
+                        Ok(r) => Some(r),
+                        Err(_) => return,
+                    }
+                } else {
+                    None
+                };
+                loop {
+                    let request = match next.take() {
+                        Some(r) => r,
+                        None => match incoming.recv_timeout(Duration::ZERO) {
+                            Ok(r) => r,
+                            Err(RecvTimeoutError::Timeout) => break,
+                            Err(RecvTimeoutError::Disconnected) => return,
+                        },
+                    };
+                    match request {
+                        Request::Quit => return,
+                        Request::Screenshot(path) => screenshots.push(path),
+                        Request::Show {
+                            state,
+                            generation,
+                            interaction,
+                        } => {
+                            let same = wanted.as_ref().is_some_and(|w| w.state == *state);
+                            let changed_at = match &wanted {
+                                Some(w) if same => w.changed_at,
+                                _ => Instant::now(),
+                            };
+                            wanted = Some(Wanted {
+                                state: *state,
+                                generation,
+                                interaction,
+                                changed_at,
+                            });
+                        }
+                    }
+                }
+                let Some(want) = wanted.as_mut() else {
+                    idle = true;
+                    continue;
+                };
+                if self.applied.as_ref().is_none_or(|(s, _)| *s != want.state) {
+                    if let Err(e) = self.apply(&want.state, want.generation) {
+                        self.refuse(want, e);
+                        idle = self.session.is_none();
+                        continue;
+                    }
+                    let upcoming =
+                        upcoming_steps(want.state.step, self.series.len(), want.interaction);
+                    prefetcher.plan(want.state.step, upcoming);
+                }
+                self.applied.as_mut().unwrap().1 = want.generation;
+                match self.frame(want, &mut screenshots, &mut last_publish) {
+                    Ok(done) => idle = done,
+                    Err(e) => {
+                        self.refuse(want, e);
+                        idle = self.session.is_none();
+                    }
+                }
+            }
+        });
+    }
+
+    /// Makes the session hold `state`: the backend it names (started if it changed), the
+    /// step and field (built, refit or only re-mapped, as the change needs).
+    fn apply(&mut self, state: &ViewState, generation: u64) -> Result<(), RenderError> {
+        if self
+            .session
+            .as_ref()
+            .is_none_or(|(k, _)| *k != state.backend)
+        {
+            self.out
+                .publish(|s| s.busy = Some(format!("starting the {} backend", state.backend)));
+            let backend = match backend::create(state.backend) {
+                Ok(b) => b,
+                Err(e) => {
+                    self.out.publish(|s| s.busy = None);
+                    return Err(e.into());
+                }
+            };
+            let caps = backend.capabilities();
+            self.out
+                .publish(|s| s.backend = Some((caps.name.to_owned(), caps.device.clone())));
+            self.session = Some((state.backend, RenderSession::new(backend, self.series)));
+        }
+        let (_, session) = self.session.as_mut().unwrap();
+        let precision = backend::parse_precision(&state.precision, Precision::RENDER)
+            .map_err(RenderError::Settings)?;
+        session.set_precision(precision);
+        let building = self
+            .applied
+            .as_ref()
+            .is_none_or(|(b, _)| b.field != state.field || b.step != state.step);
+        if building {
+            self.out
+                .publish(|s| s.busy = Some(format!("preparing step {}", state.step)));
+        }
+        let started = Instant::now();
+        let result = session.show(self.series, state.step, &state.field, state.cluster);
+        let took = started.elapsed();
+        let used = result.and_then(|change| Ok((change, session.resolve(&state.settings)?)));
+        let (change, used) = match used {
+            Ok(u) => u,
+            Err(e) => {
+                self.out.publish(|s| s.busy = None);
+                return Err(e);
+            }
+        };
+        let positions = session.backend().positions().map(|p| p.to_string());
+        let histogram = self.histogram(state)?;
+        self.applied = Some((state.clone(), generation));
+        self.last_good = Some(state.clone());
+        self.out.publish(|s| {
+            s.busy = None;
+            s.used = Some(used);
+            s.positions = positions;
+            s.step = Some(state.step);
+            if change != StepChange::None {
+                s.step_change = Some((change, took));
+            }
+            s.histogram = histogram;
+        });
+        Ok(())
+    }
+
+    /// The histogram of the state's attribute in its step (made again only when the step,
+    /// attribute or range changed).
+    fn histogram(&mut self, state: &ViewState) -> Result<Option<Arc<Histogram>>, RenderError> {
+        let key = (
+            state.step,
+            state.field.attribute.clone(),
+            state.field.attribute_range,
+        );
+        if let Some((k, h)) = &self.histogram
+            && *k == key
+        {
+            return Ok(h.clone());
+        }
+        let step = self.series.step(state.step)?;
+        let series_range = state
+            .field
+            .attribute
+            .as_deref()
+            .and_then(|a| self.series.attribute(a))
+            .map(|a| (a.min, a.max));
+        let inputs = FieldInputs::check(&step, &state.field, series_range)
+            .map_err(|e| RenderError::Settings(e.to_string()))?;
+        let histogram = inputs.attribute.map(|a| {
+            let mut counts = vec![0u32; HISTOGRAM_BINS];
+            let mut lo = f64::INFINITY;
+            let mut hi = f64::NEG_INFINITY;
+            for &v in &a.values {
+                lo = lo.min(v);
+                hi = hi.max(v);
+                let t = normalise(v, inputs.range).clamp(0.0, 1.0);
+                let bin = ((t * HISTOGRAM_BINS as f64) as usize).min(HISTOGRAM_BINS - 1);
+                counts[bin] += 1;
+            }
+            Arc::new(Histogram {
+                counts,
+                step_range: if lo <= hi { (lo, hi) } else { (0.0, 0.0) },
+            })
+        });
+        self.histogram = Some((key, histogram.clone()));
+        Ok(histogram)
+    }
+
+    /// A state was refused: say why and go back to the last state that worked (or, when the
+    /// backend itself failed, to the CPU backend).
+    fn refuse(&mut self, want: &mut Wanted, error: RenderError) {
+        let backend_failed = matches!(error, RenderError::Backend(_));
+        if backend_failed && want.state.backend != BackendKind::Cpu {
+            self.out.say(format!(
+                "the {} backend failed: {error}; falling back to the CPU backend",
+                want.state.backend
+            ));
+            self.session = None;
+            self.applied = None;
+            want.state.backend = BackendKind::Cpu;
+        } else if let Some(good) = self.last_good.clone().filter(|g| *g != want.state) {
+            self.out
+                .say(format!("{error}; showing the previous settings"));
+            want.state = good;
+        } else {
+            self.out.say(error.to_string());
+            self.session = None;
+            self.applied = None;
+            return;
+        }
+        let state = Box::new(want.state.clone());
+        self.out.publish(|s| s.reverted = Some(state));
+    }
+
+    /// Renders one frame of the wanted state; returns whether the accumulation is complete.
+    fn frame(
+        &mut self,
+        want: &Wanted,
+        screenshots: &mut Vec<PathBuf>,
+        last_publish: &mut Instant,
+    ) -> Result<bool, RenderError> {
+        let (_, session) = self.session.as_mut().unwrap();
+        let full = (want.state.settings.width, want.state.settings.height);
+        let interactive = want.interaction.interacting || want.interaction.playing.is_some();
+        let mut settings = want.state.settings.clone();
+        if interactive {
+            settings.width = ((f64::from(full.0) * self.scale).round() as u32).max(1);
+            settings.height = ((f64::from(full.1) * self.scale).round() as u32).max(1);
+        }
+        let full_resolution = (settings.width, settings.height) == full;
+        let converged = full_resolution && !interactive && session.frames() >= want.state.spp;
+        if !converged {
+            let started = Instant::now();
+            session.accumulate(&settings, 1)?;
+            let took = started.elapsed();
+            if interactive {
+                // Aim the next frame at INTERACTIVE_FRAME: pixels scale with the time.
+                let ratio = (INTERACTIVE_FRAME.as_secs_f64() / took.as_secs_f64().max(1e-4))
+                    .clamp(0.25, 4.0);
+                self.scale = (self.scale * ratio.sqrt()).clamp(MIN_SCALE, 1.0);
+            }
+            self.out.publish(|s| s.frame_time = took);
+        }
+        let frames = session.frames();
+        let done = full_resolution && !interactive && frames >= want.state.spp;
+        let publish =
+            interactive || done || last_publish.elapsed() >= PUBLISH_INTERVAL || frames == 1;
+        if publish && (!converged || self.out.shown.lock().unwrap().generation != want.generation) {
+            let started = Instant::now();
+            let image = session.image()?;
+            let rgb = image.to_srgb8();
+            let rgba = rgb.pixels().flat_map(|p| [p[0], p[1], p[2], 255]).collect();
+            let readback = started.elapsed();
+            *last_publish = Instant::now();
+            let shown = Arc::new(ShownImage {
+                width: image.width,
+                height: image.height,
+                rgba,
+            });
+            let timings = session.backend().timings();
+            let memory = session.backend().memory();
+            let since = want.changed_at.elapsed();
+            let generation = want.generation;
+            self.out.publish(|s| {
+                s.generation = generation;
+                s.image = Some(shown);
+                s.spp = frames;
+                s.full_resolution = full_resolution;
+                s.full_size = full;
+                s.since_change = since;
+                s.readback = readback;
+                s.timings = timings;
+                s.memory = memory;
+                s.converged = done;
+            });
+        }
+        if full_resolution && frames > 0 && !screenshots.is_empty() {
+            let image = session.image()?;
+            for path in screenshots.drain(..) {
+                match crate::io::output::write_png(&path, &image, true) {
+                    Ok(()) => self.out.publish(|s| s.screenshots.push(path)),
+                    Err(e) => self.out.say(format!("screenshot: {e}")),
+                }
+            }
+        }
+        Ok(done)
+    }
+}
+
+/// The steps playback shows next, in order (read ahead while the current one renders).
+fn upcoming_steps(current: usize, len: usize, interaction: Interaction) -> Vec<usize> {
+    const AHEAD: usize = 4;
+    let Some(forward) = interaction.playing else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    let mut s = current;
+    for _ in 0..AHEAD.min(len.saturating_sub(1)) {
+        s = match (forward, s) {
+            (true, s) if s + 1 < len => s + 1,
+            (true, _) if interaction.looping => 0,
+            (false, 0) if interaction.looping => len - 1,
+            (false, s) if s > 0 => s - 1,
+            _ => break,
+        };
+        out.push(s);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn playback_reads_ahead_in_its_direction_and_wraps_only_when_looping() {
+        let play = |forward, looping| Interaction {
+            interacting: false,
+            playing: Some(forward),
+            looping,
+        };
+        assert_eq!(upcoming_steps(3, 10, play(true, false)), [4, 5, 6, 7]);
+        assert_eq!(upcoming_steps(8, 10, play(true, false)), [9]);
+        assert_eq!(upcoming_steps(8, 10, play(true, true)), [9, 0, 1, 2]);
+        assert_eq!(upcoming_steps(1, 10, play(false, false)), [0]);
+        assert_eq!(upcoming_steps(1, 10, play(false, true)), [0, 9, 8, 7]);
+        assert_eq!(upcoming_steps(0, 1, play(true, true)), Vec::<usize>::new());
+        assert!(upcoming_steps(3, 10, Interaction::default()).is_empty());
+    }
+}
