@@ -543,3 +543,169 @@ fn a_grid_export_equals_point_queries_at_its_points() {
     ]);
     assert!(e.contains("--queries") && e.contains("--grid"), "{e}");
 }
+
+/// Sequences as users run them: every n-th step, resumed after an interruption without
+/// re-rendering what is written, a camera orbit, and 16-bit PNG / OpenEXR with alpha for
+/// compositing (the background taken out).
+#[test]
+fn render_sequences_resume_orbit_and_write_images_with_alpha() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = ok(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        s(&d.join("db")),
+        "--count",
+        "1200",
+        "--steps",
+        "7",
+    ]);
+    let header = header.trim();
+    let common = [
+        "--attribute",
+        "attribute",
+        "--radius",
+        "3%",
+        "--width",
+        "36",
+        "--height",
+        "24",
+        "--spp",
+        "1",
+        "--backend",
+        "cpu",
+    ];
+    let render = |extra: &[&str]| {
+        let mut a = vec!["render", "--data", header];
+        a.extend_from_slice(&common);
+        a.extend_from_slice(extra);
+        ok(&a)
+    };
+    // Every third step of 1..=6: 1, 4.
+    let seq = d.join("seq.png");
+    render(&["--steps", "1..=6:3", "--out", s(&seq)]);
+    let written = |prefix: &str| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(prefix))
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(written("seq_"), ["seq_0001.png", "seq_0004.png"]);
+    let e = fails(&[
+        "render",
+        "--data",
+        header,
+        "--steps",
+        "0..4:0",
+        "--out",
+        s(&seq),
+    ]);
+    assert!(e.contains("stride"), "{e}");
+
+    // Resuming: a frame already written is kept as it is (a stand-in proves it was not
+    // rendered again), the missing ones are rendered; --force renders everything.
+    let stand_in = std::fs::read(d.join("seq_0001.png")).unwrap();
+    std::fs::write(d.join("seq_0004.png"), b"stand-in").unwrap();
+    std::fs::remove_file(d.join("seq_0001.png")).unwrap();
+    render(&["--steps", "1..=6:3", "--out", s(&seq)]);
+    assert_eq!(std::fs::read(d.join("seq_0004.png")).unwrap(), b"stand-in");
+    assert_eq!(std::fs::read(d.join("seq_0001.png")).unwrap(), stand_in);
+    render(&["--steps", "1..=6:3", "--out", s(&seq), "--force"]);
+    assert!(image::open(d.join("seq_0004.png")).is_ok());
+
+    // An orbit: 4 frames around the data, each a different view of the same step; with a
+    // step range the steps advance with the frames.
+    let orbit = d.join("orbit.png");
+    render(&["--step", "5", "--orbit-sequence", "4", "--out", s(&orbit)]);
+    assert_eq!(
+        written("orbit_"),
+        [
+            "orbit_0000.png",
+            "orbit_0001.png",
+            "orbit_0002.png",
+            "orbit_0003.png"
+        ]
+    );
+    let frames: Vec<_> = (0..4)
+        .map(|k| {
+            image::open(d.join(format!("orbit_{k:04}.png")))
+                .unwrap()
+                .to_rgb8()
+        })
+        .collect();
+    for k in 1..4 {
+        assert_ne!(frames[0], frames[k], "frame {k} shows the same view");
+    }
+    // Frame 0 of the orbit is the step's ordinary render.
+    let plain = d.join("plain.png");
+    render(&["--step", "5", "--out", s(&plain)]);
+    assert_eq!(image::open(&plain).unwrap().to_rgb8(), frames[0]);
+    let walk = d.join("walk.png");
+    render(&[
+        "--steps",
+        "2..4",
+        "--orbit-sequence",
+        "3",
+        "--out",
+        s(&walk),
+    ]);
+    assert_eq!(written("walk_").len(), 3);
+
+    // With alpha: over a grey background the 8-bit PNG shows grey where there is no data;
+    // the 16-bit PNG and the EXR carry the data alone, transparent there.
+    let grey = ["--step", "5", "--background", "0.5,0.5,0.5"];
+    let opaque = d.join("opaque.png");
+    render(&[&grey[..], &["--out", s(&opaque)]].concat());
+    let png16 = d.join("alpha.png");
+    render(&[&grey[..], &["--bit-depth", "16", "--out", s(&png16)]].concat());
+    let exr = d.join("alpha.exr");
+    render(&[&grey[..], &["--out", s(&exr)]].concat());
+    let opaque = image::open(&opaque).unwrap().to_rgb8();
+    let rgba16 = image::open(&png16).unwrap().to_rgba16();
+    let rgba32 = image::open(&exr).unwrap().to_rgba32f();
+    assert_eq!(rgba16.dimensions(), (36, 24));
+    assert_eq!(rgba32.dimensions(), (36, 24));
+    let corner = (0, 0);
+    assert_eq!(opaque.get_pixel(corner.0, corner.1).0, [188, 188, 188]); // sRGB of 0.5
+    assert_eq!(rgba16.get_pixel(corner.0, corner.1).0[3], 0);
+    assert_eq!(rgba32.get_pixel(corner.0, corner.1).0, [0.0; 4]);
+    // Somewhere the data is opaque enough to see, and its colour composited back over the
+    // grey gives the 8-bit image (to its rounding).
+    let mut seen = 0;
+    for (x, y, p) in rgba32.enumerate_pixels() {
+        let [r, g, b, a] = p.0;
+        if a > 0.2 {
+            seen += 1;
+            let over = |c: f32| {
+                let linear = f64::from(c) + (1.0 - f64::from(a)) * 0.5;
+                aarbf::values::color_space::linear_to_srgb(linear.clamp(0.0, 1.0)) * 255.0
+            };
+            let expect = opaque.get_pixel(x, y).0;
+            for (k, c) in [r, g, b].into_iter().enumerate() {
+                assert!(
+                    (over(c) - f64::from(expect[k])).abs() <= 1.0,
+                    "pixel {x},{y}: {} vs {}",
+                    over(c),
+                    expect[k]
+                );
+            }
+        }
+    }
+    assert!(seen > 20, "{seen} pixels with data");
+    let e = fails(&["render", "--data", header, "--out", s(&d.join("x.tiff"))]);
+    assert!(e.contains("unknown image type"), "{e}");
+    let e = fails(&[
+        "render",
+        "--data",
+        header,
+        "--bit-depth",
+        "12",
+        "--out",
+        s(&d.join("x.png")),
+    ]);
+    assert!(e.contains("8 or 16"), "{e}");
+}

@@ -222,6 +222,9 @@ pub enum BackendError {
     },
     #[error("the {0} backend is not available on this machine: {1}")]
     Unavailable(&'static str, String),
+    /// The caller raised the abandon flag ([`Backend::set_abandon_flag`]) during the frame.
+    #[error("the frame was abandoned for a newer one")]
+    Abandoned,
 }
 
 /// A rendering and query backend.
@@ -265,6 +268,13 @@ pub trait Backend: Send {
 
     /// Restarts progressive accumulation.
     fn reset(&mut self);
+
+    /// A flag the caller raises to abandon the frame being rendered (a viewer whose view
+    /// changed mid-frame); `None` renders every frame whole. A backend that renders a frame in
+    /// pieces checks it between pieces and returns [`BackendError::Abandoned`] with the
+    /// accumulation as it was before the frame; one that submits a frame whole (the GPU
+    /// backends) finishes it.
+    fn set_abandon_flag(&mut self, _flag: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>) {}
 
     /// The mean of the frames accumulated so far.
     fn image(&mut self) -> Result<Image, BackendError>;

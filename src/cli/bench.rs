@@ -28,6 +28,10 @@ pub enum BenchCommand {
     /// and a Markdown summary with steps per second, each stage's share, the floors (copying
     /// a step in memory, reading its file from the page cache) and peak memory.
     Playback(PlaybackArgs),
+    /// Drive the viewer's render worker as a drag does (a new camera every 1/60 s), then
+    /// release: preview rate, size and frame time while moving, the time to a full image and
+    /// to the spp after, and the longest the window thread waited (interactive.md).
+    Interactive(super::bench_interactive::InteractiveArgs),
 }
 
 #[derive(Debug, Args)]
@@ -55,7 +59,7 @@ pub struct PlaybackArgs {
     pub force: bool,
 }
 
-fn parse_size(text: &str) -> Result<(u32, u32), String> {
+pub(super) fn parse_size(text: &str) -> Result<(u32, u32), String> {
     let (w, h) = text
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("'{text}' is not WxH"))?;
@@ -72,6 +76,7 @@ fn parse_size(text: &str) -> Result<(u32, u32), String> {
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.what {
         BenchCommand::Playback(a) => playback(a),
+        BenchCommand::Interactive(a) => super::bench_interactive::run(a),
     }
 }
 

@@ -1,6 +1,7 @@
 //! The `aarbf` command line: argument definitions and the commands behind them.
 
 mod bench;
+mod bench_interactive;
 mod field;
 mod generate;
 mod info;

@@ -19,9 +19,20 @@ pub struct RenderArgs {
     pub data: DataArgs,
     #[command(flatten)]
     pub field: FieldOptions,
-    /// A range of steps, `a..b` (b excluded) or `a..=b`: writes OUT_<step>.png for each.
+    /// A range of steps, `a..b` (b excluded) or `a..=b`, optionally every n-th (`0..48:4`):
+    /// writes OUT_<step>.<ext> for each. Frames already written are kept (a sequence resumes
+    /// where it stopped) unless --force.
     #[arg(long, conflicts_with = "step")]
     pub steps: Option<String>,
+    /// N frames with the camera turned once around the data (about the view's up axis through
+    /// its focal point): writes OUT_<frame>.<ext>; with --steps the steps advance with the
+    /// frames (frame k shows the k-th step of the range, cycling).
+    #[arg(long)]
+    pub orbit_sequence: Option<usize>,
+    /// Bits per channel of a PNG: 8 (sRGB, opaque) or 16 (sRGB with alpha, for compositing).
+    /// An .exr output is always linear 32-bit float RGBA with premultiplied alpha.
+    #[arg(long, default_value_t = 8)]
+    pub bit_depth: u8,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendKind,
     /// How a GPU backend holds positions: `auto` (f32 where the scene's radii allow a Phi
@@ -77,7 +88,7 @@ pub struct RenderArgs {
     /// Background colour r,g,b (linear, 0..1).
     #[arg(long, value_name = "R,G,B")]
     pub background: Option<String>,
-    /// Output PNG (for a step range: the prefix of the sequence).
+    /// Output image, .png or .exr (for a sequence: the prefix of its frames).
     #[arg(long)]
     pub out: PathBuf,
     /// Overwrite existing outputs.
@@ -96,13 +107,32 @@ fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
 }
 
 /// Parses `a..b` / `a..=b`.
-pub(super) fn step_range(text: &str, len: usize) -> anyhow::Result<std::ops::Range<usize>> {
-    let (a, b, inclusive) = if let Some((a, b)) = text.split_once("..=") {
+/// Parses `a..b`, `a..=b` and either with `:stride` (`0..48:4`).
+pub(super) fn step_range(
+    text: &str,
+    len: usize,
+) -> anyhow::Result<std::iter::StepBy<std::ops::Range<usize>>> {
+    let (range, stride) = match text.rsplit_once(':') {
+        Some((range, stride)) => {
+            let stride: usize =
+                stride
+                    .trim()
+                    .parse()
+                    .ok()
+                    .filter(|&s| s > 0)
+                    .with_context(|| {
+                        format!("--steps '{text}': the stride must be a positive whole number")
+                    })?;
+            (range, stride)
+        }
+        None => (text, 1),
+    };
+    let (a, b, inclusive) = if let Some((a, b)) = range.split_once("..=") {
         (a, b, true)
-    } else if let Some((a, b)) = text.split_once("..") {
+    } else if let Some((a, b)) = range.split_once("..") {
         (a, b, false)
     } else {
-        bail!("--steps '{text}': expected a..b or a..=b");
+        bail!("--steps '{text}': expected a..b or a..=b, optionally with :stride");
     };
     let a: usize = if a.is_empty() {
         0
@@ -119,7 +149,7 @@ pub(super) fn step_range(text: &str, len: usize) -> anyhow::Result<std::ops::Ran
     if a >= b || b > len {
         bail!("--steps '{text}' is empty or beyond the series' {len} steps");
     }
-    Ok(a..b)
+    Ok((a..b).step_by(stride))
 }
 
 fn set_or_auto(set: bool) -> &'static str {
@@ -174,6 +204,72 @@ fn apply_flags(args: &RenderArgs, scene: &mut SceneFile) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// One image of a render: which step, from where, into which file.
+struct Frame {
+    step: usize,
+    camera: Camera,
+    path: PathBuf,
+}
+
+/// `camera` turned by `degrees` about its up axis through its focal point.
+fn turned(camera: Camera, degrees: f64) -> Camera {
+    let turn = glam::DQuat::from_axis_angle(camera.up.normalize(), degrees.to_radians());
+    Camera {
+        eye: camera.at + turn * (camera.eye - camera.at),
+        ..camera
+    }
+}
+
+/// The kind of image file a render writes, from its extension and --bit-depth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum OutputFormat {
+    Png8,
+    Png16,
+    Exr,
+}
+
+impl OutputFormat {
+    fn of(path: &Path, bit_depth: u8) -> anyhow::Result<OutputFormat> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        Ok(match (ext.as_str(), bit_depth) {
+            ("png", 8) => OutputFormat::Png8,
+            ("png", 16) => OutputFormat::Png16,
+            ("png", d) => bail!("--bit-depth {d}: a PNG has 8 or 16 bits per channel"),
+            ("exr", 8) => OutputFormat::Exr,
+            ("exr", d) => bail!("--bit-depth {d}: an .exr output is always 32-bit float"),
+            (e, _) => bail!(
+                "--out {}: unknown image type '.{e}' (write .png or .exr)",
+                path.display()
+            ),
+        })
+    }
+
+    fn extension(self) -> &'static str {
+        match self {
+            OutputFormat::Png8 | OutputFormat::Png16 => "png",
+            OutputFormat::Exr => "exr",
+        }
+    }
+
+    fn write(
+        self,
+        path: &Path,
+        image: &crate::values::Image,
+        background: [f64; 3],
+    ) -> anyhow::Result<()> {
+        use crate::io::output;
+        match self {
+            OutputFormat::Png8 => output::write_png(path, image, true)?,
+            OutputFormat::Png16 => output::write_png16_alpha(path, image, background, true)?,
+            OutputFormat::Exr => output::write_exr(path, image, background, true)?,
+        }
+        Ok(())
+    }
+}
+
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let mut resolved = resolve(&args.data, &args.field)?;
     apply_flags(&args, &mut resolved.scene)?;
@@ -185,12 +281,13 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let spp = resolved.scene.spp();
     anyhow::ensure!(spp > 0, "--spp must be at least 1");
 
-    let steps = match &args.steps {
-        Some(text) => step_range(text, resolved.series.len())?,
-        None => resolved.step..resolved.step + 1,
+    let format = OutputFormat::of(&args.out, args.bit_depth)?;
+    let steps: Vec<usize> = match &args.steps {
+        Some(text) => step_range(text, resolved.series.len())?.collect(),
+        None => vec![resolved.step],
     };
-    let sequence = args.steps.is_some();
-    let out_for = |step: usize| -> PathBuf {
+    let sequence = args.steps.is_some() || args.orbit_sequence.is_some();
+    let frame_path = |index: usize| -> PathBuf {
         if !sequence {
             return args.out.clone();
         }
@@ -200,11 +297,48 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "frame".into());
         let dir = args.out.parent().unwrap_or(Path::new(""));
-        dir.join(format!("{stem}_{step:04}.png"))
+        dir.join(format!("{stem}_{index:04}.{}", format.extension()))
     };
-    // Check every output before rendering any, so a sequence never stops half way.
-    for step in steps.clone() {
-        crate::io::output::check_writable(&out_for(step), args.force)?;
+    let start_camera = settings
+        .camera
+        .unwrap_or_else(|| Camera::default_for(bounds));
+    let frames: Vec<Frame> = match args.orbit_sequence {
+        Some(0) => bail!("--orbit-sequence needs at least 1 frame"),
+        Some(n) => (0..n)
+            .map(|k| Frame {
+                step: steps[k % steps.len()],
+                camera: turned(start_camera, 360.0 * k as f64 / n as f64),
+                path: frame_path(k),
+            })
+            .collect(),
+        None => steps
+            .iter()
+            .map(|&step| Frame {
+                step,
+                camera: start_camera,
+                path: frame_path(step),
+            })
+            .collect(),
+    };
+    // Check every output before rendering any, so a sequence never stops half way; a
+    // sequence's frames already written are kept (outputs are written whole, atomically).
+    let (done, frames): (Vec<Frame>, Vec<Frame>) = if sequence && !args.force {
+        frames.into_iter().partition(|f| f.path.exists())
+    } else {
+        for f in &frames {
+            crate::io::output::check_writable(&f.path, args.force)?;
+        }
+        (Vec::new(), frames)
+    };
+    if !done.is_empty() {
+        tracing::info!(
+            "resuming: {} of {} frames are already written (--force renders them again)",
+            done.len(),
+            done.len() + frames.len()
+        );
+    }
+    if frames.is_empty() {
+        return Ok(());
     }
     if let Some(path) = &args.save_scene {
         crate::io::output::check_writable(path, args.force)?;
@@ -226,18 +360,20 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let mut session = RenderSession::new(backend, &resolved.series);
     session.set_precision(precision);
     let bar = crate::progress::bar(
-        (steps.len() as u64) * u64::from(spp),
+        (frames.len() as u64) * u64::from(spp),
         if sequence {
-            "rendering steps"
+            "rendering frames"
         } else {
             "rendering"
         },
     );
-    let first = steps.start;
-    for step in steps {
+    let mut settings = settings;
+    for (k, frame) in frames.iter().enumerate() {
         let started = Instant::now();
+        let step = frame.step;
+        settings.camera = Some(frame.camera);
         session.show(&resolved.series, step, &resolved.field, resolved.cluster)?;
-        if step == first {
+        if k == 0 {
             // Series-wide values: the same for every step, so printed (and saved) once.
             let used = session.resolve(&settings)?;
             tracing::info!(
@@ -252,9 +388,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 used.margin
             );
             if let Some(path) = &args.save_scene {
-                let camera = settings
-                    .camera
-                    .unwrap_or_else(|| Camera::default_for(bounds));
+                let camera = frame.camera;
                 let (data, field) = resolved.scene_sections();
                 SceneFile::reproducing(
                     data,
@@ -273,9 +407,9 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             session.accumulate(&settings, 1)?;
             bar.inc(1);
         }
-        let path = out_for(step);
+        let path = &frame.path;
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
-        crate::io::output::write_png(&path, &session.image()?, true)?;
+        format.write(path, &session.image()?, settings.background)?;
         let t = session.backend().timings();
         tracing::info!(
             "step {step}: {} ({}x{}, {spp} spp, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",

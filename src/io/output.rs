@@ -42,11 +42,16 @@ pub fn write_atomically(
         .extension()
         .map(|e| format!(".{}", e.to_string_lossy()))
         .unwrap_or_default();
-    let tmp = tempfile::Builder::new()
-        .prefix(".aarbf-partial-")
-        .suffix(&suffix)
-        .tempfile_in(dir)
-        .map_err(io)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".aarbf-partial-").suffix(&suffix);
+    // An output is an ordinary file: the mode `File::create` gives (0666 less the umask), not
+    // the private 0600 of a temporary file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let tmp = builder.tempfile_in(dir).map_err(io)?;
     write(tmp.path()).map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
@@ -65,9 +70,77 @@ pub fn write_png(
     })
 }
 
+/// Writes `image` as a 16-bit sRGB PNG with straight alpha (the background taken out, so it
+/// composites over anything), atomically; an existing file only with `force`.
+pub fn write_png16_alpha(
+    path: &Path,
+    image: &crate::values::Image,
+    background: [f64; 3],
+    force: bool,
+) -> Result<(), OutputError> {
+    use crate::values::color_space::linear_to_srgb;
+    let quantise = |v: f64| (linear_to_srgb(v.clamp(0.0, 1.0)) * 65535.0).round() as u16;
+    let data: Vec<u16> = image
+        .premultiplied(background)
+        .iter()
+        .flat_map(|&[r, g, b, a]| {
+            let straight = |c: f64| if a > 0.0 { c / a } else { 0.0 };
+            [
+                quantise(straight(r)),
+                quantise(straight(g)),
+                quantise(straight(b)),
+                (a.clamp(0.0, 1.0) * 65535.0).round() as u16,
+            ]
+        })
+        .collect();
+    let buffer =
+        image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(image.width, image.height, data)
+            .expect("one RGBA value per pixel");
+    write_atomically(path, force, |tmp| {
+        buffer
+            .save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+}
+
+/// Writes `image` as OpenEXR: linear 32-bit float RGBA, premultiplied alpha (EXR's
+/// convention), the background taken out; atomically, an existing file only with `force`.
+pub fn write_exr(
+    path: &Path,
+    image: &crate::values::Image,
+    background: [f64; 3],
+    force: bool,
+) -> Result<(), OutputError> {
+    let data: Vec<f32> = image
+        .premultiplied(background)
+        .iter()
+        .flat_map(|p| p.map(|c| c as f32))
+        .collect();
+    let buffer = image::Rgba32FImage::from_raw(image.width, image.height, data)
+        .expect("one RGBA value per pixel");
+    write_atomically(path, force, |tmp| {
+        buffer
+            .save_with_format(tmp, image::ImageFormat::OpenExr)
+            .map_err(std::io::Error::other)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn outputs_get_the_mode_of_an_ordinary_new_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let ordinary = dir.path().join("ordinary");
+        std::fs::write(&ordinary, "x").unwrap();
+        let written = dir.path().join("written");
+        write_atomically(&written, false, |p| std::fs::write(p, "x")).unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&written), mode(&ordinary));
+    }
 
     #[test]
     fn refuses_to_overwrite_and_leaves_nothing_on_failure() {

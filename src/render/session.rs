@@ -116,6 +116,15 @@ impl RenderSession {
         self.frames
     }
 
+    /// Frames accumulated of `settings` over what the backend holds: 0 if the accumulation is
+    /// of anything else (the next [`accumulate`](Self::accumulate) restarts it).
+    pub fn frames_of(&self, settings: &RenderSettings) -> u32 {
+        match (&self.last_frame_key, &self.loaded) {
+            (Some((s, l)), Some(loaded)) if s == settings && l == loaded => self.frames,
+            _ => 0,
+        }
+    }
+
     /// Makes the backend hold step `step` under `field`, doing only the work the change needs,
     /// and says which work that was.
     pub fn show(

@@ -29,6 +29,20 @@ impl Image {
         out
     }
 
+    /// Premultiplied linear RGBA without the background: a pixel's colour is the data's
+    /// composited over `background` (c = c_data + (1 - a) bg, the integrators' rule), so the
+    /// data's own is c - (1 - a) bg, the colour for compositing over anything else.
+    pub fn premultiplied(&self, background: [f64; 3]) -> Vec<[f64; 4]> {
+        self.pixels
+            .iter()
+            .map(|p| {
+                let a = f64::from(p[3]);
+                let c = |k: usize| (f64::from(p[k]) - (1.0 - a) * background[k]).max(0.0);
+                [c(0), c(1), c(2), a]
+            })
+            .collect()
+    }
+
     /// The image blurred by a normalised Gaussian of standard deviation `sigma` pixels
     /// (separable, clamped at the borders): how error looks to a viewer, whose eye low-pass
     /// filters; blue noise pushes error to frequencies this removes.

@@ -23,6 +23,8 @@ use crate::values::{Integrator, NoiseKind};
 
 /// How long after the last wheel event the view still counts as moving.
 const SCROLL_SETTLE: Duration = Duration::from_millis(250);
+/// The status bar's height in points: a line of figures and a line for the newest message.
+const STATUS_HEIGHT: f32 = 48.0;
 /// The backends a user may pick.
 const BACKENDS: [BackendKind; 3] = [BackendKind::Cpu, BackendKind::Wgpu, BackendKind::Ash];
 
@@ -154,7 +156,11 @@ impl ViewerApp {
             self.state = *state;
         }
         self.advance_playback(ui.ctx());
-        egui::Panel::bottom("status").show(ui, |ui| self.status_bar(ui));
+        // A fixed height: what the status bar says never changes the view's size (and with it
+        // the image and its accumulation).
+        egui::Panel::bottom("status")
+            .exact_size(STATUS_HEIGHT)
+            .show(ui, |ui| self.status_bar(ui));
         egui::Panel::left("controls")
             .resizable(true)
             .default_size(320.0)
@@ -220,7 +226,7 @@ impl ViewerApp {
 
     fn status_bar(&mut self, ui: &mut egui::Ui) {
         let s = self.worker.shown();
-        ui.horizontal_wrapped(|ui| {
+        ui.horizontal(|ui| {
             if let Some(busy) = &s.busy {
                 ui.spinner();
                 ui.label(busy);
@@ -256,8 +262,7 @@ impl ViewerApp {
                 ui.label(format!("{what} {:.1} ms", ms(took)));
             }
         });
-        // The newest message on a line of its own that is always there, so a message never
-        // changes the view's size (and with it the image); the others on hover.
+        // The newest message on its own line; the others on hover.
         let newest = self.messages.last().cloned().unwrap_or_default();
         let line = ui.colored_label(ui.visuals().warn_fg_color, newest);
         if self.messages.len() > 1 {

@@ -8,13 +8,14 @@
 //! state's spp (OSPRay Studio's and ParaView's level of detail do the same).
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::state::ViewState;
-use crate::backend::{self, BackendKind, MemoryReport, Precision, Timings};
+use crate::backend::{self, BackendError, BackendKind, MemoryReport, Precision, Timings};
 use crate::field::{FieldInputs, normalise};
 use crate::render::{RenderError, RenderSession, Resolved, StepChange};
 use crate::scene::TimeSeries;
@@ -115,6 +116,9 @@ pub struct Shown {
 pub struct RenderWorker {
     requests: Sender<Request>,
     shown: Arc<Mutex<Shown>>,
+    /// Raised with every new state: a full-resolution frame in progress is abandoned for it
+    /// (where the backend can stop mid-frame), so the view answers within one preview.
+    superseded: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -125,6 +129,8 @@ impl RenderWorker {
         let (requests, incoming) = mpsc::channel();
         let shown = Arc::new(Mutex::new(Shown::default()));
         let published = shown.clone();
+        let superseded = Arc::new(AtomicBool::new(false));
+        let flag = superseded.clone();
         let thread = std::thread::Builder::new()
             .name("aarbf-render".into())
             .spawn(move || {
@@ -135,7 +141,9 @@ impl RenderWorker {
                         shown: published,
                         notify,
                     },
-                    scale: 0.5,
+                    seconds_per_pixel: None,
+                    used: None,
+                    superseded: flag,
                     applied: None,
                     last_good: None,
                     histogram: None,
@@ -146,12 +154,14 @@ impl RenderWorker {
         RenderWorker {
             requests,
             shown,
+            superseded,
             thread: Some(thread),
         }
     }
 
     /// Asks for `state` to be shown; `generation` identifies it in [`Shown`].
     pub fn show(&self, state: &ViewState, generation: u64, interaction: Interaction) {
+        self.superseded.store(true, Ordering::Relaxed);
         let _ = self.requests.send(Request::Show {
             state: Box::new(state.clone()),
             generation,
@@ -223,8 +233,12 @@ struct Worker<'a> {
     series: &'a TimeSeries,
     session: Option<(BackendKind, RenderSession)>,
     out: Outbox,
-    /// The side of interactive images as a fraction of the full image's.
-    scale: f64,
+    /// What a frame at the state's own step size costs per pixel on this backend and scene,
+    /// measured on the last frame: it sizes the next interactive frame.
+    seconds_per_pixel: Option<f64>,
+    /// The automatic values of the applied state (its step size, which previews coarsen).
+    used: Option<Resolved>,
+    superseded: Arc<AtomicBool>,
     /// The state the session holds, and its generation.
     applied: Option<(ViewState, u64)>,
     last_good: Option<ViewState>,
@@ -258,6 +272,7 @@ impl Worker<'_> {
                 } else {
                     None
                 };
+                self.superseded.store(false, Ordering::Relaxed);
                 loop {
                     let request = match next.take() {
                         Some(r) => r,
@@ -306,6 +321,7 @@ impl Worker<'_> {
                 self.applied.as_mut().unwrap().1 = want.generation;
                 match self.frame(want, &mut screenshots, &mut last_publish) {
                     Ok(done) => idle = done,
+                    Err(RenderError::Backend(BackendError::Abandoned)) => idle = false,
                     Err(e) => {
                         self.refuse(want, e);
                         idle = self.session.is_none();
@@ -364,6 +380,7 @@ impl Worker<'_> {
         let histogram = self.histogram(state)?;
         self.applied = Some((state.clone(), generation));
         self.last_good = Some(state.clone());
+        self.used = Some(used);
         self.out.publish(|s| {
             s.busy = None;
             s.used = Some(used);
@@ -456,22 +473,38 @@ impl Worker<'_> {
         let full = (want.state.settings.width, want.state.settings.height);
         let interactive = want.interaction.interacting || want.interaction.playing.is_some();
         let mut settings = want.state.settings.clone();
+        let mut coarsening = 1.0;
         if interactive {
-            settings.width = ((f64::from(full.0) * self.scale).round() as u32).max(1);
-            settings.height = ((f64::from(full.1) * self.scale).round() as u32).max(1);
+            let full_pixels = f64::from(full.0) * f64::from(full.1);
+            let (scale, steps) = self
+                .seconds_per_pixel
+                .map_or((0.25, 1.0), |cost| level_of_detail(cost, full_pixels));
+            settings.width = ((f64::from(full.0) * scale).round() as u32).max(1);
+            settings.height = ((f64::from(full.1) * scale).round() as u32).max(1);
+            if steps > 1.0
+                && let Some(used) = self.used
+            {
+                settings.step_size = Some(used.step_size * steps);
+                coarsening = steps;
+            }
         }
+        // Previews are short and always finished; a full-resolution frame gives way to a new
+        // state.
+        session.backend_mut().set_abandon_flag(if interactive {
+            None
+        } else {
+            Some(self.superseded.clone())
+        });
         let full_resolution = (settings.width, settings.height) == full;
-        let converged = full_resolution && !interactive && session.frames() >= want.state.spp;
+        let converged =
+            full_resolution && !interactive && session.frames_of(&settings) >= want.state.spp;
         if !converged {
             let started = Instant::now();
             session.accumulate(&settings, 1)?;
             let took = started.elapsed();
-            if interactive {
-                // Aim the next frame at INTERACTIVE_FRAME: pixels scale with the time.
-                let ratio = (INTERACTIVE_FRAME.as_secs_f64() / took.as_secs_f64().max(1e-4))
-                    .clamp(0.25, 4.0);
-                self.scale = (self.scale * ratio.sqrt()).clamp(MIN_SCALE, 1.0);
-            }
+            // Normalised to the full march: a frame's cost grows with its samples per ray.
+            let pixels = f64::from(settings.width) * f64::from(settings.height);
+            self.seconds_per_pixel = Some(took.as_secs_f64() * coarsening / pixels);
             self.out.publish(|s| s.frame_time = took);
         }
         let frames = session.frames();
@@ -520,6 +553,31 @@ impl Worker<'_> {
     }
 }
 
+/// The interactive level of detail for a frame budget of [`INTERACTIVE_FRAME`], from what a
+/// full-step frame costs per pixel (`seconds_per_pixel`) and the full image's pixels: the
+/// image's scale (fraction of its side) and how many times the step size grows. Resolution
+/// goes first, down to a quarter of the side; then samples along the ray, up to 8x fewer (as
+/// VTK's volume mappers lengthen the sample distance to keep an update rate); then resolution
+/// again, down to [`MIN_SCALE`].
+pub fn level_of_detail(seconds_per_pixel: f64, full_pixels: f64) -> (f64, f64) {
+    const FIRST_SCALE: f64 = 0.25;
+    const MAX_COARSENING: f64 = 8.0;
+    let budget = INTERACTIVE_FRAME.as_secs_f64();
+    let cost = seconds_per_pixel.max(1e-12) * full_pixels.max(1.0);
+    let scale = (budget / cost).sqrt();
+    if scale >= FIRST_SCALE {
+        return (scale.min(1.0), 1.0);
+    }
+    let coarsening = cost * FIRST_SCALE * FIRST_SCALE / budget;
+    if coarsening <= MAX_COARSENING {
+        return (FIRST_SCALE, coarsening);
+    }
+    (
+        (budget * MAX_COARSENING / cost).sqrt().max(MIN_SCALE),
+        MAX_COARSENING,
+    )
+}
+
 /// The steps playback shows next, in order (read ahead while the current one renders).
 fn upcoming_steps(current: usize, len: usize, interaction: Interaction) -> Vec<usize> {
     const AHEAD: usize = 4;
@@ -544,6 +602,31 @@ fn upcoming_steps(current: usize, len: usize, interaction: Interaction) -> Vec<u
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_level_of_detail_meets_the_budget_resolution_first() {
+        let budget = INTERACTIVE_FRAME.as_secs_f64();
+        let full = 1024.0 * 768.0;
+        let frame = |cost: f64, (scale, steps): (f64, f64)| cost * full * scale * scale / steps;
+        // Cheap: full resolution.
+        assert_eq!(level_of_detail(budget / full / 2.0, full), (1.0, 1.0));
+        // 4x over budget: half the side, every sample.
+        let (s, k) = level_of_detail(4.0 * budget / full, full);
+        assert!((s - 0.5).abs() < 1e-12 && k == 1.0);
+        // 64x over: a quarter of the side and 4x the step, on budget.
+        let cost = 64.0 * budget / full;
+        let lod = level_of_detail(cost, full);
+        assert_eq!(lod.0, 0.25);
+        assert!((lod.1 - 4.0).abs() < 1e-9);
+        assert!((frame(cost, lod) - budget).abs() < 1e-9);
+        // 1000x over: 8x the step and a smaller image, on budget.
+        let cost = 1000.0 * budget / full;
+        let lod = level_of_detail(cost, full);
+        assert_eq!(lod.1, 8.0);
+        assert!(lod.0 < 0.25 && (frame(cost, lod) - budget).abs() < 1e-9);
+        // Beyond what the smallest preview can do: the smallest preview.
+        assert_eq!(level_of_detail(1e6 * budget / full, full), (MIN_SCALE, 8.0));
+    }
 
     #[test]
     fn playback_reads_ahead_in_its_direction_and_wraps_only_when_looping() {

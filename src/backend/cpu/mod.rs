@@ -8,6 +8,7 @@ mod accumulator;
 pub mod integrators;
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use glam::DVec3;
@@ -60,6 +61,7 @@ pub struct CpuBackend {
     prepared: Option<Prepared>,
     accumulator: Option<Accumulator>,
     timings: Timings,
+    abandon: Option<Arc<AtomicBool>>,
 }
 
 impl Default for CpuBackend {
@@ -82,6 +84,7 @@ impl CpuBackend {
             prepared: None,
             accumulator: None,
             timings: Timings::default(),
+            abandon: None,
         }
     }
 
@@ -198,10 +201,18 @@ impl Backend for CpuBackend {
         let field = self.field()?;
         let (w, h) = (frame.width, frame.height);
         let tiles_x = w.div_ceil(TILE);
+        let abandoned = || {
+            self.abandon
+                .as_ref()
+                .is_some_and(|f| f.load(Ordering::Relaxed))
+        };
         let tiles: Vec<Vec<[f64; 4]>> = (0..tiles_x * h.div_ceil(TILE))
             .into_par_iter()
             .map(|tile| {
                 let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+                if abandoned() {
+                    return Vec::new();
+                }
                 let mut out = Vec::with_capacity((TILE * TILE) as usize);
                 for y in ty * TILE..((ty + 1) * TILE).min(h) {
                     for x in tx * TILE..((tx + 1) * TILE).min(w) {
@@ -211,6 +222,11 @@ impl Backend for CpuBackend {
                 out
             })
             .collect();
+        // Checked once more after every tile: a tile that saw no flag may have been followed
+        // by one that did; the accumulation is untouched either way.
+        if abandoned() {
+            return Err(BackendError::Abandoned);
+        }
         let mut pixels = vec![[0.0; 4]; (w as usize) * (h as usize)];
         for (tile, values) in tiles.into_iter().enumerate() {
             let (tx, ty) = (tile as u32 % tiles_x, tile as u32 / tiles_x);
@@ -234,6 +250,10 @@ impl Backend for CpuBackend {
         if let Some(a) = &mut self.accumulator {
             a.reset();
         }
+    }
+
+    fn set_abandon_flag(&mut self, flag: Option<Arc<AtomicBool>>) {
+        self.abandon = flag;
     }
 
     fn image(&mut self) -> Result<Image, BackendError> {
