@@ -148,3 +148,37 @@ fn blue_noise_beats_white_noise_at_equal_samples() {
         );
     }
 }
+
+/// A viewer abandons a frame when the view changes mid-frame: the frame stops, says so, and
+/// leaves the accumulation exactly as it was; `frames_of` tells which settings it holds.
+#[test]
+fn an_abandoned_frame_leaves_the_accumulation_as_it_was() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let series = demo();
+    let mut s = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
+    s.show(&series, 4, &field(&series), ClusterSize::new(4).unwrap())
+        .unwrap();
+    let look = settings(40, Integrator::Ea, NoiseKind::Stbn);
+    s.accumulate(&look, 2).unwrap();
+    let before = s.image().unwrap();
+    assert_eq!(s.frames_of(&look), 2);
+    assert_eq!(
+        s.frames_of(&settings(41, Integrator::Ea, NoiseKind::Stbn)),
+        0
+    );
+    let flag = Arc::new(AtomicBool::new(true));
+    s.backend_mut().set_abandon_flag(Some(flag.clone()));
+    let e = s.accumulate(&look, 1).unwrap_err();
+    assert!(e.to_string().contains("abandoned"), "{e}");
+    assert_eq!(s.frames_of(&look), 2);
+    assert_eq!(s.image().unwrap(), before);
+    // Lowered, the next frame renders and accumulates as if nothing had happened.
+    flag.store(false, Ordering::Relaxed);
+    s.accumulate(&look, 1).unwrap();
+    let mut fresh = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
+    fresh
+        .show(&series, 4, &field(&series), ClusterSize::new(4).unwrap())
+        .unwrap();
+    assert_eq!(s.image().unwrap(), fresh.render(&look, 3).unwrap());
+}

@@ -350,7 +350,7 @@ struct Summary<'a> {
     image_mean: f32,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+pub(super) fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 
+use super::bench::median;
 use crate::backend::BackendKind;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::viewer::navigation::orbit;
@@ -86,6 +87,7 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
         ..idle
     };
     let mut previews: Vec<(Instant, Arc<ShownImage>, Duration)> = Vec::new();
+    let mut readbacks: Vec<f64> = Vec::new();
     let mut window_wait = Duration::ZERO;
     let started = Instant::now();
     let mut last: Option<Arc<ShownImage>> = settled.image.clone();
@@ -102,6 +104,7 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
             && !shown.full_resolution
         {
             previews.push((Instant::now(), image.clone(), shown.frame_time));
+            readbacks.push(shown.readback.as_secs_f64());
             last = Some(image.clone());
         }
         std::thread::sleep(UI_FRAME.saturating_sub(tick.elapsed()));
@@ -116,6 +119,7 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
         s.generation == generation && s.full_resolution && s.image.is_some()
     });
     let first_full = released.elapsed();
+    let full_readback = full.readback;
     let done = worker.wait_for(PATIENCE, |s| s.generation == generation && s.converged);
     let converged = released.elapsed();
     anyhow::ensure!(
@@ -189,6 +193,12 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     )?;
     writeln!(
         out,
+        "| image to the window (readback and conversion): preview / full | {:.2} ms / {:.2} ms |",
+        median(readbacks) * 1e3,
+        full_readback.as_secs_f64() * 1e3
+    )?;
+    writeln!(
+        out,
         "| after release: first full image / {} spp | {:.2} s / {:.2} s |",
         args.spp,
         first_full.as_secs_f64(),
@@ -199,12 +209,4 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     println!("{out}");
     tracing::info!("wrote {}", md.display());
     Ok(())
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }

@@ -63,9 +63,24 @@ pub fn write_png(
     image: &crate::values::Image,
     force: bool,
 ) -> Result<(), OutputError> {
-    let rgb = image.to_srgb8();
+    write_image(
+        path,
+        image.to_srgb8().into(),
+        image::ImageFormat::Png,
+        force,
+    )
+}
+
+/// Writes `image` in `format`, atomically; an existing file only with `force`.
+pub fn write_image(
+    path: &Path,
+    image: image::DynamicImage,
+    format: image::ImageFormat,
+    force: bool,
+) -> Result<(), OutputError> {
     write_atomically(path, force, |tmp| {
-        rgb.save_with_format(tmp, image::ImageFormat::Png)
+        image
+            .save_with_format(tmp, format)
             .map_err(std::io::Error::other)
     })
 }
@@ -96,11 +111,7 @@ pub fn write_png16_alpha(
     let buffer =
         image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(image.width, image.height, data)
             .expect("one RGBA value per pixel");
-    write_atomically(path, force, |tmp| {
-        buffer
-            .save_with_format(tmp, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
-    })
+    write_image(path, buffer.into(), image::ImageFormat::Png, force)
 }
 
 /// Writes `image` as OpenEXR: linear 32-bit float RGBA, premultiplied alpha (EXR's
@@ -118,11 +129,7 @@ pub fn write_exr(
         .collect();
     let buffer = image::Rgba32FImage::from_raw(image.width, image.height, data)
         .expect("one RGBA value per pixel");
-    write_atomically(path, force, |tmp| {
-        buffer
-            .save_with_format(tmp, image::ImageFormat::OpenExr)
-            .map_err(std::io::Error::other)
-    })
+    write_image(path, buffer.into(), image::ImageFormat::OpenExr, force)
 }
 
 #[cfg(test)]

@@ -338,24 +338,20 @@ impl ViewerApp {
     }
 
     fn controls(&mut self, ui: &mut egui::Ui) {
-        egui::CollapsingHeader::new("Data and time")
-            .default_open(true)
-            .show(ui, |ui| self.time_controls(ui));
-        egui::CollapsingHeader::new("Transfer functions")
-            .default_open(true)
-            .show(ui, |ui| self.map_controls(ui));
-        egui::CollapsingHeader::new("Camera")
-            .default_open(false)
-            .show(ui, |ui| self.camera_controls(ui));
-        egui::CollapsingHeader::new("Lighting and quality")
-            .default_open(true)
-            .show(ui, |ui| self.quality_controls(ui));
-        egui::CollapsingHeader::new("Backend")
-            .default_open(true)
-            .show(ui, |ui| self.backend_controls(ui));
-        egui::CollapsingHeader::new("State")
-            .default_open(true)
-            .show(ui, |ui| self.state_controls(ui));
+        type Section = (&'static str, bool, fn(&mut ViewerApp, &mut egui::Ui));
+        let sections: [Section; 6] = [
+            ("Data and time", true, Self::time_controls),
+            ("Transfer functions", true, Self::map_controls),
+            ("Camera", false, Self::camera_controls),
+            ("Lighting and quality", true, Self::quality_controls),
+            ("Backend", true, Self::backend_controls),
+            ("State", true, Self::state_controls),
+        ];
+        for (name, open, show) in sections {
+            egui::CollapsingHeader::new(name)
+                .default_open(open)
+                .show(ui, |ui| show(self, ui));
+        }
     }
 
     fn time_controls(&mut self, ui: &mut egui::Ui) {

@@ -124,10 +124,6 @@ fn write_colour_image(path: &std::path::Path, image: &egui::ColorImage) -> Resul
     let rgba: Vec<u8> = image.pixels.iter().flat_map(|c| c.to_array()).collect();
     let buffer = image::RgbaImage::from_raw(w as u32, h as u32, rgba)
         .ok_or("the window image has the wrong size")?;
-    crate::io::output::write_atomically(path, true, |tmp| {
-        buffer
-            .save_with_format(tmp, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
-    })
-    .map_err(|e| e.to_string())
+    crate::io::output::write_image(path, buffer.into(), image::ImageFormat::Png, true)
+        .map_err(|e| e.to_string())
 }
