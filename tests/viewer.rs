@@ -323,6 +323,15 @@ fn a_refused_setting_is_reported_and_the_previous_state_kept() {
     state.settings.height = kept.settings.height;
     assert_eq!(state, kept);
     assert!(back.converged && back.image.is_some());
+    // A scene file that cannot be read is an error naming it; the state stays.
+    let missing = dir.path().join("no-such-scene.toml");
+    let e = h.state_mut().load_scene(&missing).unwrap_err();
+    assert!(e.contains("no-such-scene.toml"), "{e}");
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "[field]\nradius = \"-3%\"\n").unwrap();
+    let e = h.state_mut().load_scene(&bad).unwrap_err();
+    assert!(e.contains("bad.toml") && e.contains("radius"), "{e}");
+    assert_eq!(h.state().state.field, kept.field);
     if back.full_size == good.full_size {
         let (same, what) = compare(&back.image, &good.image);
         assert!(same, "the previous state's image is not back: {what}");
