@@ -97,12 +97,12 @@ fn main() {
         });
         achieved_by_threads.push(achieved);
         println!(
-            "| {k} | {:.3} | {} | {:.1} | {:.1}% | {} |",
+            "| {k} | {:.3} | {:.3} | {:.1} | {:.1}% | {:.1}% |",
             peak64 / 1e9,
-            format!("{:.3}", peak32 / 1e9),
+            peak32 / 1e9,
             achieved / 1e6,
             100.0 * achieved / peak64,
-            format!("{:.1}%", 100.0 * achieved / peak32)
+            100.0 * achieved / peak32
         );
     }
     println!(
