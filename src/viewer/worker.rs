@@ -439,14 +439,21 @@ impl Worker<'_> {
     /// A state was refused: say why and go back to the last state that worked (or, when the
     /// backend itself failed, to the CPU backend).
     fn refuse(&mut self, want: &mut Wanted, error: RenderError) {
-        let backend_failed = matches!(error, RenderError::Backend(_));
+        // The session may hold part of the refused state (a step built before its settings
+        // failed): whatever comes next is applied in full.
+        self.applied = None;
+        // The device failing, not the field or settings it was given (which every backend
+        // refuses alike).
+        let backend_failed = matches!(
+            &error,
+            RenderError::Backend(e) if !matches!(e, BackendError::Field(_))
+        );
         if backend_failed && want.state.backend != BackendKind::Cpu {
             self.out.say(format!(
                 "the {} backend failed: {error}; falling back to the CPU backend",
                 want.state.backend
             ));
             self.session = None;
-            self.applied = None;
             want.state.backend = BackendKind::Cpu;
         } else if let Some(good) = self.last_good.clone().filter(|g| *g != want.state) {
             self.out
@@ -455,7 +462,6 @@ impl Worker<'_> {
         } else {
             self.out.say(error.to_string());
             self.session = None;
-            self.applied = None;
             return;
         }
         let state = Box::new(want.state.clone());
