@@ -191,7 +191,16 @@ fn the_window_shows_the_render_and_its_panels() {
         0.0..=WINDOW.x / 2.0,
         path.y_range(),
     ));
-    h.snapshot("viewer_window");
+    // Small rasterisation differences (a newer lavapipe, another CPU's LLVM) pass: up to 0.5%
+    // of the window's pixels may differ. A panel moved, resized or changed differs in far
+    // more.
+    let max_failed = (WINDOW.x * WINDOW.y * 0.005) as usize;
+    h.snapshot_options(
+        "viewer_window",
+        &egui_kittest::SnapshotOptions::new()
+            .threshold(1.0)
+            .max_failed_pixels(max_failed),
+    );
     assert!(shown.converged);
 }
 
