@@ -165,13 +165,13 @@ fn boxes_match_the_cpu_cluster_boxes() {
         .unwrap();
         let cpu: &ClusterBoxes = &reference.boxes;
         let gpu = b.read_boxes().unwrap();
-        let data = GpuStepData::prepare(&input(&step, &field, k)).unwrap();
+        let (data, particles) = GpuStepData::prepare(&input(&step, &field, k)).unwrap();
         let rule = RadiusRule {
             field: data.field,
             radius_table: data.radius_map_varies.then_some(&data.tables.radius[..]),
-            radius_attribute: data.radius_attribute.as_deref(),
+            radius_attribute: particles.radius_attribute.as_deref(),
         };
-        let twin = cluster_box::blas_boxes(&data.points, k as usize, &rule, gpu.len());
+        let twin = cluster_box::blas_boxes(&particles.points, k as usize, &rule, gpu.len());
         for (c, (g, t)) in gpu.iter().zip(&twin).enumerate() {
             for (a, e) in g.iter().zip(t) {
                 // One ulp: the compiler may fuse the padding's multiply into the subtraction.

@@ -13,7 +13,7 @@ use super::resources::Buffer;
 use super::structure::{BOX_BYTES, Structure};
 use crate::accel::ClusterSize;
 use crate::backend::BackendError;
-use crate::backend::gpu_data::GpuStepData;
+use crate::backend::gpu_data::SortedParticles;
 use crate::backend::shaders::{GpuFrame, pack_map_tables};
 use crate::values::FrameParams;
 use crate::values::shader_constants::TABLE_SIZE;
@@ -74,9 +74,9 @@ pub(super) fn write_points_lo(
     ctx: &Arc<Context>,
     buffer: &mut Buffer,
     capacity: usize,
-    data: &GpuStepData,
+    particles: &SortedParticles,
 ) -> Result<(), BackendError> {
-    let Some(lo) = &data.points_lo else {
+    let Some(lo) = &particles.points_lo else {
         return Ok(());
     };
     let need = capacity as u64 * 16;

@@ -34,7 +34,7 @@ impl AshBackend {
             .uploaded
             .as_ref()
             .ok_or(BackendError::NothingUploaded(NAME))?;
-        let active = up.data.cluster.clusters_for(up.data.points.len()) as u32;
+        let active = up.data.cluster.clusters_for(up.data.count) as u32;
         let started = Instant::now();
         let cb = self.commands.begin()?;
         self.commands.timestamp(TS_START);
@@ -114,9 +114,9 @@ impl AshBackend {
         let rule = RadiusRule {
             field: d.field,
             radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
-            radius_attribute: d.radius_attribute.as_deref(),
+            radius_attribute: up.particles.radius_attribute.as_deref(),
         };
-        let boxes = lbvh_bounds(&d.points, d.cluster.get(), &rule);
+        let boxes = lbvh_bounds(&up.particles.points, d.cluster.get(), &rule);
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
         if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
             return Err(device_error(

@@ -50,7 +50,7 @@ use self::launch::Launch;
 use self::pipelines::{BindingTable, Push, binding};
 use self::resources::{Buffer, Commands};
 use self::structure::{BOX_BYTES, Structure};
-use super::gpu_data::GpuStepData;
+use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::backend::shaders::cpu::Lbvh;
 use crate::backend::shaders::{GpuField, GpuFrame, SpecConstants};
@@ -126,6 +126,9 @@ struct Uploaded {
     series_bounds: Bounds,
     series_range: Option<(f64, f64)>,
     data: GpuStepData,
+    /// The step's particles in Hilbert order, prepared on the CPU (this backend has no sort
+    /// on the device yet).
+    particles: SortedParticles,
 }
 
 /// The ash ray-tracing backend.
@@ -337,8 +340,9 @@ impl AshBackend {
         let changed = up
             .data
             .apply_field(&up.step, &up.field, field, up.series_range)?;
+        up.particles.apply(&up.data, &up.step, field, changed);
         if changed.radius_attribute
-            && let Some(h) = &up.data.radius_attribute
+            && let Some(h) = &up.particles.radius_attribute
         {
             self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
         }
@@ -347,7 +351,7 @@ impl AshBackend {
                 &self.ctx,
                 &mut self.buffers.points_lo,
                 self.capacity,
-                &up.data,
+                &up.particles,
             )?;
         }
         up.field = field.clone();
@@ -369,18 +373,23 @@ impl Backend for AshBackend {
 
     fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError> {
         let started = Instant::now();
-        let data = GpuStepData::prepare(input)?;
+        let (data, particles) = GpuStepData::prepare(input)?;
         self.timings.prepare = started.elapsed();
         self.uploaded = None;
-        self.ensure_capacity(data.points.len(), data.cluster)?;
+        self.ensure_capacity(data.count, data.cluster)?;
         if let Some(s) = &mut self.structure {
             s.built = false;
         }
         self.buffers
             .points
-            .write(0, bytemuck::cast_slice(&data.points))?;
-        write_points_lo(&self.ctx, &mut self.buffers.points_lo, self.capacity, &data)?;
-        if let Some(h) = &data.radius_attribute {
+            .write(0, bytemuck::cast_slice(&particles.points))?;
+        write_points_lo(
+            &self.ctx,
+            &mut self.buffers.points_lo,
+            self.capacity,
+            &particles,
+        )?;
+        if let Some(h) = &particles.radius_attribute {
             self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
         }
         self.uploaded = Some(Uploaded {
@@ -389,6 +398,7 @@ impl Backend for AshBackend {
             series_bounds: input.series_bounds,
             series_range: input.series_range,
             data,
+            particles,
         });
         self.lbvh = None;
         self.write_params(None)?;

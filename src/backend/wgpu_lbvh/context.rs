@@ -38,6 +38,11 @@ pub enum Kernel {
     /// `shaders_wgsl/lbvh_fit.wgsl`: the bottom-up climb and the refit's reset.
     FitClimb,
     FitReset,
+    /// `shaders_wgsl/hilbert_keys.wgsl`: a step's Hilbert keys.
+    HilbertKeys,
+    /// `shaders_wgsl/gather.wgsl`, its two entry points.
+    GatherWords,
+    GatherVec4s,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -49,6 +54,8 @@ enum ShaderFile {
     Sort,
     Hierarchy,
     Fit,
+    HilbertKeys,
+    Gather,
 }
 
 impl Kernel {
@@ -61,6 +68,8 @@ impl Kernel {
             Kernel::SortCount | Kernel::SortScan | Kernel::SortScatter => ShaderFile::Sort,
             Kernel::Hierarchy => ShaderFile::Hierarchy,
             Kernel::FitClimb | Kernel::FitReset => ShaderFile::Fit,
+            Kernel::HilbertKeys => ShaderFile::HilbertKeys,
+            Kernel::GatherWords | Kernel::GatherVec4s => ShaderFile::Gather,
         }
     }
 
@@ -71,6 +80,8 @@ impl Kernel {
             Kernel::SortScatter => "scatter",
             Kernel::FitClimb => "climb",
             Kernel::FitReset => "reset",
+            Kernel::GatherWords => "gather_words",
+            Kernel::GatherVec4s => "gather_vec4s",
             _ => "main",
         }
     }
@@ -104,6 +115,10 @@ impl ShaderFile {
                 Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_hierarchy.wgsl"))
             }
             ShaderFile::Fit => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_fit.wgsl")),
+            ShaderFile::HilbertKeys => {
+                Source::Wgsl(include_str!("../../../shaders_wgsl/hilbert_keys.wgsl"))
+            }
+            ShaderFile::Gather => Source::Wgsl(include_str!("../../../shaders_wgsl/gather.wgsl")),
         }
     }
 }
