@@ -170,8 +170,22 @@ impl ParticleValues<'_> {
         particle_radius(self.settings.radius, m, h.map(f64::from))
     }
 
-    /// The radius extremes over every particle.
+    /// The radius every particle has, when the radius map is constant and there is no radius
+    /// attribute (the table then holds one value, which the lookup returns exactly).
+    fn constant_radius(&self) -> Option<f64> {
+        (self.settings.radius_map.0.is_constant() && self.inputs.radius.is_none())
+            .then(|| self.radius(0.0, None))
+    }
+
+    /// The radius extremes over `n` particles.
     fn radius_extremes(&self, n: usize) -> Extremes {
+        if let Some(r) = self.constant_radius() {
+            let mut e = Extremes::NONE;
+            if n > 0 {
+                e.add_radius(r);
+            }
+            return e;
+        }
         (0..n)
             .into_par_iter()
             .with_min_len(CHUNK)
@@ -285,7 +299,9 @@ impl StepStaging<'_> {
         let step = self.input.step;
         let origin = self.quantizer.origin();
         let second = radius.filter(|_| self.has_radius_attribute());
-        let extremes = for_each_particle(points, second, |i, slot, radius, e| {
+        // A scene whose radii are all equal (the common case) needs no radius per particle.
+        let constant_radius = self.values.constant_radius();
+        let mut extremes = for_each_particle(points, second, |i, slot, radius, e| {
             let p = self.quantizer.local(step.positions[i]);
             let t = self.values.t(i);
             let h = self.values.h(i);
@@ -293,9 +309,17 @@ impl StepStaging<'_> {
             if let (Some(slot), Some(h)) = (radius, h) {
                 slot.write(bytemuck::cast(h));
             }
-            e.largest = p.iter().fold(e.largest, |a, &c| a.max(f64::from(c).abs()));
-            e.add_radius(self.values.radius(t, h));
+            let largest = p[0].abs().max(p[1].abs()).max(p[2].abs());
+            e.largest = e.largest.max(f64::from(largest));
+            if constant_radius.is_none() {
+                e.add_radius(self.values.radius(t, h));
+            }
         });
+        if let Some(r) = constant_radius
+            && !self.is_empty()
+        {
+            extremes.add_radius(r);
+        }
         let mut data = GpuStepData {
             origin,
             quantizer: self.quantizer,
@@ -598,6 +622,73 @@ mod tests {
             precision,
         })
         .unwrap()
+    }
+
+    /// Slots over `v` cut at the particle indices `cuts` (ascending), each part with its first
+    /// particle.
+    fn split<'a>(v: &'a mut [[f32; 4]], cuts: &[usize]) -> Vec<(usize, Slots16<'a>)> {
+        let mut out = Vec::new();
+        let mut rest = v;
+        let mut first = 0;
+        for &cut in cuts {
+            let (head, tail) = rest.split_at_mut(cut - first);
+            out.push((first, slots16(head)));
+            rest = tail;
+            first = cut;
+        }
+        out.push((first, slots16(rest)));
+        out
+    }
+
+    /// The staging pass writes the same bytes however its output is cut into parts (a split
+    /// buffer's parts are not multiples of the pass's chunks), with the radius attribute and
+    /// the lo parts beside them, and sees the same extremes.
+    #[test]
+    fn staging_in_parts_equals_staging_in_one() {
+        let n = 3 * CHUNK + 1234;
+        let mut step = (*cube(n, 2.5, 1e5)).clone();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        step.attributes.push(Attribute {
+            name: "h".into(),
+            values: (0..n).map(|_| rng.random_range(0.5..1.5)).collect(),
+        });
+        let step = Arc::new(step);
+        let mut field = FieldSettings::new(Some("s"), 0.01);
+        field.radius_attribute = Some("h".into());
+        let input = StepInput {
+            step: &step,
+            field: &field,
+            cluster: ClusterSize::new(2).unwrap(),
+            series_bounds: Bounds::of_points(&step.positions),
+            series_range: Some((0.0, 1.0)),
+            precision: Precision::DoubleSingle,
+        };
+        let stage = |cuts: &[usize]| {
+            let mut points = vec![[f32::NAN; 4]; n];
+            let mut lo = vec![[f32::NAN; 4]; n];
+            let mut radius = vec![f32::NAN; n];
+            let data = GpuStepData::check(&input)
+                .unwrap()
+                .write(split(&mut points, cuts), Some(slots4(&mut radius)));
+            assert!(data.double_single);
+            data.write_lo(&step, split(&mut lo, cuts));
+            (data, points, lo, radius)
+        };
+        let bits =
+            |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
+        let (one, points, lo, radius) = stage(&[]);
+        assert!(
+            points
+                .iter()
+                .chain(&lo)
+                .all(|p| p.iter().all(|c| c.is_finite()))
+        );
+        assert!(radius.iter().all(|h| h.is_finite()));
+        let (parts, p2, lo2, radius2) = stage(&[CHUNK + 5, 3 * CHUNK - 1, 3 * CHUNK + 1000]);
+        assert_eq!(one, parts);
+        assert_eq!(bits(&points), bits(&p2));
+        assert_eq!(bits(&lo), bits(&lo2));
+        assert_eq!(radius, radius2);
     }
 
     /// A scene pays for double-single positions only when its radii and extent need them: an

@@ -466,8 +466,9 @@ impl Backend for WgpuBackend {
         let Some(prepare) = self.prepare.as_mut() else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
+        let views = prepare.map(&ctx, n, has_radius)?;
         let allocated = started.elapsed();
-        let data = prepare.stage(&ctx, staging, input.step)?;
+        let data = prepare.stage(&ctx, staging, views, input.step)?;
         let staged = started.elapsed();
         self.timings.prepare = checked + (staged - allocated);
         let mut scene = Scene {

@@ -47,6 +47,12 @@ struct Raw<B> {
     device: B,
 }
 
+/// Mapped staging memory for a step ([`Prepare::map`]).
+pub(super) struct StagingViews {
+    points: Vec<wgpu::BufferViewMut>,
+    radius: Vec<wgpu::BufferViewMut>,
+}
+
 /// The buffers of the scene the preparation writes (in Hilbert order).
 pub(super) struct Targets<'a> {
     pub particles: &'a SplitBuffer,
@@ -201,26 +207,44 @@ impl Prepare {
             .ok_or_else(|| device_error("raw radius attribute"))
     }
 
-    /// The staging pass: writes the checked step into the staging memory (the lo parts too when
-    /// the precision needs them). The CPU's whole share of a step change.
-    pub(super) fn stage(
+    /// Maps the staging memory a step of `n` particles writes (after the device's last copy
+    /// from it, which is over by then): the points', and the radius attribute's when
+    /// `with_radius`. Not CPU work on the step: a wait for the device, kept out of the pass.
+    pub(super) fn map(
         &mut self,
         ctx: &GpuContext,
-        staging: StepStaging<'_>,
-        step: &Step,
-    ) -> Result<GpuStepData, BackendError> {
-        let n = staging.len();
+        n: usize,
+        with_radius: bool,
+    ) -> Result<StagingViews, BackendError> {
         assert!(n <= self.capacity);
-        let with_radius = staging.has_radius_attribute();
-        let mut radius_views = match with_radius {
+        let radius = match with_radius {
             true => self
                 .radius(ctx)?
                 .staging
                 .views(ctx, n as u64 * WORD_BYTES)?,
             false => Vec::new(),
         };
+        Ok(StagingViews {
+            points: self.points.staging.views(ctx, n as u64 * PARTICLE_BYTES)?,
+            radius,
+        })
+    }
+
+    /// The staging pass into the views [`Self::map`] made: writes the checked step (and the lo
+    /// parts when the precision needs them). The CPU's whole share of a step change.
+    pub(super) fn stage(
+        &mut self,
+        ctx: &GpuContext,
+        staging: StepStaging<'_>,
+        views: StagingViews,
+        step: &Step,
+    ) -> Result<GpuStepData, BackendError> {
+        let n = staging.len();
+        let StagingViews {
+            points: mut views,
+            radius: mut radius_views,
+        } = views;
         let part = self.points.staging.part_bytes();
-        let mut views = self.points.staging.views(ctx, n as u64 * PARTICLE_BYTES)?;
         let data = staging.write(
             slots(&mut views, part),
             radius_views
