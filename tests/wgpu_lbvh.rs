@@ -29,7 +29,7 @@ use aarbf::backend::shaders::cpu::lbvh::{
 };
 use aarbf::backend::shaders::cpu::rbf::RadiusRule;
 use aarbf::backend::shaders::cpu::{cluster_box, lbvh_keys, radix_sort};
-use aarbf::backend::wgpu_lbvh::{BuildStage, GpuContext, WgpuBackend, prepare, sort};
+use aarbf::backend::wgpu_lbvh::{self, BuildStage, GpuContext, WgpuBackend, prepare, sort};
 use aarbf::backend::{Backend, Precision, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
 use aarbf::scene::maps::{DensityMap, RadiusMap};
@@ -264,6 +264,28 @@ fn hilbert_keys_equal_their_twin_and_sort_to_the_hilbert_order() {
             "n {n}: the twin's keys do not sort to hilbert_order"
         );
     }
+    // A series flat in z (zero extent: scale 0 on that axis), and points outside the grid
+    // (clamped), far from the origin.
+    let flat = Bounds {
+        min: DVec3::new(-7.0e7, 2.0, 5.5),
+        max: DVec3::new(-7.0e7 + 1.0e3, 2.0 + 1.0e-3, 5.5),
+    };
+    let q = HilbertQuantizer::new(flat);
+    let mut r = rng(399);
+    let points: Vec<[f32; 4]> = (0..4099)
+        .map(|_| {
+            let p = flat.min
+                + DVec3::new(r.random_range(-0.1..1.1), r.random_range(-0.1..1.1), 0.0)
+                    * (flat.max - flat.min + DVec3::Z);
+            let [x, y, z] = q.local(p);
+            [x, y, z, 0.0]
+        })
+        .collect();
+    let (keys, _) = prepare::hilbert_keys(&ctx, &points, &q).unwrap();
+    assert!(
+        keys == hilbert_keys::hilbert_keys(&points, &q),
+        "flat series"
+    );
     assert_no_driver_messages();
 }
 
@@ -368,6 +390,39 @@ fn device_preparation_equals_the_cpu_preparation() {
     let changed = simulation_input(&step, &tiny, Precision::RENDER);
     assert!(b.step_data().unwrap().double_single());
     assert_prepared_like_the_cpu(&b, &changed, "after a refit that needs lo parts");
+    assert_no_driver_messages();
+}
+
+/// Once the series' maximum is reserved, stepping makes no buffer: the staging memory, the
+/// step's arrays on the device, the sort's and the tree's buffers are all made by the first
+/// upload (here one with every optional array: a radius attribute and double-single
+/// positions) and reused by steps of any count up to the reserved one.
+#[test]
+fn stepping_through_a_reserved_series_makes_no_buffers() {
+    let ctx = gpu();
+    let mut b = backend(&ctx, None);
+    b.reserve(20_000);
+    let mut f = FieldSettings::new(Some("a"), 0.05);
+    f.radius_attribute = Some("h".into());
+    for (i, n) in [20_000usize, 5_003, 19_999, 1, 0, 12_345]
+        .into_iter()
+        .enumerate()
+    {
+        let step = Arc::new(simulation_step(n, 700 + i as u64));
+        let input = simulation_input(&step, &f, Precision::DoubleSingle);
+        let before = wgpu_lbvh::buffers_made();
+        b.upload(&input).unwrap();
+        if i > 0 {
+            assert_eq!(
+                wgpu_lbvh::buffers_made(),
+                before,
+                "step {i} ({n} particles) made buffers"
+            );
+        } else {
+            assert!(wgpu_lbvh::buffers_made() > before, "the counter counts");
+        }
+        b.build().unwrap();
+    }
     assert_no_driver_messages();
 }
 

@@ -4,6 +4,7 @@
 //! or a lost device becomes a [`BackendError`], never a panic.
 
 use std::borrow::Cow;
+use std::cell::Cell;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -16,6 +17,17 @@ pub(crate) fn device_error(message: impl Into<String>) -> BackendError {
         backend: "wgpu",
         message: message.into(),
     }
+}
+
+thread_local! {
+    static BUFFERS_MADE: Cell<u64> = const { Cell::new(0) };
+}
+
+/// Buffers this thread has made through [`GpuContext::create_buffer`], which makes every buffer
+/// of this backend: tests check that stepping through a reserved series makes none (per
+/// thread, so tests running beside each other on the shared device do not count each other's).
+pub fn buffers_made() -> u64 {
+    BUFFERS_MADE.with(Cell::get)
 }
 
 /// A compute kernel of the backend: a shader file and an entry point.
@@ -299,6 +311,12 @@ impl GpuContext {
             modules: Mutex::new(HashMap::new()),
             pipelines: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// Makes a buffer, counting it ([`buffers_made`]).
+    pub fn create_buffer(&self, desc: &wgpu::BufferDescriptor<'_>) -> wgpu::Buffer {
+        BUFFERS_MADE.with(|c| c.set(c.get() + 1));
+        self.device.create_buffer(desc)
     }
 
     /// The adapter in words.

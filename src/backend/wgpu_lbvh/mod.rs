@@ -5,8 +5,8 @@
 //!   staging memory ([`GpuStepData`]: local coordinates, t, the radius attribute); the device
 //!   copies it, computes Hilbert keys, sorts and gathers into Hilbert order (`prepare`), into
 //!   buffers kept for the largest step seen (or [`Backend::reserve`]d for the series' maximum
-//!   count), staging included, so stepping allocates nothing; the radius-attribute buffer
-//!   exists only when the scene has one. The arrays of 16-byte elements that outgrow one storage
+//!   count), staging included, so stepping makes no buffer (`buffers_made`, tested); the
+//!   radius-attribute buffer exists only when the scene has one. The arrays of 16-byte elements that outgrow one storage
 //!   binding first (particles, LBVH nodes, cluster boxes, the accumulation) live in up to
 //!   `util::PARTS` = 4 buffers each (`util::SplitBuffer`, `shaders_glsl/wgpu/split.glsl`);
 //!   a step beyond that, or one whose 4-byte arrays (sort keys, parents, radius attribute)
@@ -48,7 +48,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-pub use context::{AdapterSummary, GpuContext, Kernel, adapters, instance_flags};
+pub use context::{AdapterSummary, GpuContext, Kernel, adapters, buffers_made, instance_flags};
 pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::{GpuStepData, SortedParticles};

@@ -24,7 +24,7 @@ pub fn interleave(groups: u32) -> (u32, u32, u32) {
 
 /// A storage buffer of at least `bytes` (rounded up to 16, never 0), copyable both ways.
 pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+    ctx.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16).next_multiple_of(16),
         usage: wgpu::BufferUsages::STORAGE
@@ -35,7 +35,7 @@ pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
 }
 
 pub fn uniform(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+    ctx.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16).next_multiple_of(16),
         usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
@@ -138,7 +138,7 @@ pub fn read_into(
 ) -> Result<(), BackendError> {
     let size = bytes.next_multiple_of(4).max(4);
     let staging = ctx.scoped("readback buffer", || {
-        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -371,7 +371,7 @@ impl SplitBuffer {
 /// Memory the host writes and the device copies from: MAP_WRITE buffers cut into the parts of
 /// the array they fill (a [`SplitBuffer`]'s, or one part for an array in one buffer), made
 /// once for a capacity and mapped again for each write, so stepping through a series
-/// allocates nothing. The CPU converts a step straight into them (one copy of its bytes,
+/// makes no buffer. The CPU converts a step straight into them (one copy of its bytes,
 /// `gpu_data`), write-only: mapped memory may be uncached on the host.
 pub struct Staging {
     parts: Vec<wgpu::Buffer>,
@@ -387,7 +387,7 @@ impl Staging {
         let count = bytes.div_ceil(part_bytes);
         let parts = (0..count)
             .map(|i| {
-                ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                ctx.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(&format!("{label} staging (part {i})")),
                     size: (bytes - i * part_bytes)
                         .min(part_bytes)
