@@ -985,3 +985,93 @@ fn an_image_larger_than_one_binding_is_not_refused() {
     }
     assert_no_validation_messages();
 }
+
+/// Preparing a step on the device equals the CPU preparation bit for bit (order, positions
+/// with t, lo parts, radius attribute; the order is `hilbert_order`), for a series of awkward,
+/// changing counts far from the origin with and without a radius attribute and double-single
+/// positions, the outputs poisoned before each step; and after field changes that gather a new
+/// radius attribute and lo parts through the kept order.
+#[test]
+fn device_preparation_equals_the_cpu_preparation() {
+    use aarbf::accel::hilbert_order;
+    use aarbf::backend::Precision;
+
+    let mut b = backend();
+    let bounds = Bounds {
+        min: DVec3::new(1000.0, -50.0, 3.0),
+        max: DVec3::new(1002.0, -48.0, 5.0),
+    };
+    b.reserve(1_000_003);
+    let plain = FieldSettings::new(Some("s"), 0.02);
+    let mut with_radius = plain.clone();
+    with_radius.radius_attribute = Some("h".into());
+    let check = |b: &mut AshBackend, input: &StepInput<'_>, what: &str| {
+        let (_, cpu) = GpuStepData::prepare(input).unwrap();
+        let gpu = b.sorted_particles().unwrap();
+        assert!(
+            gpu.order == hilbert_order(&input.step.positions, input.series_bounds),
+            "{what}: the device's order is not hilbert_order"
+        );
+        let bits =
+            |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
+        assert!(bits(&gpu.points) == bits(&cpu.points), "{what}: points");
+        assert_eq!(gpu.points_lo.is_some(), cpu.points_lo.is_some(), "{what}");
+        if let (Some(g), Some(c)) = (&gpu.points_lo, &cpu.points_lo) {
+            assert!(bits(g) == bits(c), "{what}: lo parts");
+        }
+        assert_eq!(
+            gpu.radius_attribute, cpu.radius_attribute,
+            "{what}: radius attribute"
+        );
+    };
+    for (i, n) in [65537usize, 0, 1, 255, 257, 1_000_003, 4097]
+        .into_iter()
+        .enumerate()
+    {
+        let step = Arc::new(random_step(n, 800 + i as u64));
+        let (field, precision) = match i % 3 {
+            0 => (&plain, Precision::RENDER),
+            1 => (&with_radius, Precision::RENDER),
+            _ => (&with_radius, Precision::DoubleSingle),
+        };
+        let input = StepInput {
+            step: &step,
+            field,
+            cluster: ClusterSize::new(4).unwrap(),
+            series_bounds: bounds,
+            series_range: Some((-3.0, 5.0)),
+            precision,
+        };
+        if i > 0 {
+            b.poison_prepared().unwrap();
+        }
+        b.upload(&input).unwrap();
+        check(&mut b, &input, &format!("step {i} ({n} particles)"));
+    }
+
+    let step = Arc::new(random_step(70_001, 900));
+    let wide = FieldSettings::new(Some("s"), 0.3);
+    let input = |field| StepInput {
+        step: &step,
+        field,
+        cluster: ClusterSize::new(4).unwrap(),
+        series_bounds: bounds,
+        series_range: Some((-3.0, 5.0)),
+        precision: Precision::RENDER,
+    };
+    b.upload(&input(&wide)).unwrap();
+    b.build().unwrap();
+    let mut tiny = wide.clone();
+    tiny.radius = 1e-5;
+    tiny.radius_attribute = Some("h".into());
+    b.refit(&tiny).unwrap();
+    check(&mut b, &input(&tiny), "after a refit that needs lo parts");
+    assert!(
+        matches!(
+            b.positions(),
+            Some(aarbf::backend::Positions::DoubleSingle { .. })
+        ),
+        "the tiny radii need double-single positions"
+    );
+    assert_no_validation_messages();
+}

@@ -8,8 +8,8 @@
 //! normalised to t, the radius attribute rounded to f32, and on the way what the precision rule
 //! below needs (the largest coordinate, the smallest and largest radius). The Hilbert keys of
 //! those f32 local coordinates, their sort and the gather into Hilbert order then run on the
-//! device (`wgpu_lbvh::prepare`), or on the CPU ([`GpuStepData::prepare`]: the ash backend's
-//! path, and the reference the device is tested against), with the same results bit for bit.
+//! device (`wgpu_lbvh::prepare`, `ash_rt::prepare`), or on the CPU ([`GpuStepData::prepare`]:
+//! the reference the devices are tested against), with the same results bit for bit.
 //!
 //! t is normalised in the pass, in f64, not on the device: beside the conversion it costs
 //! nothing, and an attribute rounded to f32 before the subtraction would lose the digits that
@@ -64,7 +64,7 @@ pub fn slots4(v: &mut [f32]) -> Slots4<'_> {
 const CHUNK: usize = 1 << 14;
 
 /// One step, ready to upload: everything a backend needs beside the particle arrays, which
-/// live on the device (wgpu) or in [`SortedParticles`] (ash).
+/// live on the device.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GpuStepData {
     /// Local coordinates are data coordinates minus this (the series' bounding-box centre), so
@@ -93,8 +93,8 @@ pub struct GpuStepData {
     pub tables: FieldTables,
 }
 
-/// A step's particles in Hilbert order, on the host: what the device's preparation computes
-/// (tests read it back to compare), and what the ash backend uploads.
+/// A step's particles in Hilbert order, on the host: what the devices' preparation computes
+/// (tests read it back to compare with [`GpuStepData::prepare`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SortedParticles {
     /// Per particle: xyz local position (the hi part with double-single positions), w the
@@ -358,8 +358,8 @@ impl GpuStepData {
     }
 
     /// Prepares a step on the CPU: the staging pass into host arrays, then the Hilbert order
-    /// ([`hilbert_order`], the keys `shaders_wgsl/hilbert_keys.wgsl` computes on the device)
-    /// and the gather into it. The ash backend's preparation, and the wgpu backend's twin.
+    /// ([`hilbert_order`], the keys `hilbert_keys.wgsl` and `hilbert_keys.comp` compute on the
+    /// devices) and the gather into it: the GPU backends' twin.
     pub fn prepare(input: &StepInput<'_>) -> Result<(GpuStepData, SortedParticles), FieldError> {
         let staging = GpuStepData::check(input)?;
         let n = staging.len();
@@ -519,37 +519,6 @@ fn radius_attribute<'a>(step: &'a Step, settings: &FieldSettings) -> Option<&'a 
         .radius_attribute
         .as_deref()
         .and_then(|name| step.attribute(name))
-}
-
-impl SortedParticles {
-    /// Gathers again what [`GpuStepData::apply_field`] says changed: the radius attribute, or
-    /// the lo parts (dropped when the precision no longer needs them).
-    pub fn apply(
-        &mut self,
-        data: &GpuStepData,
-        step: &Step,
-        settings: &FieldSettings,
-        changed: Changed,
-    ) {
-        if changed.radius_attribute {
-            self.radius_attribute = radius_attribute(step, settings).map(|h| {
-                self.order
-                    .par_iter()
-                    .map(|&i| h.values[i as usize] as f32)
-                    .collect()
-            });
-        }
-        if !data.double_single {
-            self.points_lo = None;
-        } else if changed.positions_lo || self.points_lo.is_none() {
-            self.points_lo = Some(
-                self.order
-                    .par_iter()
-                    .map(|&i| data.lo_of(step.positions[i as usize]))
-                    .collect(),
-            );
-        }
-    }
 }
 
 /// What [`GpuStepData::apply_field`] changed that a backend must upload again.

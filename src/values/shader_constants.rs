@@ -188,6 +188,18 @@ pub fn glsl() -> String {
     out
 }
 
+/// The GLSL text of `generated/hilbert_step.glsl`: the Hilbert state table, for the ash
+/// backend's compute kernels (compiled by glslc in build.rs; kept out of
+/// `generated/constants.glsl`, which naga's GLSL front end reads for every wgpu kernel).
+pub fn hilbert_glsl() -> String {
+    let table: Vec<String> = HILBERT_STEP.iter().map(|e| format!("{e}u")).collect();
+    format!(
+        "{HEADER}const uint HILBERT_STEP[{n}] = uint[{n}]({});\n",
+        table.join(", "),
+        n = HILBERT_STEP.len()
+    )
+}
+
 /// The WGSL text of `generated/constants.wgsl`: every constant, and the Hilbert state table.
 pub fn wgsl() -> String {
     let mut out = String::from(HEADER);

@@ -127,7 +127,7 @@ impl Buffer {
     }
 
     /// The buffer's bytes, when the host can touch them in place.
-    fn host_slice(&mut self) -> Option<&mut [u8]> {
+    pub fn host_slice(&mut self) -> Option<&mut [u8]> {
         let a = self.allocation.as_mut()?;
         let coherent = a.memory_properties().contains(
             vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,

@@ -1,7 +1,8 @@
-//! The CPU twin of `shaders_wgsl/gather.wgsl` (preparing a step, the last stage): an array put
-//! into sorted order, element k of the result being element `order[k]` of the input. The wgpu
-//! backend gathers the sort's second key word, then the particles, their lo parts and radius
-//! attribute; the ash backend's CPU preparation gathers with this very function.
+//! The CPU twin of `shaders_wgsl/gather.wgsl` and `shaders_glsl/vulkan/gather_{words,vec4s}.comp`
+//! (preparing a step, the last stage): an array put into sorted order, element k of the result
+//! being element `order[k]` of the input. The GPU backends gather the sort's second key word,
+//! then the particles, their lo parts and radius attribute; the CPU preparation
+//! (`GpuStepData::prepare`, their reference) gathers with this very function.
 
 use rayon::prelude::*;
 

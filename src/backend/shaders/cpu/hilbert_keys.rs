@@ -1,5 +1,5 @@
-//! The CPU twin of `shaders_wgsl/hilbert_keys.wgsl` (preparing a step on the device, the first
-//! stage): each particle's 63-bit Hilbert key from its f32 local coordinates, the key
+//! The CPU twin of `shaders_wgsl/hilbert_keys.wgsl` and `shaders_glsl/vulkan/hilbert_keys.comp`
+//! (preparing a step on the device, the first stage): each particle's 63-bit Hilbert key from its f32 local coordinates, the key
 //! [`crate::accel::hilbert_order`] sorts by ([`HilbertQuantizer::key_of_local`]: the cell in
 //! two correctly rounded f32 operations, then the 24-state table). The device holds a key as
 //! two words, the low 32 bits and the high 31, and sorts by the low word first, then stably by
