@@ -1075,3 +1075,58 @@ fn device_preparation_equals_the_cpu_preparation() {
     );
     assert_no_validation_messages();
 }
+
+/// The preparation's stages on the ash device against their CPU twins, outputs poisoned
+/// first, at awkward sizes: the Hilbert keys of f32 local coordinates far from the origin
+/// (bit for bit, with the identity permutation), and the radix sort of random keys and of
+/// keys with few distinct values (stability decides their order).
+#[test]
+fn preparation_stages_equal_their_cpu_twins() {
+    use aarbf::accel::HilbertQuantizer;
+    use aarbf::backend::shaders::cpu::{hilbert_keys, radix_sort};
+
+    let mut b = backend();
+    let bounds = Bounds {
+        min: DVec3::new(1000.0, -50.0, 3.0),
+        max: DVec3::new(1002.0, -48.0, 5.0),
+    };
+    let q = HilbertQuantizer::new(bounds);
+    for (i, n) in [0usize, 1, 255, 257, 65537, 1_000_003]
+        .into_iter()
+        .enumerate()
+    {
+        let step = random_step(n, 1000 + i as u64);
+        let points: Vec<[f32; 4]> = step
+            .positions
+            .iter()
+            .map(|&p| {
+                let [x, y, z] = q.local(p);
+                [x, y, z, 0.25]
+            })
+            .collect();
+        let (keys, values) = b.prepare_hilbert_keys(&points, &q).unwrap();
+        assert!(
+            keys == hilbert_keys::hilbert_keys(&points, &q),
+            "n {n}: keys differ from the twin's"
+        );
+        assert!(
+            values.iter().enumerate().all(|(i, &v)| v as usize == i),
+            "n {n}"
+        );
+
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(2000 + i as u64);
+        for few in [false, true] {
+            let keys: Vec<u32> = (0..n)
+                .map(|_| match few {
+                    false => rng.random(),
+                    true => rng.random_range(0..13u32) << 20,
+                })
+                .collect();
+            assert!(
+                b.prepare_sort_pairs(&keys).unwrap() == radix_sort::sort_pairs(&keys),
+                "n {n}, few distinct keys {few}: the sort differs from its twin"
+            );
+        }
+    }
+    assert_no_validation_messages();
+}

@@ -357,6 +357,49 @@ impl AshBackend {
         })
     }
 
+    /// Stage 1 of the preparation alone on `points` (f32 local coordinates in xyz), outputs
+    /// poisoned first: each particle's Hilbert key and the permutation (tests; the twin is
+    /// `shaders::cpu::hilbert_keys`).
+    pub fn prepare_hilbert_keys(
+        &mut self,
+        points: &[[f32; 4]],
+        quantizer: &crate::accel::HilbertQuantizer,
+    ) -> Result<(Vec<u64>, Vec<u32>), BackendError> {
+        self.ensure_prepare(points.len())?;
+        match self.prepare.as_mut() {
+            Some(p) => p.hilbert_keys(&self.commands, points, quantizer),
+            None => Err(BackendError::NothingUploaded(NAME)),
+        }
+    }
+
+    /// The preparation's radix sort alone on (`keys`, their indices), scratch poisoned first:
+    /// the sorted keys and the input index of each (tests; the twin is
+    /// `shaders::cpu::radix_sort`).
+    pub fn prepare_sort_pairs(
+        &mut self,
+        keys: &[u32],
+    ) -> Result<(Vec<u32>, Vec<u32>), BackendError> {
+        self.ensure_prepare(keys.len())?;
+        match self.prepare.as_mut() {
+            Some(p) => p.sort_pairs(&self.commands, keys),
+            None => Err(BackendError::NothingUploaded(NAME)),
+        }
+    }
+
+    /// Makes the preparation's buffers hold at least `n` particles and the buffers' capacity.
+    fn ensure_prepare(&mut self, n: usize) -> Result<(), BackendError> {
+        let capacity = n.max(self.capacity);
+        if self
+            .prepare
+            .as_ref()
+            .is_none_or(|p| p.capacity() < capacity)
+        {
+            self.prepare = None;
+            self.prepare = Some(Prepare::new(&self.ctx, capacity)?);
+        }
+        Ok(())
+    }
+
     /// Fills the prepared particles, their lo parts and radius attribute and the sort's buffers
     /// with 0xFF (tests: poison before an upload).
     pub fn poison_prepared(&mut self) -> Result<(), BackendError> {
@@ -423,14 +466,7 @@ impl Backend for AshBackend {
         let checked = started.elapsed();
         self.uploaded = None;
         self.ensure_capacity(staging.len(), input.cluster)?;
-        if self
-            .prepare
-            .as_ref()
-            .is_none_or(|p| p.capacity() < self.capacity)
-        {
-            self.prepare = None;
-            self.prepare = Some(Prepare::new(&self.ctx, self.capacity)?);
-        }
+        self.ensure_prepare(self.capacity)?;
         let Some(prepare) = self.prepare.as_mut() else {
             return Err(BackendError::NothingUploaded(NAME));
         };

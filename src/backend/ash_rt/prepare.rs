@@ -18,7 +18,8 @@ use wgpu::WriteOnly;
 use super::buffers::addressed;
 use super::context::{Context, device_error};
 use super::pipelines::{ComputeKind, PreparePush, prepare_pipeline};
-use super::resources::{Buffer, barrier};
+use super::resources::{Buffer, Commands, barrier};
+use crate::accel::HilbertQuantizer;
 use crate::backend::BackendError;
 use crate::backend::gpu_data::{GpuStepData, Slots4, Slots16, StepStaging};
 use crate::field::FieldSettings;
@@ -253,12 +254,12 @@ impl Prepare {
         &self,
         cb: vk::CommandBuffer,
         kind: ComputeKind,
-        data: &GpuStepData,
+        quantizer: &HilbertQuantizer,
         n: u32,
         arrays: [u64; 5],
     ) -> Result<(), BackendError> {
-        let [lx, ly, lz] = data.quantizer.lo();
-        let [sx, sy, sz] = data.quantizer.scale();
+        let [lx, ly, lz] = quantizer.lo();
+        let [sx, sy, sz] = quantizer.scale();
         let push = PreparePush {
             grid_lo: [lx, ly, lz, 0.0],
             grid_scale: [sx, sy, sz, 0.0],
@@ -358,7 +359,7 @@ impl Prepare {
         self.elements(
             cb,
             ComputeKind::HilbertKeys,
-            data,
+            &data.quantizer,
             n,
             [
                 self.points.device.address,
@@ -405,7 +406,7 @@ impl Prepare {
         self.elements(
             cb,
             kind,
-            data,
+            &data.quantizer,
             data.count as u32,
             [self.values.address, from.address, to.address, 0, 0],
         )
@@ -451,6 +452,76 @@ impl Prepare {
             self.gather(cb, ComputeKind::GatherVec4s, data, &raw.device, dst)?;
         }
         Ok(())
+    }
+
+    /// Stage 1 alone on `points` (local coordinates in xyz), its outputs poisoned first: each
+    /// particle's key and the permutation it writes (tests).
+    pub(super) fn hilbert_keys(
+        &mut self,
+        commands: &Commands,
+        points: &[[f32; 4]],
+        quantizer: &HilbertQuantizer,
+    ) -> Result<(Vec<u64>, Vec<u32>), BackendError> {
+        let n = points.len();
+        self.poison()?;
+        self.points.staging.write(0, bytemuck::cast_slice(points))?;
+        let cb = commands.begin()?;
+        self.points.record_copy(&self.ctx, cb, n as u64 * 16);
+        barrier(
+            &self.ctx,
+            cb,
+            (
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ,
+            ),
+        );
+        self.elements(
+            cb,
+            ComputeKind::HilbertKeys,
+            quantizer,
+            n as u32,
+            [
+                self.points.device.address,
+                self.keys.address,
+                self.keys_hi.address,
+                self.values.address,
+                0,
+            ],
+        )?;
+        commands.submit_and_wait()?;
+        let lo: Vec<u32> = bytemuck::pod_collect_to_vec(&self.keys.read(n as u64 * 4)?);
+        let hi: Vec<u32> = bytemuck::pod_collect_to_vec(&self.keys_hi.read(n as u64 * 4)?);
+        let keys = lo
+            .iter()
+            .zip(&hi)
+            .map(|(&l, &h)| u64::from(h) << 32 | u64::from(l))
+            .collect();
+        Ok((keys, self.order(n)?))
+    }
+
+    /// The radix sort alone on (`keys`, their indices), its scratch poisoned first: the sorted
+    /// keys and the input index of each (tests).
+    pub(super) fn sort_pairs(
+        &mut self,
+        commands: &Commands,
+        keys: &[u32],
+    ) -> Result<(Vec<u32>, Vec<u32>), BackendError> {
+        let n = keys.len();
+        self.poison()?;
+        self.keys.write(0, bytemuck::cast_slice(keys))?;
+        let identity: Vec<u32> = (0..n as u32).collect();
+        self.values.write(0, bytemuck::cast_slice(&identity))?;
+        let cb = commands.begin()?;
+        self.record_sort(cb, n as u32)?;
+        commands.submit_and_wait()?;
+        Ok((
+            bytemuck::pod_collect_to_vec(&self.keys.read(n as u64 * 4)?),
+            self.order(n)?,
+        ))
     }
 
     /// The order of the last prepared step (tests).
