@@ -315,31 +315,16 @@ impl Prepare {
         Ok(())
     }
 
-    /// Records the copy of what [`Self::stage`] wrote and the preparation into `targets`.
-    pub(super) fn record(
-        &self,
-        cb: vk::CommandBuffer,
-        data: &GpuStepData,
-        targets: &Targets<'_>,
-    ) -> Result<(), BackendError> {
-        let n = data.count as u32;
+    /// Records the copy of what [`Self::stage`] wrote to the device.
+    pub(super) fn record_copy(&self, cb: vk::CommandBuffer, data: &GpuStepData) {
+        let n = data.count as u64;
         let ctx = &self.ctx;
-        self.points.record_copy(ctx, cb, u64::from(n) * 16);
-        let lo = self
-            .points_lo
-            .as_ref()
-            .filter(|_| data.double_single)
-            .zip(targets.points_lo);
-        let radius = self
-            .radius
-            .as_ref()
-            .filter(|_| data.has_radius_attribute)
-            .zip(targets.radius);
-        if let Some((raw, _)) = lo {
-            raw.record_copy(ctx, cb, u64::from(n) * 16);
+        self.points.record_copy(ctx, cb, n * 16);
+        if let Some(raw) = self.points_lo.as_ref().filter(|_| data.double_single) {
+            raw.record_copy(ctx, cb, n * 16);
         }
-        if let Some((raw, _)) = radius {
-            raw.record_copy(ctx, cb, u64::from(n) * 4);
+        if let Some(raw) = self.radius.as_ref().filter(|_| data.has_radius_attribute) {
+            raw.record_copy(ctx, cb, n * 4);
         }
         barrier(
             ctx,
@@ -353,6 +338,27 @@ impl Prepare {
                 vk::AccessFlags::SHADER_READ,
             ),
         );
+    }
+
+    /// Records the preparation of the copied step ([`Self::record_copy`], submitted before)
+    /// into `targets`.
+    pub(super) fn record(
+        &self,
+        cb: vk::CommandBuffer,
+        data: &GpuStepData,
+        targets: &Targets<'_>,
+    ) -> Result<(), BackendError> {
+        let n = data.count as u32;
+        let lo = self
+            .points_lo
+            .as_ref()
+            .filter(|_| data.double_single)
+            .zip(targets.points_lo);
+        let radius = self
+            .radius
+            .as_ref()
+            .filter(|_| data.has_radius_attribute)
+            .zip(targets.radius);
         if n == 0 {
             return Ok(());
         }
