@@ -135,6 +135,9 @@ pub struct MemoryReport {
     pub structure_bytes: usize,
     /// The accumulation image.
     pub image_bytes: usize,
+    /// What preparing a step on the device keeps between steps: staging memory, the step's
+    /// arrays in its own order and the sort's buffers (0 where the CPU prepares).
+    pub preparation_bytes: usize,
 }
 
 /// One step as a backend receives it.

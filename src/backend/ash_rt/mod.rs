@@ -699,6 +699,7 @@ impl Backend for AshBackend {
             image_bytes: self
                 .accum_size
                 .map_or(0, |(w, h)| (w as usize) * (h as usize) * 16),
+            preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
         }
     }
 }

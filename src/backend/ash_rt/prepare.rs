@@ -133,6 +133,33 @@ impl Prepare {
         self.capacity
     }
 
+    /// Bytes the preparation holds: staging memory, the raw arrays on the device, and the
+    /// sort's buffers.
+    pub(super) fn bytes(&self) -> usize {
+        let raws = [
+            Some(&self.points),
+            self.points_lo.as_ref(),
+            self.radius.as_ref(),
+        ];
+        let raw: u64 = raws
+            .into_iter()
+            .flatten()
+            .map(|r| r.staging.size + r.device.size)
+            .sum();
+        let sort: u64 = [
+            &self.keys,
+            &self.values,
+            &self.keys_tmp,
+            &self.values_tmp,
+            &self.keys_hi,
+            &self.histogram,
+        ]
+        .iter()
+        .map(|b| b.size)
+        .sum();
+        (raw + sort) as usize
+    }
+
     fn lo(&mut self) -> Result<&mut Raw, BackendError> {
         if self.points_lo.is_none() {
             self.points_lo = Some(Raw::new(

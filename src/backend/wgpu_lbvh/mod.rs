@@ -189,11 +189,9 @@ impl WgpuBackend {
         self.accumulation.as_ref().map_or(0, |a| a.frames)
     }
 
-    /// Bytes of build scratch (sort keys, values, histogram) beside the structure, and of the
-    /// step's preparation (its raw arrays and sort buffers).
+    /// Bytes of build scratch (sort keys, values, histogram) beside the structure.
     pub fn scratch_bytes(&self) -> usize {
         self.tree.as_ref().map_or(0, GpuTree::scratch_bytes)
-            + self.prepare.as_ref().map_or(0, Prepare::bytes)
     }
 
     /// The uploaded step's particles as the device prepared them, in Hilbert order, with the
@@ -609,6 +607,7 @@ impl Backend for WgpuBackend {
                 .accumulation
                 .as_ref()
                 .map_or(0, |a| a.sums.size() as usize),
+            preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
         }
     }
 }

@@ -135,15 +135,16 @@ impl Prepare {
         self.capacity
     }
 
-    /// Bytes the preparation holds on the device beside the scene (raw arrays, sort buffers);
-    /// as much again in staging memory on the host side.
+    /// Bytes the preparation holds beside the scene: the raw arrays on the device, as much
+    /// again in their staging memory, and the sort's buffers.
     pub(super) fn bytes(&self) -> usize {
-        let raw = self.points.device.size()
-            + self.points_lo.as_ref().map_or(0, |r| r.device.size())
-            + self
-                .radius_attribute
-                .as_ref()
-                .map_or(0, |r| r.device.size());
+        let raw = 2
+            * (self.points.device.size()
+                + self.points_lo.as_ref().map_or(0, |r| r.device.size())
+                + self
+                    .radius_attribute
+                    .as_ref()
+                    .map_or(0, |r| r.device.size()));
         let sort = [
             &self.keys,
             &self.values,
