@@ -1130,3 +1130,45 @@ fn preparation_stages_equal_their_cpu_twins() {
     }
     assert_no_validation_messages();
 }
+
+/// Once the series' maximum is reserved, stepping makes no buffer: the staging memory, the
+/// step's arrays, the sort's buffers, the BLAS and its scratch are all made by the first upload
+/// and build (one with every optional array: a radius attribute and double-single positions)
+/// and reused by steps of any count up to the reserved one.
+#[test]
+fn stepping_through_a_reserved_series_makes_no_buffers() {
+    use aarbf::backend::Precision;
+
+    let mut b = backend();
+    b.reserve(20_000);
+    let mut f = FieldSettings::new(Some("s"), 0.05);
+    f.radius_attribute = Some("h".into());
+    let bounds = Bounds {
+        min: DVec3::new(1000.0, -50.0, 3.0),
+        max: DVec3::new(1002.0, -48.0, 5.0),
+    };
+    for (i, n) in [20_000usize, 5_003, 19_999, 1, 0, 12_345]
+        .into_iter()
+        .enumerate()
+    {
+        let step = Arc::new(random_step(n, 1100 + i as u64));
+        let before = ash_rt::resources::buffers_made();
+        b.upload(&StepInput {
+            step: &step,
+            field: &f,
+            cluster: ClusterSize::new(2).unwrap(),
+            series_bounds: bounds,
+            series_range: Some((-3.0, 5.0)),
+            precision: Precision::DoubleSingle,
+        })
+        .unwrap();
+        b.build().unwrap();
+        let made = ash_rt::resources::buffers_made() - before;
+        if i > 0 {
+            assert_eq!(made, 0, "step {i} ({n} particles) made {made} buffers");
+        } else {
+            assert!(made > 0, "the counter counts");
+        }
+    }
+    assert_no_validation_messages();
+}
