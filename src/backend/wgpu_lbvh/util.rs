@@ -428,12 +428,13 @@ impl Staging {
         }
         drop(sender);
         ctx.wait()?;
-        let results: Vec<_> = receiver.try_iter().collect();
-        if results.len() != self.parts.len() {
-            return Err(device_error("staging: a map callback never ran"));
-        }
-        for r in results {
-            r.map_err(|e| device_error(format!("staging: {e}")))?;
+        // Blocking: with the device shared between threads, another thread's poll may be the
+        // one that runs these callbacks, a moment after this thread's poll returned.
+        for _ in &self.parts {
+            receiver
+                .recv()
+                .map_err(|_| device_error("staging: a map callback never ran"))?
+                .map_err(|e| device_error(format!("staging: {e}")))?;
         }
         self.mapped = true;
         Ok(())
