@@ -21,6 +21,9 @@ fn shared(name: &str) -> Option<String> {
     if name == "generated/constants.glsl" {
         return Some(shader_constants::glsl());
     }
+    if name == "generated/hilbert_step.glsl" {
+        return Some(shader_constants::hilbert_glsl());
+    }
     std::fs::read_to_string(Path::new("shaders_glsl").join(name)).ok()
 }
 

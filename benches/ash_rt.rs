@@ -106,7 +106,7 @@ fn structures(b: &mut AshBackend, sizes: &[usize]) {
             println!(
                 "| {n} | {k} | {} | {:.0} | {:.2} | {:.1} | {:.1} | {:.3} | {:.1} | {:.1} | {} |",
                 b.blas_boxes(),
-                ms(b.timings().prepare + b.timings().upload),
+                ms(b.timings().prepare + b.timings().upload + b.timings().device_prepare),
                 ms(median(kernel)),
                 ms(median(build)),
                 ms(median(refit)),

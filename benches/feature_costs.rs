@@ -150,7 +150,9 @@ fn main() {
                 precision: Precision::F32,
             };
             b.upload(&input).unwrap();
-            let upload = (b.timings().prepare + b.timings().upload).as_secs_f64();
+            // The whole upload: CPU preparation, copy and the preparation on the device.
+            let t = b.timings();
+            let upload = (t.prepare + t.upload + t.device_prepare).as_secs_f64();
             let mut builds = Vec::new();
             for _ in 0..3 {
                 b.build().unwrap();

@@ -165,13 +165,13 @@ fn boxes_match_the_cpu_cluster_boxes() {
         .unwrap();
         let cpu: &ClusterBoxes = &reference.boxes;
         let gpu = b.read_boxes().unwrap();
-        let data = GpuStepData::prepare(&input(&step, &field, k)).unwrap();
+        let (data, particles) = GpuStepData::prepare(&input(&step, &field, k)).unwrap();
         let rule = RadiusRule {
             field: data.field,
             radius_table: data.radius_map_varies.then_some(&data.tables.radius[..]),
-            radius_attribute: data.radius_attribute.as_deref(),
+            radius_attribute: particles.radius_attribute.as_deref(),
         };
-        let twin = cluster_box::blas_boxes(&data.points, k as usize, &rule, gpu.len());
+        let twin = cluster_box::blas_boxes(&particles.points, k as usize, &rule, gpu.len());
         for (c, (g, t)) in gpu.iter().zip(&twin).enumerate() {
             for (a, e) in g.iter().zip(t) {
                 // One ulp: the compiler may fuse the padding's multiply into the subtraction.
@@ -981,6 +981,193 @@ fn an_image_larger_than_one_binding_is_not_refused() {
                 [bg[0] as f32, bg[1] as f32, bg[2] as f32, 0.0],
                 "{traversal:?}: a corner is the background"
             );
+        }
+    }
+    assert_no_validation_messages();
+}
+
+/// Preparing a step on the device equals the CPU preparation bit for bit (order, positions
+/// with t, lo parts, radius attribute; the order is `hilbert_order`), for a series of awkward,
+/// changing counts far from the origin with and without a radius attribute and double-single
+/// positions, the outputs poisoned before each step; and after field changes that gather a new
+/// radius attribute and lo parts through the kept order.
+#[test]
+fn device_preparation_equals_the_cpu_preparation() {
+    use aarbf::accel::hilbert_order;
+    use aarbf::backend::Precision;
+
+    let mut b = backend();
+    let bounds = Bounds {
+        min: DVec3::new(1000.0, -50.0, 3.0),
+        max: DVec3::new(1002.0, -48.0, 5.0),
+    };
+    b.reserve(1_000_003);
+    let plain = FieldSettings::new(Some("s"), 0.02);
+    let mut with_radius = plain.clone();
+    with_radius.radius_attribute = Some("h".into());
+    let check = |b: &mut AshBackend, input: &StepInput<'_>, what: &str| {
+        let (_, cpu) = GpuStepData::prepare(input).unwrap();
+        let gpu = b.sorted_particles().unwrap();
+        assert!(
+            gpu.order == hilbert_order(&input.step.positions, input.series_bounds),
+            "{what}: the device's order is not hilbert_order"
+        );
+        let bits =
+            |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
+        assert!(bits(&gpu.points) == bits(&cpu.points), "{what}: points");
+        assert_eq!(gpu.points_lo.is_some(), cpu.points_lo.is_some(), "{what}");
+        if let (Some(g), Some(c)) = (&gpu.points_lo, &cpu.points_lo) {
+            assert!(bits(g) == bits(c), "{what}: lo parts");
+        }
+        assert_eq!(
+            gpu.radius_attribute, cpu.radius_attribute,
+            "{what}: radius attribute"
+        );
+    };
+    for (i, n) in [65537usize, 0, 1, 255, 257, 1_000_003, 4097]
+        .into_iter()
+        .enumerate()
+    {
+        let step = Arc::new(random_step(n, 800 + i as u64));
+        let (field, precision) = match i % 3 {
+            0 => (&plain, Precision::RENDER),
+            1 => (&with_radius, Precision::RENDER),
+            _ => (&with_radius, Precision::DoubleSingle),
+        };
+        let input = StepInput {
+            step: &step,
+            field,
+            cluster: ClusterSize::new(4).unwrap(),
+            series_bounds: bounds,
+            series_range: Some((-3.0, 5.0)),
+            precision,
+        };
+        if i > 0 {
+            b.poison_prepared().unwrap();
+        }
+        b.upload(&input).unwrap();
+        check(&mut b, &input, &format!("step {i} ({n} particles)"));
+    }
+
+    let step = Arc::new(random_step(70_001, 900));
+    let wide = FieldSettings::new(Some("s"), 0.3);
+    let input = |field| StepInput {
+        step: &step,
+        field,
+        cluster: ClusterSize::new(4).unwrap(),
+        series_bounds: bounds,
+        series_range: Some((-3.0, 5.0)),
+        precision: Precision::RENDER,
+    };
+    b.upload(&input(&wide)).unwrap();
+    b.build().unwrap();
+    let mut tiny = wide.clone();
+    tiny.radius = 1e-5;
+    tiny.radius_attribute = Some("h".into());
+    b.refit(&tiny).unwrap();
+    check(&mut b, &input(&tiny), "after a refit that needs lo parts");
+    assert!(
+        matches!(
+            b.positions(),
+            Some(aarbf::backend::Positions::DoubleSingle { .. })
+        ),
+        "the tiny radii need double-single positions"
+    );
+    assert_no_validation_messages();
+}
+
+/// The preparation's stages on the ash device against their CPU twins, outputs poisoned
+/// first, at awkward sizes: the Hilbert keys of f32 local coordinates far from the origin
+/// (bit for bit, with the identity permutation), and the radix sort of random keys and of
+/// keys with few distinct values (stability decides their order).
+#[test]
+fn preparation_stages_equal_their_cpu_twins() {
+    use aarbf::accel::HilbertQuantizer;
+    use aarbf::backend::shaders::cpu::{hilbert_keys, radix_sort};
+
+    let mut b = backend();
+    let bounds = Bounds {
+        min: DVec3::new(1000.0, -50.0, 3.0),
+        max: DVec3::new(1002.0, -48.0, 5.0),
+    };
+    let q = HilbertQuantizer::new(bounds);
+    for (i, n) in [0usize, 1, 255, 257, 65537, 1_000_003]
+        .into_iter()
+        .enumerate()
+    {
+        let step = random_step(n, 1000 + i as u64);
+        let points: Vec<[f32; 4]> = step
+            .positions
+            .iter()
+            .map(|&p| {
+                let [x, y, z] = q.local(p);
+                [x, y, z, 0.25]
+            })
+            .collect();
+        let (keys, values) = b.prepare_hilbert_keys(&points, &q).unwrap();
+        assert!(
+            keys == hilbert_keys::hilbert_keys(&points, &q),
+            "n {n}: keys differ from the twin's"
+        );
+        assert!(
+            values.iter().enumerate().all(|(i, &v)| v as usize == i),
+            "n {n}"
+        );
+
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(2000 + i as u64);
+        for few in [false, true] {
+            let keys: Vec<u32> = (0..n)
+                .map(|_| match few {
+                    false => rng.random(),
+                    true => rng.random_range(0..13u32) << 20,
+                })
+                .collect();
+            assert!(
+                b.prepare_sort_pairs(&keys).unwrap() == radix_sort::sort_pairs(&keys),
+                "n {n}, few distinct keys {few}: the sort differs from its twin"
+            );
+        }
+    }
+    assert_no_validation_messages();
+}
+
+/// Once the series' maximum is reserved, stepping makes no buffer: the staging memory, the
+/// step's arrays, the sort's buffers, the BLAS and its scratch are all made by the first upload
+/// and build (one with every optional array: a radius attribute and double-single positions)
+/// and reused by steps of any count up to the reserved one.
+#[test]
+fn stepping_through_a_reserved_series_makes_no_buffers() {
+    use aarbf::backend::Precision;
+
+    let mut b = backend();
+    b.reserve(20_000);
+    let mut f = FieldSettings::new(Some("s"), 0.05);
+    f.radius_attribute = Some("h".into());
+    let bounds = Bounds {
+        min: DVec3::new(1000.0, -50.0, 3.0),
+        max: DVec3::new(1002.0, -48.0, 5.0),
+    };
+    for (i, n) in [20_000usize, 5_003, 19_999, 1, 0, 12_345]
+        .into_iter()
+        .enumerate()
+    {
+        let step = Arc::new(random_step(n, 1100 + i as u64));
+        let before = ash_rt::resources::buffers_made();
+        b.upload(&StepInput {
+            step: &step,
+            field: &f,
+            cluster: ClusterSize::new(2).unwrap(),
+            series_bounds: bounds,
+            series_range: Some((-3.0, 5.0)),
+            precision: Precision::DoubleSingle,
+        })
+        .unwrap();
+        b.build().unwrap();
+        let made = ash_rt::resources::buffers_made() - before;
+        if i > 0 {
+            assert_eq!(made, 0, "step {i} ({n} particles) made {made} buffers");
+        } else {
+            assert!(made > 0, "the counter counts");
         }
     }
     assert_no_validation_messages();

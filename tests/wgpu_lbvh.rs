@@ -21,13 +21,16 @@
 use std::sync::Arc;
 
 use aarbf::accel::ClusterSize;
+use aarbf::accel::{HilbertQuantizer, hilbert_order};
+use aarbf::backend::gpu_data::GpuStepData;
+use aarbf::backend::shaders::cpu::hilbert_keys;
 use aarbf::backend::shaders::cpu::lbvh::{
     self, GpuBox, LBVH_EMPTY_KEY, LBVH_NONE, LBVH_SENTINEL, Lbvh, box_is_empty,
 };
 use aarbf::backend::shaders::cpu::rbf::RadiusRule;
 use aarbf::backend::shaders::cpu::{cluster_box, lbvh_keys, radix_sort};
-use aarbf::backend::wgpu_lbvh::{BuildStage, GpuContext, WgpuBackend, sort};
-use aarbf::backend::{Backend, StepInput};
+use aarbf::backend::wgpu_lbvh::{self, BuildStage, GpuContext, WgpuBackend, prepare, sort};
+use aarbf::backend::{Backend, Precision, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
 use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::values::{Attribute, Bounds, Step};
@@ -121,12 +124,13 @@ fn upload(backend: &mut WgpuBackend, step: &Arc<Step>, field: &FieldSettings, k:
 /// The CPU twin's cluster boxes for what the backend holds.
 fn twin_boxes(backend: &WgpuBackend) -> Vec<GpuBox> {
     let d = backend.step_data().unwrap();
+    let particles = backend.sorted_particles().unwrap();
     let rule = RadiusRule {
         field: d.field,
         radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
-        radius_attribute: d.radius_attribute.as_deref(),
+        radius_attribute: particles.radius_attribute.as_deref(),
     };
-    cluster_box::lbvh_bounds(&d.points, d.cluster.get(), &rule)
+    cluster_box::lbvh_bounds(&particles.points, d.cluster.get(), &rule)
 }
 
 fn assert_boxes_close(gpu: &[GpuBox], cpu: &[GpuBox], radius: f32, what: &str) {
@@ -189,6 +193,235 @@ fn radix_sort_equals_a_stable_sort_by_key() {
                 "n {n}, keys kind {kind}: the GPU sort differs from sort_by_key"
             );
         }
+    }
+    assert_no_driver_messages();
+}
+
+/// `n` particles as a simulation writes them: f64 positions far from the origin in a box of
+/// unequal sides (no f32-exact coordinates), an attribute `a` over [1000, 1001] and a radius
+/// attribute `h` in [0.5, 1.5].
+fn simulation_step(n: usize, seed: u64) -> Step {
+    let mut r = rng(seed);
+    let offset = DVec3::new(3.0e6, -1.25e5, 42.0);
+    let side = DVec3::new(17.0, 3.5, 9.25);
+    Step {
+        name: format!("simulation{n}"),
+        positions: (0..n)
+            .map(|_| offset + DVec3::new(r.random(), r.random(), r.random()) * side)
+            .collect(),
+        attributes: vec![
+            Attribute {
+                name: "a".into(),
+                values: (0..n).map(|_| 1000.0 + r.random::<f64>()).collect(),
+            },
+            Attribute {
+                name: "h".into(),
+                values: (0..n).map(|_| r.random_range(0.5..1.5f64)).collect(),
+            },
+        ],
+    }
+}
+
+/// The series' bounds of the simulation steps (every step lies inside).
+const SIMULATION_BOUNDS: Bounds = Bounds {
+    min: DVec3::new(3.0e6, -1.25e5, 42.0),
+    max: DVec3::new(3.0e6 + 17.0, -1.25e5 + 3.5, 42.0 + 9.25),
+};
+
+/// Preparing a step on the device, stage 1: the Hilbert keys of the f32 local coordinates
+/// equal their twin's bit for bit (outputs poisoned first), the permutation is the identity,
+/// and sorting the twin's keys is `hilbert_order` of the f64 positions.
+#[test]
+fn hilbert_keys_equal_their_twin_and_sort_to_the_hilbert_order() {
+    let ctx = gpu();
+    let quantizer = HilbertQuantizer::new(SIMULATION_BOUNDS);
+    for (i, n) in [0usize, 1, 255, 257, 65537, 1_000_003]
+        .into_iter()
+        .enumerate()
+    {
+        let step = simulation_step(n, 300 + i as u64);
+        let points: Vec<[f32; 4]> = step
+            .positions
+            .iter()
+            .map(|&p| {
+                let [x, y, z] = quantizer.local(p);
+                [x, y, z, 0.5]
+            })
+            .collect();
+        let (keys, values) = prepare::hilbert_keys(&ctx, &points, &quantizer).unwrap();
+        let twin = hilbert_keys::hilbert_keys(&points, &quantizer);
+        let differing = keys.iter().zip(&twin).filter(|(g, c)| g != c).count();
+        assert_eq!(differing, 0, "n {n}: GPU keys differ from the twin's");
+        assert_eq!(keys.len(), n);
+        assert!(
+            values.iter().enumerate().all(|(i, &v)| v as usize == i),
+            "n {n}"
+        );
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        order.sort_by_key(|&i| twin[i as usize]);
+        assert!(
+            order == hilbert_order(&step.positions, SIMULATION_BOUNDS),
+            "n {n}: the twin's keys do not sort to hilbert_order"
+        );
+    }
+    // A series flat in z (zero extent: scale 0 on that axis), and points outside the grid
+    // (clamped), far from the origin.
+    let flat = Bounds {
+        min: DVec3::new(-7.0e7, 2.0, 5.5),
+        max: DVec3::new(-7.0e7 + 1.0e3, 2.0 + 1.0e-3, 5.5),
+    };
+    let q = HilbertQuantizer::new(flat);
+    let mut r = rng(399);
+    let points: Vec<[f32; 4]> = (0..4099)
+        .map(|_| {
+            let p = flat.min
+                + DVec3::new(r.random_range(-0.1..1.1), r.random_range(-0.1..1.1), 0.0)
+                    * (flat.max - flat.min + DVec3::Z);
+            let [x, y, z] = q.local(p);
+            [x, y, z, 0.0]
+        })
+        .collect();
+    let (keys, _) = prepare::hilbert_keys(&ctx, &points, &q).unwrap();
+    assert!(
+        keys == hilbert_keys::hilbert_keys(&points, &q),
+        "flat series"
+    );
+    assert_no_driver_messages();
+}
+
+fn simulation_input<'a>(
+    step: &'a Arc<Step>,
+    field: &'a FieldSettings,
+    precision: Precision,
+) -> StepInput<'a> {
+    StepInput {
+        step,
+        field,
+        cluster: ClusterSize::new(4).unwrap(),
+        series_bounds: SIMULATION_BOUNDS,
+        series_range: Some((1000.0, 1001.0)),
+        precision,
+    }
+}
+
+/// What the device prepared (read back) equals the CPU preparation bit for bit: order,
+/// positions with t, lo parts, radius attribute, and the step's data; the order is
+/// `hilbert_order`.
+fn assert_prepared_like_the_cpu(b: &WgpuBackend, input: &StepInput<'_>, what: &str) {
+    let (data, cpu) = GpuStepData::prepare(input).unwrap();
+    let gpu = b.sorted_particles().unwrap();
+    assert!(
+        gpu.order == hilbert_order(&input.step.positions, input.series_bounds),
+        "{what}: the device's order is not hilbert_order"
+    );
+    assert!(gpu.order == cpu.order, "{what}: order");
+    let bits =
+        |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
+    assert!(bits(&gpu.points) == bits(&cpu.points), "{what}: points");
+    assert_eq!(
+        gpu.points_lo.is_some(),
+        cpu.points_lo.is_some(),
+        "{what}: lo parts"
+    );
+    if let (Some(g), Some(c)) = (&gpu.points_lo, &cpu.points_lo) {
+        assert!(bits(g) == bits(c), "{what}: lo parts");
+    }
+    assert_eq!(
+        gpu.radius_attribute, cpu.radius_attribute,
+        "{what}: radius attribute"
+    );
+    assert_eq!(b.step_data(), Some(&data), "{what}: step data");
+}
+
+/// Preparing a step on the device equals the CPU preparation bit for bit, for a series as a
+/// simulation writes it: steps of awkward, changing counts far from the origin, with and
+/// without a radius attribute and double-single positions, the buffers reused (reserved for
+/// the largest) and poisoned before each step; also with the particles split over bindings,
+/// and after field changes that gather a new radius attribute or lo parts through the kept
+/// order.
+#[test]
+fn device_preparation_equals_the_cpu_preparation() {
+    let ctx = gpu();
+    let sizes = [65537usize, 0, 1, 255, 257, 1_000_003, 4097];
+    let mut b = backend(&ctx, None);
+    b.reserve(1_000_003);
+    let mut with_radius = field(0.01, true);
+    with_radius.attribute_range = None;
+    with_radius.radius_attribute = Some("h".into());
+    let plain = FieldSettings::new(Some("a"), 0.01);
+    for (i, &n) in sizes.iter().enumerate() {
+        let step = Arc::new(simulation_step(n, 400 + i as u64));
+        let (f, precision) = match i % 3 {
+            0 => (&plain, Precision::RENDER),
+            1 => (&with_radius, Precision::RENDER),
+            _ => (&with_radius, Precision::DoubleSingle),
+        };
+        let input = simulation_input(&step, f, precision);
+        if i > 0 {
+            b.poison_prepared().unwrap();
+        }
+        b.upload(&input).unwrap();
+        assert_prepared_like_the_cpu(&b, &input, &format!("step {i} ({n} particles)"));
+    }
+
+    // Split over parts: 16-byte particles in parts of 65,536 bytes (4096 particles).
+    let mut split = backend(&ctx, Some(65_536));
+    let step = Arc::new(simulation_step(10_001, 500));
+    let input = simulation_input(&step, &with_radius, Precision::DoubleSingle);
+    split.upload(&input).unwrap();
+    split.poison_prepared().unwrap();
+    split.upload(&input).unwrap();
+    split.build().unwrap();
+    assert_eq!(split.split_parts().map(|p| p.0), Some(3));
+    assert_prepared_like_the_cpu(&split, &input, "split over 3 parts");
+
+    // Field changes keep the particles: a radius attribute appears, and radii small enough
+    // to need double-single positions; the device gathers both through the order it kept.
+    let step = Arc::new(simulation_step(70_001, 600));
+    let wide = FieldSettings::new(Some("a"), 0.2);
+    let input = simulation_input(&step, &wide, Precision::RENDER);
+    b.upload(&input).unwrap();
+    b.build().unwrap();
+    assert!(!b.step_data().unwrap().double_single());
+    let mut tiny = wide.clone();
+    tiny.radius = 1e-5;
+    tiny.radius_attribute = Some("h".into());
+    b.refit(&tiny).unwrap();
+    let changed = simulation_input(&step, &tiny, Precision::RENDER);
+    assert!(b.step_data().unwrap().double_single());
+    assert_prepared_like_the_cpu(&b, &changed, "after a refit that needs lo parts");
+    assert_no_driver_messages();
+}
+
+/// Once the series' maximum is reserved, stepping makes no buffer: the staging memory, the
+/// step's arrays on the device, the sort's and the tree's buffers are all made by the first
+/// upload (here one with every optional array: a radius attribute and double-single
+/// positions) and reused by steps of any count up to the reserved one.
+#[test]
+fn stepping_through_a_reserved_series_makes_no_buffers() {
+    let ctx = gpu();
+    let mut b = backend(&ctx, None);
+    b.reserve(20_000);
+    let mut f = FieldSettings::new(Some("a"), 0.05);
+    f.radius_attribute = Some("h".into());
+    for (i, n) in [20_000usize, 5_003, 19_999, 1, 0, 12_345]
+        .into_iter()
+        .enumerate()
+    {
+        let step = Arc::new(simulation_step(n, 700 + i as u64));
+        let input = simulation_input(&step, &f, Precision::DoubleSingle);
+        let before = wgpu_lbvh::buffers_made();
+        b.upload(&input).unwrap();
+        if i > 0 {
+            assert_eq!(
+                wgpu_lbvh::buffers_made(),
+                before,
+                "step {i} ({n} particles) made buffers"
+            );
+        } else {
+            assert!(wgpu_lbvh::buffers_made() > before, "the counter counts");
+        }
+        b.build().unwrap();
     }
     assert_no_driver_messages();
 }
@@ -721,10 +954,20 @@ fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
         "the same images as on the full device"
     );
 
-    // Split over parts: a clear error, not a crash.
+    // Split over parts: a clear error, not a crash (from the upload, whose preparation on
+    // the device is the first pass to bind the split arrays).
     let mut b = WgpuBackend::with_max_binding(limited.clone(), 20_000);
-    upload(&mut b, &step, &f, k);
-    let e = b.build().unwrap_err().to_string();
+    let e = b
+        .upload(&StepInput {
+            step: &step,
+            field: &f,
+            cluster: ClusterSize::new(k).unwrap(),
+            series_bounds: bounds_of(&step),
+            series_range: Some((0.0, 1.0)),
+            precision: Precision::FIELD,
+        })
+        .unwrap_err()
+        .to_string();
     for part in [
         "bound in 4 parts",
         "allows 8 storage buffers per shader stage",

@@ -187,5 +187,7 @@ fn sessions_refit_restart_and_reproduce_on_wgpu() {
     assert_ne!(other, pre);
     let m = s.backend().memory();
     assert!(m.particle_bytes > 0 && m.structure_bytes > 0 && m.image_bytes == 32 * 32 * 16);
+    // The step's preparation keeps at least its staging and raw copy of the particles.
+    assert!(m.preparation_bytes >= 2 * m.particle_bytes, "{m:?}");
     assert_no_driver_messages();
 }

@@ -1,33 +1,16 @@
 //! 3D Hilbert keys (Skilling, "Programming the Hilbert curve", AIP Conf. Proc. 707, 2004).
 //!
 //! Positions are quantised to 21 bits per axis over the series' bounds (so the order of a step
-//! does not depend on which other particles it holds), giving 63-bit keys.
+//! does not depend on which other particles it holds), giving 63-bit keys. The quantiser works
+//! on f32 local coordinates ([`HilbertQuantizer`]), so a GPU that holds only those computes
+//! the same keys and order bit for bit (`shaders_wgsl/hilbert_keys.wgsl`).
 
 use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::values::Bounds;
 
-/// Bits per axis of the keys we sort by.
-pub const HILBERT_BITS: u32 = 21;
-
-/// The Hilbert curve as a state machine over the 24 orientations a sub-cube's curve can
-/// have: `HILBERT_STEP[8 s + o]` for orientation `s` and octant `o` (x·4 + y·2 + z, one bit of
-/// each coordinate) is `digit | next << 3`, the octant's 3-bit place along the curve and the
-/// orientation of the curve inside it. It is Skilling's curve exactly (the tests derive this
-/// table from his transform and compare keys at every depth): one lookup per level replaces his
-/// twenty-odd exchanges.
-pub const HILBERT_STEP: [u8; 192] = [
-    8, 17, 27, 2, 39, 46, 52, 5, 56, 71, 73, 86, 91, 20, 10, 13, 48, 1, 103, 110, 115, 18, 12, 21,
-    126, 129, 29, 26, 79, 80, 140, 3, 148, 43, 37, 34, 127, 128, 78, 81, 156, 45, 35, 42, 31, 6,
-    160, 105, 72, 87, 139, 4, 57, 70, 50, 53, 0, 171, 111, 76, 49, 58, 102, 61, 180, 143, 83, 184,
-    69, 54, 66, 97, 16, 123, 9, 74, 47, 60, 38, 77, 132, 95, 85, 14, 67, 144, 82, 33, 142, 55, 185,
-    96, 93, 116, 90, 11, 188, 107, 175, 176, 101, 98, 62, 65, 164, 109, 119, 22, 99, 106, 152, 41,
-    174, 177, 63, 64, 117, 114, 92, 19, 30, 125, 161, 122, 7, 172, 104, 75, 130, 25, 133, 166, 179,
-    136, 84, 191, 94, 15, 141, 28, 145, 32, 138, 51, 146, 155, 149, 36, 137, 24, 190, 167, 154,
-    157, 147, 44, 169, 182, 120, 135, 162, 165, 121, 134, 187, 108, 168, 183, 118, 173, 23, 124,
-    153, 170, 40, 59, 178, 113, 131, 88, 181, 158, 68, 151, 186, 163, 89, 112, 189, 100, 150, 159,
-];
+pub use crate::values::shader_constants::{HILBERT_BITS, HILBERT_STEP};
 
 /// Two levels per lookup: `HILBERT_STEP2[64 s + 8 o_hi + o_lo]` is `digits | next << 6`.
 const HILBERT_STEP2: [u16; 1536] = two_levels();
@@ -84,40 +67,85 @@ fn spread_by_3(v: u32) -> u64 {
     x
 }
 
-/// Maps positions in a box to integer cells of the Hilbert grid.
-#[derive(Clone, Copy, Debug)]
+/// Maps positions in a box to integer cells of the Hilbert grid, through f32 local
+/// coordinates: a position is made relative to the box's centre in f64 and rounded to f32
+/// (exactly what the GPU backends upload, `backend::gpu_data`), and the cell is
+/// `(local - lo) · scale` in f32 arithmetic, clamped and truncated. Two correctly rounded f32
+/// operations are what every GPU computes bit for bit (WGSL and Vulkan require subtraction and
+/// multiplication to be correctly rounded), so a device that holds only the f32 local
+/// coordinates computes the same keys as the CPU (`shaders_wgsl/hilbert_keys.wgsl`). The f32
+/// rounding moves a coordinate by at most 1/16 of a cell (2^-24 of the half extent against
+/// 2^-21 of the extent), which only decides ties between neighbouring cells.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HilbertQuantizer {
-    min: DVec3,
-    scale: DVec3,
+    origin: DVec3,
+    lo: [f32; 3],
+    scale: [f32; 3],
 }
 
 impl HilbertQuantizer {
     pub fn new(bounds: Bounds) -> HilbertQuantizer {
         let cells = f64::from(1u32 << HILBERT_BITS);
         let extent = bounds.extent();
-        let scale = DVec3::select(extent.cmpgt(DVec3::ZERO), cells / extent, DVec3::ZERO);
+        let origin = bounds.center();
+        let lo = if bounds.is_empty() {
+            DVec3::ZERO
+        } else {
+            bounds.min - origin
+        };
+        let scale = |e: f64| if e > 0.0 { (cells / e) as f32 } else { 0.0 };
         HilbertQuantizer {
-            min: if bounds.is_empty() {
-                DVec3::ZERO
-            } else {
-                bounds.min
-            },
-            scale,
+            origin,
+            lo: [lo.x as f32, lo.y as f32, lo.z as f32],
+            scale: [scale(extent.x), scale(extent.y), scale(extent.z)],
         }
+    }
+
+    /// The origin of local coordinates: the box's centre (0 for an empty box).
+    pub fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// The grid's lower corner in local coordinates, and its cells per unit length (0 on an
+    /// axis of zero extent): what the key kernel is given.
+    pub fn lo(&self) -> [f32; 3] {
+        self.lo
+    }
+
+    pub fn scale(&self) -> [f32; 3] {
+        self.scale
+    }
+
+    /// `p`'s local coordinates: `p - origin` in f64, rounded to f32.
+    #[inline]
+    pub fn local(&self, p: DVec3) -> [f32; 3] {
+        let l = p - self.origin;
+        [l.x as f32, l.y as f32, l.z as f32]
+    }
+
+    /// The cell of a point with local coordinates `l`.
+    #[inline]
+    pub fn cell_of_local(&self, l: [f32; 3]) -> [u32; 3] {
+        let max = ((1u32 << HILBERT_BITS) - 1) as f32;
+        // Per component (glam's vector clamp checks its bounds on every call in checked
+        // builds, which cost as much as the key).
+        std::array::from_fn(|i| ((l[i] - self.lo[i]) * self.scale[i]).clamp(0.0, max) as u32)
     }
 
     #[inline]
     pub fn cell(&self, p: DVec3) -> [u32; 3] {
-        let max = f64::from((1u32 << HILBERT_BITS) - 1);
-        let q = (p - self.min) * self.scale;
-        // Per component (glam's vector clamp checks its bounds on every call in checked
-        // builds, which cost as much as the key).
-        [q.x, q.y, q.z].map(|v| v.clamp(0.0, max) as u32)
+        self.cell_of_local(self.local(p))
     }
 
     #[inline]
     pub fn key(&self, p: DVec3) -> u64 {
         hilbert_key(self.cell(p), HILBERT_BITS)
+    }
+
+    /// The key of a point with local coordinates `l`.
+    #[inline]
+    pub fn key_of_local(&self, l: [f32; 3]) -> u64 {
+        hilbert_key(self.cell_of_local(l), HILBERT_BITS)
     }
 }
 

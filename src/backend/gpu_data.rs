@@ -1,6 +1,21 @@
 //! A step prepared for a GPU backend: Hilbert-sorted particles in local coordinates, packed
 //! the way `shaders_glsl/shared/rbf.glsl` reads them. Both GPU backends upload exactly this.
 //!
+//! # Where the work happens
+//! The CPU makes one pass over a step ([`StepStaging::write`]), in the step's own order,
+//! straight into the memory the device copies from: each position minus the series' centre in
+//! f64, rounded to f32 (the local coordinates of [`HilbertQuantizer::local`]), the attribute
+//! normalised to t, the radius attribute rounded to f32, and on the way what the precision rule
+//! below needs (the largest coordinate, the smallest and largest radius). The Hilbert keys of
+//! those f32 local coordinates, their sort and the gather into Hilbert order then run on the
+//! device (`wgpu_lbvh::prepare`, `ash_rt::prepare`), or on the CPU ([`GpuStepData::prepare`]:
+//! the reference the devices are tested against), with the same results bit for bit.
+//!
+//! t is normalised in the pass, in f64, not on the device: beside the conversion it costs
+//! nothing, and an attribute rounded to f32 before the subtraction would lose the digits that
+//! tell its values apart when its range is narrow against its magnitude (values 1e6 + [0, 1]
+//! would keep steps of 1/16).
+//!
 //! # Precision of positions
 //! Local coordinates are the data's minus the series' centre, subtracted in f64, so offsets
 //! from the origin cost nothing. Rounded to f32 they still carry an absolute error of up to
@@ -10,40 +25,66 @@
 //! tolerance asked for (see [`Precision`]), positions go to the GPU as double-single pairs, hi
 //! the f32 rounding and lo the f32 remainder (about 48 bits), and the shaders compute
 //! distances from both (`POSITION_DS`, `shaders_glsl/shared/rbf.glsl`). A scene that does not
-//! need it uploads no lo parts and runs kernels without the extra arithmetic.
+//! need it uploads no lo parts and runs kernels without the extra arithmetic. The lo parts are
+//! a second pass over the positions ([`GpuStepData::write_lo`]), made only when the first
+//! pass's bound asks for them.
 
 use glam::DVec3;
 use rayon::prelude::*;
+use wgpu::WriteOnly;
 
 use super::shaders::GpuField;
+use super::shaders::cpu::gather::gather;
 use super::{Precision, StepInput};
-use crate::accel::{ClusterSize, hilbert_order};
+use crate::accel::{ClusterSize, HilbertQuantizer, hilbert_order};
 use crate::field::{
     FieldError, FieldInputs, FieldSettings, FieldTables, normalise, particle_radius,
 };
-use crate::values::Step;
 use crate::values::tables::lookup;
+use crate::values::{Attribute, Step};
 
-/// One step, ready to upload.
+/// Write-only slots of an array of 16-byte elements (a particle's vec4) or 4-byte ones (its
+/// radius attribute): memory the device copies from (mapped staging buffers are write-only),
+/// or a host array.
+pub type Slots16<'a> = WriteOnly<'a, [[u8; 16]]>;
+pub type Slots4<'a> = WriteOnly<'a, [[u8; 4]]>;
+
+/// Slots over a host array of vec4s.
+pub fn slots16(v: &mut [[f32; 4]]) -> Slots16<'_> {
+    WriteOnly::from_mut(bytemuck::cast_slice_mut(v))
+}
+
+/// Slots over a host array of f32s.
+pub fn slots4(v: &mut [f32]) -> Slots4<'_> {
+    WriteOnly::from_mut(bytemuck::cast_slice_mut(v))
+}
+
+/// Particles one task of a staging pass converts (large enough that rayon's overhead is
+/// nothing, small enough that two cores share the work evenly).
+const CHUNK: usize = 1 << 14;
+
+/// One step, ready to upload: everything a backend needs beside the particle arrays, which
+/// live on the device.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GpuStepData {
     /// Local coordinates are data coordinates minus this (the series' bounding-box centre), so
     /// f32 keeps its digits for data far from the origin.
     pub origin: DVec3,
-    /// Per particle, in Hilbert order: xyz local position (the hi part with double-single
-    /// positions), w the normalised attribute t (0 without an attribute).
-    pub points: Vec<[f32; 4]>,
-    /// With double-single positions, per particle: xyz the lo part (local position minus hi),
-    /// w 0.
-    pub points_lo: Option<Vec<[f32; 4]>>,
+    /// The Hilbert grid over the series' bounds (its origin is `origin`).
+    pub quantizer: HilbertQuantizer,
+    /// Particles in the step.
+    pub count: usize,
     /// The precision asked for, and the bound on the relative Phi error f32 positions would
-    /// cause in this scene (what decided `points_lo`).
+    /// cause in this scene (what decided `double_single`).
     pub precision: Precision,
     pub f32_error_bound: f64,
-    /// Per particle (Hilbert order): the radius attribute h, only when the scene uses one.
-    pub radius_attribute: Option<Vec<f32>>,
-    /// `order[k]` is the step's index of sorted particle k.
-    pub order: Vec<u32>,
+    /// The largest |local coordinate| (of the f32 positions), which the bound needs again when
+    /// the radii change.
+    pub largest_coordinate: f64,
+    /// Positions as double-single pairs: the device holds their lo parts.
+    pub double_single: bool,
+    /// The scene has a per-particle radius attribute (the device holds it, in Hilbert order).
+    pub has_radius_attribute: bool,
     pub cluster: ClusterSize,
     pub field: GpuField,
     pub radius_map_varies: bool,
@@ -52,54 +93,365 @@ pub struct GpuStepData {
     pub tables: FieldTables,
 }
 
-impl GpuStepData {
-    pub fn prepare(input: &StepInput<'_>) -> Result<GpuStepData, FieldError> {
-        let step = input.step;
-        let settings = input.field;
-        // The same checks and range as the CPU reference, so every backend refuses the same input.
-        let inputs = FieldInputs::check(step, settings, input.series_range)?;
-        let origin = input.series_bounds.center();
-        let order = hilbert_order(&step.positions, input.series_bounds);
-        let points = order
-            .par_iter()
-            .map(|&i| {
-                let p = step.positions[i as usize] - origin;
-                let t = inputs
-                    .attribute
-                    .map_or(0.0, |a| normalise(a.values[i as usize], inputs.range));
-                [p.x as f32, p.y as f32, p.z as f32, t as f32]
-            })
-            .collect();
-        let radius_attribute = inputs.radius.map(|h| {
-            order
-                .par_iter()
-                .map(|&i| h.values[i as usize] as f32)
-                .collect()
+/// A step's particles in Hilbert order, on the host: what the devices' preparation computes
+/// (tests read it back to compare with [`GpuStepData::prepare`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SortedParticles {
+    /// Per particle: xyz local position (the hi part with double-single positions), w the
+    /// normalised attribute t (0 without an attribute).
+    pub points: Vec<[f32; 4]>,
+    /// With double-single positions, per particle: xyz the lo part (local position minus hi),
+    /// w 0.
+    pub points_lo: Option<Vec<[f32; 4]>>,
+    /// The radius attribute h, only when the scene uses one.
+    pub radius_attribute: Option<Vec<f32>>,
+    /// `order[k]` is the step's index of sorted particle k.
+    pub order: Vec<u32>,
+}
+
+/// What the precision rule needs of a step's particles: the largest |local coordinate| and
+/// the smallest and largest positive radius.
+#[derive(Clone, Copy, Debug)]
+struct Extremes {
+    largest: f64,
+    r_min: f64,
+    r_max: f64,
+}
+
+impl Extremes {
+    const NONE: Extremes = Extremes {
+        largest: 0.0,
+        r_min: f64::INFINITY,
+        r_max: 0.0,
+    };
+
+    fn add_radius(&mut self, r: f64) {
+        if r > 0.0 {
+            self.r_min = self.r_min.min(r);
+            self.r_max = self.r_max.max(r);
+        }
+    }
+
+    fn merge(a: Extremes, b: Extremes) -> Extremes {
+        Extremes {
+            largest: a.largest.max(b.largest),
+            r_min: a.r_min.min(b.r_min),
+            r_max: a.r_max.max(b.r_max),
+        }
+    }
+}
+
+/// What a particle contributes to the arrays, as the pass and the radius rule see it.
+struct ParticleValues<'a> {
+    inputs: FieldInputs<'a>,
+    settings: &'a FieldSettings,
+    tables: FieldTables,
+}
+
+impl ParticleValues<'_> {
+    /// Particle i's normalised attribute t (0 without an attribute).
+    #[inline]
+    fn t(&self, i: usize) -> f32 {
+        self.inputs
+            .attribute
+            .map_or(0.0, |a| normalise(a.values[i], self.inputs.range) as f32)
+    }
+
+    #[inline]
+    fn h(&self, i: usize) -> Option<f32> {
+        self.inputs.radius.map(|h| h.values[i] as f32)
+    }
+
+    /// The radius the shaders give a particle with this t and h (`particle_radius`, from the
+    /// f32 values they hold).
+    #[inline]
+    fn radius(&self, t: f32, h: Option<f32>) -> f64 {
+        let m = lookup(&self.tables.radius, f64::from(t));
+        particle_radius(self.settings.radius, m, h.map(f64::from))
+    }
+
+    /// The radius every particle has, when the radius map is constant and there is no radius
+    /// attribute (the table then holds one value, which the lookup returns exactly).
+    fn constant_radius(&self) -> Option<f64> {
+        (self.settings.radius_map.0.is_constant() && self.inputs.radius.is_none())
+            .then(|| self.radius(0.0, None))
+    }
+
+    /// The radius extremes over `n` particles.
+    fn radius_extremes(&self, n: usize) -> Extremes {
+        if let Some(r) = self.constant_radius() {
+            let mut e = Extremes::NONE;
+            if n > 0 {
+                e.add_radius(r);
+            }
+            return e;
+        }
+        (0..n)
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .fold(
+                || Extremes::NONE,
+                |mut e, i| {
+                    e.add_radius(self.radius(self.t(i), self.h(i)));
+                    e
+                },
+            )
+            .reduce(|| Extremes::NONE, Extremes::merge)
+    }
+}
+
+/// Writes `f(i, extremes)` for every particle `i` of `parts` (slots for particles `first ..`,
+/// the parts in order, covering a prefix of the step), its second value into the matching slot
+/// of a second array when one is given (covering the same particles from 0), in parallel over
+/// tasks of [`CHUNK`] particles; returns the extremes the calls gathered. (A mapped slice
+/// cannot move to another thread, a fixed-size array of slots can: the tasks are whole chunks,
+/// and the few particles past a part's last chunk run on the calling thread.)
+fn for_each_particle<'a, A, B, F>(
+    parts: Vec<(usize, WriteOnly<'a, [A]>)>,
+    mut second: Option<WriteOnly<'a, [B]>>,
+    f: F,
+) -> Extremes
+where
+    A: Copy + Default + Send,
+    B: Copy + Default + Send,
+    F: Fn(usize, &mut Extremes) -> (A, Option<B>) + Sync,
+{
+    type Chunk<'a, T> = WriteOnly<'a, [T; CHUNK]>;
+    let mut chunks: Vec<(usize, Chunk<'a, A>, Option<Chunk<'a, B>>)> = Vec::new();
+    let mut tails = Vec::new();
+    for (first, slots) in parts {
+        let len = slots.len();
+        let paired = match second.take() {
+            Some(s) => {
+                let available = s.len();
+                let (head, rest) = s.split_at(len.min(available));
+                second = Some(rest);
+                Some(head.into_chunks::<CHUNK>())
+            }
+            None => None,
+        };
+        let (full, tail) = slots.into_chunks::<CHUNK>();
+        let whole = full.len();
+        let (paired_full, paired_tail) = match paired {
+            Some((f, t)) => (Some(f.into_iter()), Some(t)),
+            None => (None, None),
+        };
+        let mut paired_full = paired_full;
+        for (j, chunk) in full.into_iter().enumerate() {
+            let b = paired_full.as_mut().and_then(Iterator::next);
+            chunks.push((first + j * CHUNK, chunk, b));
+        }
+        tails.push((first + whole * CHUNK, tail, paired_tail));
+    }
+    let chunked = chunks
+        .into_par_iter()
+        .map(|(first, a, b)| {
+            let mut e = Extremes::NONE;
+            fill(first, a.into(), b.map(Into::into), &f, &mut e);
+            e
+        })
+        .reduce(|| Extremes::NONE, Extremes::merge);
+    let mut e = Extremes::NONE;
+    for (first, a, b) in tails {
+        fill(first, a, b, &f, &mut e);
+    }
+    Extremes::merge(chunked, e)
+}
+
+/// Writes `f(i)` for particles `first ..` into `a` (and the second values into `b`), a batch
+/// at a time: the values are made in a small array and copied into the slots in one go, which
+/// costs less than a write through a slot per particle.
+fn fill<A, B, F>(
+    first: usize,
+    mut a: WriteOnly<'_, [A]>,
+    mut b: Option<WriteOnly<'_, [B]>>,
+    f: &F,
+    e: &mut Extremes,
+) where
+    A: Copy + Default,
+    B: Copy + Default,
+    F: Fn(usize, &mut Extremes) -> (A, Option<B>),
+{
+    const BATCH: usize = 256;
+    let mut values_a = [A::default(); BATCH];
+    let mut values_b = [B::default(); BATCH];
+    let mut at = first;
+    while !a.is_empty() {
+        let k = BATCH.min(a.len());
+        for j in 0..k {
+            let (x, y) = f(at + j, e);
+            values_a[j] = x;
+            if let Some(y) = y {
+                values_b[j] = y;
+            }
+        }
+        let (mut head, rest) = a.split_at(k);
+        head.copy_from_slice(&values_a[..k]);
+        a = rest;
+        if let Some(slots) = b.take() {
+            let m = k.min(slots.len());
+            let (mut head, rest) = slots.split_at(m);
+            head.copy_from_slice(&values_b[..m]);
+            b = Some(rest);
+        }
+        at += k;
+    }
+}
+
+/// A step that passed the one check ([`FieldInputs::check`]), ready for the staging pass.
+pub struct StepStaging<'a> {
+    input: &'a StepInput<'a>,
+    values: ParticleValues<'a>,
+    quantizer: HilbertQuantizer,
+}
+
+impl StepStaging<'_> {
+    /// Particles in the step.
+    pub fn len(&self) -> usize {
+        self.input.step.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Whether the pass writes a radius attribute ([`Self::write`] needs its slots).
+    pub fn has_radius_attribute(&self) -> bool {
+        self.values.inputs.radius.is_some()
+    }
+
+    /// The staging pass: writes every particle, in the step's order, into `points` (slots for
+    /// particles `first ..`, the parts in order and covering the step: xyz the f32 local
+    /// position, w t) and, when the scene has one, its radius attribute into `radius`; and
+    /// decides the positions' precision from what it saw. The caller writes the lo parts
+    /// ([`GpuStepData::write_lo`]) when the result is double-single.
+    pub fn write(
+        self,
+        points: Vec<(usize, Slots16<'_>)>,
+        radius: Option<Slots4<'_>>,
+    ) -> GpuStepData {
+        let step = self.input.step;
+        let origin = self.quantizer.origin();
+        let second = radius.filter(|_| self.has_radius_attribute());
+        // A scene whose radii are all equal (the common case) needs no radius per particle.
+        let constant_radius = self.values.constant_radius();
+        let mut extremes = for_each_particle(points, second, |i, e| {
+            let p = self.quantizer.local(step.positions[i]);
+            let t = self.values.t(i);
+            let h = self.values.h(i);
+            let largest = p[0].abs().max(p[1].abs()).max(p[2].abs());
+            e.largest = e.largest.max(f64::from(largest));
+            if constant_radius.is_none() {
+                e.add_radius(self.values.radius(t, h));
+            }
+            (
+                bytemuck::cast([p[0], p[1], p[2], t]),
+                h.map(bytemuck::cast::<f32, [u8; 4]>),
+            )
         });
+        if let Some(r) = constant_radius
+            && !self.is_empty()
+        {
+            extremes.add_radius(r);
+        }
         let mut data = GpuStepData {
             origin,
-            points,
-            points_lo: None,
-            precision: input.precision,
+            quantizer: self.quantizer,
+            count: step.len(),
+            precision: self.input.precision,
             f32_error_bound: 0.0,
-            radius_attribute,
-            order,
-            cluster: input.cluster,
+            largest_coordinate: extremes.largest,
+            double_single: false,
+            has_radius_attribute: self.has_radius_attribute(),
+            cluster: self.input.cluster,
             field: GpuField::default(),
             radius_map_varies: false,
             density_map_varies: false,
-            tables: FieldTables::of(settings),
+            tables: self.values.tables,
         };
-        data.set_maps(settings);
-        data.choose_precision(step, settings);
-        Ok(data)
+        data.set_maps(self.values.settings);
+        data.choose_precision(extremes);
+        data
+    }
+}
+
+impl GpuStepData {
+    /// The one check every backend makes ([`FieldInputs::check`]: every backend refuses the
+    /// same input, and normalises over the same range), and what the staging pass needs.
+    pub fn check<'a>(input: &'a StepInput<'a>) -> Result<StepStaging<'a>, FieldError> {
+        let inputs = FieldInputs::check(input.step, input.field, input.series_range)?;
+        Ok(StepStaging {
+            input,
+            values: ParticleValues {
+                inputs,
+                settings: input.field,
+                tables: FieldTables::of(input.field),
+            },
+            quantizer: HilbertQuantizer::new(input.series_bounds),
+        })
+    }
+
+    /// Prepares a step on the CPU: the staging pass into host arrays, then the Hilbert order
+    /// ([`hilbert_order`], the keys `hilbert_keys.wgsl` and `hilbert_keys.comp` compute on the
+    /// devices) and the gather into it: the GPU backends' twin.
+    pub fn prepare(input: &StepInput<'_>) -> Result<(GpuStepData, SortedParticles), FieldError> {
+        let staging = GpuStepData::check(input)?;
+        let n = staging.len();
+        let mut points = vec![[0.0f32; 4]; n];
+        let mut radius = staging.has_radius_attribute().then(|| vec![0.0f32; n]);
+        let data = staging.write(
+            vec![(0, slots16(&mut points))],
+            radius.as_deref_mut().map(slots4),
+        );
+        let order = hilbert_order(&input.step.positions, input.series_bounds);
+        let points_lo = data.double_single.then(|| {
+            let mut lo = vec![[0.0f32; 4]; n];
+            data.write_lo(input.step, vec![(0, slots16(&mut lo))]);
+            gather(&lo, &order)
+        });
+        let sorted = SortedParticles {
+            points: gather(&points, &order),
+            points_lo,
+            radius_attribute: radius.map(|h| gather(&h, &order)),
+            order,
+        };
+        Ok((data, sorted))
+    }
+
+    /// Particle p's lo part: its local position minus the f32 rounding of it (the hi part),
+    /// rounded to f32.
+    #[inline]
+    fn lo_of(&self, p: DVec3) -> [f32; 4] {
+        let l = p - self.origin;
+        let lo = |c: f64| (c - f64::from(c as f32)) as f32;
+        [lo(l.x), lo(l.y), lo(l.z), 0.0]
+    }
+
+    /// The lo parts of double-single positions, in the step's order, into `parts` (as
+    /// [`StepStaging::write`] writes the points).
+    pub fn write_lo(&self, step: &Step, parts: Vec<(usize, Slots16<'_>)>) {
+        for_each_particle::<_, [u8; 4], _>(parts, None, |i, _| {
+            (bytemuck::cast(self.lo_of(step.positions[i])), None)
+        });
+    }
+
+    /// The radius attribute `settings` names, in the step's order, as f32 (after a change of
+    /// [`Self::apply_field`] says it changed); nothing when it names none.
+    pub fn write_radius_attribute(step: &Step, settings: &FieldSettings, slots: Slots4<'_>) {
+        let Some(h) = radius_attribute(step, settings) else {
+            return;
+        };
+        for_each_particle::<_, [u8; 4], _>(vec![(0, slots)], None, |i, _| {
+            (bytemuck::cast(h.values[i] as f32), None)
+        });
     }
 
     /// Applies field settings that keep the particles (the same attribute and range): checks
-    /// them with the one check every backend makes ([`FieldInputs::check`]), gathers a new
-    /// radius attribute if it changed, updates the maps, and chooses the positions' precision
-    /// again (new radii may need double-single positions, or no longer need them). Says what
-    /// a backend must upload again.
+    /// them with the one check every backend makes ([`FieldInputs::check`]), updates the maps,
+    /// and chooses the positions' precision again from the new radii (new radii may need
+    /// double-single positions, or no longer need them). Says what a backend must write and
+    /// upload again: the radius attribute ([`Self::write_radius_attribute`]) and the lo parts
+    /// ([`Self::write_lo`]).
     pub fn apply_field(
         &mut self,
         step: &Step,
@@ -109,80 +461,40 @@ impl GpuStepData {
     ) -> Result<Changed, FieldError> {
         let inputs = FieldInputs::check(step, new, series_range)?;
         let radius_changed = new.radius_attribute != old.radius_attribute;
-        if radius_changed {
-            self.radius_attribute = inputs.radius.map(|h| {
-                self.order
-                    .par_iter()
-                    .map(|&i| h.values[i as usize] as f32)
-                    .collect()
-            });
-        }
+        let values = ParticleValues {
+            inputs,
+            settings: new,
+            tables: FieldTables::of(new),
+        };
+        let extremes = Extremes {
+            largest: self.largest_coordinate,
+            ..values.radius_extremes(step.len())
+        };
+        self.has_radius_attribute = values.inputs.radius.is_some();
+        self.tables = values.tables;
         self.set_maps(new);
-        let had_lo = self.points_lo.is_some();
-        self.choose_precision(step, new);
+        let had_lo = self.double_single;
+        self.choose_precision(extremes);
         Ok(Changed {
             radius_attribute: radius_changed,
-            positions_lo: self.points_lo.is_some() != had_lo,
+            positions_lo: self.double_single && !had_lo,
         })
     }
 
-    /// Bounds the Phi error of f32 positions for the current radii ([`f32_phi_error`]) and
-    /// makes the lo parts of double-single positions when the precision asked for needs them
-    /// (dropping them when it does not).
-    fn choose_precision(&mut self, step: &Step, settings: &FieldSettings) {
-        let (largest, r_min, r_max) = self
-            .points
-            .par_iter()
-            .enumerate()
-            .map(|(k, p)| {
-                let m = lookup(&self.tables.radius, f64::from(p[3]));
-                let h = self.radius_attribute.as_ref().map(|h| f64::from(h[k]));
-                let r = particle_radius(settings.radius, m, h);
-                let coordinate = p[..3]
-                    .iter()
-                    .fold(0.0f64, |a, &c| a.max(f64::from(c).abs()));
-                let positive = r > 0.0;
-                (
-                    coordinate,
-                    if positive { r } else { f64::INFINITY },
-                    if positive { r } else { 0.0 },
-                )
-            })
-            .reduce(
-                || (0.0, f64::INFINITY, 0.0),
-                |a, b| (a.0.max(b.0), a.1.min(b.1), a.2.max(b.2)),
-            );
-        self.f32_error_bound = f32_phi_error(largest, r_min, r_max);
-        let double_single = match self.precision {
+    /// Bounds the Phi error of f32 positions for these extremes ([`f32_phi_error`]) and decides
+    /// whether the precision asked for needs double-single positions.
+    fn choose_precision(&mut self, extremes: Extremes) {
+        self.f32_error_bound = f32_phi_error(extremes.largest, extremes.r_min, extremes.r_max);
+        self.double_single = match self.precision {
             Precision::F32 => false,
             Precision::DoubleSingle => true,
             Precision::Auto { tolerance } => self.f32_error_bound > tolerance,
         };
-        if !double_single {
-            self.points_lo = None;
-        } else if self.points_lo.is_none() {
-            let origin = self.origin;
-            self.points_lo = Some(
-                self.order
-                    .par_iter()
-                    .zip(&self.points)
-                    .map(|(&i, hi)| {
-                        let local = step.positions[i as usize] - origin;
-                        [
-                            (local.x - f64::from(hi[0])) as f32,
-                            (local.y - f64::from(hi[1])) as f32,
-                            (local.z - f64::from(hi[2])) as f32,
-                            0.0,
-                        ]
-                    })
-                    .collect(),
-            );
-        }
     }
 
     /// Whether positions are double-single pairs (`POSITION_DS`).
     pub fn double_single(&self) -> bool {
-        self.points_lo.is_some()
+        self.double_single
     }
 
     /// How the positions are held, for [`super::Backend::positions`].
@@ -201,23 +513,17 @@ impl GpuStepData {
     /// A query point as the query kernels read it: one vec4 (local coordinates, f32), or with
     /// double-single positions two (hi, then lo).
     pub fn push_query(&self, x: DVec3, out: &mut Vec<[f32; 4]>) {
-        let l = x - self.origin;
-        let hi = [l.x as f32, l.y as f32, l.z as f32, 0.0];
-        out.push(hi);
+        let [x0, x1, x2] = self.quantizer.local(x);
+        out.push([x0, x1, x2, 0.0]);
         if self.double_single() {
-            out.push([
-                (l.x - f64::from(hi[0])) as f32,
-                (l.y - f64::from(hi[1])) as f32,
-                (l.z - f64::from(hi[2])) as f32,
-                0.0,
-            ]);
+            out.push(self.lo_of(x));
         }
     }
 
-    /// Updates everything that depends on the maps and the global radius (not the particles).
-    pub fn set_maps(&mut self, settings: &FieldSettings) {
-        let n = self.points.len();
-        self.tables = FieldTables::of(settings);
+    /// Updates everything that depends on the maps and the global radius (not the particles),
+    /// from `settings` and the maps' tables (`self.tables`, baked from them).
+    fn set_maps(&mut self, settings: &FieldSettings) {
+        let n = self.count;
         self.radius_map_varies = !settings.radius_map.0.is_constant();
         self.density_map_varies = !settings.density_map.0.is_constant();
         self.field = GpuField {
@@ -234,17 +540,27 @@ impl GpuStepData {
     /// Bytes of particle data a GPU holds (positions with attribute, their lo parts and radii
     /// when used).
     pub fn particle_bytes(&self) -> usize {
-        self.points.len() * 16
-            + self.points_lo.as_ref().map_or(0, |lo| lo.len() * 16)
-            + self.radius_attribute.as_ref().map_or(0, |h| h.len() * 4)
+        self.count
+            * (16
+                + 16 * usize::from(self.double_single)
+                + 4 * usize::from(self.has_radius_attribute))
     }
+}
+
+/// The radius attribute `settings` names, if the step has it.
+fn radius_attribute<'a>(step: &'a Step, settings: &FieldSettings) -> Option<&'a Attribute> {
+    settings
+        .radius_attribute
+        .as_deref()
+        .and_then(|name| step.attribute(name))
 }
 
 /// What [`GpuStepData::apply_field`] changed that a backend must upload again.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Changed {
     pub radius_attribute: bool,
-    /// The lo parts of the positions appeared or went (the precision changed).
+    /// The precision now needs the lo parts of the positions, and they were not held (when it
+    /// no longer needs them, the kernels stop reading them: nothing to upload).
     pub positions_lo: bool,
 }
 
@@ -294,7 +610,11 @@ mod tests {
         })
     }
 
-    fn prepared(step: &Arc<Step>, radius: f64, precision: Precision) -> GpuStepData {
+    fn prepared(
+        step: &Arc<Step>,
+        radius: f64,
+        precision: Precision,
+    ) -> (GpuStepData, SortedParticles) {
         let field = FieldSettings::new(Some("s"), radius);
         GpuStepData::prepare(&StepInput {
             step,
@@ -307,6 +627,73 @@ mod tests {
         .unwrap()
     }
 
+    /// Slots over `v` cut at the particle indices `cuts` (ascending), each part with its first
+    /// particle.
+    fn split<'a>(v: &'a mut [[f32; 4]], cuts: &[usize]) -> Vec<(usize, Slots16<'a>)> {
+        let mut out = Vec::new();
+        let mut rest = v;
+        let mut first = 0;
+        for &cut in cuts {
+            let (head, tail) = rest.split_at_mut(cut - first);
+            out.push((first, slots16(head)));
+            rest = tail;
+            first = cut;
+        }
+        out.push((first, slots16(rest)));
+        out
+    }
+
+    /// The staging pass writes the same bytes however its output is cut into parts (a split
+    /// buffer's parts are not multiples of the pass's chunks), with the radius attribute and
+    /// the lo parts beside them, and sees the same extremes.
+    #[test]
+    fn staging_in_parts_equals_staging_in_one() {
+        let n = 3 * CHUNK + 1234;
+        let mut step = (*cube(n, 2.5, 1e5)).clone();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        step.attributes.push(Attribute {
+            name: "h".into(),
+            values: (0..n).map(|_| rng.random_range(0.5..1.5)).collect(),
+        });
+        let step = Arc::new(step);
+        let mut field = FieldSettings::new(Some("s"), 0.01);
+        field.radius_attribute = Some("h".into());
+        let input = StepInput {
+            step: &step,
+            field: &field,
+            cluster: ClusterSize::new(2).unwrap(),
+            series_bounds: Bounds::of_points(&step.positions),
+            series_range: Some((0.0, 1.0)),
+            precision: Precision::DoubleSingle,
+        };
+        let stage = |cuts: &[usize]| {
+            let mut points = vec![[f32::NAN; 4]; n];
+            let mut lo = vec![[f32::NAN; 4]; n];
+            let mut radius = vec![f32::NAN; n];
+            let data = GpuStepData::check(&input)
+                .unwrap()
+                .write(split(&mut points, cuts), Some(slots4(&mut radius)));
+            assert!(data.double_single);
+            data.write_lo(&step, split(&mut lo, cuts));
+            (data, points, lo, radius)
+        };
+        let bits =
+            |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
+        let (one, points, lo, radius) = stage(&[]);
+        assert!(
+            points
+                .iter()
+                .chain(&lo)
+                .all(|p| p.iter().all(|c| c.is_finite()))
+        );
+        assert!(radius.iter().all(|h| h.is_finite()));
+        let (parts, p2, lo2, radius2) = stage(&[CHUNK + 5, 3 * CHUNK - 1, 3 * CHUNK + 1000]);
+        assert_eq!(one, parts);
+        assert_eq!(bits(&points), bits(&p2));
+        assert_eq!(bits(&lo), bits(&lo2));
+        assert_eq!(radius, radius2);
+    }
+
     /// A scene pays for double-single positions only when its radii and extent need them: an
     /// image of a unit-cube scene at a radius of 2% of the domain stays in f32 (16 B a
     /// particle), the same scene asked for field values at 1e-5 needs the pairs, and so does
@@ -315,16 +702,16 @@ mod tests {
     #[test]
     fn auto_precision_pays_for_pairs_only_where_the_scene_needs_them() {
         let unit = cube(2000, 1.0, 0.0);
-        let image = prepared(&unit, 0.02, Precision::RENDER);
+        let (image, _) = prepared(&unit, 0.02, Precision::RENDER);
         assert!(!image.double_single(), "bound {}", image.f32_error_bound);
         assert_eq!(image.particle_bytes(), 2000 * 16);
-        let field = prepared(&unit, 0.02, Precision::FIELD);
+        let (field, _) = prepared(&unit, 0.02, Precision::FIELD);
         assert!(field.double_single(), "bound {}", field.f32_error_bound);
         assert_eq!(field.particle_bytes(), 2000 * 32);
-        assert!(prepared(&unit, 1e-6, Precision::RENDER).double_single());
+        assert!(prepared(&unit, 1e-6, Precision::RENDER).0.double_single());
 
         let far = cube(2000, 1.0, 1e6);
-        let far_image = prepared(&far, 0.02, Precision::RENDER);
+        let (far_image, _) = prepared(&far, 0.02, Precision::RENDER);
         assert!(!far_image.double_single(), "an offset alone needs no pairs");
         assert!(
             (far_image.f32_error_bound - image.f32_error_bound).abs()
@@ -333,20 +720,24 @@ mod tests {
             far_image.f32_error_bound,
             image.f32_error_bound
         );
-        assert!(prepared(&far, 1e-4, Precision::RENDER).double_single());
+        assert!(prepared(&far, 1e-4, Precision::RENDER).0.double_single());
 
         // The pairs hold what f32 loses: hi + lo equals the f64 local position to ~48 bits.
-        let pairs = prepared(&far, 1e-4, Precision::RENDER);
-        let lo = pairs.points_lo.as_ref().unwrap();
-        for (k, &i) in pairs.order.iter().enumerate().step_by(97) {
+        let (pairs, sorted) = prepared(&far, 1e-4, Precision::RENDER);
+        let lo = sorted.points_lo.as_ref().unwrap();
+        for (k, &i) in sorted.order.iter().enumerate().step_by(97) {
             let local = far.positions[i as usize] - pairs.origin;
             for a in 0..3 {
-                let sum = f64::from(pairs.points[k][a]) + f64::from(lo[k][a]);
+                let sum = f64::from(sorted.points[k][a]) + f64::from(lo[k][a]);
                 assert!((sum - local[a]).abs() <= 1e-13, "{sum} vs {}", local[a]);
             }
         }
         // Forced precisions are obeyed either way.
-        assert!(!prepared(&unit, 1e-6, Precision::F32).double_single());
-        assert!(prepared(&unit, 0.5, Precision::DoubleSingle).double_single());
+        assert!(!prepared(&unit, 1e-6, Precision::F32).0.double_single());
+        assert!(
+            prepared(&unit, 0.5, Precision::DoubleSingle)
+                .0
+                .double_single()
+        );
     }
 }

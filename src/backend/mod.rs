@@ -111,11 +111,15 @@ pub struct Capabilities {
 /// Time spent in each stage, for the last time each ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Timings {
-    /// CPU work on a new step before anything moves to the device: checks, Hilbert sort,
-    /// gather, conversion (the whole upload for the CPU backend).
+    /// CPU work on a new step: the check and the conversion into what the device copies
+    /// (`gpu_data`), and where a backend sorts on the CPU (ash; the CPU backend, for which it
+    /// is the whole upload) the Hilbert sort and gather too. Only CPU work: waits for the
+    /// device are in `upload` and `device_prepare`.
     pub prepare: Duration,
-    /// Moving the prepared step to the device (excluding `prepare`).
+    /// Moving the step to the device (excluding `prepare`): buffers, the copy.
     pub upload: Duration,
+    /// Preparing the step on the device after the copy (wgpu: Hilbert keys, sort, gather).
+    pub device_prepare: Duration,
     pub build: Duration,
     pub refit: Duration,
     pub frame: Duration,
@@ -131,6 +135,9 @@ pub struct MemoryReport {
     pub structure_bytes: usize,
     /// The accumulation image.
     pub image_bytes: usize,
+    /// What preparing a step on the device keeps between steps: staging memory, the step's
+    /// arrays in its own order and the sort's buffers (0 where the CPU prepares).
+    pub preparation_bytes: usize,
 }
 
 /// One step as a backend receives it.

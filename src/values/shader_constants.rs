@@ -55,6 +55,28 @@ pub const LBVH_STACK_SIZE: u32 = 64;
 pub const SORT_TILE: u32 = 4096;
 pub const SORT_RADIX: u32 = 16;
 
+/// Bits per axis of the Hilbert keys particles are sorted by (`accel::hilbert`, and on the
+/// device `shaders_wgsl/hilbert_keys.wgsl`).
+pub const HILBERT_BITS: u32 = 21;
+
+/// The Hilbert curve as a state machine over the 24 orientations a sub-cube's curve can
+/// have: `HILBERT_STEP[8 s + o]` for orientation `s` and octant `o` (x·4 + y·2 + z, one bit of
+/// each coordinate) is `digit | next << 3`, the octant's 3-bit place along the curve and the
+/// orientation of the curve inside it. It is Skilling's curve exactly (the tests derive this
+/// table from his transform and compare keys at every depth): one lookup per level replaces his
+/// twenty-odd exchanges.
+pub const HILBERT_STEP: [u8; 192] = [
+    8, 17, 27, 2, 39, 46, 52, 5, 56, 71, 73, 86, 91, 20, 10, 13, 48, 1, 103, 110, 115, 18, 12, 21,
+    126, 129, 29, 26, 79, 80, 140, 3, 148, 43, 37, 34, 127, 128, 78, 81, 156, 45, 35, 42, 31, 6,
+    160, 105, 72, 87, 139, 4, 57, 70, 50, 53, 0, 171, 111, 76, 49, 58, 102, 61, 180, 143, 83, 184,
+    69, 54, 66, 97, 16, 123, 9, 74, 47, 60, 38, 77, 132, 95, 85, 14, 67, 144, 82, 33, 142, 55, 185,
+    96, 93, 116, 90, 11, 188, 107, 175, 176, 101, 98, 62, 65, 164, 109, 119, 22, 99, 106, 152, 41,
+    174, 177, 63, 64, 117, 114, 92, 19, 30, 125, 161, 122, 7, 172, 104, 75, 130, 25, 133, 166, 179,
+    136, 84, 191, 94, 15, 141, 28, 145, 32, 138, 51, 146, 155, 149, 36, 137, 24, 190, 167, 154,
+    157, 147, 44, 169, 182, 120, 135, 162, 165, 121, 134, 187, 108, 168, 183, 118, 173, 23, 124,
+    153, 170, 40, 59, 178, 113, 131, 88, 181, 158, 68, 151, 186, 163, 89, 112, 189, 100, 150, 159,
+];
+
 /// The specialisation constants (Vulkan constant ids; wgpu's pipeline-overridable constants
 /// "0", "1", ...), in id order: their names and what their values mean.
 pub const SPEC_CONSTANTS: [(&str, &str); 9] = [
@@ -124,6 +146,7 @@ fn unsigned() -> Vec<(&'static str, u64)> {
         ("LBVH_STACK_SIZE", LBVH_STACK_SIZE.into()),
         ("SORT_TILE", SORT_TILE.into()),
         ("SORT_RADIX", SORT_RADIX.into()),
+        ("HILBERT_BITS", HILBERT_BITS.into()),
         ("INTEGRATOR_EA", INTEGRATOR_EA.into()),
         ("INTEGRATOR_DELTA", INTEGRATOR_DELTA.into()),
         ("INTEGRATOR_MARCHING", INTEGRATOR_MARCHING.into()),
@@ -165,11 +188,30 @@ pub fn glsl() -> String {
     out
 }
 
-/// The WGSL text of `generated/constants.wgsl`.
+/// The GLSL text of `generated/hilbert_step.glsl`: the Hilbert state table, for the ash
+/// backend's compute kernels (compiled by glslc in build.rs; kept out of
+/// `generated/constants.glsl`, which naga's GLSL front end reads for every wgpu kernel).
+pub fn hilbert_glsl() -> String {
+    let table: Vec<String> = HILBERT_STEP.iter().map(|e| format!("{e}u")).collect();
+    format!(
+        "{HEADER}const uint HILBERT_STEP[{n}] = uint[{n}]({});\n",
+        table.join(", "),
+        n = HILBERT_STEP.len()
+    )
+}
+
+/// The WGSL text of `generated/constants.wgsl`: every constant, and the Hilbert state table.
 pub fn wgsl() -> String {
     let mut out = String::from(HEADER);
     for (name, value) in unsigned() {
         out.push_str(&format!("const {name}: u32 = {value}u;\n"));
     }
+    let table: Vec<String> = HILBERT_STEP.iter().map(|e| format!("{e}u")).collect();
+    out.push_str(&format!(
+        "const HILBERT_STEP: array<u32, {}> = array<u32, {}>({});\n",
+        HILBERT_STEP.len(),
+        HILBERT_STEP.len(),
+        table.join(", ")
+    ));
     out
 }

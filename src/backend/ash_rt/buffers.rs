@@ -13,7 +13,6 @@ use super::resources::Buffer;
 use super::structure::{BOX_BYTES, Structure};
 use crate::accel::ClusterSize;
 use crate::backend::BackendError;
-use crate::backend::gpu_data::GpuStepData;
 use crate::backend::shaders::{GpuFrame, pack_map_tables};
 use crate::values::FrameParams;
 use crate::values::shader_constants::TABLE_SIZE;
@@ -68,22 +67,18 @@ pub(super) fn boxes_buffer(ctx: &Arc<Context>, boxes: u64) -> Result<Buffer, Bac
     )
 }
 
-/// Uploads the lo parts of double-single positions, if the step has them, into `buffer`
-/// (grown to `capacity` particles the first time a step needs them).
-pub(super) fn write_points_lo(
+/// Grows `buffer`, the lo parts of double-single positions, to `capacity` particles (the
+/// first time a step needs them; the preparation gathers into it).
+pub(super) fn ensure_points_lo(
     ctx: &Arc<Context>,
     buffer: &mut Buffer,
     capacity: usize,
-    data: &GpuStepData,
 ) -> Result<(), BackendError> {
-    let Some(lo) = &data.points_lo else {
-        return Ok(());
-    };
     let need = capacity as u64 * 16;
     if buffer.size < need {
         *buffer = addressed(ctx, "particle lo parts", need)?;
     }
-    buffer.write(0, bytemuck::cast_slice(lo))
+    Ok(())
 }
 
 impl AshBackend {

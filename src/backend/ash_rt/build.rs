@@ -34,7 +34,7 @@ impl AshBackend {
             .uploaded
             .as_ref()
             .ok_or(BackendError::NothingUploaded(NAME))?;
-        let active = up.data.cluster.clusters_for(up.data.points.len()) as u32;
+        let active = up.data.cluster.clusters_for(up.data.count) as u32;
         let started = Instant::now();
         let cb = self.commands.begin()?;
         self.commands.timestamp(TS_START);
@@ -101,7 +101,8 @@ impl AshBackend {
     }
 
     /// Builds the LBVH over the uploaded particles and current radii (on the CPU, with the
-    /// wgpu backend's twin build) and uploads it, unless it is current.
+    /// wgpu backend's twin build, from the particles the device prepared) and uploads it,
+    /// unless it is current.
     pub(super) fn ensure_lbvh(&mut self) -> Result<(), BackendError> {
         if self.lbvh.is_some() {
             return Ok(());
@@ -111,12 +112,21 @@ impl AshBackend {
             .as_ref()
             .ok_or(BackendError::NothingUploaded(NAME))?;
         let d = &up.data;
+        let n = d.count as u64;
+        let points: Vec<[f32; 4]> =
+            bytemuck::pod_collect_to_vec(&self.buffers.points.read(n * 16)?);
+        let radius: Option<Vec<f32>> = match d.has_radius_attribute {
+            true => Some(bytemuck::pod_collect_to_vec(
+                &self.buffers.radius.read(n * 4)?,
+            )),
+            false => None,
+        };
         let rule = RadiusRule {
             field: d.field,
             radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
-            radius_attribute: d.radius_attribute.as_deref(),
+            radius_attribute: radius.as_deref(),
         };
-        let boxes = lbvh_bounds(&d.points, d.cluster.get(), &rule);
+        let boxes = lbvh_bounds(&points, d.cluster.get(), &rule);
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
         if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
             return Err(device_error(

@@ -40,7 +40,7 @@ impl AshBackend {
             cluster_size: d.cluster.get() as u32,
             radius_map_varies: u32::from(d.radius_map_varies),
             density_map_varies: u32::from(d.density_map_varies),
-            has_radius_attribute: u32::from(d.radius_attribute.is_some()),
+            has_radius_attribute: u32::from(d.has_radius_attribute),
             position_ds: u32::from(d.double_single()),
             rt_hit_per_particle: u32::from(self.hit_reports == HitReports::PerParticle),
         })

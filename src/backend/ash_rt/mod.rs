@@ -4,6 +4,8 @@
 //!   Mesa lavapipe): a field query at x is a ray from x along (1, 1, 1) with
 //!   tmin = tmax = 0 (see `shaders_glsl/vulkan/field_query.glsl`), an intersection shader that
 //!   tests each particle of the hit box and an any-hit shader that sums the RBF terms.
+//! - A step is prepared on the device ([`prepare`]): the CPU converts it once into staging
+//!   memory, compute passes sort it along the Hilbert curve and gather it.
 //! - The structure is an AABB BLAS with one box per cluster of K Hilbert-sorted particles,
 //!   written by a compute shader (`boxes.comp`) from positions, radius map and global radius;
 //!   a new step is a full build, a radius change a refit ([`structure`]).
@@ -24,7 +26,7 @@
 //! Files: `context` (instance, device, its limits and the validation messenger), `resources`
 //! (buffers, command submission, timestamps), `pipelines` (descriptor layout, RT and compute
 //! pipelines, binding table), `buffers` (the backend's buffers, descriptors and parameter
-//! block), `structure` (BLAS and TLAS), `build` (box kernel, build and refit, the LBVH for the
+//! block), `prepare` (the step's preparation on the device), `structure` (BLAS and TLAS), `build` (box kernel, build and refit, the LBVH for the
 //! software traversal), `launch` (specialisation, push constants, one timed launch), and here
 //! the backend itself.
 
@@ -33,6 +35,7 @@ mod build;
 pub mod context;
 mod launch;
 pub mod pipelines;
+mod prepare;
 pub mod resources;
 pub mod structure;
 
@@ -44,13 +47,14 @@ use ash::vk;
 use glam::DVec3;
 use gpu_allocator::MemoryLocation;
 
-use self::buffers::{Buffers, addressed, boxes_buffer, storage, write_points_lo};
+use self::buffers::{Buffers, addressed, boxes_buffer, ensure_points_lo, storage};
 use self::context::{Context, NAME, device_error};
 use self::launch::Launch;
 use self::pipelines::{BindingTable, Push, binding};
+use self::prepare::{Prepare, Targets};
 use self::resources::{Buffer, Commands};
 use self::structure::{BOX_BYTES, Structure};
-use super::gpu_data::GpuStepData;
+use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::backend::shaders::cpu::Lbvh;
 use crate::backend::shaders::{GpuField, GpuFrame, SpecConstants};
@@ -138,6 +142,8 @@ pub struct AshBackend {
     buffers: Buffers,
     structure: Option<Structure>,
     uploaded: Option<Uploaded>,
+    /// The step's preparation on the device (made at the first upload).
+    prepare: Option<Prepare>,
     /// Particles the buffers hold.
     capacity: usize,
     reserved: usize,
@@ -248,6 +254,7 @@ impl AshBackend {
             buffers,
             structure: None,
             uploaded: None,
+            prepare: None,
             capacity: 0,
             reserved: 0,
             tables: vec![0.0; TABLE_FLOATS],
@@ -328,6 +335,86 @@ impl AshBackend {
         }
     }
 
+    /// The uploaded step's particles as the device prepared them, in Hilbert order, with the
+    /// order (tests).
+    pub fn sorted_particles(&mut self) -> Result<SortedParticles, BackendError> {
+        let (Some(up), Some(prepare)) = (&self.uploaded, &mut self.prepare) else {
+            return Err(BackendError::NothingUploaded(NAME));
+        };
+        let n = up.data.count as u64;
+        let b = &mut self.buffers;
+        Ok(SortedParticles {
+            points: bytemuck::pod_collect_to_vec(&b.points.read(n * 16)?),
+            points_lo: match up.data.double_single {
+                true => Some(bytemuck::pod_collect_to_vec(&b.points_lo.read(n * 16)?)),
+                false => None,
+            },
+            radius_attribute: match up.data.has_radius_attribute {
+                true => Some(bytemuck::pod_collect_to_vec(&b.radius.read(n * 4)?)),
+                false => None,
+            },
+            order: prepare.order(n as usize)?,
+        })
+    }
+
+    /// Stage 1 of the preparation alone on `points` (f32 local coordinates in xyz), outputs
+    /// poisoned first: each particle's Hilbert key and the permutation (tests; the twin is
+    /// `shaders::cpu::hilbert_keys`).
+    pub fn prepare_hilbert_keys(
+        &mut self,
+        points: &[[f32; 4]],
+        quantizer: &crate::accel::HilbertQuantizer,
+    ) -> Result<(Vec<u64>, Vec<u32>), BackendError> {
+        self.ensure_prepare(points.len())?;
+        match self.prepare.as_mut() {
+            Some(p) => p.hilbert_keys(&self.commands, points, quantizer),
+            None => Err(BackendError::NothingUploaded(NAME)),
+        }
+    }
+
+    /// The preparation's radix sort alone on (`keys`, their indices), scratch poisoned first:
+    /// the sorted keys and the input index of each (tests; the twin is
+    /// `shaders::cpu::radix_sort`).
+    pub fn prepare_sort_pairs(
+        &mut self,
+        keys: &[u32],
+    ) -> Result<(Vec<u32>, Vec<u32>), BackendError> {
+        self.ensure_prepare(keys.len())?;
+        match self.prepare.as_mut() {
+            Some(p) => p.sort_pairs(&self.commands, keys),
+            None => Err(BackendError::NothingUploaded(NAME)),
+        }
+    }
+
+    /// Makes the preparation's buffers hold at least `n` particles and the buffers' capacity.
+    fn ensure_prepare(&mut self, n: usize) -> Result<(), BackendError> {
+        let capacity = n.max(self.capacity);
+        if self
+            .prepare
+            .as_ref()
+            .is_none_or(|p| p.capacity() < capacity)
+        {
+            self.prepare = None;
+            self.prepare = Some(Prepare::new(&self.ctx, capacity)?);
+        }
+        Ok(())
+    }
+
+    /// Fills the prepared particles, their lo parts and radius attribute and the sort's buffers
+    /// with 0xFF (tests: poison before an upload).
+    pub fn poison_prepared(&mut self) -> Result<(), BackendError> {
+        let prepare = self
+            .prepare
+            .as_mut()
+            .ok_or(BackendError::NothingUploaded(NAME))?;
+        prepare.poison()?;
+        let b = &mut self.buffers;
+        for buffer in [&mut b.points, &mut b.points_lo, &mut b.radius] {
+            buffer.write(0, &vec![0xFF; buffer.size as usize])?;
+        }
+        Ok(())
+    }
+
     /// Applies new maps (and radii) to the uploaded step's GPU data.
     fn apply_field(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         let up = self
@@ -337,18 +424,24 @@ impl AshBackend {
         let changed = up
             .data
             .apply_field(&up.step, &up.field, field, up.series_range)?;
-        if changed.radius_attribute
-            && let Some(h) = &up.data.radius_attribute
-        {
-            self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
-        }
+        let radius = changed.radius_attribute && up.data.has_radius_attribute;
         if changed.positions_lo {
-            write_points_lo(
-                &self.ctx,
-                &mut self.buffers.points_lo,
-                self.capacity,
+            ensure_points_lo(&self.ctx, &mut self.buffers.points_lo, self.capacity)?;
+        }
+        if radius || changed.positions_lo {
+            let prepare = self
+                .prepare
+                .as_mut()
+                .ok_or(BackendError::NothingUploaded(NAME))?;
+            prepare.restage(&up.data, &up.step, field, radius, changed.positions_lo)?;
+            let cb = self.commands.begin()?;
+            prepare.record_gathers(
+                cb,
                 &up.data,
+                radius.then_some(&self.buffers.radius),
+                changed.positions_lo.then_some(&self.buffers.points_lo),
             )?;
+            self.commands.submit_and_wait()?;
         }
         up.field = field.clone();
         self.write_params(None)
@@ -369,20 +462,48 @@ impl Backend for AshBackend {
 
     fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError> {
         let started = Instant::now();
-        let data = GpuStepData::prepare(input)?;
-        self.timings.prepare = started.elapsed();
+        let staging = GpuStepData::check(input)?;
+        let checked = started.elapsed();
         self.uploaded = None;
-        self.ensure_capacity(data.points.len(), data.cluster)?;
+        self.ensure_capacity(staging.len(), input.cluster)?;
+        self.ensure_prepare(self.capacity)?;
+        let Some(prepare) = self.prepare.as_mut() else {
+            return Err(BackendError::NothingUploaded(NAME));
+        };
+        let allocated = started.elapsed();
+        let data = prepare.stage(staging, input.step)?;
+        let staged = started.elapsed();
+        self.timings.prepare = checked + (staged - allocated);
+        if data.double_single {
+            ensure_points_lo(&self.ctx, &mut self.buffers.points_lo, self.capacity)?;
+        }
         if let Some(s) = &mut self.structure {
             s.built = false;
         }
-        self.buffers
-            .points
-            .write(0, bytemuck::cast_slice(&data.points))?;
-        write_points_lo(&self.ctx, &mut self.buffers.points_lo, self.capacity, &data)?;
-        if let Some(h) = &data.radius_attribute {
-            self.buffers.radius.write(0, bytemuck::cast_slice(h))?;
-        }
+        let cb = self.commands.begin()?;
+        prepare.record_copy(cb, &data);
+        self.commands.submit_and_wait()?;
+        let copied = started.elapsed();
+        let cb = self.commands.begin()?;
+        prepare.record(
+            cb,
+            &data,
+            &Targets {
+                points: &self.buffers.points,
+                points_lo: data.double_single.then_some(&self.buffers.points_lo),
+                radius: data.has_radius_attribute.then_some(&self.buffers.radius),
+            },
+        )?;
+        self.commands.submit_and_wait()?;
+        self.timings.device_prepare = started.elapsed() - copied;
+        tracing::debug!(
+            "ash: step '{}' ({} particles): CPU {:.1} ms, copy {:.1} ms, device preparation {:.1} ms",
+            input.step.name,
+            data.count,
+            self.timings.prepare.as_secs_f64() * 1e3,
+            (copied - staged).as_secs_f64() * 1e3,
+            self.timings.device_prepare.as_secs_f64() * 1e3
+        );
         self.uploaded = Some(Uploaded {
             step: input.step.clone(),
             field: input.field.clone(),
@@ -392,7 +513,8 @@ impl Backend for AshBackend {
         });
         self.lbvh = None;
         self.write_params(None)?;
-        self.timings.upload = started.elapsed() - self.timings.prepare;
+        self.timings.upload =
+            started.elapsed() - self.timings.prepare - self.timings.device_prepare;
         Ok(())
     }
 
@@ -577,6 +699,7 @@ impl Backend for AshBackend {
             image_bytes: self
                 .accum_size
                 .map_or(0, |(w, h)| (w as usize) * (h as usize) * 16),
+            preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
         }
     }
 }

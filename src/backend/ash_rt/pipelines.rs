@@ -45,6 +45,12 @@ const ANY_HIT: &[u8] = spirv!("particle.rahit");
 const BOXES: &[u8] = spirv!("boxes.comp");
 const LBVH_QUERY: &[u8] = spirv!("lbvh_query.comp");
 const LBVH_RENDER: &[u8] = spirv!("lbvh_render.comp");
+const HILBERT_KEYS: &[u8] = spirv!("hilbert_keys.comp");
+const SORT_COUNT: &[u8] = spirv!("sort_count.comp");
+const SORT_SCAN: &[u8] = spirv!("sort_scan.comp");
+const SORT_SCATTER: &[u8] = spirv!("sort_scatter.comp");
+const GATHER_WORDS: &[u8] = spirv!("gather_words.comp");
+const GATHER_VEC4S: &[u8] = spirv!("gather_vec4s.comp");
 
 /// Descriptor bindings (set 0); `shaders_glsl/vulkan/bindings.glsl` declares the same.
 /// Bindings 2, 3 and 9 (particles, radius attributes, boxes) are gone: those arrays grow with
@@ -91,10 +97,27 @@ pub struct Push {
     pub particle_lo_address: u64,
 }
 
-/// The descriptor-set layout and pipeline layout every pipeline uses.
+/// The push constants of the kernels that prepare a step (`PreparePush` in
+/// `shaders_glsl/vulkan/prepare.glsl`): the Hilbert grid, counts, and each pass's arrays by
+/// device address.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PreparePush {
+    pub grid_lo: [f32; 4],
+    pub grid_scale: [f32; 4],
+    pub count: u32,
+    pub shift: u32,
+    pub tiles: u32,
+    pub width: u32,
+    pub arrays: [u64; 5],
+}
+
+/// The descriptor-set layout and pipeline layout every pipeline uses, and the layout of the
+/// kernels that prepare a step (push constants only: they reach every array by address).
 pub struct Layouts {
     pub set: vk::DescriptorSetLayout,
     pub pipeline: vk::PipelineLayout,
+    pub prepare: vk::PipelineLayout,
 }
 
 impl Layouts {
@@ -138,7 +161,23 @@ impl Layouts {
                     None,
                 )
                 .inspect_err(|_| device.destroy_descriptor_set_layout(set, None))?;
-            Ok(Layouts { set, pipeline })
+            let prepare_push = [vk::PushConstantRange::default()
+                .stage_flags(vk::ShaderStageFlags::COMPUTE)
+                .size(std::mem::size_of::<PreparePush>() as u32)];
+            let prepare = device
+                .create_pipeline_layout(
+                    &vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&prepare_push),
+                    None,
+                )
+                .inspect_err(|_| {
+                    device.destroy_pipeline_layout(pipeline, None);
+                    device.destroy_descriptor_set_layout(set, None);
+                })?;
+            Ok(Layouts {
+                set,
+                pipeline,
+                prepare,
+            })
         }
     }
 
@@ -148,6 +187,7 @@ impl Layouts {
         // SAFETY: per the contract.
         unsafe {
             device.destroy_pipeline_layout(self.pipeline, None);
+            device.destroy_pipeline_layout(self.prepare, None);
             device.destroy_descriptor_set_layout(self.set, None);
         }
     }
@@ -162,6 +202,24 @@ pub enum ComputeKind {
     LbvhQuery,
     /// One frame by LBVH traversal (`lbvh_render.comp`).
     LbvhRender,
+    /// Preparing a step (`PreparePush`): Hilbert keys, the radix sort's three passes, and the
+    /// gathers of words and of vec4s.
+    HilbertKeys,
+    SortCount,
+    SortScan,
+    SortScatter,
+    GatherWords,
+    GatherVec4s,
+}
+
+impl ComputeKind {
+    /// Whether the kernel prepares a step (the push-only layout, no specialisation).
+    fn prepares(self) -> bool {
+        !matches!(
+            self,
+            ComputeKind::Boxes | ComputeKind::LbvhQuery | ComputeKind::LbvhRender
+        )
+    }
 }
 
 /// Shader modules destroyed when dropped.
@@ -306,6 +364,8 @@ pub fn compute_pipeline(
             ..spec
         },
         ComputeKind::LbvhRender => spec,
+        // Their code reads no specialisation constant: one pipeline each.
+        _ => UNSPECIALISED,
     };
     let mut cache = ctx
         .compute_pipelines
@@ -322,6 +382,12 @@ pub fn compute_pipeline(
         ComputeKind::Boxes => BOXES,
         ComputeKind::LbvhQuery => LBVH_QUERY,
         ComputeKind::LbvhRender => LBVH_RENDER,
+        ComputeKind::HilbertKeys => HILBERT_KEYS,
+        ComputeKind::SortCount => SORT_COUNT,
+        ComputeKind::SortScan => SORT_SCAN,
+        ComputeKind::SortScatter => SORT_SCATTER,
+        ComputeKind::GatherWords => GATHER_WORDS,
+        ComputeKind::GatherVec4s => GATHER_VEC4S,
     };
     let values = key_spec.values();
     let spec_info = vk::SpecializationInfo::default()
@@ -334,7 +400,11 @@ pub fn compute_pipeline(
         .specialization_info(&spec_info);
     let info = [vk::ComputePipelineCreateInfo::default()
         .stage(stage)
-        .layout(ctx.layouts.pipeline)];
+        .layout(if kind.prepares() {
+            ctx.layouts.prepare
+        } else {
+            ctx.layouts.pipeline
+        })];
     // SAFETY: valid create info.
     let pipeline = unsafe {
         ctx.device
@@ -344,6 +414,25 @@ pub fn compute_pipeline(
     cache.insert((kind, key_spec), pipeline);
     Ok(pipeline)
 }
+
+/// The pipeline of a kernel that prepares a step (no specialisation constant).
+pub fn prepare_pipeline(ctx: &Context, kind: ComputeKind) -> Result<vk::Pipeline, BackendError> {
+    debug_assert!(kind.prepares());
+    compute_pipeline(ctx, kind, UNSPECIALISED)
+}
+
+/// What the kernels that read no specialisation constant are keyed by.
+const UNSPECIALISED: SpecConstants = SpecConstants {
+    integrator: 0,
+    colour_mode: 0,
+    noise_kind: 0,
+    cluster_size: 1,
+    radius_map_varies: 0,
+    density_map_varies: 0,
+    has_radius_attribute: 0,
+    position_ds: 0,
+    rt_hit_per_particle: 0,
+};
 
 fn align_up(x: u64, a: u64) -> u64 {
     x.div_ceil(a.max(1)) * a.max(1)

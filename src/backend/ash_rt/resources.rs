@@ -5,6 +5,7 @@
 //! coherent (lavapipe, integrated GPUs, resizable BAR) the host reads and writes it in place;
 //! elsewhere [`Buffer::write`] / [`Buffer::read`] go through a staging buffer and a copy.
 
+use std::cell::Cell;
 use std::sync::Arc;
 
 use ash::vk;
@@ -24,6 +25,17 @@ pub struct Buffer {
     /// The device address (0 unless created with `SHADER_DEVICE_ADDRESS`).
     pub address: u64,
     name: String,
+}
+
+thread_local! {
+    static BUFFERS_MADE: Cell<u64> = const { Cell::new(0) };
+}
+
+/// Buffers this thread has made ([`Buffer::new`] makes every buffer of this backend): tests
+/// check that stepping through a reserved series makes none (per thread, so tests running
+/// beside each other on the shared device do not count each other's).
+pub fn buffers_made() -> u64 {
+    BUFFERS_MADE.with(Cell::get)
 }
 
 fn allocation_error(
@@ -72,6 +84,7 @@ impl Buffer {
         location: MemoryLocation,
     ) -> Result<Buffer, BackendError> {
         let size = size.max(16);
+        BUFFERS_MADE.with(|c| c.set(c.get() + 1));
         let usage = usage | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
         let device = &ctx.device;
         let info = vk::BufferCreateInfo::default()
@@ -127,7 +140,7 @@ impl Buffer {
     }
 
     /// The buffer's bytes, when the host can touch them in place.
-    fn host_slice(&mut self) -> Option<&mut [u8]> {
+    pub fn host_slice(&mut self) -> Option<&mut [u8]> {
         let a = self.allocation.as_mut()?;
         let coherent = a.memory_properties().contains(
             vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,

@@ -289,6 +289,7 @@ impl Backend for CpuBackend {
             particle_bytes,
             structure_bytes: self.field().map_or(0, ReferenceField::structure_bytes),
             image_bytes: self.accumulator.as_ref().map_or(0, Accumulator::bytes),
+            preparation_bytes: 0,
         }
     }
 }

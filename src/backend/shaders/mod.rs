@@ -57,7 +57,7 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
     ),
 ];
 
-/// The shared WGSL files of the LBVH build passes, by the name passes include them with.
+/// The shared WGSL files of the LBVH build and step-preparation passes, by the name passes include them with.
 pub const SHARED_WGSL: &[(&str, &str)] = &[
     (
         "shared/tree_params.wgsl",
@@ -70,6 +70,10 @@ pub const SHARED_WGSL: &[(&str, &str)] = &[
     (
         "shared/split_boxes.wgsl",
         include_str!("../../../shaders_wgsl/shared/split_boxes.wgsl"),
+    ),
+    (
+        "shared/prepare_params.wgsl",
+        include_str!("../../../shaders_wgsl/shared/prepare_params.wgsl"),
     ),
 ];
 

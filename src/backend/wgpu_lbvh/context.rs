@@ -4,6 +4,7 @@
 //! or a lost device becomes a [`BackendError`], never a panic.
 
 use std::borrow::Cow;
+use std::cell::Cell;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -16,6 +17,17 @@ pub(crate) fn device_error(message: impl Into<String>) -> BackendError {
         backend: "wgpu",
         message: message.into(),
     }
+}
+
+thread_local! {
+    static BUFFERS_MADE: Cell<u64> = const { Cell::new(0) };
+}
+
+/// Buffers this thread has made through [`GpuContext::create_buffer`], which makes every buffer
+/// of this backend: tests check that stepping through a reserved series makes none (per
+/// thread, so tests running beside each other on the shared device do not count each other's).
+pub fn buffers_made() -> u64 {
+    BUFFERS_MADE.with(Cell::get)
 }
 
 /// A compute kernel of the backend: a shader file and an entry point.
@@ -38,6 +50,11 @@ pub enum Kernel {
     /// `shaders_wgsl/lbvh_fit.wgsl`: the bottom-up climb and the refit's reset.
     FitClimb,
     FitReset,
+    /// `shaders_wgsl/hilbert_keys.wgsl`: a step's Hilbert keys.
+    HilbertKeys,
+    /// `shaders_wgsl/gather.wgsl`, its two entry points.
+    GatherWords,
+    GatherVec4s,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -49,6 +66,8 @@ enum ShaderFile {
     Sort,
     Hierarchy,
     Fit,
+    HilbertKeys,
+    Gather,
 }
 
 impl Kernel {
@@ -61,6 +80,8 @@ impl Kernel {
             Kernel::SortCount | Kernel::SortScan | Kernel::SortScatter => ShaderFile::Sort,
             Kernel::Hierarchy => ShaderFile::Hierarchy,
             Kernel::FitClimb | Kernel::FitReset => ShaderFile::Fit,
+            Kernel::HilbertKeys => ShaderFile::HilbertKeys,
+            Kernel::GatherWords | Kernel::GatherVec4s => ShaderFile::Gather,
         }
     }
 
@@ -71,6 +92,8 @@ impl Kernel {
             Kernel::SortScatter => "scatter",
             Kernel::FitClimb => "climb",
             Kernel::FitReset => "reset",
+            Kernel::GatherWords => "gather_words",
+            Kernel::GatherVec4s => "gather_vec4s",
             _ => "main",
         }
     }
@@ -104,6 +127,10 @@ impl ShaderFile {
                 Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_hierarchy.wgsl"))
             }
             ShaderFile::Fit => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_fit.wgsl")),
+            ShaderFile::HilbertKeys => {
+                Source::Wgsl(include_str!("../../../shaders_wgsl/hilbert_keys.wgsl"))
+            }
+            ShaderFile::Gather => Source::Wgsl(include_str!("../../../shaders_wgsl/gather.wgsl")),
         }
     }
 }
@@ -284,6 +311,12 @@ impl GpuContext {
             modules: Mutex::new(HashMap::new()),
             pipelines: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// Makes a buffer, counting it ([`buffers_made`]).
+    pub fn create_buffer(&self, desc: &wgpu::BufferDescriptor<'_>) -> wgpu::Buffer {
+        BUFFERS_MADE.with(|c| c.set(c.get() + 1));
+        self.device.create_buffer(desc)
     }
 
     /// The adapter in words.

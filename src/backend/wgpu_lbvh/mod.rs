@@ -1,10 +1,12 @@
 //! The portable GPU backend: wgpu compute over a GPU-built LBVH (Karras 2012). The paper's
 //! software baseline, and the fallback on every GPU without ray-tracing hardware.
 //!
-//! - **Upload**: a step prepared by [`GpuStepData`] (Hilbert-sorted particles in local
-//!   coordinates, maps baked to tables) goes into buffers kept for the largest step seen (or
-//!   [`Backend::reserve`]d for the series' maximum count); the radius-attribute buffer exists
-//!   only when the scene has one. The arrays of 16-byte elements that outgrow one storage
+//! - **Upload**: the CPU converts the step in one pass, in its own order, straight into mapped
+//!   staging memory ([`GpuStepData`]: local coordinates, t, the radius attribute); the device
+//!   copies it, computes Hilbert keys, sorts and gathers into Hilbert order (`prepare`), into
+//!   buffers kept for the largest step seen (or [`Backend::reserve`]d for the series' maximum
+//!   count), staging included, so stepping makes no buffer (`buffers_made`, tested); the
+//!   radius-attribute buffer exists only when the scene has one. The arrays of 16-byte elements that outgrow one storage
 //!   binding first (particles, LBVH nodes, cluster boxes, the accumulation) live in up to
 //!   `util::PARTS` = 4 buffers each (`util::SplitBuffer`, `shaders_glsl/wgpu/split.glsl`);
 //!   a step beyond that, or one whose 4-byte arrays (sort keys, parents, radius attribute)
@@ -24,7 +26,8 @@
 //!   variant, cached for the process. Frames accumulate as f32 sums in a storage buffer.
 //!
 //! Files: `context` (device, limits, shader modules and pipelines), `util` (buffers, split
-//! arrays, passes), `scene` (the uploaded step's buffers and bindings), `tree` (the LBVH
+//! arrays, staging, passes), `scene` (the uploaded step's buffers and bindings), `prepare`
+//! (the step's preparation on the device), `tree` (the LBVH
 //! build and refit passes), `sort` (the radix sort), `query` and `render` (the two traversal
 //! kernels), and here the backend itself.
 //!
@@ -32,6 +35,7 @@
 //! them, and the backend with the CPU reference.
 
 mod context;
+pub mod prepare;
 mod query;
 mod render;
 mod scene;
@@ -44,10 +48,10 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-pub use context::{AdapterSummary, GpuContext, Kernel, adapters, instance_flags};
+pub use context::{AdapterSummary, GpuContext, Kernel, adapters, buffers_made, instance_flags};
 pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
-use super::gpu_data::GpuStepData;
+use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::backend::shaders::GpuFrame;
 use crate::backend::shaders::cpu::{
@@ -60,6 +64,7 @@ use crate::values::Image;
 use crate::values::shader_constants::{TABLE_FLOATS, TABLE_SIZE, spec};
 use crate::values::{ColourMode, Integrator, NoiseKind};
 use context::device_error;
+use prepare::Prepare;
 use scene::{Scene, check_fits};
 use tree::{GpuTree, SceneBindings};
 use util::{PARTS, SplitBuffer, storage, uniform};
@@ -92,6 +97,7 @@ pub struct WgpuBackend {
     capabilities: Capabilities,
     reserved: usize,
     scene: Option<Scene>,
+    prepare: Option<Prepare>,
     tree: Option<GpuTree>,
     built: Option<TreeReport>,
     accumulation: Option<Accumulation>,
@@ -136,6 +142,7 @@ impl WgpuBackend {
             },
             reserved: 0,
             scene: None,
+            prepare: None,
             tree: None,
             built: None,
             accumulation: None,
@@ -185,6 +192,57 @@ impl WgpuBackend {
     /// Bytes of build scratch (sort keys, values, histogram) beside the structure.
     pub fn scratch_bytes(&self) -> usize {
         self.tree.as_ref().map_or(0, GpuTree::scratch_bytes)
+    }
+
+    /// The uploaded step's particles as the device prepared them, in Hilbert order, with the
+    /// order (tests).
+    pub fn sorted_particles(&self) -> Result<SortedParticles, BackendError> {
+        let (Some(scene), Some(prepare)) = (&self.scene, &self.prepare) else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        let n = scene.data.count;
+        let vec4s = |b: &SplitBuffer| -> Result<Vec<[f32; 4]>, BackendError> {
+            Ok(bytemuck::pod_collect_to_vec(
+                &b.read(&self.ctx, n as u64 * 16)?,
+            ))
+        };
+        let targets = scene.targets();
+        Ok(SortedParticles {
+            points: vecs_or_empty(n, || vec4s(targets.particles))?,
+            points_lo: targets
+                .particles_lo
+                .map(|b| vecs_or_empty(n, || vec4s(b)))
+                .transpose()?,
+            radius_attribute: targets
+                .radius_attribute
+                .map(|b| -> Result<Vec<f32>, BackendError> {
+                    Ok(bytemuck::pod_collect_to_vec(&util::read(
+                        &self.ctx,
+                        b,
+                        0,
+                        n as u64 * 4,
+                    )?))
+                })
+                .transpose()?,
+            order: prepare.order(&self.ctx, n)?,
+        })
+    }
+
+    /// Fills the prepared particles (and their lo parts and radius attribute) and the
+    /// preparation's buffers with 0xFF (tests: poison before an upload).
+    pub fn poison_prepared(&self) -> Result<(), BackendError> {
+        let (Some(scene), Some(prepare)) = (&self.scene, &self.prepare) else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        scene.particles.poison(&self.ctx);
+        if let Some(b) = &scene.particles_lo {
+            b.poison(&self.ctx);
+        }
+        if let Some(b) = &scene.radius_attribute {
+            util::poison(&self.ctx, b);
+        }
+        prepare.poison(&self.ctx);
+        Ok(())
     }
 
     /// Fills the tree's buffers with 0xFF (tests: poison before a build).
@@ -280,11 +338,19 @@ impl WgpuBackend {
             scene
                 .data
                 .apply_field(&scene.step, &scene.field, field, scene.series_range)?;
-        if changed.radius_attribute {
-            scene.write_radius_attribute(&self.ctx)?;
-        }
-        if changed.positions_lo {
-            scene.write_points_lo(&self.ctx, self.max_binding)?;
+        scene.ensure_radius_attribute(&self.ctx)?;
+        scene.ensure_points_lo(&self.ctx, self.max_binding)?;
+        let targets = scene.targets();
+        let radius = targets
+            .radius_attribute
+            .filter(|_| changed.radius_attribute);
+        let lo = targets.particles_lo.filter(|_| changed.positions_lo);
+        if radius.is_some() || lo.is_some() {
+            let prepare = self
+                .prepare
+                .as_mut()
+                .ok_or(BackendError::NothingUploaded("wgpu"))?;
+            prepare.regather(&self.ctx, &scene.data, &scene.step, field, radius, lo)?;
         }
         scene.field = field.clone();
         let colour = scene.data.tables.colour.clone();
@@ -311,11 +377,11 @@ impl Backend for WgpuBackend {
 
     fn upload(&mut self, input: &StepInput<'_>) -> Result<(), BackendError> {
         let started = Instant::now();
-        let data = GpuStepData::prepare(input)?;
-        self.timings.prepare = started.elapsed();
-        let n = data.points.len();
-        let clusters = data.field.counts[1] as usize;
-        let has_radius = data.radius_attribute.is_some();
+        let staging = GpuStepData::check(input)?;
+        let checked = started.elapsed();
+        let n = staging.len();
+        let clusters = input.cluster.clusters_for(n);
+        let has_radius = staging.has_radius_attribute();
         let max_binding = self.max_binding;
         if let Err(what) = check_fits(n, clusters, has_radius, max_binding) {
             return Err(device_error(format!(
@@ -384,6 +450,25 @@ impl Backend for WgpuBackend {
                     })?
                 }
             };
+        if self
+            .prepare
+            .as_ref()
+            .is_none_or(|p| p.capacity() < particle_capacity)
+        {
+            self.prepare = None;
+            self.prepare = Some(
+                Prepare::new(&ctx, particle_capacity, max_binding)
+                    .map_err(|e| device_error(format!("step '{}': {e}", input.step.name)))?,
+            );
+        }
+        let Some(prepare) = self.prepare.as_mut() else {
+            return Err(BackendError::NothingUploaded("wgpu"));
+        };
+        let views = prepare.map(&ctx, n, has_radius)?;
+        let allocated = started.elapsed();
+        let data = prepare.stage(&ctx, staging, views, input.step)?;
+        let staged = started.elapsed();
+        self.timings.prepare = checked + (staged - allocated);
         let mut scene = Scene {
             step: input.step.clone(),
             field: input.field.clone(),
@@ -398,11 +483,20 @@ impl Backend for WgpuBackend {
             maps,
             field_uniform,
         };
-        scene
-            .particles
-            .write(&ctx, bytemuck::cast_slice(&scene.data.points));
-        scene.write_points_lo(&ctx, max_binding)?;
-        scene.write_radius_attribute(&ctx)?;
+        scene.ensure_points_lo(&ctx, max_binding)?;
+        scene.ensure_radius_attribute(&ctx)?;
+        prepare.copy(&ctx, &scene.data)?;
+        let copied = started.elapsed();
+        prepare.run(&ctx, &scene.data, &scene.targets())?;
+        let prepared = started.elapsed();
+        self.timings.device_prepare = prepared - copied;
+        tracing::debug!(
+            "wgpu: step '{}' ({n} particles): CPU {:.1} ms, copy {:.1} ms, device preparation {:.1} ms",
+            input.step.name,
+            self.timings.prepare.as_secs_f64() * 1e3,
+            (copied - staged).as_secs_f64() * 1e3,
+            self.timings.device_prepare.as_secs_f64() * 1e3
+        );
         let cluster_capacity = input.cluster.clusters_for(scene.particle_capacity);
         if self.tree.as_ref().is_none_or(|t| t.capacity < clusters) {
             self.tree = None;
@@ -419,7 +513,8 @@ impl Backend for WgpuBackend {
         );
         self.scene = Some(scene);
         self.built = None;
-        self.timings.upload = started.elapsed() - self.timings.prepare;
+        self.timings.upload =
+            started.elapsed() - self.timings.prepare - self.timings.device_prepare;
         Ok(())
     }
 
@@ -512,6 +607,15 @@ impl Backend for WgpuBackend {
                 .accumulation
                 .as_ref()
                 .map_or(0, |a| a.sums.size() as usize),
+            preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
         }
     }
+}
+
+/// `read()` of `n` elements, or nothing without elements (a zero-length read is no read).
+fn vecs_or_empty<T>(
+    n: usize,
+    read: impl FnOnce() -> Result<Vec<T>, BackendError>,
+) -> Result<Vec<T>, BackendError> {
+    if n == 0 { Ok(Vec::new()) } else { read() }
 }

@@ -3,6 +3,7 @@
 //! of them.
 
 use super::context::{GpuContext, Layout, device_error};
+use super::prepare::Targets;
 use super::tree::GpuTree;
 use super::util::{PARTS, SplitBuffer, parts_needed, storage, write};
 use super::{CLUSTER_BYTES, PARTICLE_BYTES, WORD_BYTES};
@@ -60,7 +61,7 @@ impl Scene {
             cluster_size: self.cluster.get() as u32,
             radius_map_varies: u32::from(self.data.radius_map_varies),
             density_map_varies: u32::from(self.data.density_map_varies),
-            has_radius_attribute: u32::from(self.data.radius_attribute.is_some()),
+            has_radius_attribute: u32::from(self.data.has_radius_attribute),
             position_ds: u32::from(self.data.double_single()),
             rt_hit_per_particle: 0,
         }
@@ -100,39 +101,71 @@ impl Scene {
         entries
     }
 
-    /// Uploads the lo parts of double-single positions, making their buffer (split like the
-    /// particles) the first time a step needs them.
-    pub(super) fn write_points_lo(
+    /// Makes the buffer of the lo parts of double-single positions (split like the particles)
+    /// the first time a step needs them (the preparation gathers into it).
+    pub(super) fn ensure_points_lo(
         &mut self,
         ctx: &GpuContext,
         max_binding: u64,
     ) -> Result<(), BackendError> {
-        let Some(lo) = &self.data.points_lo else {
-            return Ok(());
-        };
-        if self
-            .particles_lo
-            .as_ref()
-            .is_none_or(|b| b.size() < self.particles.size())
+        if !self.data.double_single
+            || self
+                .particles_lo
+                .as_ref()
+                .is_some_and(|b| b.size() >= self.particles.size())
         {
-            let capacity = self.particle_capacity as u64;
-            self.particles_lo = Some(
-                ctx.scoped("particle lo parts", || {
-                    SplitBuffer::new(
-                        ctx,
-                        "particle lo parts",
-                        capacity,
-                        PARTICLE_BYTES,
-                        max_binding,
-                    )
-                })?
-                .ok_or_else(|| device_error("the particles' lo parts do not fit their parts"))?,
-            );
+            return Ok(());
         }
-        if let Some(b) = &self.particles_lo {
-            b.write(ctx, bytemuck::cast_slice(lo));
+        let capacity = self.particle_capacity as u64;
+        self.particles_lo = Some(
+            ctx.scoped("particle lo parts", || {
+                SplitBuffer::new(
+                    ctx,
+                    "particle lo parts",
+                    capacity,
+                    PARTICLE_BYTES,
+                    max_binding,
+                )
+            })?
+            .ok_or_else(|| device_error("the particles' lo parts do not fit their parts"))?,
+        );
+        Ok(())
+    }
+
+    /// Makes the radius-attribute buffer when the scene has one and it is missing or small, and
+    /// drops it when the scene has none.
+    pub(super) fn ensure_radius_attribute(&mut self, ctx: &GpuContext) -> Result<(), BackendError> {
+        if !self.data.has_radius_attribute {
+            self.radius_attribute = None;
+            return Ok(());
+        }
+        let needed = (self.particle_capacity.max(self.data.count) * 4) as u64;
+        if self
+            .radius_attribute
+            .as_ref()
+            .is_none_or(|b| b.size() < needed)
+        {
+            self.radius_attribute = Some(ctx.scoped("radius attribute buffer", || {
+                storage(ctx, "radius attribute", needed)
+            })?);
         }
         Ok(())
+    }
+
+    /// The preparation's targets: the particles, and the lo parts and radius attribute when
+    /// the scene has them.
+    pub(super) fn targets(&self) -> Targets<'_> {
+        Targets {
+            particles: &self.particles,
+            particles_lo: self
+                .particles_lo
+                .as_ref()
+                .filter(|_| self.data.double_single),
+            radius_attribute: self
+                .radius_attribute
+                .as_ref()
+                .filter(|_| self.data.has_radius_attribute),
+        }
     }
 }
 
@@ -159,7 +192,11 @@ pub(super) fn check_fits(
             ));
         }
     }
-    let mut single = vec![("the per-cluster sort keys", c)];
+    // The preparation sorts per particle, the build per cluster.
+    let mut single = vec![
+        ("the per-particle sort keys", n),
+        ("the per-cluster sort keys", c),
+    ];
     if has_radius_attribute {
         single.push(("the radius attribute", n));
     }
@@ -195,27 +232,5 @@ impl Scene {
         field.counts[2] = self.particles.part_len(PARTICLE_BYTES);
         field.counts[3] = tree.map_or(u32::MAX, |t| t.boxes.part_len(16));
         write(ctx, &self.field_uniform, bytemuck::bytes_of(&field));
-    }
-
-    pub(super) fn write_radius_attribute(&mut self, ctx: &GpuContext) -> Result<(), BackendError> {
-        match &self.data.radius_attribute {
-            Some(h) => {
-                let needed = (self.particle_capacity.max(h.len()) * 4) as u64;
-                if self
-                    .radius_attribute
-                    .as_ref()
-                    .is_none_or(|b| b.size() < needed)
-                {
-                    self.radius_attribute = Some(ctx.scoped("radius attribute buffer", || {
-                        storage(ctx, "radius attribute", needed)
-                    })?);
-                }
-                if let Some(b) = &self.radius_attribute {
-                    write(ctx, b, bytemuck::cast_slice(h));
-                }
-            }
-            None => self.radius_attribute = None,
-        }
-        Ok(())
     }
 }

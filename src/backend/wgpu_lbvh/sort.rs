@@ -34,7 +34,7 @@ impl RadixSort {
         let stride = u64::from(ctx.limits.min_uniform_buffer_offset_alignment).max(16);
         let tiles_capacity = (capacity as u32).div_ceil(SORT_TILE).max(1);
         RadixSort {
-            params: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            params: ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("radix sort params"),
                 size: stride * u64::from(PASSES),
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,

@@ -24,7 +24,7 @@ pub fn interleave(groups: u32) -> (u32, u32, u32) {
 
 /// A storage buffer of at least `bytes` (rounded up to 16, never 0), copyable both ways.
 pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+    ctx.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16).next_multiple_of(16),
         usage: wgpu::BufferUsages::STORAGE
@@ -35,7 +35,7 @@ pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
 }
 
 pub fn uniform(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+    ctx.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16).next_multiple_of(16),
         usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
@@ -138,7 +138,7 @@ pub fn read_into(
 ) -> Result<(), BackendError> {
     let size = bytes.next_multiple_of(4).max(4);
     let staging = ctx.scoped("readback buffer", || {
-        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -287,6 +287,17 @@ impl SplitBuffer {
         self.used
     }
 
+    /// Elements of `unit_bytes` bytes a full part holds (for kernels that bind this array
+    /// beside a split one of the same element size, whose part length this then is too).
+    pub fn part_capacity(&self, unit_bytes: u64) -> u32 {
+        u32::try_from(self.part_bytes / unit_bytes).unwrap_or(u32::MAX)
+    }
+
+    /// The part buffers (the placeholders too).
+    pub fn buffers(&self) -> &[wgpu::Buffer] {
+        &self.parts
+    }
+
     /// Bytes of data the buffer has room for.
     pub fn size(&self) -> u64 {
         self.bytes
@@ -353,6 +364,126 @@ impl SplitBuffer {
     pub fn poison(&self, ctx: &GpuContext) {
         for b in &self.parts {
             poison(ctx, b);
+        }
+    }
+}
+
+/// Memory the host writes and the device copies from: MAP_WRITE buffers cut into the parts of
+/// the array they fill (a [`SplitBuffer`]'s, or one part for an array in one buffer), made
+/// once for a capacity and mapped again for each write, so stepping through a series
+/// makes no buffer. The CPU converts a step straight into them (one copy of its bytes,
+/// `gpu_data`), write-only: mapped memory may be uncached on the host.
+pub struct Staging {
+    parts: Vec<wgpu::Buffer>,
+    part_bytes: u64,
+    mapped: bool,
+}
+
+impl Staging {
+    /// Room for `bytes` bytes in parts of `part_bytes`, mapped. Call inside
+    /// [`GpuContext::scoped`].
+    pub fn new(ctx: &GpuContext, label: &str, bytes: u64, part_bytes: u64) -> Staging {
+        let bytes = bytes.max(16);
+        let count = bytes.div_ceil(part_bytes);
+        let parts = (0..count)
+            .map(|i| {
+                ctx.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("{label} staging (part {i})")),
+                    size: (bytes - i * part_bytes)
+                        .min(part_bytes)
+                        .next_multiple_of(16),
+                    usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: true,
+                })
+            })
+            .collect();
+        Staging {
+            parts,
+            part_bytes,
+            mapped: true,
+        }
+    }
+
+    /// Staging for the whole of `dst`, in its parts.
+    pub fn for_split(ctx: &GpuContext, label: &str, dst: &SplitBuffer) -> Staging {
+        Staging::new(ctx, label, dst.size(), dst.part_bytes)
+    }
+
+    /// Bytes per part (all but the last are full).
+    pub fn part_bytes(&self) -> u64 {
+        self.part_bytes
+    }
+
+    /// Maps every part again (after the device's last copy from them, which it waits for).
+    fn map(&mut self, ctx: &GpuContext) -> Result<(), BackendError> {
+        if self.mapped {
+            return Ok(());
+        }
+        let (sender, receiver) = std::sync::mpsc::channel();
+        for b in &self.parts {
+            let sender = sender.clone();
+            b.map_async(wgpu::MapMode::Write, .., move |r| {
+                let _ = sender.send(r);
+            });
+        }
+        drop(sender);
+        ctx.wait()?;
+        // Blocking: with the device shared between threads, another thread's poll may be the
+        // one that runs these callbacks, a moment after this thread's poll returned.
+        for _ in &self.parts {
+            receiver
+                .recv()
+                .map_err(|_| device_error("staging: a map callback never ran"))?
+                .map_err(|e| device_error(format!("staging: {e}")))?;
+        }
+        self.mapped = true;
+        Ok(())
+    }
+
+    /// Write-only views of bytes `0 .. bytes`, one per part they reach (each from the part's
+    /// start); drop them before [`Self::encode_copy`].
+    pub fn views(
+        &mut self,
+        ctx: &GpuContext,
+        bytes: u64,
+    ) -> Result<Vec<wgpu::BufferViewMut>, BackendError> {
+        self.map(ctx)?;
+        let mut out = Vec::new();
+        let mut left = bytes;
+        for b in &self.parts {
+            if left == 0 {
+                break;
+            }
+            let n = left.min(self.part_bytes);
+            out.push(
+                b.get_mapped_range_mut(..n)
+                    .map_err(|e| device_error(format!("staging: {e}")))?,
+            );
+            left -= n;
+        }
+        Ok(out)
+    }
+
+    /// Unmaps the parts and encodes copying bytes `0 .. bytes` into `dst` (buffers cut into the
+    /// same parts).
+    pub fn encode_copy(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        dst: &[wgpu::Buffer],
+        bytes: u64,
+    ) {
+        for b in &self.parts {
+            b.unmap();
+        }
+        self.mapped = false;
+        let mut left = bytes;
+        for (src, dst) in self.parts.iter().zip(dst) {
+            if left == 0 {
+                break;
+            }
+            let n = left.min(self.part_bytes);
+            encoder.copy_buffer_to_buffer(src, 0, dst, 0, n);
+            left -= n;
         }
     }
 }

@@ -1,6 +1,13 @@
 //! The CPU twins of the GPU stages, one file per shader (as vello's `cpu/`), each doing what its
 //! stage does in the same f32 arithmetic so the tests can compare them.
 //!
+//! Preparing a step on the device (`wgpu_lbvh::prepare`): Hilbert keys of the particles' f32
+//! local coordinates (`hilbert_keys.wgsl`, 63 bits as two words), a stable radix sort by the
+//! low word and then by the high one (`radix_sort.wgsl`, with the high words gathered into
+//! the order of the first sort between the two, `gather.wgsl`), and the particles, lo parts and
+//! radius attribute gathered into the sorted order (`gather.wgsl`): keys and order bit for bit
+//! those of [`crate::accel::hilbert_order`].
+//!
 //! The LBVH: a linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees, and k-d
 //! trees", HPG 2012) over cluster boxes: the CPU twin of the wgpu backend's GPU build
 //! (`shaders_glsl/wgpu/lbvh_bounds.comp`, `shaders_wgsl/lbvh_*.wgsl`, `shaders_wgsl/radix_sort.wgsl`)
@@ -34,6 +41,8 @@
 //! and `leaf_parents[c]` ([`LBVH_NONE`] for a cluster left out, [`LBVH_ROOT_LEAF`] for the only leaf).
 
 pub mod cluster_box;
+pub mod gather;
+pub mod hilbert_keys;
 pub mod lbvh;
 pub mod lbvh_fit;
 pub mod lbvh_hierarchy;

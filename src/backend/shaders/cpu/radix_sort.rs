@@ -1,4 +1,6 @@
-//! The CPU twin of `shaders_wgsl/radix_sort.wgsl` (LBVH stage 3): a stable sort by key.
+//! The CPU twin of `shaders_wgsl/radix_sort.wgsl` (LBVH stage 3, and the sorts that prepare a
+//! step) and of the ash backend's `shaders_glsl/vulkan/sort_{count,scan,scatter}.comp`: a
+//! stable sort by key.
 
 /// Stage 3: (key, value) pairs sorted stably by key, values the input indices.
 pub fn sort_pairs(keys: &[u32]) -> (Vec<u32>, Vec<u32>) {

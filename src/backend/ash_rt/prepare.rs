@@ -1,0 +1,580 @@
+//! Preparing a step on the device (ash). The CPU's one pass writes the step, in its own order,
+//! into host-visible staging memory (`gpu_data::StepStaging::write`); the device copies it and
+//! runs the wgpu backend's stages (`wgpu_lbvh::prepare` explains them: 63-bit Hilbert keys, two
+//! stable 32-bit radix sorts with the high words gathered between them, the gather into Hilbert
+//! order) as compute passes of this backend's own (`shaders_glsl/vulkan/hilbert_keys.comp`,
+//! `sort_{count,scan,scatter}.comp`, `gather_{words,vec4s}.comp`: the sort needs workgroup
+//! atomics, which the GLSL both backends share may not use), with the same CPU twins, into the
+//! buffers the structure build reads. The order stays on the device, so a radius-attribute or
+//! precision change gathers the new array without sorting again. Every buffer is made for the
+//! largest step (or the reserved count) and reused.
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use wgpu::WriteOnly;
+
+use super::buffers::addressed;
+use super::context::{Context, device_error};
+use super::pipelines::{ComputeKind, PreparePush, prepare_pipeline};
+use super::resources::{Buffer, Commands, barrier};
+use crate::accel::HilbertQuantizer;
+use crate::backend::BackendError;
+use crate::backend::gpu_data::{GpuStepData, Slots4, Slots16, StepStaging};
+use crate::field::FieldSettings;
+use crate::values::Step;
+use crate::values::shader_constants::{SORT_RADIX, SORT_TILE};
+
+/// Threads per workgroup of the per-element kernels.
+const GROUP: u32 = 64;
+/// Elements per row of their 2D launches (at most 65535 workgroups per dimension).
+const ROW: u32 = 65_535 * GROUP;
+/// Passes of 4-bit digits over 32-bit keys.
+const SORT_PASSES: u32 = 8;
+
+/// A step's array in its own order: host-visible staging memory and the device array it is
+/// copied to.
+struct Raw {
+    staging: Buffer,
+    device: Buffer,
+}
+
+impl Raw {
+    fn new(ctx: &Arc<Context>, label: &str, bytes: u64) -> Result<Raw, BackendError> {
+        Ok(Raw {
+            staging: Buffer::new(
+                ctx,
+                label,
+                bytes,
+                vk::BufferUsageFlags::empty(),
+                MemoryLocation::CpuToGpu,
+            )?,
+            device: addressed(ctx, label, bytes)?,
+        })
+    }
+
+    /// Write-only slots over the first `n` elements of `N` bytes of the staging memory.
+    fn slots<const N: usize>(
+        &mut self,
+        n: usize,
+    ) -> Result<WriteOnly<'_, [[u8; N]]>, BackendError> {
+        let bytes = self.staging.host_slice().ok_or_else(|| {
+            device_error("staging a step", "the staging memory is not host-visible")
+        })?;
+        Ok(WriteOnly::from_mut(&mut bytes[..n * N])
+            .into_chunks::<N>()
+            .0)
+    }
+
+    /// Records copying the first `bytes` bytes to the device array.
+    fn record_copy(&self, ctx: &Context, cb: vk::CommandBuffer, bytes: u64) {
+        if bytes == 0 {
+            return;
+        }
+        let region = [vk::BufferCopy::default().size(bytes)];
+        // SAFETY: recording; both buffers are alive and hold `bytes`.
+        unsafe {
+            ctx.device
+                .cmd_copy_buffer(cb, self.staging.raw, self.device.raw, &region)
+        };
+    }
+}
+
+/// The buffers the preparation writes, in Hilbert order.
+pub(super) struct Targets<'a> {
+    pub points: &'a Buffer,
+    pub points_lo: Option<&'a Buffer>,
+    pub radius: Option<&'a Buffer>,
+}
+
+/// The preparation's buffers, for up to `capacity` particles.
+pub(super) struct Prepare {
+    ctx: Arc<Context>,
+    capacity: usize,
+    points: Raw,
+    /// Made the first time a step needs them.
+    points_lo: Option<Raw>,
+    radius: Option<Raw>,
+    /// The sort's keys and values, its scratch, the keys' high words and the digit histogram.
+    /// After a preparation `values` holds the order.
+    keys: Buffer,
+    values: Buffer,
+    keys_tmp: Buffer,
+    values_tmp: Buffer,
+    keys_hi: Buffer,
+    histogram: Buffer,
+}
+
+impl Prepare {
+    pub(super) fn new(ctx: &Arc<Context>, capacity: usize) -> Result<Prepare, BackendError> {
+        let n = capacity.max(1) as u64;
+        let tiles = n.div_ceil(u64::from(SORT_TILE));
+        Ok(Prepare {
+            ctx: ctx.clone(),
+            capacity,
+            points: Raw::new(ctx, "raw particles", n * 16)?,
+            points_lo: None,
+            radius: None,
+            keys: addressed(ctx, "hilbert keys", n * 4)?,
+            values: addressed(ctx, "hilbert order", n * 4)?,
+            keys_tmp: addressed(ctx, "hilbert keys scratch", n * 4)?,
+            values_tmp: addressed(ctx, "hilbert order scratch", n * 4)?,
+            keys_hi: addressed(ctx, "hilbert keys, high words", n * 4)?,
+            histogram: addressed(
+                ctx,
+                "radix sort histogram",
+                u64::from(SORT_RADIX) * tiles * 4,
+            )?,
+        })
+    }
+
+    pub(super) fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Bytes the preparation holds: staging memory, the raw arrays on the device, and the
+    /// sort's buffers.
+    pub(super) fn bytes(&self) -> usize {
+        let raws = [
+            Some(&self.points),
+            self.points_lo.as_ref(),
+            self.radius.as_ref(),
+        ];
+        let raw: u64 = raws
+            .into_iter()
+            .flatten()
+            .map(|r| r.staging.size + r.device.size)
+            .sum();
+        let sort: u64 = [
+            &self.keys,
+            &self.values,
+            &self.keys_tmp,
+            &self.values_tmp,
+            &self.keys_hi,
+            &self.histogram,
+        ]
+        .iter()
+        .map(|b| b.size)
+        .sum();
+        (raw + sort) as usize
+    }
+
+    fn lo(&mut self) -> Result<&mut Raw, BackendError> {
+        if self.points_lo.is_none() {
+            self.points_lo = Some(Raw::new(
+                &self.ctx,
+                "raw particle lo parts",
+                self.capacity.max(1) as u64 * 16,
+            )?);
+        }
+        self.points_lo
+            .as_mut()
+            .ok_or_else(|| device_error("staging a step", "no lo parts"))
+    }
+
+    fn radius(&mut self) -> Result<&mut Raw, BackendError> {
+        if self.radius.is_none() {
+            self.radius = Some(Raw::new(
+                &self.ctx,
+                "raw radius attribute",
+                self.capacity.max(1) as u64 * 4,
+            )?);
+        }
+        self.radius
+            .as_mut()
+            .ok_or_else(|| device_error("staging a step", "no radius attribute"))
+    }
+
+    /// The staging pass: writes the checked step (and the lo parts when the precision needs
+    /// them) into the staging memory. The CPU's whole share of a step change.
+    pub(super) fn stage(
+        &mut self,
+        staging: StepStaging<'_>,
+        step: &Step,
+    ) -> Result<GpuStepData, BackendError> {
+        let n = staging.len();
+        if n > self.capacity {
+            return Err(device_error(
+                "staging a step",
+                format!("{n} particles exceed the {} staged", self.capacity),
+            ));
+        }
+        if staging.has_radius_attribute() {
+            self.radius()?;
+        }
+        let Prepare { points, radius, .. } = self;
+        let points: Slots16<'_> = points.slots::<16>(n)?;
+        let radius: Option<Slots4<'_>> = match radius {
+            Some(r) if staging.has_radius_attribute() => Some(r.slots::<4>(n)?),
+            _ => None,
+        };
+        let data = staging.write(vec![(0, points)], radius);
+        if data.double_single {
+            let lo = self.lo()?.slots::<16>(n)?;
+            data.write_lo(step, vec![(0, lo)]);
+        }
+        Ok(data)
+    }
+
+    /// After a field change ([`GpuStepData::apply_field`]): stages the radius attribute
+    /// `settings` names (with `radius`) and the lo parts (with `lo`) for [`Self::record_gathers`].
+    pub(super) fn restage(
+        &mut self,
+        data: &GpuStepData,
+        step: &Step,
+        settings: &FieldSettings,
+        radius: bool,
+        lo: bool,
+    ) -> Result<(), BackendError> {
+        let n = data.count;
+        if radius {
+            GpuStepData::write_radius_attribute(step, settings, self.radius()?.slots::<4>(n)?);
+        }
+        if lo {
+            data.write_lo(step, vec![(0, self.lo()?.slots::<16>(n)?)]);
+        }
+        Ok(())
+    }
+
+    /// Records one dispatch of `kind` with `push`.
+    fn dispatch(
+        &self,
+        cb: vk::CommandBuffer,
+        kind: ComputeKind,
+        push: &PreparePush,
+        groups: (u32, u32),
+    ) -> Result<(), BackendError> {
+        let ctx = &self.ctx;
+        let pipeline = prepare_pipeline(ctx, kind)?;
+        // SAFETY: recording; the pipeline uses the prepare layout, whose push range is
+        // `PreparePush`.
+        unsafe {
+            ctx.device
+                .cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, pipeline);
+            ctx.device.cmd_push_constants(
+                cb,
+                ctx.layouts.prepare,
+                vk::ShaderStageFlags::COMPUTE,
+                0,
+                bytemuck::bytes_of(push),
+            );
+            ctx.device.cmd_dispatch(cb, groups.0, groups.1, 1);
+        }
+        barrier(
+            ctx,
+            cb,
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+            ),
+        );
+        Ok(())
+    }
+
+    /// Records a per-element kernel over `n` elements with `arrays`.
+    fn elements(
+        &self,
+        cb: vk::CommandBuffer,
+        kind: ComputeKind,
+        quantizer: &HilbertQuantizer,
+        n: u32,
+        arrays: [u64; 5],
+    ) -> Result<(), BackendError> {
+        let [lx, ly, lz] = quantizer.lo();
+        let [sx, sy, sz] = quantizer.scale();
+        let push = PreparePush {
+            grid_lo: [lx, ly, lz, 0.0],
+            grid_scale: [sx, sy, sz, 0.0],
+            count: n,
+            width: ROW,
+            arrays,
+            ..PreparePush::default()
+        };
+        let groups = n.div_ceil(GROUP).max(1);
+        self.dispatch(
+            cb,
+            kind,
+            &push,
+            (groups.min(ROW / GROUP), n.div_ceil(ROW).max(1)),
+        )
+    }
+
+    /// Records the stable sort of the first `n` (keys, values) pairs.
+    fn record_sort(&self, cb: vk::CommandBuffer, n: u32) -> Result<(), BackendError> {
+        if n <= 1 {
+            return Ok(());
+        }
+        let tiles = n.div_ceil(SORT_TILE);
+        for pass in 0..SORT_PASSES {
+            let (from, to) = if pass % 2 == 0 {
+                (
+                    (&self.keys, &self.values),
+                    (&self.keys_tmp, &self.values_tmp),
+                )
+            } else {
+                (
+                    (&self.keys_tmp, &self.values_tmp),
+                    (&self.keys, &self.values),
+                )
+            };
+            let push = PreparePush {
+                count: n,
+                shift: 4 * pass,
+                tiles,
+                arrays: [
+                    from.0.address,
+                    from.1.address,
+                    to.0.address,
+                    to.1.address,
+                    self.histogram.address,
+                ],
+                ..PreparePush::default()
+            };
+            self.dispatch(cb, ComputeKind::SortCount, &push, (tiles, 1))?;
+            self.dispatch(cb, ComputeKind::SortScan, &push, (1, 1))?;
+            self.dispatch(cb, ComputeKind::SortScatter, &push, (tiles, 1))?;
+        }
+        Ok(())
+    }
+
+    /// Records the copy of what [`Self::stage`] wrote to the device.
+    pub(super) fn record_copy(&self, cb: vk::CommandBuffer, data: &GpuStepData) {
+        let n = data.count as u64;
+        let ctx = &self.ctx;
+        self.points.record_copy(ctx, cb, n * 16);
+        if let Some(raw) = self.points_lo.as_ref().filter(|_| data.double_single) {
+            raw.record_copy(ctx, cb, n * 16);
+        }
+        if let Some(raw) = self.radius.as_ref().filter(|_| data.has_radius_attribute) {
+            raw.record_copy(ctx, cb, n * 4);
+        }
+        barrier(
+            ctx,
+            cb,
+            (
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ,
+            ),
+        );
+    }
+
+    /// Records the preparation of the copied step ([`Self::record_copy`], submitted before)
+    /// into `targets`.
+    pub(super) fn record(
+        &self,
+        cb: vk::CommandBuffer,
+        data: &GpuStepData,
+        targets: &Targets<'_>,
+    ) -> Result<(), BackendError> {
+        let n = data.count as u32;
+        let lo = self
+            .points_lo
+            .as_ref()
+            .filter(|_| data.double_single)
+            .zip(targets.points_lo);
+        let radius = self
+            .radius
+            .as_ref()
+            .filter(|_| data.has_radius_attribute)
+            .zip(targets.radius);
+        if n == 0 {
+            return Ok(());
+        }
+        self.elements(
+            cb,
+            ComputeKind::HilbertKeys,
+            &data.quantizer,
+            n,
+            [
+                self.points.device.address,
+                self.keys.address,
+                self.keys_hi.address,
+                self.values.address,
+                0,
+            ],
+        )?;
+        self.record_sort(cb, n)?;
+        self.gather(
+            cb,
+            ComputeKind::GatherWords,
+            data,
+            &self.keys_hi,
+            &self.keys,
+        )?;
+        self.record_sort(cb, n)?;
+        self.gather(
+            cb,
+            ComputeKind::GatherVec4s,
+            data,
+            &self.points.device,
+            targets.points,
+        )?;
+        if let Some((raw, dst)) = lo {
+            self.gather(cb, ComputeKind::GatherVec4s, data, &raw.device, dst)?;
+        }
+        if let Some((raw, dst)) = radius {
+            self.gather(cb, ComputeKind::GatherWords, data, &raw.device, dst)?;
+        }
+        Ok(())
+    }
+
+    /// Records `to[k] = from[order[k]]` over the step's particles.
+    fn gather(
+        &self,
+        cb: vk::CommandBuffer,
+        kind: ComputeKind,
+        data: &GpuStepData,
+        from: &Buffer,
+        to: &Buffer,
+    ) -> Result<(), BackendError> {
+        self.elements(
+            cb,
+            kind,
+            &data.quantizer,
+            data.count as u32,
+            [self.values.address, from.address, to.address, 0, 0],
+        )
+    }
+
+    /// Records the copy of what [`Self::restage`] wrote and its gathers through the kept order.
+    pub(super) fn record_gathers(
+        &self,
+        cb: vk::CommandBuffer,
+        data: &GpuStepData,
+        radius: Option<&Buffer>,
+        lo: Option<&Buffer>,
+    ) -> Result<(), BackendError> {
+        let n = data.count as u64;
+        let ctx = &self.ctx;
+        let radius = self.radius.as_ref().zip(radius);
+        let lo = self.points_lo.as_ref().zip(lo);
+        if let Some((raw, _)) = radius {
+            raw.record_copy(ctx, cb, n * 4);
+        }
+        if let Some((raw, _)) = lo {
+            raw.record_copy(ctx, cb, n * 16);
+        }
+        barrier(
+            ctx,
+            cb,
+            (
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ,
+            ),
+        );
+        if n == 0 {
+            return Ok(());
+        }
+        if let Some((raw, dst)) = radius {
+            self.gather(cb, ComputeKind::GatherWords, data, &raw.device, dst)?;
+        }
+        if let Some((raw, dst)) = lo {
+            self.gather(cb, ComputeKind::GatherVec4s, data, &raw.device, dst)?;
+        }
+        Ok(())
+    }
+
+    /// Stage 1 alone on `points` (local coordinates in xyz), its outputs poisoned first: each
+    /// particle's key and the permutation it writes (tests).
+    pub(super) fn hilbert_keys(
+        &mut self,
+        commands: &Commands,
+        points: &[[f32; 4]],
+        quantizer: &HilbertQuantizer,
+    ) -> Result<(Vec<u64>, Vec<u32>), BackendError> {
+        let n = points.len();
+        self.poison()?;
+        self.points.staging.write(0, bytemuck::cast_slice(points))?;
+        let cb = commands.begin()?;
+        self.points.record_copy(&self.ctx, cb, n as u64 * 16);
+        barrier(
+            &self.ctx,
+            cb,
+            (
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ,
+            ),
+        );
+        self.elements(
+            cb,
+            ComputeKind::HilbertKeys,
+            quantizer,
+            n as u32,
+            [
+                self.points.device.address,
+                self.keys.address,
+                self.keys_hi.address,
+                self.values.address,
+                0,
+            ],
+        )?;
+        commands.submit_and_wait()?;
+        let lo: Vec<u32> = bytemuck::pod_collect_to_vec(&self.keys.read(n as u64 * 4)?);
+        let hi: Vec<u32> = bytemuck::pod_collect_to_vec(&self.keys_hi.read(n as u64 * 4)?);
+        let keys = lo
+            .iter()
+            .zip(&hi)
+            .map(|(&l, &h)| u64::from(h) << 32 | u64::from(l))
+            .collect();
+        Ok((keys, self.order(n)?))
+    }
+
+    /// The radix sort alone on (`keys`, their indices), its scratch poisoned first: the sorted
+    /// keys and the input index of each (tests).
+    pub(super) fn sort_pairs(
+        &mut self,
+        commands: &Commands,
+        keys: &[u32],
+    ) -> Result<(Vec<u32>, Vec<u32>), BackendError> {
+        let n = keys.len();
+        self.poison()?;
+        self.keys.write(0, bytemuck::cast_slice(keys))?;
+        let identity: Vec<u32> = (0..n as u32).collect();
+        self.values.write(0, bytemuck::cast_slice(&identity))?;
+        let cb = commands.begin()?;
+        self.record_sort(cb, n as u32)?;
+        commands.submit_and_wait()?;
+        Ok((
+            bytemuck::pod_collect_to_vec(&self.keys.read(n as u64 * 4)?),
+            self.order(n)?,
+        ))
+    }
+
+    /// The order of the last prepared step (tests).
+    pub(super) fn order(&mut self, n: usize) -> Result<Vec<u32>, BackendError> {
+        Ok(bytemuck::pod_collect_to_vec(
+            &self.values.read(n as u64 * 4)?,
+        ))
+    }
+
+    /// Fills the sort's buffers with 0xFF (tests).
+    pub(super) fn poison(&mut self) -> Result<(), BackendError> {
+        for b in [
+            &mut self.keys,
+            &mut self.values,
+            &mut self.keys_tmp,
+            &mut self.values_tmp,
+            &mut self.keys_hi,
+        ] {
+            b.write(0, &vec![0xFF; b.size as usize])?;
+        }
+        Ok(())
+    }
+}
