@@ -81,11 +81,12 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
 }
 
 /// The stages of a step change, in the order a step goes through them.
-const STAGES: [&str; 6] = [
+const STAGES: [&str; 7] = [
     "read+decode",
     "wait for step",
     "prepare (cpu)",
     "upload",
+    "prepare (device)",
     "build",
     "frame",
 ];
@@ -95,7 +96,7 @@ struct StepTimes {
     particles: usize,
     bytes: usize,
     /// Seconds per stage of `STAGES`, and the whole step as the player saw it.
-    stages: [f64; 6],
+    stages: [f64; 7],
     total: f64,
     /// Whether the worker had read the step before the player asked for it.
     prefetched: bool,
@@ -188,6 +189,7 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
                     wait,
                     t.prepare,
                     t.upload,
+                    t.device_prepare,
                     t.build,
                     frame,
                 ]
@@ -253,7 +255,7 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
         peak,
         backend_bytes: {
             let m = session.backend().memory();
-            m.particle_bytes + m.structure_bytes + m.image_bytes
+            m.particle_bytes + m.structure_bytes + m.image_bytes + m.preparation_bytes
         },
         image_mean: image.pixels.iter().map(|p| p[3]).sum::<f32>() / image.pixels.len() as f32,
     });

@@ -665,18 +665,22 @@ impl ViewerApp {
         }
         let t = s.timings;
         ui.label(format!(
-            "prepare {:.1} ms · upload {:.1} ms · build {:.1} ms · refit {:.1} ms",
+            "prepare {:.1} ms (CPU) + {:.1} ms (device) · upload {:.1} ms · build {:.1} ms · \
+             refit {:.1} ms",
             ms(t.prepare),
+            ms(t.device_prepare),
             ms(t.upload),
             ms(t.build),
             ms(t.refit)
         ));
         let m = s.memory;
         ui.label(format!(
-            "memory: particles {:.1} MiB · structure {:.1} MiB · image {:.1} MiB",
+            "memory: particles {:.1} MiB · structure {:.1} MiB · image {:.1} MiB · step \
+             preparation {:.1} MiB",
             mib(m.particle_bytes),
             mib(m.structure_bytes),
-            mib(m.image_bytes)
+            mib(m.image_bytes),
+            mib(m.preparation_bytes)
         ));
         ui.label(format!(
             "image to window: {:.1} ms per update (readback and conversion)",
