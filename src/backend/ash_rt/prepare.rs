@@ -18,7 +18,7 @@ use wgpu::WriteOnly;
 use super::buffers::addressed;
 use super::context::{Context, device_error};
 use super::pipelines::{ComputeKind, PreparePush, prepare_pipeline};
-use super::resources::{Buffer, Commands, barrier};
+use super::resources::{Buffer, COMPUTE_READ, Commands, TRANSFER_WRITE, barrier};
 use crate::accel::HilbertQuantizer;
 use crate::backend::BackendError;
 use crate::backend::gpu_data::{GpuStepData, Slots4, Slots16, StepStaging};
@@ -353,18 +353,7 @@ impl Prepare {
         if let Some(raw) = self.radius.as_ref().filter(|_| data.has_radius_attribute) {
             raw.record_copy(ctx, cb, n * 4);
         }
-        barrier(
-            ctx,
-            cb,
-            (
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-            ),
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_READ,
-            ),
-        );
+        barrier(ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
     }
 
     /// Records the preparation of the copied step ([`Self::record_copy`], submitted before)
@@ -463,18 +452,7 @@ impl Prepare {
         if let Some((raw, _)) = lo {
             raw.record_copy(ctx, cb, n * 16);
         }
-        barrier(
-            ctx,
-            cb,
-            (
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-            ),
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_READ,
-            ),
-        );
+        barrier(ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
         if n == 0 {
             return Ok(());
         }

@@ -422,6 +422,17 @@ impl Drop for Commands {
 }
 
 /// A memory barrier between two stages.
+/// A copy's writes, as the source of a [`barrier`].
+pub const TRANSFER_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) = (
+    vk::PipelineStageFlags::TRANSFER,
+    vk::AccessFlags::TRANSFER_WRITE,
+);
+/// A compute shader's reads, as the destination of a [`barrier`].
+pub const COMPUTE_READ: (vk::PipelineStageFlags, vk::AccessFlags) = (
+    vk::PipelineStageFlags::COMPUTE_SHADER,
+    vk::AccessFlags::SHADER_READ,
+);
+
 pub fn barrier(
     ctx: &Context,
     cb: vk::CommandBuffer,
