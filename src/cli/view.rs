@@ -52,21 +52,9 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
         anyhow::ensure!(spp > 0, "--spp must be at least 1");
         loaded.scene.render.spp = Some(spp);
     }
-    let backend = match args.backend {
-        // The viewer switches backends by name; auto resolves to one now.
-        BackendKind::Auto => {
-            let b = crate::backend::create(BackendKind::Auto)?;
-            match b.capabilities().name {
-                "ash" => BackendKind::Ash,
-                "wgpu" => BackendKind::Wgpu,
-                _ => BackendKind::Cpu,
-            }
-        }
-        kind => kind,
-    };
     crate::viewer::run(
         loaded,
-        backend,
+        args.backend,
         ViewOptions {
             cache_mib: args.data.cache_mib,
         },

@@ -11,7 +11,7 @@ use egui::{Color32, ColorImage, Sense, TextureHandle, TextureOptions};
 use super::map_editor::map_editor;
 use super::navigation::{self, AxisView};
 use super::state::{DataSource, ViewState, view_bounds};
-use super::worker::{Interaction, RenderWorker, ShownImage};
+use super::worker::{Interaction, RenderWorker, Shown, ShownImage};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
 use crate::field::Classification;
@@ -25,8 +25,14 @@ use crate::values::{Integrator, NoiseKind};
 const SCROLL_SETTLE: Duration = Duration::from_millis(250);
 /// The status bar's height in points: a line of figures and a line for the newest message.
 const STATUS_HEIGHT: f32 = 48.0;
-/// The backends a user may pick.
-const BACKENDS: [BackendKind; 3] = [BackendKind::Cpu, BackendKind::Wgpu, BackendKind::Ash];
+/// The backends a user may pick (`auto` as `aarbf render` resolves it; the panel names the
+/// one it chose).
+const BACKENDS: [BackendKind; 4] = [
+    BackendKind::Auto,
+    BackendKind::Cpu,
+    BackendKind::Wgpu,
+    BackendKind::Ash,
+];
 
 /// Where the attribute is normalised over.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,6 +64,8 @@ pub struct ViewerApp {
     worker: RenderWorker,
     texture: Option<TextureHandle>,
     texture_of: Option<Arc<ShownImage>>,
+    /// What the worker had to show when this frame began.
+    shown: Shown,
     /// Playback: the direction while playing, whether it wraps, steps per second.
     playing: Option<bool>,
     looping: bool,
@@ -111,6 +119,7 @@ impl ViewerApp {
             worker,
             texture: None,
             texture_of: None,
+            shown: Shown::default(),
             playing: None,
             looping: true,
             rate: 10.0,
@@ -149,6 +158,8 @@ impl ViewerApp {
     /// The whole window, inside `ui` (eframe's root, or a test harness's).
     pub fn ui(&mut self, ui: &mut egui::Ui) {
         let (news, reverted) = self.worker.take_news();
+        // One look at the worker's output per frame, for every panel.
+        self.shown = self.worker.shown();
         for m in news {
             self.say(m);
         }
@@ -203,10 +214,9 @@ impl ViewerApp {
         };
         let len = self.series.len();
         let interval = Duration::from_secs_f64(1.0 / self.rate.max(0.01));
-        let shown = self.worker.shown();
         // A step is shown once its frame is out: playback never outruns the renderer.
         let current_shown =
-            shown.generation == self.generation && shown.step == Some(self.state.step);
+            self.shown.generation == self.generation && self.shown.step == Some(self.state.step);
         if current_shown && self.last_step_at.elapsed() >= interval {
             let next = match (forward, self.state.step) {
                 (true, s) if s + 1 < len => Some(s + 1),
@@ -225,7 +235,7 @@ impl ViewerApp {
     }
 
     fn status_bar(&mut self, ui: &mut egui::Ui) {
-        let s = self.worker.shown();
+        let s = &self.shown;
         ui.horizontal(|ui| {
             if let Some(busy) = &s.busy {
                 ui.spinner();
@@ -279,8 +289,8 @@ impl ViewerApp {
         self.state.settings.height = height;
         let (rect, response) = ui.allocate_exact_size(size, Sense::click_and_drag());
         response.widget_info(|| egui::WidgetInfo::labeled(egui::Role::Image, true, "render view"));
-        let shown = self.worker.shown();
-        if let Some(image) = &shown.image
+        let image = self.shown.image.clone();
+        if let Some(image) = &image
             && self
                 .texture_of
                 .as_ref()
@@ -412,11 +422,11 @@ impl ViewerApp {
             ui.radio_value(&mut self.range_mode, RangeMode::Step, "this step");
             ui.radio_value(&mut self.range_mode, RangeMode::Fixed, "fixed");
         });
-        let shown = self.worker.shown();
+        let histogram = self.shown.histogram.clone();
         match self.range_mode {
             RangeMode::Series => self.state.field.attribute_range = None,
             RangeMode::Step => {
-                if let Some(h) = &shown.histogram
+                if let Some(h) = &histogram
                     && (previous != RangeMode::Step || self.state.field.attribute_range.is_none())
                 {
                     self.state.field.attribute_range = Some(h.step_range);
@@ -448,8 +458,8 @@ impl ViewerApp {
     }
 
     fn map_controls(&mut self, ui: &mut egui::Ui) {
-        let shown = self.worker.shown();
-        let histogram = shown.histogram.as_deref();
+        let histogram = self.shown.histogram.clone();
+        let histogram = histogram.as_deref();
         let mut colormap = self.state.colormap.clone();
         ui.horizontal(|ui| {
             egui::ComboBox::new("colormap", "colour map")
@@ -528,7 +538,7 @@ impl ViewerApp {
         let mut optical = self.state.settings.optical.map().clone();
         let top = optical.max_value().max(1.0);
         let changed = map_editor(ui, "optical density map", &mut optical, top, None, false);
-        let used_scale = shown.used.map(|u| u.density_scale);
+        let used_scale = self.shown.used.map(|u| u.density_scale);
         let mut scale = self.state.settings.optical.scale();
         ui.horizontal(|ui| {
             let mut automatic = scale.is_none();
@@ -609,7 +619,7 @@ impl ViewerApp {
             ui.radio_value(&mut s.noise, NoiseKind::Stbn, "blue (STBN)");
             ui.radio_value(&mut s.noise, NoiseKind::White, "white");
         });
-        let used_step = self.worker.shown().used.map(|u| u.step_size);
+        let used_step = self.shown.used.map(|u| u.step_size);
         ui.horizontal(|ui| {
             let mut automatic = s.step_size.is_none();
             let label = ui.checkbox(&mut automatic, "automatic step").id;
@@ -656,7 +666,7 @@ impl ViewerApp {
                 }
             });
         self.state.backend = kind;
-        let s = self.worker.shown();
+        let s = &self.shown;
         if let Some((name, device)) = &s.backend {
             ui.label(format!("{name} on {device}"));
         }
@@ -714,7 +724,7 @@ impl ViewerApp {
                 self.worker.screenshot(PathBuf::from(&self.screenshot_path));
             }
         });
-        if let Some(last) = self.worker.shown().screenshots.last() {
+        if let Some(last) = self.shown.screenshots.last() {
             ui.label(format!("wrote {}", last.display()));
         }
     }
