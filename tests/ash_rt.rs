@@ -990,13 +990,27 @@ fn an_image_larger_than_one_binding_is_not_refused() {
 /// with t, lo parts, radius attribute; the order is `hilbert_order`), for a series of awkward,
 /// changing counts far from the origin with and without a radius attribute and double-single
 /// positions, the outputs poisoned before each step; and after field changes that gather a new
-/// radius attribute and lo parts through the kept order.
+/// radius attribute and lo parts through the kept order. Twice: reading the staged step in
+/// place (lavapipe's memory is device-local and host-visible, as an integrated GPU's or one
+/// with resizable BAR) and through the copies a discrete GPU needs.
 #[test]
 fn device_preparation_equals_the_cpu_preparation() {
+    let in_place = device_preparation_equals_the_cpu_preparation_on(backend());
+    let mut b = backend();
+    b.always_copy_staging();
+    let copied = device_preparation_equals_the_cpu_preparation_on(b);
+    // Same capacity and arrays: the copies' device arrays are the only difference.
+    assert!(
+        in_place < copied,
+        "staging read in place holds {in_place} B, through copies {copied} B"
+    );
+}
+
+/// Runs the checks; the preparation's bytes at the end.
+fn device_preparation_equals_the_cpu_preparation_on(mut b: AshBackend) -> usize {
     use aarbf::accel::hilbert_order;
     use aarbf::backend::Precision;
 
-    let mut b = backend();
     let bounds = Bounds {
         min: DVec3::new(1000.0, -50.0, 3.0),
         max: DVec3::new(1002.0, -48.0, 5.0),
@@ -1074,6 +1088,7 @@ fn device_preparation_equals_the_cpu_preparation() {
         "the tiny radii need double-single positions"
     );
     assert_no_validation_messages();
+    b.memory().preparation_bytes
 }
 
 /// The preparation's stages on the ash device against their CPU twins, outputs poisoned

@@ -144,6 +144,9 @@ pub struct AshBackend {
     uploaded: Option<Uploaded>,
     /// The step's preparation on the device (made at the first upload).
     prepare: Option<Prepare>,
+    /// Whether the preparation may read the step where the CPU wrote it (see
+    /// [`prepare::Staging`]); tests turn it off to run a discrete GPU's copies.
+    staging: prepare::Staging,
     /// Particles the buffers hold.
     capacity: usize,
     reserved: usize,
@@ -255,6 +258,7 @@ impl AshBackend {
             structure: None,
             uploaded: None,
             prepare: None,
+            staging: prepare::Staging::InPlaceWherePossible,
             capacity: 0,
             reserved: 0,
             tables: vec![0.0; TABLE_FLOATS],
@@ -395,9 +399,17 @@ impl AshBackend {
             .is_none_or(|p| p.capacity() < capacity)
         {
             self.prepare = None;
-            self.prepare = Some(Prepare::new(&self.ctx, capacity)?);
+            self.prepare = Some(Prepare::new(&self.ctx, capacity, self.staging)?);
         }
         Ok(())
+    }
+
+    /// Copies every step from host-visible staging memory to device memory before preparing
+    /// it, as on a discrete GPU without resizable BAR, even where the device could read the
+    /// staging memory in place (tests: the copy path on a device that does not need it).
+    pub fn always_copy_staging(&mut self) {
+        self.staging = prepare::Staging::AlwaysCopy;
+        self.prepare = None;
     }
 
     /// Fills the prepared particles, their lo parts and radius attribute and the sort's buffers
@@ -480,11 +492,12 @@ impl Backend for AshBackend {
         if let Some(s) = &mut self.structure {
             s.built = false;
         }
-        let cb = self.commands.begin()?;
-        prepare.record_copy(cb, &data);
-        self.commands.submit_and_wait()?;
+        let mut cb = self.commands.begin()?;
+        if prepare.record_copy(cb, &data) {
+            self.commands.submit_and_wait()?;
+            cb = self.commands.begin()?;
+        }
         let copied = started.elapsed();
-        let cb = self.commands.begin()?;
         prepare.record(
             cb,
             &data,

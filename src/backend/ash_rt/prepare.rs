@@ -33,25 +33,52 @@ const ROW: u32 = 65_535 * GROUP;
 /// Passes of 4-bit digits over 32-bit keys.
 const SORT_PASSES: u32 = 8;
 
-/// A step's array in its own order: host-visible staging memory and the device array it is
-/// copied to.
+/// A step's array in its own order: the host-visible memory the CPU writes it into and, where
+/// that memory is not device-local (a discrete GPU without resizable BAR), the device array it
+/// is copied to. Where the host-visible memory is device-local (integrated GPUs, resizable BAR,
+/// lavapipe) the shaders read what the CPU wrote in place and a step change copies nothing.
 struct Raw {
     staging: Buffer,
-    device: Buffer,
+    device: Option<Buffer>,
+}
+
+/// Whether a step's arrays are read where the CPU wrote them when the memory allows it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Staging {
+    InPlaceWherePossible,
+    AlwaysCopy,
 }
 
 impl Raw {
-    fn new(ctx: &Arc<Context>, label: &str, bytes: u64) -> Result<Raw, BackendError> {
-        Ok(Raw {
-            staging: Buffer::new(
-                ctx,
-                label,
-                bytes,
-                vk::BufferUsageFlags::empty(),
-                MemoryLocation::CpuToGpu,
-            )?,
-            device: addressed(ctx, label, bytes)?,
-        })
+    fn new(
+        ctx: &Arc<Context>,
+        label: &str,
+        bytes: u64,
+        mode: Staging,
+    ) -> Result<Raw, BackendError> {
+        let staging = Buffer::new(
+            ctx,
+            label,
+            bytes,
+            vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            MemoryLocation::CpuToGpu,
+        )?;
+        let device =
+            if mode == Staging::InPlaceWherePossible && staging.device_local_and_host_coherent() {
+                None
+            } else {
+                Some(addressed(ctx, label, bytes)?)
+            };
+        Ok(Raw { staging, device })
+    }
+
+    /// The array the shaders read.
+    fn on_device(&self) -> &Buffer {
+        self.device.as_ref().unwrap_or(&self.staging)
+    }
+
+    fn bytes(&self) -> u64 {
+        self.staging.size + self.device.as_ref().map_or(0, |d| d.size)
     }
 
     /// Write-only slots over the first `n` elements of `N` bytes of the staging memory.
@@ -67,17 +94,19 @@ impl Raw {
             .0)
     }
 
-    /// Records copying the first `bytes` bytes to the device array.
-    fn record_copy(&self, ctx: &Context, cb: vk::CommandBuffer, bytes: u64) {
-        if bytes == 0 {
-            return;
-        }
+    /// Records copying the first `bytes` bytes to the device array, if there is one to copy
+    /// to; whether it recorded a copy.
+    fn record_copy(&self, ctx: &Context, cb: vk::CommandBuffer, bytes: u64) -> bool {
+        let Some(device) = self.device.as_ref().filter(|_| bytes > 0) else {
+            return false;
+        };
         let region = [vk::BufferCopy::default().size(bytes)];
         // SAFETY: recording; both buffers are alive and hold `bytes`.
         unsafe {
             ctx.device
-                .cmd_copy_buffer(cb, self.staging.raw, self.device.raw, &region)
+                .cmd_copy_buffer(cb, self.staging.raw, device.raw, &region)
         };
+        true
     }
 }
 
@@ -92,6 +121,7 @@ pub(super) struct Targets<'a> {
 pub(super) struct Prepare {
     ctx: Arc<Context>,
     capacity: usize,
+    staging: Staging,
     points: Raw,
     /// Made the first time a step needs them.
     points_lo: Option<Raw>,
@@ -107,13 +137,18 @@ pub(super) struct Prepare {
 }
 
 impl Prepare {
-    pub(super) fn new(ctx: &Arc<Context>, capacity: usize) -> Result<Prepare, BackendError> {
+    pub(super) fn new(
+        ctx: &Arc<Context>,
+        capacity: usize,
+        staging: Staging,
+    ) -> Result<Prepare, BackendError> {
         let n = capacity.max(1) as u64;
         let tiles = n.div_ceil(u64::from(SORT_TILE));
         Ok(Prepare {
             ctx: ctx.clone(),
             capacity,
-            points: Raw::new(ctx, "raw particles", n * 16)?,
+            staging,
+            points: Raw::new(ctx, "raw particles", n * 16, staging)?,
             points_lo: None,
             radius: None,
             keys: addressed(ctx, "hilbert keys", n * 4)?,
@@ -141,11 +176,7 @@ impl Prepare {
             self.points_lo.as_ref(),
             self.radius.as_ref(),
         ];
-        let raw: u64 = raws
-            .into_iter()
-            .flatten()
-            .map(|r| r.staging.size + r.device.size)
-            .sum();
+        let raw: u64 = raws.into_iter().flatten().map(Raw::bytes).sum();
         let sort: u64 = [
             &self.keys,
             &self.values,
@@ -166,6 +197,7 @@ impl Prepare {
                 &self.ctx,
                 "raw particle lo parts",
                 self.capacity.max(1) as u64 * 16,
+                self.staging,
             )?);
         }
         self.points_lo
@@ -179,6 +211,7 @@ impl Prepare {
                 &self.ctx,
                 "raw radius attribute",
                 self.capacity.max(1) as u64 * 4,
+                self.staging,
             )?);
         }
         self.radius
@@ -342,18 +375,23 @@ impl Prepare {
         Ok(())
     }
 
-    /// Records the copy of what [`Self::stage`] wrote to the device.
-    pub(super) fn record_copy(&self, cb: vk::CommandBuffer, data: &GpuStepData) {
+    /// Records the copy of what [`Self::stage`] wrote to the device; whether there was
+    /// anything to copy (nothing where the staging memory is the device's, see [`Raw`]: the
+    /// submission that follows makes the host's writes visible to the device).
+    pub(super) fn record_copy(&self, cb: vk::CommandBuffer, data: &GpuStepData) -> bool {
         let n = data.count as u64;
         let ctx = &self.ctx;
-        self.points.record_copy(ctx, cb, n * 16);
+        let mut copied = self.points.record_copy(ctx, cb, n * 16);
         if let Some(raw) = self.points_lo.as_ref().filter(|_| data.double_single) {
-            raw.record_copy(ctx, cb, n * 16);
+            copied |= raw.record_copy(ctx, cb, n * 16);
         }
         if let Some(raw) = self.radius.as_ref().filter(|_| data.has_radius_attribute) {
-            raw.record_copy(ctx, cb, n * 4);
+            copied |= raw.record_copy(ctx, cb, n * 4);
         }
-        barrier(ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
+        if copied {
+            barrier(ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
+        }
+        copied
     }
 
     /// Records the preparation of the copied step ([`Self::record_copy`], submitted before)
@@ -384,7 +422,7 @@ impl Prepare {
             &data.quantizer,
             n,
             [
-                self.points.device.address,
+                self.points.on_device().address,
                 self.keys.address,
                 self.keys_hi.address,
                 self.values.address,
@@ -404,14 +442,14 @@ impl Prepare {
             cb,
             ComputeKind::GatherVec4s,
             data,
-            &self.points.device,
+            self.points.on_device(),
             targets.points,
         )?;
         if let Some((raw, dst)) = lo {
-            self.gather(cb, ComputeKind::GatherVec4s, data, &raw.device, dst)?;
+            self.gather(cb, ComputeKind::GatherVec4s, data, raw.on_device(), dst)?;
         }
         if let Some((raw, dst)) = radius {
-            self.gather(cb, ComputeKind::GatherWords, data, &raw.device, dst)?;
+            self.gather(cb, ComputeKind::GatherWords, data, raw.on_device(), dst)?;
         }
         Ok(())
     }
@@ -446,21 +484,24 @@ impl Prepare {
         let ctx = &self.ctx;
         let radius = self.radius.as_ref().zip(radius);
         let lo = self.points_lo.as_ref().zip(lo);
+        let mut copied = false;
         if let Some((raw, _)) = radius {
-            raw.record_copy(ctx, cb, n * 4);
+            copied |= raw.record_copy(ctx, cb, n * 4);
         }
         if let Some((raw, _)) = lo {
-            raw.record_copy(ctx, cb, n * 16);
+            copied |= raw.record_copy(ctx, cb, n * 16);
         }
-        barrier(ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
+        if copied {
+            barrier(ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
+        }
         if n == 0 {
             return Ok(());
         }
         if let Some((raw, dst)) = radius {
-            self.gather(cb, ComputeKind::GatherWords, data, &raw.device, dst)?;
+            self.gather(cb, ComputeKind::GatherWords, data, raw.on_device(), dst)?;
         }
         if let Some((raw, dst)) = lo {
-            self.gather(cb, ComputeKind::GatherVec4s, data, &raw.device, dst)?;
+            self.gather(cb, ComputeKind::GatherVec4s, data, raw.on_device(), dst)?;
         }
         Ok(())
     }
@@ -496,7 +537,7 @@ impl Prepare {
             quantizer,
             n as u32,
             [
-                self.points.device.address,
+                self.points.on_device().address,
                 self.keys.address,
                 self.keys_hi.address,
                 self.values.address,

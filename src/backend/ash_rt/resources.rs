@@ -139,6 +139,18 @@ impl Buffer {
         Ok(buffer)
     }
 
+    /// Whether the buffer's memory is the device's own and the host's writes need no flush
+    /// (integrated GPUs, resizable BAR, lavapipe): the host writes what the shaders read.
+    pub fn device_local_and_host_coherent(&self) -> bool {
+        self.allocation.as_ref().is_some_and(|a| {
+            a.memory_properties().contains(
+                vk::MemoryPropertyFlags::DEVICE_LOCAL
+                    | vk::MemoryPropertyFlags::HOST_VISIBLE
+                    | vk::MemoryPropertyFlags::HOST_COHERENT,
+            )
+        })
+    }
+
     /// The buffer's bytes, when the host can touch them in place.
     pub fn host_slice(&mut self) -> Option<&mut [u8]> {
         let a = self.allocation.as_mut()?;
