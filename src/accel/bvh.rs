@@ -78,7 +78,8 @@ impl ClusterBvh {
 
     /// Appends `(t_in, t_out, cluster)` for every cluster box the ray `origin + t dir` crosses
     /// within `[t0, t1]`, in f64 and local coordinates (the boxes' outward-rounded f32 bounds
-    /// are exact in f64, so nothing is missed to rounding).
+    /// are exact in f64, so nothing is missed to rounding). The tree is walked near child
+    /// first, so the boxes come out nearly in order of `t_in` (a sort of them is then cheap).
     pub fn ray_boxes(
         &self,
         origin: DVec3,
@@ -90,30 +91,47 @@ impl ClusterBvh {
         let Some(bvh) = &self.bvh else { return };
         let origin = origin - self.origin;
         let inv = dir.recip();
-        let hit = |b: &Aabb| -> Option<(f64, f64)> {
+        let hit = |b: &Aabb| -> Option<f64> {
             let lo = (b.min.as_dvec3() - origin) * inv;
             let hi = (b.max.as_dvec3() - origin) * inv;
             // NaN (0 * inf on a face) must not shrink the interval: min/max ignore NaN.
             let t_in = lo.min(hi).max_element().max(t0);
             let t_out = lo.max(hi).min_element().min(t1);
+            (t_in <= t_out).then_some(t_in)
+        };
+        let interval = |b: &Aabb| -> Option<(f64, f64)> {
+            let lo = (b.min.as_dvec3() - origin) * inv;
+            let hi = (b.max.as_dvec3() - origin) * inv;
+            let t_in = lo.min(hi).max_element().max(t0);
+            let t_out = lo.max(hi).min_element().min(t1);
             (t_in <= t_out).then_some((t_in, t_out))
         };
-        let mut stack = vec![0u32];
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        if hit(bvh.nodes[0].aabb()).is_some() {
+            stack.push(0);
+        }
         while let Some(index) = stack.pop() {
             let node = &bvh.nodes[index as usize];
-            if hit(node.aabb()).is_none() {
-                continue;
-            }
             if node.is_leaf() {
                 for i in node.first_index..node.first_index + node.prim_count {
                     let prim = bvh.primitive_indices[i as usize] as usize;
-                    if let Some((a, b)) = hit(&self.leaf_boxes[prim]) {
+                    if let Some((a, b)) = interval(&self.leaf_boxes[prim]) {
                         out.push((a, b, self.clusters[prim]));
                     }
                 }
-            } else {
-                stack.push(node.first_index);
-                stack.push(node.first_index + 1);
+                continue;
+            }
+            let (l, r) = (node.first_index, node.first_index + 1);
+            match (
+                hit(bvh.nodes[l as usize].aabb()),
+                hit(bvh.nodes[r as usize].aabb()),
+            ) {
+                // The nearer child goes on top of the stack.
+                (Some(a), Some(b)) if a <= b => stack.extend([r, l]),
+                (Some(_), Some(_)) => stack.extend([l, r]),
+                (Some(_), None) => stack.push(l),
+                (None, Some(_)) => stack.push(r),
+                (None, None) => {}
             }
         }
     }

@@ -487,7 +487,7 @@ impl GpuStepData {
         self.f32_error_bound = f32_phi_error(extremes.largest, extremes.r_min, extremes.r_max);
         self.double_single = match self.precision {
             Precision::F32 => false,
-            Precision::DoubleSingle => true,
+            Precision::DoubleSingle | Precision::F64 => true,
             Precision::Auto { tolerance } => self.f32_error_bound > tolerance,
         };
     }

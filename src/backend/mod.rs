@@ -150,21 +150,28 @@ pub struct StepInput<'a> {
     pub series_bounds: Bounds,
     /// The attribute's range over the series.
     pub series_range: Option<(f64, f64)>,
-    /// How precisely a GPU backend holds positions (the CPU backend computes in f64).
+    /// How precisely a backend holds positions: f32 or double-single on the GPU backends, f32
+    /// (the fast kernel) or f64 (the reference) on the CPU backend.
     pub precision: Precision,
 }
 
-/// How a GPU backend holds positions (`gpu_data` explains the error f32 positions carry).
+/// How precisely a backend holds positions and computes the field (`gpu_data` explains the
+/// error f32 positions carry; one rule decides for every backend).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Precision {
     /// f32 where this scene's positions and radii let it keep the relative error of Phi below
-    /// `tolerance`, double-single otherwise: what the scene needs, no more.
+    /// `tolerance`, otherwise double-single (GPU backends) or f64 (the CPU): what the scene
+    /// needs, no more.
     Auto { tolerance: f64 },
-    /// f32 positions in local coordinates, whatever the error.
+    /// f32 positions in local coordinates (and, on the CPU, the f32 kernel), whatever the
+    /// error.
     F32,
     /// Double-single positions (f32 hi + lo pairs, about 48 bits), whatever the scene.
     DoubleSingle,
+    /// f64 throughout: the CPU backend's reference field, exactly what the tests compare
+    /// against. The GPU backends hold double-single positions for it, the most they have.
+    F64,
 }
 
 impl Precision {
@@ -199,17 +206,18 @@ pub fn query_in_hilbert_order<B: Backend + ?Sized>(
     Ok(out)
 }
 
-/// The CLI spelling: `auto` (with the default tolerance of the command), `f32`, `ds`, or
-/// `auto:TOLERANCE`.
+/// The CLI spelling: `auto` (with the default tolerance of the command), `f32`, `ds`, `f64`,
+/// or `auto:TOLERANCE`.
 pub fn parse_precision(text: &str, auto: Precision) -> Result<Precision, String> {
     match text {
         "auto" => Ok(auto),
         "f32" => Ok(Precision::F32),
         "ds" | "double-single" => Ok(Precision::DoubleSingle),
+        "f64" => Ok(Precision::F64),
         t => match t.strip_prefix("auto:").map(str::parse::<f64>) {
             Some(Ok(tolerance)) if tolerance > 0.0 => Ok(Precision::Auto { tolerance }),
             _ => Err(format!(
-                "precision '{text}': expected auto, auto:TOLERANCE (e.g. auto:1e-4), f32 or ds"
+                "precision '{text}': expected auto, auto:TOLERANCE (e.g. auto:1e-4), f32, ds or f64"
             )),
         },
     }

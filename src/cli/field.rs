@@ -35,9 +35,10 @@ pub struct FieldArgs {
     /// pipeline) evaluate in f32 on a GPU (or lavapipe); `auto` picks the best.
     #[arg(long, value_enum, default_value = "cpu")]
     pub backend: BackendKind,
-    /// How a GPU backend holds positions: `auto` (f32 where the scene's radii allow a Phi
-    /// error below 1e-5, double-single pairs otherwise), `auto:TOLERANCE`, `f32` or `ds`
-    /// (double-single). The CPU backend computes in f64 whatever this says.
+    /// Precision of positions and arithmetic: `auto` (f32 where the scene's positions and
+    /// radii allow a Phi error below 1e-5; otherwise double-single pairs on the GPU backends and
+    /// the f64 reference on the CPU), `auto:TOLERANCE`, `f32`, `ds` (double-single) or `f64`
+    /// (the CPU's reference, exact to rounding; double-single on the GPU backends).
     #[arg(long, default_value = "auto")]
     pub precision: String,
     /// Overwrite an existing output.

@@ -35,9 +35,10 @@ pub struct RenderArgs {
     pub bit_depth: u8,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendKind,
-    /// How a GPU backend holds positions: `auto` (f32 where the scene's radii allow a Phi
-    /// error below 1e-3, double-single pairs otherwise; the default), `auto:TOLERANCE`, `f32`
-    /// or `ds`.
+    /// Precision of positions and arithmetic: `auto` (f32 where the scene's positions and
+    /// radii allow a Phi error below 1e-3; otherwise double-single pairs on the GPU backends and
+    /// the f64 reference on the CPU; the default), `auto:TOLERANCE`, `f32`, `ds`
+    /// (double-single) or `f64` (the CPU's reference; double-single on the GPU backends).
     #[arg(long)]
     pub precision: Option<String>,
     /// Also write a scene file (TOML) holding every setting the image used, the automatic

@@ -13,6 +13,8 @@
 //! with theta_i = s_i (post-classification; reported in the attribute's own units) or the
 //! linear-light colour C(t_i) (pre-classification).
 
+pub mod f32_field;
+pub mod f32_kernel;
 mod grid;
 mod inputs;
 mod particles;
@@ -20,6 +22,7 @@ mod reference;
 
 use serde::{Deserialize, Serialize};
 
+pub use f32_field::{F32Field, F32Ray};
 pub use grid::RegularGrid;
 pub use inputs::{FieldInputs, normalise};
 pub use particles::{FieldTables, Particles, Theta, particle_radius};

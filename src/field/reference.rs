@@ -139,7 +139,7 @@ impl ReferenceField {
         let mut hits = Vec::new();
         self.bvh
             .ray_boxes(origin - self.particles.origin, dir, t0, t1, &mut hits);
-        hits.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        hits.sort_by(|a, b| a.0.total_cmp(&b.0));
         for (a, b, _) in hits {
             match out.last_mut() {
                 Some(last) if a <= last.1 => last.1 = last.1.max(b),

@@ -26,19 +26,31 @@ use crate::values::frame::{ColourMode, Integrator, NoiseKind};
 use crate::values::shader_constants::{NOISE_OFFSETS, PHI_EPSILON};
 use crate::values::tables::{lookup, lookup_colour};
 
-/// The field as an integrator sees it.
+/// The field as an integrator sees it: sampled along rays, each at increasing distances (every
+/// integrator marches or tracks forward), so a sampler may keep what one sample found for the
+/// next ([`crate::field::F32Ray`]).
 pub trait FieldSampler: Sync {
-    /// Phi and the Theta numerator (Σ theta_i phi_i: normalised attribute in `[0]`, or
-    /// linear RGB) at `x`, in the data's coordinates.
-    fn sample(&self, x: DVec3) -> (f64, [f64; 3]);
+    /// What sampling along one ray keeps between samples; one per ray in flight (a pixel has
+    /// its primary ray and a shadow ray), made once per thread and reused.
+    type Ray: Default + Send;
 
-    /// Appends the sub-intervals of `[t0, t1]` along `origin + t dir` where the field may be
-    /// non-zero, in order. The default is the whole interval; a sampler that knows where its
-    /// particles are may leave out the rest, where Phi is 0 (the integrators skip it only when
-    /// density 0 has no extinction, see `march_intervals`).
-    fn occupied(&self, _origin: DVec3, _dir: DVec3, t0: f64, t1: f64, out: &mut Vec<(f64, f64)>) {
-        out.push((t0, t1));
-    }
+    /// Starts the ray `origin + t dir` over `[t0, t1]` and appends to `occupied` the ordered
+    /// sub-intervals where the field may be non-zero (all of it, for a sampler that does not
+    /// know where its particles are; outside them Phi is 0, and the integrators skip that
+    /// space when density 0 has no extinction, see `march_intervals`).
+    fn begin(
+        &self,
+        ray: &mut Self::Ray,
+        origin: DVec3,
+        dir: DVec3,
+        t0: f64,
+        t1: f64,
+        occupied: &mut Vec<(f64, f64)>,
+    );
+
+    /// Phi and the Theta numerator (Σ theta_i phi_i: normalised attribute in `[0]`, or
+    /// linear RGB) at `origin + t dir`, `t` at or after the ray's last sample.
+    fn sample(&self, ray: &mut Self::Ray, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]);
 }
 
 /// The integrator math on a frame (kept here, beside its only users, rather than with the
@@ -123,30 +135,34 @@ fn march(
     }
 }
 
-/// The sub-intervals of `[t0, t1]` along the ray to march: those where the field has
-/// particles, when space without particles is truly empty (the optical map's D(0) is 0);
-/// otherwise the whole interval, since extinction there is `scale · D(0)` (and its colour
-/// may show). The GPU backends march every sample; skipping changes no result where it is done.
-fn march_intervals(
+/// Starts sampling `ray` and gives the sub-intervals of `[t0, t1]` along it to march: those
+/// where the field has particles, when space without particles is truly empty (the optical
+/// map's D(0) is 0); otherwise the whole interval, since extinction there is `scale · D(0)`
+/// (and its colour may show). The GPU backends march every sample; skipping changes no result
+/// where it is done.
+#[allow(clippy::too_many_arguments)]
+fn march_intervals<F: FieldSampler>(
     p: &FrameParams,
-    field: &impl FieldSampler,
+    field: &F,
+    ray: &mut F::Ray,
     origin: DVec3,
     dir: DVec3,
     t0: f64,
     t1: f64,
     out: &mut Vec<(f64, f64)>,
 ) {
+    field.begin(ray, origin, dir, t0, t1, out);
     if p.shade(0.0, [0.0; 3]).0 > 0.0 {
+        out.clear();
         out.push((t0, t1));
-    } else {
-        field.occupied(origin, dir, t0, t1, out);
     }
 }
 
 /// Transmittance from `x` towards the light to the march box's exit: `exp(-Σ sigma dt)`.
-fn shadow(
+fn shadow<F: FieldSampler>(
     p: &FrameParams,
-    field: &impl FieldSampler,
+    field: &F,
+    ray: &mut F::Ray,
     x: DVec3,
     jitter: f64,
     scratch: &mut Vec<(f64, f64)>,
@@ -155,10 +171,14 @@ fn shadow(
         return 1.0;
     };
     scratch.clear();
-    march_intervals(p, field, x, p.light_dir, 0.0, t_exit, scratch);
+    march_intervals(p, field, ray, x, p.light_dir, 0.0, t_exit, scratch);
     let mut tau = 0.0;
+    let clear_where_empty = p.shade(0.0, [0.0; 3]).0 <= 0.0;
     march(0.0, t_exit, p.dt, jitter, scratch, |t| {
-        let (phi, num) = field.sample(x + p.light_dir * t);
+        let (phi, num) = field.sample(ray, x, p.light_dir, t);
+        if phi == 0.0 && clear_where_empty {
+            return true;
+        }
         tau += p.shade(phi, num).0 * p.dt;
         // Beyond this the light is gone to f64 precision; stop marching.
         tau < 745.0
@@ -166,20 +186,46 @@ fn shadow(
     (-tau).exp()
 }
 
-/// The radiance of pixel (x, y) in this frame: linear RGB and opacity.
-pub fn render_pixel(p: &FrameParams, field: &impl FieldSampler, x: u32, y: u32) -> [f64; 4] {
+/// The radiance of pixel (x, y) in this frame: linear RGB and opacity (rays made for the
+/// call; [`render_pixel_with`] reuses them).
+pub fn render_pixel<F: FieldSampler>(p: &FrameParams, field: &F, x: u32, y: u32) -> [f64; 4] {
+    render_pixel_with(p, field, x, y, &mut Default::default())
+}
+
+/// The radiance of pixel (x, y) in this frame: linear RGB and opacity. `rays` are the
+/// primary ray's and the shadow rays' sampling state.
+pub fn render_pixel_with<F: FieldSampler>(
+    p: &FrameParams,
+    field: &F,
+    x: u32,
+    y: u32,
+    rays: &mut (F::Ray, F::Ray),
+) -> [f64; 4] {
     let (origin, dir) = p.primary_ray(x, y);
     let bg = p.background;
     let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
         return [bg[0], bg[1], bg[2], 0.0];
     };
+    let (primary, shadow_ray) = rays;
+    // Where Phi is 0 and density 0 has no extinction a sample adds nothing: skip its shading.
+    let clear_where_empty = p.shade(0.0, [0.0; 3]).0 <= 0.0;
     let mut intervals = Vec::new();
-    march_intervals(p, field, origin, dir, t_enter, t_exit, &mut intervals);
+    march_intervals(
+        p,
+        field,
+        primary,
+        origin,
+        dir,
+        t_enter,
+        t_exit,
+        &mut intervals,
+    );
     let mut scratch = Vec::new();
-    let radiance =
+    let mut radiance =
         |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, shadow_jitter: f64| {
-            let light =
-                p.light_intensity * shadow(p, field, at, shadow_jitter, scratch) + p.ambient;
+            let light = p.light_intensity
+                * shadow(p, field, shadow_ray, at, shadow_jitter, scratch)
+                + p.ambient;
             albedo.map(|a| a * light)
         };
 
@@ -191,12 +237,15 @@ pub fn render_pixel(p: &FrameParams, field: &impl FieldSampler, x: u32, y: u32) 
             let mut colour = [0.0; 3];
             let mut transmittance = 1.0;
             march(t_enter, t_exit, p.dt, jitter, &intervals, |t| {
-                let at = origin + dir * t;
-                let (phi, num) = field.sample(at);
+                let (phi, num) = field.sample(primary, origin, dir, t);
+                if phi == 0.0 && clear_where_empty {
+                    return true;
+                }
                 let (sigma, rgb) = p.shade(phi, num);
                 if sigma <= 0.0 {
                     return true;
                 }
+                let at = origin + dir * t;
                 let alpha = 1.0 - (-sigma * p.dt).exp();
                 let emitted = if scatter {
                     radiance(at, rgb, &mut scratch, shadow_jitter)
@@ -223,8 +272,11 @@ pub fn render_pixel(p: &FrameParams, field: &impl FieldSampler, x: u32, y: u32) 
             let mut tau = 0.0;
             let mut hit = None;
             march(t_enter, t_exit, p.dt, jitter, &intervals, |t| {
+                let (phi, num) = field.sample(primary, origin, dir, t);
+                if phi == 0.0 && clear_where_empty {
+                    return true;
+                }
                 let at = origin + dir * t;
-                let (phi, num) = field.sample(at);
                 let (sigma, rgb) = p.shade(phi, num);
                 tau += sigma * p.dt;
                 if tau > target {
@@ -267,7 +319,7 @@ pub fn render_pixel(p: &FrameParams, field: &impl FieldSampler, x: u32, y: u32) 
                     t = intervals[interval].0 + over;
                 }
                 let at = origin + dir * t;
-                let (phi, num) = field.sample(at);
+                let (phi, num) = field.sample(primary, origin, dir, t);
                 let (sigma, rgb) = p.shade(phi, num);
                 let accept = p.random(x, y, dim);
                 dim += 1;
@@ -297,8 +349,22 @@ mod tests {
     struct Analytic<F: Fn(DVec3) -> f64 + Sync>(F);
 
     impl<F: Fn(DVec3) -> f64 + Sync> FieldSampler for Analytic<F> {
-        fn sample(&self, x: DVec3) -> (f64, [f64; 3]) {
-            let phi = (self.0)(x);
+        type Ray = ();
+
+        fn begin(
+            &self,
+            _: &mut (),
+            _: DVec3,
+            _: DVec3,
+            t0: f64,
+            t1: f64,
+            occupied: &mut Vec<(f64, f64)>,
+        ) {
+            occupied.push((t0, t1));
+        }
+
+        fn sample(&self, _: &mut (), origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
+            let phi = (self.0)(origin + dir * t);
             (phi, [0.5 * phi, 0.0, 0.0])
         }
     }

@@ -1,8 +1,12 @@
-//! The CPU backend: the f64 reference field (a BVH over Hilbert-sorted cluster boxes) and the
-//! integrators of [`integrators`] (the twin of `shaders_glsl/shared/integrators.glsl`), rayon over image tiles. It is the reference renderer
-//! GPU backends are compared with, and the fallback where no GPU driver exists. It computes in
-//! f64 throughout (as fast as f32 here, and one path instead of two), and skips empty space
-//! along rays with the BVH (the image is unchanged: the field there is 0).
+//! The CPU backend: the field of a step (a BVH over Hilbert-sorted cluster boxes) and the
+//! integrators of [`integrators`] (the twin of `shaders_glsl/shared/integrators.glsl`), rayon
+//! over image tiles. It is the reference renderer GPU backends are compared with, and the
+//! renderer where no GPU driver exists. Two precisions, chosen per scene by the same rule as
+//! the GPU backends' positions ([`Precision`]): the f64 reference ([`ReferenceField`], what
+//! every test compares against), and f32 ([`F32Field`]: the same particles, clusters and tree,
+//! evaluated eight at a time, one tree traversal per ray with the candidates kept between
+//! samples), where the scene's positions and radii let f32 keep the error asked for. Empty
+//! space along rays is skipped with the BVH (the image is unchanged: the field there is 0).
 
 mod accumulator;
 pub mod integrators;
@@ -15,9 +19,10 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use self::accumulator::Accumulator;
-use self::integrators::{FieldSampler, render_pixel};
-use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
-use crate::field::{FieldSettings, Particles, ReferenceField};
+use self::integrators::{FieldSampler, render_pixel_with};
+use super::gpu_data::f32_phi_error;
+use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
+use crate::field::{F32Field, F32Ray, FieldSettings, Particles, ReferenceField};
 use crate::values::{FrameParams, Image, Step};
 
 const TILE: u32 = 16;
@@ -29,6 +34,8 @@ struct Uploaded {
     field: FieldSettings,
     cluster: crate::accel::ClusterSize,
     series_range: Option<(f64, f64)>,
+    series_bounds: crate::values::Bounds,
+    precision: Precision,
 }
 
 /// The particles, sorted once per upload, before and after the structure is built over them
@@ -59,6 +66,11 @@ pub struct CpuBackend {
     capabilities: Capabilities,
     uploaded: Option<Uploaded>,
     prepared: Option<Prepared>,
+    /// The field in f32, when the scene's precision allows it (made after every build, refit
+    /// and map change).
+    packed: Option<F32Field>,
+    /// The bound on the relative Phi error f32 positions would cause in the uploaded scene.
+    f32_error_bound: f64,
     accumulator: Option<Accumulator>,
     timings: Timings,
     abandon: Option<Arc<AtomicBool>>,
@@ -82,6 +94,8 @@ impl CpuBackend {
             },
             uploaded: None,
             prepared: None,
+            packed: None,
+            f32_error_bound: 0.0,
             accumulator: None,
             timings: Timings::default(),
             abandon: None,
@@ -107,16 +121,127 @@ impl CpuBackend {
         up.field = field.clone();
         Ok(up)
     }
+
+    /// Decides the precision of the built field ([`Precision`], by the f32 error bound of
+    /// `gpu_data`, one rule for every backend) and packs the particles for the f32 kernel when
+    /// it is f32.
+    fn choose_precision(&mut self) {
+        self.packed = None;
+        let (Some(up), Some(Prepared::Built(field))) = (&self.uploaded, &self.prepared) else {
+            return;
+        };
+        let p = &field.particles;
+        let (r_min, r_max) = p
+            .radii
+            .par_iter()
+            .filter(|&&r| r > 0.0)
+            .fold(
+                || (f64::INFINITY, 0.0f64),
+                |(lo, hi), &r| (lo.min(r), hi.max(r)),
+            )
+            .reduce(|| (f64::INFINITY, 0.0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+        // Local coordinates are relative to the series' centre: none exceeds its half-extent.
+        let b = up.series_bounds;
+        let largest = if b.is_empty() {
+            0.0
+        } else {
+            (b.max - b.min).max_element() * 0.5
+        };
+        self.f32_error_bound = f32_phi_error(largest, r_min, r_max);
+        let f32_allowed = match up.precision {
+            Precision::F32 => true,
+            Precision::DoubleSingle | Precision::F64 => false,
+            Precision::Auto { tolerance } => self.f32_error_bound <= tolerance,
+        };
+        if f32_allowed {
+            self.packed = Some(F32Field::new(p));
+        }
+    }
+
+    /// The field as the integrators and queries use it: f32 or the f64 reference.
+    fn sampler(&self) -> Result<Sampler<'_>, BackendError> {
+        let reference = self.field()?;
+        Ok(match &self.packed {
+            Some(packed) => Sampler::F32(packed),
+            None => Sampler::F64(reference),
+        })
+    }
+}
+
+/// The field a frame or a query reads.
+enum Sampler<'a> {
+    F64(&'a ReferenceField),
+    F32(&'a F32Field),
 }
 
 impl FieldSampler for ReferenceField {
-    fn sample(&self, x: DVec3) -> (f64, [f64; 3]) {
-        self.eval_sums(x)
+    type Ray = ();
+
+    fn begin(
+        &self,
+        _: &mut (),
+        origin: DVec3,
+        dir: DVec3,
+        t0: f64,
+        t1: f64,
+        occupied: &mut Vec<(f64, f64)>,
+    ) {
+        self.occupied_intervals(origin, dir, t0, t1, occupied);
     }
 
-    fn occupied(&self, origin: DVec3, dir: DVec3, t0: f64, t1: f64, out: &mut Vec<(f64, f64)>) {
-        self.occupied_intervals(origin, dir, t0, t1, out);
+    fn sample(&self, _: &mut (), origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
+        self.eval_sums(origin + dir * t)
     }
+}
+
+impl FieldSampler for F32Field {
+    type Ray = F32Ray;
+
+    fn begin(
+        &self,
+        _: &mut F32Ray,
+        origin: DVec3,
+        dir: DVec3,
+        t0: f64,
+        t1: f64,
+        occupied: &mut Vec<(f64, f64)>,
+    ) {
+        self.occupied(origin, dir, t0, t1, occupied);
+    }
+
+    fn sample(&self, ray: &mut F32Ray, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
+        self.eval_sums(origin + dir * t, ray)
+    }
+}
+
+/// Renders one frame's pixels with `field`, rayon over tiles, each tile's rays reused for its
+/// pixels; None when `abandoned` said so before a tile.
+fn render_tiles<F: FieldSampler>(
+    frame: &FrameParams,
+    field: &F,
+    abandoned: &(dyn Fn() -> bool + Sync),
+) -> Vec<Vec<[f64; 4]>> {
+    let (w, h) = (frame.width, frame.height);
+    let tiles_x = w.div_ceil(TILE);
+    (0..tiles_x * h.div_ceil(TILE))
+        .into_par_iter()
+        .map_init(
+            || (F::Ray::default(), F::Ray::default()),
+            |rays, tile| {
+                let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+                if abandoned() {
+                    return Vec::new();
+                }
+                let mut out = Vec::with_capacity((TILE * TILE) as usize);
+                for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                    for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                        out.push(render_pixel_with(frame, field, x, y, rays));
+                    }
+                }
+                out
+            },
+        )
+        .collect()
 }
 
 impl Backend for CpuBackend {
@@ -137,8 +262,11 @@ impl Backend for CpuBackend {
             field: input.field.clone(),
             cluster: input.cluster,
             series_range: input.series_range,
+            series_bounds: input.series_bounds,
+            precision: input.precision,
         });
         self.prepared = Some(Prepared::Sorted(particles));
+        self.packed = None;
         // Nothing moves to a device: preparing is the whole upload.
         self.timings.prepare = started.elapsed();
         self.timings.upload = std::time::Duration::ZERO;
@@ -154,6 +282,7 @@ impl Backend for CpuBackend {
             prepared.into_particles(),
             up.cluster,
         )));
+        self.choose_precision();
         self.timings.build = started.elapsed();
         Ok(())
     }
@@ -169,19 +298,28 @@ impl Backend for CpuBackend {
             .expect("applied above")
             .into_particles();
         self.prepared = Some(Prepared::Built(ReferenceField::new(particles, cluster)));
+        self.choose_precision();
         self.timings.refit = started.elapsed();
         Ok(())
     }
 
     fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         self.apply_field(field)?;
+        if matches!(self.prepared, Some(Prepared::Built(_))) {
+            self.choose_precision();
+        }
         Ok(())
     }
 
     fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
         let started = Instant::now();
-        let field = self.field()?;
-        let out = points.par_iter().map(|&x| field.eval_sums(x)).collect();
+        let out = match self.sampler()? {
+            Sampler::F64(field) => points.par_iter().map(|&x| field.eval_sums(x)).collect(),
+            Sampler::F32(field) => points
+                .par_iter()
+                .map_init(F32Ray::default, |scratch, &x| field.eval_sums(x, scratch))
+                .collect(),
+        };
         self.timings.query = started.elapsed();
         Ok(out)
     }
@@ -198,7 +336,6 @@ impl Backend for CpuBackend {
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
         let started = Instant::now();
-        let field = self.field()?;
         let (w, h) = (frame.width, frame.height);
         let tiles_x = w.div_ceil(TILE);
         let abandoned = || {
@@ -206,22 +343,10 @@ impl Backend for CpuBackend {
                 .as_ref()
                 .is_some_and(|f| f.load(Ordering::Relaxed))
         };
-        let tiles: Vec<Vec<[f64; 4]>> = (0..tiles_x * h.div_ceil(TILE))
-            .into_par_iter()
-            .map(|tile| {
-                let (tx, ty) = (tile % tiles_x, tile / tiles_x);
-                if abandoned() {
-                    return Vec::new();
-                }
-                let mut out = Vec::with_capacity((TILE * TILE) as usize);
-                for y in ty * TILE..((ty + 1) * TILE).min(h) {
-                    for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                        out.push(render_pixel(frame, field, x, y));
-                    }
-                }
-                out
-            })
-            .collect();
+        let tiles = match self.sampler()? {
+            Sampler::F64(field) => render_tiles(frame, field, &abandoned),
+            Sampler::F32(field) => render_tiles(frame, field, &abandoned),
+        };
         // Checked once more after every tile: a tile that saw no flag may have been followed
         // by one that did; the accumulation is untouched either way.
         if abandoned() {
@@ -268,7 +393,12 @@ impl Backend for CpuBackend {
     }
 
     fn positions(&self) -> Option<super::Positions> {
-        self.uploaded.as_ref().map(|_| super::Positions::F64)
+        self.uploaded.as_ref().map(|_| match self.packed {
+            Some(_) => super::Positions::F32 {
+                error_bound: self.f32_error_bound,
+            },
+            None => super::Positions::F64,
+        })
     }
 
     fn memory(&self) -> MemoryReport {
@@ -286,7 +416,7 @@ impl Backend for CpuBackend {
                 }
         });
         MemoryReport {
-            particle_bytes,
+            particle_bytes: particle_bytes + self.packed.as_ref().map_or(0, F32Field::bytes),
             structure_bytes: self.field().map_or(0, ReferenceField::structure_bytes),
             image_bytes: self.accumulator.as_ref().map_or(0, Accumulator::bytes),
             preparation_bytes: 0,

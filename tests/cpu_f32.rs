@@ -1,0 +1,281 @@
+//! The CPU backend's f32 path (the cell grid and the eight-lane kernel) against the f64
+//! reference, on data as simulations write it: f64 positions far from the origin, radii across
+//! eight orders of magnitude, awkward counts, a per-particle radius attribute; and its two
+//! builds (AVX2 and baseline) against each other, bit for bit.
+
+use aarbf::accel::ClusterSize;
+use aarbf::backend::{self, BackendKind, Positions, Precision, StepInput};
+use aarbf::field::f32_kernel;
+use aarbf::field::{Classification, F32Field, F32Ray, FieldSettings, Particles, ReferenceField};
+use aarbf::render::{RenderSession, RenderSettings};
+use aarbf::scene::TimeSeries;
+use aarbf::scene::synth::Generator;
+use aarbf::values::{Attribute, Bounds, Integrator, NoiseKind, Step};
+use glam::DVec3;
+use proptest::prelude::*;
+use rand::{Rng, SeedableRng};
+
+/// `n` particles in a cube of side `side` at `offset`, clumped (half of them within a few
+/// radii of each other), with an attribute `s` and a smoothing length `h` spread over 4x.
+fn step(n: usize, seed: u64, offset: f64, side: f64) -> Step {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let positions: Vec<DVec3> = (0..n)
+        .map(|i| {
+            let u = DVec3::new(rng.random(), rng.random(), rng.random());
+            let u = if i % 2 == 0 { u } else { 0.4 + 0.05 * u };
+            DVec3::splat(offset) + u * side
+        })
+        .collect();
+    let s = (0..n).map(|_| rng.random_range(-3.0..5.0)).collect();
+    let h = (0..n).map(|_| rng.random_range(0.25..1.0)).collect();
+    Step {
+        name: format!("seed {seed}"),
+        positions,
+        attributes: vec![
+            Attribute {
+                name: "s".into(),
+                values: s,
+            },
+            Attribute {
+                name: "h".into(),
+                values: h,
+            },
+        ],
+    }
+}
+
+/// What f32 cannot decide: particles whose sphere's edge lies within the rounding of the f32
+/// local coordinates of `x` (a kernel may count them in or out; the phi at an edge is
+/// exp(-4.5) w, not small), each at most its kernel at its distance less that rounding.
+fn edge_allowance(reference: &ReferenceField, x: DVec3) -> (f64, f64) {
+    let p = &reference.particles;
+    let local = x - p.origin;
+    let mut phi = 0.0;
+    let mut num = 0.0;
+    for i in 0..p.len() {
+        let r = p.radii[i];
+        let d = (local - p.centers[i]).length();
+        let band = 1e-5 * r
+            + 4.0
+                * f64::from(f32::EPSILON)
+                * (local.abs().max_element() + p.centers[i].abs().max_element());
+        if r > 0.0 && (d - r).abs() <= band {
+            let nearest = (d - band).max(0.0) / r;
+            let w = p.weights[i] * (-4.5 * nearest * nearest).exp() * 1.01;
+            phi += w;
+            num += w * match &p.theta {
+                aarbf::field::Theta::Scalar(t) => t[i].abs(),
+                _ => 1.0,
+            };
+        }
+    }
+    (phi, num)
+}
+
+fn check_against_reference(
+    n: usize,
+    seed: u64,
+    offset: f64,
+    radius: f64,
+    per_particle: bool,
+) -> Result<(), TestCaseError> {
+    let step = std::sync::Arc::new(step(n, seed, offset, 1.0));
+    let bounds = Bounds::of_points(&step.positions);
+    let mut field = FieldSettings::new(Some("s"), radius);
+    if per_particle {
+        field.radius_attribute = Some("h".into());
+    }
+    let range = Some((-3.0, 5.0));
+    let cluster = ClusterSize::new(4).unwrap();
+    let reference = ReferenceField::of_step(&step, &field, cluster, bounds, range).unwrap();
+    let mut cpu = backend::create(BackendKind::Cpu).unwrap();
+    cpu.upload(&StepInput {
+        step: &step,
+        field: &field,
+        cluster,
+        series_bounds: bounds,
+        series_range: range,
+        precision: Precision::F32,
+    })
+    .unwrap();
+    cpu.build().unwrap();
+    let Some(Positions::F32 { error_bound }) = cpu.positions() else {
+        panic!("f32 was asked for: {:?}", cpu.positions());
+    };
+    // Points anywhere, and points within reach of particles (where tiny radii put the field).
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x5eed);
+    let mut queries: Vec<DVec3> = (0..200)
+        .map(|_| DVec3::splat(offset) + DVec3::new(rng.random(), rng.random(), rng.random()))
+        .collect();
+    for i in (0..n).step_by((n / 300).max(1)) {
+        let u = DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - 1.0;
+        queries.push(step.positions[i] + u * radius * 0.6);
+    }
+    let got = cpu.query(&queries).unwrap();
+    let tolerance = 1e-5 + error_bound;
+    for (x, (phi, num)) in queries.iter().zip(got) {
+        let (rphi, rnum) = reference.eval_sums(*x);
+        let (edge_phi, edge_num) = edge_allowance(&reference, *x);
+        prop_assert!(
+            (phi - rphi).abs() <= tolerance * rphi + edge_phi + 1e-30,
+            "n {n}, offset {offset:e}, radius {radius:e}: Phi {phi} vs {rphi} at {x} (bound {error_bound:e})"
+        );
+        prop_assert!(
+            (num[0] - rnum[0]).abs() <= tolerance * rnum[0].abs().max(rphi) + edge_num + 1e-30,
+            "n {n}, offset {offset:e}, radius {radius:e}: Theta {} vs {} at {x}",
+            num[0],
+            rnum[0]
+        );
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Radii from 1e-6 to 1e2 of the data's extent, offsets up to 1e6, counts that are not
+    /// powers of two: the f32 field is within the error bound the backend states.
+    #[test]
+    fn f32_field_is_within_its_stated_bound_of_the_reference(
+        n in 1usize..2500,
+        seed in 0u64..1000,
+        offset_exp in prop_oneof![Just(None), (0i32..=6).prop_map(Some)],
+        radius_exp in -6.0f64..2.0,
+        per_particle in any::<bool>(),
+    ) {
+        let offset = offset_exp.map_or(0.0, |e| -(10f64.powi(e)));
+        check_against_reference(n, seed, offset, 10f64.powf(radius_exp), per_particle)?;
+    }
+}
+
+/// The AVX2 build of the kernel and the baseline one give the same field and the same image,
+/// bit for bit (the dispatch forced off for the second), and the AVX2 build is the one used
+/// where the CPU has it.
+#[test]
+fn simd_and_baseline_builds_agree_bit_for_bit() {
+    #[cfg(target_arch = "x86_64")]
+    assert_eq!(
+        f32_kernel::simd_in_use(),
+        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma"),
+        "the dispatch uses AVX2 exactly where the CPU has it"
+    );
+    let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(2999, 3, 1));
+    let mut field = FieldSettings::new(Some("velocity"), 0.02 * series.bounds().diagonal());
+    field.classification = Classification::Pre;
+    let run = |simd: bool| {
+        f32_kernel::allow_simd(simd);
+        let mut s = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
+        s.set_precision(Precision::F32);
+        s.show(&series, 2, &field, ClusterSize::new(4).unwrap())
+            .unwrap();
+        let image = s
+            .render(
+                &RenderSettings {
+                    width: 40,
+                    height: 33,
+                    integrator: Integrator::Marching,
+                    noise: NoiseKind::Stbn,
+                    ..RenderSettings::default()
+                },
+                2,
+            )
+            .unwrap();
+        f32_kernel::allow_simd(true);
+        image
+    };
+    let (fast, baseline) = (run(true), run(false));
+    let bits = |i: &aarbf::values::Image| -> Vec<u32> {
+        i.pixels.iter().flatten().map(|v| v.to_bits()).collect()
+    };
+    assert!(bits(&fast) == bits(&baseline), "images differ");
+    assert!(
+        fast.pixels.iter().any(|p| p[3] > 0.3),
+        "the fluid is visible"
+    );
+}
+
+/// The f32 image of the demo equals the f64 reference's to well below an 8-bit step (the same
+/// random numbers drive both: only the field differs).
+#[test]
+fn f32_and_f64_images_agree() {
+    let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(3001, 4, 1));
+    let field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());
+    let render = |precision| {
+        let mut s = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
+        s.set_precision(precision);
+        s.show(&series, 3, &field, ClusterSize::new(4).unwrap())
+            .unwrap();
+        let image = s
+            .render(
+                &RenderSettings {
+                    width: 48,
+                    height: 37,
+                    integrator: Integrator::Ea,
+                    noise: NoiseKind::Stbn,
+                    ..RenderSettings::default()
+                },
+                2,
+            )
+            .unwrap();
+        (image, s.backend().positions())
+    };
+    let ((f32_image, f32_positions), (f64_image, f64_positions)) =
+        (render(Precision::RENDER), render(Precision::F64));
+    assert!(
+        matches!(f32_positions, Some(Positions::F32 { .. })),
+        "{f32_positions:?}"
+    );
+    assert_eq!(f64_positions, Some(Positions::F64));
+    let worst = f32_image
+        .pixels
+        .iter()
+        .zip(&f64_image.pixels)
+        .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "largest pixel difference {worst}");
+    assert!(f64_image.pixels.iter().any(|p| p[3] > 0.3));
+}
+
+/// Empty-space skipping never skips field: along random rays through a clumped scene, every
+/// sample with density lies inside an interval the cell walk reported, and those intervals are
+/// ordered and disjoint.
+#[test]
+fn the_cell_walk_misses_no_density() {
+    let step = step(1777, 9, -1234.5, 3.0);
+    let bounds = Bounds::of_points(&step.positions);
+    let mut field = FieldSettings::new(Some("s"), 0.04);
+    field.radius_attribute = Some("h".into());
+    let particles = Particles::prepare(&step, &field, bounds, Some((-3.0, 5.0))).unwrap();
+    let f32_field = F32Field::new(&particles);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(4);
+    let mut scratch = F32Ray::default();
+    let mut intervals = Vec::new();
+    let mut checked = 0;
+    for _ in 0..300 {
+        let origin =
+            bounds.center() + DVec3::new(rng.random(), rng.random(), rng.random()) * 8.0 - 4.0;
+        // Aimed near the clump, some exactly along an axis.
+        let mut dir = (bounds.min + (bounds.max - bounds.min) * 0.42 - origin).normalize();
+        if checked % 7 == 0 {
+            dir = DVec3::X * dir.x.signum();
+        }
+        let (t0, t1) = (0.0, 12.0);
+        intervals.clear();
+        f32_field.occupied(origin, dir, t0, t1, &mut intervals);
+        for w in intervals.windows(2) {
+            assert!(w[0].1 < w[1].0, "ordered and disjoint: {intervals:?}");
+        }
+        for k in 0..4000 {
+            let t = t0 + (t1 - t0) * (f64::from(k) + 0.5) / 4000.0;
+            let (phi, _) = f32_field.eval_sums(origin + dir * t, &mut scratch);
+            if phi > 0.0 {
+                checked += 1;
+                assert!(
+                    intervals.iter().any(|&(a, b)| a <= t && t <= b),
+                    "density {phi} at t = {t} outside {intervals:?}"
+                );
+            }
+        }
+    }
+    assert!(checked > 1000, "rays met density ({checked} samples)");
+}
