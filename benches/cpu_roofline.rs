@@ -1,8 +1,9 @@
 //! How close the CPU backend's field queries run to what this machine can do: the peak rate
 //! of RBF terms (w · exp(-4.5 d²/r²) for particles within r) in a tight loop over particles
-//! in cache, against the terms per second the backend achieves on N particles × M queries
-//! (~30 terms a query), at every thread count up to the machine's. Results go to
-//! docs/benchmarks.md.
+//! in cache (a scalar f64 loop as the reference evaluates a term; the f32 kernel's AVX2 and
+//! baseline builds), against the terms per second the backend achieves on N particles × M
+//! queries (~30 terms a query) in f64 and in f32, at every thread count up to the machine's.
+//! Results go to docs/benchmarks.md.
 //!
 //! cargo xtask bench cpu_roofline -- [N] [M]     (defaults: 1000000 1000000)
 //!
@@ -13,7 +14,9 @@
 use std::time::Instant;
 
 use aarbf::accel::ClusterSize;
-use aarbf::field::{FieldSettings, ReferenceField};
+use aarbf::backend::{self, Backend, BackendKind, Precision, StepInput};
+use aarbf::field::FieldSettings;
+use aarbf::field::f32_kernel::{self, Packed};
 use aarbf::scene::synth::Generator;
 use aarbf::values::Bounds;
 use glam::DVec3;
@@ -40,8 +43,23 @@ fn main() {
     let radius = (30.0 * 3.0 / (4.0 * std::f64::consts::PI * n as f64)).cbrt();
     let field = FieldSettings::new(None, radius);
     let bounds = Bounds::of_points(&step.positions);
-    let reference =
-        ReferenceField::of_step(&step, &field, ClusterSize::new(4).unwrap(), bounds, None).unwrap();
+    let step = std::sync::Arc::new(step);
+    let backend_with = |precision| -> Box<dyn Backend> {
+        let mut b = backend::create(BackendKind::Cpu).unwrap();
+        b.upload(&StepInput {
+            step: &step,
+            field: &field,
+            cluster: ClusterSize::new(4).unwrap(),
+            series_bounds: bounds,
+            series_range: None,
+            precision,
+        })
+        .unwrap();
+        b.build().unwrap();
+        b
+    };
+    let mut f64_backend = backend_with(Precision::F64);
+    let mut f32_backend = backend_with(Precision::F32);
     let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
     let mut queries: Vec<DVec3> = (0..m)
         .map(|_| DVec3::new(rng.random(), rng.random(), rng.random()))
@@ -56,19 +74,10 @@ fn main() {
         t.elapsed().as_secs_f64()
     );
 
-    // The vectorised exp's error over the kernel's range (d <= r: x in [-4.5, 0]).
-    let exp_error = (0..=100_000)
-        .map(|i| {
-            let x = (-4.5 * f64::from(i) / 100_000.0) as f32;
-            let e = wide::f32x8::splat(x).exp().to_array()[0];
-            (f64::from(e) / f64::from(x).exp() - 1.0).abs()
-        })
-        .fold(0.0, f64::max);
-    eprintln!("f32x8 exp: largest relative error over [-4.5, 0]: {exp_error:.2e}");
     println!(
-        "| threads | peak, f64 scalar exp (G terms/s) | peak, f32x8 with vector exp (G terms/s) | backend field queries (M terms/s) | backend / f64 peak | backend / f32x8 peak |"
+        "| threads | peak, f64 scalar exp (G terms/s) | peak, f32 kernel AVX2 (G terms/s) | peak, f32 kernel baseline (G terms/s) | backend f64 (M terms/s) | backend f32 (M terms/s) | f64 / f64 peak | f32 / AVX2 peak | f32 / f64 |"
     );
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let mut threads = vec![1];
     let mut t = 2;
     while t <= cores {
@@ -79,38 +88,60 @@ fn main() {
         threads.push(cores);
     }
     let mut achieved_by_threads = Vec::new();
+    let simd = f32_kernel::simd_in_use();
     for &k in &threads {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(k)
             .build()
             .unwrap();
-        let (peak64, peak32, achieved) = pool.install(|| {
+        let row = pool.install(|| {
             let peak64 = best_rate(3, || peak_f64(k));
-            let peak32 = best_rate(3, || peak_f32_simd(k));
-            let achieved = best_rate(2, || {
-                let t = Instant::now();
-                let sum: f64 = queries.par_iter().map(|&x| reference.eval_sums(x).0).sum();
-                std::hint::black_box(sum);
-                (terms, t.elapsed().as_secs_f64())
-            });
-            (peak64, peak32, achieved)
+            let peak_avx2 = best_rate(3, || peak_f32_kernel(k));
+            f32_kernel::allow_simd(false);
+            let peak_baseline = best_rate(3, || peak_f32_kernel(k));
+            f32_kernel::allow_simd(true);
+            let achieved = |b: &mut Box<dyn Backend>| {
+                best_rate(2, || {
+                    let t = Instant::now();
+                    let sum: f64 = b.query(&queries).unwrap().iter().map(|s| s.0).sum();
+                    std::hint::black_box(sum);
+                    (terms, t.elapsed().as_secs_f64())
+                })
+            };
+            let a64 = achieved(&mut f64_backend);
+            let a32 = achieved(&mut f32_backend);
+            (peak64, peak_avx2, peak_baseline, a64, a32)
         });
-        achieved_by_threads.push(achieved);
+        let (peak64, peak_avx2, peak_baseline, a64, a32) = row;
+        achieved_by_threads.push((a64, a32));
         println!(
-            "| {k} | {:.3} | {:.3} | {:.1} | {:.1}% | {:.1}% |",
+            "| {k} | {:.3} | {} | {:.3} | {:.1} | {:.1} | {:.1}% | {} | {:.1}x |",
             peak64 / 1e9,
-            peak32 / 1e9,
-            achieved / 1e6,
-            100.0 * achieved / peak64,
-            100.0 * achieved / peak32
+            if simd {
+                format!("{:.3}", peak_avx2 / 1e9)
+            } else {
+                "(no AVX2)".into()
+            },
+            peak_baseline / 1e9,
+            a64 / 1e6,
+            a32 / 1e6,
+            100.0 * a64 / peak64,
+            if simd {
+                format!("{:.1}%", 100.0 * a32 / peak_avx2)
+            } else {
+                "-".into()
+            },
+            a32 / a64
         );
     }
+    let (first, last) = (achieved_by_threads[0], *achieved_by_threads.last().unwrap());
     println!(
         "\nN = {n}, M = {m} (Hilbert-ordered), radius = {radius:.5} (unit cube), K = 4, \
-         {:.1} terms a query; scaling from 1 to {} threads: {:.2}x",
+         {:.1} terms a query; scaling from 1 to {} threads: {:.2}x (f64), {:.2}x (f32)",
         terms as f64 / m as f64,
         threads.last().unwrap(),
-        achieved_by_threads.last().unwrap() / achieved_by_threads[0]
+        last.0 / first.0,
+        last.1 / first.1
     );
 }
 
@@ -227,40 +258,36 @@ fn peak_f64(threads: usize) -> (u64, f64) {
     )
 }
 
-/// Terms a second in f32, eight at a time (`wide::f32x8`, with its vectorised exp; SSE2 pairs
-/// on a build for baseline x86-64, AVX2 where the build targets it): the ceiling a
-/// vectorised evaluation reaches on this CPU with the instructions this build uses.
-fn peak_f32_simd(threads: usize) -> (u64, f64) {
+/// Terms a second of the backend's f32 kernel over the block in cache, in whichever build
+/// (AVX2 or baseline) the dispatch allows now: the ceiling of the kernel on this CPU.
+fn peak_f32_kernel(threads: usize) -> (u64, f64) {
     let (b, queries) = block::<f32>();
+    let mut packed = Packed {
+        x: b.x,
+        y: b.y,
+        z: b.z,
+        // Radius 1 covers the block.
+        r2: vec![1.0; BLOCK],
+        k: vec![4.5; BLOCK],
+        w: b.w,
+        theta: [Vec::new(), Vec::new(), Vec::new()],
+        channels: 0,
+    };
+    packed.pad();
+    let runs = [(0u32, BLOCK as u32)];
     let t = Instant::now();
-    let sum: f32 = (0..threads)
+    let sum: f64 = (0..threads)
         .into_par_iter()
-        .map(|_| queries.iter().map(|q| block_sum(&b, *q)).sum::<f32>())
+        .map(|_| {
+            queries
+                .iter()
+                .map(|q| packed.sums(&runs, *q).0)
+                .sum::<f64>()
+        })
         .sum();
     std::hint::black_box(sum);
     (
         (threads * BLOCK * PEAK_QUERIES) as u64,
         t.elapsed().as_secs_f64(),
     )
-}
-
-/// The in-range terms of one query over the block, eight lanes at a time, branch-free (an
-/// out-of-range term is blended to 0).
-fn block_sum(b: &Block<f32>, q: [f32; 3]) -> f32 {
-    use wide::{CmpLe, f32x8};
-    let (qx, qy, qz) = (f32x8::splat(q[0]), f32x8::splat(q[1]), f32x8::splat(q[2]));
-    let mut acc = f32x8::ZERO;
-    for (((x, y), z), w) in
-        b.x.chunks_exact(8)
-            .zip(b.y.chunks_exact(8))
-            .zip(b.z.chunks_exact(8))
-            .zip(b.w.chunks_exact(8))
-    {
-        let lane = |s: &[f32]| f32x8::from(<[f32; 8]>::try_from(s).unwrap());
-        let (dx, dy, dz) = (lane(x) - qx, lane(y) - qy, lane(z) - qz);
-        let d2 = dx * dx + dy * dy + dz * dz;
-        let term = lane(w) * (f32x8::splat(-4.5) * d2).exp();
-        acc += d2.cmp_le(f32x8::ONE).blend(term, f32x8::ZERO);
-    }
-    acc.reduce_add()
 }
