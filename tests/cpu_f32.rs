@@ -279,3 +279,54 @@ fn the_cell_walk_misses_no_density() {
     }
     assert!(checked > 1000, "rays met density ({checked} samples)");
 }
+
+/// A map change and a radius change on the f32 path give exactly what a fresh upload with the
+/// new field gives, and the f32 path builds only its cells: no BVH (its structure is the
+/// grid, smaller than the reference's tree over the same particles).
+#[test]
+fn changes_rebuild_the_cells_and_nothing_else_is_built() {
+    let step = std::sync::Arc::new(step(2047, 31, 1e4, 2.0));
+    let bounds = Bounds::of_points(&step.positions);
+    let range = Some((-3.0, 5.0));
+    let cluster = ClusterSize::new(4).unwrap();
+    let make = |field: &FieldSettings, precision| {
+        let mut b = backend::create(BackendKind::Cpu).unwrap();
+        b.upload(&StepInput {
+            step: &step,
+            field,
+            cluster,
+            series_bounds: bounds,
+            series_range: range,
+            precision,
+        })
+        .unwrap();
+        b.build().unwrap();
+        b
+    };
+    let base = FieldSettings::new(Some("s"), 0.3);
+    let mut mapped = base.clone();
+    mapped.density_map = aarbf::scene::maps::DensityMap::new("ramp".parse().unwrap()).unwrap();
+    let mut wider = mapped.clone();
+    wider.radius = 0.45;
+    let queries: Vec<DVec3> = step.positions.iter().step_by(7).copied().collect();
+    let mut b = make(&base, Precision::F32);
+    b.update_maps(&mapped).unwrap();
+    assert_eq!(
+        b.query(&queries).unwrap(),
+        make(&mapped, Precision::F32).query(&queries).unwrap(),
+        "after a map change"
+    );
+    b.refit(&wider).unwrap();
+    assert_eq!(
+        b.query(&queries).unwrap(),
+        make(&wider, Precision::F32).query(&queries).unwrap(),
+        "after a radius change"
+    );
+    let (f32_memory, f64_memory) = (b.memory(), make(&wider, Precision::F64).memory());
+    assert!(
+        f32_memory.structure_bytes < f64_memory.structure_bytes,
+        "cells {} B, BVH {} B",
+        f32_memory.structure_bytes,
+        f64_memory.structure_bytes
+    );
+}

@@ -139,9 +139,14 @@ impl F32Field {
         }
     }
 
-    /// Bytes of the packed arrays and the grid.
-    pub fn bytes(&self) -> usize {
-        self.particles.bytes() + 5 * self.reached.len()
+    /// Bytes of the packed particles.
+    pub fn particle_bytes(&self) -> usize {
+        self.particles.bytes()
+    }
+
+    /// Bytes of the grid (the cells' starts and whether each is reached).
+    pub fn grid_bytes(&self) -> usize {
+        4 * self.start.len() + self.reached.len()
     }
 
     /// The cell width (at least the largest radius).

@@ -15,7 +15,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::reference::Accumulator;
-use super::{ReferenceField, Sample, Theta};
+use super::{Particles, ReferenceField, Sample, Theta};
 
 /// Points `origin + i·spacing[0]·e[axes[0]] + j·spacing[1]·e[axes[1]] + k·spacing[2]·e[axes[2]]`
 /// for `i < dims[0]`, `j < dims[1]`, `k < dims[2]`, stored with i fastest: `axes` says which
@@ -106,7 +106,15 @@ impl ReferenceField {
             .collect()
     }
 
-    /// Phi and the Theta numerator at every point of `grid` (what `eval_sums` gives there).
+    /// Phi and the Theta numerator at every point of `grid` ([`Particles::eval_grid_sums`]).
+    pub fn eval_grid_sums(&self, grid: &RegularGrid) -> Vec<(f64, [f64; 3])> {
+        self.particles.eval_grid_sums(grid)
+    }
+}
+
+impl Particles {
+    /// Phi and the Theta numerator at every point of `grid` (what the reference's `eval_sums`
+    /// gives there), scattering each particle onto the grid points it reaches: no tree.
     /// Parallel over blocks of grid rows; each block takes the particles that reach it, in
     /// Hilbert order, so the result does not depend on the number of threads.
     pub fn eval_grid_sums(&self, grid: &RegularGrid) -> Vec<(f64, [f64; 3])> {
@@ -115,7 +123,7 @@ impl ReferenceField {
         if grid.is_empty() {
             return Vec::new();
         }
-        let particles = &self.particles;
+        let particles = self;
         // About 16 blocks a thread, at least 1 row each.
         let blocks = (16 * rayon::current_num_threads()).min(rows).max(1);
         let rows_per_block = rows.div_ceil(blocks);

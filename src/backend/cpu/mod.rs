@@ -38,26 +38,35 @@ struct Uploaded {
     precision: Precision,
 }
 
-/// The particles, sorted once per upload, before and after the structure is built over them
-/// (one of them at a time, so the size difference costs nothing).
+/// The particles, sorted once per upload, and the structure built over them for the precision
+/// the scene gets: nothing yet, the f64 reference's BVH, or the f32 cells (one at a time, so
+/// a scene pays only for the structure it renders with).
 #[allow(clippy::large_enum_variant)]
 enum Prepared {
     Sorted(Particles),
-    Built(ReferenceField),
+    Reference(ReferenceField),
+    Cells(Particles, F32Field),
 }
 
 impl Prepared {
+    fn particles(&self) -> &Particles {
+        match self {
+            Prepared::Sorted(p) | Prepared::Cells(p, _) => p,
+            Prepared::Reference(f) => &f.particles,
+        }
+    }
+
     fn particles_mut(&mut self) -> &mut Particles {
         match self {
-            Prepared::Sorted(p) => p,
-            Prepared::Built(f) => &mut f.particles,
+            Prepared::Sorted(p) | Prepared::Cells(p, _) => p,
+            Prepared::Reference(f) => &mut f.particles,
         }
     }
 
     fn into_particles(self) -> Particles {
         match self {
-            Prepared::Sorted(p) => p,
-            Prepared::Built(f) => f.particles,
+            Prepared::Sorted(p) | Prepared::Cells(p, _) => p,
+            Prepared::Reference(f) => f.particles,
         }
     }
 }
@@ -66,9 +75,6 @@ pub struct CpuBackend {
     capabilities: Capabilities,
     uploaded: Option<Uploaded>,
     prepared: Option<Prepared>,
-    /// The field in f32, when the scene's precision allows it (made after every build, refit
-    /// and map change).
-    packed: Option<F32Field>,
     /// The bound on the relative Phi error f32 positions would cause in the uploaded scene.
     f32_error_bound: f64,
     accumulator: Option<Accumulator>,
@@ -94,7 +100,6 @@ impl CpuBackend {
             },
             uploaded: None,
             prepared: None,
-            packed: None,
             f32_error_bound: 0.0,
             accumulator: None,
             timings: Timings::default(),
@@ -102,11 +107,10 @@ impl CpuBackend {
         }
     }
 
-    fn field(&self) -> Result<&ReferenceField, BackendError> {
-        match &self.prepared {
-            Some(Prepared::Built(f)) => Ok(f),
-            _ => Err(BackendError::NothingUploaded("cpu")),
-        }
+    fn prepared(&self) -> Result<&Prepared, BackendError> {
+        self.prepared
+            .as_ref()
+            .ok_or(BackendError::NothingUploaded("cpu"))
     }
 
     /// Re-evaluates the particles under `field` (checked first: on an error nothing changes),
@@ -122,16 +126,15 @@ impl CpuBackend {
         Ok(up)
     }
 
-    /// Decides the precision of the built field ([`Precision`], by the f32 error bound of
-    /// `gpu_data`, one rule for every backend) and packs the particles for the f32 kernel when
-    /// it is f32.
-    fn choose_precision(&mut self) {
-        self.packed = None;
-        let (Some(up), Some(Prepared::Built(field))) = (&self.uploaded, &self.prepared) else {
-            return;
+    /// Builds the structure for the scene's precision ([`Precision`], decided by the f32
+    /// error bound of `gpu_data`, one rule for every backend): the f32 cells where f32 is
+    /// allowed, the f64 reference's BVH otherwise.
+    fn build_structure(&mut self) -> Result<(), BackendError> {
+        let (Some(up), Some(prepared)) = (&self.uploaded, self.prepared.take()) else {
+            return Err(BackendError::NothingUploaded("cpu"));
         };
-        let p = &field.particles;
-        let (r_min, r_max) = p
+        let particles = prepared.into_particles();
+        let (r_min, r_max) = particles
             .radii
             .par_iter()
             .filter(|&&r| r > 0.0)
@@ -153,18 +156,22 @@ impl CpuBackend {
             Precision::DoubleSingle | Precision::F64 => false,
             Precision::Auto { tolerance } => self.f32_error_bound <= tolerance,
         };
-        if f32_allowed {
-            self.packed = Some(F32Field::new(p));
-        }
+        self.prepared = Some(if f32_allowed {
+            let cells = F32Field::new(&particles);
+            Prepared::Cells(particles, cells)
+        } else {
+            Prepared::Reference(ReferenceField::new(particles, up.cluster))
+        });
+        Ok(())
     }
 
     /// The field as the integrators and queries use it: f32 or the f64 reference.
     fn sampler(&self) -> Result<Sampler<'_>, BackendError> {
-        let reference = self.field()?;
-        Ok(match &self.packed {
-            Some(packed) => Sampler::F32(packed),
-            None => Sampler::F64(reference),
-        })
+        match self.prepared()? {
+            Prepared::Reference(f) => Ok(Sampler::F64(f)),
+            Prepared::Cells(_, cells) => Ok(Sampler::F32(cells)),
+            Prepared::Sorted(_) => Err(BackendError::NothingUploaded("cpu")),
+        }
     }
 }
 
@@ -266,7 +273,6 @@ impl Backend for CpuBackend {
             precision: input.precision,
         });
         self.prepared = Some(Prepared::Sorted(particles));
-        self.packed = None;
         // Nothing moves to a device: preparing is the whole upload.
         self.timings.prepare = started.elapsed();
         self.timings.upload = std::time::Duration::ZERO;
@@ -274,39 +280,29 @@ impl Backend for CpuBackend {
     }
 
     fn build(&mut self) -> Result<(), BackendError> {
-        let (Some(up), Some(prepared)) = (&self.uploaded, self.prepared.take()) else {
-            return Err(BackendError::NothingUploaded("cpu"));
-        };
         let started = Instant::now();
-        self.prepared = Some(Prepared::Built(ReferenceField::new(
-            prepared.into_particles(),
-            up.cluster,
-        )));
-        self.choose_precision();
+        self.build_structure()?;
         self.timings.build = started.elapsed();
         Ok(())
     }
 
     fn refit(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         let started = Instant::now();
-        let cluster = self.apply_field(field)?.cluster;
-        // Boxes change with the radii; the CPU BVH is rebuilt over them (obvhs builds in tens of
-        // milliseconds per million boxes, and clusters that became empty leave the tree).
-        let particles = self
-            .prepared
-            .take()
-            .expect("applied above")
-            .into_particles();
-        self.prepared = Some(Prepared::Built(ReferenceField::new(particles, cluster)));
-        self.choose_precision();
+        self.apply_field(field)?;
+        // The structure follows the radii: the CPU BVH is rebuilt over the new boxes (obvhs
+        // builds in tens of milliseconds per million boxes, and clusters that became empty
+        // leave the tree), the cells are made again (their width is the largest radius), and
+        // the precision decided again.
+        self.build_structure()?;
         self.timings.refit = started.elapsed();
         Ok(())
     }
 
     fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         self.apply_field(field)?;
-        if matches!(self.prepared, Some(Prepared::Built(_))) {
-            self.choose_precision();
+        // The cells hold copies of the weights and theta the maps gave; the BVH holds none.
+        if let Some(Prepared::Cells(particles, cells)) = &mut self.prepared {
+            *cells = F32Field::new(particles);
         }
         Ok(())
     }
@@ -329,7 +325,7 @@ impl Backend for CpuBackend {
         grid: &crate::field::RegularGrid,
     ) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
         let started = Instant::now();
-        let out = self.field()?.eval_grid_sums(grid);
+        let out = self.prepared()?.particles().eval_grid_sums(grid);
         self.timings.query = started.elapsed();
         Ok(out)
     }
@@ -393,21 +389,17 @@ impl Backend for CpuBackend {
     }
 
     fn positions(&self) -> Option<super::Positions> {
-        self.uploaded.as_ref().map(|_| match self.packed {
-            Some(_) => super::Positions::F32 {
+        self.uploaded.as_ref().map(|_| match self.prepared {
+            Some(Prepared::Cells(..)) => super::Positions::F32 {
                 error_bound: self.f32_error_bound,
             },
-            None => super::Positions::F64,
+            _ => super::Positions::F64,
         })
     }
 
     fn memory(&self) -> MemoryReport {
-        let particles = match &self.prepared {
-            Some(Prepared::Sorted(p)) => Some(p),
-            Some(Prepared::Built(f)) => Some(&f.particles),
-            None => None,
-        };
-        let particle_bytes = particles.map_or(0, |p| {
+        let particle_bytes = self.prepared.as_ref().map_or(0, |prepared| {
+            let p = prepared.particles();
             p.len() * (24 + 8 + 8 + 4)
                 + match &p.theta {
                     crate::field::Theta::None => 0,
@@ -415,9 +407,14 @@ impl Backend for CpuBackend {
                     crate::field::Theta::Rgb(v) => v.len() * 24,
                 }
         });
+        let (packed_bytes, structure_bytes) = match &self.prepared {
+            Some(Prepared::Reference(f)) => (0, f.structure_bytes()),
+            Some(Prepared::Cells(_, cells)) => (cells.particle_bytes(), cells.grid_bytes()),
+            _ => (0, 0),
+        };
         MemoryReport {
-            particle_bytes: particle_bytes + self.packed.as_ref().map_or(0, F32Field::bytes),
-            structure_bytes: self.field().map_or(0, ReferenceField::structure_bytes),
+            particle_bytes: particle_bytes + packed_bytes,
+            structure_bytes,
             image_bytes: self.accumulator.as_ref().map_or(0, Accumulator::bytes),
             preparation_bytes: 0,
         }
