@@ -375,6 +375,36 @@ fn the_backend_switches_at_run_time() {
     common::assert_no_driver_messages();
 }
 
+/// The quality panel's precision reaches the backend: the CPU's f64 reference and its f32
+/// path, chosen at run time, give the same image up to f32 rounding.
+#[test]
+fn the_precision_switches_at_run_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = harness(open(dir.path(), BackendKind::Cpu));
+    settle(&mut h);
+    h.state_mut().state.precision = "f64".into();
+    let reference = settle(&mut h);
+    assert_eq!(reference.positions.as_deref(), Some("f64"));
+    h.state_mut().state.precision = "f32".into();
+    let fast = settle(&mut h);
+    assert!(
+        fast.positions
+            .as_deref()
+            .is_some_and(|p| p.starts_with("f32")),
+        "{:?}",
+        fast.positions
+    );
+    let (a, b) = (reference.image.unwrap(), fast.image.unwrap());
+    let worst = a
+        .rgba
+        .iter()
+        .zip(&b.rgba)
+        .map(|(x, y)| x.abs_diff(*y))
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "largest difference {worst} of 255");
+}
+
 /// The real thing: `aarbf view` opens an X11 window (on Xvfb) through eframe and wgpu on
 /// lavapipe, renders, and writes a screenshot of the whole window.
 #[test]

@@ -654,6 +654,18 @@ impl ViewerApp {
                 }
             });
         self.state.cluster = k;
+        let mut precision = self.state.precision.clone();
+        egui::ComboBox::new("precision", "precision")
+            .selected_text(precision.clone())
+            .show_ui(ui, |ui| {
+                for (value, meaning) in PRECISIONS {
+                    ui.selectable_value(&mut precision, value.to_owned(), value)
+                        .on_hover_text(meaning);
+                }
+            })
+            .response
+            .on_hover_text("how positions are held and the field computed (the backend panel says what the scene got)");
+        self.state.precision = precision;
     }
 
     fn backend_controls(&mut self, ui: &mut egui::Ui) {
@@ -830,6 +842,21 @@ fn spawn_worker(ctx: &egui::Context, series: &Arc<TimeSeries>) -> RenderWorker {
     let repaint = ctx.clone();
     RenderWorker::spawn(series.clone(), Box::new(move || repaint.request_repaint()))
 }
+
+/// The precisions the quality panel offers (`backend::parse_precision` spells them), and what
+/// each means.
+const PRECISIONS: [(&str, &str); 4] = [
+    (
+        "auto",
+        "f32 where this scene's positions and radii allow it, else double-single (GPU) or f64 (CPU)",
+    ),
+    (
+        "f32",
+        "f32 local coordinates whatever the error: the fastest",
+    ),
+    ("f64", "the CPU's f64 reference (double-single on a GPU)"),
+    ("ds", "double-single positions on a GPU (f64 on the CPU)"),
+];
 
 fn integrator_name(i: Integrator) -> &'static str {
     match i {

@@ -32,7 +32,8 @@ pub struct ViewState {
     pub settings: RenderSettings,
     /// Samples per pixel to accumulate once the view stops changing.
     pub spp: u32,
-    /// How GPU backends hold positions (`auto`, `auto:TOLERANCE`, `f32`, `ds`).
+    /// How positions are held and the field computed (`auto`, `auto:TOLERANCE`, `f32`, `ds`,
+    /// `f64`).
     pub precision: String,
     pub backend: BackendKind,
 }
