@@ -186,41 +186,55 @@ fn shadow<F: FieldSampler>(
     (-tau).exp()
 }
 
-/// The radiance of pixel (x, y) in this frame: linear RGB and opacity (rays made for the
-/// call; [`render_pixel_with`] reuses them).
-pub fn render_pixel<F: FieldSampler>(p: &FrameParams, field: &F, x: u32, y: u32) -> [f64; 4] {
-    render_pixel_with(p, field, x, y, &mut Default::default())
+/// What a pixel's rays keep while they are marched (their samplers' state and their
+/// intervals), made once per thread and reused for every pixel.
+pub struct PixelScratch<R> {
+    primary: R,
+    shadow: R,
+    intervals: Vec<(f64, f64)>,
+    shadow_intervals: Vec<(f64, f64)>,
 }
 
-/// The radiance of pixel (x, y) in this frame: linear RGB and opacity. `rays` are the
-/// primary ray's and the shadow rays' sampling state.
+impl<R: Default> Default for PixelScratch<R> {
+    fn default() -> Self {
+        PixelScratch {
+            primary: R::default(),
+            shadow: R::default(),
+            intervals: Vec::new(),
+            shadow_intervals: Vec::new(),
+        }
+    }
+}
+
+/// The radiance of pixel (x, y) in this frame: linear RGB and opacity (scratch made for the
+/// call; [`render_pixel_with`] reuses it).
+pub fn render_pixel<F: FieldSampler>(p: &FrameParams, field: &F, x: u32, y: u32) -> [f64; 4] {
+    render_pixel_with(p, field, x, y, &mut PixelScratch::default())
+}
+
+/// The radiance of pixel (x, y) in this frame: linear RGB and opacity.
 pub fn render_pixel_with<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
     x: u32,
     y: u32,
-    rays: &mut (F::Ray, F::Ray),
+    pixel: &mut PixelScratch<F::Ray>,
 ) -> [f64; 4] {
     let (origin, dir) = p.primary_ray(x, y);
     let bg = p.background;
     let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
         return [bg[0], bg[1], bg[2], 0.0];
     };
-    let (primary, shadow_ray) = rays;
+    let PixelScratch {
+        primary,
+        shadow: shadow_ray,
+        intervals,
+        shadow_intervals: scratch,
+    } = pixel;
+    intervals.clear();
     // Where Phi is 0 and density 0 has no extinction a sample adds nothing: skip its shading.
     let clear_where_empty = p.shade(0.0, [0.0; 3]).0 <= 0.0;
-    let mut intervals = Vec::new();
-    march_intervals(
-        p,
-        field,
-        primary,
-        origin,
-        dir,
-        t_enter,
-        t_exit,
-        &mut intervals,
-    );
-    let mut scratch = Vec::new();
+    march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
     let mut radiance =
         |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, shadow_jitter: f64| {
             let light = p.light_intensity
@@ -236,7 +250,7 @@ pub fn render_pixel_with<F: FieldSampler>(
             let shadow_jitter = p.random(x, y, 2);
             let mut colour = [0.0; 3];
             let mut transmittance = 1.0;
-            march(t_enter, t_exit, p.dt, jitter, &intervals, |t| {
+            march(t_enter, t_exit, p.dt, jitter, intervals, |t| {
                 let (phi, num) = field.sample(primary, origin, dir, t);
                 if phi == 0.0 && clear_where_empty {
                     return true;
@@ -248,7 +262,7 @@ pub fn render_pixel_with<F: FieldSampler>(
                 let at = origin + dir * t;
                 let alpha = 1.0 - (-sigma * p.dt).exp();
                 let emitted = if scatter {
-                    radiance(at, rgb, &mut scratch, shadow_jitter)
+                    radiance(at, rgb, scratch, shadow_jitter)
                 } else {
                     rgb
                 };
@@ -271,7 +285,7 @@ pub fn render_pixel_with<F: FieldSampler>(
             let target = -(1.0 - xi).ln();
             let mut tau = 0.0;
             let mut hit = None;
-            march(t_enter, t_exit, p.dt, jitter, &intervals, |t| {
+            march(t_enter, t_exit, p.dt, jitter, intervals, |t| {
                 let (phi, num) = field.sample(primary, origin, dir, t);
                 if phi == 0.0 && clear_where_empty {
                     return true;
@@ -287,7 +301,7 @@ pub fn render_pixel_with<F: FieldSampler>(
             });
             match hit {
                 Some((at, albedo)) => {
-                    let l = radiance(at, albedo, &mut scratch, p.random(x, y, 2));
+                    let l = radiance(at, albedo, scratch, p.random(x, y, 2));
                     [l[0], l[1], l[2], 1.0]
                 }
                 None => [bg[0], bg[1], bg[2], 0.0],
@@ -324,7 +338,7 @@ pub fn render_pixel_with<F: FieldSampler>(
                 let accept = p.random(x, y, dim);
                 dim += 1;
                 if accept * p.majorant < sigma {
-                    let l = radiance(at, rgb, &mut scratch, p.random(x, y, 2));
+                    let l = radiance(at, rgb, scratch, p.random(x, y, 2));
                     return [l[0], l[1], l[2], 1.0];
                 }
                 if dim > 100_000 {

@@ -19,7 +19,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use self::accumulator::Accumulator;
-use self::integrators::{FieldSampler, render_pixel_with};
+use self::integrators::{FieldSampler, PixelScratch, render_pixel_with};
 use super::gpu_data::f32_phi_error;
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
 use crate::field::{F32Field, F32Ray, FieldSettings, Particles, ReferenceField};
@@ -232,22 +232,19 @@ fn render_tiles<F: FieldSampler>(
     let tiles_x = w.div_ceil(TILE);
     (0..tiles_x * h.div_ceil(TILE))
         .into_par_iter()
-        .map_init(
-            || (F::Ray::default(), F::Ray::default()),
-            |rays, tile| {
-                let (tx, ty) = (tile % tiles_x, tile / tiles_x);
-                if abandoned() {
-                    return Vec::new();
+        .map_init(PixelScratch::<F::Ray>::default, |scratch, tile| {
+            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+            if abandoned() {
+                return Vec::new();
+            }
+            let mut out = Vec::with_capacity((TILE * TILE) as usize);
+            for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                    out.push(render_pixel_with(frame, field, x, y, scratch));
                 }
-                let mut out = Vec::with_capacity((TILE * TILE) as usize);
-                for y in ty * TILE..((ty + 1) * TILE).min(h) {
-                    for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                        out.push(render_pixel_with(frame, field, x, y, rays));
-                    }
-                }
-                out
-            },
-        )
+            }
+            out
+        })
         .collect()
 }
 
