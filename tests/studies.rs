@@ -40,6 +40,8 @@ const TINY: &[&str] = &[
     "1,4",
     "--reference-spp",
     "16",
+    "--seeds",
+    "1",
     "--noise-size",
     "16x16",
     "--min-n",
@@ -48,6 +50,8 @@ const TINY: &[&str] = &[
     "800",
     "--queries",
     "500",
+    "--voxel-grids",
+    "8,16",
 ];
 
 fn aarbf(args: &[&str]) -> Output {
@@ -149,9 +153,15 @@ fn check_study(
         "the page shows the command:\n{md}"
     );
     let png = image::open(dir.join(format!("{study}.png"))).unwrap();
+    // 760 x 480 per panel, two panels a row, a title, and a caption of at least 3 lines.
     let cols = if panels > 1 { 2 } else { 1 };
-    let expected = (760 * cols, 44 + 480 * panels.div_ceil(cols) + 24 * 3 + 16);
-    assert_eq!((png.width(), png.height()), expected, "{study}: PNG size");
+    assert_eq!(png.width(), 760 * cols, "{study}: PNG width");
+    let panels_height = 44 + 480 * panels.div_ceil(cols) + 16;
+    assert!(
+        (panels_height + 24 * 3..=panels_height + 24 * 8).contains(&png.height()),
+        "{study}: PNG height {}",
+        png.height()
+    );
     records
 }
 
@@ -171,7 +181,7 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
     ];
     args.extend_from_slice(TINY);
     let stdout = ok(&args);
-    assert_eq!(stdout.lines().count(), 5, "{stdout}");
+    assert_eq!(stdout.lines().count(), 6, "{stdout}");
     let b = ["cpu", "wgpu"];
     let frame = [
         "width",
@@ -243,6 +253,41 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
     // The scaling page states a fitted exponent for each line.
     let md = std::fs::read_to_string(p.join("scaling/scaling.md")).unwrap();
     assert!(md.contains("∝ N^"), "{md}");
+    // RBF on both backends, voxel grids 8 and 16 on cpu: 4 x (frame, structure, march, rmse).
+    let rows = check_study(
+        p,
+        "baselines",
+        &[
+            "method",
+            "grid",
+            "radius",
+            "k",
+            "width",
+            "height",
+            "integrator",
+            "noise",
+            "spp",
+            "cameras",
+            "reference_spp",
+        ],
+        16,
+        &b,
+        2,
+    );
+    let variants: Vec<(&str, &str)> = rows
+        .iter()
+        .filter(|r| r[23] == "rmse")
+        .map(|r| (r[4].as_str(), r[8].as_str()))
+        .collect();
+    assert_eq!(
+        variants,
+        [
+            ("cpu", "rbf"),
+            ("cpu", "voxel 8"),
+            ("cpu", "voxel 16"),
+            ("wgpu", "rbf")
+        ]
+    );
     // Results are not overwritten without --force.
     let again = aarbf(&args);
     assert!(!again.status.success());

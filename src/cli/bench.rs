@@ -44,6 +44,9 @@ pub enum BenchCommand {
     Noise(super::bench_study::StudyArgs),
     /// Build, refit, query and frame time vs N on a log-log plot with fitted exponents.
     Scaling(super::bench_study::StudyArgs),
+    /// Table 3: our method vs the voxel-grid baseline, with the structure rebuilt every frame,
+    /// and each one's image error against a converged reference.
+    Baselines(super::bench_study::StudyArgs),
     /// Every study above in turn, with the same options.
     All(super::bench_study::StudyArgs),
 }
@@ -96,6 +99,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchCommand::Traversal(a) => super::bench_study::run(Some(Study::Traversal), &a),
         BenchCommand::Noise(a) => super::bench_study::run(Some(Study::Noise), &a),
         BenchCommand::Scaling(a) => super::bench_study::run(Some(Study::Scaling), &a),
+        BenchCommand::Baselines(a) => super::bench_study::run(Some(Study::Baselines), &a),
         BenchCommand::All(a) => super::bench_study::run(None, &a),
     }
 }

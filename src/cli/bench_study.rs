@@ -65,6 +65,10 @@ pub struct StudyArgs {
     /// noise: samples per pixel of the converged reference.
     #[arg(long, default_value_t = 4096)]
     pub reference_spp: u32,
+    /// noise, baselines: seeds whose images' error is measured (each renders up to the
+    /// largest --spp).
+    #[arg(long, default_value_t = 2)]
+    pub seeds: u32,
     /// noise: the size of the error images, WxH.
     #[arg(long, default_value = "64x64", value_parser = parse_size)]
     pub noise_size: (u32, u32),
@@ -77,6 +81,9 @@ pub struct StudyArgs {
     /// scaling: query points per timed query.
     #[arg(long, default_value_t = 100_000)]
     pub queries: usize,
+    /// baselines: the voxel grids, cells along the longest side (the paper: 512).
+    #[arg(long, value_delimiter = ',', default_value = "64,128,256")]
+    pub voxel_grids: Vec<usize>,
 }
 
 impl StudyArgs {
@@ -98,10 +105,12 @@ impl StudyArgs {
             radius_factors: self.radii.clone(),
             spps: self.spp.clone(),
             reference_spp: self.reference_spp,
+            seeds: self.seeds,
             noise_image: self.noise_size,
             min_n: self.min_n,
             max_n: self.max_n,
             queries: self.queries,
+            voxel_grids: self.voxel_grids.clone(),
             command,
         }
     }

@@ -6,7 +6,8 @@
 //! - [`traversal`]: the RT pipeline vs the LBVH traversal on one device, and the wgpu LBVH
 //!   (Fig. 10a);
 //! - [`noise`]: blue (STBN) vs white noise, frame time and error vs spp (Fig. 10b);
-//! - [`scaling`]: build, refit, query and frame time vs N, with fitted exponents.
+//! - [`scaling`]: build, refit, query and frame time vs N, with fitted exponents;
+//! - [`baselines`]: our method against the voxel-grid baseline, rebuilt every frame (Table 3).
 //!
 //! Every study drives backends through [`RenderSession`] as the CLI and viewer do, warms each
 //! configuration up with one untimed launch (lavapipe compiles a pipeline on first use), times
@@ -14,6 +15,7 @@
 //! ([`record::Recorder`]): an interrupted study keeps what it measured, and a study that fails
 //! still writes its table and figure of the rows it has.
 
+pub mod baselines;
 pub mod cluster;
 pub mod data;
 pub mod noise;
@@ -75,15 +77,17 @@ pub enum Study {
     Traversal,
     Noise,
     Scaling,
+    Baselines,
 }
 
 impl Study {
-    pub const ALL: [Study; 5] = [
+    pub const ALL: [Study; 6] = [
         Study::Radius,
         Study::Cluster,
         Study::Traversal,
         Study::Noise,
         Study::Scaling,
+        Study::Baselines,
     ];
 
     pub fn name(self) -> &'static str {
@@ -93,6 +97,7 @@ impl Study {
             Study::Traversal => "traversal",
             Study::Noise => "noise",
             Study::Scaling => "scaling",
+            Study::Baselines => "baselines",
         }
     }
 
@@ -149,6 +154,9 @@ pub struct Options {
     pub spps: Vec<u32>,
     /// Samples per pixel of the `noise` study's reference.
     pub reference_spp: u32,
+    /// Seeds whose images' errors are measured (`noise`, `baselines`): each renders up to the
+    /// largest spp, so they are counted apart from the timing repetitions.
+    pub seeds: u32,
     /// The `noise` study's image size (its error images).
     pub noise_image: (u32, u32),
     /// The `scaling` study's sizes: from `min_n`, times 4, up to `max_n`.
@@ -156,6 +164,8 @@ pub struct Options {
     pub max_n: usize,
     /// Query points per timed query in the `scaling` study.
     pub queries: usize,
+    /// Grid sizes (cells along the longest side) of the `baselines` study's voxel grids.
+    pub voxel_grids: Vec<usize>,
     /// The command line, as the pages show it.
     pub command: String,
 }
@@ -179,10 +189,12 @@ impl Default for Options {
             radius_factors: vec![0.5, 0.75, 1.0, 1.5, 2.0],
             spps: vec![1, 4, 16, 64, 1024],
             reference_spp: 4096,
+            seeds: 2,
             noise_image: (64, 64),
             min_n: 10_000,
             max_n: 1_000_000,
             queries: 100_000,
+            voxel_grids: vec![64, 128, 256],
             command: String::new(),
         }
     }
@@ -210,11 +222,18 @@ impl Options {
         {
             return bad("--radii: every factor must be positive");
         }
-        if self.spps.contains(&0) || self.reference_spp == 0 {
-            return bad("--spp and --reference-spp must be at least 1");
+        if self.spps.contains(&0) || self.reference_spp == 0 || self.seeds == 0 {
+            return bad("--spp, --reference-spp and --seeds must be at least 1");
         }
         if self.min_n == 0 || self.max_n < self.min_n {
             return bad("--min-n must be at least 1 and at most --max-n");
+        }
+        if self
+            .voxel_grids
+            .iter()
+            .any(|&n| n == 0 || n > crate::render::voxel::MAX_GRID)
+        {
+            return bad("--voxel-grids: each grid must have 1..=1024 cells along its longest side");
         }
         if self.queries == 0 {
             return bad("--queries must be at least 1");
@@ -257,6 +276,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Traversal => traversal::DESCRIPTION,
         Study::Noise => noise::DESCRIPTION,
         Study::Scaling => scaling::DESCRIPTION,
+        Study::Baselines => baselines::DESCRIPTION,
     };
     let mut recorder = Recorder::create(&csv, Machine::this(), description.settings)?;
     let data = if options.data.is_empty() {
@@ -289,6 +309,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Traversal => traversal::measure(&mut ctx),
         Study::Noise => noise::measure(&mut ctx),
         Study::Scaling => scaling::measure(&mut ctx),
+        Study::Baselines => baselines::measure(&mut ctx),
     };
     let failure = measured.as_ref().err().map(|e| e.to_string());
     // The page and figure of what was measured, also when the study stopped early.
@@ -298,6 +319,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Traversal => traversal::summarise(recorder.rows(), options),
         Study::Noise => noise::summarise(recorder.rows(), options),
         Study::Scaling => scaling::summarise(recorder.rows(), options),
+        Study::Baselines => baselines::summarise(recorder.rows(), options),
     };
     let page = report::markdown(
         &report::Page {

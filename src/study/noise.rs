@@ -6,7 +6,7 @@
 //! another seed: past 64 frames every cycle of the mask reads it at a new shift
 //! (`BlueNoiseMask::cycle_shift`), so it converges like the images it judges, where a
 //! white-noise reference of the same cost would be noisier than the 1024-spp blue images.
-//! Each repetition is another seed; the error is RMSE over linear RGBA, raw and after a
+//! The error is measured for `--seeds` seeds (its spread is over them): RMSE over linear RGBA, raw and after a
 //! 1-pixel Gaussian blur (the low-pass an observer's eye applies).
 
 use super::plot::{self, Figure, Panel, Scale};
@@ -110,7 +110,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                     .record(row("frame", "ms", o.image, 1, frames))?;
                 // errors[s] = [raw, blurred] per seed at spps[s].
                 let mut errors = vec![[Vec::new(), Vec::new()]; spps.len()];
-                for seed in 0..o.repetitions as u32 {
+                for seed in 0..o.seeds {
                     let settings = error_settings(noise, seed);
                     let mut done = 0;
                     for (s, &spp) in spps.iter().enumerate() {
@@ -209,7 +209,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
         caption: vec![
             "Paper (Fig. 10b): blue noise made frames 1-2x faster than white noise on its GPUs; at equal spp"
                 .into(),
-            "blue noise's error is lower once frames accumulate (error: median over seeds, whiskers min to max)."
+            "blue noise's error is lower once frames accumulate (error: median over the seeds, whiskers min to max)."
                 .into(),
             super::timing_caption(options),
         ],

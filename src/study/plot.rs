@@ -217,13 +217,40 @@ fn plot_error(e: impl std::fmt::Display) -> StudyError {
     StudyError::Plot(e.to_string())
 }
 
+/// Pixels per character of the caption's font (Hack, monospace, at 15 px).
+const CAPTION_CHAR: u32 = 9;
+
+/// The caption's lines wrapped at word boundaries to `width` pixels.
+fn caption_lines(figure: &Figure, width: u32) -> Vec<String> {
+    let max = ((width.saturating_sub(32)) / CAPTION_CHAR).max(20) as usize;
+    let mut out = Vec::new();
+    for text in &figure.caption {
+        let mut line = String::new();
+        for word in text.split_whitespace() {
+            if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > max {
+                out.push(std::mem::take(&mut line));
+            }
+            if !line.is_empty() {
+                line.push(' ');
+            }
+            line.push_str(word);
+        }
+        if !line.is_empty() {
+            out.push(line);
+        }
+    }
+    out
+}
+
 /// The figure's size in pixels.
 pub fn size(figure: &Figure) -> (u32, u32) {
     let cols = if figure.panels.len() > 1 { 2 } else { 1 };
     let rows = figure.panels.len().div_ceil(cols).max(1) as u32;
+    let width = PANEL.0 * cols as u32;
+    let lines = caption_lines(figure, width).len() as u32;
     (
-        PANEL.0 * cols as u32,
-        TITLE_HEIGHT + PANEL.1 * rows + CAPTION_LINE * figure.caption.len() as u32 + 16,
+        width,
+        TITLE_HEIGHT + PANEL.1 * rows + CAPTION_LINE * lines + 16,
     )
 }
 
@@ -254,7 +281,7 @@ pub fn write_png(path: &Path, figure: &Figure, force: bool) -> Result<(), StudyE
             }
         }
         let style = (FONT, 15).into_font().color(&BLACK);
-        for (i, line) in figure.caption.iter().enumerate() {
+        for (i, line) in caption_lines(figure, w).iter().enumerate() {
             caption
                 .draw_text(line, &style, (16, 4 + CAPTION_LINE as i32 * i as i32))
                 .map_err(plot_error)?;

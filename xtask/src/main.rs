@@ -459,6 +459,11 @@ fn studies(extra: &[String]) -> Result<()> {
     let aarbf = root.join("target").join(PROFILE).join("aarbf");
     let out = root.join("target").join("studies");
     let mut command = Command::new(&aarbf);
+    // The checked profile turns the Vulkan validation layer on, which slows the ash backend:
+    // measure without it unless asked.
+    if std::env::var_os("AARBF_VK_VALIDATION").is_none() {
+        command.env("AARBF_VK_VALIDATION", "0");
+    }
     vulkan_env(&mut command)
         .args(["bench", "all", "--force", "--out"])
         .arg(&out);
