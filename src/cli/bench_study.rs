@@ -82,7 +82,7 @@ pub struct StudyArgs {
     #[arg(long, default_value_t = 100_000)]
     pub queries: usize,
     /// baselines: the voxel grids, cells along the longest side (the paper: 512).
-    #[arg(long, value_delimiter = ',', default_value = "64,128,256")]
+    #[arg(long, value_delimiter = ',', default_value = "64,128,256,512")]
     pub voxel_grids: Vec<usize>,
 }
 

@@ -194,7 +194,7 @@ impl Default for Options {
             min_n: 10_000,
             max_n: 1_000_000,
             queries: 100_000,
-            voxel_grids: vec![64, 128, 256],
+            voxel_grids: vec![64, 128, 256, 512],
             command: String::new(),
         }
     }

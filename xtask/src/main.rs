@@ -421,27 +421,31 @@ fn fuzz(args: &[String]) -> Result<()> {
 
 /// `aarbf bench all` at a size that finishes in under about 30 minutes on the project's
 /// 2-core machine with the cpu backend and both GPU backends on lavapipe (docs/benchmarks.md
-/// shows such a run): the paper's settings, with fewer cameras and repetitions, smaller
-/// images, a shorter noise reference and N up to 1M.
+/// shows such a run): the paper's studies and sweeps, with 4 orbit cameras instead of 50,
+/// 64x64 frames, 24x24 error images and N up to 640K.
 const STUDIES: &[&str] = &[
     "--size",
-    "128x128",
+    "64x64",
     "--cameras",
-    "8",
+    "4",
     "--repetitions",
     "3",
+    "--seeds",
+    "2",
     "--spp",
     "1,4,16,64,1024",
     "--reference-spp",
     "4096",
     "--noise-size",
-    "32x32",
+    "24x24",
     "--min-n",
     "10000",
     "--max-n",
     "640000",
     "--queries",
     "100000",
+    "--voxel-grids",
+    "64,128,256,512",
 ];
 
 fn bench(name: &str, extra: &[String]) -> Result<()> {
