@@ -11,7 +11,7 @@
 
 use std::time::Instant;
 
-use super::plot::{self, Figure, Panel};
+use super::plot::{self, Figure, Panel, Scale};
 use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
@@ -253,11 +253,11 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     }
     for r in rows.iter().filter(|r| r.metric == "rmse") {
         notes.push(format!(
-            "{} {} on {}: RMSE {:.5} against the converged RBF reference at {} spp",
+            "{} {} on {}: RMSE {} against the converged RBF reference at {} spp",
             r.device.backend,
             r.variant,
             r.data,
-            r.median(),
+            super::report::number(r.median()),
             r.setting("spp").unwrap_or("?")
         ));
     }
@@ -269,7 +269,51 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
         "structure (rebuild or voxelise)".into()
     });
     series.extend(structure);
-    let (error_categories, errors) = plot::bars(rows, "rmse", category, |_| "RMSE".into());
+    // The voxel grids' error over the grid size; each RBF image's error as a dashed level.
+    let grid_of = |r: &Row| {
+        r.setting("grid")
+            .and_then(|g| g.parse::<f64>().ok())
+            .unwrap_or(f64::NAN)
+    };
+    let voxel_rows: Vec<Row> = rows
+        .iter()
+        .filter(|r| r.variant.starts_with("voxel"))
+        .cloned()
+        .collect();
+    let mut errors = plot::lines(
+        &voxel_rows,
+        "rmse",
+        |r| format!("{} voxel grid ({})", r.device.backend, r.data),
+        grid_of,
+        1.0,
+    );
+    let grids: Vec<f64> = voxel_rows
+        .iter()
+        .map(grid_of)
+        .filter(|g| g.is_finite())
+        .collect();
+    let (lo, hi) = grids
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &g| {
+            (l.min(g), h.max(g))
+        });
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (1.0, 2.0) };
+    for r in rows
+        .iter()
+        .filter(|r| r.variant == "rbf" && r.metric == "rmse")
+    {
+        let v = (r.median(), r.min(), r.max());
+        errors.push(plot::Series {
+            label: format!(
+                "{} rbf, {} spp ({})",
+                r.device.backend,
+                r.setting("spp").unwrap_or("?"),
+                r.data
+            ),
+            points: vec![(lo, v.0, v.1, v.2), (hi, v.0, v.1, v.2)],
+            dashed: true,
+        });
+    }
     let figure = Figure {
         title: DESCRIPTION.title.into(),
         panels: vec![
@@ -279,13 +323,12 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
                 categories,
                 series,
             },
-            Panel::Bars {
-                title: format!(
-                    "error vs a {}-spp RBF reference",
-                    options.reference_spp
-                ),
+            Panel::Lines {
+                title: format!("error vs a {}-spp RBF reference", options.reference_spp),
+                x_label: "voxel grid (cells along the longest side)".into(),
                 y_label: "RMSE (linear RGBA)".into(),
-                categories: error_categories,
+                x_scale: Scale::Log2,
+                y_scale: Scale::Log10,
                 series: errors,
             },
         ],

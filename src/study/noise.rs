@@ -168,12 +168,12 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
                 white.median() / blue.median()
             )),
             "rmse" => notes.push(format!(
-                "{} on {} at {} spp: RMSE blue {:.5}, white {:.5} (blue / white = {:.2})",
+                "{} on {} at {} spp: RMSE blue {}, white {} (blue / white = {:.2})",
                 blue.device.backend,
                 blue.data,
                 blue.setting("spp").unwrap_or("?"),
-                blue.median(),
-                white.median(),
+                super::report::number(blue.median()),
+                super::report::number(white.median()),
                 blue.median() / white.median()
             )),
             _ => {}
