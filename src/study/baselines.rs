@@ -333,9 +333,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             },
         ],
         caption: vec![
-            "Paper (Table 3): with a rebuild every frame, ours was 38x faster than a re-voxelised 512^3 grid on"
-                .into(),
-            "Viscus (voxelising dominates), and the grid's quantisation shows on fine structures."
+            "Paper (Table 3): with a rebuild every frame, ours was 38x faster than a re-voxelised 512^3 grid on Viscus (voxelising dominates), and the grid's quantisation shows on fine structures."
                 .into(),
             format!(
                 "{}x{} px EA, mean over {} orbit cameras, median of {} repetitions; voxel grids on the cpu backend.",

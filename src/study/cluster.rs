@@ -203,9 +203,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             },
         ],
         caption: vec![
-            "Paper: frame time depends little on K (Fig. 9 red); builds and refits get faster with K, a refit"
-                .into(),
-            "at most ~1/3 of a rebuild (Table 1); structure bytes fall linearly with K (Table 2; dashed: particle bytes)."
+            "Paper: frame time depends little on K (Fig. 9 red); builds and refits get faster with K, a refit at most ~1/3 of a rebuild (Table 1); structure bytes fall linearly with K (Table 2; dashed: particle bytes)."
                 .into(),
             super::timing_caption(options),
         ],

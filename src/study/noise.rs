@@ -207,9 +207,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             },
         ],
         caption: vec![
-            "Paper (Fig. 10b): blue noise made frames 1-2x faster than white noise on its GPUs; at equal spp"
-                .into(),
-            "blue noise's error is lower once frames accumulate (error: median over the seeds, whiskers min to max)."
+            "Paper (Fig. 10b): blue noise made frames 1-2x faster than white noise on its GPUs; at equal spp blue noise's error is lower once frames accumulate (error: median over the seeds, whiskers min to max)."
                 .into(),
             super::timing_caption(options),
         ],

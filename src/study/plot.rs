@@ -429,12 +429,25 @@ fn draw_lines(
             .map_err(plot_error)?;
     }
     if !series.is_empty() {
+        // The legend goes in the corner with the fewest points.
+        let (mx, my) = (0.5 * (xs.0 + xs.1), 0.5 * (ys.0 + ys.1));
+        let mut count = [0usize; 4];
+        for p in series.iter().flat_map(|s| &s.points) {
+            let (x, y) = (tx(p.0), ty(p.1));
+            count[usize::from(x > mx) + 2 * usize::from(y < my)] += 1;
+        }
+        let corner = match (0..4).min_by_key(|&i| count[i]).unwrap_or(0) {
+            0 => SeriesLabelPosition::UpperLeft,
+            1 => SeriesLabelPosition::UpperRight,
+            2 => SeriesLabelPosition::LowerLeft,
+            _ => SeriesLabelPosition::LowerRight,
+        };
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
             .border_style(RGBColor(160, 160, 160))
             .label_font((FONT, 13))
-            .position(SeriesLabelPosition::UpperLeft)
+            .position(corner)
             .draw()
             .map_err(plot_error)?;
     }
@@ -459,7 +472,8 @@ fn draw_bars(
         .iter()
         .flat_map(|s| s.values.iter().flatten().map(|v| v.2))
         .fold(0.0f64, f64::max);
-    let top = if top > 0.0 { top * 1.25 } else { 1.0 };
+    // Headroom above the tallest bar for the legend (up to about 5 entries).
+    let top = if top > 0.0 { top * 1.4 } else { 1.0 };
     let mut chart = ChartBuilder::on(area)
         .caption(title, (FONT, 19))
         .margin(14)

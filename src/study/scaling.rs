@@ -186,9 +186,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
         title: DESCRIPTION.title.into(),
         panels,
         caption: vec![
-            "Cost vs N at constant overlap, log-log, with the fitted exponent e (time ∝ N^e) in each label:"
-                .into(),
-            "builds and refits are expected near-linear (e ≈ 1); queries and frames grow slowly (tree depth)."
+            "Cost vs N at constant overlap, log-log, with the fitted exponent e (time ∝ N^e) in each label: builds and refits are expected near-linear (e ≈ 1); queries and frames grow slowly (tree depth)."
                 .into(),
             super::timing_caption(options),
         ],

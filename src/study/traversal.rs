@@ -141,9 +141,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             series,
         }],
         caption: vec![
-            "Paper (Fig. 10a): the RT pipeline beats a software LBVH traversal on the same GPU (most on"
-                .into(),
-            "NVIDIA and Intel, and more on Random than Uniform). Lavapipe emulates RT on the CPU: it cannot show this."
+            "Paper (Fig. 10a): the RT pipeline beats a software LBVH traversal on the same GPU (most on NVIDIA and Intel, and more on Random than Uniform). Lavapipe emulates RT on the CPU: it cannot show this."
                 .into(),
             super::timing_caption(options),
         ],
