@@ -56,7 +56,7 @@ fn uniform(n: usize, seed: u64) -> Step {
 
 /// The radius at which ~30 particles of N uniform ones in the unit cube overlap a point.
 fn radius_for_30(n: usize) -> f64 {
-    (30.0 * 3.0 / (4.0 * std::f64::consts::PI * n as f64)).cbrt()
+    aarbf::study::data::radius_for_overlap(30.0, n)
 }
 
 fn input<'a>(step: &'a Arc<Step>, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
@@ -120,15 +120,9 @@ fn structures(b: &mut AshBackend, sizes: &[usize]) {
     println!();
 }
 
-/// `m` random points in the unit cube, Hilbert-sorted (as `aarbf field` sorts its queries).
+/// `m` random points in the data's bounds, Hilbert-sorted (as `aarbf field` sorts its queries).
 fn query_points(m: usize, bounds: aarbf::values::Bounds) -> Vec<DVec3> {
-    let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-    let (lo, hi) = (bounds.min, bounds.max);
-    let points: Vec<DVec3> = (0..m)
-        .map(|_| lo + DVec3::new(rng.random(), rng.random(), rng.random()) * (hi - lo))
-        .collect();
-    let order = aarbf::accel::hilbert_order(&points, bounds);
-    order.iter().map(|&i| points[i as usize]).collect()
+    aarbf::study::query_points(m, bounds, 11)
 }
 
 fn queries(b: &mut AshBackend, m: usize) {

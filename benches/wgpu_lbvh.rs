@@ -37,7 +37,7 @@ fn uniform_step(n: usize, seed: u64) -> Step {
 
 /// The radius at which ~30 particles reach a point (unit cube).
 fn radius_for(n: usize) -> f64 {
-    (30.0 * 3.0 / (4.0 * std::f64::consts::PI * n as f64)).cbrt()
+    aarbf::study::data::radius_for_overlap(30.0, n)
 }
 
 const UNIT: Bounds = Bounds {

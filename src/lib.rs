@@ -13,7 +13,8 @@
 //! - [`backend`]: the `Backend` trait, its CPU, wgpu and ash implementations, and the shaders
 //!   with their CPU twins;
 //! - [`render`]: the rendering session (what each change costs, the automatic settings);
-//! - [`cli`], [`viewer`] and [`scene_file`] (which composes all of the above) at the top.
+//! - [`cli`], [`viewer`], [`study`] (the paper's benchmark studies) and [`scene_file`] (which
+//!   composes all of the above) at the top.
 
 pub mod accel;
 pub mod backend;
@@ -25,5 +26,6 @@ pub mod progress;
 pub mod render;
 pub mod scene;
 pub mod scene_file;
+pub mod study;
 pub mod values;
 pub mod viewer;

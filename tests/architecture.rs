@@ -2,7 +2,7 @@
 //! modules, and this test holds the code to it by reading every `crate::` path in `src/`.
 //!
 //! ```text
-//! values, progress → noise → io → scene → accel → field → backend → render → cli / viewer / scene_file
+//! values, progress → noise → io → scene → accel → field → backend → render → cli / viewer / study / scene_file
 //! ```
 //!
 //! A module may use the modules before it in the flow, never one after it; only the top tier
@@ -27,6 +27,7 @@ const FLOW: &[(&str, u32)] = &[
     ("cli", 8),
     ("scene_file", 8),
     ("viewer", 8),
+    ("study", 8),
 ];
 const TOP: u32 = 8;
 

@@ -13,6 +13,7 @@ use crate::render::{RenderSession, RenderSettings};
 use crate::scene::prefetch::Prefetcher;
 use crate::scene::{OpenOptions, TimeSeries};
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::study::Study;
 use crate::values::Step;
 
 #[derive(Debug, Args)]
@@ -32,6 +33,22 @@ pub enum BenchCommand {
     /// release: preview rate, size and frame time while moving, the time to a full image and
     /// to the spp after, and the longest the window thread waited (interactive.md).
     Interactive(super::bench_interactive::InteractiveArgs),
+    /// The paper's Fig. 9 (blue): frame time vs the global radius at K = 1 and K = 16, over the
+    /// benchmark orbit (writes OUT/radius/radius.{csv,md,png}).
+    Radius(super::bench_study::StudyArgs),
+    /// Fig. 9 (red) and Tables 1-2: frame, build and refit time and structure bytes vs K.
+    Cluster(super::bench_study::StudyArgs),
+    /// Fig. 10a: the RT pipeline vs the LBVH traversal on one device, and the wgpu LBVH.
+    Traversal(super::bench_study::StudyArgs),
+    /// Fig. 10b: blue vs white noise, frame time and error against a converged reference.
+    Noise(super::bench_study::StudyArgs),
+    /// Build, refit, query and frame time vs N on a log-log plot with fitted exponents.
+    Scaling(super::bench_study::StudyArgs),
+    /// Table 3: our method vs the voxel-grid baseline, with the structure rebuilt every frame,
+    /// and each one's image error against a converged reference.
+    Baselines(super::bench_study::StudyArgs),
+    /// Every study above in turn, with the same options.
+    All(super::bench_study::StudyArgs),
 }
 
 #[derive(Debug, Args)]
@@ -77,6 +94,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.what {
         BenchCommand::Playback(a) => playback(a),
         BenchCommand::Interactive(a) => super::bench_interactive::run(a),
+        BenchCommand::Radius(a) => super::bench_study::run(Some(Study::Radius), &a),
+        BenchCommand::Cluster(a) => super::bench_study::run(Some(Study::Cluster), &a),
+        BenchCommand::Traversal(a) => super::bench_study::run(Some(Study::Traversal), &a),
+        BenchCommand::Noise(a) => super::bench_study::run(Some(Study::Noise), &a),
+        BenchCommand::Scaling(a) => super::bench_study::run(Some(Study::Scaling), &a),
+        BenchCommand::Baselines(a) => super::bench_study::run(Some(Study::Baselines), &a),
+        BenchCommand::All(a) => super::bench_study::run(None, &a),
     }
 }
 

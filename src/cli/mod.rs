@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_interactive;
+mod bench_study;
 mod field;
 mod generate;
 mod info;
@@ -55,7 +56,8 @@ pub enum Command {
     /// the state as a scene file `aarbf render --scene` renders to the same image.
     View(ViewArgs),
     /// Measure this machine on your data: `aarbf bench playback` plays a series and says where
-    /// each step's time goes.
+    /// each step's time goes; `aarbf bench radius|cluster|traversal|noise|scaling|all` run the
+    /// paper's studies (CSV, Markdown table and PNG figure each).
     Bench(BenchArgs),
 }
 

@@ -7,6 +7,7 @@
 pub mod auto;
 pub mod session;
 pub mod settings;
+pub mod voxel;
 
 pub use auto::AutoValues;
 pub use session::{RenderError, RenderSession, Resolved, StepChange};

@@ -7,6 +7,8 @@
 //! - `test`: setup, then the whole test suite (optimised, with debug assertions).
 //! - `demo`: setup, then render the built-in demo scene to `demo.png`.
 //! - `bench NAME [args]`: setup, then `cargo bench --bench NAME -- args`.
+//! - `bench studies [args]`: setup, then `aarbf bench all` at the size of [`STUDIES`] (or with
+//!   `args` instead) on every backend present, into `target/studies/`.
 //! - `fuzz [--seconds N] [TARGET...]`: run the reader fuzz targets (cargo fuzz, libFuzzer) for a
 //!   bounded time each, copy any finding into tests/fuzz_regressions/, print a summary.
 
@@ -43,7 +45,7 @@ fn main() -> ExitCode {
                  setup  install the Vulkan driver (lavapipe) and tools if missing\n  \
                  test   setup, then run every test\n  \
                  demo   setup, then render the demo scene to demo.png\n  \
-                 bench  run benches/NAME.rs (results belong in docs/benchmarks.md)\n  \
+                 bench  run benches/NAME.rs (results belong in docs/benchmarks.md); `bench studies`\n         runs every study of the paper (aarbf bench all) into target/studies/\n  \
                  fuzz   [--seconds N] [TARGET...]: fuzz the readers (default 600 s each)"
             );
             return ExitCode::from(2);
@@ -417,9 +419,69 @@ fn fuzz(args: &[String]) -> Result<()> {
     Ok(())
 }
 
+/// `aarbf bench all` at a size that finishes in under about 30 minutes on the project's
+/// 2-core machine with the cpu backend and both GPU backends on lavapipe (docs/benchmarks.md
+/// shows such a run): the paper's studies and sweeps, with 4 orbit cameras instead of 50,
+/// 64x64 frames, 24x24 error images and N up to 640K.
+const STUDIES: &[&str] = &[
+    "--size",
+    "64x64",
+    "--cameras",
+    "4",
+    "--repetitions",
+    "3",
+    "--seeds",
+    "2",
+    "--spp",
+    "1,4,16,64,1024",
+    "--reference-spp",
+    "4096",
+    "--noise-size",
+    "24x24",
+    "--min-n",
+    "10000",
+    "--max-n",
+    "640000",
+    "--queries",
+    "100000",
+    "--voxel-grids",
+    "64,128,256,512",
+];
+
 fn bench(name: &str, extra: &[String]) -> Result<()> {
     setup()?;
+    if name == "studies" {
+        return studies(extra);
+    }
     run(cargo().args(["bench", "--bench", name, "--"]).args(extra))
+}
+
+/// `aarbf bench all` on every backend present, into target/studies/ (replacing an earlier run).
+fn studies(extra: &[String]) -> Result<()> {
+    let root = workspace_root();
+    run(cargo().args(["build", "--profile", PROFILE, "--bin", "aarbf"]))?;
+    let aarbf = root.join("target").join(PROFILE).join("aarbf");
+    let out = root.join("target").join("studies");
+    let mut command = Command::new(&aarbf);
+    // The checked profile turns the Vulkan validation layer on, which slows the ash backend:
+    // measure without it unless asked.
+    if std::env::var_os("AARBF_VK_VALIDATION").is_none() {
+        command.env("AARBF_VK_VALIDATION", "0");
+    }
+    vulkan_env(&mut command)
+        .args(["bench", "all", "--force", "--out"])
+        .arg(&out);
+    if extra.is_empty() {
+        command.args(STUDIES);
+    } else {
+        command.args(extra);
+    }
+    run(&mut command)?;
+    step(&format!(
+        "wrote {}/<study>/<study>.{{csv,md,png}}",
+        out.display()
+    ));
+    Ok(())
 }
 
 fn demo() -> Result<()> {

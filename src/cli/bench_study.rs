@@ -1,0 +1,152 @@
+//! `aarbf bench radius | cluster | traversal | noise | scaling | all`: the paper's studies
+//! (`crate::study`), each writing `OUT/<study>/<study>.{csv,md,png}`.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::bench::parse_size;
+use crate::backend::BackendKind;
+use crate::study::{self, DataSpec, Options, Study};
+use crate::values::Integrator;
+
+#[derive(Debug, Args)]
+pub struct StudyArgs {
+    /// A data set: uniform, random, clusters, dambreak-demo (generated in memory) or a path
+    /// (file, directory or glob). Repeat for several (default: the study's own: uniform, random
+    /// and dambreak-demo for traversal, uniform for scaling, dambreak-demo otherwise).
+    #[arg(long, value_parser = clap::value_parser!(DataSpec))]
+    pub data: Vec<DataSpec>,
+    /// A backend to measure (cpu, wgpu, ash); repeat for several (default: every one this
+    /// machine has).
+    #[arg(long, value_enum)]
+    pub backend: Vec<BackendKind>,
+    /// Results go to OUT/<study>/ (created if missing).
+    #[arg(long, default_value = "studies")]
+    pub out: PathBuf,
+    /// Overwrite earlier results.
+    #[arg(long)]
+    pub force: bool,
+    /// Particles of a generated data set (default: the generator's: 60K uniform and random,
+    /// 20K dambreak-demo).
+    #[arg(long)]
+    pub count: Option<usize>,
+    /// The step of the series (default: the last).
+    #[arg(long)]
+    pub step: Option<usize>,
+    /// The attribute (default: the generator's, or the data's first).
+    #[arg(long)]
+    pub attribute: Option<String>,
+    /// The global radius as a percentage of the step's diagonal (default: ~30 particles per
+    /// point for uniform and random, 1.5% otherwise).
+    #[arg(long, value_name = "PERCENT")]
+    pub radius: Option<f64>,
+    /// Timed frames' size, WxH.
+    #[arg(long, default_value = "256x256", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Cameras on the benchmark orbit (the paper: 50).
+    #[arg(long, default_value_t = 50)]
+    pub cameras: usize,
+    /// Timed repetitions of each measurement (after one untimed warm-up).
+    #[arg(long, default_value_t = 3)]
+    pub repetitions: usize,
+    /// The integrator of timed frames (the paper times frames with shadows: marching).
+    #[arg(long, value_enum, default_value = "marching")]
+    pub integrator: Integrator,
+    /// radius: the radii, as multiples of the data set's radius.
+    #[arg(long, value_delimiter = ',', default_value = "0.5,0.75,1,1.5,2")]
+    pub radii: Vec<f64>,
+    /// cluster: the cluster sizes.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16")]
+    pub clusters: Vec<u32>,
+    /// noise: the samples per pixel at which the error is measured.
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,1024")]
+    pub spp: Vec<u32>,
+    /// noise: samples per pixel of the converged reference.
+    #[arg(long, default_value_t = 4096)]
+    pub reference_spp: u32,
+    /// noise, baselines: seeds whose images' error is measured (each renders up to the
+    /// largest --spp).
+    #[arg(long, default_value_t = 2)]
+    pub seeds: u32,
+    /// noise: the size of the error images, WxH.
+    #[arg(long, default_value = "64x64", value_parser = parse_size)]
+    pub noise_size: (u32, u32),
+    /// scaling: the smallest particle count (then times 4 up to --max-n).
+    #[arg(long, default_value_t = 10_000)]
+    pub min_n: usize,
+    /// scaling: the largest particle count.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub max_n: usize,
+    /// scaling: query points per timed query.
+    #[arg(long, default_value_t = 100_000)]
+    pub queries: usize,
+    /// baselines: the voxel grids, cells along the longest side (the paper: 512).
+    #[arg(long, value_delimiter = ',', default_value = "64,128,256,512")]
+    pub voxel_grids: Vec<usize>,
+}
+
+impl StudyArgs {
+    fn options(&self, command: String) -> Options {
+        Options {
+            data: self.data.clone(),
+            count: self.count,
+            step: self.step,
+            attribute: self.attribute.clone(),
+            radius_pct: self.radius,
+            backends: self.backend.clone(),
+            out: self.out.clone(),
+            force: self.force,
+            image: self.size,
+            cameras: self.cameras,
+            repetitions: self.repetitions,
+            integrator: self.integrator,
+            clusters: self.clusters.clone(),
+            radius_factors: self.radii.clone(),
+            spps: self.spp.clone(),
+            reference_spp: self.reference_spp,
+            seeds: self.seeds,
+            noise_image: self.noise_size,
+            min_n: self.min_n,
+            max_n: self.max_n,
+            queries: self.queries,
+            voxel_grids: self.voxel_grids.clone(),
+            command,
+        }
+    }
+}
+
+/// The command line as typed, for the pages (`aarbf` for the binary's path).
+fn command_line() -> String {
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    args.insert(0, "aarbf".into());
+    args.iter()
+        .map(|a| {
+            if a.contains([' ', '"', '\'']) {
+                format!("'{a}'")
+            } else {
+                a.clone()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Runs one study (`Some`) or all of them.
+pub fn run(which: Option<Study>, args: &StudyArgs) -> anyhow::Result<()> {
+    let options = args.options(command_line());
+    let written = match which {
+        Some(s) => vec![study::run(s, &options)?],
+        None => study::run_all(&options)?,
+    };
+    for w in written {
+        println!(
+            "{} ({} rows), {}, {}",
+            w.csv.display(),
+            w.rows,
+            w.markdown.display(),
+            w.png.display()
+        );
+    }
+    Ok(())
+}

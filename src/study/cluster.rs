@@ -1,0 +1,212 @@
+//! Cluster size K = 1..16 (the paper's Fig. 9 red, Tables 1 and 2): the frame time over the
+//! benchmark orbit, the structure's build and refit times, and its bytes beside the
+//! particles' bytes, on every backend.
+
+use super::plot::{self, Figure, Panel, Scale};
+use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of, frame_times, value};
+use crate::accel::ClusterSize;
+use crate::field::FieldSettings;
+use crate::values::NoiseKind;
+
+pub const DESCRIPTION: Description = Description {
+    title: "Cluster size: frame, build, refit and bytes (paper Fig. 9 red, Tables 1-2)",
+    paper: "The paper varies the particles per cluster K from 1 to 16 at a fixed radius: frame \
+            time depends far less on K than on the radius (Fig. 9, red); rebuild and refit get \
+            faster with K, a refit costing at most about a third of a rebuild (Table 1); and the \
+            structure's size falls linearly with K, from about 9x the particles' bytes at K = 1 \
+            to about half of them at K = 16 (Table 2).",
+    settings: &[
+        "radius",
+        "k",
+        "width",
+        "height",
+        "integrator",
+        "noise",
+        "spp",
+        "cameras",
+        "step_size",
+    ],
+};
+
+pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
+    let o = ctx.options;
+    let bar = ctx.bar(
+        ctx.data.len() * ctx.backends.len() * o.clusters.len(),
+        "cluster",
+    );
+    for spec in ctx.data {
+        let ds = ctx.load(spec)?;
+        let orbit = cameras(ds.bounds, o.cameras);
+        let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
+        let mut wider = field.clone();
+        wider.radius *= 1.1;
+        for &kind in ctx.backends {
+            let mut session = super::session(kind, &ds)?;
+            let device = device_of(&session);
+            for &k in &o.clusters {
+                let cluster = ClusterSize::new(k).map_err(StudyError::Invalid)?;
+                // Uploads and builds (the untimed warm-up build).
+                session.show(&ds.series, ds.step, &field, cluster)?;
+                let mut builds = Vec::new();
+                for _ in 0..o.repetitions {
+                    session.backend_mut().build()?;
+                    builds.push(ms(session.backend().timings().build));
+                }
+                // A refit after a 10% radius change, back and forth; the first is a warm-up.
+                session.show(&ds.series, ds.step, &wider, cluster)?;
+                let mut refits = Vec::new();
+                for i in 0..o.repetitions {
+                    let f = if i % 2 == 0 { &field } else { &wider };
+                    session.show(&ds.series, ds.step, f, cluster)?;
+                    refits.push(ms(session.backend().timings().refit));
+                }
+                session.show(&ds.series, ds.step, &field, cluster)?;
+                let memory = session.backend().memory();
+                let settings = ctx.frame_settings(NoiseKind::Stbn);
+                let dt = session.resolve(&settings)?.step_size;
+                let frames = frame_times(&mut session, &settings, &orbit, o.repetitions)?;
+                let row = |metric, unit, values| Row {
+                    device: device.clone(),
+                    variant: String::new(),
+                    data: ds.name.clone(),
+                    step: ds.step,
+                    n: ds.n,
+                    settings: vec![
+                        ("radius", value(ds.radius)),
+                        ("k", k.to_string()),
+                        ("width", o.image.0.to_string()),
+                        ("height", o.image.1.to_string()),
+                        ("integrator", format!("{:?}", o.integrator).to_lowercase()),
+                        ("noise", "stbn".into()),
+                        ("spp", "1".into()),
+                        ("cameras", o.cameras.to_string()),
+                        ("step_size", value(dt)),
+                    ],
+                    metric,
+                    unit,
+                    values,
+                };
+                ctx.recorder.record(row("frame", "ms", frames))?;
+                ctx.recorder.record(row("build", "ms", builds))?;
+                ctx.recorder.record(row("refit", "ms", refits))?;
+                ctx.recorder.record(row(
+                    "structure_bytes",
+                    "bytes",
+                    vec![memory.structure_bytes as f64],
+                ))?;
+                ctx.recorder.record(row(
+                    "particle_bytes",
+                    "bytes",
+                    vec![memory.particle_bytes as f64],
+                ))?;
+                bar.inc(1);
+            }
+        }
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn k_of(r: &Row) -> f64 {
+    r.setting("k")
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(f64::NAN)
+}
+
+fn find<'a>(rows: &'a [Row], like: &Row, metric: &str, k: &str) -> Option<&'a Row> {
+    rows.iter().find(|r| {
+        r.metric == metric
+            && r.device == like.device
+            && r.data == like.data
+            && r.setting("k") == Some(k)
+    })
+}
+
+pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
+    let name = |r: &Row| super::line_name(r, rows);
+    let mut notes = Vec::new();
+    for base in rows.iter().filter(|r| r.metric == "build") {
+        let k = base.setting("k").unwrap_or("?");
+        if let Some(refit) = find(rows, base, "refit", k) {
+            notes.push(format!(
+                "{} K = {k}: refit {:.3} ms, build {:.3} ms (refit / build = {:.2})",
+                name(base),
+                refit.median(),
+                base.median(),
+                refit.median() / base.median()
+            ));
+        }
+    }
+    for s1 in rows
+        .iter()
+        .filter(|r| r.metric == "structure_bytes" && r.setting("k") == Some("1"))
+    {
+        let p = find(rows, s1, "particle_bytes", "1").map_or(f64::NAN, Row::median);
+        let mut line = format!(
+            "{}: structure {:.2} MB at K = 1 ({:.2}x the particles' {:.2} MB)",
+            name(s1),
+            s1.median() / 1e6,
+            s1.median() / p,
+            p / 1e6
+        );
+        if let Some(s16) = find(rows, s1, "structure_bytes", "16") {
+            line += &format!(
+                ", {:.2} MB at K = 16 ({:.2}x the particles'; K = 1 / K = 16 = {:.1}, linear would be 16)",
+                s16.median() / 1e6,
+                s16.median() / p,
+                s1.median() / s16.median()
+            );
+        }
+        notes.push(line);
+        if let (Some(f1), Some(f16)) = (find(rows, s1, "frame", "1"), find(rows, s1, "frame", "16"))
+        {
+            notes.push(format!(
+                "{}: frame {:.3} ms at K = 1, {:.3} ms at K = 16 ({:.2}x)",
+                name(s1),
+                f1.median(),
+                f16.median(),
+                f16.median() / f1.median()
+            ));
+        }
+    }
+    let mut bytes = plot::lines(rows, "structure_bytes", name, k_of, 1e-6);
+    for mut p in plot::lines(rows, "particle_bytes", name, k_of, 1e-6) {
+        p.label = format!("{} particles", p.label);
+        p.dashed = true;
+        bytes.push(p);
+    }
+    let panel = |title: &str, metric: &str, y: &str| Panel::Lines {
+        title: title.into(),
+        x_label: "particles per cluster K".into(),
+        y_label: y.into(),
+        x_scale: Scale::Log2,
+        y_scale: Scale::Log10,
+        series: plot::lines(rows, metric, name, k_of, 1.0),
+    };
+    let figure = Figure {
+        title: DESCRIPTION.title.into(),
+        panels: vec![
+            panel("frame time over the orbit (Fig. 9 red)", "frame", "frame time (ms)"),
+            panel("structure build (Table 1)", "build", "build time (ms)"),
+            panel("refit after a radius change (Table 1)", "refit", "refit time (ms)"),
+            Panel::Lines {
+                title: "structure bytes vs particle bytes (Table 2)".into(),
+                x_label: "particles per cluster K".into(),
+                y_label: "memory (MB)".into(),
+                x_scale: Scale::Log2,
+                y_scale: Scale::Log10,
+                series: bytes,
+            },
+        ],
+        caption: vec![
+            "Paper: frame time depends little on K (Fig. 9 red); builds and refits get faster with K, a refit at most ~1/3 of a rebuild (Table 1); structure bytes fall linearly with K (Table 2; dashed: particle bytes)."
+                .into(),
+            super::timing_caption(options),
+        ],
+    };
+    (notes, figure)
+}

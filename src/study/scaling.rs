@@ -1,0 +1,208 @@
+//! How cost grows with work: structure build and refit, field queries and frame time against
+//! the particle count N, from 10K up to what this machine holds, on a log-log plot with the
+//! exponent fitted to each line (cost ∝ N^e).
+//!
+//! The data is a generator's (`uniform` by default) at each N; the radius keeps the overlap
+//! constant (about 30 particles reach a point in `uniform` and `random`; for other generators
+//! the default radius shrinks as N^(-1/3) from the generator's default count), so the work per
+//! sample stays the same and the curves show what N alone costs.
+
+use super::plot::{Figure, Panel, Scale};
+use super::{
+    Ctx, DataSpec, Description, Options, Row, StudyError, cameras, device_of, frame_times, value,
+};
+use crate::accel::ClusterSize;
+use crate::field::FieldSettings;
+use crate::scene::synth::Generator;
+use crate::values::NoiseKind;
+
+pub const DESCRIPTION: Description = Description {
+    title: "Scaling with the particle count",
+    paper: "Not a figure of the paper: how build, refit, query and frame time grow with N at a \
+            constant overlap. A GPU LBVH build (radix sort, hierarchy, bottom-up bounds) and a \
+            refit are linear in N; a query's cost grows with the tree's depth (log N) at a fixed \
+            number of particles per point.",
+    settings: &[
+        "radius",
+        "k",
+        "queries",
+        "width",
+        "height",
+        "integrator",
+        "noise",
+        "spp",
+        "cameras",
+        "step_size",
+    ],
+};
+
+/// The particle counts: from `min_n` times 4 while at most `max_n`, and `max_n` itself.
+pub fn sizes(min_n: usize, max_n: usize) -> Vec<usize> {
+    let mut out = Vec::new();
+    let mut n = min_n;
+    while n <= max_n {
+        out.push(n);
+        n = n.saturating_mul(4);
+    }
+    if out.last() != Some(&max_n) {
+        out.push(max_n);
+    }
+    out
+}
+
+pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
+    let o = ctx.options;
+    let ns = sizes(o.min_n, o.max_n);
+    let bar = ctx.bar(ctx.data.len() * ns.len() * ctx.backends.len(), "scaling");
+    let cluster = ClusterSize::new(1).map_err(StudyError::Invalid)?;
+    for spec in ctx.data {
+        let DataSpec::Generated(generator) = spec else {
+            return Err(StudyError::Invalid(format!(
+                "scaling generates its data at each N: --data must be a generator (uniform, random, clusters, dambreak-demo), not {spec}"
+            )));
+        };
+        for &n in &ns {
+            let mut ds =
+                super::Dataset::load(spec, Some(n), o.step, o.attribute.as_deref(), o.radius_pct)?;
+            if o.radius_pct.is_none()
+                && !matches!(generator, Generator::Uniform | Generator::Random)
+            {
+                ds.radius *= (generator.default_count() as f64 / ds.n as f64).cbrt();
+            }
+            let orbit = cameras(ds.bounds, o.cameras);
+            let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
+            let mut wider = field.clone();
+            wider.radius *= 1.1;
+            let points = super::query_points(o.queries, ds.bounds, 11);
+            for &kind in ctx.backends {
+                let mut session = super::session(kind, &ds)?;
+                let device = device_of(&session);
+                session.show(&ds.series, ds.step, &field, cluster)?;
+                let mut builds = Vec::new();
+                for _ in 0..o.repetitions {
+                    session.backend_mut().build()?;
+                    builds.push(ms(session.backend().timings().build));
+                }
+                session.show(&ds.series, ds.step, &wider, cluster)?;
+                let mut refits = Vec::new();
+                for i in 0..o.repetitions {
+                    let f = if i % 2 == 0 { &field } else { &wider };
+                    session.show(&ds.series, ds.step, f, cluster)?;
+                    refits.push(ms(session.backend().timings().refit));
+                }
+                session.show(&ds.series, ds.step, &field, cluster)?;
+                session
+                    .backend_mut()
+                    .query(&points[..points.len().min(1024)])?;
+                let mut queries = Vec::new();
+                for _ in 0..o.repetitions {
+                    session.backend_mut().query(&points)?;
+                    queries.push(ms(session.backend().timings().query));
+                }
+                let settings = ctx.frame_settings(NoiseKind::Stbn);
+                let dt = session.resolve(&settings)?.step_size;
+                let frames = frame_times(&mut session, &settings, &orbit, o.repetitions)?;
+                let row = |metric, values| Row {
+                    device: device.clone(),
+                    variant: String::new(),
+                    data: ds.name.clone(),
+                    step: ds.step,
+                    n: ds.n,
+                    settings: vec![
+                        ("radius", value(ds.radius)),
+                        ("k", "1".into()),
+                        ("queries", points.len().to_string()),
+                        ("width", o.image.0.to_string()),
+                        ("height", o.image.1.to_string()),
+                        ("integrator", format!("{:?}", o.integrator).to_lowercase()),
+                        ("noise", "stbn".into()),
+                        ("spp", "1".into()),
+                        ("cameras", o.cameras.to_string()),
+                        ("step_size", value(dt)),
+                    ],
+                    metric,
+                    unit: "ms",
+                    values,
+                };
+                ctx.recorder.record(row("build", builds))?;
+                ctx.recorder.record(row("refit", refits))?;
+                ctx.recorder.record(row("query", queries))?;
+                ctx.recorder.record(row("frame", frames))?;
+                bar.inc(1);
+            }
+        }
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
+    let mut notes = Vec::new();
+    let mut panels = Vec::new();
+    for (metric, title) in [
+        ("build", "structure build"),
+        ("refit", "refit after a radius change"),
+        ("query", "field queries"),
+        ("frame", "frame over the orbit"),
+    ] {
+        let mut series = super::plot::lines(
+            rows,
+            metric,
+            |r| super::line_name(r, rows),
+            |r| r.n as f64,
+            1.0,
+        );
+        for s in &mut series {
+            let fit: Vec<(f64, f64)> = s.points.iter().map(|p| (p.0, p.1)).collect();
+            if let Some(e) = super::fitted_exponent(&fit) {
+                notes.push(format!(
+                    "{} {metric}: time ∝ N^{e:.2} over N = {:.0}..{:.0}",
+                    s.label,
+                    fit.first().map_or(0.0, |p| p.0),
+                    fit.last().map_or(0.0, |p| p.0)
+                ));
+                s.label = format!("{} (∝ N^{e:.2})", s.label);
+            }
+        }
+        let y = if metric == "query" {
+            format!("time for {} queries (ms)", options.queries)
+        } else {
+            format!("{metric} time (ms)")
+        };
+        panels.push(Panel::Lines {
+            title: title.into(),
+            x_label: "particles N".into(),
+            y_label: y,
+            x_scale: Scale::Log10,
+            y_scale: Scale::Log10,
+            series,
+        });
+    }
+    let figure = Figure {
+        title: DESCRIPTION.title.into(),
+        panels,
+        caption: vec![
+            "Cost vs N at constant overlap, log-log, with the fitted exponent e (time ∝ N^e) in each label: builds and refits are expected near-linear (e ≈ 1); queries and frames grow slowly (tree depth)."
+                .into(),
+            super::timing_caption(options),
+        ],
+    };
+    (notes, figure)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn sizes_grow_by_four_to_the_largest() {
+        assert_eq!(
+            super::sizes(10_000, 200_000),
+            [10_000, 40_000, 160_000, 200_000]
+        );
+        assert_eq!(super::sizes(100, 1600), [100, 400, 1600]);
+        assert_eq!(super::sizes(300, 300), [300]);
+    }
+}

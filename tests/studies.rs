@@ -1,0 +1,443 @@
+//! The paper's studies through the binary, as a user runs them, at a tiny size: every study on
+//! the CPU backend and the wgpu backend (one `aarbf bench all`, so lavapipe compiles each
+//! pipeline once), the traversal study on the ash backend (RT pipeline and LBVH on the same
+//! device), and what a failed or interrupted study leaves behind. The GPU backends are named
+//! explicitly, so a machine without a Vulkan device fails these tests rather than skipping them.
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const LEADING: [&str; 12] = [
+    "date", "machine", "cpu", "threads", "backend", "adapter", "driver", "timer", "variant",
+    "data", "step", "n",
+];
+const TRAILING: [&str; 7] = [
+    "metric",
+    "unit",
+    "repetitions",
+    "median",
+    "min",
+    "max",
+    "values",
+];
+
+/// Tiny sizes for every study: 300 particles, 2 cameras, 16x16 images, 1 repetition.
+const TINY: &[&str] = &[
+    "--count",
+    "300",
+    "--size",
+    "16x16",
+    "--cameras",
+    "2",
+    "--repetitions",
+    "1",
+    "--radii",
+    "1,2",
+    "--clusters",
+    "1,4",
+    "--spp",
+    "1,4",
+    "--reference-spp",
+    "16",
+    "--seeds",
+    "1",
+    "--noise-size",
+    "16x16",
+    "--min-n",
+    "200",
+    "--max-n",
+    "800",
+    "--queries",
+    "500",
+    "--voxel-grids",
+    "8,16",
+];
+
+fn aarbf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("AARBF_LOG", "warn")
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("the binary runs")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = aarbf(args);
+    assert!(
+        out.status.success(),
+        "aarbf {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// A study's CSV: its header and rows (the csv crate parses quoting).
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+    let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+    let rows = reader
+        .records()
+        .map(|r| r.unwrap().iter().map(String::from).collect())
+        .collect();
+    (header, rows)
+}
+
+fn column(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+}
+
+/// Checks `out/<study>`: the CSV's columns (leading, `settings`, trailing) and `rows` rows of
+/// finite positive values (`repetitions` each, median between min and max), the Markdown
+/// table's rows, and the PNG's size (`panels` panels, 3 caption lines).
+fn check_study(
+    out: &Path,
+    study: &str,
+    settings: &[&str],
+    rows: usize,
+    backends: &[&str],
+    panels: u32,
+) -> Vec<Vec<String>> {
+    let dir = out.join(study);
+    let (header, records) = read_csv(&dir.join(format!("{study}.csv")));
+    let want: Vec<&str> = LEADING
+        .iter()
+        .chain(settings)
+        .chain(&TRAILING)
+        .copied()
+        .collect();
+    assert_eq!(header, want, "{study}: columns");
+    assert_eq!(records.len(), rows, "{study}: rows\n{records:?}");
+    let c = |n| column(&header, n);
+    for r in &records {
+        assert_eq!(r.len(), header.len());
+        assert!(backends.contains(&r[c("backend")].as_str()), "{r:?}");
+        assert!(
+            r[c("date")].ends_with('Z') && !r[c("cpu")].is_empty(),
+            "{r:?}"
+        );
+        assert!(r[c("n")].parse::<usize>().unwrap() > 0);
+        let values: Vec<f64> = r[c("values")]
+            .split(';')
+            .map(|v| v.parse().unwrap())
+            .collect();
+        assert_eq!(values.len(), r[c("repetitions")].parse::<usize>().unwrap());
+        assert!(
+            values.iter().all(|v| v.is_finite() && *v > 0.0),
+            "{study}: values must be finite and positive: {r:?}"
+        );
+        let [median, min, max] = ["median", "min", "max"].map(|n| r[c(n)].parse::<f64>().unwrap());
+        assert!(min <= median && median <= max, "{r:?}");
+    }
+    for b in backends {
+        assert!(
+            records.iter().any(|r| r[c("backend")] == *b),
+            "{study}: no row of {b}"
+        );
+    }
+    let md = std::fs::read_to_string(dir.join(format!("{study}.md"))).unwrap();
+    assert!(md.contains("![") && md.contains(&format!("({study}.png)")));
+    let table_rows = md
+        .lines()
+        .skip_while(|l| !l.starts_with("| backend | variant |"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .count();
+    assert_eq!(table_rows, rows, "{study}: Markdown rows\n{md}");
+    assert!(
+        md.contains("aarbf bench"),
+        "the page shows the command:\n{md}"
+    );
+    let png = image::open(dir.join(format!("{study}.png"))).unwrap();
+    // 760 x 480 per panel, two panels a row, a title, and a caption of at least 3 lines.
+    let cols = if panels > 1 { 2 } else { 1 };
+    assert_eq!(png.width(), 760 * cols, "{study}: PNG width");
+    let panels_height = 44 + 480 * panels.div_ceil(cols) + 16;
+    assert!(
+        (panels_height + 24 * 3..=panels_height + 24 * 8).contains(&png.height()),
+        "{study}: PNG height {}",
+        png.height()
+    );
+    records
+}
+
+#[test]
+fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let mut args = vec![
+        "bench",
+        "all",
+        "--backend",
+        "cpu",
+        "--backend",
+        "wgpu",
+        "--out",
+        out,
+    ];
+    args.extend_from_slice(TINY);
+    let stdout = ok(&args);
+    assert_eq!(stdout.lines().count(), 6, "{stdout}");
+    let b = ["cpu", "wgpu"];
+    let frame = [
+        "width",
+        "height",
+        "integrator",
+        "noise",
+        "spp",
+        "cameras",
+        "step_size",
+    ];
+    let with = |lead: &[&'static str], tail: &[&'static str]| -> Vec<&'static str> {
+        lead.iter().chain(tail).copied().collect()
+    };
+    let p = dir.path();
+    // 1 data set x 2 backends x K in {1, 16} x 2 radii.
+    let radius = with(
+        &["radius", "radius_pct_diagonal", "radius_factor", "k"],
+        &frame,
+    );
+    let rows = check_study(p, "radius", &radius, 8, &b, 1);
+    let frames = |rows: &[Vec<String>], k: &str| rows.iter().filter(|r| r[15] == k).count();
+    assert_eq!(frames(&rows, "1"), 4);
+    // 2 backends x 2 cluster sizes x (frame, build, refit, structure and particle bytes).
+    check_study(p, "cluster", &with(&["radius", "k"], &frame), 20, &b, 4);
+    // 3 data sets (uniform, random, dam break) x 2 backends.
+    let rows = check_study(
+        p,
+        "traversal",
+        &with(&["radius", "k", "traversal"], &frame),
+        6,
+        &b,
+        1,
+    );
+    for data in ["uniform", "random", "dambreak-demo"] {
+        assert_eq!(rows.iter().filter(|r| r[9] == data).count(), 2, "{data}");
+    }
+    // 2 backends x 2 noises x (frame + 2 spp x (rmse, blurred rmse)).
+    check_study(
+        p,
+        "noise",
+        &[
+            "radius",
+            "k",
+            "noise",
+            "width",
+            "height",
+            "integrator",
+            "spp",
+            "cameras",
+            "reference_spp",
+            "step_size",
+        ],
+        20,
+        &b,
+        2,
+    );
+    // N = 200 and 800 x 2 backends x (build, refit, query, frame).
+    let rows = check_study(
+        p,
+        "scaling",
+        &with(&["radius", "k", "queries"], &frame),
+        16,
+        &b,
+        4,
+    );
+    let mut ns: Vec<&str> = rows.iter().map(|r| r[11].as_str()).collect();
+    ns.dedup();
+    assert_eq!(ns, ["200", "800"]);
+    // The scaling page states a fitted exponent for each line.
+    let md = std::fs::read_to_string(p.join("scaling/scaling.md")).unwrap();
+    assert!(md.contains("∝ N^"), "{md}");
+    // RBF on both backends, voxel grids 8 and 16 on cpu: 4 x (frame, structure, march, rmse).
+    let rows = check_study(
+        p,
+        "baselines",
+        &[
+            "method",
+            "grid",
+            "radius",
+            "k",
+            "width",
+            "height",
+            "integrator",
+            "noise",
+            "spp",
+            "cameras",
+            "reference_spp",
+        ],
+        16,
+        &b,
+        2,
+    );
+    let variants: Vec<(&str, &str)> = rows
+        .iter()
+        .filter(|r| r[23] == "rmse")
+        .map(|r| (r[4].as_str(), r[8].as_str()))
+        .collect();
+    assert_eq!(
+        variants,
+        [
+            ("cpu", "rbf"),
+            ("cpu", "voxel 8"),
+            ("cpu", "voxel 16"),
+            ("wgpu", "rbf")
+        ]
+    );
+    // Results are not overwritten without --force.
+    let again = aarbf(&args);
+    assert!(!again.status.success());
+    assert!(
+        String::from_utf8_lossy(&again.stderr).contains("--force"),
+        "{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+}
+
+#[test]
+fn the_traversal_study_compares_the_rt_pipeline_and_the_lbvh_on_the_ash_device() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let mut args = vec![
+        "bench",
+        "traversal",
+        "--backend",
+        "ash",
+        "--data",
+        "uniform",
+        "--out",
+        out,
+    ];
+    args.extend_from_slice(TINY);
+    ok(&args);
+    let frame = [
+        "radius",
+        "k",
+        "traversal",
+        "width",
+        "height",
+        "integrator",
+        "noise",
+        "spp",
+        "cameras",
+        "step_size",
+    ];
+    let rows = check_study(dir.path(), "traversal", &frame, 2, &["ash"], 1);
+    let variants: Vec<&str> = rows.iter().map(|r| r[8].as_str()).collect();
+    assert_eq!(variants, ["rt pipeline", "lbvh compute"]);
+    // Same device for both, and device timestamps.
+    assert_eq!(rows[0][5], rows[1][5]);
+    assert_eq!(rows[0][7], "device timestamps");
+    let md = std::fs::read_to_string(dir.path().join("traversal/traversal.md")).unwrap();
+    assert!(md.contains("speed-up of the RT pipeline"), "{md}");
+}
+
+#[test]
+fn a_study_that_fails_keeps_the_rows_it_measured_and_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let missing = dir.path().join("no-such-data.particles");
+    let mut args = vec![
+        "bench",
+        "radius",
+        "--backend",
+        "cpu",
+        "--data",
+        "uniform",
+        "--data",
+        missing.to_str().unwrap(),
+        "--out",
+        out,
+    ];
+    args.extend_from_slice(TINY);
+    let result = aarbf(&args);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(!result.status.success());
+    assert!(stderr.contains("no-such-data"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let (_, rows) = read_csv(&dir.path().join("radius/radius.csv"));
+    assert_eq!(rows.len(), 4, "the uniform rows were kept");
+    let md = std::fs::read_to_string(dir.path().join("radius/radius.md")).unwrap();
+    assert!(md.contains("stopped early"), "{md}");
+    // Bad options are errors, not panics.
+    for bad in [
+        &["bench", "cluster", "--clusters", "3", "--out", out][..],
+        &[
+            "bench",
+            "scaling",
+            "--data",
+            "nothing.csv",
+            "--out",
+            out,
+            "--force",
+        ][..],
+        &["bench", "radius", "--cameras", "0", "--out", out, "--force"][..],
+    ] {
+        let r = aarbf(bad);
+        let e = String::from_utf8_lossy(&r.stderr);
+        assert!(
+            !r.status.success() && e.contains("error") && !e.contains("panicked"),
+            "{bad:?}: {e}"
+        );
+    }
+}
+
+#[test]
+fn an_interrupted_study_keeps_every_row_it_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("scaling/scaling.csv");
+    // A scaling run far longer than the test: killed once it has written two rows.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args([
+            "bench",
+            "scaling",
+            "--backend",
+            "cpu",
+            "--min-n",
+            "1000",
+            "--max-n",
+            "64000000",
+            "--size",
+            "16x16",
+            "--cameras",
+            "2",
+            "--repetitions",
+            "1",
+            "--queries",
+            "500",
+            "--out",
+            dir.path().to_str().unwrap(),
+        ])
+        .env("AARBF_LOG", "warn")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    loop {
+        let lines = std::fs::read_to_string(&csv)
+            .map(|t| t.lines().count())
+            .unwrap_or(0);
+        if lines >= 3 {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no rows after a minute"
+        );
+        assert!(child.try_wait().unwrap().is_none(), "the study ended early");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let (header, rows) = read_csv(&csv);
+    assert!(rows.len() >= 2);
+    for r in &rows {
+        assert_eq!(r.len(), header.len(), "a whole row: {r:?}");
+        assert!(r[header.len() - 1].parse::<f64>().unwrap() > 0.0);
+    }
+}
