@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use clap::Args;
 use glam::DVec3;
 
-use crate::field::{Classification, ReferenceField, RegularGrid, normalise};
+use crate::field::{Classification, Particles, RegularGrid, normalise};
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::values::color_space::linear_to_srgb;
 
@@ -54,10 +54,10 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
     crate::io::output::check_writable(&args.out, args.force)?;
     let resolved = resolve(&args.data, &args.field)?;
     let step = resolved.series.step(resolved.step)?;
-    let field = ReferenceField::of_step(
+    // The particles alone: scattering them onto the pixels needs no tree.
+    let particles = Particles::prepare(
         &step,
         &resolved.field,
-        resolved.cluster,
         resolved.series.bounds(),
         resolved.series_range(),
     )?;
@@ -84,7 +84,7 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         spacing: [extent[u] / width as f64, -extent[v] / height as f64, 0.0],
         dims: [width, height, 1],
     };
-    let samples = field.eval_grid(&grid);
+    let samples = particles.eval_grid(&grid);
 
     // Brightness: 1 - exp(-2 Phi / Phi_ref), Phi_ref the 95th percentile of non-zero Phi.
     let mut nonzero: Vec<f64> = samples.iter().map(|s| s.phi).filter(|p| *p > 0.0).collect();
@@ -94,7 +94,7 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         .copied()
         .unwrap_or(1.0);
     let pre = resolved.field.classification == Classification::Pre;
-    let range = field.particles.range;
+    let range = particles.range;
     let mut image = image::RgbImage::new(width as u32, height as u32);
     for (pixel, s) in image.pixels_mut().zip(&samples) {
         let alpha = 1.0 - (-2.0 * s.phi / phi_ref).exp();

@@ -97,13 +97,9 @@ impl RegularGrid {
 }
 
 impl ReferenceField {
-    /// The field at every point of `grid`, in the grid's order (what `eval` gives at each
-    /// [`RegularGrid::point`], summed in another order).
+    /// The field at every point of `grid` ([`Particles::eval_grid`]).
     pub fn eval_grid(&self, grid: &RegularGrid) -> Vec<Sample> {
-        self.eval_grid_sums(grid)
-            .into_par_iter()
-            .map(|(phi, theta)| self.finish(Accumulator { phi, theta }))
-            .collect()
+        self.particles.eval_grid(grid)
     }
 
     /// Phi and the Theta numerator at every point of `grid` ([`Particles::eval_grid_sums`]).
@@ -113,6 +109,15 @@ impl ReferenceField {
 }
 
 impl Particles {
+    /// The field at every point of `grid`, in the grid's order (what the reference's `eval`
+    /// gives at each [`RegularGrid::point`], summed in another order), with no tree built.
+    pub fn eval_grid(&self, grid: &RegularGrid) -> Vec<Sample> {
+        self.eval_grid_sums(grid)
+            .into_par_iter()
+            .map(|(phi, theta)| self.finish(Accumulator { phi, theta }))
+            .collect()
+    }
+
     /// Phi and the Theta numerator at every point of `grid` (what the reference's `eval_sums`
     /// gives there), scattering each particle onto the grid points it reaches: no tree.
     /// Parallel over blocks of grid rows; each block takes the particles that reach it, in

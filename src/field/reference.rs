@@ -187,7 +187,14 @@ impl ReferenceField {
     }
 
     pub(super) fn finish(&self, acc: Accumulator) -> Sample {
-        let post = matches!(self.particles.theta, Theta::Scalar(_));
-        finish_sums(acc.phi, acc.theta, post, self.particles.range)
+        self.particles.finish(acc)
+    }
+}
+
+impl Particles {
+    /// The field's value from its sums over these particles ([`finish_sums`]).
+    pub(super) fn finish(&self, acc: Accumulator) -> Sample {
+        let post = matches!(self.theta, Theta::Scalar(_));
+        finish_sums(acc.phi, acc.theta, post, self.range)
     }
 }
