@@ -472,6 +472,39 @@ pub fn frame_times(
 }
 
 /// A new session on `kind` over `data`'s series.
+/// Build and refit times (ms) of `repetitions` each on `session`, for `data`'s step under
+/// `field` with `cluster`: the untimed warm-up build first, then rebuilds; then refits after
+/// a radius change to `wider` and back, the first untimed. Leaves the step shown under `field`.
+pub fn build_and_refit_times(
+    session: &mut RenderSession,
+    data: &Dataset,
+    field: &crate::field::FieldSettings,
+    wider: &crate::field::FieldSettings,
+    cluster: crate::accel::ClusterSize,
+    repetitions: usize,
+) -> Result<(Vec<f64>, Vec<f64>), StudyError> {
+    session.show(&data.series, data.step, field, cluster)?;
+    let mut builds = Vec::new();
+    for _ in 0..repetitions {
+        session.backend_mut().build()?;
+        builds.push(ms(session.backend().timings().build));
+    }
+    session.show(&data.series, data.step, wider, cluster)?;
+    let mut refits = Vec::new();
+    for i in 0..repetitions {
+        let f = if i % 2 == 0 { field } else { wider };
+        session.show(&data.series, data.step, f, cluster)?;
+        refits.push(ms(session.backend().timings().refit));
+    }
+    session.show(&data.series, data.step, field, cluster)?;
+    Ok((builds, refits))
+}
+
+/// Milliseconds of a duration.
+pub fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
 pub fn session(kind: BackendKind, data: &Dataset) -> Result<RenderSession, StudyError> {
     Ok(RenderSession::new(backend::create(kind)?, &data.series))
 }

@@ -77,27 +77,23 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
             for &kind in ctx.backends {
                 let mut session = super::session(kind, &ds)?;
                 let device = device_of(&session);
-                session.show(&ds.series, ds.step, &field, cluster)?;
-                let mut builds = Vec::new();
-                for _ in 0..o.repetitions {
-                    session.backend_mut().build()?;
-                    builds.push(ms(session.backend().timings().build));
-                }
-                session.show(&ds.series, ds.step, &wider, cluster)?;
-                let mut refits = Vec::new();
-                for i in 0..o.repetitions {
-                    let f = if i % 2 == 0 { &field } else { &wider };
-                    session.show(&ds.series, ds.step, f, cluster)?;
-                    refits.push(ms(session.backend().timings().refit));
-                }
-                session.show(&ds.series, ds.step, &field, cluster)?;
+                // Builds (after the untimed warm-up) and refits after a 10% radius change, back and
+                // forth (the first untimed).
+                let (builds, refits) = super::build_and_refit_times(
+                    &mut session,
+                    &ds,
+                    &field,
+                    &wider,
+                    cluster,
+                    o.repetitions,
+                )?;
                 session
                     .backend_mut()
                     .query(&points[..points.len().min(1024)])?;
                 let mut queries = Vec::new();
                 for _ in 0..o.repetitions {
                     session.backend_mut().query(&points)?;
-                    queries.push(ms(session.backend().timings().query));
+                    queries.push(super::ms(session.backend().timings().query));
                 }
                 let settings = ctx.frame_settings(NoiseKind::Stbn);
                 let dt = session.resolve(&settings)?.step_size;
@@ -134,10 +130,6 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     }
     bar.finish_and_clear();
     Ok(())
-}
-
-fn ms(d: std::time::Duration) -> f64 {
-    d.as_secs_f64() * 1e3
 }
 
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
