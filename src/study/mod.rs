@@ -500,6 +500,26 @@ pub fn build_and_refit_times(
     Ok((builds, refits))
 }
 
+/// A timed frame row's settings: `own` (what the study varies), then the frames' (the
+/// options' image size and integrator, blue noise, 1 spp, the orbit's cameras, the march step
+/// the session used).
+pub fn with_frame_settings(
+    mut own: Vec<(&'static str, String)>,
+    o: &Options,
+    step_size: f64,
+) -> Vec<(&'static str, String)> {
+    own.extend([
+        ("width", o.image.0.to_string()),
+        ("height", o.image.1.to_string()),
+        ("integrator", format!("{:?}", o.integrator).to_lowercase()),
+        ("noise", "stbn".into()),
+        ("spp", "1".into()),
+        ("cameras", o.cameras.to_string()),
+        ("step_size", value(step_size)),
+    ]);
+    own
+}
+
 /// Milliseconds of a duration.
 pub fn ms(d: std::time::Duration) -> f64 {
     d.as_secs_f64() * 1e3
