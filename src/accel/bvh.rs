@@ -91,21 +91,15 @@ impl ClusterBvh {
         let Some(bvh) = &self.bvh else { return };
         let origin = origin - self.origin;
         let inv = dir.recip();
-        let hit = |b: &Aabb| -> Option<f64> {
+        let interval = |b: &Aabb| -> Option<(f64, f64)> {
             let lo = (b.min.as_dvec3() - origin) * inv;
             let hi = (b.max.as_dvec3() - origin) * inv;
             // NaN (0 * inf on a face) must not shrink the interval: min/max ignore NaN.
             let t_in = lo.min(hi).max_element().max(t0);
             let t_out = lo.max(hi).min_element().min(t1);
-            (t_in <= t_out).then_some(t_in)
-        };
-        let interval = |b: &Aabb| -> Option<(f64, f64)> {
-            let lo = (b.min.as_dvec3() - origin) * inv;
-            let hi = (b.max.as_dvec3() - origin) * inv;
-            let t_in = lo.min(hi).max_element().max(t0);
-            let t_out = lo.max(hi).min_element().min(t1);
             (t_in <= t_out).then_some((t_in, t_out))
         };
+        let hit = |b: &Aabb| interval(b).map(|(t_in, _)| t_in);
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         if hit(bvh.nodes[0].aabb()).is_some() {
             stack.push(0);

@@ -71,8 +71,10 @@ impl F32Field {
         let inv = 1.0 / cell;
         let cell_of = |c: DVec3| -> usize {
             let g = ((c - corner) * inv).floor();
-            let [i, j, k] = [0, 1, 2].map(|a| (g[a].max(0.0) as usize).min(dims[a] - 1));
-            i + dims[0] * (j + dims[1] * k)
+            cell_index(
+                dims,
+                [0, 1, 2].map(|a| (g[a].max(0.0) as usize).min(dims[a] - 1)),
+            )
         };
         let mut keyed: Vec<(u32, u32)> = live
             .par_iter()
@@ -91,12 +93,7 @@ impl F32Field {
         let reached: Vec<bool> = (0..cells)
             .into_par_iter()
             .map(|c| {
-                let (i, j, k) = (
-                    c % dims[0],
-                    (c / dims[0]) % dims[1],
-                    c / (dims[0] * dims[1]),
-                );
-                neighbour_rows(dims, [i, j, k]).any(|(a, b)| start[b + 1] > start[a])
+                neighbour_rows(dims, cell_coords(dims, c)).any(|(a, b)| start[b + 1] > start[a])
             })
             .collect();
         tracing::debug!(
@@ -131,7 +128,7 @@ impl F32Field {
             origin: p.origin,
             corner,
             cell,
-            inv_cell: 1.0 / cell,
+            inv_cell: inv,
             dims,
             start,
             reached,
@@ -149,11 +146,6 @@ impl F32Field {
         4 * self.start.len() + self.reached.len()
     }
 
-    /// The cell width (at least the largest radius).
-    pub fn cell_width(&self) -> f64 {
-        self.cell
-    }
-
     /// The cell holding local point `l`, if it is in the grid.
     fn cell_at(&self, l: DVec3) -> Option<usize> {
         let g = (l - self.corner) * self.inv_cell;
@@ -165,15 +157,13 @@ impl F32Field {
             }
             idx[a] = g[a] as usize;
         }
-        Some(idx[0] + self.dims[0] * (idx[1] + self.dims[1] * idx[2]))
+        Some(cell_index(self.dims, idx))
     }
 
     /// The particles of cell `c`'s 27 neighbours, as nine runs of particle indices.
     fn runs(&self, c: usize, out: &mut Vec<(u32, u32)>) {
         out.clear();
-        let d = self.dims;
-        let ijk = [c % d[0], (c / d[0]) % d[1], c / (d[0] * d[1])];
-        for (a, b) in neighbour_rows(d, ijk) {
+        for (a, b) in neighbour_rows(self.dims, cell_coords(self.dims, c)) {
             let run = (self.start[a], self.start[b + 1]);
             if run.1 > run.0 {
                 out.push(run);
@@ -246,8 +236,7 @@ impl F32Field {
                 2
             };
             let leave = next[ax].min(exit);
-            let c = cell[0] as usize
-                + self.dims[0] * (cell[1] as usize + self.dims[1] * cell[2] as usize);
+            let c = cell_index(self.dims, cell.map(|v| v as usize));
             if self.reached[c] && leave > t {
                 match out.last_mut() {
                     Some(last) if last.1 >= t => last.1 = leave,
@@ -295,11 +284,25 @@ fn neighbour_rows(dims: [usize; 3], ijk: [usize; 3]) -> impl Iterator<Item = (us
     let span = |v: usize, n: usize| v.saturating_sub(1)..=(v + 1).min(n - 1);
     let (i0, i1) = (ijk[0].saturating_sub(1), (ijk[0] + 1).min(dims[0] - 1));
     span(ijk[2], dims[2]).flat_map(move |k| {
-        span(ijk[1], dims[1]).map(move |j| {
-            let row = dims[0] * (j + dims[1] * k);
-            (row + i0, row + i1)
-        })
+        span(ijk[1], dims[1])
+            .map(move |j| (cell_index(dims, [i0, j, k]), cell_index(dims, [i1, j, k])))
     })
+}
+
+/// The index of cell `ijk` (x fastest, then y, then z).
+#[inline]
+fn cell_index(dims: [usize; 3], ijk: [usize; 3]) -> usize {
+    ijk[0] + dims[0] * (ijk[1] + dims[1] * ijk[2])
+}
+
+/// The cell coordinates of index `c` ([`cell_index`]'s inverse).
+#[inline]
+fn cell_coords(dims: [usize; 3], c: usize) -> [usize; 3] {
+    [
+        c % dims[0],
+        (c / dims[0]) % dims[1],
+        c / (dims[0] * dims[1]),
+    ]
 }
 
 /// Sampling along rays (and point queries): the runs of candidates of the last cell visited,

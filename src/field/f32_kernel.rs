@@ -105,15 +105,6 @@ impl Packed {
         }
     }
 
-    /// Particles, without the padding.
-    pub fn len(&self) -> usize {
-        self.x.len().saturating_sub(LANES)
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// Bytes of the arrays.
     pub fn bytes(&self) -> usize {
         4 * (6 + self.channels) * self.x.len()

@@ -139,7 +139,8 @@ fn march(
 /// where the field has particles, when space without particles is truly empty (the optical
 /// map's D(0) is 0); otherwise the whole interval, since extinction there is `scale · D(0)`
 /// (and its colour may show). The GPU backends march every sample; skipping changes no result
-/// where it is done.
+/// where it is done. Returns whether empty space is clear: then a sample where Phi is 0 adds
+/// nothing and need not be shaded.
 #[allow(clippy::too_many_arguments)]
 fn march_intervals<F: FieldSampler>(
     p: &FrameParams,
@@ -150,12 +151,14 @@ fn march_intervals<F: FieldSampler>(
     t0: f64,
     t1: f64,
     out: &mut Vec<(f64, f64)>,
-) {
+) -> bool {
     field.begin(ray, origin, dir, t0, t1, out);
-    if p.shade(0.0, [0.0; 3]).0 > 0.0 {
+    let clear = p.shade(0.0, [0.0; 3]).0 <= 0.0;
+    if !clear {
         out.clear();
         out.push((t0, t1));
     }
+    clear
 }
 
 /// Transmittance from `x` towards the light to the march box's exit: `exp(-Σ sigma dt)`.
@@ -171,9 +174,8 @@ fn shadow<F: FieldSampler>(
         return 1.0;
     };
     scratch.clear();
-    march_intervals(p, field, ray, x, p.light_dir, 0.0, t_exit, scratch);
+    let clear_where_empty = march_intervals(p, field, ray, x, p.light_dir, 0.0, t_exit, scratch);
     let mut tau = 0.0;
-    let clear_where_empty = p.shade(0.0, [0.0; 3]).0 <= 0.0;
     march(0.0, t_exit, p.dt, jitter, scratch, |t| {
         let (phi, num) = field.sample(ray, x, p.light_dir, t);
         if phi == 0.0 && clear_where_empty {
@@ -188,22 +190,12 @@ fn shadow<F: FieldSampler>(
 
 /// What a pixel's rays keep while they are marched (their samplers' state and their
 /// intervals), made once per thread and reused for every pixel.
+#[derive(Default)]
 pub struct PixelScratch<R> {
     primary: R,
     shadow: R,
     intervals: Vec<(f64, f64)>,
     shadow_intervals: Vec<(f64, f64)>,
-}
-
-impl<R: Default> Default for PixelScratch<R> {
-    fn default() -> Self {
-        PixelScratch {
-            primary: R::default(),
-            shadow: R::default(),
-            intervals: Vec::new(),
-            shadow_intervals: Vec::new(),
-        }
-    }
 }
 
 /// The radiance of pixel (x, y) in this frame: linear RGB and opacity (scratch made for the
@@ -232,9 +224,8 @@ pub fn render_pixel_with<F: FieldSampler>(
         shadow_intervals: scratch,
     } = pixel;
     intervals.clear();
-    // Where Phi is 0 and density 0 has no extinction a sample adds nothing: skip its shading.
-    let clear_where_empty = p.shade(0.0, [0.0; 3]).0 <= 0.0;
-    march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
+    let clear_where_empty =
+        march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
     let mut radiance =
         |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, shadow_jitter: f64| {
             let light = p.light_intensity

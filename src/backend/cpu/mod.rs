@@ -1,12 +1,12 @@
-//! The CPU backend: the field of a step (a BVH over Hilbert-sorted cluster boxes) and the
-//! integrators of [`integrators`] (the twin of `shaders_glsl/shared/integrators.glsl`), rayon
-//! over image tiles. It is the reference renderer GPU backends are compared with, and the
-//! renderer where no GPU driver exists. Two precisions, chosen per scene by the same rule as
-//! the GPU backends' positions ([`Precision`]): the f64 reference ([`ReferenceField`], what
-//! every test compares against), and f32 ([`F32Field`]: the same particles, clusters and tree,
-//! evaluated eight at a time, one tree traversal per ray with the candidates kept between
-//! samples), where the scene's positions and radii let f32 keep the error asked for. Empty
-//! space along rays is skipped with the BVH (the image is unchanged: the field there is 0).
+//! The CPU backend: the field of a step and the integrators of [`integrators`] (the twin of
+//! `shaders_glsl/shared/integrators.glsl`), rayon over image tiles. It is the reference
+//! renderer GPU backends are compared with, and the renderer where no GPU driver exists. Two
+//! precisions, chosen per scene by the rule the GPU backends use for their positions
+//! ([`Precision`]): the f64 reference ([`ReferenceField`]: a BVH over Hilbert-sorted cluster
+//! boxes; what every test compares against), and f32 ([`F32Field`]: the same particles in a
+//! grid of cells, evaluated eight at a time), where the scene's positions and radii let f32
+//! keep the error asked for. Each skips empty space along rays with its own structure (the
+//! image is unchanged: the field there is 0), and a scene builds only the one it uses.
 
 mod accumulator;
 pub mod integrators;
