@@ -350,6 +350,31 @@ impl RenderSession {
     }
 }
 
+impl RenderSession {
+    /// Frames `first..first + count` of `settings` as a fresh accumulation, read back: one
+    /// chunk of a sequence. The frame numbers pick the noise, so the chunks of a sequence,
+    /// averaged by their frames, are the sequence's image; targeted renders keep two
+    /// independent sequences this way. The next [`accumulate`](Self::accumulate) restarts.
+    pub fn render_frames(
+        &mut self,
+        settings: &RenderSettings,
+        first: u32,
+        count: u32,
+    ) -> Result<Image, RenderError> {
+        if self.loaded.is_none() {
+            return Err(BackendError::NothingUploaded("session").into());
+        }
+        self.backend.reset();
+        self.frames = 0;
+        self.last_frame_key = None;
+        for frame in first..first.saturating_add(count) {
+            let params = self.frame_params(settings, frame)?;
+            self.backend.render(&params)?;
+        }
+        self.image()
+    }
+}
+
 /// Whether two field settings give the same per-particle data (positions, attribute).
 fn same_particles(a: &FieldSettings, b: &FieldSettings) -> bool {
     a.attribute == b.attribute

@@ -97,4 +97,44 @@ impl Image {
             .sum();
         (sum / (3 * self.pixels.len().max(1)) as f64).sqrt()
     }
+    /// Mean FLIP (NVIDIA's perceptual difference, 0 = identical, 1 = as different as black
+    /// and white) of this image against `reference`, both shown as 8-bit sRGB at FLIP's
+    /// default viewing distance (67 pixels per degree): what an observer sees of the error.
+    pub fn flip(&self, reference: &Image) -> f64 {
+        assert_eq!(
+            (self.width, self.height),
+            (reference.width, reference.height)
+        );
+        let srgb = |i: &Image| {
+            nv_flip::FlipImageRgb8::with_data(i.width, i.height, &i.to_srgb8().into_raw())
+        };
+        let error = nv_flip::flip(
+            srgb(reference),
+            srgb(self),
+            nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+        );
+        f64::from(nv_flip::FlipPool::from_image(&error).mean())
+    }
+
+    /// This image plus `scale` times (`a` - `b`), per channel: an image whose difference from
+    /// this one has the statistics of a measured difference (the error estimates use it).
+    pub fn offset_by(&self, a: &Image, b: &Image, scale: f64) -> Image {
+        assert_eq!((self.width, self.height), (a.width, a.height));
+        assert_eq!((a.width, a.height), (b.width, b.height));
+        let pixels = self
+            .pixels
+            .iter()
+            .zip(a.pixels.iter().zip(&b.pixels))
+            .map(|(p, (x, y))| {
+                std::array::from_fn(|c| {
+                    (f64::from(p[c]) + scale * (f64::from(x[c]) - f64::from(y[c]))) as f32
+                })
+            })
+            .collect();
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels,
+        }
+    }
 }
