@@ -8,6 +8,8 @@ use clap::Args;
 
 use crate::backend::{self, BackendKind};
 use crate::render::RenderSession;
+use crate::render::accuracy::{ErrorMetric, render_to_target};
+use crate::render::reference::{ReferenceOptions, converged_reference};
 use crate::render::voxel::{Method, VoxelGrid, VoxelRenderer};
 use crate::scene::Camera;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
@@ -100,6 +102,27 @@ pub struct RenderArgs {
     /// Background colour r,g,b (linear, 0..1).
     #[arg(long, value_name = "R,G,B")]
     pub background: Option<String>,
+    /// Render until the estimated error against the converged reference is at most E (in
+    /// --error-metric): the step and the samples per pixel are chosen (--spp is ignored; a set
+    /// --step-size is kept) and the estimate is printed with the time it took.
+    #[arg(long, value_name = "E")]
+    pub target_error: Option<f64>,
+    /// Render for S seconds (calibration included) at the step with the least estimated error,
+    /// and print the estimate; with --target-error, stop at whichever comes first.
+    #[arg(long, value_name = "S")]
+    pub time_budget: Option<f64>,
+    /// The measure of --target-error: `rmse` (linear RGB) or `flip` (perceptual, 0 to 1).
+    #[arg(long, value_enum)]
+    pub error_metric: Option<ErrorMetric>,
+    /// Render the converged reference instead: the CPU backend in f64 with a step and samples
+    /// fine enough that halving the step and doubling the samples each change the image by at
+    /// most --reference-tolerance (both printed); cached per scene in
+    /// $XDG_CACHE_HOME/aarbf/references.
+    #[arg(long, conflicts_with_all = ["target_error", "time_budget"])]
+    pub reference: bool,
+    /// The reference's convergence tolerance (RMSE over linear RGB).
+    #[arg(long, default_value_t = 1e-3, requires = "reference")]
+    pub reference_tolerance: f64,
     /// Output image, .png or .exr (for a sequence: the prefix of its frames).
     #[arg(long)]
     pub out: PathBuf,
@@ -187,6 +210,9 @@ fn apply_flags(args: &RenderArgs, scene: &mut SceneFile) -> anyhow::Result<()> {
     over(&mut r.phi_ref, &args.phi_ref);
     over(&mut r.density_scale, &args.density_scale);
     over(&mut r.precision, &args.precision);
+    over(&mut r.target_error, &args.target_error);
+    over(&mut r.time_budget, &args.time_budget);
+    over(&mut r.error_metric, &args.error_metric);
     if let Some(text) = &args.optical_map {
         r.optical_map = Some(MapSpec::Text(text.clone()));
     }
@@ -292,6 +318,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?;
     let spp = resolved.scene.spp();
     anyhow::ensure!(spp > 0, "--spp must be at least 1");
+    let target = resolved.scene.target().map_err(anyhow::Error::msg)?;
+    if (target.is_some() || args.reference) && args.method != Method::Rbf {
+        bail!("--target-error, --time-budget and --reference render with --method rbf");
+    }
 
     let format = OutputFormat::of(&args.out, args.bit_depth)?;
     let steps: Vec<usize> = match &args.steps {
@@ -380,6 +410,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         },
     );
     let mut settings = settings;
+    let mut scene_used = None;
     for (k, frame) in frames.iter().enumerate() {
         let started = Instant::now();
         let step = frame.step;
@@ -399,24 +430,80 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 resolved.field.radius,
                 used.margin
             );
-            if let Some(path) = &args.save_scene {
-                let camera = frame.camera;
-                let (data, field) = resolved.scene_sections();
-                SceneFile::reproducing(
-                    data,
-                    field,
-                    &settings,
-                    Some(&used),
-                    camera,
-                    spp,
-                    &precision_text,
-                )
-                .save(path, true)?;
-                tracing::info!("wrote {}", path.display());
-            }
+            scene_used = Some(used);
         }
         let path = &frame.path;
+        // What the image used where it chose: the step and samples of a targeted render.
+        let (mut used_step, mut used_spp) = (None, spp);
         let image = match args.method {
+            Method::Rbf if args.reference => {
+                let options = ReferenceOptions {
+                    tolerance: args.reference_tolerance,
+                    ..ReferenceOptions::default()
+                };
+                let reference = converged_reference(
+                    &resolved.series,
+                    step,
+                    &resolved.field,
+                    resolved.cluster,
+                    &settings,
+                    &options,
+                )?;
+                tracing::info!(
+                    "reference of step {step}: step size {:.4e}, {} spp; doubling the samples changes it by {:.2e}, halving the step by {} (tolerance {:.1e}, {}){}",
+                    reference.step_size,
+                    reference.spp,
+                    reference.spp_change,
+                    reference
+                        .step_change
+                        .map_or("(not tried: the sample bound)".into(), |c| format!(
+                            "{c:.2e}"
+                        )),
+                    reference.tolerance,
+                    if reference.converged {
+                        "converged"
+                    } else {
+                        "NOT converged"
+                    },
+                    if reference.from_cache {
+                        ", from the cache"
+                    } else {
+                        ""
+                    },
+                );
+                (used_step, used_spp) = (Some(reference.step_size), reference.spp);
+                bar.inc(u64::from(spp));
+                reference.image().clone()
+            }
+            Method::Rbf if target.is_some() => {
+                let target = target.as_ref().expect("checked");
+                let done = render_to_target(&mut session, &settings, target)?;
+                tracing::info!(
+                    "step {step}: estimated error {:.3e} ({}{}) at step size {:.4e} and {} spp, in {:.2} s ({:.2} s calibrating; step bias {:.2e} {}, order {:.2}); noise {:.2e}",
+                    done.estimate,
+                    target.metric.name(),
+                    match (done.met, target.error) {
+                        (true, Some(e)) => format!(", target {e:.3e} met"),
+                        (false, Some(e)) => format!(", target {e:.3e} NOT met"),
+                        (_, None) => String::new(),
+                    },
+                    done.step_size,
+                    done.spp,
+                    done.elapsed.as_secs_f64(),
+                    done.calibration.as_secs_f64(),
+                    done.bias.at(done.step_size),
+                    if done.bias.resolved {
+                        "measured"
+                    } else {
+                        "bounded by the noise"
+                    },
+                    done.bias.order,
+                    done.noise_rmse,
+                );
+                (used_step, used_spp) = (Some(done.step_size), done.spp);
+                bar.inc(u64::from(spp));
+                done.image
+            }
             Method::Rbf => {
                 for _ in 0..spp {
                     session.accumulate(&settings, 1)?;
@@ -449,6 +536,34 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         };
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
         format.write(path, &image, settings.background)?;
+        if let (Some(path), Some(used)) = (&args.save_scene, scene_used.take()) {
+            let (data, field) = resolved.scene_sections();
+            let used = crate::render::Resolved {
+                step_size: used_step.unwrap_or(used.step_size),
+                ..used
+            };
+            let mut saved = settings.clone();
+            if args.reference {
+                // The reference's own noise and seed made the image.
+                saved.noise = NoiseKind::Stbn;
+                saved.seed = crate::render::reference::REFERENCE_SEED;
+            }
+            SceneFile::reproducing(
+                data,
+                field,
+                &saved,
+                Some(&used),
+                frame.camera,
+                used_spp,
+                if args.reference {
+                    "f64"
+                } else {
+                    &precision_text
+                },
+            )
+            .save(path, true)?;
+            tracing::info!("wrote {}", path.display());
+        }
         let t = session.backend().timings();
         tracing::info!(
             "step {step}: {} ({}x{}, {spp} spp, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",

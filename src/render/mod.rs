@@ -4,7 +4,9 @@
 //! integrators themselves are shader code (`shaders_glsl/shared/integrators.glsl`) with their
 //! CPU twin in [`crate::backend::cpu::integrators`].
 
+pub mod accuracy;
 pub mod auto;
+pub mod reference;
 pub mod session;
 pub mod settings;
 pub mod voxel;

@@ -177,6 +177,13 @@ pub struct RenderSection {
     pub light: Option<crate::values::Light>,
     /// How GPU backends hold positions (`auto`, `auto:TOLERANCE`, `f32`, `ds`).
     pub precision: Option<String>,
+    /// Render until the estimated error (in `error_metric`) is at most this, choosing the
+    /// step and the samples per pixel (`spp` is then ignored).
+    pub target_error: Option<f64>,
+    /// Render for this many seconds, choosing the step with the least estimated error.
+    pub time_budget: Option<f64>,
+    /// The measure of `target_error`: `rmse` (linear RGB, the default) or `flip`.
+    pub error_metric: Option<crate::render::accuracy::ErrorMetric>,
 }
 
 /// A scene file.
@@ -318,8 +325,36 @@ impl SceneFile {
                 opacity_threshold: Some(settings.opacity_threshold),
                 light: Some(settings.light),
                 precision: Some(precision.to_owned()),
+                // The step and samples a targeted render chose are written above: the scene
+                // reproduces its image, not its search.
+                target_error: None,
+                time_budget: None,
+                error_metric: None,
             },
         }
+    }
+
+    /// What a targeted render aims for, if the scene asks for one.
+    pub fn target(&self) -> Result<Option<crate::render::accuracy::Target>, String> {
+        let r = &self.render;
+        if r.target_error.is_none() && r.time_budget.is_none() {
+            return Ok(None);
+        }
+        let time_budget = r
+            .time_budget
+            .map(|s| {
+                std::time::Duration::try_from_secs_f64(s)
+                    .map_err(|_| format!("time budget {s} s must be a positive number of seconds"))
+            })
+            .transpose()?;
+        let target = crate::render::accuracy::Target {
+            error: r.target_error,
+            time_budget,
+            metric: r.error_metric.unwrap_or_default(),
+            max_spp: crate::render::accuracy::Target::DEFAULT_MAX_SPP,
+        };
+        target.check().map_err(|e| e.to_string())?;
+        Ok(Some(target))
     }
 
     /// Writes the scene as TOML, atomically; an existing file only with `force`.

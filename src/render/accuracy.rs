@@ -1,0 +1,642 @@
+//! How wrong an image is, estimated without the answer, and rendering to an error or within a
+//! time (`aarbf render --target-error E`, `--time-budget S`, the scene file's `target_error`
+//! and `time_budget`).
+//!
+//! A targeted render accumulates two independent sequences of frames, A and B (the same
+//! settings under two seeds), and shows their mean. Its error against the converged reference
+//! has two parts whose squares add (the noise has zero mean, so it is uncorrelated with the
+//! bias):
+//!
+//! - **Noise**, from the image itself (the dual-buffer estimate): `rmse(A, B) / 2`, exact in
+//!   expectation because A and B are independent. (Splitting one sequence into its first and
+//!   second halves is not: blue-noise frames are anti-correlated within a mask cycle, and the
+//!   halves' difference overstated the noise up to 2.3x in the tests.)
+//! - **Step bias**, which no number of samples removes: from images at `dt0`, `2 dt0` and
+//!   `4 dt0`, see [`StepBias`].
+//!
+//! From those, [`render_to_target`] picks the step (`dt0 · 2^j`, `j` in -3..=2, unless the
+//! user fixed it) whose predicted time to the target is least, with the noise's measured rate
+//! of fall ([`Convergence`]), renders to the predicted frames, checks the estimate and goes on
+//! if it falls short. A time budget picks the step with the least predicted error for the time
+//! left and renders until it is spent. The calibration is part of what a target costs; its
+//! images at `dt0` are kept, so when `dt0` is chosen nothing is rendered twice.
+
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use super::session::{RenderError, RenderSession};
+use super::settings::RenderSettings;
+use crate::values::Image;
+
+/// The measure of an image's error against the reference.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ErrorMetric {
+    /// Root-mean-square difference over linear RGB.
+    #[default]
+    Rmse,
+    /// Mean FLIP over the 8-bit sRGB images (perceptual; 0 to 1).
+    Flip,
+}
+
+impl ErrorMetric {
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorMetric::Rmse => "rmse",
+            ErrorMetric::Flip => "flip",
+        }
+    }
+
+    /// The error of `image` against `reference`.
+    pub fn between(self, image: &Image, reference: &Image) -> f64 {
+        match self {
+            ErrorMetric::Rmse => image.rmse(reference),
+            ErrorMetric::Flip => image.flip(reference),
+        }
+    }
+}
+
+/// The noise (RMSE over linear RGB) of the mean of `a` and `b`, two independent
+/// accumulations of equally many frames (the dual-buffer estimate).
+pub fn noise_of_pair(a: &Image, b: &Image) -> f64 {
+    0.5 * a.rmse(b)
+}
+
+/// The march's bias (RMSE over linear RGB) as a function of the step, calibrated from
+/// images at `dt0`, `2 dt0` and `4 dt0`.
+///
+/// The two coarser steps' bias is measured directly (their difference from the image at `dt0`,
+/// noise subtracted in quadrature, plus the bias at `dt0`); the bias at `dt0` and finer comes
+/// from the order `p` (Richardson). The bias is rarely a clean power law (it stays within the
+/// noise while the step resolves the kernel, then grows fast), so the coarser steps are never
+/// extrapolated from finer ones, and a step is only chosen when its bias *bound* (the estimate
+/// plus what the noise could hide) fits the target.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepBias {
+    pub dt0: f64,
+    /// The estimated bias at `dt0`, `2 dt0`, `4 dt0`.
+    pub levels: [f64; 3],
+    /// What the calibration images' noise could hide at each of them.
+    pub hidden: [f64; 3],
+    /// `p` in bias ∝ dt^p, at `dt0` and finer.
+    pub order: f64,
+    /// Whether the step's effect at `2 dt0` stood clear of the calibration images' noise.
+    pub resolved: bool,
+}
+
+impl StepBias {
+    /// The order assumed where the calibration cannot tell: the jittered march's error on a
+    /// smooth field (the images bound it anyway: below the noise, it cannot matter).
+    pub const DEFAULT_ORDER: f64 = 2.0;
+
+    /// The estimated bias at step `dt`.
+    pub fn at(&self, dt: f64) -> f64 {
+        self.interpolate(dt, self.levels)
+    }
+
+    /// The most the bias at `dt` may be: the estimate and what the noise could hide.
+    pub fn bound(&self, dt: f64) -> f64 {
+        let sum = std::array::from_fn(|i| self.levels[i] + self.hidden[i]);
+        self.interpolate(dt, sum)
+    }
+
+    fn interpolate(&self, dt: f64, at: [f64; 3]) -> f64 {
+        let x = (dt / self.dt0).log2();
+        if x <= 0.0 {
+            return at[0] * (dt / self.dt0).powf(self.order);
+        }
+        if x >= 2.0 {
+            return at[2] * (dt / (4.0 * self.dt0)).powf(self.order);
+        }
+        // Linear between the measured steps (in log2 of the step).
+        let i = (x.floor() as usize).min(1);
+        let f = x - i as f64;
+        at[i] * (1.0 - f) + at[i + 1] * f
+    }
+
+    /// The bias from images at `dt0`, `2 dt0` and `4 dt0` and their noise (RMSE).
+    pub fn calibrate(dt0: f64, images: [&Image; 3], noise: [f64; 3]) -> StepBias {
+        // The difference of level i's expectation from dt0's, its noise subtracted in
+        // quadrature; the noise of that difference (what it could hide, at one standard
+        // deviation); whether it stands clear of it (two).
+        let diff = |i: usize| {
+            let d = images[i].rmse(images[0]);
+            let n = noise[i].hypot(noise[0]);
+            ((d * d - n * n).max(0.0).sqrt(), n, d > 2.0 * n)
+        };
+        let (d1, h1, r1) = diff(1);
+        let (d2, h2, r2) = diff(2);
+        // M(2dt) - M(dt) = (2^p - 1) b(dt0), M(4dt) - M(dt) = (4^p - 1) b(dt0): the ratio is
+        // 2^p + 1.
+        let order = if r1 && r2 {
+            (d2 / d1 - 1.0).max(2f64.sqrt()).log2().clamp(0.5, 3.0)
+        } else {
+            Self::DEFAULT_ORDER
+        };
+        let b0 = d1 / (order.exp2() - 1.0);
+        let h0 = h1 / (order.exp2() - 1.0);
+        StepBias {
+            dt0,
+            levels: [b0, b0 + d1, b0 + d2],
+            hidden: [h0, h0 + h1, h0 + h2],
+            order,
+            resolved: r1,
+        }
+    }
+}
+
+/// How the noise of an accumulated image falls with its frames: `noise(N) ∝ N^-rate`
+/// (0.5 for independent samples; blue noise falls faster while its mask stratifies).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Convergence {
+    pub frames: u32,
+    pub noise: f64,
+    pub rate: f64,
+}
+
+impl Convergence {
+    /// From the noise at two frame counts.
+    fn of(a: (u32, f64), b: (u32, f64)) -> Convergence {
+        let (lo, hi) = if a.0 < b.0 { (a, b) } else { (b, a) };
+        let rate = if hi.0 > lo.0 && lo.1 > 0.0 && hi.1 > 0.0 && lo.1.is_finite() {
+            ((lo.1 / hi.1).ln() / (f64::from(hi.0) / f64::from(lo.0)).ln()).clamp(0.5, 1.0)
+        } else {
+            0.5
+        };
+        Convergence {
+            frames: hi.0,
+            noise: hi.1,
+            rate,
+        }
+    }
+
+    /// The noise after `frames` frames.
+    pub fn noise_at(&self, frames: f64) -> f64 {
+        self.noise * (f64::from(self.frames) / frames).powf(self.rate)
+    }
+
+    /// The frames at which the noise falls to `noise`.
+    pub fn frames_for(&self, noise: f64) -> f64 {
+        f64::from(self.frames) * (self.noise / noise).powf(1.0 / self.rate)
+    }
+}
+
+/// What a targeted render aims for: an error, a time, or both (whichever is reached first).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Target {
+    pub error: Option<f64>,
+    pub time_budget: Option<Duration>,
+    pub metric: ErrorMetric,
+    /// The most samples per pixel it may take.
+    pub max_spp: u32,
+}
+
+impl Target {
+    pub const DEFAULT_MAX_SPP: u32 = 1 << 16;
+
+    pub fn check(&self) -> Result<(), RenderError> {
+        if self.error.is_none() && self.time_budget.is_none() {
+            return Err(RenderError::Settings(
+                "a targeted render needs a target error or a time budget".into(),
+            ));
+        }
+        if let Some(e) = self.error
+            && !(e.is_finite() && e > 0.0)
+        {
+            return Err(RenderError::Settings(format!(
+                "target error {e} must be a positive number"
+            )));
+        }
+        if let Some(t) = self.time_budget
+            && t.is_zero()
+        {
+            return Err(RenderError::Settings(
+                "the time budget must be more than 0 s".into(),
+            ));
+        }
+        if self.max_spp < 8 {
+            return Err(RenderError::Settings(format!(
+                "a targeted render needs at least 8 samples per pixel, not {}",
+                self.max_spp
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// A targeted render's image and what it estimates about it.
+#[derive(Clone, Debug)]
+pub struct Targeted {
+    pub image: Image,
+    pub step_size: f64,
+    pub spp: u32,
+    /// The estimated error in the target's metric.
+    pub estimate: f64,
+    pub noise_rmse: f64,
+    pub bias: StepBias,
+    /// How the noise fell with the frames (the last two estimates).
+    pub convergence: Convergence,
+    /// Whether the estimate meets the target error (always true with only a time budget).
+    pub met: bool,
+    pub elapsed: Duration,
+    pub calibration: Duration,
+    /// Every frame rendered, the calibration's included, in frames at the starting step (a
+    /// frame at twice the step counts a half): the work, free of the machine's speed.
+    pub work: f64,
+}
+
+/// Frames each sequence of a calibration image starts with.
+const CALIBRATION_FRAMES: u32 = 4;
+/// The most frames a calibration sequence takes while the noise hides whether a coarser step
+/// would do.
+const MAX_CALIBRATION_FRAMES: u32 = 64;
+/// The share of the squared target error the bias may take (the rest is left to the noise).
+const BIAS_SHARE: f64 = 0.75;
+/// The second sequence's seed is the first's with these bits flipped.
+const SECOND_SEED: u32 = 0x9E37_79B9;
+
+/// The running mean of one sequence of frames, in f64.
+#[derive(Clone)]
+struct Sequence {
+    seed: u32,
+    frames: u32,
+    mean: Vec<[f64; 4]>,
+}
+
+impl Sequence {
+    fn new(seed: u32) -> Sequence {
+        Sequence {
+            seed,
+            frames: 0,
+            mean: Vec::new(),
+        }
+    }
+
+    /// Folds in `image`, the mean of this sequence's next `count` frames.
+    fn add(&mut self, image: &Image, count: u32) {
+        let total = f64::from(self.frames + count);
+        let (w_old, w_new) = (f64::from(self.frames) / total, f64::from(count) / total);
+        if self.mean.len() != image.pixels.len() {
+            self.mean = vec![[0.0; 4]; image.pixels.len()];
+        }
+        for (m, p) in self.mean.iter_mut().zip(&image.pixels) {
+            for c in 0..4 {
+                m[c] = w_old * m[c] + w_new * f64::from(p[c]);
+            }
+        }
+        self.frames += count;
+    }
+
+    fn image(&self, width: u32, height: u32) -> Image {
+        Image {
+            width,
+            height,
+            pixels: self.mean.iter().map(|p| p.map(|v| v as f32)).collect(),
+        }
+    }
+}
+
+/// Two independent sequences at one step: the image is their mean.
+struct Pair {
+    dt: f64,
+    a: Sequence,
+    b: Sequence,
+    /// (frames per sequence, noise of the mean) at each check, oldest first.
+    history: Vec<(u32, f64)>,
+    /// Seconds per frame, over all frames rendered.
+    seconds: f64,
+}
+
+impl Pair {
+    fn new(dt: f64, seed: u32) -> Pair {
+        Pair {
+            dt,
+            a: Sequence::new(seed),
+            b: Sequence::new(seed ^ SECOND_SEED),
+            history: Vec::new(),
+            seconds: 0.0,
+        }
+    }
+
+    /// Frames of both sequences together (the image's samples per pixel).
+    fn spp(&self) -> u32 {
+        self.a.frames + self.b.frames
+    }
+
+    fn frame_time(&self) -> f64 {
+        self.seconds / f64::from(self.spp().max(1))
+    }
+
+    fn images(&self, settings: &RenderSettings) -> (Image, Image) {
+        let (w, h) = (settings.width, settings.height);
+        (self.a.image(w, h), self.b.image(w, h))
+    }
+
+    fn image(&self, settings: &RenderSettings) -> Image {
+        let (a, b) = self.images(settings);
+        a.offset_by(&a, &b, -0.5)
+    }
+
+    fn noise(&self) -> f64 {
+        self.history.last().map_or(f64::INFINITY, |h| h.1)
+    }
+
+    /// How the noise fell over the last two checks (samples per pixel, both sequences).
+    fn convergence(&self) -> Convergence {
+        match self.history.as_slice() {
+            [.., a, b] => Convergence::of((2 * a.0, a.1), (2 * b.0, b.1)),
+            [b] => Convergence {
+                frames: 2 * b.0,
+                noise: b.1,
+                rate: 0.5,
+            },
+            [] => Convergence {
+                frames: 1,
+                noise: f64::INFINITY,
+                rate: 0.5,
+            },
+        }
+    }
+}
+
+struct Run<'a> {
+    session: &'a mut RenderSession,
+    settings: RenderSettings,
+    target: Target,
+    started: Instant,
+    dt0: f64,
+    work: f64,
+}
+
+impl Run<'_> {
+    fn at(&self, dt: f64, seed: u32) -> RenderSettings {
+        RenderSettings {
+            step_size: Some(dt),
+            seed,
+            ..self.settings.clone()
+        }
+    }
+
+    fn out_of_time(&self) -> bool {
+        self.target
+            .time_budget
+            .is_some_and(|b| self.started.elapsed() >= b)
+    }
+
+    /// Extends both sequences of `pair` to `frames` frames each (or fewer when the time
+    /// budget runs out: whole chunks of one frame per sequence then) and records the noise.
+    fn extend(&mut self, pair: &mut Pair, frames: u32) -> Result<(), RenderError> {
+        let before = pair.a.frames;
+        while pair.a.frames < frames {
+            let budgeted = self.target.time_budget.is_some() && pair.a.frames > 0;
+            // Under a budget, chunks of a predicted size that fits the time left.
+            let mut count = frames - pair.a.frames;
+            if budgeted {
+                let left = self.target.time_budget.map_or(0.0, |b| {
+                    b.saturating_sub(self.started.elapsed()).as_secs_f64()
+                });
+                let fit = (left / (2.0 * pair.frame_time()).max(1e-9)).floor();
+                if fit < 1.0 {
+                    break;
+                }
+                count = count.min(fit as u32);
+            }
+            let started = Instant::now();
+            for sequence in [&mut pair.a, &mut pair.b] {
+                let settings = self.at(pair.dt, sequence.seed);
+                let image = self
+                    .session
+                    .render_frames(&settings, sequence.frames, count)?;
+                sequence.add(&image, count);
+            }
+            pair.seconds += started.elapsed().as_secs_f64();
+            self.work += 2.0 * f64::from(count) * self.dt0 / pair.dt;
+        }
+        if pair.a.frames > before || pair.history.is_empty() {
+            let (a, b) = pair.images(&self.settings);
+            pair.history.push((pair.a.frames, noise_of_pair(&a, &b)));
+        }
+        Ok(())
+    }
+
+    /// Whether the session accepts step `dt` (the march's sample bound).
+    fn allowed(&self, dt: f64) -> bool {
+        self.session.resolve(&self.at(dt, 0)).is_ok()
+    }
+}
+
+/// Renders `settings` (its step size as the starting step, or fixed when set) until the
+/// estimated error meets `target.error` or `target.time_budget` is spent.
+pub fn render_to_target(
+    session: &mut RenderSession,
+    settings: &RenderSettings,
+    target: &Target,
+) -> Result<Targeted, RenderError> {
+    target.check()?;
+    let dt0 = session.resolve(settings)?.step_size;
+    let step_fixed = settings.step_size.is_some();
+    let seed = settings.seed;
+    let mut run = Run {
+        session,
+        settings: settings.clone(),
+        target: *target,
+        started: Instant::now(),
+        dt0,
+        work: 0.0,
+    };
+
+    // Calibrate: both sequences at dt0, 2 dt0 and 4 dt0, read at 2 and 4 frames each (the
+    // noise's rate of fall from the two).
+    let mut levels = [dt0, 2.0 * dt0, 4.0 * dt0].map(|dt| Pair::new(dt, seed));
+    let mut frames = CALIBRATION_FRAMES;
+    let bias = loop {
+        for level in &mut levels {
+            if level.history.is_empty() {
+                run.extend(level, frames / 2)?;
+            }
+            run.extend(level, frames)?;
+        }
+        let images = levels.each_ref().map(|l| l.image(&run.settings));
+        let bias = StepBias::calibrate(
+            dt0,
+            [&images[0], &images[1], &images[2]],
+            levels.each_ref().map(Pair::noise),
+        );
+        // More calibration frames only while the noise hides whether four times the step
+        // would meet the target, and while that costs little beside the frames the target
+        // needs (the grown images' samples at most an eighth of them).
+        let unclear = target.error.is_some_and(|e| {
+            let e = e * rmse_per_unit(target.metric, &levels[0], &run.settings);
+            bias.bound(4.0 * dt0) > BIAS_SHARE.sqrt() * e
+                && bias.at(4.0 * dt0) < BIAS_SHARE.sqrt() * e
+        });
+        let needed = target.error.map_or(0.0, |e| {
+            let e = e * rmse_per_unit(target.metric, &levels[0], &run.settings);
+            levels[0]
+                .convergence()
+                .frames_for((1.0 - BIAS_SHARE).sqrt() * e)
+        });
+        if !unclear
+            || step_fixed
+            || frames >= MAX_CALIBRATION_FRAMES
+            || 8.0 * f64::from(frames) > 0.125 * needed
+            || run.out_of_time()
+        {
+            break bias;
+        }
+        frames *= 4;
+    };
+    let calibration = run.started.elapsed();
+    let per_unit = rmse_per_unit(target.metric, &levels[0], &run.settings);
+    let e_rmse = target.error.map(|e| e * per_unit);
+
+    // Choose the step: the least predicted time to the target, or the least predicted error
+    // within the budget.
+    let steps: Vec<i32> = if step_fixed {
+        vec![0]
+    } else {
+        (-3..=2).collect()
+    };
+    let fine = &levels[0];
+    let mut best: Option<(f64, i32, f64)> = None; // (score, j, spp)
+    for &j in &steps {
+        let dt = dt0 * 2f64.powi(j);
+        if !run.allowed(dt) {
+            continue;
+        }
+        let level = usize::try_from(j).ok().and_then(|j| levels.get(j));
+        let convergence = level.map_or(fine.convergence(), Pair::convergence);
+        let frame_time = level.map_or(fine.frame_time() * 2f64.powi(-j), Pair::frame_time);
+        let b = bias.at(dt);
+        // Twice dt0 on its estimated bias (the default step resolves the kernel with room to
+        // spare: its doubling's bias stayed below 0.3 of the noise in every scene measured);
+        // four times only where the bias is known to fit, noise and all.
+        let b_choice = if j > 1 { bias.bound(dt) } else { b };
+        let held = level.map_or(0, Pair::spp);
+        let (score, spp) = match (e_rmse, target.time_budget) {
+            (Some(e), _) => {
+                if b_choice * b_choice > BIAS_SHARE * e * e {
+                    continue;
+                }
+                let spp = convergence.frames_for((e * e - b * b).sqrt()).ceil();
+                ((spp - f64::from(held)).max(0.0) * frame_time, spp)
+            }
+            (None, Some(budget)) => {
+                let left = budget.saturating_sub(run.started.elapsed()).as_secs_f64();
+                let spp = f64::from(held) + left / frame_time.max(1e-9);
+                let noise = convergence.noise_at(spp);
+                (b_choice * b_choice + noise * noise, spp)
+            }
+            (None, None) => unreachable!("checked: a target has an error or a budget"),
+        };
+        if best.is_none_or(|(s, _, _)| score < s) {
+            best = Some((score, j, spp));
+        }
+    }
+    // A target no step reaches within its bias share: the finest allowed step.
+    let (j, mut spp) = match best {
+        Some((_, j, spp)) => (j, spp),
+        None => {
+            let j = steps
+                .iter()
+                .copied()
+                .find(|&j| run.allowed(dt0 * 2f64.powi(j)))
+                .unwrap_or(0);
+            tracing::warn!(
+                "the target error is below the march's estimated bias at every step tried; rendering at the finest"
+            );
+            (j, f64::from(target.max_spp))
+        }
+    };
+    let dt = dt0 * 2f64.powi(j);
+    let b = bias.at(dt);
+    let [fine, middle, coarse] = levels;
+    let bias_images = (middle.image(&run.settings), fine.image(&run.settings));
+    let mut pair = match j {
+        0 => fine,
+        1 => middle,
+        2 => coarse,
+        _ => Pair::new(dt, seed),
+    };
+
+    // Render, check, and go on while the estimate falls short.
+    loop {
+        let frames = ((spp / 2.0).ceil() as u32).clamp(1, target.max_spp / 2);
+        let frames = frames.max(pair.a.frames);
+        run.extend(&mut pair, frames)?;
+        let image = pair.image(&run.settings);
+        let noise = pair.noise();
+        let estimate = match target.metric {
+            ErrorMetric::Rmse => noise.hypot(b),
+            ErrorMetric::Flip => {
+                // One realisation of the noise ((A - B) / 2) and of the bias (the calibration
+                // difference from dt0 to 2 dt0, scaled to the bias at this step) added.
+                let (a, bb) = pair.images(&run.settings);
+                let scale = b / bias_images.0.rmse(&bias_images.1).max(1e-30);
+                let disturbed =
+                    image
+                        .offset_by(&a, &bb, 0.5)
+                        .offset_by(&bias_images.0, &bias_images.1, scale);
+                image.flip(&disturbed)
+            }
+        };
+        let met = target.error.is_none_or(|e| estimate <= e);
+        let reached = pair.a.frames;
+        let finished = (target.error.is_some() && met)
+            || run.out_of_time()
+            || 2 * reached >= target.max_spp
+            || reached < frames;
+        if finished {
+            return Ok(Targeted {
+                image,
+                step_size: dt,
+                spp: pair.spp(),
+                estimate,
+                noise_rmse: noise,
+                bias,
+                convergence: pair.convergence(),
+                met,
+                elapsed: run.started.elapsed(),
+                calibration,
+                work: run.work,
+            });
+        }
+        // Short: predict again from the noise measured now (a budget alone renders on until
+        // the time is spent).
+        let convergence = pair.convergence();
+        let now = f64::from(pair.spp());
+        let predicted = match (target.error, target.metric) {
+            (Some(e), ErrorMetric::Rmse) => {
+                convergence.frames_for((e * e - b * b).max(0.1 * e * e).sqrt())
+            }
+            (Some(e), ErrorMetric::Flip) => now * (estimate / e).powf(1.0 / convergence.rate),
+            (None, _) => 2.0 * now,
+        };
+        spp = if predicted.is_finite() {
+            // At most doubling: the prediction's rate is of the frames so far, and a sequence
+            // of blue noise slows once a mask cycle is complete.
+            predicted.clamp(now + 2.0, 2.0 * now)
+        } else {
+            2.0 * now
+        };
+    }
+}
+
+/// RMSE per unit of the target's metric, from a calibration pair's noise (FLIP grows about
+/// linearly with small errors).
+fn rmse_per_unit(metric: ErrorMetric, pair: &Pair, settings: &RenderSettings) -> f64 {
+    match metric {
+        ErrorMetric::Rmse => 1.0,
+        ErrorMetric::Flip => {
+            let (a, b) = pair.images(settings);
+            let image = pair.image(settings);
+            let flip = image.flip(&image.offset_by(&a, &b, 0.5));
+            if flip > 0.0 && pair.noise().is_finite() {
+                pair.noise() / flip
+            } else {
+                1.0
+            }
+        }
+    }
+}

@@ -1,0 +1,439 @@
+//! Speed versus accuracy (issue 15): the converged reference checks what it claims and is
+//! reused from its cache only for the same scene; the error estimate of a targeted render is
+//! within 2x of the true error against the reference, on the dam break and two synthetic
+//! scenes, and a targeted render stops near its target; the CLI and the scene file take the
+//! targets. (What a target costs beside the measured Pareto front is a benchmark's figure:
+//! `aarbf bench accuracy`, docs/accuracy.md.)
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use aarbf::accel::ClusterSize;
+use aarbf::backend::{self, BackendKind};
+use aarbf::field::FieldSettings;
+use aarbf::render::accuracy::{ErrorMetric, Target, noise_of_pair, render_to_target};
+use aarbf::render::reference::{ReferenceOptions, converged_reference};
+use aarbf::render::{RenderSession, RenderSettings};
+use aarbf::scene::synth::Generator;
+use aarbf::study::{DataSpec, Dataset};
+use aarbf::values::Integrator;
+
+const SIZE: u32 = 32;
+const TOLERANCE: f64 = 5e-4;
+
+/// A cache that outlives one run of the tests (the references take a while in f64).
+fn cache() -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("accuracy-references")
+}
+
+fn dataset(g: Generator, count: usize) -> Dataset {
+    Dataset::load(&DataSpec::Generated(g), Some(count), None, None, None).unwrap()
+}
+
+fn settings(integrator: Integrator) -> RenderSettings {
+    RenderSettings {
+        width: SIZE,
+        height: SIZE,
+        integrator,
+        ..RenderSettings::default()
+    }
+}
+
+fn field(ds: &Dataset) -> FieldSettings {
+    FieldSettings::new(ds.attribute.as_deref(), ds.radius)
+}
+
+fn k1() -> ClusterSize {
+    ClusterSize::new(1).unwrap()
+}
+
+fn reference(ds: &Dataset, s: &RenderSettings) -> aarbf::render::reference::Reference {
+    converged_reference(
+        &ds.series,
+        ds.step,
+        &field(ds),
+        k1(),
+        s,
+        &ReferenceOptions {
+            tolerance: TOLERANCE,
+            cache: Some(cache()),
+            ..ReferenceOptions::default()
+        },
+    )
+    .unwrap()
+}
+
+fn cpu_session(ds: &Dataset) -> RenderSession {
+    let mut s = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &ds.series);
+    s.show(&ds.series, ds.step, &field(ds), k1()).unwrap();
+    s
+}
+
+#[test]
+fn the_reference_meets_its_tolerance_and_is_cached_per_scene() {
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let s = settings(Integrator::Ea);
+    let dir = tempfile::tempdir().unwrap();
+    let options = ReferenceOptions {
+        tolerance: 2e-3,
+        cache: Some(dir.path().to_path_buf()),
+        ..ReferenceOptions::default()
+    };
+    let first = converged_reference(&ds.series, ds.step, &field(&ds), k1(), &s, &options).unwrap();
+    assert!(first.converged, "{first:?}");
+    assert!(!first.from_cache);
+    assert!(first.spp_change <= 0.5 * options.tolerance);
+    assert!(first.step_change.unwrap() <= options.tolerance);
+    let pixels = &first.image().pixels;
+    assert!(pixels.iter().flatten().all(|v| v.is_finite()));
+    assert!(
+        pixels.iter().any(|p| p[3] > 0.1),
+        "the reference shows the data"
+    );
+
+    // The same scene: from the cache, the same image.
+    let again = converged_reference(&ds.series, ds.step, &field(&ds), k1(), &s, &options).unwrap();
+    assert!(again.from_cache);
+    assert_eq!(again.image(), first.image());
+    assert_eq!(again.spp, first.spp);
+
+    // Another radius is another scene.
+    let wider = FieldSettings {
+        radius: ds.radius * 1.25,
+        ..field(&ds)
+    };
+    let other = converged_reference(&ds.series, ds.step, &wider, k1(), &s, &options).unwrap();
+    assert!(!other.from_cache);
+    assert_ne!(other.image(), first.image());
+
+    // A damaged cache file is ignored and written again.
+    for entry in std::fs::read_dir(dir.path()).unwrap() {
+        std::fs::write(entry.unwrap().path(), "{ not json").unwrap();
+    }
+    let rebuilt =
+        converged_reference(&ds.series, ds.step, &field(&ds), k1(), &s, &options).unwrap();
+    assert!(!rebuilt.from_cache);
+    assert_eq!(rebuilt.image(), first.image());
+}
+
+#[test]
+fn the_dual_buffer_noise_estimate_matches_the_noise() {
+    // At the reference's fine step the bias is negligible: the error against the reference
+    // is the noise. Two seeds' accumulations are independent, so half their difference is the
+    // noise of their mean, for white and blue noise alike.
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let truth = reference(&ds, &settings(Integrator::Marching));
+    let mut session = cpu_session(&ds);
+    for noise in [
+        aarbf::values::NoiseKind::White,
+        aarbf::values::NoiseKind::Stbn,
+    ] {
+        for frames in [4, 16, 64] {
+            let at = |seed| RenderSettings {
+                noise,
+                seed,
+                step_size: Some(truth.step_size),
+                ..settings(Integrator::Marching)
+            };
+            let a = session.render_frames(&at(1), 0, frames).unwrap();
+            let b = session.render_frames(&at(2), 0, frames).unwrap();
+            let mean = a.offset_by(&a, &b, -0.5);
+            let estimate = noise_of_pair(&a, &b);
+            let true_error = mean.rmse(truth.image());
+            let ratio = estimate / true_error;
+            assert!(
+                (0.5..=2.0).contains(&ratio),
+                "{noise:?} at 2 x {frames} spp: noise estimate {estimate:.3e}, true error {true_error:.3e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn chunks_of_a_sequence_average_to_the_sequence() {
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let s = settings(Integrator::Marching);
+    let mut session = cpu_session(&ds);
+    let whole = session.render_frames(&s, 0, 12).unwrap();
+    let first = session.render_frames(&s, 0, 5).unwrap();
+    let rest = session.render_frames(&s, 5, 7).unwrap();
+    // (5 first + 7 rest) / 12 = first + 7/12 (rest - first).
+    let joined = first.offset_by(&rest, &first, 7.0 / 12.0);
+    assert!(joined.rmse(&whole) < 1e-6, "{}", joined.rmse(&whole));
+    // And `accumulate` gives the same frames.
+    session.accumulate(&s, 12).unwrap();
+    assert!(session.image().unwrap().rmse(&whole) < 1e-7);
+}
+
+/// The scenes the estimator is held to: the dam break and two synthetic sets.
+fn scenes() -> Vec<(&'static str, Dataset, Integrator)> {
+    vec![
+        (
+            "dambreak",
+            dataset(Generator::DambreakDemo, 3000),
+            Integrator::Marching,
+        ),
+        ("uniform", dataset(Generator::Uniform, 4000), Integrator::Ea),
+        (
+            "clusters",
+            dataset(Generator::Clusters, 4000),
+            Integrator::Delta,
+        ),
+    ]
+}
+
+#[test]
+fn targeted_renders_estimate_their_error_within_2x() {
+    let mut worst_cost: f64 = 0.0;
+    for (name, ds, integrator) in scenes() {
+        let s = settings(integrator);
+        let truth = reference(&ds, &s);
+        let mut session = cpu_session(&ds);
+        let dt0 = session.resolve(&s).unwrap().step_size;
+        // The measured front, in samples taken (spp over the step, in units of the default
+        // step): the cheapest setting whose true error is within each target.
+        let mut measured: Vec<(f64, f64, f64, u32)> = Vec::new(); // (work, error, factor, spp)
+        for factor in [0.5, 1.0, 2.0, 4.0] {
+            let at = RenderSettings {
+                step_size: Some(dt0 * factor),
+                seed: 7,
+                ..s.clone()
+            };
+            let mut done = 0;
+            for spp in [
+                1u32, 2, 4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512,
+            ] {
+                session.accumulate(&at, spp - done).unwrap();
+                done = spp;
+                let error = session.image().unwrap().rmse(truth.image());
+                measured.push((f64::from(spp) / factor, error, factor, spp));
+            }
+        }
+        // The errors the defaults reach at 64 and 256 spp (the front may reach them cheaper).
+        let at_default = |spp: u32| {
+            measured
+                .iter()
+                .find(|m| m.2 == 1.0 && m.3 == spp)
+                .expect("measured")
+                .1
+        };
+        for e in [
+            at_default(32),
+            at_default(64),
+            at_default(128),
+            at_default(256),
+        ] {
+            let target = Target {
+                error: Some(e),
+                time_budget: None,
+                metric: ErrorMetric::Rmse,
+                max_spp: 4096,
+            };
+            let done = render_to_target(&mut session, &s, &target).unwrap();
+            let true_error = done.image.rmse(truth.image());
+            let ratio = done.estimate / true_error;
+            // The cheapest measured setting whose error is within the target, in frames at
+            // the default step.
+            let cheapest = measured
+                .iter()
+                .filter(|m| m.1 <= e)
+                .map(|m| m.0)
+                .fold(f64::INFINITY, f64::min);
+            println!(
+                "{name}, target {e:.3e}: estimate {:.3e}, true {true_error:.3e} (x{ratio:.2}); step x{}, {} spp, work {:.0} (front {cheapest}); bias {:?}; {:?}",
+                done.estimate,
+                done.step_size / dt0,
+                done.spp,
+                done.work,
+                done.bias,
+                done.convergence,
+            );
+            assert!(
+                (0.5..=2.0).contains(&ratio),
+                "{name}, target {e:.3e}: estimate {:.3e}, true error {true_error:.3e}",
+                done.estimate,
+            );
+            assert!(done.met, "{name}: target {e:.3e} reported as missed");
+            assert!(
+                true_error <= 1.5 * e,
+                "{name}: target {e:.3e}, true error {true_error:.3e}"
+            );
+            // No gross waste: it stops once the estimate meets the target, not far beyond
+            // (noise falls at least as N^-1/2: an estimate of E/3 is 9x the samples needed),
+            // unless the calibration's own frames already met it.
+            assert!(
+                done.estimate >= e / 3.0 || done.work <= 16.0,
+                "{name}, target {e:.3e}: rendered on to {:.3e}",
+                done.estimate
+            );
+            worst_cost = worst_cost.max(done.work / cheapest);
+        }
+    }
+    // What a target costs beside the measured front (work at the default step, the
+    // calibration included) is the accuracy study's to measure and docs/accuracy.md's to
+    // state; here it is printed.
+    println!("the most work beside the front's cheapest: {worst_cost:.1}x");
+}
+
+#[test]
+fn a_time_budget_is_kept_and_estimated() {
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let s = settings(Integrator::Marching);
+    let truth = reference(&ds, &s);
+    let mut session = cpu_session(&ds);
+    let budget = std::time::Duration::from_millis(1500);
+    let done = render_to_target(
+        &mut session,
+        &s,
+        &Target {
+            error: None,
+            time_budget: Some(budget),
+            metric: ErrorMetric::Rmse,
+            max_spp: Target::DEFAULT_MAX_SPP,
+        },
+    )
+    .unwrap();
+    // One frame may finish after the budget; a 32x32 frame takes milliseconds.
+    assert!(done.elapsed < budget + std::time::Duration::from_millis(500));
+    assert!(
+        done.spp > 8,
+        "the budget buys frames beyond the calibration"
+    );
+    let ratio = done.estimate / done.image.rmse(truth.image());
+    assert!((0.5..=2.0).contains(&ratio), "estimate / true = {ratio}");
+}
+
+#[test]
+fn flip_targets_are_met_as_flip() {
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let s = settings(Integrator::Ea);
+    let truth = reference(&ds, &s);
+    let mut session = cpu_session(&ds);
+    let done = render_to_target(
+        &mut session,
+        &s,
+        &Target {
+            error: Some(0.05),
+            time_budget: None,
+            metric: ErrorMetric::Flip,
+            max_spp: 4096,
+        },
+    )
+    .unwrap();
+    let true_flip = done.image.flip(truth.image());
+    assert!(done.met);
+    assert!(
+        (0.5..=2.0).contains(&(done.estimate / true_flip)),
+        "FLIP estimate {:.4}, true {true_flip:.4}",
+        done.estimate
+    );
+}
+
+fn aarbf() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_aarbf"))
+}
+
+#[test]
+fn the_cli_and_the_scene_file_take_targets_and_references() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t.png");
+    let data = dir.path().join("db");
+    let made = aarbf()
+        .args([
+            "generate",
+            "dambreak-demo",
+            "--count",
+            "2000",
+            "--steps",
+            "2",
+            "--out",
+        ])
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{made:?}");
+    let run = |args: &[&str]| {
+        let o = aarbf()
+            .args(["render", "--width", "24", "--height", "24", "--data"])
+            .arg(&data)
+            .args(args)
+            .env("XDG_CACHE_HOME", dir.path().join("cache"))
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (ok, log) = run(&[
+        "--target-error",
+        "0.02",
+        "--out",
+        out.to_str().unwrap(),
+        "--save-scene",
+        dir.path().join("t.toml").to_str().unwrap(),
+    ]);
+    assert!(ok, "{log}");
+    assert!(
+        log.contains("estimated error") && log.contains("met"),
+        "{log}"
+    );
+    assert!(out.exists());
+    // The saved scene reproduces the image: the step and samples chosen, no target.
+    let scene = std::fs::read_to_string(dir.path().join("t.toml")).unwrap();
+    assert!(
+        scene.contains("step_size") && !scene.contains("target_error"),
+        "{scene}"
+    );
+
+    // The scene file's target.
+    let toml = dir.path().join("target.toml");
+    std::fs::write(
+        &toml,
+        "[render]\ntime_budget = 0.5\nerror_metric = \"flip\"\n",
+    )
+    .unwrap();
+    let (ok, log) = run(&[
+        "--scene",
+        toml.to_str().unwrap(),
+        "--out",
+        dir.path().join("b.png").to_str().unwrap(),
+    ]);
+    assert!(ok, "{log}");
+    assert!(
+        log.contains("estimated error") && log.contains("flip"),
+        "{log}"
+    );
+
+    // The reference, then from the cache.
+    let reference = dir.path().join("r.exr");
+    for expect_cached in [false, true] {
+        let (ok, log) = run(&[
+            "--reference",
+            "--reference-tolerance",
+            "0.004",
+            "--force",
+            "--out",
+            reference.to_str().unwrap(),
+        ]);
+        assert!(ok, "{log}");
+        assert!(log.contains("converged"), "{log}");
+        assert_eq!(log.contains("from the cache"), expect_cached, "{log}");
+    }
+
+    // Bad targets are named.
+    let bad_out = dir.path().join("x.png");
+    for (args, says) in [
+        (vec!["--target-error=-1"], "target error -1"),
+        (vec!["--time-budget", "0"], "time budget"),
+        (
+            vec!["--target-error", "0.01", "--method", "voxel"],
+            "--method rbf",
+        ),
+    ] {
+        let mut all = args.clone();
+        all.extend(["--out", bad_out.to_str().unwrap()]);
+        let (ok, log) = run(&all);
+        assert!(!ok && log.contains(says), "{args:?}: {log}");
+    }
+}
