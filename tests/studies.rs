@@ -52,6 +52,10 @@ const TINY: &[&str] = &[
     "500",
     "--voxel-grids",
     "8,16",
+    "--step-factors",
+    "1,2",
+    "--reference-tolerance",
+    "4e-3",
 ];
 
 fn aarbf(args: &[&str]) -> Output {
@@ -181,7 +185,7 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
     ];
     args.extend_from_slice(TINY);
     let stdout = ok(&args);
-    assert_eq!(stdout.lines().count(), 6, "{stdout}");
+    assert_eq!(stdout.lines().count(), 7, "{stdout}");
     let b = ["cpu", "wgpu"];
     let frame = [
         "width",
@@ -287,6 +291,40 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             ("cpu", "voxel 16"),
             ("wgpu", "rbf")
         ]
+    );
+    // 2 backends x (5 configurations (defaults, step x2, white noise, K=16, delta tracking)
+    // x 2 spp x (time, rmse, blurred rmse, flip) + 1 target x (time, rmse, estimate)).
+    let rows = check_study(
+        p,
+        "accuracy",
+        &[
+            "configuration",
+            "step_factor",
+            "step_size",
+            "spp",
+            "k",
+            "noise",
+            "integrator",
+            "width",
+            "height",
+            "target_error",
+            "reference_spp",
+            "reference_step",
+        ],
+        86,
+        &b,
+        1,
+    );
+    assert_eq!(
+        rows.iter()
+            .filter(|r| r[12] == "target-error" && r[24] == "estimate")
+            .count(),
+        2
+    );
+    let md = std::fs::read_to_string(p.join("accuracy/accuracy.md")).unwrap();
+    assert!(
+        md.contains("Pareto front") && md.contains("--target-error"),
+        "{md}"
     );
     // Results are not overwritten without --force.
     let again = aarbf(&args);

@@ -47,6 +47,9 @@ pub enum BenchCommand {
     /// Table 3: our method vs the voxel-grid baseline, with the structure rebuilt every frame,
     /// and each one's image error against a converged reference.
     Baselines(super::bench_study::StudyArgs),
+    /// Speed vs accuracy: every knob's time and error against a converged f64 reference, the
+    /// Pareto front, the defaults and --target-error against it.
+    Accuracy(super::bench_study::StudyArgs),
     /// Every study above in turn, with the same options.
     All(super::bench_study::StudyArgs),
 }
@@ -100,6 +103,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchCommand::Noise(a) => super::bench_study::run(Some(Study::Noise), &a),
         BenchCommand::Scaling(a) => super::bench_study::run(Some(Study::Scaling), &a),
         BenchCommand::Baselines(a) => super::bench_study::run(Some(Study::Baselines), &a),
+        BenchCommand::Accuracy(a) => super::bench_study::run(Some(Study::Accuracy), &a),
         BenchCommand::All(a) => super::bench_study::run(None, &a),
     }
 }

@@ -1,4 +1,4 @@
-//! `aarbf bench radius | cluster | traversal | noise | scaling | all`: the paper's studies
+//! `aarbf bench radius | cluster | traversal | noise | scaling | baselines | accuracy | all`: the paper's studies
 //! (`crate::study`), each writing `OUT/<study>/<study>.{csv,md,png}`.
 
 use std::path::PathBuf;
@@ -84,6 +84,13 @@ pub struct StudyArgs {
     /// baselines: the voxel grids, cells along the longest side (the paper: 512).
     #[arg(long, value_delimiter = ',', default_value = "64,128,256,512")]
     pub voxel_grids: Vec<usize>,
+    /// accuracy: the march steps, as multiples of the default step (1 must be among them).
+    #[arg(long, value_delimiter = ',', default_value = "0.5,1,2,4")]
+    pub step_factors: Vec<f64>,
+    /// accuracy: the reference's tolerance: the most doubling its samples or halving its step
+    /// may change it (RMSE over linear RGB).
+    #[arg(long, default_value_t = 1e-3)]
+    pub reference_tolerance: f64,
 }
 
 impl StudyArgs {
@@ -111,6 +118,8 @@ impl StudyArgs {
             max_n: self.max_n,
             queries: self.queries,
             voxel_grids: self.voxel_grids.clone(),
+            step_factors: self.step_factors.clone(),
+            reference_tolerance: self.reference_tolerance,
             command,
         }
     }

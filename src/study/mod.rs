@@ -7,7 +7,9 @@
 //!   (Fig. 10a);
 //! - [`noise`]: blue (STBN) vs white noise, frame time and error vs spp (Fig. 10b);
 //! - [`scaling`]: build, refit, query and frame time vs N, with fitted exponents;
-//! - [`baselines`]: our method against the voxel-grid baseline, rebuilt every frame (Table 3).
+//! - [`baselines`]: our method against the voxel-grid baseline, rebuilt every frame (Table 3);
+//! - [`accuracy`]: every knob's time and error against a converged reference, the Pareto
+//!   front, the defaults and `--target-error` against it.
 //!
 //! Every study drives backends through [`RenderSession`] as the CLI and viewer do, warms each
 //! configuration up with one untimed launch (lavapipe compiles a pipeline on first use), times
@@ -15,6 +17,7 @@
 //! ([`record::Recorder`]): an interrupted study keeps what it measured, and a study that fails
 //! still writes its table and figure of the rows it has.
 
+pub mod accuracy;
 pub mod baselines;
 pub mod cluster;
 pub mod data;
@@ -78,16 +81,18 @@ pub enum Study {
     Noise,
     Scaling,
     Baselines,
+    Accuracy,
 }
 
 impl Study {
-    pub const ALL: [Study; 6] = [
+    pub const ALL: [Study; 7] = [
         Study::Radius,
         Study::Cluster,
         Study::Traversal,
         Study::Noise,
         Study::Scaling,
         Study::Baselines,
+        Study::Accuracy,
     ];
 
     pub fn name(self) -> &'static str {
@@ -98,6 +103,7 @@ impl Study {
             Study::Noise => "noise",
             Study::Scaling => "scaling",
             Study::Baselines => "baselines",
+            Study::Accuracy => "accuracy",
         }
     }
 
@@ -166,6 +172,11 @@ pub struct Options {
     pub queries: usize,
     /// Grid sizes (cells along the longest side) of the `baselines` study's voxel grids.
     pub voxel_grids: Vec<usize>,
+    /// The `accuracy` study's march steps, as multiples of the default step.
+    pub step_factors: Vec<f64>,
+    /// The `accuracy` study's reference: the most doubling the samples or halving the step
+    /// may change it (RMSE over linear RGB).
+    pub reference_tolerance: f64,
     /// The command line, as the pages show it.
     pub command: String,
 }
@@ -195,6 +206,8 @@ impl Default for Options {
             max_n: 1_000_000,
             queries: 100_000,
             voxel_grids: vec![64, 128, 256, 512],
+            step_factors: vec![0.5, 1.0, 2.0, 4.0],
+            reference_tolerance: 1e-3,
             command: String::new(),
         }
     }
@@ -234,6 +247,17 @@ impl Options {
             .any(|&n| n == 0 || n > crate::render::voxel::MAX_GRID)
         {
             return bad("--voxel-grids: each grid must have 1..=1024 cells along its longest side");
+        }
+        if !self.step_factors.contains(&1.0)
+            || self
+                .step_factors
+                .iter()
+                .any(|f| !(f.is_finite() && *f > 0.0))
+        {
+            return bad("--step-factors: positive multiples of the default step, 1 among them");
+        }
+        if !(self.reference_tolerance.is_finite() && self.reference_tolerance > 0.0) {
+            return bad("--reference-tolerance must be a positive number");
         }
         if self.queries == 0 {
             return bad("--queries must be at least 1");
@@ -277,6 +301,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Noise => noise::DESCRIPTION,
         Study::Scaling => scaling::DESCRIPTION,
         Study::Baselines => baselines::DESCRIPTION,
+        Study::Accuracy => accuracy::DESCRIPTION,
     };
     let mut recorder = Recorder::create(&csv, Machine::this(), description.settings)?;
     let data = if options.data.is_empty() {
@@ -310,6 +335,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Noise => noise::measure(&mut ctx),
         Study::Scaling => scaling::measure(&mut ctx),
         Study::Baselines => baselines::measure(&mut ctx),
+        Study::Accuracy => accuracy::measure(&mut ctx),
     };
     let failure = measured.as_ref().err().map(|e| e.to_string());
     // The page and figure of what was measured, also when the study stopped early.
@@ -320,6 +346,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Noise => noise::summarise(recorder.rows(), options),
         Study::Scaling => scaling::summarise(recorder.rows(), options),
         Study::Baselines => baselines::summarise(recorder.rows(), options),
+        Study::Accuracy => accuracy::summarise(recorder.rows(), options),
     };
     let page = report::markdown(
         &report::Page {

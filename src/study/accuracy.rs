@@ -1,0 +1,485 @@
+//! Speed against accuracy: every knob's cost in time and in error against the converged
+//! reference ([`crate::render::reference`]), the Pareto front of the two, how far the default
+//! settings sit from it, and what `--target-error` costs against it.
+//!
+//! For each data set and backend, one camera (the default view) and the error images' size
+//! (`--noise-size`), the study sweeps the samples per pixel (`--spp`) of configurations that
+//! each change one knob from the defaults: the march step (`--step-factors` times the default),
+//! white instead of blue noise, 16 particles per cluster, and the other stochastic
+//! single-scattering integrator (delta tracking for marching and the reverse; emission–absorption
+//! converges to another image, so it is compared only with itself). Each configuration is
+//! rendered `--seeds` times; a row holds one value per seed: the time to accumulate the samples
+//! (ms, wall clock, the image read back outside it), and the image's RMSE over linear RGB, its
+//! RMSE after a 1-pixel blur (what an observer sees of blue noise) and its mean FLIP against
+//! the reference. Then, for targets spanning the measured errors, `--target-error` in RMSE:
+//! its time (calibration included), its true error and its own estimate.
+
+use std::time::Instant;
+
+use super::plot::{Figure, Panel, Scale, Series};
+use super::{Ctx, Description, Options, Row, StudyError, device_of, value};
+use crate::accel::ClusterSize;
+use crate::field::FieldSettings;
+use crate::render::RenderSettings;
+use crate::render::accuracy::{ErrorMetric, Target, render_to_target};
+use crate::render::reference::{ReferenceOptions, converged_reference};
+use crate::values::{Integrator, NoiseKind};
+
+pub const DESCRIPTION: Description = Description {
+    title: "Speed vs accuracy: error against time per image, the Pareto front",
+    paper: "The paper trades image quality for speed with the march step, the samples per pixel, \
+            the cluster size and blue noise, but reports only times; this study measures each \
+            knob's error against a converged f64 reference beside its time, draws the front of \
+            the best trades, and checks the defaults and --target-error against it.",
+    settings: &[
+        "configuration",
+        "step_factor",
+        "step_size",
+        "spp",
+        "k",
+        "noise",
+        "integrator",
+        "width",
+        "height",
+        "target_error",
+        "reference_spp",
+        "reference_step",
+    ],
+};
+
+/// One configuration: the defaults with one knob changed.
+#[derive(Clone, Debug)]
+struct Config {
+    name: String,
+    step_factor: f64,
+    k: u32,
+    noise: NoiseKind,
+    integrator: Integrator,
+}
+
+fn configs(o: &Options) -> Vec<Config> {
+    let base = Config {
+        name: String::new(),
+        step_factor: 1.0,
+        k: 1,
+        noise: NoiseKind::Stbn,
+        integrator: o.integrator,
+    };
+    let mut out: Vec<Config> = o
+        .step_factors
+        .iter()
+        .map(|&f| Config {
+            name: if f == 1.0 {
+                "defaults".into()
+            } else {
+                format!("step x{f}")
+            },
+            step_factor: f,
+            ..base.clone()
+        })
+        .collect();
+    out.push(Config {
+        name: "white noise".into(),
+        noise: NoiseKind::White,
+        ..base.clone()
+    });
+    out.push(Config {
+        name: "K=16".into(),
+        k: 16,
+        ..base.clone()
+    });
+    let other = match o.integrator {
+        Integrator::Marching => Some(Integrator::Delta),
+        Integrator::Delta | Integrator::SsReference => Some(Integrator::Marching),
+        Integrator::Ea => None,
+    };
+    if let Some(integrator) = other {
+        out.push(Config {
+            name: format!("{integrator:?}").to_lowercase(),
+            integrator,
+            ..base
+        });
+    }
+    out
+}
+
+fn noise_name(n: NoiseKind) -> &'static str {
+    match n {
+        NoiseKind::Stbn => "stbn",
+        NoiseKind::White => "white",
+    }
+}
+
+pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
+    let o = ctx.options;
+    let mut spps = o.spps.clone();
+    spps.sort_unstable();
+    spps.dedup();
+    let configs = configs(o);
+    let bar = ctx.bar(
+        ctx.data.len() * (1 + ctx.backends.len() * (configs.len() + 1)),
+        "accuracy",
+    );
+    for spec in ctx.data {
+        let ds = ctx.load(spec)?;
+        let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
+        let base = RenderSettings {
+            width: o.noise_image.0,
+            height: o.noise_image.1,
+            integrator: o.integrator,
+            ..RenderSettings::default()
+        };
+        let k1 = ClusterSize::new(1).map_err(StudyError::Invalid)?;
+        let reference = converged_reference(
+            &ds.series,
+            ds.step,
+            &field,
+            k1,
+            &base,
+            &ReferenceOptions {
+                tolerance: o.reference_tolerance,
+                cache: Some(o.out.join("references")),
+                ..ReferenceOptions::default()
+            },
+        )?;
+        tracing::info!(
+            "accuracy: reference of {} at step {:.3e}, {} spp (changes: samples {:.2e}, step {:?}; {:.1} s{})",
+            ds.name,
+            reference.step_size,
+            reference.spp,
+            reference.spp_change,
+            reference.step_change,
+            reference.seconds,
+            if reference.from_cache { ", cached" } else { "" }
+        );
+        let truth = reference.image();
+        let truth_blurred = truth.blurred(1.0);
+        bar.inc(1);
+        for &kind in ctx.backends {
+            let mut session = super::session(kind, &ds)?;
+            let device = device_of(&session);
+            session.show(&ds.series, ds.step, &field, k1)?;
+            let dt0 = session.resolve(&base)?.step_size;
+            let row =
+                |c: &Config, dt: f64, spp: u32, target: Option<f64>, metric, unit, values| Row {
+                    device: device.clone(),
+                    variant: c.name.clone(),
+                    data: ds.name.clone(),
+                    step: ds.step,
+                    n: ds.n,
+                    settings: vec![
+                        ("configuration", c.name.clone()),
+                        ("step_factor", value(dt / dt0)),
+                        ("step_size", value(dt)),
+                        ("spp", spp.to_string()),
+                        ("k", c.k.to_string()),
+                        ("noise", noise_name(c.noise).into()),
+                        ("integrator", format!("{:?}", c.integrator).to_lowercase()),
+                        ("width", o.noise_image.0.to_string()),
+                        ("height", o.noise_image.1.to_string()),
+                        ("target_error", target.map(value).unwrap_or_default()),
+                        ("reference_spp", reference.spp.to_string()),
+                        ("reference_step", value(reference.step_size)),
+                    ],
+                    metric,
+                    unit,
+                    values,
+                };
+            let mut defaults_errors = Vec::new();
+            for c in &configs {
+                let cluster = ClusterSize::new(c.k).map_err(StudyError::Invalid)?;
+                session.show(&ds.series, ds.step, &field, cluster)?;
+                let dt = dt0 * c.step_factor;
+                // [time, rmse, rmse_blurred, flip] per seed, at each spp.
+                let mut m = vec![[const { Vec::new() }; 4]; spps.len()];
+                // The warm-up: lavapipe compiles this configuration's pipeline now.
+                let warm = RenderSettings {
+                    step_size: Some(dt),
+                    integrator: c.integrator,
+                    noise: c.noise,
+                    seed: u32::MAX,
+                    ..base.clone()
+                };
+                session.accumulate(&warm, 1)?;
+                for seed in 0..o.seeds {
+                    let settings = RenderSettings {
+                        seed,
+                        ..warm.clone()
+                    };
+                    let (mut done, mut elapsed) = (0, 0.0);
+                    for (s, &spp) in spps.iter().enumerate() {
+                        let t = Instant::now();
+                        session.accumulate(&settings, spp - done)?;
+                        elapsed += t.elapsed().as_secs_f64();
+                        done = spp;
+                        let image = session.image()?;
+                        m[s][0].push(1e3 * elapsed);
+                        m[s][1].push(image.rmse(truth));
+                        m[s][2].push(image.blurred(1.0).rmse(&truth_blurred));
+                        m[s][3].push(image.flip(truth));
+                    }
+                }
+                for (&spp, [time, rmse, blurred, flip]) in spps.iter().zip(m) {
+                    if c.name == "defaults" {
+                        defaults_errors.push(super::record::median(&rmse));
+                    }
+                    let r = |metric, unit, values| row(c, dt, spp, None, metric, unit, values);
+                    ctx.recorder.record(r("time", "ms", time))?;
+                    ctx.recorder.record(r("rmse", "linear rgb", rmse))?;
+                    ctx.recorder
+                        .record(r("rmse_blurred", "linear rgb", blurred))?;
+                    ctx.recorder.record(r("flip", "mean flip", flip))?;
+                }
+                bar.inc(1);
+            }
+            // --target-error at the errors the defaults reached beyond their fewest samples:
+            // "as good as the defaults at N spp", which the front may reach more cheaply.
+            let target_config = Config {
+                name: "target-error".into(),
+                ..configs[0].clone()
+            };
+            session.show(&ds.series, ds.step, &field, k1)?;
+            let targets: Vec<f64> = defaults_errors.iter().skip(1).copied().collect();
+            let max_spp = 4 * spps.last().copied().unwrap_or(1).max(16);
+            for e in targets {
+                let (mut time, mut truth_error, mut estimate, mut spp, mut dt) =
+                    (Vec::new(), Vec::new(), Vec::new(), 0, dt0);
+                for seed in 0..o.seeds {
+                    let settings = RenderSettings {
+                        seed,
+                        ..base.clone()
+                    };
+                    let done = render_to_target(
+                        &mut session,
+                        &settings,
+                        &Target {
+                            error: Some(e),
+                            time_budget: None,
+                            metric: ErrorMetric::Rmse,
+                            max_spp,
+                        },
+                    )?;
+                    time.push(done.elapsed.as_secs_f64() * 1e3);
+                    truth_error.push(done.image.rmse(truth));
+                    estimate.push(done.estimate);
+                    (spp, dt) = (done.spp, done.step_size);
+                }
+                let r = |metric, unit, values| {
+                    row(&target_config, dt, spp, Some(e), metric, unit, values)
+                };
+                ctx.recorder.record(r("time", "ms", time))?;
+                ctx.recorder.record(r("rmse", "linear rgb", truth_error))?;
+                ctx.recorder.record(r("estimate", "linear rgb", estimate))?;
+            }
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+/// A measured point: (time ms, error), from a configuration at one spp.
+#[derive(Clone, Debug)]
+struct Point<'a> {
+    time: f64,
+    error: f64,
+    time_row: &'a Row,
+}
+
+/// The (time, rmse) points of `rows` for one device and data set, configurations only.
+fn points<'a>(rows: &'a [Row], like: &Row) -> Vec<Point<'a>> {
+    rows.iter()
+        .filter(|r| {
+            r.metric == "time"
+                && r.variant != "target-error"
+                && r.device == like.device
+                && r.data == like.data
+        })
+        .filter_map(|t| {
+            let e = rows.iter().find(|r| {
+                r.metric == "rmse"
+                    && r.device == t.device
+                    && r.data == t.data
+                    && r.variant == t.variant
+                    && r.setting("spp") == t.setting("spp")
+                    && r.setting("step_size") == t.setting("step_size")
+            })?;
+            Some(Point {
+                time: t.median(),
+                error: e.median(),
+                time_row: t,
+            })
+        })
+        .collect()
+}
+
+/// The Pareto front: the points no other point beats in both time and error, by time.
+fn front<'a>(points: &[Point<'a>]) -> Vec<Point<'a>> {
+    let mut sorted = points.to_vec();
+    sorted.sort_by(|a, b| a.time.total_cmp(&b.time).then(a.error.total_cmp(&b.error)));
+    let mut out: Vec<Point<'a>> = Vec::new();
+    for p in sorted {
+        if out.last().is_none_or(|last| p.error < last.error) {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The least time on `front` that reaches error `e` or better.
+fn front_time_at(front: &[Point<'_>], e: f64) -> Option<f64> {
+    front
+        .iter()
+        .filter(|p| p.error <= e)
+        .map(|p| p.time)
+        .min_by(f64::total_cmp)
+}
+
+/// Each (device, data set) once, in the rows' order.
+fn groups(rows: &[Row]) -> Vec<&Row> {
+    let mut out: Vec<&Row> = Vec::new();
+    for r in rows {
+        if !out.iter().any(|o| o.device == r.device && o.data == r.data) {
+            out.push(r);
+        }
+    }
+    out
+}
+
+pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
+    let mut notes = Vec::new();
+    let mut series = Vec::new();
+    let several = groups(rows).len() > 1;
+    for g in groups(rows) {
+        let label = |name: &str| {
+            if several {
+                format!("{} {name} ({})", g.device.backend, g.data)
+            } else {
+                format!("{} {name}", g.device.backend)
+            }
+        };
+        let pts = points(rows, g);
+        let front = front(&pts);
+        notes.push(format!(
+            "{} on {}: the Pareto front (time to the image, RMSE over linear RGB): {}",
+            g.device.backend,
+            g.data,
+            front
+                .iter()
+                .map(|p| format!(
+                    "{} at {} spp: {:.1} ms, {}",
+                    p.time_row.variant,
+                    p.time_row.setting("spp").unwrap_or("?"),
+                    p.time,
+                    super::report::number(p.error)
+                ))
+                .collect::<Vec<_>>()
+                .join("; ")
+        ));
+        // The defaults against the front at equal error.
+        let ratios: Vec<f64> = pts
+            .iter()
+            .filter(|p| p.time_row.variant == "defaults")
+            .filter_map(|p| Some(p.time / front_time_at(&front, p.error)?))
+            .collect();
+        if !ratios.is_empty() {
+            notes.push(format!(
+                "{} on {}: the defaults take {} the front's time at their error (worst {:.2}x; goal: within 1.5x)",
+                g.device.backend,
+                g.data,
+                ratios
+                    .iter()
+                    .map(|r| format!("{r:.2}x"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                ratios.iter().copied().fold(0.0, f64::max)
+            ));
+        }
+        // --target-error: its cost against the front, and its estimate against the truth.
+        for t in rows.iter().filter(|r| {
+            r.variant == "target-error"
+                && r.metric == "time"
+                && r.device == g.device
+                && r.data == g.data
+        }) {
+            let find = |metric: &str| {
+                rows.iter().find(|r| {
+                    r.metric == metric
+                        && r.variant == t.variant
+                        && r.device == t.device
+                        && r.data == t.data
+                        && r.setting("target_error") == t.setting("target_error")
+                })
+            };
+            let (Some(truth), Some(estimate)) = (find("rmse"), find("estimate")) else {
+                continue;
+            };
+            let e: f64 = t
+                .setting("target_error")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(f64::NAN);
+            notes.push(format!(
+                "{} on {}: --target-error {}: {:.1} ms at step x{} and {} spp; true error {} (estimate {}, estimate / true {:.2}); the front's cheapest at error <= target: {} ({})",
+                g.device.backend,
+                g.data,
+                super::report::number(e),
+                t.median(),
+                t.setting("step_factor").and_then(|v| v.parse::<f64>().ok()).map_or("?".into(), |f| format!("{f:.3}")),
+                t.setting("spp").unwrap_or("?"),
+                super::report::number(truth.median()),
+                super::report::number(estimate.median()),
+                estimate.median() / truth.median(),
+                front_time_at(&front, e).map_or("none".into(), |f| format!("{f:.1} ms")),
+                front_time_at(&front, e).map_or("-".into(), |f| format!("{:.2}x of it; goal 1.5x", t.median() / f)),
+            ));
+        }
+        // One line per configuration through its spp sweep, and the front.
+        let mut by: std::collections::BTreeMap<String, Vec<(f64, f64, f64, f64)>> =
+            Default::default();
+        for p in &pts {
+            by.entry(label(&p.time_row.variant))
+                .or_default()
+                .push((p.time, p.error, p.error, p.error));
+        }
+        for (name, mut points) in by {
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            series.push(Series {
+                label: name,
+                points,
+                dashed: false,
+            });
+        }
+        series.push(Series {
+            label: label("front"),
+            points: front
+                .iter()
+                .map(|p| (p.time, p.error, p.error, p.error))
+                .collect(),
+            dashed: true,
+        });
+    }
+    let figure = Figure {
+        title: DESCRIPTION.title.into(),
+        panels: vec![Panel::Lines {
+            title: format!(
+                "RMSE vs a converged f64 reference ({}x{} px), each line a configuration's samples per pixel {:?}",
+                options.noise_image.0, options.noise_image.1, options.spps
+            ),
+            x_label: "time to the image (ms)".into(),
+            y_label: "RMSE (linear RGB)".into(),
+            x_scale: Scale::Log10,
+            y_scale: Scale::Log10,
+            series,
+        }],
+        caption: vec![
+            "Dashed: the Pareto front (no other setting is both faster and more accurate). \
+             Each configuration changes one knob of the defaults; median over the seeds."
+                .into(),
+            format!(
+                "Reference: CPU f64, samples doubled and step halved until each changes the image by at most {} RMSE.",
+                options.reference_tolerance
+            ),
+        ],
+    };
+    (notes, figure)
+}
