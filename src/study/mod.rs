@@ -7,7 +7,9 @@
 //!   (Fig. 10a);
 //! - [`noise`]: blue (STBN) vs white noise, frame time and error vs spp (Fig. 10b);
 //! - [`scaling`]: build, refit, query and frame time vs N, with fitted exponents;
-//! - [`baselines`]: our method against the voxel-grid baseline, rebuilt every frame (Table 3).
+//! - [`baselines`]: our method against the voxel-grid baseline, rebuilt every frame (Table 3);
+//! - [`extremes`]: the f32 and double-single field error against the f64 reference at extreme
+//!   radii, offsets and densities (not the paper's; issue 15).
 //!
 //! Every study drives backends through [`RenderSession`] as the CLI and viewer do, warms each
 //! configuration up with one untimed launch (lavapipe compiles a pipeline on first use), times
@@ -18,6 +20,7 @@
 pub mod baselines;
 pub mod cluster;
 pub mod data;
+pub mod extremes;
 pub mod noise;
 pub mod plot;
 pub mod radius;
@@ -78,16 +81,18 @@ pub enum Study {
     Noise,
     Scaling,
     Baselines,
+    Extremes,
 }
 
 impl Study {
-    pub const ALL: [Study; 6] = [
+    pub const ALL: [Study; 7] = [
         Study::Radius,
         Study::Cluster,
         Study::Traversal,
         Study::Noise,
         Study::Scaling,
         Study::Baselines,
+        Study::Extremes,
     ];
 
     pub fn name(self) -> &'static str {
@@ -98,6 +103,7 @@ impl Study {
             Study::Noise => "noise",
             Study::Scaling => "scaling",
             Study::Baselines => "baselines",
+            Study::Extremes => "extremes",
         }
     }
 
@@ -111,6 +117,8 @@ impl Study {
                 DataSpec::Generated(DambreakDemo),
             ],
             Study::Scaling => vec![DataSpec::Generated(Uniform)],
+            // It generates its own cases.
+            Study::Extremes => Vec::new(),
             _ => vec![DataSpec::Generated(DambreakDemo)],
         }
     }
@@ -166,6 +174,12 @@ pub struct Options {
     pub queries: usize,
     /// Grid sizes (cells along the longest side) of the `baselines` study's voxel grids.
     pub voxel_grids: Vec<usize>,
+    /// The `extremes` study's radii, as fractions of its domain (a unit box).
+    pub radius_fractions: Vec<f64>,
+    /// The `extremes` study's coordinate offsets, in domains, on every axis.
+    pub offsets: Vec<f64>,
+    /// The `extremes` study's density weights (Phi scales with them, down to f32's denormals).
+    pub phi_weights: Vec<f64>,
     /// The command line, as the pages show it.
     pub command: String,
 }
@@ -195,6 +209,9 @@ impl Default for Options {
             max_n: 1_000_000,
             queries: 100_000,
             voxel_grids: vec![64, 128, 256, 512],
+            radius_fractions: vec![1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2],
+            offsets: vec![0.0, 1e2, 1e4, 1e6],
+            phi_weights: vec![1e-30, 1e-34, 1e-36, 1e-38, 1e-40, 1e-42, 1e-44],
             command: String::new(),
         }
     }
@@ -238,7 +255,7 @@ impl Options {
         if self.queries == 0 {
             return bad("--queries must be at least 1");
         }
-        Ok(())
+        extremes::check_sweeps(self).map_err(StudyError::Invalid)
     }
 }
 
@@ -277,6 +294,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Noise => noise::DESCRIPTION,
         Study::Scaling => scaling::DESCRIPTION,
         Study::Baselines => baselines::DESCRIPTION,
+        Study::Extremes => extremes::DESCRIPTION,
     };
     let mut recorder = Recorder::create(&csv, Machine::this(), description.settings)?;
     let data = if options.data.is_empty() {
@@ -310,6 +328,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Noise => noise::measure(&mut ctx),
         Study::Scaling => scaling::measure(&mut ctx),
         Study::Baselines => baselines::measure(&mut ctx),
+        Study::Extremes => extremes::measure(&mut ctx),
     };
     let failure = measured.as_ref().err().map(|e| e.to_string());
     // The page and figure of what was measured, also when the study stopped early.
@@ -320,6 +339,12 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Noise => noise::summarise(recorder.rows(), options),
         Study::Scaling => scaling::summarise(recorder.rows(), options),
         Study::Baselines => baselines::summarise(recorder.rows(), options),
+        Study::Extremes => extremes::summarise(recorder.rows(), options),
+    };
+    // A table of the study's own shape beside the table of every row.
+    let extra = match study {
+        Study::Extremes => extremes::table(recorder.rows()),
+        _ => String::new(),
     };
     let page = report::markdown(
         &report::Page {
@@ -328,6 +353,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
             paper: description.paper,
             command: &options.command,
             notes: &notes,
+            extra: &extra,
             failure: failure.as_deref(),
         },
         &recorder,
