@@ -50,6 +50,10 @@ pub enum BenchCommand {
     /// Speed vs accuracy: every knob's time and error against a converged f64 reference, the
     /// Pareto front, the defaults and --target-error against it.
     Accuracy(super::bench_study::StudyArgs),
+    /// The field error of the backends' f32 and double-single paths against the f64 reference
+    /// at radii from 1e-6 to 1e2 of the domain, offsets up to 1e6 and Phi down to f32's
+    /// denormals, on f64 and on f32-exact inputs (not the paper's; issue 15).
+    Extremes(super::bench_study::StudyArgs),
     /// Every study above in turn, with the same options.
     All(super::bench_study::StudyArgs),
 }
@@ -104,6 +108,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchCommand::Scaling(a) => super::bench_study::run(Some(Study::Scaling), &a),
         BenchCommand::Baselines(a) => super::bench_study::run(Some(Study::Baselines), &a),
         BenchCommand::Accuracy(a) => super::bench_study::run(Some(Study::Accuracy), &a),
+        BenchCommand::Extremes(a) => super::bench_study::run(Some(Study::Extremes), &a),
         BenchCommand::All(a) => super::bench_study::run(None, &a),
     }
 }

@@ -1,4 +1,5 @@
-//! `aarbf bench radius | cluster | traversal | noise | scaling | baselines | accuracy | all`: the paper's studies
+//! `aarbf bench radius | cluster | traversal | noise | scaling | baselines | accuracy | extremes
+//! | all`: the paper's studies and ours
 //! (`crate::study`), each writing `OUT/<study>/<study>.{csv,md,png}`.
 
 use std::path::PathBuf;
@@ -28,7 +29,7 @@ pub struct StudyArgs {
     #[arg(long)]
     pub force: bool,
     /// Particles of a generated data set (default: the generator's: 60K uniform and random,
-    /// 20K dambreak-demo).
+    /// 20K dambreak-demo; 4000 in each of the extremes study's cases).
     #[arg(long)]
     pub count: Option<usize>,
     /// The step of the series (default: the last).
@@ -91,6 +92,23 @@ pub struct StudyArgs {
     /// may change it (RMSE over linear RGB).
     #[arg(long, default_value_t = 1e-3)]
     pub reference_tolerance: f64,
+    /// extremes: the radii, as fractions of the domain (a unit box).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "1e-6,1e-5,1e-4,1e-3,1e-2,1e-1,1,1e1,1e2"
+    )]
+    pub radius_fractions: Vec<f64>,
+    /// extremes: the coordinate offsets, in domains, added on every axis.
+    #[arg(long, value_delimiter = ',', default_value = "0,1e2,1e4,1e6")]
+    pub offsets: Vec<f64>,
+    /// extremes: the density weights w (Phi ~ w), down to f32's denormals.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "1e-30,1e-34,1e-36,1e-38,1e-40,1e-42,1e-44"
+    )]
+    pub weights: Vec<f64>,
 }
 
 impl StudyArgs {
@@ -120,6 +138,9 @@ impl StudyArgs {
             voxel_grids: self.voxel_grids.clone(),
             step_factors: self.step_factors.clone(),
             reference_tolerance: self.reference_tolerance,
+            radius_fractions: self.radius_fractions.clone(),
+            offsets: self.offsets.clone(),
+            phi_weights: self.weights.clone(),
             command,
         }
     }

@@ -10,6 +10,8 @@
 //! - [`baselines`]: our method against the voxel-grid baseline, rebuilt every frame (Table 3);
 //! - [`accuracy`]: every knob's time and error against a converged reference, the Pareto
 //!   front, the defaults and `--target-error` against it.
+//! - [`extremes`]: the f32 and double-single field error against the f64 reference at extreme
+//!   radii, offsets and densities (not the paper's; issue 15).
 //!
 //! Every study drives backends through [`RenderSession`] as the CLI and viewer do, warms each
 //! configuration up with one untimed launch (lavapipe compiles a pipeline on first use), times
@@ -21,6 +23,7 @@ pub mod accuracy;
 pub mod baselines;
 pub mod cluster;
 pub mod data;
+pub mod extremes;
 pub mod noise;
 pub mod plot;
 pub mod radius;
@@ -82,10 +85,11 @@ pub enum Study {
     Scaling,
     Baselines,
     Accuracy,
+    Extremes,
 }
 
 impl Study {
-    pub const ALL: [Study; 7] = [
+    pub const ALL: [Study; 8] = [
         Study::Radius,
         Study::Cluster,
         Study::Traversal,
@@ -93,6 +97,7 @@ impl Study {
         Study::Scaling,
         Study::Baselines,
         Study::Accuracy,
+        Study::Extremes,
     ];
 
     pub fn name(self) -> &'static str {
@@ -104,6 +109,7 @@ impl Study {
             Study::Scaling => "scaling",
             Study::Baselines => "baselines",
             Study::Accuracy => "accuracy",
+            Study::Extremes => "extremes",
         }
     }
 
@@ -117,6 +123,8 @@ impl Study {
                 DataSpec::Generated(DambreakDemo),
             ],
             Study::Scaling => vec![DataSpec::Generated(Uniform)],
+            // It generates its own cases.
+            Study::Extremes => Vec::new(),
             _ => vec![DataSpec::Generated(DambreakDemo)],
         }
     }
@@ -177,6 +185,12 @@ pub struct Options {
     /// The `accuracy` study's reference: the most doubling the samples or halving the step
     /// may change it (RMSE over linear RGB).
     pub reference_tolerance: f64,
+    /// The `extremes` study's radii, as fractions of its domain (a unit box).
+    pub radius_fractions: Vec<f64>,
+    /// The `extremes` study's coordinate offsets, in domains, on every axis.
+    pub offsets: Vec<f64>,
+    /// The `extremes` study's density weights (Phi scales with them, down to f32's denormals).
+    pub phi_weights: Vec<f64>,
     /// The command line, as the pages show it.
     pub command: String,
 }
@@ -208,6 +222,9 @@ impl Default for Options {
             voxel_grids: vec![64, 128, 256, 512],
             step_factors: vec![0.5, 1.0, 2.0, 4.0],
             reference_tolerance: 1e-3,
+            radius_fractions: vec![1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2],
+            offsets: vec![0.0, 1e2, 1e4, 1e6],
+            phi_weights: vec![1e-30, 1e-34, 1e-36, 1e-38, 1e-40, 1e-42, 1e-44],
             command: String::new(),
         }
     }
@@ -262,7 +279,7 @@ impl Options {
         if self.queries == 0 {
             return bad("--queries must be at least 1");
         }
-        Ok(())
+        extremes::check_sweeps(self).map_err(StudyError::Invalid)
     }
 }
 
@@ -302,6 +319,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Scaling => scaling::DESCRIPTION,
         Study::Baselines => baselines::DESCRIPTION,
         Study::Accuracy => accuracy::DESCRIPTION,
+        Study::Extremes => extremes::DESCRIPTION,
     };
     let mut recorder = Recorder::create(&csv, Machine::this(), description.settings)?;
     let data = if options.data.is_empty() {
@@ -336,6 +354,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Scaling => scaling::measure(&mut ctx),
         Study::Baselines => baselines::measure(&mut ctx),
         Study::Accuracy => accuracy::measure(&mut ctx),
+        Study::Extremes => extremes::measure(&mut ctx),
     };
     let failure = measured.as_ref().err().map(|e| e.to_string());
     // The page and figure of what was measured, also when the study stopped early.
@@ -347,6 +366,12 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
         Study::Scaling => scaling::summarise(recorder.rows(), options),
         Study::Baselines => baselines::summarise(recorder.rows(), options),
         Study::Accuracy => accuracy::summarise(recorder.rows(), options),
+        Study::Extremes => extremes::summarise(recorder.rows(), options),
+    };
+    // A table of the study's own shape beside the table of every row.
+    let extra = match study {
+        Study::Extremes => extremes::table(recorder.rows()),
+        _ => String::new(),
     };
     let page = report::markdown(
         &report::Page {
@@ -355,6 +380,7 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
             paper: description.paper,
             command: &options.command,
             notes: &notes,
+            extra: &extra,
             failure: failure.as_deref(),
         },
         &recorder,

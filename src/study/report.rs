@@ -14,6 +14,9 @@ pub struct Page<'a> {
     pub paper: &'a str,
     pub command: &'a str,
     pub notes: &'a [String],
+    /// Markdown of the study's own after the notes (a table shaped as its question is), or
+    /// empty.
+    pub extra: &'a str,
     /// The study stopped early: why.
     pub failure: Option<&'a str>,
 }
@@ -82,6 +85,9 @@ pub fn markdown(page: &Page<'_>, recorder: &Recorder) -> String {
             let _ = writeln!(out, "- {n}");
         }
         let _ = writeln!(out);
+    }
+    if !page.extra.is_empty() {
+        let _ = writeln!(out, "{}", page.extra);
     }
     // Settings the same in every row are stated once; those that vary are columns.
     let keys = recorder.settings();
