@@ -12,3 +12,14 @@ pub fn bar(len: u64, message: &str) -> ProgressBar {
     );
     bar
 }
+
+/// A spinner for work of unknown length, its message updated as it goes (`set_message`);
+/// `finish_and_clear` it when done.
+pub fn spinner(message: &str) -> ProgressBar {
+    let bar = ProgressBar::new_spinner().with_message(message.to_owned());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {msg} ({elapsed})").expect("a valid template"),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    bar
+}

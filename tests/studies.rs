@@ -332,7 +332,7 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
         ],
         86,
         &b,
-        1,
+        2,
     );
     assert_eq!(
         rows.iter()

@@ -90,7 +90,7 @@ pub struct StudyArgs {
     pub step_factors: Vec<f64>,
     /// accuracy: the reference's tolerance: the most doubling its samples or halving its step
     /// may change it (RMSE over linear RGB).
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-4)]
     pub reference_tolerance: f64,
     /// extremes: the radii, as fractions of the domain (a unit box).
     #[arg(

@@ -401,8 +401,15 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     );
     let mut session = RenderSession::new(backend, &resolved.series);
     session.set_precision(precision);
+    // A targeted or reference render does not know its samples in advance: the bar counts
+    // images, and the render shows its own progress.
+    let per_image = if target.is_some() || args.reference {
+        1
+    } else {
+        u64::from(spp)
+    };
     let bar = crate::progress::bar(
-        (frames.len() as u64) * u64::from(spp),
+        (frames.len() as u64) * per_image,
         if sequence {
             "rendering frames"
         } else {
@@ -472,7 +479,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                     },
                 );
                 (used_step, used_spp) = (Some(reference.step_size), reference.spp);
-                bar.inc(u64::from(spp));
+                bar.inc(1);
                 reference.image().clone()
             }
             Method::Rbf if target.is_some() => {
@@ -501,7 +508,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                     done.noise_rmse,
                 );
                 (used_step, used_spp) = (Some(done.step_size), done.spp);
-                bar.inc(u64::from(spp));
+                bar.inc(1);
                 done.image
             }
             Method::Rbf => {

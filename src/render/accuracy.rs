@@ -561,6 +561,7 @@ pub fn render_to_target(
     };
 
     // Render, check, and go on while the estimate falls short.
+    let spinner = crate::progress::spinner("rendering to the target");
     loop {
         let frames = ((spp / 2.0).ceil() as u32).clamp(1, target.max_spp / 2);
         let frames = frames.max(pair.a.frames);
@@ -581,6 +582,13 @@ pub fn render_to_target(
                 image.flip(&disturbed)
             }
         };
+        spinner.set_message(format!(
+            "{} spp at step {dt:.3e}: estimated error {estimate:.3e}{}",
+            pair.spp(),
+            target
+                .error
+                .map_or(String::new(), |e| format!(" (target {e:.3e})"))
+        ));
         let met = target.error.is_none_or(|e| estimate <= e);
         let reached = pair.a.frames;
         let finished = (target.error.is_some() && met)
@@ -588,6 +596,7 @@ pub fn render_to_target(
             || 2 * reached >= target.max_spp
             || reached < frames;
         if finished {
+            spinner.finish_and_clear();
             return Ok(Targeted {
                 image,
                 step_size: dt,

@@ -45,7 +45,7 @@ impl Default for ReferenceOptions {
     fn default() -> Self {
         ReferenceOptions {
             tolerance: 1e-3,
-            start_spp: 64,
+            start_spp: 4,
             max_spp: 1 << 14,
             cache: default_cache(),
         }

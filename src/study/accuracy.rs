@@ -26,7 +26,7 @@ use crate::render::reference::{ReferenceOptions, converged_reference};
 use crate::values::{Integrator, NoiseKind};
 
 pub const DESCRIPTION: Description = Description {
-    title: "Speed vs accuracy: error against time per image, the Pareto front",
+    title: "Speed vs accuracy: error against time, the Pareto front",
     paper: "The paper trades image quality for speed with the march step, the samples per pixel, \
             the cluster size and blue noise, but reports only times; this study measures each \
             knob's error against a converged f64 reference beside its time, draws the front of \
@@ -348,16 +348,9 @@ fn groups(rows: &[Row]) -> Vec<&Row> {
 
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let mut notes = Vec::new();
-    let mut series = Vec::new();
-    let several = groups(rows).len() > 1;
+    let mut panels = Vec::new();
     for g in groups(rows) {
-        let label = |name: &str| {
-            if several {
-                format!("{} {name} ({})", g.device.backend, g.data)
-            } else {
-                format!("{} {name}", g.device.backend)
-            }
-        };
+        let mut series = Vec::new();
         let pts = points(rows, g);
         let front = front(&pts);
         notes.push(format!(
@@ -437,7 +430,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
         let mut by: std::collections::BTreeMap<String, Vec<(f64, f64, f64, f64)>> =
             Default::default();
         for p in &pts {
-            by.entry(label(&p.time_row.variant))
+            by.entry(p.time_row.variant.clone())
                 .or_default()
                 .push((p.time, p.error, p.error, p.error));
         }
@@ -450,30 +443,58 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             });
         }
         series.push(Series {
-            label: label("front"),
+            label: "front".into(),
             points: front
                 .iter()
                 .map(|p| (p.time, p.error, p.error, p.error))
                 .collect(),
             dashed: true,
         });
-    }
-    let figure = Figure {
-        title: DESCRIPTION.title.into(),
-        panels: vec![Panel::Lines {
-            title: format!(
-                "RMSE vs a converged f64 reference ({}x{} px), each line a configuration's samples per pixel {:?}",
-                options.noise_image.0, options.noise_image.1, options.spps
-            ),
+        // --target-error's renders: their time and true error.
+        let targeted: Vec<(f64, f64, f64, f64)> = rows
+            .iter()
+            .filter(|r| {
+                r.variant == "target-error"
+                    && r.metric == "time"
+                    && r.device == g.device
+                    && r.data == g.data
+            })
+            .filter_map(|t| {
+                let e = rows.iter().find(|r| {
+                    r.metric == "rmse"
+                        && r.variant == t.variant
+                        && r.device == t.device
+                        && r.data == t.data
+                        && r.setting("target_error") == t.setting("target_error")
+                })?;
+                Some((t.median(), e.median(), e.min(), e.max()))
+            })
+            .collect();
+        if !targeted.is_empty() {
+            series.push(Series {
+                label: "--target-error".into(),
+                points: targeted,
+                dashed: true,
+            });
+        }
+        panels.push(Panel::Lines {
+            title: format!("{} on {}", g.device.backend, g.data),
             x_label: "time to the image (ms)".into(),
             y_label: "RMSE (linear RGB)".into(),
             x_scale: Scale::Log10,
             y_scale: Scale::Log10,
             series,
-        }],
+        });
+    }
+    let figure = Figure {
+        title: DESCRIPTION.title.into(),
+        panels,
         caption: vec![
-            "Dashed: the Pareto front (no other setting is both faster and more accurate). \
-             Each configuration changes one knob of the defaults; median over the seeds."
+            format!(
+                "RMSE against a converged f64 reference ({}x{} px); a line per configuration (one knob of the defaults changed) over {:?} spp; median over the seeds.",
+                options.noise_image.0, options.noise_image.1, options.spps
+            ),
+            "Dashed: the Pareto front (nothing else is both faster and more accurate) and --target-error's renders (time, true error)."
                 .into(),
             format!(
                 "Reference: CPU f64, samples doubled and step halved until each changes the image by at most {} RMSE.",

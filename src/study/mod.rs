@@ -221,7 +221,7 @@ impl Default for Options {
             queries: 100_000,
             voxel_grids: vec![64, 128, 256, 512],
             step_factors: vec![0.5, 1.0, 2.0, 4.0],
-            reference_tolerance: 1e-3,
+            reference_tolerance: 1e-4,
             radius_fractions: vec![1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2],
             offsets: vec![0.0, 1e2, 1e4, 1e6],
             phi_weights: vec![1e-30, 1e-34, 1e-36, 1e-38, 1e-40, 1e-42, 1e-44],
