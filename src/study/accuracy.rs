@@ -103,13 +103,6 @@ fn configs(o: &Options) -> Vec<Config> {
     out
 }
 
-fn noise_name(n: NoiseKind) -> &'static str {
-    match n {
-        NoiseKind::Stbn => "stbn",
-        NoiseKind::White => "white",
-    }
-}
-
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let mut spps = o.spps.clone();
@@ -173,7 +166,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         ("step_size", value(dt)),
                         ("spp", spp.to_string()),
                         ("k", c.k.to_string()),
-                        ("noise", noise_name(c.noise).into()),
+                        ("noise", c.noise.name().into()),
                         ("integrator", format!("{:?}", c.integrator).to_lowercase()),
                         ("width", o.noise_image.0.to_string()),
                         ("height", o.noise_image.1.to_string()),
@@ -335,6 +328,30 @@ fn front_time_at(front: &[Point<'_>], e: f64) -> Option<f64> {
         .min_by(f64::total_cmp)
 }
 
+/// `--target-error`'s renders of one device and data set: (time, true error, estimate) rows.
+fn targeted<'a>(rows: &'a [Row], like: &Row) -> Vec<(&'a Row, &'a Row, Option<&'a Row>)> {
+    rows.iter()
+        .filter(|t| {
+            t.variant == "target-error"
+                && t.metric == "time"
+                && t.device == like.device
+                && t.data == like.data
+        })
+        .filter_map(|t| {
+            let find = |metric: &str| {
+                rows.iter().find(|r| {
+                    r.metric == metric
+                        && r.variant == t.variant
+                        && r.device == t.device
+                        && r.data == t.data
+                        && r.setting("target_error") == t.setting("target_error")
+                })
+            };
+            Some((t, find("rmse")?, find("estimate")))
+        })
+        .collect()
+}
+
 /// Each (device, data set) once, in the rows' order.
 fn groups(rows: &[Row]) -> Vec<&Row> {
     let mut out: Vec<&Row> = Vec::new();
@@ -389,22 +406,8 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             ));
         }
         // --target-error: its cost against the front, and its estimate against the truth.
-        for t in rows.iter().filter(|r| {
-            r.variant == "target-error"
-                && r.metric == "time"
-                && r.device == g.device
-                && r.data == g.data
-        }) {
-            let find = |metric: &str| {
-                rows.iter().find(|r| {
-                    r.metric == metric
-                        && r.variant == t.variant
-                        && r.device == t.device
-                        && r.data == t.data
-                        && r.setting("target_error") == t.setting("target_error")
-                })
-            };
-            let (Some(truth), Some(estimate)) = (find("rmse"), find("estimate")) else {
+        for (t, truth, estimate) in targeted(rows, g) {
+            let Some(estimate) = estimate else {
                 continue;
             };
             let e: f64 = t
@@ -451,24 +454,9 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             dashed: true,
         });
         // --target-error's renders: their time and true error.
-        let targeted: Vec<(f64, f64, f64, f64)> = rows
+        let targeted: Vec<(f64, f64, f64, f64)> = targeted(rows, g)
             .iter()
-            .filter(|r| {
-                r.variant == "target-error"
-                    && r.metric == "time"
-                    && r.device == g.device
-                    && r.data == g.data
-            })
-            .filter_map(|t| {
-                let e = rows.iter().find(|r| {
-                    r.metric == "rmse"
-                        && r.variant == t.variant
-                        && r.device == t.device
-                        && r.data == t.data
-                        && r.setting("target_error") == t.setting("target_error")
-                })?;
-                Some((t.median(), e.median(), e.min(), e.max()))
-            })
+            .map(|(t, e, _)| (t.median(), e.median(), e.min(), e.max()))
             .collect();
         if !targeted.is_empty() {
             series.push(Series {

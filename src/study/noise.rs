@@ -39,13 +39,6 @@ pub const DESCRIPTION: Description = Description {
 /// The seed of the reference (the repetitions use seeds 0, 1, ...).
 const REFERENCE_SEED: u32 = 1000;
 
-fn noise_name(n: NoiseKind) -> &'static str {
-    match n {
-        NoiseKind::Stbn => "stbn",
-        NoiseKind::White => "white",
-    }
-}
-
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let mut spps = o.spps.clone();
@@ -85,14 +78,14 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                 let dt = session.resolve(&timed)?.step_size;
                 let row = |metric, unit, (w, h): (u32, u32), spp: u32, values| Row {
                     device: device.clone(),
-                    variant: noise_name(noise).into(),
+                    variant: noise.name().into(),
                     data: ds.name.clone(),
                     step: ds.step,
                     n: ds.n,
                     settings: vec![
                         ("radius", value(ds.radius)),
                         ("k", "1".into()),
-                        ("noise", noise_name(noise).into()),
+                        ("noise", noise.name().into()),
                         ("width", w.to_string()),
                         ("height", h.to_string()),
                         ("integrator", format!("{:?}", o.integrator).to_lowercase()),

@@ -46,6 +46,16 @@ pub enum NoiseKind {
     White,
 }
 
+impl NoiseKind {
+    /// The name the command line and the scene file use.
+    pub fn name(self) -> &'static str {
+        match self {
+            NoiseKind::Stbn => "stbn",
+            NoiseKind::White => "white",
+        }
+    }
+}
+
 /// What the colour of a sample comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
