@@ -70,8 +70,8 @@ pub fn noise_of_pair(a: &Image, b: &Image) -> f64 {
 /// noise subtracted in quadrature, plus the bias at `dt0`); the bias at `dt0` and finer comes
 /// from the order `p` (Richardson). The bias is rarely a clean power law (it stays within the
 /// noise while the step resolves the kernel, then grows fast), so the coarser steps are never
-/// extrapolated from finer ones, and a step is only chosen when its bias *bound* (the estimate
-/// plus what the noise could hide) fits the target.
+/// extrapolated from finer ones, and four times `dt0` is only chosen when its bias *bound* (the
+/// estimate plus what the noise could hide) fits the target.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepBias {
     pub dt0: f64,
@@ -646,6 +646,90 @@ fn rmse_per_unit(metric: ErrorMetric, pair: &Pair, settings: &RenderSettings) ->
             } else {
                 1.0
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flat(value: f32) -> Image {
+        Image {
+            width: 4,
+            height: 3,
+            pixels: vec![[value, value, value, 1.0]; 12],
+        }
+    }
+
+    #[test]
+    fn a_second_order_bias_is_found_from_three_steps() {
+        // bias(dt) = 0.01 (dt / dt0)^2 over a flat reference of 0.5.
+        let images = [0.01, 0.04, 0.16].map(|b| flat(0.5 + b));
+        let bias = StepBias::calibrate(2.0, [&images[0], &images[1], &images[2]], [0.0; 3]);
+        assert!(bias.resolved);
+        assert!((bias.order - 2.0).abs() < 1e-4, "{bias:?}");
+        for (dt, want) in [(2.0, 0.01), (4.0, 0.04), (8.0, 0.16), (1.0, 0.0025)] {
+            assert!((bias.at(dt) - want).abs() < 1e-6, "{dt}: {}", bias.at(dt));
+        }
+        assert_eq!(bias.bound(4.0), bias.at(4.0), "no noise, nothing hidden");
+    }
+
+    #[test]
+    fn a_bias_within_the_noise_is_bounded_not_assumed() {
+        // The coarser images differ from the finest by less than their noise.
+        let images = [flat(0.5), flat(0.5005), flat(0.501)];
+        let bias = StepBias::calibrate(1.0, [&images[0], &images[1], &images[2]], [0.01; 3]);
+        assert!(!bias.resolved);
+        assert_eq!(bias.order, StepBias::DEFAULT_ORDER);
+        assert_eq!(bias.at(4.0), 0.0, "the noise explains the whole difference");
+        assert!(
+            bias.bound(4.0) >= 0.01,
+            "but could hide {}",
+            bias.bound(4.0)
+        );
+    }
+
+    #[test]
+    fn the_noise_falls_at_its_measured_rate() {
+        let blue = Convergence::of((4, 0.1), (16, 0.025));
+        assert!((blue.rate - 1.0).abs() < 1e-12);
+        assert!((blue.frames_for(0.0125) - 32.0).abs() < 1e-9);
+        let white = Convergence::of((16, 0.05), (4, 0.1));
+        assert!((white.rate - 0.5).abs() < 1e-12);
+        assert!((white.noise_at(64.0) - 0.025).abs() < 1e-12);
+        // Rates outside what sampling gives are clamped.
+        assert_eq!(Convergence::of((4, 0.1), (16, 0.001)).rate, 1.0);
+        assert_eq!(Convergence::of((4, 0.1), (16, 0.2)).rate, 0.5);
+    }
+
+    #[test]
+    fn targets_are_checked() {
+        let ok = Target {
+            error: Some(0.01),
+            time_budget: None,
+            metric: ErrorMetric::Rmse,
+            max_spp: 64,
+        };
+        assert!(ok.check().is_ok());
+        for bad in [
+            Target { error: None, ..ok },
+            Target {
+                error: Some(-1.0),
+                ..ok
+            },
+            Target {
+                error: Some(f64::NAN),
+                ..ok
+            },
+            Target { max_spp: 4, ..ok },
+            Target {
+                error: None,
+                time_budget: Some(Duration::ZERO),
+                ..ok
+            },
+        ] {
+            assert!(bad.check().is_err(), "{bad:?}");
         }
     }
 }
