@@ -420,6 +420,34 @@ fn the_cli_and_the_scene_file_take_targets_and_references() {
         assert!(log.contains("converged"), "{log}");
         assert_eq!(log.contains("from the cache"), expect_cached, "{log}");
     }
+    // Its saved scene renders the same image: the reference's integrator, noise, seed, step,
+    // samples and precision.
+    let (ok, log) = run(&[
+        "--integrator",
+        "marching",
+        "--reference",
+        "--reference-tolerance",
+        "0.004",
+        "--out",
+        dir.path().join("rm.exr").to_str().unwrap(),
+        "--save-scene",
+        dir.path().join("rm.toml").to_str().unwrap(),
+    ]);
+    assert!(ok, "{log}");
+    let (ok, log) = run(&[
+        "--scene",
+        dir.path().join("rm.toml").to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--out",
+        dir.path().join("again.exr").to_str().unwrap(),
+    ]);
+    assert!(ok, "{log}");
+    assert_eq!(
+        std::fs::read(dir.path().join("rm.exr")).unwrap(),
+        std::fs::read(dir.path().join("again.exr")).unwrap(),
+        "the saved scene reproduces the reference"
+    );
 
     // Bad targets are named.
     let bad_out = dir.path().join("x.png");

@@ -9,7 +9,7 @@ use clap::Args;
 use crate::backend::{self, BackendKind};
 use crate::render::RenderSession;
 use crate::render::accuracy::{ErrorMetric, render_to_target};
-use crate::render::reference::{ReferenceOptions, converged_reference};
+use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
 use crate::render::voxel::{Method, VoxelGrid, VoxelRenderer};
 use crate::scene::Camera;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
@@ -549,12 +549,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 step_size: used_step.unwrap_or(used.step_size),
                 ..used
             };
-            let mut saved = settings.clone();
-            if args.reference {
-                // The reference's own noise and seed made the image.
-                saved.noise = NoiseKind::Stbn;
-                saved.seed = crate::render::reference::REFERENCE_SEED;
-            }
+            let saved = if args.reference {
+                reference_settings(&settings)
+            } else {
+                settings.clone()
+            };
             SceneFile::reproducing(
                 data,
                 field,

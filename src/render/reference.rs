@@ -100,6 +100,23 @@ struct CacheFile {
     reference: Reference,
 }
 
+/// What a reference of `settings` renders: its own noise and seed, and for a scattering
+/// integrator the deterministic `ss-reference`, which every single-scattering integrator
+/// converges to with the least noise (the step and samples are the search's).
+pub fn reference_settings(settings: &RenderSettings) -> RenderSettings {
+    let integrator = if settings.integrator.scatters() {
+        Integrator::SsReference
+    } else {
+        settings.integrator
+    };
+    RenderSettings {
+        noise: NoiseKind::Stbn,
+        seed: REFERENCE_SEED,
+        integrator,
+        ..settings.clone()
+    }
+}
+
 /// The converged reference of `settings` (its camera, size, maps and light; its noise and seed
 /// are the reference's own, and a scattering integrator is the deterministic `ss-reference`
 /// all of them converge to) for step `step` of `series` under `field`.
@@ -127,19 +144,7 @@ pub fn converged_reference(
     let mut session = RenderSession::new(Box::new(CpuBackend::new()), series);
     session.set_precision(Precision::F64);
     session.show(series, step, field, cluster)?;
-    // Scattering converges to the same image under every single-scattering integrator; the
-    // deterministic one (a shadow ray at every sample) gets there with the least noise.
-    let integrator = if settings.integrator.scatters() {
-        Integrator::SsReference
-    } else {
-        settings.integrator
-    };
-    let base = RenderSettings {
-        noise: NoiseKind::Stbn,
-        seed: REFERENCE_SEED,
-        integrator,
-        ..settings.clone()
-    };
+    let base = reference_settings(settings);
     let start_dt = session.resolve(&base)?.step_size / 2.0;
     let key = cache_key(&session, &base, &*series.step(step)?, field, options)?;
     let cache_path = options
