@@ -47,14 +47,6 @@ impl ErrorMetric {
             ErrorMetric::Flip => "flip",
         }
     }
-
-    /// The error of `image` against `reference`.
-    pub fn between(self, image: &Image, reference: &Image) -> f64 {
-        match self {
-            ErrorMetric::Rmse => image.rmse(reference),
-            ErrorMetric::Flip => image.flip(reference),
-        }
-    }
 }
 
 /// The noise (RMSE over linear RGB) of the mean of `a` and `b`, two independent
@@ -450,7 +442,7 @@ pub fn render_to_target(
     // noise's rate of fall from the two).
     let mut levels = [dt0, 2.0 * dt0, 4.0 * dt0].map(|dt| Pair::new(dt, seed));
     let mut frames = CALIBRATION_FRAMES;
-    let bias = loop {
+    let (bias, e_rmse) = loop {
         for level in &mut levels {
             if level.history.is_empty() {
                 run.extend(level, frames / 2)?;
@@ -466,13 +458,14 @@ pub fn render_to_target(
         // More calibration frames only while the noise hides whether four times the step
         // would meet the target, and while that costs little beside the frames the target
         // needs (the grown images' samples at most an eighth of them).
-        let unclear = target.error.is_some_and(|e| {
-            let e = e * rmse_per_unit(target.metric, &levels[0], &run.settings);
+        let e_rmse = target
+            .error
+            .map(|e| e * rmse_per_unit(target.metric, &levels[0], &run.settings));
+        let unclear = e_rmse.is_some_and(|e| {
             bias.bound(4.0 * dt0) > BIAS_SHARE.sqrt() * e
                 && bias.at(4.0 * dt0) < BIAS_SHARE.sqrt() * e
         });
-        let needed = target.error.map_or(0.0, |e| {
-            let e = e * rmse_per_unit(target.metric, &levels[0], &run.settings);
+        let needed = e_rmse.map_or(0.0, |e| {
             levels[0]
                 .convergence()
                 .frames_for((1.0 - BIAS_SHARE).sqrt() * e)
@@ -483,13 +476,11 @@ pub fn render_to_target(
             || 8.0 * f64::from(frames) > 0.125 * needed
             || run.out_of_time()
         {
-            break bias;
+            break (bias, e_rmse);
         }
         frames *= 4;
     };
     let calibration = run.started.elapsed();
-    let per_unit = rmse_per_unit(target.metric, &levels[0], &run.settings);
-    let e_rmse = target.error.map(|e| e * per_unit);
 
     // Choose the step: the least predicted time to the target, or the least predicted error
     // within the budget.

@@ -163,48 +163,46 @@ pub fn converged_reference(
     let mut dt = start_dt;
     let mut spp = options.start_spp;
     let bar = crate::progress::bar(u64::from(options.max_spp), "reference");
-    let reference = loop {
+    let (image, step_size, spp_change, step_change, converged) = loop {
         // Double the samples until they change the image by at most half the tolerance.
         session.accumulate(&at(dt), spp.saturating_sub(session.frames_of(&at(dt))))?;
         let mut before = session.image()?;
-        let spp_change = loop {
+        let (spp_change, coarse) = loop {
             session.accumulate(&at(dt), spp)?;
             bar.set_position(u64::from(2 * spp));
             let after = session.image()?;
             let change = before.rmse(&after);
             spp *= 2;
             if change <= 0.5 * options.tolerance || spp >= options.max_spp {
-                break change;
+                break (change, after);
             }
             before = after;
         };
-        let coarse = session.image()?;
         // Halve the step at the same samples.
         let finer = dt / 2.0;
         if session.resolve(&at(finer)).is_err() {
-            break finish(coarse, dt, spp, spp_change, None, options, false);
+            break (coarse, dt, spp_change, None, false);
         }
         session.accumulate(&at(finer), spp)?;
         let fine = session.image()?;
         let step_change = coarse.rmse(&fine);
         let converged = spp_change <= options.tolerance && step_change <= options.tolerance;
         if step_change <= options.tolerance || spp >= options.max_spp {
-            break finish(
-                fine,
-                finer,
-                spp,
-                spp_change,
-                Some(step_change),
-                options,
-                converged,
-            );
+            break (fine, finer, spp_change, Some(step_change), converged);
         }
         dt = finer;
     };
     bar.finish_and_clear();
     let reference = Reference {
+        image: Some(image),
+        step_size,
+        spp,
+        spp_change,
+        step_change,
+        tolerance: options.tolerance,
+        converged,
         seconds: started.elapsed().as_secs_f64(),
-        ..reference
+        from_cache: false,
     };
     if !reference.converged {
         tracing::warn!(
@@ -225,28 +223,6 @@ pub fn converged_reference(
         tracing::warn!("the reference was not cached: {e}");
     }
     Ok(reference)
-}
-
-fn finish(
-    image: Image,
-    step_size: f64,
-    spp: u32,
-    spp_change: f64,
-    step_change: Option<f64>,
-    options: &ReferenceOptions,
-    converged: bool,
-) -> Reference {
-    Reference {
-        image: Some(image),
-        step_size,
-        spp,
-        spp_change,
-        step_change,
-        tolerance: options.tolerance,
-        converged,
-        seconds: 0.0,
-        from_cache: false,
-    }
 }
 
 fn hash_of<T: Hash + ?Sized>(value: &T) -> u64 {
