@@ -106,6 +106,9 @@ pub struct Capabilities {
     pub software: bool,
     /// The most particles one step may hold, if limited.
     pub max_particles: Option<usize>,
+    /// Whether [`Backend::query_grid`] scatters the uploaded particles onto the grid, so that
+    /// a grid needs no [`Backend::build`] first (the CPU backend).
+    pub scatters_grids: bool,
 }
 
 /// Time spent in each stage, for the last time each ran.

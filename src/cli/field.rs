@@ -1,5 +1,6 @@
 //! `aarbf field`: the density and attribute fields at query points.
 
+use rayon::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -84,7 +85,10 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         precision: parse_precision(&args.precision, Precision::FIELD)
             .map_err(anyhow::Error::msg)?,
     })?;
-    backend.build()?;
+    // A backend that scatters particles onto a grid builds no tree for one.
+    if !(matches!(queries, Queries::Grid(_)) && backend.capabilities().scatters_grids) {
+        backend.build()?;
+    }
     let build_time = built.elapsed();
     if let Some(p) = backend.positions() {
         tracing::info!("{}: positions in {p}", backend.capabilities().name);
@@ -111,10 +115,13 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         Queries::Grid(grid) => backend.query_grid(grid)?,
     };
     bar.finish_and_clear();
-    for (s, (phi, num)) in samples.iter_mut().zip(sums) {
-        let f = finish_sums(phi, num, !pre, range);
-        *s = [f.phi, f.theta[0], f.theta[1], f.theta[2]];
-    }
+    samples
+        .par_iter_mut()
+        .zip(sums.into_par_iter())
+        .for_each(|(s, (phi, num))| {
+            let f = finish_sums(phi, num, !pre, range);
+            *s = [f.phi, f.theta[0], f.theta[1], f.theta[2]];
+        });
     let eval_time = started.elapsed();
     let cols = if pre { 4 } else { 2 };
     let mut out = Vec::with_capacity(samples.len() * cols);

@@ -247,6 +247,7 @@ impl AshBackend {
             max_particles: Some(
                 (ctx.info.max_allocation / BOX_BYTES).min(ctx.info.max_primitive_count) as usize,
             ),
+            scatters_grids: false,
         };
         let mut backend = AshBackend {
             ctx,

@@ -97,6 +97,7 @@ impl CpuBackend {
                 hardware_rt: false,
                 software: false,
                 max_particles: None,
+                scatters_grids: true,
             },
             uploaded: None,
             prepared: None,

@@ -139,6 +139,7 @@ impl WgpuBackend {
                 max_particles: Some(
                     (util::part_limit(max_binding) / CLUSTER_BYTES * PARTS) as usize,
                 ),
+                scatters_grids: false,
             },
             reserved: 0,
             scene: None,
