@@ -148,7 +148,10 @@ fn render_sequences_in_chunks_and_alone_write_the_same_files() {
         "at the seam"
     );
     assert!(
-        log.contains("phi_ref") && log.contains("step size") && log.contains("density scale"),
+        log.contains("phi_ref")
+            && log.contains("step size")
+            && log.contains("density scale")
+            && log.contains("cluster size K = "),
         "the values used are printed: {log}"
     );
     // The saved scene holds every value the frame used; rendering it gives the same file.
@@ -160,6 +163,7 @@ fn render_sequences_in_chunks_and_alone_write_the_same_files() {
         "radius",
         "step = 5",
         "seed",
+        "cluster = ",
     ] {
         assert!(
             scene.contains(key),
@@ -180,4 +184,71 @@ fn render_sequences_in_chunks_and_alone_write_the_same_files() {
         bytes("alone.png"),
         "the saved scene reproduces it"
     );
+}
+
+/// The cluster size a user leaves unset comes from the data: a jittered lattice (as a CSV with
+/// 17 significant digits, an awkward 9 x 7 x 5 count) whose particles barely reach each other
+/// gets K = 4, the same lattice with a radius reaching dozens of neighbours K = 16, and
+/// `--cluster` overrides either; the choice is printed and saved in the scene file.
+#[test]
+fn the_cluster_size_follows_the_particles_overlap() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut csv = String::from("x,y,z,temperature\n");
+    let mut state = 0x9e3779b97f4a7c15u64;
+    let mut jitter = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.2
+    };
+    for k in 0..5 {
+        for j in 0..7 {
+            for i in 0..9 {
+                let p = [i, j, k].map(|v| 1e3 + 0.1 * (f64::from(v) + jitter()));
+                let t = 250.0 + f64::from(i * j) / 7.0;
+                csv += &format!("{:.17e},{:.17e},{:.17e},{t:.17e}\n", p[0], p[1], p[2]);
+            }
+        }
+    }
+    std::fs::write(d.join("lattice.csv"), csv).unwrap();
+    let (data, out) = (d.join("lattice.csv"), d.join("out.png"));
+    let render = |radius: &str, extra: &[&str]| -> (String, String) {
+        let scene = d.join(format!("scene-{radius}-{}.toml", extra.len()));
+        let mut args = vec![
+            "render",
+            "--data",
+            s(&data),
+            "--attribute",
+            "temperature",
+            "--radius",
+            radius,
+            "--backend",
+            "cpu",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--spp",
+            "1",
+            "--out",
+            s(&out),
+            "--force",
+            "--save-scene",
+            s(&scene),
+        ];
+        args.extend_from_slice(extra);
+        let log = aarbf(&args);
+        (log, std::fs::read_to_string(&scene).unwrap())
+    };
+    // Spacing 0.1: radius 0.05 reaches no neighbour, 0.25 reaches dozens.
+    let (log, scene) = render("0.05", &[]);
+    assert!(log.contains("cluster size K = 4 (1.0 particles"), "{log}");
+    assert!(scene.contains("cluster = 4"), "{scene}");
+    let (log, scene) = render("0.25", &[]);
+    assert!(log.contains("cluster size K = 16"), "{log}");
+    assert!(scene.contains("cluster = 16"), "{scene}");
+    let (log, scene) = render("0.25", &["--cluster", "2"]);
+    assert!(!log.contains("cluster size K ="), "{log}");
+    assert!(scene.contains("cluster = 2"), "{scene}");
 }

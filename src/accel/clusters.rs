@@ -10,6 +10,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::values::Bounds;
 
+/// The mean overlap from which [`ClusterSize::for_overlap`] picks K = 16.
+pub const DENSE_OVERLAP: f64 = 4.0;
+
 /// Particles per cluster: 1, 2, 4, 8 or 16.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(try_from = "u32", into = "u32")]
@@ -29,6 +32,24 @@ impl ClusterSize {
             Ok(ClusterSize(k))
         } else {
             Err(format!("cluster size {k} is not one of 1, 2, 4, 8, 16"))
+        }
+    }
+
+    /// The cluster size for data where `overlap` particles reach a particle centre on average
+    /// (itself included; [`crate::render::auto::mean_overlap`]): 16 where particles overlap
+    /// ([`DENSE_OVERLAP`] or more), 4 where they barely do. Measured with `aarbf bench cluster`
+    /// on every backend (docs/benchmarks.md, "The cluster size from the data"): where several
+    /// particles reach a point, larger clusters only gain (a query visits fewer, fuller boxes;
+    /// K = 16 was the fastest or within 8% of it on uniform data at overlap 30, on clusters at
+    /// overlap over 1000 and on the dam break at 7); where a point meets about one particle,
+    /// the best K depends on how small the particles are against their spacing (K = 8 at a
+    /// radius of 0.7 spacings, K = 1 at 0.27), which the overlap does not see, and K = 4 was
+    /// within 11% of the fastest on every backend at both, K = 16 up to 25% slower.
+    pub fn for_overlap(overlap: f64) -> ClusterSize {
+        if overlap >= DENSE_OVERLAP {
+            ClusterSize(16)
+        } else {
+            ClusterSize(4)
         }
     }
 
@@ -171,6 +192,16 @@ impl ClusterBoxes {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_cluster_size_grows_with_the_overlap() {
+        let k = |n: f64| ClusterSize::for_overlap(n).get();
+        assert_eq!(k(1.0), 4);
+        assert_eq!(k(DENSE_OVERLAP - 1e-9), 4);
+        assert_eq!(k(DENSE_OVERLAP), 16);
+        assert_eq!(k(1e4), 16);
+        assert_eq!(k(f64::NAN), 4);
+    }
 
     #[test]
     fn outward_rounding_contains_the_f64_value() {

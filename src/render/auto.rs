@@ -80,6 +80,67 @@ impl AutoValues {
     }
 }
 
+/// Particle centres [`mean_overlap`] counts at, at most.
+const OVERLAP_SAMPLES: usize = 1024;
+
+/// How many particles reach a particle centre of the series' first step, on average (each
+/// particle's own radius, as the field's): the overlap that decides how many particles a
+/// cluster box should hold ([`crate::accel::ClusterSize::for_overlap`]). A property of the
+/// series and the field, like Phi_ref.
+pub fn mean_overlap(series: &TimeSeries, field: &FieldSettings) -> Result<f64, RenderError> {
+    if series.is_empty() {
+        return Ok(0.0);
+    }
+    let step = series.step(0)?;
+    let tables = FieldTables::of(field);
+    let h = field
+        .radius_attribute
+        .as_deref()
+        .and_then(|a| series.attribute(a));
+    let max_radius = field.radius * table_max(&tables.radius) * h.map_or(1.0, |h| h.max);
+    let n = step.len();
+    if n == 0 || max_radius.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return Ok(0.0);
+    }
+    let range = field
+        .attribute_range
+        .or_else(|| {
+            let a = series.attribute(field.attribute.as_deref()?)?;
+            Some((a.min, a.max))
+        })
+        .unwrap_or((0.0, 0.0));
+    let grid = Grid::new(&step.positions, max_radius);
+    let attribute = field.attribute.as_deref().and_then(|a| step.attribute(a));
+    let h = field
+        .radius_attribute
+        .as_deref()
+        .and_then(|a| step.attribute(a));
+    let radius = |i: usize| {
+        let t = attribute.map_or(0.5, |a| normalise(a.values[i], range));
+        particle_radius(
+            field.radius,
+            lookup(&tables.radius, t),
+            h.map(|h| h.values[i]),
+        )
+    };
+    let samples = n.min(OVERLAP_SAMPLES);
+    let stride = n.div_ceil(samples).max(1);
+    let counts: Vec<usize> = (0..n)
+        .into_par_iter()
+        .step_by(stride)
+        .map(|j| {
+            let x = step.positions[j];
+            let mut count = 0;
+            grid.for_each_near(x, |i| {
+                let r = radius(i);
+                count += usize::from(r > 0.0 && (x - step.positions[i]).length_squared() <= r * r);
+            });
+            count
+        })
+        .collect();
+    Ok(counts.iter().sum::<usize>() as f64 / counts.len().max(1) as f64)
+}
+
 /// The 95th percentile of Phi (positive values) at every k-th particle centre of `step`.
 fn phi_ref(
     step: &Step,
@@ -213,6 +274,53 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::values::Attribute;
+
+    /// The mean overlap is the count of particles whose own radius reaches each sampled centre,
+    /// itself included, found by brute force here; radii from an attribute (smoothing length)
+    /// and off-origin f64 positions.
+    #[test]
+    fn mean_overlap_counts_the_particles_reaching_each_centre() {
+        let mut state = 7u64;
+        let mut random = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let n: usize = 1237;
+        let positions: Vec<DVec3> = (0..n)
+            .map(|_| DVec3::new(random(), random(), random()) * DVec3::new(3.0, 2.0, 1.0) - 5e4)
+            .collect();
+        let h: Vec<f64> = (0..n).map(|_| 0.5 + random()).collect();
+        let step = Step {
+            name: "overlap".into(),
+            positions: positions.clone(),
+            attributes: vec![Attribute {
+                name: "h".into(),
+                values: h.clone(),
+            }],
+        };
+        let series = TimeSeries::from_steps(vec![step]);
+        let mut field = FieldSettings::new(None, 0.2);
+        field.radius_attribute = Some("h".into());
+        let got = mean_overlap(&series, &field).unwrap();
+        let stride = n.div_ceil(n.min(OVERLAP_SAMPLES));
+        let counts: Vec<usize> = (0..n)
+            .step_by(stride)
+            .map(|j| {
+                (0..n)
+                    .filter(|&i| {
+                        let r = 0.2 * h[i];
+                        (positions[j] - positions[i]).length_squared() <= r * r
+                    })
+                    .count()
+            })
+            .collect();
+        let want = counts.iter().sum::<usize>() as f64 / counts.len() as f64;
+        assert_eq!(got, want);
+        assert!(want > 3.0, "the particles overlap: {want}");
+    }
     use crate::field::ReferenceField;
     use crate::scene::synth::Generator;
 

@@ -245,7 +245,17 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             .or(scene.field.classification)
             .unwrap_or_default(),
     };
-    let cluster = options.cluster.or(scene.field.cluster).unwrap_or_default();
+    let cluster = match options.cluster.or(scene.field.cluster) {
+        Some(k) => k,
+        None => {
+            let overlap = crate::render::auto::mean_overlap(&series, &field)?;
+            let k = ClusterSize::for_overlap(overlap);
+            tracing::info!(
+                "cluster size K = {k} ({overlap:.1} particles reach a particle centre on average; --cluster sets it)"
+            );
+            k
+        }
+    };
     // Every backend uses a map through its table; say so where that changes it visibly.
     for (what, map) in [
         ("radius map", &field.radius_map.0),
