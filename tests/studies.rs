@@ -311,7 +311,7 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             ("wgpu", "rbf")
         ]
     );
-    // 2 backends x (5 configurations (defaults, step x2, white noise, K=16, delta tracking)
+    // 2 backends x (5 configurations (defaults, step x2, white noise, K=16 or 1, delta tracking)
     // x 2 spp x (time, rmse, blurred rmse, flip) + 1 target x (time, rmse, estimate)).
     let rows = check_study(
         p,

@@ -40,8 +40,8 @@ impl ClusterSize {
     /// ([`DENSE_OVERLAP`] or more), 4 where they barely do. Measured with `aarbf bench cluster`
     /// on every backend (docs/benchmarks.md, "The cluster size from the data"): where several
     /// particles reach a point, larger clusters only gain (a query visits fewer, fuller boxes;
-    /// K = 16 was the fastest or within 8% of it on uniform data at overlap 30, on clusters at
-    /// overlap over 1000 and on the dam break at 7); where a point meets about one particle,
+    /// K = 16 was the fastest or within 12% of it on uniform data at overlap 28, on clusters at
+    /// overlap over 2000 and on the dam break at 7); where a point meets about one particle,
     /// the best K depends on how small the particles are against their spacing (K = 8 at a
     /// radius of 0.7 spacings, K = 1 at 0.27), which the overlap does not see, and K = 4 was
     /// within 11% of the fastest on every backend at both, K = 16 up to 25% slower.

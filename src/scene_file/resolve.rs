@@ -68,7 +68,8 @@ pub struct FieldOptions {
     /// post: average the attribute, then colour it; pre: colour each particle, then average.
     #[arg(long, value_enum)]
     pub classification: Option<Classification>,
-    /// Particles per cluster box (1, 2, 4, 8, 16), Hilbert-sorted.
+    /// Particles per cluster box (1, 2, 4, 8, 16), Hilbert-sorted. Unset: 16 where particles
+    /// overlap (4 or more reach a particle centre on average), 4 where they barely do.
     #[arg(long)]
     pub cluster: Option<ClusterSize>,
 }

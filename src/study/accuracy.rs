@@ -5,7 +5,8 @@
 //! For each data set and backend, one camera (the default view) and the error images' size
 //! (`--noise-size`), the study sweeps the samples per pixel (`--spp`) of configurations that
 //! each change one knob from the defaults: the march step (`--step-factors` times the default),
-//! white instead of blue noise, 16 particles per cluster, and the other stochastic
+//! white instead of blue noise, the other end of the cluster sizes (16 particles per cluster,
+//! or 1 where the data's default is 16), and the other stochastic
 //! single-scattering integrator (delta tracking for marching and the reverse; emission–absorption
 //! converges to another image, so it is compared only with itself). Each configuration is
 //! rendered `--seeds` times; a row holds one value per seed: the time to accumulate the samples
@@ -62,11 +63,13 @@ struct Config {
     integrator: Integrator,
 }
 
-fn configs(o: &Options) -> Vec<Config> {
+/// The configurations, around the defaults for data whose default cluster size is `k`
+/// ([`ClusterSize::for_overlap`]); the cluster-size variant takes the other end of 1..=16.
+fn configs(o: &Options, k: u32) -> Vec<Config> {
     let base = Config {
         name: String::new(),
         step_factor: 1.0,
-        k: 1,
+        k,
         noise: NoiseKind::Stbn,
         integrator: o.integrator,
     };
@@ -88,9 +91,10 @@ fn configs(o: &Options) -> Vec<Config> {
         noise: NoiseKind::White,
         ..base.clone()
     });
+    let other_k = if k == 16 { 1 } else { 16 };
     out.push(Config {
-        name: "K=16".into(),
-        k: 16,
+        name: format!("K={other_k}"),
+        k: other_k,
         ..base.clone()
     });
     let other = match o.integrator {
@@ -113,14 +117,17 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let mut spps = o.spps.clone();
     spps.sort_unstable();
     spps.dedup();
-    let configs = configs(o);
+    // As many configurations for every data set (their K differs).
+    let config_count = configs(o, 1).len();
     let bar = ctx.bar(
-        ctx.data.len() * (1 + ctx.backends.len() * (configs.len() + 1)),
+        ctx.data.len() * (1 + ctx.backends.len() * (config_count + 1)),
         "accuracy",
     );
     for spec in ctx.data {
         let ds = ctx.load(spec)?;
         let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
+        let overlap = crate::render::auto::mean_overlap(&ds.series, &field)?;
+        let configs = configs(o, ClusterSize::for_overlap(overlap).get() as u32);
         let base = RenderSettings {
             width: o.noise_image.0,
             height: o.noise_image.1,
