@@ -51,25 +51,12 @@ impl AutoValues {
     /// The values for `field` over `series`.
     pub fn of(series: &TimeSeries, field: &FieldSettings) -> Result<AutoValues, RenderError> {
         let tables = FieldTables::of(field);
-        let m_max = table_max(&tables.radius);
-        let h = field
-            .radius_attribute
-            .as_deref()
-            .and_then(|a| series.attribute(a));
-        let (mean_h, max_h) = h.map_or((1.0, 1.0), |h| (h.mean, h.max));
-        let typical_radius = field.radius * m_max * mean_h;
-        let max_radius = field.radius * m_max * max_h;
+        let (typical_radius, max_radius) = radii(series, field, &tables);
         let phi_ref = if series.is_empty() {
             1.0
         } else {
             let step = series.step(0)?;
-            let range = field
-                .attribute_range
-                .or_else(|| {
-                    let a = series.attribute(field.attribute.as_deref()?)?;
-                    Some((a.min, a.max))
-                })
-                .unwrap_or((0.0, 0.0));
+            let range = attribute_range(series, field);
             phi_ref(&step, field, &tables, range, max_radius)
         };
         Ok(AutoValues {
@@ -78,6 +65,29 @@ impl AutoValues {
             max_radius,
         })
     }
+}
+
+/// The typical radius (`R · max m · mean h`) and the largest (`R · max m · max h`, h over the
+/// whole series).
+fn radii(series: &TimeSeries, field: &FieldSettings, tables: &FieldTables) -> (f64, f64) {
+    let m_max = table_max(&tables.radius);
+    let h = field
+        .radius_attribute
+        .as_deref()
+        .and_then(|a| series.attribute(a));
+    let (mean_h, max_h) = h.map_or((1.0, 1.0), |h| (h.mean, h.max));
+    (field.radius * m_max * mean_h, field.radius * m_max * max_h)
+}
+
+/// The range the field's attribute is normalised over: the field's, else the series'.
+fn attribute_range(series: &TimeSeries, field: &FieldSettings) -> (f64, f64) {
+    field
+        .attribute_range
+        .or_else(|| {
+            let a = series.attribute(field.attribute.as_deref()?)?;
+            Some((a.min, a.max))
+        })
+        .unwrap_or((0.0, 0.0))
 }
 
 /// Particle centres [`mean_overlap`] counts at, at most.
@@ -93,22 +103,12 @@ pub fn mean_overlap(series: &TimeSeries, field: &FieldSettings) -> Result<f64, R
     }
     let step = series.step(0)?;
     let tables = FieldTables::of(field);
-    let h = field
-        .radius_attribute
-        .as_deref()
-        .and_then(|a| series.attribute(a));
-    let max_radius = field.radius * table_max(&tables.radius) * h.map_or(1.0, |h| h.max);
+    let (_, max_radius) = radii(series, field, &tables);
     let n = step.len();
     if n == 0 || max_radius.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return Ok(0.0);
     }
-    let range = field
-        .attribute_range
-        .or_else(|| {
-            let a = series.attribute(field.attribute.as_deref()?)?;
-            Some((a.min, a.max))
-        })
-        .unwrap_or((0.0, 0.0));
+    let range = attribute_range(series, field);
     let grid = Grid::new(&step.positions, max_radius);
     let attribute = field.attribute.as_deref().and_then(|a| step.attribute(a));
     let h = field
