@@ -293,8 +293,17 @@ fn a_time_budget_is_kept_and_estimated() {
         },
     )
     .unwrap();
-    // One frame may finish after the budget; a 32x32 frame takes milliseconds.
-    assert!(done.elapsed < budget + std::time::Duration::from_millis(500));
+    // The last chunk may finish after the budget. Chunks take at most half the time left at
+    // the frame time measured so far, so the other tests running beside this one (which
+    // change the frame time from chunk to chunk) cannot push it far past: when a chunk filled
+    // all the time left, and a fresh step's first chunk ran unmeasured, a CI run took 2.0-2.6 s
+    // of a 1.5 s budget.
+    println!("budget {budget:?}: took {:?}", done.elapsed);
+    assert!(
+        done.elapsed < budget + std::time::Duration::from_millis(500),
+        "a budget of {budget:?} took {:?}",
+        done.elapsed
+    );
     assert!(
         done.spp > 8,
         "the budget buys frames beyond the calibration"
