@@ -18,8 +18,8 @@ use rayon::prelude::*;
 use super::session::RenderError;
 use crate::field::{FieldSettings, FieldTables, normalise, particle_radius};
 use crate::scene::TimeSeries;
-use crate::values::Step;
 use crate::values::tables::{lookup, table_max};
+use crate::values::{Attribute, Step};
 
 /// Particle centres Phi_ref is estimated at, at most.
 pub const PHI_REF_SAMPLES: usize = 4096;
@@ -108,21 +108,8 @@ pub fn mean_overlap(series: &TimeSeries, field: &FieldSettings) -> Result<f64, R
     if n == 0 || max_radius.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return Ok(0.0);
     }
-    let range = attribute_range(series, field);
+    let rule = ParticleRule::new(&step, field, &tables, attribute_range(series, field));
     let grid = Grid::new(&step.positions, max_radius);
-    let attribute = field.attribute.as_deref().and_then(|a| step.attribute(a));
-    let h = field
-        .radius_attribute
-        .as_deref()
-        .and_then(|a| step.attribute(a));
-    let radius = |i: usize| {
-        let t = attribute.map_or(0.5, |a| normalise(a.values[i], range));
-        particle_radius(
-            field.radius,
-            lookup(&tables.radius, t),
-            h.map(|h| h.values[i]),
-        )
-    };
     let samples = n.min(OVERLAP_SAMPLES);
     let stride = n.div_ceil(samples).max(1);
     let counts: Vec<usize> = (0..n)
@@ -132,7 +119,7 @@ pub fn mean_overlap(series: &TimeSeries, field: &FieldSettings) -> Result<f64, R
             let x = step.positions[j];
             let mut count = 0;
             grid.for_each_near(x, |i| {
-                let r = radius(i);
+                let r = rule.radius(rule.t(i), i);
                 count += usize::from(r > 0.0 && (x - step.positions[i]).length_squared() <= r * r);
             });
             count
@@ -154,12 +141,7 @@ fn phi_ref(
         return 1.0;
     }
     let grid = Grid::new(&step.positions, max_radius);
-    let attribute = field.attribute.as_deref().and_then(|a| step.attribute(a));
-    let h = field
-        .radius_attribute
-        .as_deref()
-        .and_then(|a| step.attribute(a));
-    let t_of = |i: usize| attribute.map_or(0.5, |a| normalise(a.values[i], range));
+    let rule = ParticleRule::new(step, field, tables, range);
     // Fewer samples where every sample meets most of the step (radii spanning the data).
     let per_sample = grid.mean_candidates().max(1.0);
     let samples = ((PHI_REF_WORK as f64 / per_sample) as usize)
@@ -173,12 +155,8 @@ fn phi_ref(
             let x = step.positions[j];
             let mut sum = 0.0;
             grid.for_each_near(x, |i| {
-                let t = t_of(i);
-                let r = particle_radius(
-                    field.radius,
-                    lookup(&tables.radius, t),
-                    h.map(|h| h.values[i]),
-                );
+                let t = rule.t(i);
+                let r = rule.radius(t, i);
                 let d2 = (x - step.positions[i]).length_squared();
                 if r > 0.0 && d2 <= r * r {
                     sum += lookup(&tables.density, t) * (-4.5 * d2 / (r * r)).exp();
@@ -190,6 +168,51 @@ fn phi_ref(
         .collect();
     phi.sort_by(f64::total_cmp);
     phi.get(phi.len() * 95 / 100).copied().unwrap_or(1.0)
+}
+
+/// A step's particles under the field's rules, evaluated in f64 on the CPU: each one's
+/// normalised attribute and radius.
+struct ParticleRule<'a> {
+    field: &'a FieldSettings,
+    tables: &'a FieldTables,
+    range: (f64, f64),
+    attribute: Option<&'a Attribute>,
+    h: Option<&'a Attribute>,
+}
+
+impl<'a> ParticleRule<'a> {
+    fn new(
+        step: &'a Step,
+        field: &'a FieldSettings,
+        tables: &'a FieldTables,
+        range: (f64, f64),
+    ) -> Self {
+        ParticleRule {
+            field,
+            tables,
+            range,
+            attribute: field.attribute.as_deref().and_then(|a| step.attribute(a)),
+            h: field
+                .radius_attribute
+                .as_deref()
+                .and_then(|a| step.attribute(a)),
+        }
+    }
+
+    /// Particle `i`'s attribute, normalised (0.5 without one).
+    fn t(&self, i: usize) -> f64 {
+        self.attribute
+            .map_or(0.5, |a| normalise(a.values[i], self.range))
+    }
+
+    /// Particle `i`'s radius, `t` being its [`ParticleRule::t`].
+    fn radius(&self, t: f64, i: usize) -> f64 {
+        particle_radius(
+            self.field.radius,
+            lookup(&self.tables.radius, t),
+            self.h.map(|h| h.values[i]),
+        )
+    }
 }
 
 /// Particles bucketed in cubic cells of side `cell` (sorted by cell key), for finding every
@@ -274,7 +297,6 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::values::Attribute;
 
     /// The mean overlap is the count of particles whose own radius reaches each sampled centre,
     /// itself included, found by brute force here; radii from an attribute (smoothing length)
