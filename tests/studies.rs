@@ -52,6 +52,8 @@ const TINY: &[&str] = &[
     "500",
     "--voxel-grids",
     "8,16",
+    "--splat-ks",
+    "1,15",
     "--step-factors",
     "1,2",
     "--reference-tolerance",
@@ -276,8 +278,10 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
     // The scaling page states a fitted exponent for each line.
     let md = std::fs::read_to_string(p.join("scaling/scaling.md")).unwrap();
     assert!(md.contains("∝ N^"), "{md}");
-    // RBF on both backends, voxel grids 8 and 16 on cpu: 4 x (frame, structure, march, rmse).
-    let rows = check_study(
+    // RBF on both backends, voxel grids 8 and 16 on cpu: 4 x (frame, structure, march, rmse);
+    // the splatter with k = 1 and 15 on cpu: 2 x (frame, structure, march, lost, rmse). The
+    // share of hits lost may be 0.
+    let rows = check_study_values(
         p,
         "baselines",
         &[
@@ -285,6 +289,7 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             "grid",
             "radius",
             "k",
+            "splat_k",
             "width",
             "height",
             "integrator",
@@ -293,14 +298,16 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             "cameras",
             "reference_spp",
         ],
-        16,
+        26,
         &b,
         2,
+        |v| v >= 0.0,
     );
+    let (metric, variant, backend) = (24, 8, 4);
     let variants: Vec<(&str, &str)> = rows
         .iter()
-        .filter(|r| r[23] == "rmse")
-        .map(|r| (r[4].as_str(), r[8].as_str()))
+        .filter(|r| r[metric] == "rmse")
+        .map(|r| (r[backend].as_str(), r[variant].as_str()))
         .collect();
     assert_eq!(
         variants,
@@ -308,9 +315,31 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             ("cpu", "rbf"),
             ("cpu", "voxel 8"),
             ("cpu", "voxel 16"),
+            ("cpu", "splat 1"),
+            ("cpu", "splat 15"),
             ("wgpu", "rbf")
         ]
     );
+    let median_of = |v: &str, m: &str| -> f64 {
+        let r = rows
+            .iter()
+            .find(|r| r[variant] == v && r[metric] == m)
+            .unwrap();
+        r[r.len() - 4].parse().unwrap()
+    };
+    // Every error is positive (no baseline is the reference); a one-entry buffer loses at least
+    // the hits fifteen lose, and its image is no nearer the reference (tests/splat_baseline.rs
+    // checks the losses where slabs overflow; these tiny scenes may not).
+    for v in ["rbf", "voxel 8", "splat 1", "splat 15"] {
+        assert!(median_of(v, "rmse") > 0.0, "{v}");
+    }
+    assert!(
+        median_of("splat 1", "lost") >= median_of("splat 15", "lost"),
+        "lost: k = 1 {} %, k = 15 {} %",
+        median_of("splat 1", "lost"),
+        median_of("splat 15", "lost")
+    );
+    assert!(median_of("splat 1", "rmse") >= median_of("splat 15", "rmse"));
     // 2 backends x (5 configurations (defaults, step x2, white noise, K=16 or 1, delta tracking)
     // x 2 spp x (time, rmse, blurred rmse, flip) + 1 target x (time, rmse, estimate)).
     let rows = check_study(

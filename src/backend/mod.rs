@@ -284,6 +284,24 @@ pub trait Backend: Send {
     /// frame's size differs from the accumulated one's).
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError>;
 
+    /// Renders one frame with Knoll et al.'s RT splatter, the paper's Table 3 baseline
+    /// (`--method splat`: slabs of one march step, at most `k` hits each, sorted and
+    /// composited front to back; `crate::field::splat` says what a hit is and how a full
+    /// buffer loses hits), and adds it to the accumulation; returns what the slabs' buffers
+    /// kept and lost. Emission–absorption only.
+    fn render_splat(
+        &mut self,
+        _frame: &FrameParams,
+        _k: usize,
+    ) -> Result<crate::field::splat::SplatCounts, BackendError> {
+        Err(BackendError::Device {
+            backend: self.capabilities().name,
+            message: "the splatter baseline (--method splat) runs on the cpu backend; its GPU \
+                      versions are not written yet"
+                .into(),
+        })
+    }
+
     /// Restarts progressive accumulation.
     fn reset(&mut self);
 

@@ -85,6 +85,10 @@ pub struct StudyArgs {
     /// baselines: the voxel grids, cells along the longest side (the paper: 512).
     #[arg(long, value_delimiter = ',', default_value = "64,128,256,512")]
     pub voxel_grids: Vec<usize>,
+    /// baselines: the splatter's hits per slab (the RBF paper's port: 15; Knoll et al.'s book
+    /// chapter: 31).
+    #[arg(long, value_delimiter = ',', default_value = "4,15,31")]
+    pub splat_ks: Vec<usize>,
     /// accuracy: the march steps, as multiples of the default step (1 must be among them).
     #[arg(long, value_delimiter = ',', default_value = "0.5,1,2,4")]
     pub step_factors: Vec<f64>,
@@ -136,6 +140,7 @@ impl StudyArgs {
             max_n: self.max_n,
             queries: self.queries,
             voxel_grids: self.voxel_grids.clone(),
+            splat_ks: self.splat_ks.clone(),
             step_factors: self.step_factors.clone(),
             reference_tolerance: self.reference_tolerance,
             radius_fractions: self.radius_fractions.clone(),

@@ -3,14 +3,15 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use anyhow::{Context, bail, ensure};
 use clap::Args;
 
 use crate::backend::{self, BackendKind};
 use crate::render::RenderSession;
 use crate::render::accuracy::{ErrorMetric, render_to_target};
 use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
-use crate::render::voxel::{Method, VoxelGrid, VoxelRenderer};
+use crate::render::voxel::{VoxelGrid, VoxelRenderer};
+use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
@@ -38,16 +39,22 @@ pub struct RenderArgs {
     pub bit_depth: u8,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendKind,
-    /// How the image is made: `rbf`, the paper's method (every sample queries the particles),
-    /// or `voxel`, its Table 3 baseline (the particles splatted into a grid with the same
-    /// kernel through the backend, then the grid ray-marched on the CPU with the same
-    /// integrator, noise and transfer functions; re-voxelised for every step).
+    /// How the image is made: `rbf`, the paper's method (every sample queries the particles);
+    /// `voxel`, a Table 3 baseline (the particles splatted into a grid with the same kernel
+    /// through the backend, then the grid ray-marched on the CPU with the same integrator,
+    /// noise and transfer functions; re-voxelised for every step); or `splat`, the other
+    /// Table 3 baseline, Knoll et al.'s RT splatter (slabs one march step long, at most
+    /// --splat-k particles each, sorted and composited front to back; emission-absorption,
+    /// cpu backend).
     #[arg(long, value_enum, default_value = "rbf")]
     pub method: Method,
     /// For `--method voxel`: cells along the grid's longest side (cubic cells over the march
     /// box; the paper's baseline is 512).
     #[arg(long, default_value_t = 256)]
     pub voxel_grid: usize,
+    /// For `--method splat`: hits each slab's buffer holds (more are lost, by design).
+    #[arg(long, default_value_t = SPLAT_K)]
+    pub splat_k: usize,
     /// Precision of positions and arithmetic: `auto` (f32 where the scene's positions and
     /// radii allow a Phi error below 1e-3; otherwise double-single pairs on the GPU backends and
     /// the f64 reference on the CPU; the default), `auto:TOLERANCE`, `f32`, `ds`
@@ -322,6 +329,14 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if (target.is_some() || args.reference) && args.method != Method::Rbf {
         bail!("--target-error, --time-budget and --reference render with --method rbf");
     }
+    if args.method == Method::Splat {
+        ensure!(
+            settings.integrator == Integrator::Ea,
+            "--method splat composites emission-absorption (as Knoll et al.'s splatter): use --integrator ea, not {:?}",
+            settings.integrator
+        );
+        ensure!(args.splat_k > 0, "--splat-k must be at least 1");
+    }
 
     let format = OutputFormat::of(&args.out, args.bit_depth)?;
     let steps: Vec<usize> = match &args.steps {
@@ -400,7 +415,13 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         backend.capabilities().device
     );
     let mut session = RenderSession::new(backend, &resolved.series);
-    session.set_precision(precision);
+    // The splatter collects hits through the f64 BVH (the cpu backend's only tree); asking
+    // for it up front spares building the f32 cells first.
+    session.set_precision(if args.method == Method::Splat {
+        backend::Precision::F64
+    } else {
+        precision
+    });
     // A targeted or reference render does not know its samples in advance: the bar counts
     // images, and the render shows its own progress.
     let per_image = if target.is_some() || args.reference {
@@ -539,6 +560,23 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                     bar.inc(1);
                 }
                 voxels.image().context("no frame rendered")?
+            }
+            Method::Splat => {
+                session.backend_mut().reset();
+                let mut counts = crate::field::splat::SplatCounts::default();
+                for f in 0..spp {
+                    let frame = session.frame_params(&settings, f)?;
+                    counts = counts + session.backend_mut().render_splat(&frame, args.splat_k)?;
+                    bar.inc(1);
+                }
+                tracing::info!(
+                    "splatted step {step}: {} hits composited, {} ({:.2}%) lost to full {}-entry slab buffers",
+                    counts.kept,
+                    counts.lost,
+                    100.0 * counts.lost_fraction(),
+                    args.splat_k
+                );
+                session.backend_mut().image()?
             }
         };
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.

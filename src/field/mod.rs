@@ -19,6 +19,7 @@ mod grid;
 mod inputs;
 mod particles;
 mod reference;
+pub mod splat;
 
 use serde::{Deserialize, Serialize};
 

@@ -80,7 +80,7 @@ pub fn finish_sums(phi: f64, num: [f64; 3], post: bool, range: (f64, f64)) -> Sa
 pub struct ReferenceField {
     pub particles: Particles,
     pub boxes: ClusterBoxes,
-    bvh: ClusterBvh,
+    pub(super) bvh: ClusterBvh,
 }
 
 impl ReferenceField {

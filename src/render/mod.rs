@@ -13,4 +13,4 @@ pub mod voxel;
 
 pub use auto::AutoValues;
 pub use session::{RenderError, RenderSession, Resolved, StepChange};
-pub use settings::RenderSettings;
+pub use settings::{Method, RenderSettings, SPLAT_K};

@@ -48,3 +48,20 @@ impl Default for RenderSettings {
         }
     }
 }
+
+/// How an image is rendered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Method {
+    /// The attribute-aware RBFs: every sample queries the particles (the paper's method).
+    #[default]
+    Rbf,
+    /// The voxel baseline: particles splatted into a grid, the grid ray-marched.
+    Voxel,
+    /// Knoll et al.'s RT splatter, the other Table 3 baseline: each slab of a ray collects at
+    /// most k particles, sorted and composited front to back.
+    Splat,
+}
+
+/// Hits per slab in the splatter: 15, as the RBF paper's port of Knoll et al. (31 in their
+/// book chapter).
+pub const SPLAT_K: usize = 15;

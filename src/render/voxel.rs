@@ -20,16 +20,6 @@ use crate::backend::{Backend, BackendError};
 use crate::field::RegularGrid;
 use crate::values::{FrameParams, Image};
 
-/// How an image is rendered.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum Method {
-    /// The attribute-aware RBFs: every sample queries the particles (the paper's method).
-    #[default]
-    Rbf,
-    /// The voxel baseline: particles splatted into a grid, the grid ray-marched.
-    Voxel,
-}
-
 /// The largest grid side accepted (a 1024³ grid holds 16 GiB of f32 sums).
 pub const MAX_GRID: usize = 1024;
 

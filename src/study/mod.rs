@@ -7,7 +7,7 @@
 //!   (Fig. 10a);
 //! - [`noise`]: blue (STBN) vs white noise, frame time and error vs spp (Fig. 10b);
 //! - [`scaling`]: build, refit, query and frame time vs N, with fitted exponents;
-//! - [`baselines`]: our method against the voxel-grid baseline, rebuilt every frame (Table 3);
+//! - [`baselines`]: our method against the voxel grid and Knoll et al.'s splatter, rebuilt every frame (Table 3);
 //! - [`accuracy`]: every knob's time and error against a converged reference, the Pareto
 //!   front, the defaults and `--target-error` against it.
 //! - [`extremes`]: the f32 and double-single field error against the f64 reference at extreme
@@ -180,6 +180,8 @@ pub struct Options {
     pub queries: usize,
     /// Grid sizes (cells along the longest side) of the `baselines` study's voxel grids.
     pub voxel_grids: Vec<usize>,
+    /// The `baselines` study's splatter buffer sizes (hits per slab).
+    pub splat_ks: Vec<usize>,
     /// The `accuracy` study's march steps, as multiples of the default step.
     pub step_factors: Vec<f64>,
     /// The `accuracy` study's reference: the most doubling the samples or halving the step
@@ -220,6 +222,7 @@ impl Default for Options {
             max_n: 1_000_000,
             queries: 100_000,
             voxel_grids: vec![64, 128, 256, 512],
+            splat_ks: vec![4, 15, 31],
             step_factors: vec![0.5, 1.0, 2.0, 4.0],
             reference_tolerance: 1e-4,
             radius_fractions: vec![1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2],
@@ -264,6 +267,9 @@ impl Options {
             .any(|&n| n == 0 || n > crate::render::voxel::MAX_GRID)
         {
             return bad("--voxel-grids: each grid must have 1..=1024 cells along its longest side");
+        }
+        if self.splat_ks.contains(&0) {
+            return bad("--splat-ks: each buffer must hold at least 1 hit");
         }
         if !self.step_factors.contains(&1.0)
             || self

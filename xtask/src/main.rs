@@ -446,6 +446,8 @@ const STUDIES: &[&str] = &[
     "100000",
     "--voxel-grids",
     "64,128,256,512",
+    "--splat-ks",
+    "4,15,31",
 ];
 
 fn bench(name: &str, extra: &[String]) -> Result<()> {

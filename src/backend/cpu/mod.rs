@@ -10,9 +10,10 @@
 
 mod accumulator;
 pub mod integrators;
+pub mod splat;
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 use glam::DVec3;
@@ -22,6 +23,7 @@ use self::accumulator::Accumulator;
 use self::integrators::{FieldSampler, PixelScratch, render_pixel_with};
 use super::gpu_data::f32_phi_error;
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
+use crate::field::splat::{SplatCounts, SplatScratch};
 use crate::field::{F32Field, F32Ray, FieldSettings, Particles, ReferenceField};
 use crate::values::{FrameParams, Image, Step};
 
@@ -229,11 +231,25 @@ fn render_tiles<F: FieldSampler>(
     field: &F,
     abandoned: &(dyn Fn() -> bool + Sync),
 ) -> Vec<Vec<[f64; 4]>> {
+    tiles_of(
+        frame,
+        abandoned,
+        |scratch: &mut PixelScratch<F::Ray>, x, y| render_pixel_with(frame, field, x, y, scratch),
+    )
+}
+
+/// Each tile's pixels (row-major within the tile), rayon over tiles, `pixel` called with a
+/// scratch made once per rayon job; a tile started after `abandoned` said so is left empty.
+fn tiles_of<S: Default + Send>(
+    frame: &FrameParams,
+    abandoned: &(dyn Fn() -> bool + Sync),
+    pixel: impl Fn(&mut S, u32, u32) -> [f64; 4] + Sync,
+) -> Vec<Vec<[f64; 4]>> {
     let (w, h) = (frame.width, frame.height);
     let tiles_x = w.div_ceil(TILE);
     (0..tiles_x * h.div_ceil(TILE))
         .into_par_iter()
-        .map_init(PixelScratch::<F::Ray>::default, |scratch, tile| {
+        .map_init(S::default, |scratch, tile| {
             let (tx, ty) = (tile % tiles_x, tile / tiles_x);
             if abandoned() {
                 return Vec::new();
@@ -241,12 +257,52 @@ fn render_tiles<F: FieldSampler>(
             let mut out = Vec::with_capacity((TILE * TILE) as usize);
             for y in ty * TILE..((ty + 1) * TILE).min(h) {
                 for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                    out.push(render_pixel_with(frame, field, x, y, scratch));
+                    out.push(pixel(scratch, x, y));
                 }
             }
             out
         })
         .collect()
+}
+
+impl CpuBackend {
+    fn abandoned(&self) -> bool {
+        self.abandon
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed))
+    }
+
+    /// Puts a frame's tiles in image order and adds them to the accumulation (a frame of
+    /// another size restarts it); nothing is added when the frame was abandoned.
+    fn accumulate_tiles(
+        &mut self,
+        frame: &FrameParams,
+        tiles: Vec<Vec<[f64; 4]>>,
+    ) -> Result<(), BackendError> {
+        // Checked once more after every tile: a tile that saw no flag may have been followed
+        // by one that did; the accumulation is untouched either way.
+        if self.abandoned() {
+            return Err(BackendError::Abandoned);
+        }
+        let (w, h) = (frame.width, frame.height);
+        let tiles_x = w.div_ceil(TILE);
+        let mut pixels = vec![[0.0; 4]; (w as usize) * (h as usize)];
+        for (tile, values) in tiles.into_iter().enumerate() {
+            let (tx, ty) = (tile as u32 % tiles_x, tile as u32 / tiles_x);
+            let mut values = values.into_iter();
+            for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                    pixels[(y * w + x) as usize] = values.next().expect("one value per pixel");
+                }
+            }
+        }
+        let acc = match &mut self.accumulator {
+            Some(a) if a.width == w && a.height == h => a,
+            slot => slot.insert(Accumulator::new(w, h)),
+        };
+        acc.add(&pixels);
+        Ok(())
+    }
 }
 
 impl Backend for CpuBackend {
@@ -330,39 +386,48 @@ impl Backend for CpuBackend {
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
         let started = Instant::now();
-        let (w, h) = (frame.width, frame.height);
-        let tiles_x = w.div_ceil(TILE);
-        let abandoned = || {
-            self.abandon
-                .as_ref()
-                .is_some_and(|f| f.load(Ordering::Relaxed))
-        };
+        let abandoned = || self.abandoned();
         let tiles = match self.sampler()? {
             Sampler::F64(field) => render_tiles(frame, field, &abandoned),
             Sampler::F32(field) => render_tiles(frame, field, &abandoned),
         };
-        // Checked once more after every tile: a tile that saw no flag may have been followed
-        // by one that did; the accumulation is untouched either way.
-        if abandoned() {
-            return Err(BackendError::Abandoned);
-        }
-        let mut pixels = vec![[0.0; 4]; (w as usize) * (h as usize)];
-        for (tile, values) in tiles.into_iter().enumerate() {
-            let (tx, ty) = (tile as u32 % tiles_x, tile as u32 / tiles_x);
-            let mut values = values.into_iter();
-            for y in ty * TILE..((ty + 1) * TILE).min(h) {
-                for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                    pixels[(y * w + x) as usize] = values.next().expect("one value per pixel");
-                }
-            }
-        }
-        let acc = match &mut self.accumulator {
-            Some(a) if a.width == w && a.height == h => a,
-            slot => slot.insert(Accumulator::new(w, h)),
-        };
-        acc.add(&pixels);
+        self.accumulate_tiles(frame, tiles)?;
         self.timings.frame = started.elapsed();
         Ok(())
+    }
+
+    /// The splatter collects its hits through the f64 reference's BVH: a scene prepared in f32
+    /// cells gets that BVH built first (timed as a build), and keeps it.
+    fn render_splat(&mut self, frame: &FrameParams, k: usize) -> Result<SplatCounts, BackendError> {
+        if let Some(Prepared::Cells(..)) = &self.prepared {
+            let started = Instant::now();
+            let (Some(up), Some(prepared)) = (&self.uploaded, self.prepared.take()) else {
+                unreachable!("checked above")
+            };
+            self.prepared = Some(Prepared::Reference(ReferenceField::new(
+                prepared.into_particles(),
+                up.cluster,
+            )));
+            self.timings.build = started.elapsed();
+        }
+        let started = Instant::now();
+        let Prepared::Reference(field) = self.prepared()? else {
+            return Err(BackendError::NothingUploaded("cpu"));
+        };
+        let (kept, lost) = (AtomicU64::new(0), AtomicU64::new(0));
+        let abandoned = || self.abandoned();
+        let tiles = tiles_of(frame, &abandoned, |scratch: &mut SplatScratch, x, y| {
+            let (pixel, counts) = splat::splat_pixel(frame, field, x, y, k, scratch);
+            kept.fetch_add(counts.kept, Ordering::Relaxed);
+            lost.fetch_add(counts.lost, Ordering::Relaxed);
+            pixel
+        });
+        self.accumulate_tiles(frame, tiles)?;
+        self.timings.frame = started.elapsed();
+        Ok(SplatCounts {
+            kept: kept.into_inner(),
+            lost: lost.into_inner(),
+        })
     }
 
     fn reset(&mut self) {
