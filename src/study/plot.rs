@@ -468,40 +468,85 @@ fn draw_bars(
         unreachable!("called for a bar panel")
     };
     let n = categories.len().max(1);
-    let top = series
+    let values = || series.iter().flat_map(|s| s.values.iter().flatten());
+    let top = values().map(|v| v.2).fold(0.0f64, f64::max);
+    let bottom = values()
+        .map(|v| v.1)
+        .filter(|&v| v > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    // Bars spanning more than 30x are drawn on a log axis (in decades: y is log10 of the
+    // value), so the small ones stay readable beside the largest.
+    let log = top > 30.0 * bottom;
+    let (y, y_range) = if log {
+        let lo = (bottom.log10() - 0.3).floor();
+        // Headroom above the tallest bar for the legend, as below.
+        let hi = top.log10() + 0.5 + 0.15 * (top.log10() - lo);
+        (
+            Box::new(move |v: f64| v.max(10f64.powf(lo)).log10()) as Box<dyn Fn(f64) -> f64>,
+            lo..hi,
+        )
+    } else {
+        // Headroom above the tallest bar for the legend (up to about 5 entries).
+        let top = if top > 0.0 { top * 1.4 } else { 1.0 };
+        (Box::new(|v: f64| v) as Box<dyn Fn(f64) -> f64>, 0.0..top)
+    };
+    let base = y_range.start;
+    // Labels longer than a category's width go on two staggered rows.
+    let longest = categories
         .iter()
-        .flat_map(|s| s.values.iter().flatten().map(|v| v.2))
-        .fold(0.0f64, f64::max);
-    // Headroom above the tallest bar for the legend (up to about 5 entries).
-    let top = if top > 0.0 { top * 1.4 } else { 1.0 };
+        .map(|c| c.chars().count())
+        .max()
+        .unwrap_or(0);
+    let (area_w, _) = area.dim_in_pixel();
+    let staggered = (longest as f64 * 7.5) > 0.9 * f64::from(area_w.saturating_sub(110)) / n as f64;
     let mut chart = ChartBuilder::on(area)
         .caption(title, (FONT, 19))
         .margin(14)
-        .x_label_area_size(52)
+        .x_label_area_size(if staggered { 60 } else { 52 })
         .y_label_area_size(78)
-        .build_cartesian_2d(-0.5..(n as f64 - 0.5), 0.0..top)
+        .build_cartesian_2d(-0.5..(n as f64 - 0.5), y_range)
         .map_err(plot_error)?;
     let names = categories.clone();
     let fx = move |v: &f64| {
         let i = v.round();
         if (v - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
-            names[i as usize].clone()
+            // The odd categories' labels are drawn a row lower, below.
+            if staggered && i as usize % 2 == 1 {
+                String::new()
+            } else {
+                names[i as usize].clone()
+            }
         } else {
             String::new()
         }
+    };
+    let y_desc = if log {
+        format!("{y_label}, log scale")
+    } else {
+        y_label.clone()
     };
     chart
         .configure_mesh()
         .disable_x_mesh()
         .x_labels(n)
-        .y_desc(y_label.as_str())
+        .y_desc(y_desc.as_str())
         .x_label_formatter(&fx)
-        .y_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| if log { tick(10f64.powf(*v)) } else { tick(*v) })
         .label_style((FONT, 13))
         .axis_desc_style((FONT, 15))
         .light_line_style(RGBColor(235, 235, 235))
         .draw()
         .map_err(plot_error)?;
+    if staggered {
+        let style = TextStyle::from((FONT, 13).into_font()).color(&BLACK);
+        let (ax, ay) = area.get_base_pixel();
+        for (i, name) in categories.iter().enumerate().filter(|(i, _)| i % 2 == 1) {
+            let (px, py) = chart.backend_coord(&(i as f64, base));
+            let (tw, _) = area.estimate_text_size(name, &style).map_err(plot_error)?;
+            area.draw_text(name, &style, (px - ax - tw as i32 / 2, py - ay + 24))
+                .map_err(plot_error)?;
+        }
+    }
     let width = 0.8 / series.len().max(1) as f64;
     for (j, s) in series.iter().enumerate() {
         let fill = colour(j).filled();
@@ -513,7 +558,7 @@ fn draw_bars(
         let x0 = |i: usize| i as f64 - 0.4 + j as f64 * width;
         chart
             .draw_series(s.values.iter().enumerate().filter_map(|(i, v)| {
-                v.map(|v| Rectangle::new([(x0(i), 0.0), (x0(i) + 0.92 * width, v.0)], fill))
+                v.map(|v| Rectangle::new([(x0(i), base), (x0(i) + 0.92 * width, y(v.0))], fill))
             }))
             .map_err(plot_error)?
             .label(s.label.as_str())
@@ -522,7 +567,7 @@ fn draw_bars(
             .draw_series(s.values.iter().enumerate().filter_map(|(i, v)| {
                 v.filter(|v| v.2 > v.1).map(|v| {
                     let c = x0(i) + 0.46 * width;
-                    PathElement::new(vec![(c, v.1), (c, v.2)], line)
+                    PathElement::new(vec![(c, y(v.1)), (c, y(v.2))], line)
                 })
             }))
             .map_err(plot_error)?;
