@@ -19,7 +19,7 @@ fn splat(session: &mut RenderSession, settings: &RenderSettings, k: usize) -> (I
     let frame = session.frame_params(settings, 0).unwrap();
     let backend = session.backend_mut();
     backend.reset();
-    let counts = backend.render_splat(&frame, k).unwrap();
+    let counts = backend.render_splat(&frame, k).unwrap().expect("the cpu counts hits");
     (backend.image().unwrap(), counts.lost_fraction())
 }
 

@@ -13,7 +13,8 @@ struct Frame {
     vec4 box_max;    // xyz march box; w = opacity threshold
     vec4 light;      // xyz unit vector towards the light; w = intensity
     vec4 background; // rgb; w = ambient light
-    vec4 shading;    // x = Phi_ref, y = density scale, z = majorant, w unused
+    vec4 shading;    // x = Phi_ref, y = density scale, z = majorant, w = the splatter's hits
+                     // per slab (splat kernels only; splat.glsl)
     uvec4 image;     // width, height, frame number, seed
 };
 

@@ -288,12 +288,14 @@ pub trait Backend: Send {
     /// (`--method splat`: slabs of one march step, at most `k` hits each, sorted and
     /// composited front to back; `crate::field::splat` says what a hit is and how a full
     /// buffer loses hits), and adds it to the accumulation; returns what the slabs' buffers
-    /// kept and lost. Emission–absorption only.
+    /// kept and lost where the backend counts them (the CPU does; the GPU kernels do not, to
+    /// cost nothing beside the splatting). Emission–absorption only. GPU backends hold at
+    /// most [`crate::values::shader_constants::SPLAT_K_MAX`] hits per slab.
     fn render_splat(
         &mut self,
         _frame: &FrameParams,
         _k: usize,
-    ) -> Result<crate::field::splat::SplatCounts, BackendError> {
+    ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError> {
         Err(BackendError::Device {
             backend: self.capabilities().name,
             message: "the splatter baseline (--method splat) runs on the cpu backend; its GPU \

@@ -563,19 +563,26 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             }
             Method::Splat => {
                 session.backend_mut().reset();
-                let mut counts = crate::field::splat::SplatCounts::default();
+                let mut counts = Some(crate::field::splat::SplatCounts::default());
                 for f in 0..spp {
                     let frame = session.frame_params(&settings, f)?;
-                    counts = counts + session.backend_mut().render_splat(&frame, args.splat_k)?;
+                    let frame_counts = session.backend_mut().render_splat(&frame, args.splat_k)?;
+                    counts = counts.zip(frame_counts).map(|(a, b)| a + b);
                     bar.inc(1);
                 }
-                tracing::info!(
-                    "splatted step {step}: {} hits composited, {} ({:.2}%) lost to full {}-entry slab buffers",
-                    counts.kept,
-                    counts.lost,
-                    100.0 * counts.lost_fraction(),
-                    args.splat_k
-                );
+                match counts {
+                    Some(counts) => tracing::info!(
+                        "splatted step {step}: {} hits composited, {} ({:.2}%) lost to full {}-entry slab buffers",
+                        counts.kept,
+                        counts.lost,
+                        100.0 * counts.lost_fraction(),
+                        args.splat_k
+                    ),
+                    None => tracing::info!(
+                        "splatted step {step} with {}-entry slab buffers (this backend does not count lost hits)",
+                        args.splat_k
+                    ),
+                }
                 session.backend_mut().image()?
             }
         };

@@ -248,20 +248,23 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                     (Vec::new(), Vec::new(), Vec::new(), Vec::new());
                 for _ in 0..o.repetitions {
                     let (mut b, mut m) = (0.0, 0.0);
-                    let mut counts = crate::field::splat::SplatCounts::default();
+                    let mut counts = Some(crate::field::splat::SplatCounts::default());
                     for &c in &orbit {
                         splatter.backend_mut().build()?;
                         b += splatter.backend().timings().build.as_secs_f64();
                         let params = splatter.frame_params(&at(c), 0)?;
                         splatter.backend_mut().reset();
-                        counts = counts + splatter.backend_mut().render_splat(&params, k)?;
+                        let frame_counts = splatter.backend_mut().render_splat(&params, k)?;
+                        counts = counts.zip(frame_counts).map(|(a, b)| a + b);
                         m += splatter.backend().timings().frame.as_secs_f64();
                     }
                     let n = orbit.len() as f64;
                     build.push(1e3 * b / n);
                     composite.push(1e3 * m / n);
                     total.push(1e3 * (b + m) / n);
-                    lost.push(100.0 * counts.lost_fraction());
+                    if let Some(counts) = counts {
+                        lost.push(100.0 * counts.lost_fraction());
+                    }
                 }
                 let params = splatter.frame_params(&error_settings(0), 0)?;
                 splatter.backend_mut().reset();
@@ -280,6 +283,10 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         vec![error],
                     ),
                 ] {
+                    // A backend that does not count lost hits has no "lost" row.
+                    if values.is_empty() {
+                        continue;
+                    }
                     ctx.recorder.record(Row {
                         variant: variant.clone(),
                         ..row(metric, unit, settings, values)

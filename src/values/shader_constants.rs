@@ -50,6 +50,9 @@ pub const MORTON_CELLS: u32 = 1024;
 /// Entries of the traversal stack: at least the deepest possible tree's depth (30 key bits +
 /// 32 index bits = 62), so it cannot overflow.
 pub const LBVH_STACK_SIZE: u32 = 64;
+/// The most hits a GPU splatter's slab buffer holds (`--splat-k`; Knoll et al. used 31, the RBF
+/// paper's port 15): the buffer lives in a ray payload or a kernel's private arrays.
+pub const SPLAT_K_MAX: u32 = 64;
 
 /// Keys per radix-sort tile (`shaders_wgsl/radix_sort.wgsl`) and digits per pass.
 pub const SORT_TILE: u32 = 4096;
@@ -144,6 +147,7 @@ fn unsigned() -> Vec<(&'static str, u64)> {
         ("LBVH_EMPTY_KEY", LBVH_EMPTY_KEY.into()),
         ("MORTON_CELLS", MORTON_CELLS.into()),
         ("LBVH_STACK_SIZE", LBVH_STACK_SIZE.into()),
+        ("SPLAT_K_MAX", SPLAT_K_MAX.into()),
         ("SORT_TILE", SORT_TILE.into()),
         ("SORT_RADIX", SORT_RADIX.into()),
         ("HILBERT_BITS", HILBERT_BITS.into()),

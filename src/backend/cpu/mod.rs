@@ -398,7 +398,11 @@ impl Backend for CpuBackend {
 
     /// The splatter collects its hits through the f64 reference's BVH: a scene prepared in f32
     /// cells gets that BVH built first (timed as a build), and keeps it.
-    fn render_splat(&mut self, frame: &FrameParams, k: usize) -> Result<SplatCounts, BackendError> {
+    fn render_splat(
+        &mut self,
+        frame: &FrameParams,
+        k: usize,
+    ) -> Result<Option<SplatCounts>, BackendError> {
         if let Some(Prepared::Cells(..)) = &self.prepared {
             let started = Instant::now();
             let (Some(up), Some(prepared)) = (&self.uploaded, self.prepared.take()) else {
@@ -424,10 +428,10 @@ impl Backend for CpuBackend {
         });
         self.accumulate_tiles(frame, tiles)?;
         self.timings.frame = started.elapsed();
-        Ok(SplatCounts {
+        Ok(Some(SplatCounts {
             kept: kept.into_inner(),
             lost: lost.into_inner(),
-        })
+        }))
     }
 
     fn reset(&mut self) {
