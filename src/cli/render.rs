@@ -414,10 +414,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         backend.capabilities().name,
         backend.capabilities().device
     );
+    let on_cpu = backend.capabilities().name == "cpu";
     let mut session = RenderSession::new(backend, &resolved.series);
-    // The splatter collects hits through the f64 BVH (the cpu backend's only tree); asking
+    // The CPU splatter collects hits through the f64 BVH (the cpu backend's only tree); asking
     // for it up front spares building the f32 cells first.
-    session.set_precision(if args.method == Method::Splat {
+    session.set_precision(if args.method == Method::Splat && on_cpu {
         backend::Precision::F64
     } else {
         precision

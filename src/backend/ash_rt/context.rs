@@ -158,7 +158,8 @@ pub struct Context {
     pub info: DeviceInfo,
     pub validation: bool,
     pub layouts: Layouts,
-    pub(crate) rt_pipelines: Mutex<HashMap<SpecConstants, vk::Pipeline>>,
+    pub(crate) rt_pipelines:
+        Mutex<HashMap<(SpecConstants, super::pipelines::RtProgram), vk::Pipeline>>,
     pub(crate) compute_pipelines: Mutex<HashMap<(ComputeKind, SpecConstants), vk::Pipeline>>,
 }
 

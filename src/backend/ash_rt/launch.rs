@@ -6,7 +6,7 @@ use std::time::Duration;
 use ash::vk;
 
 use super::context::NAME;
-use super::pipelines::{self, BindingTable, ComputeKind, Push};
+use super::pipelines::{self, BindingTable, ComputeKind, Push, RtProgram};
 use super::resources::barrier;
 use super::{AshBackend, HitReports, QUERY_WIDTH, TS_END, TS_START, Traversal};
 use crate::backend::BackendError;
@@ -18,6 +18,8 @@ use crate::values::ColourMode;
 pub(super) enum Launch {
     Query,
     Render,
+    /// A frame of Knoll et al.'s splatter.
+    Splat,
 }
 
 impl AshBackend {
@@ -56,17 +58,19 @@ impl AshBackend {
         })
     }
 
-    /// The RT pipeline and binding table for `spec`.
+    /// The RT pipeline and binding table of `program` for `spec`.
     pub(super) fn rt(
         &mut self,
         spec: SpecConstants,
+        program: RtProgram,
     ) -> Result<(vk::Pipeline, &BindingTable), BackendError> {
-        let pipeline = pipelines::rt_pipeline(&self.ctx, spec)?;
-        if !self.binding_tables.contains_key(&spec) {
-            let table = BindingTable::new(&self.ctx, pipeline)?;
-            self.binding_tables.insert(spec, table);
+        let pipeline = pipelines::rt_pipeline(&self.ctx, spec, program)?;
+        let key = (spec, program);
+        if !self.binding_tables.contains_key(&key) {
+            let table = BindingTable::new(&self.ctx, pipeline, program)?;
+            self.binding_tables.insert(key, table);
         }
-        Ok((pipeline, &self.binding_tables[&spec]))
+        Ok((pipeline, &self.binding_tables[&key]))
     }
 
     pub(super) fn bind(
@@ -119,7 +123,7 @@ impl AshBackend {
     ) -> Result<Duration, BackendError> {
         let (w, h) = match launch {
             Launch::Query => (size.0.min(QUERY_WIDTH), size.0.div_ceil(QUERY_WIDTH)),
-            Launch::Render => size,
+            Launch::Render | Launch::Splat => size,
         };
         enum Work {
             Rays(vk::Pipeline, [vk::StridedDeviceAddressRegionKHR; 3]),
@@ -127,10 +131,15 @@ impl AshBackend {
         }
         let work = match self.traversal {
             Traversal::RtPipeline => {
-                let (pipeline, table) = self.rt(spec)?;
+                let program = match launch {
+                    Launch::Splat => RtProgram::Splat,
+                    Launch::Query | Launch::Render => RtProgram::Field,
+                };
+                let (pipeline, table) = self.rt(spec, program)?;
+                // The field pipeline's raygens: render, then query.
                 let raygen = match launch {
-                    Launch::Query => table.query,
-                    Launch::Render => table.render,
+                    Launch::Query => table.raygens[1],
+                    Launch::Render | Launch::Splat => table.raygens[0],
                 };
                 Work::Rays(pipeline, [raygen, table.miss, table.hit])
             }
@@ -139,6 +148,7 @@ impl AshBackend {
                 let (kind, group) = match launch {
                     Launch::Query => (ComputeKind::LbvhQuery, [64, 1]),
                     Launch::Render => (ComputeKind::LbvhRender, [8, 8]),
+                    Launch::Splat => (ComputeKind::LbvhSplat, [8, 8]),
                 };
                 let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
                 Work::Compute(pipeline, [w.div_ceil(group[0]), h.div_ceil(group[1])])

@@ -62,6 +62,7 @@ use crate::field::FieldSettings;
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
 use crate::values::Image;
+use crate::values::shader_constants::SPLAT_K_MAX;
 use crate::values::shader_constants::{STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS};
 use crate::values::{Bounds, Step};
 
@@ -154,7 +155,7 @@ pub struct AshBackend {
     tables: Vec<f32>,
     accum_size: Option<(u32, u32)>,
     frames: u32,
-    binding_tables: HashMap<SpecConstants, BindingTable>,
+    binding_tables: HashMap<(SpecConstants, pipelines::RtProgram), BindingTable>,
     timings: Timings,
     structure_timings: StructureTimings,
     traversal: Traversal,
@@ -461,6 +462,82 @@ impl AshBackend {
     }
 }
 
+impl AshBackend {
+    /// One frame of `launch` (a render or a splat) added to the accumulation; `splat_k` goes
+    /// into the frame's shading.w (the splatter's hits per slab).
+    fn render_launch(
+        &mut self,
+        frame: &FrameParams,
+        launch: Launch,
+        splat_k: usize,
+    ) -> Result<(), BackendError> {
+        self.built()?;
+        let (w, h) = (frame.width, frame.height);
+        let invocations = u64::from(w) * u64::from(h);
+        if w == 0 || h == 0 || invocations > u64::from(self.ctx.info.max_dispatch_invocations) {
+            return Err(device_error(
+                "rendering",
+                format!(
+                    "a {w} x {h} image exceeds the device's ray-dispatch limit of {} rays",
+                    self.ctx.info.max_dispatch_invocations
+                ),
+            ));
+        }
+        // The kernels reach the accumulation by device address, so only the allocation limit
+        // applies (not maxStorageBufferRange, which a 4K image outgrows on lavapipe).
+        let limit = self.ctx.info.max_allocation;
+        if invocations * 16 > limit {
+            return Err(device_error(
+                "rendering",
+                format!(
+                    "a {w} x {h} accumulation buffer ({} MiB) exceeds this device's largest \
+                     allocation (maxMemoryAllocationSize = {} MiB)",
+                    (invocations * 16) >> 20,
+                    limit >> 20
+                ),
+            ));
+        }
+        if self.accum_size != Some((w, h)) {
+            self.accum_size = None;
+            // Reached through the push constants, not a descriptor: nothing to rewrite.
+            self.buffers.accum = addressed(&self.ctx, "accumulation", invocations * 16)?;
+            self.accum_size = Some((w, h));
+            self.frames = 0;
+        }
+        self.write_params(Some(frame))?;
+        if launch == Launch::Splat {
+            let at = std::mem::offset_of!(GpuFrame, shading) + 3 * 4;
+            self.buffers
+                .params
+                .write(at as u64, bytemuck::bytes_of(&(splat_k as f32)))?;
+        }
+        let spec = self.spec(
+            SpecConstants::integrator_id(frame.integrator),
+            SpecConstants::colour_id(frame.colour),
+            SpecConstants::noise_id(frame.noise),
+        )?;
+        let first = self.frames == 0;
+        let push = Push {
+            first_frame: u32::from(first),
+            ..Push::default()
+        };
+        // On a first frame, poison the accumulation: a pixel the frame misses shows as NaN.
+        let poison = (
+            self.buffers.accum.raw,
+            if first { vk::WHOLE_SIZE } else { 0 },
+        );
+        let started = Instant::now();
+        let gpu = self.launch(launch, spec, push, poison, (w, h))?;
+        self.frames += 1;
+        self.timings.frame = if self.ctx.info.timestamp_period.is_some() {
+            gpu
+        } else {
+            started.elapsed()
+        };
+        Ok(())
+    }
+}
+
 impl Backend for AshBackend {
     fn capabilities(&self) -> &Capabilities {
         &self.capabilities
@@ -607,64 +684,24 @@ impl Backend for AshBackend {
     }
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
-        self.built()?;
-        let (w, h) = (frame.width, frame.height);
-        let invocations = u64::from(w) * u64::from(h);
-        if w == 0 || h == 0 || invocations > u64::from(self.ctx.info.max_dispatch_invocations) {
+        self.render_launch(frame, Launch::Render, 0)
+    }
+
+    /// Knoll et al.'s splatter through the RT pipeline (`splat.rgen`; the LBVH kernel
+    /// `lbvh_splat.comp` with the LBVH traversal), into the same accumulation as `render`.
+    fn render_splat(
+        &mut self,
+        frame: &FrameParams,
+        k: usize,
+    ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError> {
+        if k == 0 || k > SPLAT_K_MAX as usize {
             return Err(device_error(
-                "rendering",
-                format!(
-                    "a {w} x {h} image exceeds the device's ray-dispatch limit of {} rays",
-                    self.ctx.info.max_dispatch_invocations
-                ),
+                "splatting",
+                format!("{k} hits per slab: 1..={SPLAT_K_MAX} fit a ray payload"),
             ));
         }
-        // The kernels reach the accumulation by device address, so only the allocation limit
-        // applies (not maxStorageBufferRange, which a 4K image outgrows on lavapipe).
-        let limit = self.ctx.info.max_allocation;
-        if invocations * 16 > limit {
-            return Err(device_error(
-                "rendering",
-                format!(
-                    "a {w} x {h} accumulation buffer ({} MiB) exceeds this device's largest \
-                     allocation (maxMemoryAllocationSize = {} MiB)",
-                    (invocations * 16) >> 20,
-                    limit >> 20
-                ),
-            ));
-        }
-        if self.accum_size != Some((w, h)) {
-            self.accum_size = None;
-            // Reached through the push constants, not a descriptor: nothing to rewrite.
-            self.buffers.accum = addressed(&self.ctx, "accumulation", invocations * 16)?;
-            self.accum_size = Some((w, h));
-            self.frames = 0;
-        }
-        self.write_params(Some(frame))?;
-        let spec = self.spec(
-            SpecConstants::integrator_id(frame.integrator),
-            SpecConstants::colour_id(frame.colour),
-            SpecConstants::noise_id(frame.noise),
-        )?;
-        let first = self.frames == 0;
-        let push = Push {
-            first_frame: u32::from(first),
-            ..Push::default()
-        };
-        // On a first frame, poison the accumulation: a pixel the frame misses shows as NaN.
-        let poison = (
-            self.buffers.accum.raw,
-            if first { vk::WHOLE_SIZE } else { 0 },
-        );
-        let started = Instant::now();
-        let gpu = self.launch(Launch::Render, spec, push, poison, (w, h))?;
-        self.frames += 1;
-        self.timings.frame = if self.ctx.info.timestamp_period.is_some() {
-            gpu
-        } else {
-            started.elapsed()
-        };
-        Ok(())
+        self.render_launch(frame, Launch::Splat, k)?;
+        Ok(None)
     }
 
     fn reset(&mut self) {

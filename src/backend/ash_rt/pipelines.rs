@@ -16,8 +16,13 @@
 //!   LBVH stack traversal (`shared/lbvh.glsl`) in place of the RT pipeline, for the
 //!   same-device hardware-versus-software comparison (the paper's Fig. 10a).
 //!
-//! Shader groups: 0 render raygen, 1 query raygen, 2 miss, 3 the procedural hit group
-//! (intersection + any-hit).
+//! - `splat.rgen`, `splat.rint`, `splat.rahit`: Knoll et al.'s splatter (the Table 3
+//!   baseline), its own pipeline ([`RtProgram::Splat`]), made only when a scene splats;
+//!   `lbvh_splat.comp` its LBVH twin.
+//!
+//! Shader groups of the field pipeline: 0 render raygen, 1 query raygen, 2 miss, 3 the
+//! procedural hit group (intersection + any-hit); of the splat pipeline: 0 raygen, 1 miss, 2
+//! the hit group.
 
 use std::io::Cursor;
 use std::sync::Arc;
@@ -42,6 +47,10 @@ const QUERY: &[u8] = spirv!("query.rgen");
 const MISS: &[u8] = spirv!("empty.rmiss");
 const INTERSECTION: &[u8] = spirv!("particle.rint");
 const ANY_HIT: &[u8] = spirv!("particle.rahit");
+const SPLAT_RAYGEN: &[u8] = spirv!("splat.rgen");
+const SPLAT_INTERSECTION: &[u8] = spirv!("splat.rint");
+const SPLAT_ANY_HIT: &[u8] = spirv!("splat.rahit");
+const LBVH_SPLAT: &[u8] = spirv!("lbvh_splat.comp");
 const BOXES: &[u8] = spirv!("boxes.comp");
 const LBVH_QUERY: &[u8] = spirv!("lbvh_query.comp");
 const LBVH_RENDER: &[u8] = spirv!("lbvh_render.comp");
@@ -202,6 +211,8 @@ pub enum ComputeKind {
     LbvhQuery,
     /// One frame by LBVH traversal (`lbvh_render.comp`).
     LbvhRender,
+    /// One splatted frame by LBVH traversal (`lbvh_splat.comp`).
+    LbvhSplat,
     /// Preparing a step (`PreparePush`): Hilbert keys, the radix sort's three passes, and the
     /// gathers of words and of vec4s.
     HilbertKeys,
@@ -217,7 +228,10 @@ impl ComputeKind {
     fn prepares(self) -> bool {
         !matches!(
             self,
-            ComputeKind::Boxes | ComputeKind::LbvhQuery | ComputeKind::LbvhRender
+            ComputeKind::Boxes
+                | ComputeKind::LbvhQuery
+                | ComputeKind::LbvhRender
+                | ComputeKind::LbvhSplat
         )
     }
 }
@@ -267,11 +281,34 @@ const SPEC_ENTRIES: [vk::SpecializationMapEntry; SPEC_CONSTANTS.len()] = {
     e
 };
 
-/// The ray-tracing pipeline for `spec`, compiled on first use in this process.
-pub fn rt_pipeline(ctx: &Context, spec: SpecConstants) -> Result<vk::Pipeline, BackendError> {
+/// What a ray-tracing pipeline runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RtProgram {
+    /// The RBF field: frames and point queries (`raygen.rgen`, `query.rgen`, `particle.*`).
+    Field,
+    /// Knoll et al.'s splatter (`splat.*`).
+    Splat,
+}
+
+impl RtProgram {
+    /// Ray-generation groups (first in the pipeline's groups; a miss and a hit group follow).
+    pub fn raygens(self) -> u32 {
+        match self {
+            RtProgram::Field => 2,
+            RtProgram::Splat => 1,
+        }
+    }
+}
+
+/// The ray-tracing pipeline of `program` for `spec`, compiled on first use in this process.
+pub fn rt_pipeline(
+    ctx: &Context,
+    spec: SpecConstants,
+    program: RtProgram,
+) -> Result<vk::Pipeline, BackendError> {
     // The lock is held while compiling, so two threads never compile the same variant.
     let mut cache = ctx.rt_pipelines.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(&p) = cache.get(&spec) {
+    if let Some(&p) = cache.get(&(spec, program)) {
         return Ok(p);
     }
     let started = std::time::Instant::now();
@@ -292,16 +329,23 @@ pub fn rt_pipeline(ctx: &Context, spec: SpecConstants) -> Result<vk::Pipeline, B
             .name(c"main")
             .specialization_info(&spec_info)
     };
-    let stages = [
-        stage(vk::ShaderStageFlags::RAYGEN_KHR, modules.load(RAYGEN)?),
-        stage(vk::ShaderStageFlags::RAYGEN_KHR, modules.load(QUERY)?),
-        stage(vk::ShaderStageFlags::MISS_KHR, modules.load(MISS)?),
-        stage(
-            vk::ShaderStageFlags::INTERSECTION_KHR,
-            modules.load(INTERSECTION)?,
-        ),
-        stage(vk::ShaderStageFlags::ANY_HIT_KHR, modules.load(ANY_HIT)?),
-    ];
+    let (raygens, intersection, any_hit): (&[&[u8]], _, _) = match program {
+        RtProgram::Field => (&[RAYGEN, QUERY], INTERSECTION, ANY_HIT),
+        RtProgram::Splat => (&[SPLAT_RAYGEN], SPLAT_INTERSECTION, SPLAT_ANY_HIT),
+    };
+    let mut stages = Vec::new();
+    for &code in raygens {
+        stages.push(stage(vk::ShaderStageFlags::RAYGEN_KHR, modules.load(code)?));
+    }
+    stages.push(stage(vk::ShaderStageFlags::MISS_KHR, modules.load(MISS)?));
+    stages.push(stage(
+        vk::ShaderStageFlags::INTERSECTION_KHR,
+        modules.load(intersection)?,
+    ));
+    stages.push(stage(
+        vk::ShaderStageFlags::ANY_HIT_KHR,
+        modules.load(any_hit)?,
+    ));
     let general = |i: u32| {
         vk::RayTracingShaderGroupCreateInfoKHR::default()
             .ty(vk::RayTracingShaderGroupTypeKHR::GENERAL)
@@ -310,17 +354,17 @@ pub fn rt_pipeline(ctx: &Context, spec: SpecConstants) -> Result<vk::Pipeline, B
             .any_hit_shader(vk::SHADER_UNUSED_KHR)
             .intersection_shader(vk::SHADER_UNUSED_KHR)
     };
-    let groups = [
-        general(0),
-        general(1),
-        general(2),
+    // Raygens, then the miss shader (stage n), then the hit group (stages n + 1, n + 2).
+    let n = program.raygens();
+    let mut groups: Vec<_> = (0..=n).map(general).collect();
+    groups.push(
         vk::RayTracingShaderGroupCreateInfoKHR::default()
             .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)
             .general_shader(vk::SHADER_UNUSED_KHR)
             .closest_hit_shader(vk::SHADER_UNUSED_KHR)
-            .any_hit_shader(4)
-            .intersection_shader(3),
-    ];
+            .any_hit_shader(n + 2)
+            .intersection_shader(n + 1),
+    );
     let info = [vk::RayTracingPipelineCreateInfoKHR::default()
         .stages(&stages)
         .groups(&groups)
@@ -337,10 +381,10 @@ pub fn rt_pipeline(ctx: &Context, spec: SpecConstants) -> Result<vk::Pipeline, B
     }
     .map_err(|(_, e)| vk_error("creating the ray-tracing pipeline", e))?[0];
     tracing::debug!(
-        "ash: ray-tracing pipeline {spec:?} created in {:.2} s",
+        "ash: ray-tracing pipeline {program:?} {spec:?} created in {:.2} s",
         started.elapsed().as_secs_f64()
     );
-    cache.insert(spec, pipeline);
+    cache.insert((spec, program), pipeline);
     Ok(pipeline)
 }
 
@@ -363,7 +407,7 @@ pub fn compute_pipeline(
             noise_kind: 0,
             ..spec
         },
-        ComputeKind::LbvhRender => spec,
+        ComputeKind::LbvhRender | ComputeKind::LbvhSplat => spec,
         // Their code reads no specialisation constant: one pipeline each.
         _ => UNSPECIALISED,
     };
@@ -382,6 +426,7 @@ pub fn compute_pipeline(
         ComputeKind::Boxes => BOXES,
         ComputeKind::LbvhQuery => LBVH_QUERY,
         ComputeKind::LbvhRender => LBVH_RENDER,
+        ComputeKind::LbvhSplat => LBVH_SPLAT,
         ComputeKind::HilbertKeys => HILBERT_KEYS,
         ComputeKind::SortCount => SORT_COUNT,
         ComputeKind::SortScan => SORT_SCAN,
@@ -438,20 +483,23 @@ fn align_up(x: u64, a: u64) -> u64 {
     x.div_ceil(a.max(1)) * a.max(1)
 }
 
-/// A shader binding table for one ray-tracing pipeline: the render raygen, the query raygen,
-/// the miss shader and the hit group, each region starting at a multiple of
-/// `shaderGroupBaseAlignment`, records `shaderGroupHandleAlignment`-aligned, and each raygen
+/// A shader binding table for one ray-tracing pipeline of `program`: its raygens (the field's:
+/// render, then query), the miss shader and the hit group, each region starting at a multiple
+/// of `shaderGroupBaseAlignment`, records `shaderGroupHandleAlignment`-aligned, and each raygen
 /// region's size equal to its stride (as the specification requires).
 pub struct BindingTable {
     _buffer: Buffer,
-    pub render: vk::StridedDeviceAddressRegionKHR,
-    pub query: vk::StridedDeviceAddressRegionKHR,
+    pub raygens: Vec<vk::StridedDeviceAddressRegionKHR>,
     pub miss: vk::StridedDeviceAddressRegionKHR,
     pub hit: vk::StridedDeviceAddressRegionKHR,
 }
 
 impl BindingTable {
-    pub fn new(ctx: &Arc<Context>, pipeline: vk::Pipeline) -> Result<BindingTable, BackendError> {
+    pub fn new(
+        ctx: &Arc<Context>,
+        pipeline: vk::Pipeline,
+        program: RtProgram,
+    ) -> Result<BindingTable, BackendError> {
         let info = &ctx.info;
         let handle = u64::from(info.handle_size);
         let stride = align_up(handle, u64::from(info.handle_alignment));
@@ -465,8 +513,9 @@ impl BindingTable {
             ));
         }
         let slot = align_up(stride, u64::from(info.base_alignment));
-        let groups = 4u32;
-        // SAFETY: the pipeline has 4 groups.
+        let raygens = program.raygens();
+        let groups = raygens + 2;
+        // SAFETY: the pipeline of `program` has that many groups.
         let handles = unsafe {
             ctx.rt.get_ray_tracing_shader_group_handles(
                 pipeline,
@@ -500,10 +549,9 @@ impl BindingTable {
                 .size(stride)
         };
         Ok(BindingTable {
-            render: region(0),
-            query: region(1),
-            miss: region(2),
-            hit: region(3),
+            raygens: (0..raygens).map(|g| region(u64::from(g))).collect(),
+            miss: region(u64::from(raygens)),
+            hit: region(u64::from(raygens) + 1),
             _buffer: buffer,
         })
     }
