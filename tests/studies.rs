@@ -278,9 +278,9 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
     // The scaling page states a fitted exponent for each line.
     let md = std::fs::read_to_string(p.join("scaling/scaling.md")).unwrap();
     assert!(md.contains("∝ N^"), "{md}");
-    // RBF on both backends, voxel grids 8 and 16 on cpu: 4 x (frame, structure, march, rmse);
-    // the splatter with k = 1 and 15 on cpu: 2 x (frame, structure, march, lost, rmse). The
-    // share of hits lost may be 0.
+    // RBF on both backends and voxel grids 8 and 16 on cpu: 4 x (frame, structure, march,
+    // rmse); the splatter with k = 1 and 15 on both: 2 x (frame, structure, march, rmse), with
+    // the share of hits lost (which may be 0) on cpu.
     let rows = check_study_values(
         p,
         "baselines",
@@ -298,7 +298,7 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             "cameras",
             "reference_spp",
         ],
-        26,
+        34,
         &b,
         2,
         |v| v >= 0.0,
@@ -317,13 +317,15 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             ("cpu", "voxel 16"),
             ("cpu", "splat 1"),
             ("cpu", "splat 15"),
-            ("wgpu", "rbf")
+            ("wgpu", "rbf"),
+            ("wgpu", "splat 1"),
+            ("wgpu", "splat 15")
         ]
     );
     let median_of = |v: &str, m: &str| -> f64 {
         let r = rows
             .iter()
-            .find(|r| r[variant] == v && r[metric] == m)
+            .find(|r| r[backend] == "cpu" && r[variant] == v && r[metric] == m)
             .unwrap();
         r[r.len() - 4].parse().unwrap()
     };
