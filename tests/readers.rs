@@ -842,3 +842,276 @@ fn a_selection_decodes_only_its_attributes_and_names_the_rest() {
         "{e}"
     );
 }
+
+/// A `.vtu` as VTK's XML writer lays it out by default (what ParaView's "Save Data" writes):
+/// raw appended data, `header_type="UInt64"`, zlib in blocks (here 64 bytes, so arrays span
+/// several), Float64 points, two pieces of 5 and 7 points, cell arrays and field data beside
+/// the point data. `garbage` names a point-data array whose compressed bytes are not zlib.
+fn vtu_as_vtk_writes_it(
+    dir: &Path,
+    name: &str,
+    big_endian: bool,
+    compressed: bool,
+    garbage: &str,
+) -> PathBuf {
+    struct Arr {
+        name: &'static str,
+        ty: &'static str,
+        comps: usize,
+        bytes: Vec<u8>,
+    }
+    let e8 = |v: f64| {
+        if big_endian {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        }
+    };
+    let int = |v: u64| -> Vec<u8> {
+        if big_endian {
+            v.to_be_bytes().to_vec()
+        } else {
+            v.to_le_bytes().to_vec()
+        }
+    };
+    let mut appended = Vec::new();
+    let mut xml = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"{}\" header_type=\"UInt64\"{}>\n  <UnstructuredGrid>\n    <FieldData>\n",
+        if big_endian {
+            "BigEndian"
+        } else {
+            "LittleEndian"
+        },
+        if compressed {
+            " compressor=\"vtkZLibDataCompressor\""
+        } else {
+            ""
+        }
+    );
+    let mut put = |arr: &Arr, appended: &mut Vec<u8>, corrupt: bool| -> String {
+        let offset = appended.len();
+        if compressed {
+            let blocks: Vec<&[u8]> = arr.bytes.chunks(64).collect();
+            let mut packed = Vec::new();
+            for b in &blocks {
+                let mut enc =
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+                enc.write_all(b).unwrap();
+                let mut z = enc.finish().unwrap();
+                if corrupt {
+                    z.iter_mut().for_each(|x| *x = 0xA5);
+                }
+                packed.push(z);
+            }
+            appended.extend(int(blocks.len() as u64));
+            appended.extend(int(64));
+            appended.extend(int(blocks.last().map_or(0, |b| b.len()) as u64));
+            for z in &packed {
+                appended.extend(int(z.len() as u64));
+            }
+            for z in packed {
+                appended.extend(z);
+            }
+        } else {
+            appended.extend(int(arr.bytes.len() as u64));
+            appended.extend(&arr.bytes);
+        }
+        format!(
+            "<DataArray type=\"{}\" Name=\"{}\" NumberOfComponents=\"{}\" format=\"appended\" RangeMin=\"0\" RangeMax=\"1\" offset=\"{offset}\"/>\n",
+            arr.ty, arr.name, arr.comps
+        )
+    };
+    xml += &put(
+        &Arr {
+            name: "TimeValue",
+            ty: "Float64",
+            comps: 1,
+            bytes: e8(0.25).to_vec(),
+        },
+        &mut appended,
+        false,
+    );
+    xml += "    </FieldData>\n";
+    for (piece, n) in [(0usize, 5usize), (1, 7)] {
+        xml += &format!(
+            "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">\n      <PointData Scalars=\"density\">\n"
+        );
+        let ids: Vec<usize> = (0..n).map(|i| 100 * piece + i).collect();
+        let density: Vec<u8> = ids
+            .iter()
+            .flat_map(|&i| e8(1.0 / 3.0 + i as f64 * 1e-9))
+            .collect();
+        let id64: Vec<u8> = ids
+            .iter()
+            .flat_map(|&i| int(i as u64 * 1_000_000_007))
+            .collect();
+        let kind: Vec<u8> = ids.iter().map(|&i| (i % 3) as u8).collect();
+        let velocity: Vec<u8> = ids
+            .iter()
+            .flat_map(|&i| [i as f32, -(i as f32), 0.5])
+            .flat_map(|v| {
+                if big_endian {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                }
+            })
+            .collect();
+        for (arr, corrupt) in [
+            (
+                Arr {
+                    name: "density",
+                    ty: "Float64",
+                    comps: 1,
+                    bytes: density,
+                },
+                false,
+            ),
+            (
+                Arr {
+                    name: "id",
+                    ty: "Int64",
+                    comps: 1,
+                    bytes: id64,
+                },
+                false,
+            ),
+            (
+                Arr {
+                    name: "type",
+                    ty: "UInt8",
+                    comps: 1,
+                    bytes: kind,
+                },
+                false,
+            ),
+            (
+                Arr {
+                    name: "velocity",
+                    ty: "Float32",
+                    comps: 3,
+                    bytes: velocity.clone(),
+                },
+                false,
+            ),
+            (
+                Arr {
+                    name: "pressure",
+                    ty: "Float32",
+                    comps: 1,
+                    bytes: velocity[..4 * n].to_vec(),
+                },
+                garbage == "pressure",
+            ),
+        ] {
+            xml += &put(&arr, &mut appended, corrupt);
+        }
+        xml += "      </PointData>\n      <CellData>\n";
+        xml += &put(
+            &Arr {
+                name: "cell_id",
+                ty: "Int32",
+                comps: 1,
+                bytes: (0..n as u32)
+                    .flat_map(|i| {
+                        if big_endian {
+                            i.to_be_bytes()
+                        } else {
+                            i.to_le_bytes()
+                        }
+                    })
+                    .collect(),
+            },
+            &mut appended,
+            false,
+        );
+        xml += "      </CellData>\n      <Points>\n";
+        let points: Vec<u8> = ids
+            .iter()
+            .flat_map(|&i| [1.0e6 + 0.1 * i as f64, -2.5e5 + 1.0 / 7.0, 1e-3 * i as f64])
+            .flat_map(e8)
+            .collect();
+        xml += &put(
+            &Arr {
+                name: "Points",
+                ty: "Float64",
+                comps: 3,
+                bytes: points,
+            },
+            &mut appended,
+            false,
+        );
+        xml += "      </Points>\n      <Cells>\n";
+        xml += &put(
+            &Arr {
+                name: "connectivity",
+                ty: "Int64",
+                comps: 1,
+                bytes: (0..n as u64).flat_map(int).collect(),
+            },
+            &mut appended,
+            false,
+        );
+        xml += "      </Cells>\n    </Piece>\n";
+    }
+    xml += "  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
+    let mut bytes = xml.into_bytes();
+    bytes.extend(appended);
+    bytes.extend(b"\n  </AppendedData>\n</VTKFile>\n");
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+#[test]
+fn vtk_appended_data_is_read_by_offset_and_only_as_selected() {
+    let dir = tempfile::tempdir().unwrap();
+    let ids: Vec<usize> = (0..5).chain(100..107).collect();
+    for (big_endian, compressed) in [(false, true), (true, true), (false, false), (true, false)] {
+        let path = vtu_as_vtk_writes_it(dir.path(), "grid.vtu", big_endian, compressed, "");
+        let what = format!("big endian {big_endian}, zlib {compressed}");
+        let step = read(&path).unwrap_or_else(|e| panic!("{what}: {e}"));
+        // Every digit of the Float64 points and of the Float64 and Int64 arrays survives.
+        let want: Vec<DVec3> = ids
+            .iter()
+            .map(|&i| DVec3::new(1.0e6 + 0.1 * i as f64, -2.5e5 + 1.0 / 7.0, 1e-3 * i as f64))
+            .collect();
+        assert_eq!(step.positions, want, "{what}");
+        let density: Vec<f64> = ids.iter().map(|&i| 1.0 / 3.0 + i as f64 * 1e-9).collect();
+        assert_eq!(step.attribute("density").unwrap().values, density, "{what}");
+        let id: Vec<f64> = ids
+            .iter()
+            .map(|&i| (i as u64 * 1_000_000_007) as f64)
+            .collect();
+        assert_eq!(step.attribute("id").unwrap().values, id, "{what}");
+        let kind: Vec<f64> = ids.iter().map(|&i| (i % 3) as f64).collect();
+        assert_eq!(step.attribute("type").unwrap().values, kind, "{what}");
+        let vy: Vec<f64> = ids.iter().map(|&i| -(i as f64)).collect();
+        assert_eq!(step.attribute("velocity_y").unwrap().values, vy, "{what}");
+        // Cell and field arrays are not particles' attributes.
+        assert!(step.attribute("cell_id").is_none() && step.attribute("TimeValue").is_none());
+    }
+    // An array whose bytes are not zlib is never read unless asked for.
+    let path = vtu_as_vtk_writes_it(dir.path(), "bad_pressure.vtu", false, true, "pressure");
+    let refs = io::list_steps(&path, None).unwrap();
+    let only = AttributeSelection::Only(vec!["density".into()]);
+    let step = io::read_step(&refs[0], &only).unwrap();
+    assert_eq!(step.attributes.len(), 1);
+    assert_eq!(step.positions.len(), 12);
+    let e = err_text(&path);
+    assert!(
+        e.contains("bad_pressure.vtu")
+            && e.contains("array 'pressure' block 0")
+            && e.contains("inflate"),
+        "{e}"
+    );
+    // A file cut short names the array that lies past its end.
+    let whole = std::fs::read(dir.path().join("grid.vtu")).unwrap();
+    let cut = dir.path().join("cut.vtu");
+    std::fs::write(&cut, &whole[..whole.len() - 120]).unwrap();
+    let e = err_text(&cut);
+    assert!(
+        e.contains("cut.vtu") && e.contains("past the end of the file"),
+        "{e}"
+    );
+}

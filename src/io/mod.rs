@@ -14,6 +14,7 @@ pub mod particles;
 pub mod ply;
 pub mod raw;
 pub mod vtk;
+mod vtk_appended;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

@@ -26,6 +26,13 @@ pub fn read_step(
     selection: &AttributeSelection,
 ) -> Result<Columns, DataError> {
     precheck_counts(at, legacy)?;
+    // Raw appended data (VTK's and ParaView's default) is read by offset, only the arrays
+    // asked for; everything else is parsed whole by vtkio below.
+    if !legacy {
+        if let Some(columns) = super::vtk_appended::read(at, selection)? {
+            return Ok(columns);
+        }
+    }
     let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
     let xml = if legacy {
         None
@@ -155,7 +162,7 @@ pub fn read_step(
 
 /// The most a compressed VTK array may inflate: zlib (VTK's default) tops out near 1032:1 and
 /// LZ4 near 255:1; LZMA on constant data goes further, so this leaves it room.
-const MAX_INFLATION: usize = 4096;
+pub(super) const MAX_INFLATION: usize = 4096;
 
 /// Refuses compressed arrays whose headers declare more uncompressed bytes than the file could
 /// inflate to, before vtkio allocates the declared size (a 1 KB file could ask for 4 GB).

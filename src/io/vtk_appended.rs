@@ -1,0 +1,471 @@
+//! VTK XML files whose arrays are raw appended data — what VTK and ParaView write by default —
+//! read by offset: the XML before `<AppendedData>` is parsed for each array's type, components
+//! and offset, and only the point coordinates and the selected point-data arrays are read from
+//! the file (and inflated, for zlib, VTK's default compressor); every other array is never read
+//! or decoded. Files with inline (ascii or base64) arrays, base64 appended data or another
+//! compressor go through vtkio ([`super::vtk`]).
+
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+
+use glam::DVec3;
+use quick_xml::events::{BytesStart, Event};
+
+use super::{At, AttributeSelection, Columns, DataError, array_attribute_names, split_components};
+
+/// The most bytes of XML read while looking for `<AppendedData ... _` (a header describes
+/// arrays; 64 MiB of it would be thousands of pieces).
+const MAX_HEADER: usize = 64 << 20;
+
+/// An array as the header describes it.
+#[derive(Clone, Debug)]
+struct ArrayDesc {
+    name: String,
+    scalar: Scalar,
+    components: usize,
+    offset: u64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    I64,
+    U64,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(text: &str) -> Option<Scalar> {
+        Some(match text {
+            "Int8" | "Char" => Scalar::I8,
+            "UInt8" | "UnsignedChar" => Scalar::U8,
+            "Int16" | "Short" => Scalar::I16,
+            "UInt16" | "UnsignedShort" => Scalar::U16,
+            "Int32" | "Int" => Scalar::I32,
+            "UInt32" | "UnsignedInt" => Scalar::U32,
+            "Int64" | "Long" | "LongLong" => Scalar::I64,
+            "UInt64" | "UnsignedLong" | "UnsignedLongLong" => Scalar::U64,
+            "Float32" | "Float" => Scalar::F32,
+            "Float64" | "Double" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::I64 | Scalar::U64 | Scalar::F64 => 8,
+        }
+    }
+
+    /// The value of `b` (this type's size, in the file's byte order) as f64.
+    fn value(self, b: &[u8], big_endian: bool) -> f64 {
+        let mut le = [0u8; 8];
+        le[..b.len()].copy_from_slice(b);
+        if big_endian {
+            le[..b.len()].reverse();
+        }
+        match self {
+            Scalar::I8 => f64::from(le[0] as i8),
+            Scalar::U8 => f64::from(le[0]),
+            Scalar::I16 => f64::from(i16::from_le_bytes([le[0], le[1]])),
+            Scalar::U16 => f64::from(u16::from_le_bytes([le[0], le[1]])),
+            Scalar::I32 => f64::from(i32::from_le_bytes([le[0], le[1], le[2], le[3]])),
+            Scalar::U32 => f64::from(u32::from_le_bytes([le[0], le[1], le[2], le[3]])),
+            Scalar::I64 => i64::from_le_bytes(le) as f64,
+            Scalar::U64 => u64::from_le_bytes(le) as f64,
+            Scalar::F32 => f64::from(f32::from_le_bytes([le[0], le[1], le[2], le[3]])),
+            Scalar::F64 => f64::from_le_bytes(le),
+        }
+    }
+}
+
+/// One piece: its point count, coordinates and point-data arrays.
+#[derive(Default, Debug)]
+struct PieceDesc {
+    points: u64,
+    coordinates: Option<ArrayDesc>,
+    arrays: Vec<ArrayDesc>,
+}
+
+/// What the header says about the whole file.
+struct Header {
+    big_endian: bool,
+    /// Bytes of each size integer in an array's header (UInt32 or UInt64).
+    int_bytes: usize,
+    zlib: bool,
+    pieces: Vec<PieceDesc>,
+    /// Where the raw appended data starts (just after the `_`).
+    data_start: u64,
+}
+
+/// Reads the step by offset, or `None` where the file is not raw appended data this reader
+/// handles (vtkio reads it instead).
+pub(super) fn read(
+    at: At<'_>,
+    selection: &AttributeSelection,
+) -> Result<Option<Columns>, DataError> {
+    let mut file = File::open(at.file).map_err(|e| at.io(e))?;
+    let file_len = super::file_len(at, &file)?;
+    let Some(header) = read_header(at, &mut file)? else {
+        return Ok(None);
+    };
+    let mut reader = ArrayReader {
+        at,
+        file,
+        file_len,
+        header: &header,
+    };
+    let mut positions = Vec::new();
+    let mut attributes: Vec<super::Attribute> = Vec::new();
+    let mut skipped = Vec::new();
+    for (index, piece) in header.pieces.iter().enumerate() {
+        let n = usize::try_from(piece.points)
+            .map_err(|_| at.malformed("a piece's NumberOfPoints overflows"))?;
+        let Some(coordinates) = &piece.coordinates else {
+            return Err(at.malformed(format!("piece {index} has no <Points> array")));
+        };
+        if coordinates.components != 3 {
+            return Err(at.malformed(format!(
+                "piece {index}'s points have {} components, not 3",
+                coordinates.components
+            )));
+        }
+        let coords = reader.values(coordinates, n)?;
+        let mut piece_attributes = Vec::new();
+        for array in &piece.arrays {
+            let names = array_attribute_names(&array.name, array.components);
+            if !names.iter().any(|name| selection.keeps(name)) {
+                if index == 0 {
+                    skipped.extend(names);
+                }
+                continue;
+            }
+            let values = reader.values(array, n)?;
+            piece_attributes.extend(split_components(&array.name, &values, array.components));
+        }
+        if index == 0 {
+            attributes = piece_attributes;
+        } else {
+            for a in &mut attributes {
+                let p = piece_attributes
+                    .iter_mut()
+                    .find(|p| p.name == a.name)
+                    .ok_or_else(|| {
+                        at.malformed(format!(
+                            "piece {index} lacks the point-data array '{}'",
+                            a.name
+                        ))
+                    })?;
+                a.values.append(&mut p.values);
+            }
+        }
+        positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
+    }
+    Ok(Some(Columns {
+        positions,
+        attributes,
+        skipped,
+    }))
+}
+
+/// The XML before the raw appended data, parsed; `None` when the file has no raw appended
+/// data, or an array or encoding this reader leaves to vtkio.
+fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError> {
+    let find = |hay: &[u8], needle: &[u8], from: usize| {
+        hay.get(from..)?
+            .windows(needle.len())
+            .position(|w| w == needle)
+            .map(|p| p + from)
+    };
+    // Read until the '_' that starts the raw data.
+    let mut head = Vec::new();
+    let mut chunk = vec![0u8; 1 << 16];
+    let (tag, underscore) = loop {
+        let got = file.read(&mut chunk).map_err(|e| at.io(e))?;
+        let searched_to = head.len().saturating_sub(16);
+        head.extend_from_slice(&chunk[..got]);
+        if let Some(tag) = find(&head, b"<AppendedData", searched_to.saturating_sub(16)) {
+            if let Some(end) = find(&head, b">", tag) {
+                if let Some(u) = find(&head, b"_", end) {
+                    break (tag, u);
+                }
+            }
+        }
+        if got == 0 || head.len() > MAX_HEADER {
+            return Ok(None);
+        }
+    };
+    let tag_end = find(&head, b">", tag).unwrap_or(underscore);
+    let tag_text = String::from_utf8_lossy(&head[tag..tag_end]);
+    if !tag_text.contains("\"raw\"") {
+        return Ok(None);
+    }
+    let mut xml = quick_xml::Reader::from_reader(&head[..tag]);
+    xml.config_mut().check_end_names = false;
+    let mut header = Header {
+        big_endian: false,
+        int_bytes: 4,
+        zlib: false,
+        pieces: Vec::new(),
+        data_start: underscore as u64 + 1,
+    };
+    // Where we are: in <Points> or <PointData> of the current piece (other arrays, such as
+    // cells', are not particles' and are skipped).
+    #[derive(PartialEq)]
+    enum In {
+        Other,
+        Points,
+        PointData,
+    }
+    let mut inside = In::Other;
+    let attr = |e: &BytesStart<'_>, key: &[u8]| -> Option<String> {
+        e.attributes()
+            .flatten()
+            .find(|a| a.key.as_ref() == key)
+            .and_then(|a| a.unescape_value().ok().map(|v| v.into_owned()))
+    };
+    let mut buffer = Vec::new();
+    loop {
+        let event = match xml.read_event_into(&mut buffer) {
+            Ok(e) => e,
+            // Malformed XML is vtkio's to report, in its words.
+            Err(_) => return Ok(None),
+        };
+        match event {
+            Event::Eof => break,
+            Event::Start(e) | Event::Empty(e) => match e.name().as_ref() {
+                b"VTKFile" => {
+                    // Image data and rectilinear grids have no particle positions: vtkio's
+                    // path says so.
+                    if !matches!(
+                        attr(&e, b"type").as_deref(),
+                        Some("PolyData" | "UnstructuredGrid" | "StructuredGrid")
+                    ) {
+                        return Ok(None);
+                    }
+                    header.big_endian = attr(&e, b"byte_order").as_deref() == Some("BigEndian");
+                    header.int_bytes = match attr(&e, b"header_type").as_deref() {
+                        Some("UInt64") => 8,
+                        Some("UInt32") | None => 4,
+                        Some(_) => return Ok(None),
+                    };
+                    match attr(&e, b"compressor").as_deref() {
+                        None | Some("") => {}
+                        Some("vtkZLibDataCompressor") => header.zlib = true,
+                        // LZ4 and LZMA: vtkio's.
+                        Some(_) => return Ok(None),
+                    }
+                }
+                b"Piece" => {
+                    let points = attr(&e, b"NumberOfPoints")
+                        .and_then(|v| v.trim().parse::<u64>().ok())
+                        .ok_or_else(|| at.malformed("a <Piece> lacks a valid NumberOfPoints"))?;
+                    header.pieces.push(PieceDesc {
+                        points,
+                        ..PieceDesc::default()
+                    });
+                }
+                b"Points" => inside = In::Points,
+                b"PointData" => inside = In::PointData,
+                b"CellData" | b"FieldData" | b"Verts" | b"Lines" | b"Strips" | b"Polys"
+                | b"Cells" => inside = In::Other,
+                b"DataArray" if inside != In::Other => {
+                    if attr(&e, b"format").as_deref() != Some("appended") {
+                        return Ok(None);
+                    }
+                    let Some(scalar) = attr(&e, b"type").as_deref().and_then(Scalar::parse) else {
+                        return Ok(None);
+                    };
+                    let name = attr(&e, b"Name").unwrap_or_default();
+                    let components = attr(&e, b"NumberOfComponents")
+                        .map(|v| v.trim().parse::<usize>())
+                        .transpose()
+                        .map_err(|_| {
+                            at.malformed(format!("array '{name}': bad NumberOfComponents"))
+                        })?
+                        .unwrap_or(1);
+                    if components == 0 {
+                        return Err(at.malformed(format!("array '{name}' has 0 components")));
+                    }
+                    let offset = attr(&e, b"offset")
+                        .and_then(|v| v.trim().parse::<u64>().ok())
+                        .ok_or_else(|| at.malformed(format!("array '{name}': bad offset")))?;
+                    let desc = ArrayDesc {
+                        name,
+                        scalar,
+                        components,
+                        offset,
+                    };
+                    let Some(piece) = header.pieces.last_mut() else {
+                        return Err(at.malformed("a DataArray lies outside any <Piece>"));
+                    };
+                    if inside == In::Points {
+                        piece.coordinates = Some(desc);
+                    } else {
+                        piece.arrays.push(desc);
+                    }
+                }
+                _ => {}
+            },
+            Event::End(e) => {
+                if matches!(e.name().as_ref(), b"Points" | b"PointData") {
+                    inside = In::Other;
+                }
+            }
+            _ => {}
+        }
+        buffer.clear();
+    }
+    if header.pieces.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some(header))
+}
+
+/// Reads arrays out of the appended data.
+struct ArrayReader<'a> {
+    at: At<'a>,
+    file: File,
+    file_len: u64,
+    header: &'a Header,
+}
+
+impl ArrayReader<'_> {
+    /// `len` bytes at `pos` of the appended data, refused when they lie past the file's end
+    /// (checked before allocating: a hostile offset or size cannot make us allocate).
+    fn bytes(&mut self, pos: u64, len: u64, what: &str) -> Result<Vec<u8>, DataError> {
+        let start = self.header.data_start.checked_add(pos);
+        let end = start.and_then(|s| s.checked_add(len));
+        let (Some(start), Some(end)) = (start, end) else {
+            return Err(self
+                .at
+                .malformed(format!("{what} lies past the end of the file")));
+        };
+        if end > self.file_len {
+            return Err(self.at.malformed(format!(
+                "{what} lies past the end of the file (appended data is truncated: it ends at \
+                 byte {}, the data would end at {end})",
+                self.file_len
+            )));
+        }
+        self.file
+            .seek(SeekFrom::Start(start))
+            .map_err(|e| self.at.io(e))?;
+        let mut out = vec![0u8; len as usize];
+        self.file.read_exact(&mut out).map_err(|e| self.at.io(e))?;
+        Ok(out)
+    }
+
+    /// The size integers at `pos`.
+    fn ints(&mut self, pos: u64, count: u64, what: &str) -> Result<Vec<u64>, DataError> {
+        let w = self.header.int_bytes;
+        let len = count
+            .checked_mul(w as u64)
+            .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
+        let raw = self.bytes(pos, len, what)?;
+        Ok(raw
+            .chunks_exact(w)
+            .map(|b| {
+                let mut le = [0u8; 8];
+                le[..w].copy_from_slice(b);
+                if self.header.big_endian {
+                    le[..w].reverse();
+                }
+                u64::from_le_bytes(le)
+            })
+            .collect())
+    }
+
+    /// The values of `array` for `n` points, as f64.
+    fn values(&mut self, array: &ArrayDesc, n: usize) -> Result<Vec<f64>, DataError> {
+        let name = &array.name;
+        let expected = (n as u64)
+            .checked_mul(array.components as u64)
+            .and_then(|v| v.checked_mul(array.scalar.size() as u64))
+            .ok_or_else(|| self.at.malformed(format!("array '{name}' overflows")))?;
+        // Checked before anything is allocated: a hostile header could declare terabytes.
+        let limit = if self.header.zlib {
+            self.file_len
+                .saturating_mul(super::vtk::MAX_INFLATION as u64)
+                .saturating_add(1 << 20)
+        } else {
+            self.file_len
+        };
+        if expected > limit {
+            return Err(self.at.malformed(format!(
+                "array '{name}' would hold {expected} bytes ({n} points of {} {:?}), more than \
+                 this {}-byte file can hold",
+                array.components, array.scalar, self.file_len
+            )));
+        }
+        let w = self.header.int_bytes as u64;
+        let data = if self.header.zlib {
+            let what = format!("array '{name}'s compressed header");
+            let head = self.ints(array.offset, 3, &what)?;
+            let (blocks, block_size, last) = (head[0], head[1], head[2]);
+            let declared = block_size
+                .checked_mul(blocks.saturating_sub(1))
+                .and_then(|v| v.checked_add(if blocks == 0 { 0 } else { last }));
+            if declared != Some(expected) {
+                return Err(self.at.malformed(format!(
+                    "array '{name}' declares {} uncompressed bytes ({blocks} blocks of \
+                     {block_size}, the last {last}); {n} points of {} {:?} need {expected}",
+                    declared.map_or_else(|| "overflowing".into(), |d| d.to_string()),
+                    array.components,
+                    array.scalar
+                )));
+            }
+            let sizes = self.ints(array.offset + 3 * w, blocks, &what)?;
+            let mut pos = array.offset + (3 + blocks) * w;
+            let mut out = Vec::with_capacity(expected as usize);
+            for (b, &size) in sizes.iter().enumerate() {
+                let compressed = self.bytes(pos, size, &format!("array '{name}' block {b}"))?;
+                pos += size;
+                let want = if b as u64 + 1 == blocks {
+                    last
+                } else {
+                    block_size
+                };
+                let before = out.len();
+                flate2::read::ZlibDecoder::new(&compressed[..])
+                    .take(want)
+                    .read_to_end(&mut out)
+                    .map_err(|e| {
+                        self.at.malformed(format!(
+                            "array '{name}' block {b}: cannot inflate its zlib data: {e}"
+                        ))
+                    })?;
+                if (out.len() - before) as u64 != want {
+                    return Err(self.at.malformed(format!(
+                        "array '{name}' block {b} inflates to {} bytes, not {want}",
+                        out.len() - before
+                    )));
+                }
+            }
+            out
+        } else {
+            let size = self.ints(array.offset, 1, &format!("array '{name}'s size"))?[0];
+            if size != expected {
+                return Err(self.at.malformed(format!(
+                    "array '{name}' holds {size} bytes; {n} points of {} {:?} need {expected}",
+                    array.components, array.scalar
+                )));
+            }
+            self.bytes(array.offset + w, size, &format!("array '{name}'"))?
+        };
+        let big_endian = self.header.big_endian;
+        Ok(data
+            .chunks_exact(array.scalar.size())
+            .map(|b| array.scalar.value(b, big_endian))
+            .collect())
+    }
+}
