@@ -19,7 +19,10 @@ fn splat(session: &mut RenderSession, settings: &RenderSettings, k: usize) -> (I
     let frame = session.frame_params(settings, 0).unwrap();
     let backend = session.backend_mut();
     backend.reset();
-    let counts = backend.render_splat(&frame, k).unwrap().expect("the cpu counts hits");
+    let counts = backend
+        .render_splat(&frame, k)
+        .unwrap()
+        .expect("the cpu counts hits");
     (backend.image().unwrap(), counts.lost_fraction())
 }
 
@@ -196,8 +199,8 @@ fn aarbf_render_splats_text_data_and_refuses_what_it_cannot_do() {
             "--splat-k must be at least 1",
         ),
         (
-            &["--backend", "wgpu", "--force"][..],
-            "runs on the cpu backend",
+            &["--backend", "wgpu", "--splat-k", "65", "--force"][..],
+            "holds 1 to 64 hits",
         ),
     ] {
         let bad = run(&[&common[..], extra].concat());
