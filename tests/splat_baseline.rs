@@ -199,8 +199,8 @@ fn aarbf_render_splats_text_data_and_refuses_what_it_cannot_do() {
             "--splat-k must be at least 1",
         ),
         (
-            &["--backend", "ash", "--splat-k", "65", "--force"][..],
-            "1..=64",
+            &["--backend", "wgpu", "--splat-k", "65", "--force"][..],
+            "the GPU splatter's slab buffer holds 1..=64 hits",
         ),
     ] {
         let bad = run(&[&common[..], extra].concat());

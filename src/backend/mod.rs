@@ -246,6 +246,21 @@ pub enum BackendError {
 }
 
 /// A rendering and query backend.
+/// The GPU splatters' rule for `k`, the hits a slab's buffer holds (a ray payload or a
+/// kernel's private array of [`crate::values::shader_constants::SPLAT_K_MAX`] entries).
+pub(crate) fn check_gpu_splat_k(backend: &'static str, k: usize) -> Result<(), BackendError> {
+    use crate::values::shader_constants::SPLAT_K_MAX;
+    if k == 0 || k > SPLAT_K_MAX as usize {
+        return Err(BackendError::Device {
+            backend,
+            message: format!(
+                "{k} hits per slab: the GPU splatter's slab buffer holds 1..={SPLAT_K_MAX} hits"
+            ),
+        });
+    }
+    Ok(())
+}
+
 pub trait Backend: Send {
     fn capabilities(&self) -> &Capabilities;
 
@@ -293,16 +308,9 @@ pub trait Backend: Send {
     /// most [`crate::values::shader_constants::SPLAT_K_MAX`] hits per slab.
     fn render_splat(
         &mut self,
-        _frame: &FrameParams,
-        _k: usize,
-    ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError> {
-        Err(BackendError::Device {
-            backend: self.capabilities().name,
-            message: "the splatter baseline (--method splat) runs on the cpu backend; its GPU \
-                      versions are not written yet"
-                .into(),
-        })
-    }
+        frame: &FrameParams,
+        k: usize,
+    ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError>;
 
     /// Restarts progressive accumulation.
     fn reset(&mut self);

@@ -28,10 +28,8 @@ pub fn read_step(
     precheck_counts(at, legacy)?;
     // Raw appended data (VTK's and ParaView's default) is read by offset, only the arrays
     // asked for; everything else is parsed whole by vtkio below.
-    if !legacy {
-        if let Some(columns) = super::vtk_appended::read(at, selection)? {
-            return Ok(columns);
-        }
+    if !legacy && let Some(columns) = super::vtk_appended::read(at, selection)? {
+        return Ok(columns);
     }
     let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
     let xml = if legacy {

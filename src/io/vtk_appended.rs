@@ -189,16 +189,20 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
     // Read until the '_' that starts the raw data.
     let mut head = Vec::new();
     let mut chunk = vec![0u8; 1 << 16];
+    let mut tag = None;
     let (tag, underscore) = loop {
         let got = file.read(&mut chunk).map_err(|e| at.io(e))?;
-        let searched_to = head.len().saturating_sub(16);
+        // A tag may straddle two reads: look again from a little before the new bytes.
+        let from = head.len().saturating_sub(16);
         head.extend_from_slice(&chunk[..got]);
-        if let Some(tag) = find(&head, b"<AppendedData", searched_to.saturating_sub(16)) {
-            if let Some(end) = find(&head, b">", tag) {
-                if let Some(u) = find(&head, b"_", end) {
-                    break (tag, u);
-                }
-            }
+        if tag.is_none() {
+            tag = find(&head, b"<AppendedData", from);
+        }
+        if let Some(t) = tag
+            && let Some(end) = find(&head, b">", t)
+            && let Some(u) = find(&head, b"_", end)
+        {
+            break (t, u);
         }
         if got == 0 || head.len() > MAX_HEADER {
             return Ok(None);

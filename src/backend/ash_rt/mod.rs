@@ -62,7 +62,6 @@ use crate::field::FieldSettings;
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
 use crate::values::Image;
-use crate::values::shader_constants::SPLAT_K_MAX;
 use crate::values::shader_constants::{STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, TABLE_FLOATS};
 use crate::values::{Bounds, Step};
 
@@ -694,12 +693,7 @@ impl Backend for AshBackend {
         frame: &FrameParams,
         k: usize,
     ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError> {
-        if k == 0 || k > SPLAT_K_MAX as usize {
-            return Err(device_error(
-                "splatting",
-                format!("{k} hits per slab: 1..={SPLAT_K_MAX} fit a ray payload"),
-            ));
-        }
+        super::check_gpu_splat_k(NAME, k)?;
         self.render_launch(frame, Launch::Splat, k)?;
         Ok(None)
     }

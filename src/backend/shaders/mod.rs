@@ -36,8 +36,20 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
         include_str!("../../../shaders_glsl/shared/rbf.glsl"),
     ),
     (
+        "shared/shade.glsl",
+        include_str!("../../../shaders_glsl/shared/shade.glsl"),
+    ),
+    (
         "shared/integrators.glsl",
         include_str!("../../../shaders_glsl/shared/integrators.glsl"),
+    ),
+    (
+        "shared/splat.glsl",
+        include_str!("../../../shaders_glsl/shared/splat.glsl"),
+    ),
+    (
+        "shared/splat_pixel.glsl",
+        include_str!("../../../shaders_glsl/shared/splat_pixel.glsl"),
     ),
     (
         "shared/cluster_box.glsl",
@@ -46,6 +58,10 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
     (
         "shared/lbvh.glsl",
         include_str!("../../../shaders_glsl/shared/lbvh.glsl"),
+    ),
+    (
+        "shared/lbvh_splat.glsl",
+        include_str!("../../../shaders_glsl/shared/lbvh_splat.glsl"),
     ),
     (
         "wgpu/split.glsl",

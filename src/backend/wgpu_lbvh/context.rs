@@ -39,6 +39,8 @@ pub enum Kernel {
     Query,
     /// `shaders_glsl/wgpu/lbvh_render.comp`: one frame of an integrator.
     Render,
+    /// `shaders_glsl/wgpu/lbvh_splat.comp`: one frame of Knoll et al.'s splatter.
+    Splat,
     /// `shaders_wgsl/lbvh_keys.wgsl`.
     Keys,
     /// `shaders_wgsl/radix_sort.wgsl`, its three entry points.
@@ -62,6 +64,7 @@ enum ShaderFile {
     Bounds,
     Query,
     Render,
+    Splat,
     Keys,
     Sort,
     Hierarchy,
@@ -76,6 +79,7 @@ impl Kernel {
             Kernel::Bounds => ShaderFile::Bounds,
             Kernel::Query => ShaderFile::Query,
             Kernel::Render => ShaderFile::Render,
+            Kernel::Splat => ShaderFile::Splat,
             Kernel::Keys => ShaderFile::Keys,
             Kernel::SortCount | Kernel::SortScan | Kernel::SortScatter => ShaderFile::Sort,
             Kernel::Hierarchy => ShaderFile::Hierarchy,
@@ -100,7 +104,10 @@ impl Kernel {
 
     /// Whether the kernel is GLSL with the specialisation constants of `params.glsl`.
     fn specialised(self) -> bool {
-        matches!(self, Kernel::Bounds | Kernel::Query | Kernel::Render)
+        matches!(
+            self,
+            Kernel::Bounds | Kernel::Query | Kernel::Render | Kernel::Splat
+        )
     }
 }
 
@@ -120,6 +127,9 @@ impl ShaderFile {
             }
             ShaderFile::Render => {
                 Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_render.comp"))
+            }
+            ShaderFile::Splat => {
+                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_splat.comp"))
             }
             ShaderFile::Keys => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_keys.wgsl")),
             ShaderFile::Sort => Source::Wgsl(include_str!("../../../shaders_wgsl/radix_sort.wgsl")),

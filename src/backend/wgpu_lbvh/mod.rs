@@ -20,7 +20,8 @@
 //!   (`lbvh_fit.wgsl`). The build reads back the leaf count and the tree's depth.
 //! - **Refit** (radius changes): boxes and bottom-up bounds again over the same topology. A
 //!   cluster that was empty at the build and is not any more forces a rebuild (it has no leaf).
-//! - **Query and render**: `shaders_glsl/wgpu/lbvh_query.comp` and `lbvh_render.comp`, the
+//! - **Query and render**: `shaders_glsl/wgpu/lbvh_query.comp` and `lbvh_render.comp` (and
+//!   `lbvh_splat.comp`, Knoll et al.'s splatter, for [`Backend::render_splat`]), the
 //!   shared GLSL (`shaders_glsl/shared/`: RBF, maps, noise, integrators and the LBVH traversal
 //!   `lbvh.glsl`) through naga's GLSL front end; one pipeline per specialisation-constant
 //!   variant, cached for the process. Frames accumulate as f32 sums in a storage buffer.
@@ -243,6 +244,19 @@ impl WgpuBackend {
             util::poison(&self.ctx, b);
         }
         prepare.poison(&self.ctx);
+        Ok(())
+    }
+
+    /// Fills the accumulation with 0xFF (NaN) and restarts it (tests: the next splatter frame
+    /// stores every pixel into the sums uncleared, so a pixel it misses shows as NaN).
+    pub fn poison_accumulation(&mut self) -> Result<(), BackendError> {
+        let acc = self
+            .accumulation
+            .as_mut()
+            .ok_or(BackendError::NothingUploaded("wgpu"))?;
+        acc.sums.poison(&self.ctx);
+        acc.frames = 0;
+        acc.clear = true;
         Ok(())
     }
 
@@ -559,6 +573,17 @@ impl Backend for WgpuBackend {
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
         self.run_render(frame)
+    }
+
+    /// The splatter's slabs collect their hits by a software traversal of the LBVH
+    /// (`lbvh_splat.comp`); the kernel does not count lost hits.
+    fn render_splat(
+        &mut self,
+        frame: &FrameParams,
+        k: usize,
+    ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError> {
+        self.run_splat(frame, k)?;
+        Ok(None)
     }
 
     fn reset(&mut self) {

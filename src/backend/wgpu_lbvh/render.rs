@@ -1,5 +1,7 @@
 //! One frame on the wgpu backend: the accumulation (split like the particles when large),
-//! the blue-noise mask, the frame constants, and the render kernel over 8x8 tiles.
+//! the blue-noise mask, the frame constants, and a frame kernel over 8x8 tiles: the
+//! integrators' (`lbvh_render.comp`) or Knoll et al.'s splatter's (`lbvh_splat.comp`), both
+//! adding to the same accumulation.
 
 use std::time::Instant;
 
@@ -10,10 +12,30 @@ use crate::backend::BackendError;
 use crate::backend::shaders::GpuFrame;
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
-use crate::values::shader_constants::{STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH};
+use crate::values::shader_constants::{STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, spec};
+
+/// What a frame runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum FrameKernel {
+    /// The frame's integrator (`lbvh_render.comp`).
+    Integrator,
+    /// The splatter with at most `k` hits per slab (`lbvh_splat.comp`).
+    Splat { k: usize },
+}
 
 impl WgpuBackend {
     pub(super) fn run_render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
+        self.run_frame(frame, FrameKernel::Integrator)
+    }
+
+    /// One splatter frame with at most `k` hits per slab (1 ..= `SPLAT_K_MAX`: the slab's
+    /// buffer is the kernel's private array).
+    pub(super) fn run_splat(&mut self, frame: &FrameParams, k: usize) -> Result<(), BackendError> {
+        crate::backend::check_gpu_splat_k("wgpu", k)?;
+        self.run_frame(frame, FrameKernel::Splat { k })
+    }
+
+    fn run_frame(&mut self, frame: &FrameParams, kernel: FrameKernel) -> Result<(), BackendError> {
         let started = Instant::now();
         let ctx = self.ctx.clone();
         self.built_scene()?;
@@ -47,7 +69,8 @@ impl WgpuBackend {
                 clear: true,
             });
         }
-        if self.stbn.is_none() {
+        // The splatter uses no noise: a scene that only splats never uploads the mask.
+        if kernel == FrameKernel::Integrator && self.stbn.is_none() {
             let mask = BlueNoiseMask::builtin();
             if (mask.width, mask.height, mask.depth) != (STBN_WIDTH, STBN_HEIGHT, STBN_DEPTH) {
                 return Err(device_error(format!(
@@ -66,56 +89,79 @@ impl WgpuBackend {
         let tree = self.tree.as_ref().expect("built");
         self.optical = frame.optical_table.to_vec();
         scene.write_maps(&ctx, Some(tree), &self.optical, &frame.colour_table);
-        write(
-            &ctx,
-            &self.frame_uniform,
-            bytemuck::bytes_of(&GpuFrame::new(frame, scene.data.origin)),
-        );
+        let mut gpu_frame = GpuFrame::new(frame, scene.data.origin);
+        if let FrameKernel::Splat { k } = kernel {
+            // shading.w carries the slab's buffer size to splat_pixel.glsl.
+            gpu_frame.shading[3] = k as f32;
+        }
+        write(&ctx, &self.frame_uniform, bytemuck::bytes_of(&gpu_frame));
         let sums = &self.accumulation.as_ref().expect("made above").sums;
         let layout = Layout::of(&[&scene.particles, &tree.nodes, &tree.boxes, sums]);
-        let pipeline = ctx.pipeline(
-            Kernel::Render,
-            Some(scene.variant(frame.integrator, frame.colour, frame.noise)),
-            layout,
-        )?;
+        let mut variant = scene.variant(frame.integrator, frame.colour, frame.noise);
+        let (pipeline_kernel, label) = match kernel {
+            FrameKernel::Integrator => (Kernel::Render, "lbvh render"),
+            FrameKernel::Splat { .. } => {
+                // The splatter reads neither the integrator nor the noise: one variant serves
+                // every frame setting of a scene.
+                variant[spec::INTEGRATOR] = 0;
+                variant[spec::NOISE_KIND] = 0;
+                (Kernel::Splat, "lbvh splat")
+            }
+        };
+        let pipeline = ctx.pipeline(pipeline_kernel, Some(variant), layout)?;
         let tiles_x = w.div_ceil(8);
         let tiles = tiles_x * h.div_ceil(8);
         let (blocks, per_block, dispatched) = util::interleave(tiles);
-        let acc_part = self
-            .accumulation
-            .as_ref()
-            .map_or(u32::MAX, |a| a.sums.part_len(16));
+        let acc = self.accumulation.as_mut().expect("made above");
+        let acc_part = acc.sums.part_len(16);
+        // The splatter stores the first frame's pixels rather than adding them to cleared sums
+        // (as the ash backend's kernels do): every pixel is written, so no clear is needed, and
+        // a pixel the kernel missed keeps what the buffer held (tests poison it with NaN).
+        let store_first = matches!(kernel, FrameKernel::Splat { .. }) && acc.clear;
         write(
             &ctx,
             &self.tiling_uniform,
-            bytemuck::cast_slice(&[tiles_x, tiles, blocks, per_block, acc_part, 0, 0, 0]),
+            bytemuck::cast_slice(&[
+                tiles_x,
+                tiles,
+                blocks,
+                per_block,
+                acc_part,
+                u32::from(store_first),
+                0,
+                0,
+            ]),
         );
-        let acc = self.accumulation.as_mut().expect("made above");
-        let stbn = self.stbn.as_ref().expect("made above");
+        let stbn = self.stbn.as_ref();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        ctx.scoped("render", || {
+        ctx.scoped(label, || {
             let mut entries = scene.traversal_entries(tree, &self.dummy, layout);
             entries.extend([
                 (0, self.frame_uniform.as_entire_binding()),
-                (7, stbn.as_entire_binding()),
                 (9, self.tiling_uniform.as_entire_binding()),
             ]);
+            if kernel == FrameKernel::Integrator {
+                let stbn = stbn.expect("made above");
+                entries.push((7, stbn.as_entire_binding()));
+            }
             entries.extend(acc.sums.entries(22, layout));
             let bg = bind(&ctx, &pipeline, &entries);
             if acc.clear {
-                acc.sums.clear(&mut encoder);
+                if !store_first {
+                    acc.sums.clear(&mut encoder);
+                }
                 acc.frames = 0;
                 acc.clear = false;
             }
             dispatch(
                 &mut encoder,
-                "lbvh render",
+                label,
                 &pipeline,
                 &bg,
                 grid(u64::from(dispatched), 1),
             );
         })?;
-        util::submit_and_wait(&ctx, "render", encoder)?;
+        util::submit_and_wait(&ctx, label, encoder)?;
         acc.frames += 1;
         self.timings.frame = started.elapsed();
         Ok(())
