@@ -191,3 +191,43 @@ fn sessions_refit_restart_and_reproduce_on_wgpu() {
     assert!(m.preparation_bytes >= 2 * m.particle_bytes, "{m:?}");
     assert_no_driver_messages();
 }
+
+#[test]
+fn frames_are_timed_by_device_timestamps_where_the_adapter_writes_them() {
+    let ctx = gpu();
+    let features = ctx.adapter.features();
+    let has = features.contains(
+        wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS,
+    );
+    let series = demo();
+    let mut s = session(BackendKind::Wgpu, &series, &field(&series));
+    let caps = s.backend().capabilities().clone();
+    assert_eq!(
+        caps.frame_timer,
+        if has {
+            backend::FrameTimer::DeviceTimestamps
+        } else {
+            backend::FrameTimer::SubmitToCompletion
+        },
+        "{}",
+        caps.device
+    );
+    let settings = RenderSettings {
+        width: 48,
+        height: 40,
+        ..RenderSettings::default()
+    };
+    for _ in 0..3 {
+        let started = std::time::Instant::now();
+        s.accumulate(&settings, 1).unwrap();
+        let wall = started.elapsed();
+        let frame = s.backend().timings().frame;
+        // The device's time lies within the host's around the call (which adds the uniforms'
+        // writes, the submission and the readback of the timestamps).
+        assert!(
+            frame > std::time::Duration::ZERO && frame <= wall,
+            "frame {frame:?}, wall clock {wall:?}"
+        );
+    }
+    assert_no_driver_messages();
+}

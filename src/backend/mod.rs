@@ -109,9 +109,22 @@ pub struct Capabilities {
     /// Whether [`Backend::query_grid`] scatters the uploaded particles onto the grid, so that
     /// a grid needs no [`Backend::build`] first (the CPU backend).
     pub scatters_grids: bool,
+    /// How the backend's frame times ([`Timings::frame`]) are taken.
+    pub frame_timer: FrameTimer,
 }
 
 /// Time spent in each stage, for the last time each ran.
+/// How a backend times its frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameTimer {
+    /// Timestamps the device writes before and after the frame's work.
+    DeviceTimestamps,
+    /// The host's clock from submission to completion (a GPU without timestamp queries).
+    SubmitToCompletion,
+    /// The host's clock around the work (the CPU backend).
+    WallClock,
+}
+
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Timings {
     /// CPU work on a new step: the check and the conversion into what the device copies

@@ -481,10 +481,14 @@ pub fn backends(asked: &[BackendKind]) -> Result<Vec<BackendKind>, StudyError> {
 }
 
 /// How a backend's times are taken.
-pub fn timer(kind: &str) -> &'static str {
-    match kind {
-        "ash" => "device timestamps",
-        "wgpu" => "wall clock, submit to completion",
+pub fn timer(caps: &crate::backend::Capabilities) -> &'static str {
+    use crate::backend::FrameTimer;
+    match (caps.name, caps.frame_timer) {
+        ("ash", FrameTimer::DeviceTimestamps) => "device timestamps",
+        ("wgpu", FrameTimer::DeviceTimestamps) => {
+            "device timestamps for frames; wall clock, submit to completion, for the rest"
+        }
+        (_, FrameTimer::SubmitToCompletion) => "wall clock, submit to completion",
         _ => "wall clock",
     }
 }
@@ -492,7 +496,7 @@ pub fn timer(kind: &str) -> &'static str {
 /// The device a session's backend runs on.
 pub fn device_of(session: &RenderSession) -> Device {
     let caps = session.backend().capabilities();
-    Device::of(caps.name, &caps.device, timer(caps.name))
+    Device::of(caps.name, &caps.device, timer(caps))
 }
 
 /// The paper's benchmark orbit: `count` cameras on a Fibonacci hemisphere around `bounds`

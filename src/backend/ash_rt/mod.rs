@@ -248,6 +248,11 @@ impl AshBackend {
                 (ctx.info.max_allocation / BOX_BYTES).min(ctx.info.max_primitive_count) as usize,
             ),
             scatters_grids: false,
+            frame_timer: if ctx.info.timestamp_period.is_some() {
+                super::FrameTimer::DeviceTimestamps
+            } else {
+                super::FrameTimer::SubmitToCompletion
+            },
         };
         let mut backend = AshBackend {
             ctx,

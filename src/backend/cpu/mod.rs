@@ -100,6 +100,7 @@ impl CpuBackend {
                 software: false,
                 max_particles: None,
                 scatters_grids: true,
+                frame_timer: super::FrameTimer::WallClock,
             },
             uploaded: None,
             prepared: None,

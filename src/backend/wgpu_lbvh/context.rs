@@ -229,9 +229,52 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     pub info: wgpu::AdapterInfo,
     pub limits: wgpu::Limits,
+    /// Timestamp queries, where the adapter has them inside command encoders.
+    pub timestamps: Option<Timestamps>,
     lost: Arc<Mutex<Option<String>>>,
     modules: Mutex<HashMap<(ShaderFile, Layout), Arc<wgpu::ShaderModule>>>,
     pipelines: Mutex<HashMap<(Kernel, Variant, Layout), Arc<wgpu::ComputePipeline>>>,
+}
+
+/// A pair of timestamp queries and the buffers their values come back through, for timing one
+/// submission at a time (the lock: the context is shared between threads).
+pub struct Timestamps {
+    pub queries: wgpu::QuerySet,
+    pub resolved: wgpu::Buffer,
+    pub readback: wgpu::Buffer,
+    /// Nanoseconds per timestamp tick.
+    pub period: f32,
+    pub lock: Mutex<()>,
+}
+
+impl Timestamps {
+    fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Timestamps {
+        let buffer = |label, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 16,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Timestamps {
+            queries: device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("frame timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            }),
+            resolved: buffer(
+                "resolved timestamps",
+                wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            ),
+            readback: buffer(
+                "timestamp readback",
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            ),
+            period: queue.get_timestamp_period(),
+            lock: Mutex::new(()),
+        }
+    }
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -283,9 +326,18 @@ impl GpuContext {
         let adapter = adapter?;
         let info = adapter.get_info();
         let limits = requested.unwrap_or_else(|| adapter.limits());
+        // Frames are timed on the device where timestamps can be written between command
+        // buffers (util::submit_and_time).
+        let timestamp_features =
+            wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+        let timed = adapter.features().contains(timestamp_features);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("aarbf wgpu"),
-            required_features: wgpu::Features::empty(),
+            required_features: if timed {
+                timestamp_features
+            } else {
+                wgpu::Features::empty()
+            },
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -311,12 +363,14 @@ impl GpuContext {
             info.driver,
             info.driver_info
         );
+        let timestamps = timed.then(|| Timestamps::new(&device, &queue));
         Ok(GpuContext {
             adapter,
             device,
             queue,
             info,
             limits,
+            timestamps,
             lost,
             modules: Mutex::new(HashMap::new()),
             pipelines: Mutex::new(HashMap::new()),

@@ -141,6 +141,11 @@ impl WgpuBackend {
                     (util::part_limit(max_binding) / CLUSTER_BYTES * PARTS) as usize,
                 ),
                 scatters_grids: false,
+                frame_timer: if ctx.timestamps.is_some() {
+                    super::FrameTimer::DeviceTimestamps
+                } else {
+                    super::FrameTimer::SubmitToCompletion
+                },
             },
             reserved: 0,
             scene: None,

@@ -161,9 +161,9 @@ impl WgpuBackend {
                 grid(u64::from(dispatched), 1),
             );
         })?;
-        util::submit_and_wait(&ctx, label, encoder)?;
+        let device_time = util::submit_and_time(&ctx, label, encoder)?;
         acc.frames += 1;
-        self.timings.frame = started.elapsed();
+        self.timings.frame = device_time.unwrap_or_else(|| started.elapsed());
         Ok(())
     }
 }

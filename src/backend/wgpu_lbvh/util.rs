@@ -200,6 +200,51 @@ pub fn submit_and_wait(
     ctx.wait()
 }
 
+/// Submits `encoder` and waits for it, returning the time the device spent on it, from
+/// timestamps written in command buffers submitted just before and after it (`None` where the
+/// device has no timestamps inside encoders: the caller times it on the host).
+pub fn submit_and_time(
+    ctx: &GpuContext,
+    what: &str,
+    encoder: wgpu::CommandEncoder,
+) -> Result<Option<std::time::Duration>, BackendError> {
+    let Some(ts) = &ctx.timestamps else {
+        submit_and_wait(ctx, what, encoder)?;
+        return Ok(None);
+    };
+    let _one_at_a_time = ts.lock.lock().unwrap_or_else(|e| e.into_inner());
+    let mut before = ctx.device.create_command_encoder(&Default::default());
+    before.write_timestamp(&ts.queries, 0);
+    let mut after = ctx.device.create_command_encoder(&Default::default());
+    after.write_timestamp(&ts.queries, 1);
+    after.resolve_query_set(&ts.queries, 0..2, &ts.resolved, 0);
+    after.copy_buffer_to_buffer(&ts.resolved, 0, &ts.readback, 0, 16);
+    ctx.scoped(what, || {
+        ctx.queue
+            .submit([before.finish(), encoder.finish(), after.finish()]);
+    })?;
+    ctx.wait()?;
+    let (sender, receiver) = std::sync::mpsc::channel();
+    ts.readback.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = sender.send(r);
+    });
+    ctx.wait()?;
+    receiver
+        .recv()
+        .map_err(|_| device_error("timestamps: the map callback never ran"))?
+        .map_err(|e| device_error(format!("timestamps: {e}")))?;
+    let ticks: [u64; 2] = {
+        let view = ts
+            .readback
+            .get_mapped_range(..)
+            .map_err(|e| device_error(format!("timestamps: {e}")))?;
+        bytemuck::pod_read_unaligned(&view[..16])
+    };
+    ts.readback.unmap();
+    let nanos = ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(ts.period);
+    Ok(Some(std::time::Duration::from_nanos(nanos as u64)))
+}
+
 /// Parts an array may be split into ([`SplitBuffer`]); the kernels' [`Layout::Split`] variant
 /// (`SPLIT_PARTS` = 4 in `shaders_glsl/wgpu/split.glsl`, `shaders_wgsl/shared/split_boxes.wgsl`,
 /// `shaders_wgsl/lbvh_{hierarchy,fit}.wgsl`) binds this many buffers per array.
