@@ -44,8 +44,8 @@ pub enum BenchCommand {
     Noise(super::bench_study::StudyArgs),
     /// Build, refit, query and frame time vs N on a log-log plot with fitted exponents.
     Scaling(super::bench_study::StudyArgs),
-    /// Table 3: our method vs the voxel-grid baseline, with the structure rebuilt every frame,
-    /// and each one's image error against a converged reference.
+    /// Table 3: our method vs the voxel-grid baseline and Knoll et al.'s splatter, with the
+    /// structure rebuilt every frame, and each one's image error against a converged reference.
     Baselines(super::bench_study::StudyArgs),
     /// Speed vs accuracy: every knob's time and error against a converged f64 reference, the
     /// Pareto front, the defaults and --target-error against it.

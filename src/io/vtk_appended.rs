@@ -1,9 +1,10 @@
-//! VTK XML files whose arrays are raw appended data — what VTK and ParaView write by default —
-//! read by offset: the XML before `<AppendedData>` is parsed for each array's type, components
-//! and offset, and only the point coordinates and the selected point-data arrays are read from
-//! the file (and inflated, for zlib, VTK's default compressor); every other array is never read
-//! or decoded. Files with inline (ascii or base64) arrays, base64 appended data or another
-//! compressor go through vtkio ([`super::vtk`]).
+//! VTK XML files whose arrays are appended data — what VTK and ParaView write by default, raw or
+//! base64-encoded — read by offset: the XML before `<AppendedData>` is parsed for each array's
+//! type, components and offset, and only the point coordinates and the selected point-data
+//! arrays are read from the file (decoded, and inflated for zlib, VTK's default compressor);
+//! every other array is never read or decoded. Files with inline (ascii or base64) arrays or
+//! another compressor go through vtkio ([`super::vtk`]). (vtkio 0.7.0-rc2 panics on the base64
+//! appended data VTK 9.7's writer makes of a million particles: `benches/peers/vtk_read.py`.)
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -103,8 +104,13 @@ struct Header {
     int_bytes: usize,
     zlib: bool,
     pieces: Vec<PieceDesc>,
-    /// Where the raw appended data starts (just after the `_`).
+    /// Where the appended data starts (just after the `_`).
     data_start: u64,
+    /// The appended data is base64 text (VTK's writer's default where `EncodeAppendedData`
+    /// is on): offsets count characters, and each run of bytes VTK wrote is encoded on its
+    /// own (an uncompressed array's size and data together; a compressed array's header,
+    /// then all its blocks).
+    base64: bool,
 }
 
 /// Reads the step by offset, or `None` where the file is not raw appended data this reader
@@ -210,9 +216,13 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
     };
     let tag_end = find(&head, b">", tag).unwrap_or(underscore);
     let tag_text = String::from_utf8_lossy(&head[tag..tag_end]);
-    if !tag_text.contains("\"raw\"") {
+    let base64 = if tag_text.contains("\"raw\"") {
+        false
+    } else if tag_text.contains("\"base64\"") {
+        true
+    } else {
         return Ok(None);
-    }
+    };
     let mut xml = quick_xml::Reader::from_reader(&head[..tag]);
     xml.config_mut().check_end_names = false;
     let mut header = Header {
@@ -221,6 +231,7 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
         zlib: false,
         pieces: Vec::new(),
         data_start: underscore as u64 + 1,
+        base64,
     };
     // Where we are: in <Points> or <PointData> of the current piece (other arrays, such as
     // cells', are not particles' and are skipped).
@@ -369,14 +380,46 @@ impl ArrayReader<'_> {
         Ok(out)
     }
 
-    /// The size integers at `pos`.
-    fn ints(&mut self, pos: u64, count: u64, what: &str) -> Result<Vec<u64>, DataError> {
-        let w = self.header.int_bytes;
-        let len = count
-            .checked_mul(w as u64)
+    /// The `len` bytes VTK wrote as one run at `pos` of the appended data, and where the next
+    /// run starts: raw, the bytes themselves; base64, the run's own encoding (4 characters per
+    /// 3 bytes, padded at its end). A prefix of a run may be asked for (its first groups
+    /// decode alone).
+    fn run(&mut self, pos: u64, len: u64, what: &str) -> Result<(Vec<u8>, u64), DataError> {
+        if !self.header.base64 {
+            let end = pos
+                .checked_add(len)
+                .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
+            return Ok((self.bytes(pos, len, what)?, end));
+        }
+        use base64::Engine;
+        let chars = len
+            .div_ceil(3)
+            .checked_mul(4)
             .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
-        let raw = self.bytes(pos, len, what)?;
-        Ok(raw
+        let text = self.bytes(pos, chars, what)?;
+        // Decoded in parallel: every 4-character group decodes alone, and only the last may
+        // be padded.
+        use rayon::prelude::*;
+        let pieces: Vec<Vec<u8>> = text
+            .par_chunks(1 << 20)
+            .map(|chunk| base64::engine::general_purpose::STANDARD.decode(chunk))
+            .collect::<Result<_, _>>()
+            .map_err(|e| self.at.malformed(format!("{what}: bad base64: {e}")))?;
+        let mut decoded = pieces.concat();
+        if (decoded.len() as u64) < len {
+            return Err(self.at.malformed(format!(
+                "{what}: its base64 holds {} bytes, not {len}",
+                decoded.len()
+            )));
+        }
+        decoded.truncate(len as usize);
+        Ok((decoded, pos + chars))
+    }
+
+    /// The size integers in `bytes` (the file's integer width and byte order).
+    fn ints(&self, bytes: &[u8]) -> Vec<u64> {
+        let w = self.header.int_bytes;
+        bytes
             .chunks_exact(w)
             .map(|b| {
                 let mut le = [0u8; 8];
@@ -386,7 +429,7 @@ impl ArrayReader<'_> {
                 }
                 u64::from_le_bytes(le)
             })
-            .collect())
+            .collect()
     }
 
     /// The values of `array` for `n` points, as f64.
@@ -414,12 +457,15 @@ impl ArrayReader<'_> {
         let w = self.header.int_bytes as u64;
         let data = if self.header.zlib {
             let what = format!("array '{name}'s compressed header");
-            let head = self.ints(array.offset, 3, &what)?;
-            let (blocks, block_size, last) = (head[0], head[1], head[2]);
+            let (head, _) = self.run(array.offset, 3 * w, &what)?;
+            let head = self.ints(&head);
+            // The last block's size is 0 when it is full (VTK's format).
+            let (blocks, block_size) = (head[0], head[1]);
+            let last = if head[2] == 0 { block_size } else { head[2] };
             let declared = block_size
                 .checked_mul(blocks.saturating_sub(1))
                 .and_then(|v| v.checked_add(if blocks == 0 { 0 } else { last }));
-            if declared != Some(expected) {
+            if declared != Some(expected) || last > block_size {
                 return Err(self.at.malformed(format!(
                     "array '{name}' declares {} uncompressed bytes ({blocks} blocks of \
                      {block_size}, the last {last}); {n} points of {} {:?} need {expected}",
@@ -428,47 +474,62 @@ impl ArrayReader<'_> {
                     array.scalar
                 )));
             }
-            let sizes = self.ints(array.offset + 3 * w, blocks, &what)?;
-            let mut pos = array.offset + (3 + blocks) * w;
-            let mut out = Vec::with_capacity(expected as usize);
-            for (b, &size) in sizes.iter().enumerate() {
-                let compressed = self.bytes(pos, size, &format!("array '{name}' block {b}"))?;
-                pos += size;
-                let want = if b as u64 + 1 == blocks {
-                    last
-                } else {
-                    block_size
-                };
-                let before = out.len();
-                flate2::read::ZlibDecoder::new(&compressed[..])
-                    .take(want)
-                    .read_to_end(&mut out)
-                    .map_err(|e| {
-                        self.at.malformed(format!(
-                            "array '{name}' block {b}: cannot inflate its zlib data: {e}"
-                        ))
-                    })?;
-                if (out.len() - before) as u64 != want {
-                    return Err(self.at.malformed(format!(
-                        "array '{name}' block {b} inflates to {} bytes, not {want}",
-                        out.len() - before
-                    )));
-                }
+            let header_len = blocks
+                .checked_add(3)
+                .and_then(|b| b.checked_mul(w))
+                .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
+            let (header, data_pos) = self.run(array.offset, header_len, &what)?;
+            let sizes = self.ints(&header[(3 * w) as usize..]);
+            let total = sizes
+                .iter()
+                .try_fold(0u64, |t, &s| t.checked_add(s))
+                .ok_or_else(|| {
+                    self.at
+                        .malformed(format!("array '{name}': block sizes overflow"))
+                })?;
+            let (packed, _) = self.run(data_pos, total, &format!("array '{name}'s blocks"))?;
+            // The blocks inflate independently: in parallel, each into its place.
+            let mut starts = Vec::with_capacity(sizes.len());
+            let mut at = 0usize;
+            for &size in &sizes {
+                starts.push(at);
+                at += size as usize;
             }
+            let mut out = vec![0u8; expected as usize];
+            use rayon::prelude::*;
+            let at = self.at;
+            out.par_chunks_mut(block_size.max(1) as usize)
+                .zip(sizes.par_iter().zip(&starts))
+                .enumerate()
+                .try_for_each(|(b, (target, (&size, &start)))| {
+                    let mut inflater =
+                        flate2::read::ZlibDecoder::new(&packed[start..start + size as usize]);
+                    inflater.read_exact(target).map_err(|e| {
+                        at.malformed(format!(
+                            "array '{name}' block {b}: cannot inflate its zlib data to {} bytes: {e}",
+                            target.len()
+                        ))
+                    })
+                })?;
             out
         } else {
-            let size = self.ints(array.offset, 1, &format!("array '{name}'s size"))?[0];
+            let what = format!("array '{name}'s size");
+            let (head, _) = self.run(array.offset, w, &what)?;
+            let size = self.ints(&head)[0];
             if size != expected {
                 return Err(self.at.malformed(format!(
                     "array '{name}' holds {size} bytes; {n} points of {} {:?} need {expected}",
                     array.components, array.scalar
                 )));
             }
-            self.bytes(array.offset + w, size, &format!("array '{name}'"))?
+            let (mut all, _) = self.run(array.offset, w + size, &format!("array '{name}'"))?;
+            all.drain(..w as usize);
+            all
         };
         let big_endian = self.header.big_endian;
+        use rayon::prelude::*;
         Ok(data
-            .chunks_exact(array.scalar.size())
+            .par_chunks_exact(array.scalar.size())
             .map(|b| array.scalar.value(b, big_endian))
             .collect())
     }
