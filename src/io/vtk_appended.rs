@@ -113,8 +113,8 @@ struct Header {
     base64: bool,
 }
 
-/// Reads the step by offset, or `None` where the file is not raw appended data this reader
-/// handles (vtkio reads it instead).
+/// Reads the step by offset, or `None` where the file is not appended data this reader handles
+/// (vtkio reads it instead).
 pub(super) fn read(
     at: At<'_>,
     selection: &AttributeSelection,
@@ -133,7 +133,9 @@ pub(super) fn read(
     let mut positions = Vec::new();
     let mut attributes: Vec<super::Attribute> = Vec::new();
     let mut skipped = Vec::new();
-    for (index, piece) in header.pieces.iter().enumerate() {
+    // A piece without points (VTK writes them for idle MPI ranks) adds nothing.
+    let pieces = header.pieces.iter().filter(|p| p.points > 0);
+    for (index, piece) in pieces.enumerate() {
         let n = usize::try_from(piece.points)
             .map_err(|_| at.malformed("a piece's NumberOfPoints overflows"))?;
         let Some(coordinates) = &piece.coordinates else {
