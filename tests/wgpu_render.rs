@@ -193,7 +193,7 @@ fn sessions_refit_restart_and_reproduce_on_wgpu() {
 }
 
 #[test]
-fn frames_are_timed_by_device_timestamps_where_the_adapter_writes_them() {
+fn gpu_work_is_timed_by_device_timestamps_where_the_adapter_writes_them() {
     let ctx = gpu();
     let features = ctx.adapter.features();
     let has = features.contains(
@@ -229,5 +229,26 @@ fn frames_are_timed_by_device_timestamps_where_the_adapter_writes_them() {
             "frame {frame:?}, wall clock {wall:?}"
         );
     }
+    // The tree's build and refit, and queries, on the same clock.
+    let within = |what: &str, took: std::time::Duration, wall: std::time::Duration| {
+        assert!(
+            took > std::time::Duration::ZERO && took <= wall,
+            "{what} {took:?}, wall clock {wall:?}"
+        );
+    };
+    let started = std::time::Instant::now();
+    s.backend_mut().build().unwrap();
+    within("build", s.backend().timings().build, started.elapsed());
+    let wider = FieldSettings::new(Some("velocity"), 0.02 * series.bounds().diagonal());
+    let started = std::time::Instant::now();
+    s.backend_mut().refit(&wider).unwrap();
+    within("refit", s.backend().timings().refit, started.elapsed());
+    let b = series.bounds();
+    let points: Vec<glam::DVec3> = (0..1000)
+        .map(|i| b.min + (b.max - b.min) * (i as f64 / 1000.0))
+        .collect();
+    let started = std::time::Instant::now();
+    s.backend_mut().query(&points).unwrap();
+    within("query", s.backend().timings().query, started.elapsed());
     assert_no_driver_messages();
 }

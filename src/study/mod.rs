@@ -486,7 +486,7 @@ pub fn timer(caps: &crate::backend::Capabilities) -> &'static str {
     match (caps.name, caps.frame_timer) {
         ("ash", FrameTimer::DeviceTimestamps) => "device timestamps",
         ("wgpu", FrameTimer::DeviceTimestamps) => {
-            "device timestamps for frames; wall clock, submit to completion, for the rest"
+            "device timestamps for frames, builds, refits and queries; wall clock for uploads"
         }
         (_, FrameTimer::SubmitToCompletion) => "wall clock, submit to completion",
         _ => "wall clock",

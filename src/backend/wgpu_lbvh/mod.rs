@@ -336,7 +336,7 @@ impl WgpuBackend {
                 )));
             }
             self.built = Some(report);
-            self.timings.build = started.elapsed();
+            self.timings.build = report.device_time.unwrap_or_else(|| started.elapsed());
             tracing::debug!(
                 "wgpu: built an LBVH over {} clusters ({} leaves, depth {}) in {:.1} ms",
                 scene.clusters(),
@@ -564,7 +564,12 @@ impl Backend for WgpuBackend {
         } else if let Some(b) = &mut self.built {
             b.needs_rebuild = false;
         }
-        self.timings.refit = started.elapsed();
+        // On the device's clock where it has one: the refit, and the rebuild it led to.
+        self.timings.refit = match report.device_time {
+            Some(t) if report.needs_rebuild => t + self.timings.build,
+            Some(t) => t,
+            None => started.elapsed(),
+        };
         Ok(())
     }
 

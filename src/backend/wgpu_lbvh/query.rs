@@ -75,6 +75,8 @@ impl WgpuBackend {
         })?;
         let mut out = Vec::with_capacity(points.len());
         let mut bytes = Vec::new();
+        // The chunks' dispatches on the device's clock, where it has one.
+        let mut device_time: Option<std::time::Duration> = None;
         let mut local: Vec<[f32; 4]> = Vec::with_capacity(chunk * per_point);
         for part in points.chunks(chunk) {
             local.clear();
@@ -90,6 +92,7 @@ impl WgpuBackend {
                 bytemuck::cast_slice(&[part.len() as u32, groups, blocks, per_block]),
             );
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            let span = util::DeviceSpan::begin(&ctx, &mut encoder);
             ctx.scoped("query", || {
                 dispatch(
                     &mut encoder,
@@ -99,6 +102,9 @@ impl WgpuBackend {
                     grid(u64::from(dispatched), 1),
                 );
             })?;
+            if let Some(span) = &span {
+                span.end(&mut encoder);
+            }
             bytes.clear();
             util::read_into(
                 &ctx,
@@ -108,6 +114,9 @@ impl WgpuBackend {
                 part.len() as u64 * 16,
                 &mut bytes,
             )?;
+            if let Some(span) = span {
+                *device_time.get_or_insert_default() += span.read(&ctx)?;
+            }
             let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
             out.extend(values.iter().map(|v| {
                 (
@@ -116,7 +125,7 @@ impl WgpuBackend {
                 )
             }));
         }
-        self.timings.query = started.elapsed();
+        self.timings.query = device_time.unwrap_or_else(|| started.elapsed());
         Ok(out)
     }
 }

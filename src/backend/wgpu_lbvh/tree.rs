@@ -44,6 +44,8 @@ pub struct TreeReport {
     pub depth: u32,
     /// A refit found a cluster outside the tree holding particles: rebuild.
     pub needs_rebuild: bool,
+    /// The device's time on the build or refit, where it writes timestamps.
+    pub device_time: Option<std::time::Duration>,
 }
 
 /// The scene's buffers a tree pass reads.
@@ -237,6 +239,7 @@ impl GpuTree {
         assert!(clusters as usize <= self.capacity);
         self.write_params(ctx, grid_, clusters, 7);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        let span = super::util::DeviceSpan::begin(ctx, &mut encoder);
         ctx.scoped("lbvh build", || -> Result<(), BackendError> {
             encoder.clear_buffer(&self.counters, 0, None);
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
@@ -300,7 +303,7 @@ impl GpuTree {
             }
             Ok(())
         })??;
-        self.report(ctx, encoder)
+        self.report(ctx, encoder, span)
     }
 
     /// Encodes a refit (bounds, reset, climb over the built topology) and submits it.
@@ -313,6 +316,7 @@ impl GpuTree {
     ) -> Result<TreeReport, BackendError> {
         self.write_params(ctx, grid_, clusters, 6);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        let span = super::util::DeviceSpan::begin(ctx, &mut encoder);
         ctx.scoped("lbvh refit", || -> Result<(), BackendError> {
             self.encode_bounds(ctx, &mut encoder, scene, clusters)?;
             encoder.clear_buffer(&self.counters, 8, Some(4));
@@ -331,14 +335,19 @@ impl GpuTree {
             )?;
             self.encode_climb(ctx, &mut encoder, clusters)
         })??;
-        self.report(ctx, encoder)
+        self.report(ctx, encoder, span)
     }
 
+    /// Submits the recorded build or refit with the readback of its counters.
     fn report(
         &self,
         ctx: &GpuContext,
-        encoder: wgpu::CommandEncoder,
+        mut encoder: wgpu::CommandEncoder,
+        span: Option<super::util::DeviceSpan<'_>>,
     ) -> Result<TreeReport, BackendError> {
+        if let Some(span) = &span {
+            span.end(&mut encoder);
+        }
         let mut bytes = Vec::new();
         super::util::read_into(ctx, Some(encoder), &self.counters, 0, 16, &mut bytes)?;
         let c: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
@@ -346,6 +355,7 @@ impl GpuTree {
             leaves: c[0],
             depth: c[1],
             needs_rebuild: c[2] != 0,
+            device_time: span.map(|s| s.read(ctx)).transpose()?,
         })
     }
 

@@ -208,41 +208,72 @@ pub fn submit_and_time(
     what: &str,
     encoder: wgpu::CommandEncoder,
 ) -> Result<Option<std::time::Duration>, BackendError> {
-    let Some(ts) = &ctx.timestamps else {
+    let mut before = ctx.device.create_command_encoder(&Default::default());
+    let Some(span) = DeviceSpan::begin(ctx, &mut before) else {
         submit_and_wait(ctx, what, encoder)?;
         return Ok(None);
     };
-    let _one_at_a_time = ts.lock.lock().unwrap_or_else(|e| e.into_inner());
-    let mut before = ctx.device.create_command_encoder(&Default::default());
-    before.write_timestamp(&ts.queries, 0);
     let mut after = ctx.device.create_command_encoder(&Default::default());
-    after.write_timestamp(&ts.queries, 1);
-    after.resolve_query_set(&ts.queries, 0..2, &ts.resolved, 0);
-    after.copy_buffer_to_buffer(&ts.resolved, 0, &ts.readback, 0, 16);
+    span.end(&mut after);
     ctx.scoped(what, || {
         ctx.queue
             .submit([before.finish(), encoder.finish(), after.finish()]);
     })?;
     ctx.wait()?;
-    let (sender, receiver) = std::sync::mpsc::channel();
-    ts.readback.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = sender.send(r);
-    });
-    ctx.wait()?;
-    receiver
-        .recv()
-        .map_err(|_| device_error("timestamps: the map callback never ran"))?
-        .map_err(|e| device_error(format!("timestamps: {e}")))?;
-    let ticks: [u64; 2] = {
-        let view = ts
-            .readback
-            .get_mapped_range(..)
+    span.read(ctx).map(Some)
+}
+
+/// The device's time between two points of recorded work (where it writes timestamps inside
+/// encoders): [`DeviceSpan::begin`] records the first timestamp, [`DeviceSpan::end`] the second
+/// with their resolution, and [`DeviceSpan::read`], once that work has completed, the time
+/// between them. Holds the context's timestamps until read (the context is shared between
+/// threads), so nothing between begin and read may time anything else.
+pub struct DeviceSpan<'a> {
+    ts: &'a super::context::Timestamps,
+    _one_at_a_time: std::sync::MutexGuard<'a, ()>,
+}
+
+impl<'a> DeviceSpan<'a> {
+    pub fn begin(ctx: &'a GpuContext, encoder: &mut wgpu::CommandEncoder) -> Option<Self> {
+        let ts = ctx.timestamps.as_ref()?;
+        let guard = ts.lock.lock().unwrap_or_else(|e| e.into_inner());
+        encoder.write_timestamp(&ts.queries, 0);
+        Some(DeviceSpan {
+            ts,
+            _one_at_a_time: guard,
+        })
+    }
+
+    pub fn end(&self, encoder: &mut wgpu::CommandEncoder) {
+        let ts = self.ts;
+        encoder.write_timestamp(&ts.queries, 1);
+        encoder.resolve_query_set(&ts.queries, 0..2, &ts.resolved, 0);
+        encoder.copy_buffer_to_buffer(&ts.resolved, 0, &ts.readback, 0, 16);
+    }
+
+    /// The time between the two timestamps (the work holding `end` must have completed).
+    pub fn read(self, ctx: &GpuContext) -> Result<std::time::Duration, BackendError> {
+        let ts = self.ts;
+        let (sender, receiver) = std::sync::mpsc::channel();
+        ts.readback.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = sender.send(r);
+        });
+        ctx.wait()?;
+        receiver
+            .recv()
+            .map_err(|_| device_error("timestamps: the map callback never ran"))?
             .map_err(|e| device_error(format!("timestamps: {e}")))?;
-        bytemuck::pod_read_unaligned(&view[..16])
-    };
-    ts.readback.unmap();
-    let nanos = ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(ts.period);
-    Ok(Some(std::time::Duration::from_nanos(nanos as u64)))
+        let ticks: [u64; 2] = {
+            let view = ts
+                .readback
+                .get_mapped_range(..)
+                .map_err(|e| device_error(format!("timestamps: {e}")))?;
+            bytemuck::pod_read_unaligned(&view[..16])
+        };
+        ts.readback.unmap();
+        let nanos = ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(ts.period);
+        Ok(std::time::Duration::from_nanos(nanos as u64))
+    }
 }
 
 /// Parts an array may be split into ([`SplitBuffer`]); the kernels' [`Layout::Split`] variant
