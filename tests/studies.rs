@@ -231,17 +231,32 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
     assert_eq!(frames(&rows, "1"), 4);
     // 2 backends x 2 cluster sizes x (frame, build, refit, structure and particle bytes).
     check_study(p, "cluster", &with(&["radius", "k"], &frame), 20, &b, 4);
-    // 3 data sets (uniform, random, dam break) x 2 backends.
+    // 3 data sets (uniform, random, dam break) x (cpu + wgpu on every adapter that opens:
+    // on this project's machines lavapipe through Vulkan and llvmpipe through GL).
+    let adapters: Vec<String> = aarbf::backend::wgpu_lbvh::GpuContext::on_every_adapter()
+        .into_iter()
+        .flatten()
+        .map(|c| format!("lbvh compute, {:?}", c.info.backend))
+        .collect();
+    assert!(!adapters.is_empty());
     let rows = check_study(
         p,
         "traversal",
         &with(&["radius", "k", "traversal"], &frame),
-        6,
+        3 * (1 + adapters.len()),
         &b,
         1,
     );
     for data in ["uniform", "random", "dambreak-demo"] {
-        assert_eq!(rows.iter().filter(|r| r[9] == data).count(), 2, "{data}");
+        let mut variants: Vec<&str> = rows
+            .iter()
+            .filter(|r| r[9] == data)
+            .map(|r| r[8].as_str())
+            .collect();
+        variants.sort_unstable();
+        let mut want: Vec<&str> = adapters.iter().map(String::as_str).chain(["bvh"]).collect();
+        want.sort_unstable();
+        assert_eq!(variants, want, "{data}");
     }
     // 2 backends x 2 noises x (frame + 2 spp x (rmse, blurred rmse)).
     check_study(

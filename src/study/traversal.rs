@@ -1,13 +1,16 @@
 //! Hardware vs software traversal (the paper's Fig. 10a): the same frames through the ash
 //! backend's RT pipeline and through its LBVH compute traversal on the same device, beside the
-//! wgpu backend's LBVH (the portable path) and the CPU backend, on the paper's Uniform and
-//! Random sets (60K) and the dam break, one particle per cluster.
+//! wgpu backend's LBVH (the portable path) on every adapter wgpu opens (the paper compares
+//! several GPUs; this machine has lavapipe through Vulkan and llvmpipe through GL) and the CPU
+//! backend, on the paper's Uniform and Random sets (60K) and the dam break, one particle per
+//! cluster.
 
 use super::plot::{self, Figure, Panel};
 use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of, frame_times, value};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
 use crate::backend::ash_rt::{AshBackend, Traversal};
+use crate::backend::wgpu_lbvh::GpuContext;
 use crate::field::FieldSettings;
 use crate::render::RenderSession;
 use crate::values::NoiseKind;
@@ -33,21 +36,67 @@ pub const DESCRIPTION: Description = Description {
     ],
 };
 
-/// The traversals a backend offers: (variant name, how to make its session).
-fn variants(kind: BackendKind) -> Vec<(&'static str, Option<Traversal>)> {
+/// How a row's session is made.
+enum Maker {
+    Ash(Traversal),
+    /// The wgpu backend on one adapter.
+    Wgpu(std::sync::Arc<GpuContext>),
+    Default,
+}
+
+/// The traversals a backend offers, with how to make each one's session: the ash backend's
+/// two on its device; the wgpu backend's LBVH on every adapter (the devices are opened once,
+/// so every data set runs on the same ones).
+/// The wgpu rows' variants name the graphics API, so two adapters (say Vulkan and GL on one
+/// GPU) stay apart in the table and the plot.
+fn variants(kind: BackendKind, adapters: &[std::sync::Arc<GpuContext>]) -> Vec<(String, Maker)> {
     match kind {
         BackendKind::Ash => vec![
-            ("rt pipeline", Some(Traversal::RtPipeline)),
-            ("lbvh compute", Some(Traversal::Lbvh)),
+            ("rt pipeline".into(), Maker::Ash(Traversal::RtPipeline)),
+            ("lbvh compute".into(), Maker::Ash(Traversal::Lbvh)),
         ],
-        BackendKind::Wgpu => vec![("lbvh compute", None)],
-        _ => vec![("bvh", None)],
+        BackendKind::Wgpu => adapters
+            .iter()
+            .map(|a| {
+                (
+                    format!("lbvh compute, {:?}", a.info.backend),
+                    Maker::Wgpu(a.clone()),
+                )
+            })
+            .collect(),
+        _ => vec![("bvh".into(), Maker::Default)],
     }
+}
+
+/// A device on every wgpu adapter that opens (those that do not are logged).
+fn wgpu_adapters() -> Result<Vec<std::sync::Arc<GpuContext>>, StudyError> {
+    let mut out = Vec::new();
+    for opened in GpuContext::on_every_adapter() {
+        match opened {
+            Ok(ctx) => out.push(std::sync::Arc::new(ctx)),
+            Err(e) => tracing::warn!("traversal: a wgpu adapter did not open: {e}"),
+        }
+    }
+    if out.is_empty() {
+        // The backend's own error, which says how to get an adapter.
+        crate::backend::wgpu_lbvh::WgpuBackend::new()?;
+        return Err(StudyError::Invalid("no wgpu adapter opened".into()));
+    }
+    Ok(out)
 }
 
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
-    let total: usize = ctx.backends.iter().map(|&b| variants(b).len()).sum();
+    let adapters = if ctx.backends.contains(&BackendKind::Wgpu) {
+        wgpu_adapters()?
+    } else {
+        Vec::new()
+    };
+    let total: usize = ctx
+        .backends
+        .iter()
+        .map(|&b| variants(b, &adapters).len())
+        .sum();
     let bar = ctx.bar(ctx.data.len() * total, "traversal");
     let cluster = ClusterSize::new(1).map_err(StudyError::Invalid)?;
     for spec in ctx.data {
@@ -55,14 +104,18 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
         let orbit = cameras(ds.bounds, o.cameras);
         let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
         for &kind in ctx.backends {
-            for (variant, traversal) in variants(kind) {
-                let mut session = match traversal {
-                    Some(t) => {
+            for (variant, maker) in variants(kind, &adapters) {
+                let mut session = match maker {
+                    Maker::Ash(t) => {
                         let mut b = AshBackend::new()?;
                         b.set_traversal(t);
                         RenderSession::new(Box::new(b), &ds.series)
                     }
-                    None => super::session(kind, &ds)?,
+                    Maker::Wgpu(device) => RenderSession::new(
+                        Box::new(crate::backend::wgpu_lbvh::WgpuBackend::with_context(device)),
+                        &ds.series,
+                    ),
+                    Maker::Default => super::session(kind, &ds)?,
                 };
                 let device = device_of(&session);
                 session.show(&ds.series, ds.step, &field, cluster)?;
@@ -71,7 +124,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                 let values = frame_times(&mut session, &settings, &orbit, o.repetitions)?;
                 ctx.recorder.record(Row {
                     device,
-                    variant: variant.into(),
+                    variant: variant.clone(),
                     data: ds.name.clone(),
                     step: ds.step,
                     n: ds.n,
@@ -79,7 +132,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         vec![
                             ("radius", value(ds.radius)),
                             ("k", "1".into()),
-                            ("traversal", variant.into()),
+                            ("traversal", variant),
                         ],
                         o,
                         dt,

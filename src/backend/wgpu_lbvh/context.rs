@@ -323,7 +323,21 @@ impl GpuContext {
                 break;
             }
         }
-        let adapter = adapter?;
+        GpuContext::open(adapter?, requested)
+    }
+
+    /// A device on every adapter wgpu finds (on every backend it was built with: on this
+    /// project's machines lavapipe through Vulkan and llvmpipe through GL), each opened or
+    /// the reason it could not be, for studies that compare traversal across adapters.
+    pub fn on_every_adapter() -> Vec<Result<GpuContext, String>> {
+        let instance = instance();
+        pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
+            .into_iter()
+            .map(|a| GpuContext::open(a, None))
+            .collect()
+    }
+
+    fn open(adapter: wgpu::Adapter, requested: Option<wgpu::Limits>) -> Result<GpuContext, String> {
         let info = adapter.get_info();
         let limits = requested.unwrap_or_else(|| adapter.limits());
         // Frames are timed on the device where timestamps can be written between command
