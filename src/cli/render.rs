@@ -318,24 +318,36 @@ impl OutputFormat {
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let mut resolved = resolve(&args.data, &args.field)?;
     apply_flags(&args, &mut resolved.scene)?;
+    if args.method == Method::Splat {
+        resolved.scene.render.splat_k = Some(args.splat_k);
+    }
     let bounds = resolved.series.bounds();
-    let settings = resolved
+    let mut settings = resolved
         .scene
         .render_settings(bounds)
         .map_err(anyhow::Error::msg)?;
+    // A scene file's `splat_k` asks for the splatter as --method splat does.
+    let method = match (args.method, settings.splat_k) {
+        (Method::Rbf, Some(_)) => Method::Splat,
+        (Method::Voxel, _) => {
+            settings.splat_k = None;
+            Method::Voxel
+        }
+        (m, _) => m,
+    };
     let spp = resolved.scene.spp();
     anyhow::ensure!(spp > 0, "--spp must be at least 1");
     let target = resolved.scene.target().map_err(anyhow::Error::msg)?;
-    if (target.is_some() || args.reference) && args.method != Method::Rbf {
+    if (target.is_some() || args.reference) && method != Method::Rbf {
         bail!("--target-error, --time-budget and --reference render with --method rbf");
     }
-    if args.method == Method::Splat {
+    if let Some(k) = settings.splat_k {
         ensure!(
             settings.integrator == Integrator::Ea,
             "--method splat composites emission-absorption (as Knoll et al.'s splatter): use --integrator ea, not {:?}",
             settings.integrator
         );
-        ensure!(args.splat_k > 0, "--splat-k must be at least 1");
+        ensure!(k > 0, "--splat-k must be at least 1");
     }
 
     let format = OutputFormat::of(&args.out, args.bit_depth)?;
@@ -418,7 +430,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let mut session = RenderSession::new(backend, &resolved.series);
     // The CPU splatter collects hits through the f64 BVH (the cpu backend's only tree); asking
     // for it up front spares building the f32 cells first.
-    session.set_precision(if args.method == Method::Splat && on_cpu {
+    session.set_precision(if method == Method::Splat && on_cpu {
         backend::Precision::F64
     } else {
         precision
@@ -438,7 +450,6 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             "rendering"
         },
     );
-    let mut settings = settings;
     let mut scene_used = None;
     for (k, frame) in frames.iter().enumerate() {
         let started = Instant::now();
@@ -464,7 +475,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         let path = &frame.path;
         // What the image used where it chose: the step and samples of a targeted render.
         let (mut used_step, mut used_spp) = (None, spp);
-        let image = match args.method {
+        let image = match method {
             Method::Rbf if args.reference => {
                 let options = ReferenceOptions {
                     tolerance: args.reference_tolerance,
@@ -564,10 +575,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             }
             Method::Splat => {
                 session.backend_mut().reset();
+                let k = settings.splat_k.expect("set for the splatter");
                 let mut counts = Some(crate::field::splat::SplatCounts::default());
                 for f in 0..spp {
                     let frame = session.frame_params(&settings, f)?;
-                    let frame_counts = session.backend_mut().render_splat(&frame, args.splat_k)?;
+                    let frame_counts = session.backend_mut().render_splat(&frame, k)?;
                     counts = counts.zip(frame_counts).map(|(a, b)| a + b);
                     bar.inc(1);
                 }
@@ -577,11 +589,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                         counts.kept,
                         counts.lost,
                         100.0 * counts.lost_fraction(),
-                        args.splat_k
+                        k
                     ),
                     None => tracing::info!(
                         "splatted step {step} with {}-entry slab buffers (this backend does not count lost hits)",
-                        args.splat_k
+                        k
                     ),
                 }
                 session.backend_mut().image()?

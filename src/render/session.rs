@@ -343,7 +343,12 @@ impl RenderSession {
         }
         for _ in 0..frames {
             let params = self.frame_params(settings, self.frames)?;
-            self.backend.render(&params)?;
+            match settings.splat_k {
+                None => self.backend.render(&params)?,
+                Some(k) => {
+                    self.backend.render_splat(&params, k)?;
+                }
+            }
             self.frames += 1;
         }
         Ok(())

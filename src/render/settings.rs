@@ -27,6 +27,9 @@ pub struct RenderSettings {
     pub background: [f64; 3],
     /// Ray marching stops when a pixel's opacity reaches this.
     pub opacity_threshold: f64,
+    /// `Some(k)`: frames are Knoll et al.'s splatter with k hits per slab (the Table 3
+    /// baseline, emission-absorption whatever `integrator` says) instead of the RBF renderer.
+    pub splat_k: Option<usize>,
 }
 
 impl Default for RenderSettings {
@@ -45,6 +48,7 @@ impl Default for RenderSettings {
             light: Light::default(),
             background: [0.0; 3],
             opacity_threshold: 0.99,
+            splat_k: None,
         }
     }
 }

@@ -184,6 +184,9 @@ pub struct RenderSection {
     pub time_budget: Option<f64>,
     /// The measure of `target_error`: `rmse` (linear RGB, the default) or `flip`.
     pub error_metric: Option<crate::render::accuracy::ErrorMetric>,
+    /// Render with Knoll et al.'s splatter, this many hits per slab, instead of the RBFs
+    /// (`aarbf render --method splat --splat-k K`).
+    pub splat_k: Option<usize>,
 }
 
 /// A scene file.
@@ -284,6 +287,7 @@ impl SceneFile {
             light: r.light.unwrap_or(d.light),
             background: r.background.unwrap_or(d.background),
             opacity_threshold: r.opacity_threshold.unwrap_or(d.opacity_threshold),
+            splat_k: r.splat_k,
         })
     }
 
@@ -330,6 +334,7 @@ impl SceneFile {
                 target_error: None,
                 time_budget: None,
                 error_metric: None,
+                splat_k: settings.splat_k,
             },
         }
     }

@@ -593,19 +593,41 @@ impl ViewerApp {
 
     fn quality_controls(&mut self, ui: &mut egui::Ui) {
         let s = &mut self.state.settings;
-        egui::ComboBox::new("integrator", "integrator")
-            .selected_text(integrator_name(s.integrator))
-            .show_ui(ui, |ui| {
-                for i in [
-                    Integrator::Ea,
-                    Integrator::Delta,
-                    Integrator::Marching,
-                    Integrator::SsReference,
-                ] {
-                    ui.selectable_value(&mut s.integrator, i, integrator_name(i));
-                }
-            });
-        let scattering = s.integrator != Integrator::Ea;
+        // The Table 3 baseline, to look at its artefacts beside the RBF image.
+        let mut splatting = s.splat_k.is_some();
+        ui.checkbox(&mut splatting, "splat (Knoll et al.'s baseline)")
+            .on_hover_text(
+                "each ray cut into slabs one step long, at most k particles a slab, sorted and \
+                 composited front to back (emission-absorption)",
+            );
+        s.splat_k = if splatting {
+            let mut k = s.splat_k.unwrap_or(crate::render::SPLAT_K);
+            ui.add(
+                egui::Slider::new(
+                    &mut k,
+                    1..=crate::values::shader_constants::SPLAT_K_MAX as usize,
+                )
+                .text("hits per slab"),
+            );
+            Some(k)
+        } else {
+            None
+        };
+        ui.add_enabled_ui(!splatting, |ui| {
+            egui::ComboBox::new("integrator", "integrator")
+                .selected_text(integrator_name(s.integrator))
+                .show_ui(ui, |ui| {
+                    for i in [
+                        Integrator::Ea,
+                        Integrator::Delta,
+                        Integrator::Marching,
+                        Integrator::SsReference,
+                    ] {
+                        ui.selectable_value(&mut s.integrator, i, integrator_name(i));
+                    }
+                });
+        });
+        let scattering = s.integrator != Integrator::Ea && !splatting;
         ui.add_enabled_ui(scattering, |ui| {
             ui.add(egui::Slider::new(&mut s.light.azimuth, -180.0..=180.0).text("light azimuth °"));
             ui.add(
