@@ -13,6 +13,7 @@ pub mod output;
 pub mod particles;
 pub mod ply;
 pub mod raw;
+mod scalar;
 pub mod vtk;
 mod vtk_appended;
 

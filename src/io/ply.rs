@@ -6,6 +6,7 @@ use std::path::Path;
 
 use glam::DVec3;
 
+use super::scalar::Scalar;
 use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
 
@@ -19,64 +20,19 @@ enum Encoding {
     BigEndian,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn parse(s: &str) -> Option<Scalar> {
-        Some(match s {
-            "char" | "int8" => Scalar::I8,
-            "uchar" | "uint8" => Scalar::U8,
-            "short" | "int16" => Scalar::I16,
-            "ushort" | "uint16" => Scalar::U16,
-            "int" | "int32" => Scalar::I32,
-            "uint" | "uint32" => Scalar::U32,
-            "float" | "float32" => Scalar::F32,
-            "double" | "float64" => Scalar::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Scalar::I8 | Scalar::U8 => 1,
-            Scalar::I16 | Scalar::U16 => 2,
-            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
-            Scalar::F64 => 8,
-        }
-    }
-
-    fn read(self, b: &[u8], enc: Encoding) -> f64 {
-        macro_rules! num {
-            ($t:ty) => {{
-                let a = b[..std::mem::size_of::<$t>()].try_into().unwrap();
-                (if enc == Encoding::BigEndian {
-                    <$t>::from_be_bytes(a)
-                } else {
-                    <$t>::from_le_bytes(a)
-                }) as f64
-            }};
-        }
-        match self {
-            Scalar::I8 => b[0] as i8 as f64,
-            Scalar::U8 => b[0] as f64,
-            Scalar::I16 => num!(i16),
-            Scalar::U16 => num!(u16),
-            Scalar::I32 => num!(i32),
-            Scalar::U32 => num!(u32),
-            Scalar::F32 => num!(f32),
-            Scalar::F64 => num!(f64),
-        }
-    }
+/// A PLY type name as a scalar.
+fn parse_scalar(s: &str) -> Option<Scalar> {
+    Some(match s {
+        "char" | "int8" => Scalar::I8,
+        "uchar" | "uint8" => Scalar::U8,
+        "short" | "int16" => Scalar::I16,
+        "ushort" | "uint16" => Scalar::U16,
+        "int" | "int32" => Scalar::I32,
+        "uint" | "uint32" => Scalar::U32,
+        "float" | "float32" => Scalar::F32,
+        "double" | "float64" => Scalar::F64,
+        _ => return None,
+    })
 }
 
 #[derive(Debug)]
@@ -143,15 +99,15 @@ fn parse_header(at: At<'_>, bytes: &[u8]) -> Result<Header, DataError> {
                 let e = elements
                     .last_mut()
                     .ok_or_else(|| bad("property before any element"))?;
-                let c = Scalar::parse(count_type).ok_or_else(|| bad("unknown type"))?;
-                let i = Scalar::parse(item_type).ok_or_else(|| bad("unknown type"))?;
+                let c = parse_scalar(count_type).ok_or_else(|| bad("unknown type"))?;
+                let i = parse_scalar(item_type).ok_or_else(|| bad("unknown type"))?;
                 e.properties.push(Property::List(c, i));
             }
             ["property", ty, name] => {
                 let e = elements
                     .last_mut()
                     .ok_or_else(|| bad("property before any element"))?;
-                let t = Scalar::parse(ty).ok_or_else(|| bad("unknown type"))?;
+                let t = parse_scalar(ty).ok_or_else(|| bad("unknown type"))?;
                 e.properties.push(Property::Scalar((*name).to_owned(), t));
             }
             _ => return Err(bad("not understood")),
@@ -200,7 +156,10 @@ impl Body<'_> {
             if self.pos + n > self.bytes.len() {
                 return Err(self.truncated(at, element, row));
             }
-            let v = t.read(&self.bytes[self.pos..], self.encoding);
+            let v = t.value(
+                &self.bytes[self.pos..],
+                self.encoding == Encoding::BigEndian,
+            );
             self.pos += n;
             Ok(v)
         }

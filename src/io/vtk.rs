@@ -133,22 +133,7 @@ pub fn read_step(
                 piece_attributes.extend(split_components(&name, &values, components));
             }
         }
-        if index == 0 {
-            attributes = piece_attributes;
-        } else {
-            for a in &mut attributes {
-                let p = piece_attributes
-                    .iter_mut()
-                    .find(|p| p.name == a.name)
-                    .ok_or_else(|| {
-                        at.malformed(format!(
-                            "piece {index} lacks the point-data array '{}'",
-                            a.name
-                        ))
-                    })?;
-                a.values.append(&mut p.values);
-            }
-        }
+        append_piece(at, &mut attributes, piece_attributes, index)?;
         positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
     }
     Ok(Columns {
@@ -156,6 +141,30 @@ pub fn read_step(
         attributes,
         skipped,
     })
+}
+
+/// Appends piece `index`'s attributes to the first pieces' (the first piece's become them);
+/// every later piece must have each of the first piece's arrays.
+pub(super) fn append_piece(
+    at: At<'_>,
+    attributes: &mut Vec<Attribute>,
+    mut piece: Vec<Attribute>,
+    index: usize,
+) -> Result<(), DataError> {
+    if index == 0 {
+        *attributes = piece;
+        return Ok(());
+    }
+    for a in attributes {
+        let p = piece.iter_mut().find(|p| p.name == a.name).ok_or_else(|| {
+            at.malformed(format!(
+                "piece {index} lacks the point-data array '{}'",
+                a.name
+            ))
+        })?;
+        a.values.append(&mut p.values);
+    }
+    Ok(())
 }
 
 /// The most a compressed VTK array may inflate: zlib (VTK's default) tops out near 1032:1 and

@@ -12,6 +12,7 @@ use std::io::{Read, Seek, SeekFrom};
 use glam::DVec3;
 use quick_xml::events::{BytesStart, Event};
 
+use super::scalar::Scalar;
 use super::{At, AttributeSelection, Columns, DataError, array_attribute_names, split_components};
 
 /// The most bytes of XML read while looking for `<AppendedData ... _` (a header describes
@@ -27,66 +28,21 @@ struct ArrayDesc {
     offset: u64,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    I64,
-    U64,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn parse(text: &str) -> Option<Scalar> {
-        Some(match text {
-            "Int8" | "Char" => Scalar::I8,
-            "UInt8" | "UnsignedChar" => Scalar::U8,
-            "Int16" | "Short" => Scalar::I16,
-            "UInt16" | "UnsignedShort" => Scalar::U16,
-            "Int32" | "Int" => Scalar::I32,
-            "UInt32" | "UnsignedInt" => Scalar::U32,
-            "Int64" | "Long" | "LongLong" => Scalar::I64,
-            "UInt64" | "UnsignedLong" | "UnsignedLongLong" => Scalar::U64,
-            "Float32" | "Float" => Scalar::F32,
-            "Float64" | "Double" => Scalar::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Scalar::I8 | Scalar::U8 => 1,
-            Scalar::I16 | Scalar::U16 => 2,
-            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
-            Scalar::I64 | Scalar::U64 | Scalar::F64 => 8,
-        }
-    }
-
-    /// The value of `b` (this type's size, in the file's byte order) as f64.
-    fn value(self, b: &[u8], big_endian: bool) -> f64 {
-        let mut le = [0u8; 8];
-        le[..b.len()].copy_from_slice(b);
-        if big_endian {
-            le[..b.len()].reverse();
-        }
-        match self {
-            Scalar::I8 => f64::from(le[0] as i8),
-            Scalar::U8 => f64::from(le[0]),
-            Scalar::I16 => f64::from(i16::from_le_bytes([le[0], le[1]])),
-            Scalar::U16 => f64::from(u16::from_le_bytes([le[0], le[1]])),
-            Scalar::I32 => f64::from(i32::from_le_bytes([le[0], le[1], le[2], le[3]])),
-            Scalar::U32 => f64::from(u32::from_le_bytes([le[0], le[1], le[2], le[3]])),
-            Scalar::I64 => i64::from_le_bytes(le) as f64,
-            Scalar::U64 => u64::from_le_bytes(le) as f64,
-            Scalar::F32 => f64::from(f32::from_le_bytes([le[0], le[1], le[2], le[3]])),
-            Scalar::F64 => f64::from_le_bytes(le),
-        }
-    }
+/// A VTK type name (the XML's and the legacy spellings) as a scalar.
+fn parse_scalar(text: &str) -> Option<Scalar> {
+    Some(match text {
+        "Int8" | "Char" => Scalar::I8,
+        "UInt8" | "UnsignedChar" => Scalar::U8,
+        "Int16" | "Short" => Scalar::I16,
+        "UInt16" | "UnsignedShort" => Scalar::U16,
+        "Int32" | "Int" => Scalar::I32,
+        "UInt32" | "UnsignedInt" => Scalar::U32,
+        "Int64" | "Long" | "LongLong" => Scalar::I64,
+        "UInt64" | "UnsignedLong" | "UnsignedLongLong" => Scalar::U64,
+        "Float32" | "Float" => Scalar::F32,
+        "Float64" | "Double" => Scalar::F64,
+        _ => return None,
+    })
 }
 
 /// One piece: its point count, coordinates and point-data arrays.
@@ -160,22 +116,7 @@ pub(super) fn read(
             let values = reader.values(array, n)?;
             piece_attributes.extend(split_components(&array.name, &values, array.components));
         }
-        if index == 0 {
-            attributes = piece_attributes;
-        } else {
-            for a in &mut attributes {
-                let p = piece_attributes
-                    .iter_mut()
-                    .find(|p| p.name == a.name)
-                    .ok_or_else(|| {
-                        at.malformed(format!(
-                            "piece {index} lacks the point-data array '{}'",
-                            a.name
-                        ))
-                    })?;
-                a.values.append(&mut p.values);
-            }
-        }
+        super::vtk::append_piece(at, &mut attributes, piece_attributes, index)?;
         positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
     }
     Ok(Some(Columns {
@@ -299,7 +240,7 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
                     if attr(&e, b"format").as_deref() != Some("appended") {
                         return Ok(None);
                     }
-                    let Some(scalar) = attr(&e, b"type").as_deref().and_then(Scalar::parse) else {
+                    let Some(scalar) = attr(&e, b"type").as_deref().and_then(parse_scalar) else {
                         return Ok(None);
                     };
                     let name = attr(&e, b"Name").unwrap_or_default();
