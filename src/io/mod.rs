@@ -7,6 +7,7 @@
 
 pub mod csv;
 pub mod error;
+mod mapped;
 pub mod natural;
 pub mod npy;
 pub mod output;

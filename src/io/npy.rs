@@ -2,13 +2,16 @@
 //! named `col3`, `col4`, ...), and the query points and results of `aarbf field`.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Seek};
+use std::io::{BufWriter, Cursor, Read, Seek};
 use std::path::Path;
 
 use glam::DVec3;
 use npyz::{DType, NpyFile, Order, WriterBuilder};
+use rayon::prelude::*;
 
-use super::{At, AttributeSelection, Columns, DataError, Problem, file_len};
+use super::mapped::Mapped;
+use super::scalar::{Scalar, strided_column};
+use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::Attribute;
 
 /// A 2-D array in row-major order.
@@ -113,105 +116,162 @@ fn check_header(at: At<'_>, reader: &mut (impl Read + Seek), size: u64) -> Resul
     Ok(())
 }
 
-/// Reads a 2-D numeric array of any element type as f64 (a 1-D array of length 3 is one row).
-pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
-    let file = File::open(at.file).map_err(|e| at.io(e))?;
-    let size = file_len(at, &file)?;
-    let mut reader = BufReader::new(file);
-    check_header(at, &mut reader, size)?;
-    let header = npyz::NpyHeader::from_reader(&mut reader)
-        .map_err(|e| at.malformed(format!("not a valid .npy file: {e}")))?;
-    let data_start = reader.stream_position().map_err(|e| at.io(e))?;
-    let npy = NpyFile::with_header(header, reader);
-    let shape = npy.shape().to_vec();
-    let (rows, cols) = match shape.as_slice() {
-        [r, c] => (*r, *c),
-        [n] if *n == 3 => (1, 3),
-        other => {
-            return Err(at.err(Problem::Dimensionality(format!(
-                "expected a 2-D array (N rows x columns), found shape {other:?}"
-            ))));
-        }
+/// A 2-D array in a mapped `.npy` file: its shape, element type and layout. Values are
+/// decoded from the map only for the columns asked for.
+struct MappedArray {
+    bytes: Mapped,
+    data_start: usize,
+    rows: usize,
+    cols: usize,
+    scalar: Scalar,
+    big_endian: bool,
+    fortran: bool,
+}
+
+/// The element type a NumPy type string (`<f8`, `|u1`, `>i4`, `|b1`) names; `None` for
+/// types that are not plain real numbers (complex, half floats, dates, strings, objects).
+fn scalar_of(descr: &str) -> Option<(Scalar, bool)> {
+    let mut chars = descr.chars();
+    let big_endian = match chars.next()? {
+        '>' | '!' => true,
+        '<' | '|' => false,
+        '=' => cfg!(target_endian = "big"),
+        _ => return None,
     };
-    let item = match npy.dtype() {
-        DType::Plain(t) => t.size_field(),
-        other => {
-            return Err(at.malformed(format!(
-                "expected a plain numeric array, found dtype {}",
-                other.descr()
-            )));
-        }
+    let kind = chars.next()?;
+    let size: usize = chars.as_str().parse().ok()?;
+    let scalar = match (kind, size) {
+        ('f', 4) => Scalar::F32,
+        ('f', 8) => Scalar::F64,
+        ('i', 1) => Scalar::I8,
+        ('i', 2) => Scalar::I16,
+        ('i', 4) => Scalar::I32,
+        ('i', 8) => Scalar::I64,
+        ('u' | 'b', 1) => Scalar::U8,
+        ('u', 2) => Scalar::U16,
+        ('u', 4) => Scalar::U32,
+        ('u', 8) => Scalar::U64,
+        _ => return None,
     };
-    let elements = rows
-        .checked_mul(cols)
-        .ok_or_else(|| at.malformed(format!("shape {shape:?} overflows")))?;
-    let available = size.saturating_sub(data_start);
-    at.check_count("array element", elements, item, available)?;
-    if elements * item > available {
-        return Err(at.err(Problem::Truncated {
-            what: format!("a {rows} x {cols} array"),
-            needed: elements * item,
-            available,
-        }));
-    }
-    let fortran = npy.order() == Order::Fortran;
-    let data = read_as_f64(npy).map_err(|e| at.malformed(e))?;
-    let (rows, cols) = (rows as usize, cols as usize);
-    let data = if fortran && rows > 1 && cols > 1 {
-        let mut c = vec![0.0; data.len()];
-        for i in 0..rows {
-            for j in 0..cols {
-                c[i * cols + j] = data[j * rows + i];
+    Some((scalar, big_endian))
+}
+
+impl MappedArray {
+    fn open(at: At<'_>) -> Result<MappedArray, DataError> {
+        let bytes = Mapped::open(at)?;
+        let size = bytes.len() as u64;
+        let mut reader = Cursor::new(&bytes[..]);
+        check_header(at, &mut reader, size)?;
+        let header = npyz::NpyHeader::from_reader(&mut reader)
+            .map_err(|e| at.malformed(format!("not a valid .npy file: {e}")))?;
+        let data_start = reader.position();
+        let npy = NpyFile::with_header(header, reader);
+        let shape = npy.shape().to_vec();
+        let (rows, cols) = match shape.as_slice() {
+            [r, c] => (*r, *c),
+            [n] if *n == 3 => (1, 3),
+            other => {
+                return Err(at.err(Problem::Dimensionality(format!(
+                    "expected a 2-D array (N rows x columns), found shape {other:?}"
+                ))));
             }
+        };
+        let (scalar, big_endian) = match npy.dtype() {
+            DType::Plain(t) => scalar_of(&t.to_string()).ok_or_else(|| {
+                at.malformed(format!(
+                    "unsupported element type {t} (expected real numbers: float32/64, \
+                     (u)int8 to (u)int64 or bool)"
+                ))
+            })?,
+            other => {
+                return Err(at.malformed(format!(
+                    "expected a plain numeric array, found dtype {}",
+                    other.descr()
+                )));
+            }
+        };
+        let elements = rows
+            .checked_mul(cols)
+            .ok_or_else(|| at.malformed(format!("shape {shape:?} overflows")))?;
+        let item = scalar.size() as u64;
+        let available = size.saturating_sub(data_start);
+        at.check_count("array element", elements, item, available)?;
+        if elements * item > available {
+            return Err(at.err(Problem::Truncated {
+                what: format!("a {rows} x {cols} array"),
+                needed: elements * item,
+                available,
+            }));
         }
-        c
-    } else {
-        data
-    };
+        let fortran = npy.order() == Order::Fortran;
+        Ok(MappedArray {
+            bytes,
+            data_start: data_start as usize,
+            rows: rows as usize,
+            cols: cols as usize,
+            scalar,
+            big_endian,
+            fortran,
+        })
+    }
+
+    /// Column `c`, decoded in parallel straight from the map.
+    fn column(&self, c: usize) -> Vec<f64> {
+        let item = self.scalar.size();
+        let (stride, offset) = if self.fortran {
+            (item, c * self.rows * item)
+        } else {
+            (self.cols * item, c * item)
+        };
+        strided_column(
+            &self.bytes[self.data_start..],
+            self.rows,
+            stride,
+            offset,
+            self.scalar,
+            self.big_endian,
+        )
+    }
+}
+
+/// Reads a 2-D numeric array of any real element type as f64 (a 1-D array of length 3 is
+/// one row), C or Fortran order, either byte order.
+pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
+    let array = MappedArray::open(at)?;
+    let (rows, cols) = (array.rows, array.cols);
+    let columns: Vec<Vec<f64>> = (0..cols).map(|c| array.column(c)).collect();
+    let mut data = vec![0.0; rows * cols];
+    if cols > 0 {
+        data.par_chunks_mut(cols).enumerate().for_each(|(i, row)| {
+            for (v, column) in row.iter_mut().zip(&columns) {
+                *v = column[i];
+            }
+        });
+    }
     Ok(Matrix { rows, cols, data })
 }
 
-fn read_as_f64<R: Read>(npy: NpyFile<R>) -> Result<Vec<f64>, String> {
-    fn all<T: npyz::Deserialize + Into<f64>, R: Read>(
-        npy: NpyFile<R>,
-    ) -> Result<Result<Vec<f64>, String>, NpyFile<R>> {
-        npy.try_data::<T>().map(|data| {
-            data.map(|v| v.map(Into::into))
-                .collect::<Result<Vec<f64>, _>>()
-                .map_err(|e| format!("cannot read the array data: {e}"))
-        })
-    }
-    macro_rules! try_types {
-        ($npy:expr, $($t:ty),*) => {{
-            let npy = $npy;
-            $(let npy = match all::<$t, _>(npy) { Ok(r) => return r, Err(npy) => npy };)*
-            Err(format!("unsupported element type {}", npy.dtype().descr()))
-        }};
-    }
-    try_types!(npy, f64, f32, i32, u32, i16, u16, i8, u8)
-}
-
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    let m = read_matrix(at)?;
-    if m.cols < 3 {
+    let array = MappedArray::open(at)?;
+    if array.cols < 3 {
         return Err(at.err(Problem::Dimensionality(format!(
             "a particle array needs at least 3 columns (x, y, z), found {}",
-            m.cols
+            array.cols
         ))));
     }
-    let positions = (0..m.rows)
-        .map(|i| {
-            let r = m.row(i);
-            DVec3::new(r[0], r[1], r[2])
-        })
+    let [x, y, z] = [0, 1, 2].map(|c| array.column(c));
+    let positions = (x, y, z)
+        .into_par_iter()
+        .map(|(x, y, z)| DVec3::new(x, y, z))
         .collect();
+    // Only the columns the scene keeps are decoded.
     let (kept, skipped): (Vec<usize>, Vec<usize>) =
-        (3..m.cols).partition(|c| selection.keeps(&format!("col{c}")));
+        (3..array.cols).partition(|c| selection.keeps(&format!("col{c}")));
     let attributes = kept
         .into_iter()
         .map(|c| Attribute {
             name: format!("col{c}"),
-            values: (0..m.rows).map(|i| m.data[i * m.cols + c]).collect(),
+            values: array.column(c),
         })
         .collect();
     Ok(Columns {

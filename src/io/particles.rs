@@ -4,11 +4,10 @@
 //! `<header path>_<name>`: a little-endian u64 particle count, then count records of four
 //! little-endian f32 (x, y, z, attribute).
 
-use std::fs::File;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use super::{At, AttributeSelection, Columns, DataError, Problem, file_len};
+use super::mapped::Mapped;
+use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::Step;
 
 /// The name the format's single unnamed attribute gets.
@@ -45,8 +44,8 @@ pub fn step_path(header: &Path, name: &str) -> PathBuf {
 }
 
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    let mut file = File::open(at.file).map_err(|e| at.io(e))?;
-    let size = file_len(at, &file)?;
+    let bytes = Mapped::open(at)?;
+    let size = bytes.len() as u64;
     if size < 8 {
         return Err(at.err(Problem::Truncated {
             what: "the u64 particle count".into(),
@@ -54,9 +53,7 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             available: size,
         }));
     }
-    let mut count = [0u8; 8];
-    file.read_exact(&mut count).map_err(|e| at.io(e))?;
-    let count = u64::from_le_bytes(count);
+    let count = u64::from_le_bytes(bytes[..8].try_into().unwrap());
     let n = at.check_count("particle", count, RECORD_BYTES, size - 8)?;
     let expected = 8 + n as u64 * RECORD_BYTES;
     if size > expected {
@@ -66,9 +63,11 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             size - expected
         );
     }
-    let mut bytes = vec![0u8; n * RECORD_BYTES as usize];
-    file.read_exact(&mut bytes).map_err(|e| at.io(e))?;
-    Ok(super::raw::xyzw_columns(&bytes, ATTRIBUTE_NAME, selection))
+    Ok(super::raw::xyzw_columns(
+        &bytes[8..expected as usize],
+        ATTRIBUTE_NAME,
+        selection,
+    ))
 }
 
 /// Writes a series as a `.particles` header and one file per step, carrying `attribute`.

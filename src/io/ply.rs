@@ -6,7 +6,7 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::scalar::Scalar;
+use super::scalar::{Scalar, strided_column};
 use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
 
@@ -173,7 +173,7 @@ impl Body<'_> {
 }
 
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
+    let bytes = super::mapped::Mapped::open(at)?;
     let header = parse_header(at, &bytes)?;
     let body_len = (bytes.len() - header.body_start) as u64;
     let mut body = Body {
@@ -237,36 +237,61 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             .enumerate()
             .map(|(k, (name, _))| [ix, iy, iz].contains(&k) || selection.keeps(name))
             .collect();
-        let mut columns: Vec<Vec<f64>> = stored
-            .iter()
-            .map(|&s| Vec::with_capacity(if s { n } else { 0 }))
-            .collect();
-        let mut row_values = vec![0.0f64; scalars.len()];
-        for row in 0..element.count {
-            let mut k = 0;
-            for p in &element.properties {
-                match p {
-                    Property::Scalar(_, t) => {
-                        row_values[k] = body.next(at, *t, "vertex", row)?;
-                        k += 1;
-                    }
-                    Property::List(c, i) => {
-                        let len = body.next(at, *c, "vertex", row)?;
-                        for _ in 0..(len.max(0.0) as u64) {
-                            body.next(at, *i, "vertex", row)?;
+        let columns =
+            if header.encoding != Encoding::Ascii && scalars.len() == element.properties.len() {
+                // Rows of scalars only have a fixed size: each stored property is read by its
+                // stride, in parallel; the others are never decoded.
+                let stride: usize = scalars.iter().map(|(_, t)| t.size()).sum();
+                let rest = &body.bytes[body.pos..];
+                if n * stride > rest.len() {
+                    let complete = (rest.len() / stride) as u64;
+                    return Err(body.truncated(at, "vertex", complete));
+                }
+                let big_endian = header.encoding == Encoding::BigEndian;
+                let mut offset = 0;
+                let mut columns = Vec::with_capacity(scalars.len());
+                for ((_, t), &keep) in scalars.iter().zip(&stored) {
+                    columns.push(if keep {
+                        strided_column(rest, n, stride, offset, *t, big_endian)
+                    } else {
+                        Vec::new()
+                    });
+                    offset += t.size();
+                }
+                columns
+            } else {
+                let mut columns: Vec<Vec<f64>> = stored
+                    .iter()
+                    .map(|&s| Vec::with_capacity(if s { n } else { 0 }))
+                    .collect();
+                let mut row_values = vec![0.0f64; scalars.len()];
+                for row in 0..element.count {
+                    let mut k = 0;
+                    for p in &element.properties {
+                        match p {
+                            Property::Scalar(_, t) => {
+                                row_values[k] = body.next(at, *t, "vertex", row)?;
+                                k += 1;
+                            }
+                            Property::List(c, i) => {
+                                let len = body.next(at, *c, "vertex", row)?;
+                                for _ in 0..(len.max(0.0) as u64) {
+                                    body.next(at, *i, "vertex", row)?;
+                                }
+                            }
                         }
                     }
+                    for ((col, v), _) in columns
+                        .iter_mut()
+                        .zip(&row_values)
+                        .zip(&stored)
+                        .filter(|(_, s)| **s)
+                    {
+                        col.push(*v);
+                    }
                 }
-            }
-            for ((col, v), _) in columns
-                .iter_mut()
-                .zip(&row_values)
-                .zip(&stored)
-                .filter(|(_, s)| **s)
-            {
-                col.push(*v);
-            }
-        }
+                columns
+            };
         let positions = (0..n)
             .map(|i| DVec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
             .collect();

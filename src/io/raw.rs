@@ -11,7 +11,7 @@ use crate::values::{Attribute, Step};
 pub const ATTRIBUTE_NAME: &str = "w";
 
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
+    let bytes = super::mapped::Mapped::open(at)?;
     if bytes.len() % 16 != 0 {
         let n = bytes.len() / 16;
         return Err(at.err(Problem::Truncated {

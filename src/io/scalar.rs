@@ -53,3 +53,32 @@ impl Scalar {
         }
     }
 }
+
+/// Values `n` records of `stride` bytes hold at `offset` within each record, from `bytes`
+/// (which must hold them: the caller checked `bytes.len()` against the records' extent):
+/// one column of a table of fixed-size records (PLY's vertex rows, a C-order NumPy array), or
+/// of a run of consecutive scalars (`stride` = the scalar's size). Decoded in parallel.
+pub(crate) fn strided_column(
+    bytes: &[u8],
+    n: usize,
+    stride: usize,
+    offset: usize,
+    scalar: Scalar,
+    big_endian: bool,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    debug_assert!(n == 0 || (n - 1) * stride + offset + scalar.size() <= bytes.len());
+    // Enough values per task that rayon's bookkeeping is noise beside the decode.
+    const CHUNK: usize = 1 << 15;
+    let mut out = vec![0.0; n];
+    out.par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(chunk, values)| {
+            let first = chunk * CHUNK;
+            for (k, v) in values.iter_mut().enumerate() {
+                let at = (first + k) * stride + offset;
+                *v = scalar.value(&bytes[at..], big_endian);
+            }
+        });
+    out
+}
