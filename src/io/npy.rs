@@ -10,7 +10,7 @@ use npyz::{DType, NpyFile, Order, WriterBuilder};
 use rayon::prelude::*;
 
 use super::mapped::Mapped;
-use super::scalar::{Scalar, strided_column};
+use super::scalar::{InRecord, Scalar, decode_records, strided_column};
 use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::Attribute;
 
@@ -215,6 +215,38 @@ impl MappedArray {
         })
     }
 
+    /// The positions (columns 0, 1, 2) and the columns `attributes`, decoded in parallel
+    /// straight from the map: in C order a row at a time (one pass over the table), in Fortran
+    /// order a column at a time (each a contiguous run).
+    fn columns(&self, attributes: impl Iterator<Item = usize>) -> (Vec<DVec3>, Vec<Vec<f64>>) {
+        let attributes: Vec<usize> = attributes.collect();
+        if self.fortran {
+            let [x, y, z] = [0, 1, 2].map(|c| self.column(c));
+            let positions = (x, y, z)
+                .into_par_iter()
+                .map(|(x, y, z)| DVec3::new(x, y, z))
+                .collect();
+            return (
+                positions,
+                attributes.iter().map(|&c| self.column(c)).collect(),
+            );
+        }
+        let item = self.scalar.size();
+        let at = |c: usize| InRecord {
+            offset: c * item,
+            scalar: self.scalar,
+        };
+        let wanted: Vec<InRecord> = attributes.iter().map(|&c| at(c)).collect();
+        decode_records(
+            &self.bytes[self.data_start..],
+            self.rows,
+            self.cols * item,
+            self.big_endian,
+            [at(0), at(1), at(2)],
+            &wanted,
+        )
+    }
+
     /// Column `c`, decoded in parallel straight from the map.
     fn column(&self, c: usize) -> Vec<f64> {
         let item = self.scalar.size();
@@ -239,6 +271,19 @@ impl MappedArray {
 pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
     let array = MappedArray::open(at)?;
     let (rows, cols) = (array.rows, array.cols);
+    if !array.fortran {
+        // Row-major already: every element in file order, one pass.
+        let item = array.scalar.size();
+        let data = strided_column(
+            &array.bytes[array.data_start..],
+            rows * cols,
+            item,
+            0,
+            array.scalar,
+            array.big_endian,
+        );
+        return Ok(Matrix { rows, cols, data });
+    }
     let columns: Vec<Vec<f64>> = (0..cols).map(|c| array.column(c)).collect();
     let mut data = vec![0.0; rows * cols];
     if cols > 0 {
@@ -259,19 +304,16 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             array.cols
         ))));
     }
-    let [x, y, z] = [0, 1, 2].map(|c| array.column(c));
-    let positions = (x, y, z)
-        .into_par_iter()
-        .map(|(x, y, z)| DVec3::new(x, y, z))
-        .collect();
     // Only the columns the scene keeps are decoded.
     let (kept, skipped): (Vec<usize>, Vec<usize>) =
         (3..array.cols).partition(|c| selection.keeps(&format!("col{c}")));
+    let (positions, values) = array.columns(kept.iter().copied());
     let attributes = kept
         .into_iter()
-        .map(|c| Attribute {
+        .zip(values)
+        .map(|(c, values)| Attribute {
             name: format!("col{c}"),
-            values: array.column(c),
+            values,
         })
         .collect();
     Ok(Columns {

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::scalar::{Scalar, strided_column};
+use super::scalar::{InRecord, Scalar, decode_records};
 use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
 
@@ -237,28 +237,41 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             .enumerate()
             .map(|(k, (name, _))| [ix, iy, iz].contains(&k) || selection.keeps(name))
             .collect();
-        let columns =
+        let (positions, columns) =
             if header.encoding != Encoding::Ascii && scalars.len() == element.properties.len() {
-                // Rows of scalars only have a fixed size: each stored property is read by its
-                // stride, in parallel; the others are never decoded.
-                let stride: usize = scalars.iter().map(|(_, t)| t.size()).sum();
+                // Rows of scalars only have a fixed size: the positions and the stored properties
+                // are decoded by their offsets in one parallel pass; the others are never decoded.
+                let mut layout = Vec::with_capacity(scalars.len());
+                let mut stride = 0;
+                for (_, t) in &scalars {
+                    layout.push(InRecord {
+                        offset: stride,
+                        scalar: *t,
+                    });
+                    stride += t.size();
+                }
                 let rest = &body.bytes[body.pos..];
                 if n * stride > rest.len() {
                     let complete = (rest.len() / stride) as u64;
                     return Err(body.truncated(at, "vertex", complete));
                 }
-                let big_endian = header.encoding == Encoding::BigEndian;
-                let mut offset = 0;
-                let mut columns = Vec::with_capacity(scalars.len());
-                for ((_, t), &keep) in scalars.iter().zip(&stored) {
-                    columns.push(if keep {
-                        strided_column(rest, n, stride, offset, *t, big_endian)
-                    } else {
-                        Vec::new()
-                    });
-                    offset += t.size();
+                let decoded: Vec<usize> = (0..scalars.len())
+                    .filter(|k| stored[*k] && ![ix, iy, iz].contains(k))
+                    .collect();
+                let wanted: Vec<InRecord> = decoded.iter().map(|&k| layout[k]).collect();
+                let (positions, values) = decode_records(
+                    rest,
+                    n,
+                    stride,
+                    header.encoding == Encoding::BigEndian,
+                    [layout[ix], layout[iy], layout[iz]],
+                    &wanted,
+                );
+                let mut columns = vec![Vec::new(); scalars.len()];
+                for (k, v) in decoded.into_iter().zip(values) {
+                    columns[k] = v;
                 }
-                columns
+                (positions, columns)
             } else {
                 let mut columns: Vec<Vec<f64>> = stored
                     .iter()
@@ -290,11 +303,11 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
                         col.push(*v);
                     }
                 }
-                columns
+                let positions = (0..n)
+                    .map(|i| DVec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
+                    .collect();
+                (positions, columns)
             };
-        let positions = (0..n)
-            .map(|i| DVec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
-            .collect();
         let mut attributes = Vec::new();
         let mut skipped = Vec::new();
         for (k, ((name, _), values)) in scalars.iter().zip(columns).enumerate() {

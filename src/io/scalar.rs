@@ -82,3 +82,52 @@ pub(crate) fn strided_column(
         });
     out
 }
+
+/// Where a value sits in a fixed-size record, and its type.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct InRecord {
+    pub offset: usize,
+    pub scalar: Scalar,
+}
+
+/// The positions (`xyz`) and the columns `attributes` name, from `n` records of `stride`
+/// bytes at the start of `bytes` (which must hold them: the caller checked): one parallel pass
+/// over the records, each record's values decoded together while its cache line is loaded
+/// (a column at a time would read the whole table once per column).
+pub(crate) fn decode_records(
+    bytes: &[u8],
+    n: usize,
+    stride: usize,
+    big_endian: bool,
+    xyz: [InRecord; 3],
+    attributes: &[InRecord],
+) -> (Vec<glam::DVec3>, Vec<Vec<f64>>) {
+    use rayon::prelude::*;
+    debug_assert!(n * stride <= bytes.len());
+    const CHUNK: usize = 1 << 14;
+    let mut positions = vec![glam::DVec3::ZERO; n];
+    let mut columns: Vec<Vec<f64>> = attributes.iter().map(|_| vec![0.0; n]).collect();
+    // Chunk c of every column, together.
+    let mut chunks: Vec<Vec<&mut [f64]>> = (0..n.div_ceil(CHUNK)).map(|_| Vec::new()).collect();
+    for column in &mut columns {
+        for (c, part) in column.chunks_mut(CHUNK).enumerate() {
+            chunks[c].push(part);
+        }
+    }
+    positions
+        .par_chunks_mut(CHUNK)
+        .zip(chunks.into_par_iter())
+        .enumerate()
+        .for_each(|(c, (points, mut parts))| {
+            let first = c * CHUNK;
+            for (k, point) in points.iter_mut().enumerate() {
+                let record = &bytes[(first + k) * stride..(first + k + 1) * stride];
+                let [x, y, z] = xyz.map(|f| f.scalar.value(&record[f.offset..], big_endian));
+                *point = glam::DVec3::new(x, y, z);
+                for (part, f) in parts.iter_mut().zip(attributes) {
+                    part[k] = f.scalar.value(&record[f.offset..], big_endian);
+                }
+            }
+        });
+    (positions, columns)
+}
