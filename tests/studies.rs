@@ -624,3 +624,53 @@ fn an_interrupted_study_keeps_every_row_it_wrote() {
         assert!(r[header.len() - 1].parse::<f64>().unwrap() > 0.0);
     }
 }
+
+/// Scaling on a data file as NumPy writes it (big-endian, Fortran order, 1e6 from the origin):
+/// nested random subsets of its step up to the whole step (1001 particles, not a power of
+/// two), the radius grown as the subset thins so the overlap stays.
+#[test]
+fn scaling_runs_on_subsets_of_a_data_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/numpy_fortran_be.npy");
+    ok(&[
+        "bench",
+        "scaling",
+        "--data",
+        data.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--min-n",
+        "100",
+        "--max-n",
+        "1000000",
+        "--size",
+        "16x16",
+        "--cameras",
+        "2",
+        "--repetitions",
+        "1",
+        "--queries",
+        "200",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    let (header, rows) = read_csv(&dir.path().join("scaling/scaling.csv"));
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let mut ns: Vec<&str> = rows.iter().map(|r| r[col("n")].as_str()).collect();
+    ns.dedup();
+    assert_eq!(ns, ["100", "400", "1001"]);
+    assert_eq!(rows.len(), 3 * 4, "build, refit, query and frame at each N");
+    let radius = |n: &str| -> f64 {
+        let r = rows.iter().find(|r| r[col("n")] == n).unwrap();
+        r[col("radius")].parse().unwrap()
+    };
+    let grown = radius("100") / radius("1001");
+    assert!(
+        (grown / (1001.0f64 / 100.0).cbrt() - 1.0).abs() < 1e-6,
+        "{grown}"
+    );
+    for r in &rows {
+        let median: f64 = r[col("median")].parse().unwrap();
+        assert!(median.is_finite() && median >= 0.0, "{r:?}");
+    }
+}

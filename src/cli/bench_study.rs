@@ -76,7 +76,8 @@ pub struct StudyArgs {
     /// scaling: the smallest particle count (then times 4 up to --max-n).
     #[arg(long, default_value_t = 10_000)]
     pub min_n: usize,
-    /// scaling: the largest particle count.
+    /// scaling: the largest particle count (with --data PATH: at most the data's largest step,
+    /// whose nested random subsets are measured up to the whole step).
     #[arg(long, default_value_t = 1_000_000)]
     pub max_n: usize,
     /// scaling: query points per timed query.

@@ -145,6 +145,60 @@ impl Dataset {
     }
 }
 
+impl Dataset {
+    /// The step with the most particles (the first of equals): the largest this data holds.
+    pub fn largest_step(&self) -> usize {
+        (0..self.series.len())
+            .max_by_key(|&i| {
+                let count = self.series.step_info(i).map_or(0, |s| s.count);
+                (count, std::cmp::Reverse(i))
+            })
+            .unwrap_or(self.step)
+    }
+
+    /// `n` particles of this data set's step drawn at random (seeded: the subsets of one seed
+    /// are nested, each smaller one inside each larger one), kept in the file's order, as a
+    /// one-step data set. With `keep_overlap` the radius grows by (N / n)^(1/3), so about as
+    /// many particles reach a point as in the whole step.
+    pub fn subset(&self, n: usize, seed: u64, keep_overlap: bool) -> Result<Dataset, StudyError> {
+        use rand::SeedableRng;
+        use rand::seq::SliceRandom;
+        let step = self.series.step(self.step)?;
+        let n = n.clamp(1, step.len());
+        let mut chosen: Vec<usize> = (0..step.len()).collect();
+        chosen.shuffle(&mut rand_pcg::Pcg64::seed_from_u64(seed));
+        chosen.truncate(n);
+        chosen.sort_unstable();
+        let subset = Step {
+            name: format!("{} ({n} of {})", step.name, step.len()),
+            positions: chosen.iter().map(|&i| step.positions[i]).collect(),
+            attributes: step
+                .attributes
+                .iter()
+                .map(|a| crate::values::Attribute {
+                    name: a.name.clone(),
+                    values: chosen.iter().map(|&i| a.values[i]).collect(),
+                })
+                .collect(),
+        };
+        let bounds = subset.bounds();
+        let radius = if keep_overlap {
+            self.radius * (step.len() as f64 / n as f64).cbrt()
+        } else {
+            self.radius
+        };
+        Ok(Dataset {
+            name: self.name.clone(),
+            series: TimeSeries::from_steps(vec![subset]),
+            step: 0,
+            attribute: self.attribute.clone(),
+            n,
+            bounds,
+            radius,
+        })
+    }
+}
+
 /// The radius a study renders a data set at: for the unit-cube sets (`uniform`, `random`) the
 /// one at which about 30 particles reach a point, as the other benchmarks use; for every
 /// other data set 1.5% of the bounds' diagonal, the demo's radius.

@@ -2,10 +2,12 @@
 //! the particle count N, from 10K up to what this machine holds, on a log-log plot with the
 //! exponent fitted to each line (cost ∝ N^e).
 //!
-//! The data is a generator's (`uniform` by default) at each N; the radius keeps the overlap
-//! constant (about 30 particles reach a point in `uniform` and `random`; for other generators
-//! the default radius shrinks as N^(-1/3) from the generator's default count), so the work per
-//! sample stays the same and the curves show what N alone costs.
+//! The data is a generator's (`uniform` by default) at each N, or random nested subsets of a
+//! data set's largest step up to the whole step (`--data PATH`: the largest step this machine
+//! holds is the one the user has); the radius keeps the overlap constant (about 30 particles
+//! reach a point in `uniform` and `random`; for other generators the default radius shrinks as
+//! N^(-1/3) from the generator's default count; a subset's grows as (N_step / N)^(1/3)), so the
+//! work per sample stays the same and the curves show what N alone costs.
 
 use super::plot::{Figure, Panel, Scale};
 use super::{
@@ -56,19 +58,48 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let bar = ctx.bar(ctx.data.len() * ns.len() * ctx.backends.len(), "scaling");
     let cluster = ClusterSize::new(1).map_err(StudyError::Invalid)?;
     for spec in ctx.data {
-        let DataSpec::Generated(generator) = spec else {
-            return Err(StudyError::Invalid(format!(
-                "scaling generates its data at each N: --data must be a generator (uniform, random, clusters, dambreak-demo), not {spec}"
-            )));
+        // A data set on disk: random subsets of its largest step (or of --step), up to the
+        // whole step; a generator: its data generated at each N.
+        let (whole, generator) = match spec {
+            DataSpec::Path(_) => {
+                let load = |step| {
+                    super::Dataset::load(spec, None, step, o.attribute.as_deref(), o.radius_pct)
+                };
+                let ds = load(o.step)?;
+                let largest = ds.largest_step();
+                let ds = if o.step.is_none() && largest != ds.step {
+                    load(Some(largest))?
+                } else {
+                    ds
+                };
+                (Some(ds), None)
+            }
+            DataSpec::Generated(g) => (None, Some(*g)),
+        };
+        let ns = match &whole {
+            Some(w) => sizes(o.min_n.min(w.n), o.max_n.min(w.n)),
+            None => ns.clone(),
         };
         for &n in &ns {
-            let mut ds =
-                super::Dataset::load(spec, Some(n), o.step, o.attribute.as_deref(), o.radius_pct)?;
-            if o.radius_pct.is_none()
-                && !matches!(generator, Generator::Uniform | Generator::Random)
-            {
-                ds.radius *= (generator.default_count() as f64 / ds.n as f64).cbrt();
-            }
+            let ds = match (&whole, generator) {
+                (Some(whole), _) => whole.subset(n, 17, o.radius_pct.is_none())?,
+                (None, generator) => {
+                    let mut ds = super::Dataset::load(
+                        spec,
+                        Some(n),
+                        o.step,
+                        o.attribute.as_deref(),
+                        o.radius_pct,
+                    )?;
+                    if o.radius_pct.is_none()
+                        && let Some(g) = generator
+                        && !matches!(g, Generator::Uniform | Generator::Random)
+                    {
+                        ds.radius *= (g.default_count() as f64 / ds.n as f64).cbrt();
+                    }
+                    ds
+                }
+            };
             let orbit = cameras(ds.bounds, o.cameras);
             let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
             let mut wider = field.clone();
