@@ -293,8 +293,8 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
     // The scaling page states a fitted exponent for each line.
     let md = std::fs::read_to_string(p.join("scaling/scaling.md")).unwrap();
     assert!(md.contains("∝ N^"), "{md}");
-    // RBF on both backends and voxel grids 8 and 16 on cpu: 4 x (frame, structure, march,
-    // rmse); the splatter with k = 1 and 15 on both: 2 x (frame, structure, march, rmse), with
+    // RBF and voxel grids 8 and 16 on both backends (each voxelises and marches its own
+    // grid): 6 x (frame, structure, march, rmse); the splatter with k = 1 and 15 on both: 2 x (frame, structure, march, rmse), with
     // the share of hits lost (which may be 0) on cpu.
     let rows = check_study_values(
         p,
@@ -313,7 +313,7 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             "cameras",
             "reference_spp",
         ],
-        34,
+        42,
         &b,
         2,
         |v| v >= 0.0,
@@ -333,6 +333,8 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             ("cpu", "splat 1"),
             ("cpu", "splat 15"),
             ("wgpu", "rbf"),
+            ("wgpu", "voxel 8"),
+            ("wgpu", "voxel 16"),
             ("wgpu", "splat 1"),
             ("wgpu", "splat 15")
         ]

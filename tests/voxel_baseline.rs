@@ -8,7 +8,6 @@ use std::process::Command;
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind};
 use aarbf::field::FieldSettings;
-use aarbf::render::voxel::{VoxelGrid, VoxelRenderer};
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
@@ -38,14 +37,18 @@ fn the_voxel_image_converges_to_the_rbf_image_as_the_grid_grows() {
     let frame0 = session.frame_params(&settings, 0).unwrap();
     let mut errors = Vec::new();
     for n in [8, 16, 32, 64, 128] {
-        let grid =
-            VoxelGrid::voxelize(session.backend_mut(), frame0.box_min, frame0.box_max, n).unwrap();
-        assert_eq!(grid.dims().into_iter().max(), Some(n));
-        let mut voxels = VoxelRenderer::new(grid);
+        let backend = session.backend_mut();
+        backend.voxelize(&frame0, n).unwrap();
+        assert_eq!(
+            backend.voxel_grid().unwrap().dims().into_iter().max(),
+            Some(n)
+        );
+        backend.reset();
         for f in 0..spp {
-            voxels.render(&session.frame_params(&settings, f).unwrap());
+            let frame = session.frame_params(&settings, f).unwrap();
+            session.backend_mut().render_voxels(&frame).unwrap();
         }
-        let image = voxels.image().unwrap();
+        let image = session.backend_mut().image().unwrap();
         assert!(image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())));
         errors.push(image.rmse(&rbf));
     }

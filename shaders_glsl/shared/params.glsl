@@ -29,3 +29,18 @@ struct Field {
 // VkSpecializationInfo): one shader source, a variant per used feature, and no runtime branch
 // over an unused one. Generated from src/values/shader_constants.rs.
 #include "generated/constants.glsl"
+
+// The voxel-grid baseline's grid (src/backend/voxel.rs; the Rust twin is `GpuVoxels` in
+// src/backend/shaders/mod.rs, and shaders_wgsl/voxel_splat.wgsl declares the same struct).
+struct Voxels {
+    vec4 origin;     // xyz the first cell's centre, local coordinates (the hi part with
+                     // double-single positions); w unused
+    vec4 origin_lo;  // xyz the lo part of origin (double-single positions; else 0); w unused
+    vec4 cell;       // xyz the cell size; w unused
+    uvec4 dims;      // xyz cells per axis; w cells per row of the splat's slab buffer (dims.x
+                     // rounded up for the row alignment of buffer-to-texture copies)
+    uvec4 range;     // the splat's pass: x first particle, y particles, z the slab's first
+                     // layer (z), w its layers
+    uvec4 channels;  // x the sums each cell receives: 1 (Phi), 2 (and a scalar Theta
+                     // numerator) or 4 (and an RGB one); yzw unused
+};

@@ -11,6 +11,7 @@ pub mod ash_rt;
 pub mod cpu;
 pub mod gpu_data;
 pub mod shaders;
+pub mod voxel;
 pub mod wgpu_lbvh;
 
 use std::fmt;
@@ -109,6 +110,9 @@ pub struct Capabilities {
     /// Whether [`Backend::query_grid`] scatters the uploaded particles onto the grid, so that
     /// a grid needs no [`Backend::build`] first (the CPU backend).
     pub scatters_grids: bool,
+    /// Whether the backend runs the voxel-grid baseline ([`Backend::voxelize`],
+    /// [`Backend::render_voxels`]); one that does not refuses both with an error saying so.
+    pub voxel_grids: bool,
     /// How the backend's frame times ([`Timings::frame`]) are taken (on the GPU backends also
     /// their builds, refits and queries).
     pub frame_timer: FrameTimer,
@@ -141,6 +145,9 @@ pub struct Timings {
     pub refit: Duration,
     pub frame: Duration,
     pub query: Duration,
+    /// The last [`Backend::voxelize`]: the splat into the grid, on the device where the
+    /// backend has one (its march is timed as a frame).
+    pub voxelize: Duration,
 }
 
 /// Memory held for the current step.
@@ -254,6 +261,9 @@ pub enum BackendError {
     },
     #[error("the {0} backend is not available on this machine: {1}")]
     Unavailable(&'static str, String),
+    /// [`Backend::render_voxels`] or [`Backend::voxel_grid`] before any [`Backend::voxelize`].
+    #[error("{0}: no voxel grid yet (voxelize the step first)")]
+    NoVoxelGrid(&'static str),
     /// The caller raised the abandon flag ([`Backend::set_abandon_flag`]) during the frame.
     #[error("the frame was abandoned for a newer one")]
     Abandoned,
@@ -325,6 +335,26 @@ pub trait Backend: Send {
         frame: &FrameParams,
         k: usize,
     ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError>;
+
+    /// The voxel-grid baseline of the paper's Table 3 ([`voxel`]), its first half: splats the
+    /// uploaded particles (no [`Backend::build`] needed) into a grid over the frame's march
+    /// box, cubic cells with `n` along its longest side, each cell centre receiving Phi and
+    /// the Theta numerator of every particle that reaches it (with the frame's colour map for
+    /// pre-classification), and keeps the grid, replacing the last one. Timed in
+    /// [`Timings::voxelize`]. The CPU backend scatters in f64 and rounds the sums to f32; the
+    /// GPU backends add f32 contributions with atomics (the grid is the CPU's up to f32
+    /// rounding and summation order). A grid the backend cannot hold is refused with an
+    /// error naming the limit.
+    fn voxelize(&mut self, frame: &FrameParams, n: usize) -> Result<(), BackendError>;
+
+    /// The voxel baseline's second half: renders one frame of the frame's integrator over the
+    /// last voxelised grid (trilinear between cell centres, [`voxel::VoxelGrid`]'s sampling
+    /// rule) and adds it to the accumulation (restarted by `reset`, or when the frame's size
+    /// differs), so [`Backend::image`] gives the mean. Timed as a frame.
+    fn render_voxels(&mut self, frame: &FrameParams) -> Result<(), BackendError>;
+
+    /// The last voxelised grid, read back (tests, exports).
+    fn voxel_grid(&mut self) -> Result<voxel::VoxelGrid, BackendError>;
 
     /// Restarts progressive accumulation.
     fn reset(&mut self);

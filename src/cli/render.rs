@@ -6,11 +6,11 @@ use std::time::Instant;
 use anyhow::{Context, bail, ensure};
 use clap::Args;
 
+use crate::backend::voxel::VoxelGeometry;
 use crate::backend::{self, BackendKind};
 use crate::render::RenderSession;
 use crate::render::accuracy::{ErrorMetric, render_to_target};
 use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
-use crate::render::voxel::{VoxelGrid, VoxelRenderer};
 use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
@@ -552,26 +552,29 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 session.image()?
             }
             Method::Voxel => {
+                // The backend's own voxel path: splat into its grid, then march the grid.
                 let box_of = session.frame_params(&settings, 0)?;
-                let voxelised = Instant::now();
-                let grid = VoxelGrid::voxelize(
-                    session.backend_mut(),
+                session.backend_mut().reset();
+                session.backend_mut().voxelize(&box_of, args.voxel_grid)?;
+                let geometry = VoxelGeometry::new(
+                    session.backend().capabilities().name,
                     box_of.box_min,
                     box_of.box_max,
                     args.voxel_grid,
                 )?;
                 tracing::info!(
-                    "voxelised step {step} into {:?} cells ({:.1} MiB) in {:.3} s",
-                    grid.dims(),
-                    grid.bytes() as f64 / 1048576.0,
-                    voxelised.elapsed().as_secs_f64()
+                    "voxelised step {step} on {} into {:?} cells ({:.1} MiB) in {:.3} s",
+                    session.backend().capabilities().name,
+                    geometry.dims,
+                    geometry.bytes() as f64 / 1048576.0,
+                    session.backend().timings().voxelize.as_secs_f64()
                 );
-                let mut voxels = VoxelRenderer::new(grid);
                 for f in 0..spp {
-                    voxels.render(&session.frame_params(&settings, f)?);
+                    let frame = session.frame_params(&settings, f)?;
+                    session.backend_mut().render_voxels(&frame)?;
                     bar.inc(1);
                 }
-                voxels.image().context("no frame rendered")?
+                session.backend_mut().image()?
             }
             Method::Splat => {
                 session.backend_mut().reset();

@@ -9,7 +9,6 @@ pub mod auto;
 pub mod reference;
 pub mod session;
 pub mod settings;
-pub mod voxel;
 
 pub use auto::AutoValues;
 pub use session::{RenderError, RenderSession, Resolved, StepChange};

@@ -264,7 +264,7 @@ impl Options {
         if self
             .voxel_grids
             .iter()
-            .any(|&n| n == 0 || n > crate::render::voxel::MAX_GRID)
+            .any(|&n| n == 0 || n > crate::backend::voxel::MAX_GRID)
         {
             return bad("--voxel-grids: each grid must have 1..=1024 cells along its longest side");
         }

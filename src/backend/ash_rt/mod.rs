@@ -248,6 +248,7 @@ impl AshBackend {
                 (ctx.info.max_allocation / BOX_BYTES).min(ctx.info.max_primitive_count) as usize,
             ),
             scatters_grids: false,
+            voxel_grids: false,
             frame_timer: if ctx.info.timestamp_period.is_some() {
                 super::FrameTimer::DeviceTimestamps
             } else {
@@ -701,6 +702,21 @@ impl Backend for AshBackend {
         super::check_gpu_splat_k(NAME, k)?;
         self.render_launch(frame, Launch::Splat, k)?;
         Ok(None)
+    }
+
+    fn voxelize(&mut self, _frame: &FrameParams, _n: usize) -> Result<(), BackendError> {
+        Err(BackendError::Device {
+            backend: NAME,
+            message: "the voxel-grid baseline does not run on the ash backend yet (use --backend cpu or wgpu)".into(),
+        })
+    }
+
+    fn render_voxels(&mut self, _frame: &FrameParams) -> Result<(), BackendError> {
+        Err(BackendError::NoVoxelGrid(NAME))
+    }
+
+    fn voxel_grid(&mut self) -> Result<super::voxel::VoxelGrid, BackendError> {
+        Err(BackendError::NoVoxelGrid(NAME))
     }
 
     fn reset(&mut self) {

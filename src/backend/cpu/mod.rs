@@ -22,6 +22,7 @@ use rayon::prelude::*;
 use self::accumulator::Accumulator;
 use self::integrators::{FieldSampler, PixelScratch, render_pixel_with};
 use super::gpu_data::f32_phi_error;
+use super::voxel::{VoxelGeometry, VoxelGrid};
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
 use crate::field::splat::{SplatCounts, SplatScratch};
 use crate::field::{F32Field, F32Ray, FieldSettings, Particles, ReferenceField};
@@ -80,6 +81,8 @@ pub struct CpuBackend {
     /// The bound on the relative Phi error f32 positions would cause in the uploaded scene.
     f32_error_bound: f64,
     accumulator: Option<Accumulator>,
+    /// The voxel baseline's grid of the last [`Backend::voxelize`].
+    voxels: Option<VoxelGrid>,
     timings: Timings,
     abandon: Option<Arc<AtomicBool>>,
 }
@@ -100,12 +103,14 @@ impl CpuBackend {
                 software: false,
                 max_particles: None,
                 scatters_grids: true,
+                voxel_grids: true,
                 frame_timer: super::FrameTimer::WallClock,
             },
             uploaded: None,
             prepared: None,
             f32_error_bound: 0.0,
             accumulator: None,
+            voxels: None,
             timings: Timings::default(),
             abandon: None,
         }
@@ -433,6 +438,35 @@ impl Backend for CpuBackend {
             kept: kept.into_inner(),
             lost: lost.into_inner(),
         }))
+    }
+
+    /// Scatters each particle onto the cell centres it reaches, in f64, slab by slab
+    /// ([`Particles::eval_grid_sums`]), the sums rounded to f32.
+    fn voxelize(&mut self, frame: &FrameParams, n: usize) -> Result<(), BackendError> {
+        let started = Instant::now();
+        let geometry = VoxelGeometry::new("cpu", frame.box_min, frame.box_max, n)?;
+        let particles = self.prepared()?.particles();
+        let grid = VoxelGrid::splat_with(geometry, |slab| Ok(particles.eval_grid_sums(slab)))?;
+        self.voxels = Some(grid);
+        self.timings.voxelize = started.elapsed();
+        Ok(())
+    }
+
+    fn render_voxels(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
+        let started = Instant::now();
+        let grid = self
+            .voxels
+            .as_ref()
+            .ok_or(BackendError::NoVoxelGrid("cpu"))?;
+        let abandoned = || self.abandoned();
+        let tiles = render_tiles(frame, grid, &abandoned);
+        self.accumulate_tiles(frame, tiles)?;
+        self.timings.frame = started.elapsed();
+        Ok(())
+    }
+
+    fn voxel_grid(&mut self) -> Result<VoxelGrid, BackendError> {
+        self.voxels.clone().ok_or(BackendError::NoVoxelGrid("cpu"))
     }
 
     fn reset(&mut self) {

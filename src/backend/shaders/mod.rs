@@ -52,6 +52,10 @@ pub const SHARED_GLSL: &[(&str, &str)] = &[
         include_str!("../../../shaders_glsl/shared/splat_pixel.glsl"),
     ),
     (
+        "shared/voxel_sample.glsl",
+        include_str!("../../../shaders_glsl/shared/voxel_sample.glsl"),
+    ),
+    (
         "shared/cluster_box.glsl",
         include_str!("../../../shaders_glsl/shared/cluster_box.glsl"),
     ),
@@ -184,6 +188,43 @@ impl GpuFrame {
                 0.0,
             ],
             image: [p.width, p.height, p.frame, p.seed],
+        }
+    }
+}
+
+/// `params.glsl`'s `Voxels` (and `shaders_wgsl/voxel_splat.wgsl`'s): the voxel baseline's
+/// grid, and the range one splat pass covers.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuVoxels {
+    pub origin: [f32; 4],
+    pub origin_lo: [f32; 4],
+    pub cell: [f32; 4],
+    pub dims: [u32; 4],
+    pub range: [u32; 4],
+    pub channels: [u32; 4],
+}
+
+impl GpuVoxels {
+    /// The grid of `geometry` in local coordinates (data coordinates minus `origin`, in f64
+    /// before rounding; the first centre also as a double-single pair), with rows of
+    /// `row_cells` cells in the slab buffer and `channels` sums per cell.
+    pub fn new(
+        geometry: &crate::backend::voxel::VoxelGeometry,
+        origin: DVec3,
+        row_cells: u32,
+        channels: u32,
+    ) -> GpuVoxels {
+        let first = geometry.first_centre() - origin;
+        let hi = first.as_vec3().as_dvec3();
+        let d = geometry.dims;
+        GpuVoxels {
+            origin: v4(first, 0.0),
+            origin_lo: v4(first - hi, 0.0),
+            cell: v4(geometry.cell(), 0.0),
+            dims: [d[0] as u32, d[1] as u32, d[2] as u32, row_cells],
+            range: [0; 4],
+            channels: [channels, 0, 0, 0],
         }
     }
 }
@@ -372,5 +413,6 @@ mod tests {
         let e = resolve_includes("#include \"zzz\"", &files, ShaderLanguage::Glsl).unwrap_err();
         assert!(e.contains("zzz"));
         assert_eq!(std::mem::size_of::<GpuFrame>(), 160);
+        assert_eq!(std::mem::size_of::<GpuVoxels>(), 96);
     }
 }

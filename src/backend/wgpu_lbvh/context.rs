@@ -41,6 +41,13 @@ pub enum Kernel {
     Render,
     /// `shaders_glsl/wgpu/lbvh_splat.comp`: one frame of Knoll et al.'s splatter.
     Splat,
+    /// `shaders_glsl/wgpu/voxel_particles.comp`: the voxel baseline's particles as the kernel
+    /// sees them.
+    VoxelParticles,
+    /// `shaders_wgsl/voxel_splat.wgsl`: their kernels added to a slab of the grid.
+    VoxelSplat,
+    /// `shaders_glsl/wgpu/voxel_render.comp`: one frame of an integrator over the grid.
+    VoxelRender,
     /// `shaders_wgsl/lbvh_keys.wgsl`.
     Keys,
     /// `shaders_wgsl/radix_sort.wgsl`, its three entry points.
@@ -65,6 +72,9 @@ enum ShaderFile {
     Query,
     Render,
     Splat,
+    VoxelParticles,
+    VoxelSplat,
+    VoxelRender,
     Keys,
     Sort,
     Hierarchy,
@@ -80,6 +90,9 @@ impl Kernel {
             Kernel::Query => ShaderFile::Query,
             Kernel::Render => ShaderFile::Render,
             Kernel::Splat => ShaderFile::Splat,
+            Kernel::VoxelParticles => ShaderFile::VoxelParticles,
+            Kernel::VoxelSplat => ShaderFile::VoxelSplat,
+            Kernel::VoxelRender => ShaderFile::VoxelRender,
             Kernel::Keys => ShaderFile::Keys,
             Kernel::SortCount | Kernel::SortScan | Kernel::SortScatter => ShaderFile::Sort,
             Kernel::Hierarchy => ShaderFile::Hierarchy,
@@ -106,7 +119,12 @@ impl Kernel {
     fn specialised(self) -> bool {
         matches!(
             self,
-            Kernel::Bounds | Kernel::Query | Kernel::Render | Kernel::Splat
+            Kernel::Bounds
+                | Kernel::Query
+                | Kernel::Render
+                | Kernel::Splat
+                | Kernel::VoxelParticles
+                | Kernel::VoxelRender
         )
     }
 }
@@ -130,6 +148,15 @@ impl ShaderFile {
             }
             ShaderFile::Splat => {
                 Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_splat.comp"))
+            }
+            ShaderFile::VoxelParticles => Source::Glsl(include_str!(
+                "../../../shaders_glsl/wgpu/voxel_particles.comp"
+            )),
+            ShaderFile::VoxelSplat => {
+                Source::Wgsl(include_str!("../../../shaders_wgsl/voxel_splat.wgsl"))
+            }
+            ShaderFile::VoxelRender => {
+                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/voxel_render.comp"))
             }
             ShaderFile::Keys => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_keys.wgsl")),
             ShaderFile::Sort => Source::Wgsl(include_str!("../../../shaders_wgsl/radix_sort.wgsl")),

@@ -43,6 +43,7 @@ mod scene;
 pub mod sort;
 pub mod tree;
 mod util;
+mod voxel;
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -108,6 +109,9 @@ pub struct WgpuBackend {
     optical: Vec<f32>,
     frame_uniform: wgpu::Buffer,
     tiling_uniform: wgpu::Buffer,
+    /// The voxel baseline's grid of the last [`Backend::voxelize`], and the splat's buffers.
+    voxels: Option<voxel::Voxels>,
+    splat_buffers: voxel::SplatBuffers,
     /// The largest storage binding this backend uses: the device's, or lower (tests).
     max_binding: u64,
     timings: Timings,
@@ -141,6 +145,7 @@ impl WgpuBackend {
                     (util::part_limit(max_binding) / CLUSTER_BYTES * PARTS) as usize,
                 ),
                 scatters_grids: false,
+                voxel_grids: true,
                 frame_timer: if ctx.timestamps.is_some() {
                     super::FrameTimer::DeviceTimestamps
                 } else {
@@ -159,6 +164,8 @@ impl WgpuBackend {
             optical: vec![0.0; TABLE_SIZE],
             frame_uniform: uniform(&ctx, "frame", std::mem::size_of::<GpuFrame>() as u64),
             tiling_uniform: uniform(&ctx, "tiling", 32),
+            voxels: None,
+            splat_buffers: voxel::SplatBuffers::default(),
             max_binding,
             ctx,
             timings: Timings::default(),
@@ -594,6 +601,21 @@ impl Backend for WgpuBackend {
     ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError> {
         self.run_splat(frame, k)?;
         Ok(None)
+    }
+
+    /// Splats with atomics into a 3D texture, slab by slab (`voxel_particles.comp`,
+    /// `voxel_splat.wgsl`); needs no build.
+    fn voxelize(&mut self, frame: &FrameParams, n: usize) -> Result<(), BackendError> {
+        self.run_voxelize(frame, n)
+    }
+
+    /// `voxel_render.comp`: the shared integrators over the grid's texture.
+    fn render_voxels(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
+        self.run_voxel_frame(frame)
+    }
+
+    fn voxel_grid(&mut self) -> Result<crate::backend::voxel::VoxelGrid, BackendError> {
+        self.read_voxels()
     }
 
     fn reset(&mut self) {

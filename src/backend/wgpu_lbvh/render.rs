@@ -39,51 +39,10 @@ impl WgpuBackend {
         let started = Instant::now();
         let ctx = self.ctx.clone();
         self.built_scene()?;
-        let (w, h) = (frame.width, frame.height);
-        let bytes = u64::from(w) * u64::from(h) * 16;
-        let pixels = u64::from(w) * u64::from(h);
-        if parts_needed(pixels, 16, self.max_binding) > PARTS {
-            return Err(device_error(format!(
-                "a {w}x{h} image needs {bytes} bytes of accumulation, more than {PARTS} x {}; \
-                 {} binds at most {} bytes per storage buffer",
-                self.max_binding, ctx.info.name, self.max_binding
-            )));
-        }
-        if self
-            .accumulation
-            .as_ref()
-            .is_none_or(|a| a.width != w || a.height != h)
-        {
-            self.accumulation = None;
-            let max_binding = self.max_binding;
-            let sums = ctx
-                .scoped(&format!("accumulation buffer ({bytes} bytes)"), || {
-                    SplitBuffer::new(&ctx, "accumulation", pixels, 16, max_binding)
-                })?
-                .ok_or_else(|| device_error("the accumulation does not fit its parts"))?;
-            self.accumulation = Some(Accumulation {
-                width: w,
-                height: h,
-                frames: 0,
-                sums,
-                clear: true,
-            });
-        }
+        self.ensure_accumulation(frame.width, frame.height)?;
         // The splatter uses no noise: a scene that only splats never uploads the mask.
-        if kernel == FrameKernel::Integrator && self.stbn.is_none() {
-            let mask = BlueNoiseMask::builtin();
-            if (mask.width, mask.height, mask.depth) != (STBN_WIDTH, STBN_HEIGHT, STBN_DEPTH) {
-                return Err(device_error(format!(
-                    "the shaders expect a 128x128x64 blue-noise mask, not {}x{}x{}",
-                    mask.width, mask.height, mask.depth
-                )));
-            }
-            let words = mask.packed_words();
-            let buffer = ctx.scoped("blue-noise mask", || {
-                storage(&ctx, "stbn mask", words.len() as u64 * 4)
-            })?;
-            write(&ctx, &buffer, bytemuck::cast_slice(&words));
-            self.stbn = Some(buffer);
+        if kernel == FrameKernel::Integrator {
+            self.ensure_stbn()?;
         }
         let scene = self.scene.as_ref().expect("checked above");
         let tree = self.tree.as_ref().expect("built");
@@ -109,6 +68,7 @@ impl WgpuBackend {
             }
         };
         let pipeline = ctx.pipeline(pipeline_kernel, Some(variant), layout)?;
+        let (w, h) = (frame.width, frame.height);
         let tiles_x = w.div_ceil(8);
         let tiles = tiles_x * h.div_ceil(8);
         let (blocks, per_block, dispatched) = util::interleave(tiles);
@@ -164,6 +124,63 @@ impl WgpuBackend {
         let device_time = util::submit_and_time(&ctx, label, encoder)?;
         acc.frames += 1;
         self.timings.frame = device_time.unwrap_or_else(|| started.elapsed());
+        Ok(())
+    }
+    /// Makes the accumulation for `w` x `h` frames (a new size restarts it), or refuses an
+    /// image whose sums outgrow the accumulation's parts.
+    pub(super) fn ensure_accumulation(&mut self, w: u32, h: u32) -> Result<(), BackendError> {
+        let ctx = self.ctx.clone();
+        let bytes = u64::from(w) * u64::from(h) * 16;
+        let pixels = u64::from(w) * u64::from(h);
+        if parts_needed(pixels, 16, self.max_binding) > PARTS {
+            return Err(device_error(format!(
+                "a {w}x{h} image needs {bytes} bytes of accumulation, more than {PARTS} x {}; \
+                 {} binds at most {} bytes per storage buffer",
+                self.max_binding, ctx.info.name, self.max_binding
+            )));
+        }
+        if self
+            .accumulation
+            .as_ref()
+            .is_none_or(|a| a.width != w || a.height != h)
+        {
+            self.accumulation = None;
+            let max_binding = self.max_binding;
+            let sums = ctx
+                .scoped(&format!("accumulation buffer ({bytes} bytes)"), || {
+                    SplitBuffer::new(&ctx, "accumulation", pixels, 16, max_binding)
+                })?
+                .ok_or_else(|| device_error("the accumulation does not fit its parts"))?;
+            self.accumulation = Some(Accumulation {
+                width: w,
+                height: h,
+                frames: 0,
+                sums,
+                clear: true,
+            });
+        }
+        Ok(())
+    }
+
+    /// Uploads the blue-noise mask the first time an integrator needs it.
+    pub(super) fn ensure_stbn(&mut self) -> Result<(), BackendError> {
+        if self.stbn.is_some() {
+            return Ok(());
+        }
+        let ctx = self.ctx.clone();
+        let mask = BlueNoiseMask::builtin();
+        if (mask.width, mask.height, mask.depth) != (STBN_WIDTH, STBN_HEIGHT, STBN_DEPTH) {
+            return Err(device_error(format!(
+                "the shaders expect a 128x128x64 blue-noise mask, not {}x{}x{}",
+                mask.width, mask.height, mask.depth
+            )));
+        }
+        let words = mask.packed_words();
+        let buffer = ctx.scoped("blue-noise mask", || {
+            storage(&ctx, "stbn mask", words.len() as u64 * 4)
+        })?;
+        write(&ctx, &buffer, bytemuck::cast_slice(&words));
+        self.stbn = Some(buffer);
         Ok(())
     }
 }
