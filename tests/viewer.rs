@@ -469,7 +469,7 @@ fn the_splatter_is_one_tick_away_and_its_scene_reproduces_it() {
     let before = settle(&mut h);
     // The quality panel offers it (set through the state, as the precision test does: the
     // panel lies below the window's fold).
-    h.get_by_label("splat (Knoll et al.'s baseline)");
+    h.get_by_label("renderer");
     h.state_mut().state.settings.splat_k = Some(aarbf::render::SPLAT_K);
     let after = settle(&mut h);
     let (same, what) = compare(&before.image, &after.image);
@@ -504,5 +504,51 @@ fn the_splatter_is_one_tick_away_and_its_scene_reproduces_it() {
         pixels(&shot),
         pixels(&batch),
         "aarbf render --scene of the splatting state differs from the viewer's image"
+    );
+}
+
+/// The voxel-grid baseline from the same menu: a different image from the RBFs' (the grid's
+/// cells are coarse), and the saved scene (`voxel_grid`) renders the viewer's image pixel for
+/// pixel through `aarbf render --scene`.
+#[test]
+fn the_voxel_grid_is_one_choice_away_and_its_scene_reproduces_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = harness(open(dir.path(), BackendKind::Cpu));
+    let before = settle(&mut h);
+    h.get_by_label("renderer");
+    h.state_mut().state.settings.voxel_grid = Some(24);
+    let after = settle(&mut h);
+    let (same, what) = compare(&before.image, &after.image);
+    assert!(!same, "the voxel grid's image equals the RBF image: {what}");
+    let lit = after
+        .image
+        .as_ref()
+        .unwrap()
+        .rgba
+        .chunks(4)
+        .filter(|p| p[..3] != [0, 0, 0])
+        .count();
+    assert!(lit > 100, "{lit} pixels lit");
+    let scene = dir.path().join("voxel.toml");
+    h.state_mut().save_scene(&scene).unwrap();
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(
+        text.contains("voxel_grid = 24") && !text.contains("splat_k"),
+        "{text}"
+    );
+    let shot = dir.path().join("voxel.png");
+    h.state().worker().screenshot(shot.clone());
+    let start = Instant::now();
+    while !h.state().worker().shown().screenshots.contains(&shot) {
+        assert!(start.elapsed() < SETTLE);
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let batch = dir.path().join("batch.png");
+    render_scene(&scene, &batch);
+    assert_eq!(
+        pixels(&shot),
+        pixels(&batch),
+        "aarbf render --scene of the voxel state differs from the viewer's image"
     );
 }

@@ -104,7 +104,17 @@ fn aarbf_render_draws_the_voxel_baseline_and_refuses_a_bad_grid() {
         "--out",
         out.to_str().unwrap(),
     ];
-    let ok = run(&[&common[..], &["--voxel-grid", "32"]].concat());
+    let scene = d.join("voxel.toml");
+    let ok = run(&[
+        &common[..],
+        &[
+            "--voxel-grid",
+            "32",
+            "--save-scene",
+            scene.to_str().unwrap(),
+        ],
+    ]
+    .concat());
     assert!(
         ok.status.success(),
         "{}",
@@ -112,6 +122,46 @@ fn aarbf_render_draws_the_voxel_baseline_and_refuses_a_bad_grid() {
     );
     let image = image::open(&out).unwrap();
     assert_eq!((image.width(), image.height()), (24, 24));
+    // The scene file carries the baseline: rendering it draws the same image.
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(text.contains("voxel_grid = 32"), "{text}");
+    let again = d.join("again.png");
+    let r = run(&[
+        "render",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(
+        image::open(&again).unwrap().to_rgba8().into_raw(),
+        image.to_rgba8().into_raw(),
+        "aarbf render --scene differs from the render that saved it"
+    );
+    // A scene asking for both baselines is refused, naming both.
+    let both = d.join("both.toml");
+    std::fs::write(
+        &both,
+        text.replace("voxel_grid = 32", "voxel_grid = 32\nsplat_k = 15"),
+    )
+    .unwrap();
+    let r = run(&[
+        "render",
+        "--scene",
+        both.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+        "--force",
+    ]);
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        !r.status.success()
+            && stderr.contains("splat_k = 15")
+            && stderr.contains("voxel_grid = 32")
+            && !stderr.contains("panicked"),
+        "{stderr}"
+    );
     let bad = run(&[&common[..], &["--voxel-grid", "0", "--force"]].concat());
     let stderr = String::from_utf8_lossy(&bad.stderr);
     assert!(

@@ -50,7 +50,7 @@ pub struct RenderArgs {
     pub method: Method,
     /// For `--method voxel`: cells along the grid's longest side (cubic cells over the march
     /// box; the paper's baseline is 512).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = crate::render::VOXEL_GRID)]
     pub voxel_grid: usize,
     /// For `--method splat`: hits each slab's buffer holds (more are lost, by design).
     #[arg(long, default_value_t = SPLAT_K)]
@@ -318,22 +318,27 @@ impl OutputFormat {
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let mut resolved = resolve(&args.data, &args.field)?;
     apply_flags(&args, &mut resolved.scene)?;
-    if args.method == Method::Splat {
-        resolved.scene.render.splat_k = Some(args.splat_k);
+    match args.method {
+        Method::Splat => {
+            resolved.scene.render.splat_k = Some(args.splat_k);
+            resolved.scene.render.voxel_grid = None;
+        }
+        Method::Voxel => {
+            resolved.scene.render.voxel_grid = Some(args.voxel_grid);
+            resolved.scene.render.splat_k = None;
+        }
+        Method::Rbf => {}
     }
     let bounds = resolved.series.bounds();
     let mut settings = resolved
         .scene
         .render_settings(bounds)
         .map_err(anyhow::Error::msg)?;
-    // A scene file's `splat_k` asks for the splatter as --method splat does.
-    let method = match (args.method, settings.splat_k) {
-        (Method::Rbf, Some(_)) => Method::Splat,
-        (Method::Voxel, _) => {
-            settings.splat_k = None;
-            Method::Voxel
-        }
-        (m, _) => m,
+    // A scene file's `splat_k` or `voxel_grid` asks for its baseline as --method does.
+    let method = match (settings.splat_k, settings.voxel_grid) {
+        (Some(_), _) => Method::Splat,
+        (None, Some(_)) => Method::Voxel,
+        (None, None) => Method::Rbf,
     };
     let spp = resolved.scene.spp();
     anyhow::ensure!(spp > 0, "--spp must be at least 1");
@@ -552,15 +557,19 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 session.image()?
             }
             Method::Voxel => {
-                // The backend's own voxel path: splat into its grid, then march the grid.
+                // The backend's own voxel path: the session splats the particles into the
+                // backend's grid with the first frame, then marches the grid.
+                let n = settings.voxel_grid.expect("set for the voxel baseline");
+                for _ in 0..spp {
+                    session.accumulate(&settings, 1)?;
+                    bar.inc(1);
+                }
                 let box_of = session.frame_params(&settings, 0)?;
-                session.backend_mut().reset();
-                session.backend_mut().voxelize(&box_of, args.voxel_grid)?;
                 let geometry = VoxelGeometry::new(
                     session.backend().capabilities().name,
                     box_of.box_min,
                     box_of.box_max,
-                    args.voxel_grid,
+                    n,
                 )?;
                 tracing::info!(
                     "voxelised step {step} on {} into {:?} cells ({:.1} MiB) in {:.3} s",
@@ -569,12 +578,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                     geometry.bytes() as f64 / 1048576.0,
                     session.backend().timings().voxelize.as_secs_f64()
                 );
-                for f in 0..spp {
-                    let frame = session.frame_params(&settings, f)?;
-                    session.backend_mut().render_voxels(&frame)?;
-                    bar.inc(1);
-                }
-                session.backend_mut().image()?
+                session.image()?
             }
             Method::Splat => {
                 session.backend_mut().reset();

@@ -12,4 +12,4 @@ pub mod settings;
 
 pub use auto::AutoValues;
 pub use session::{RenderError, RenderSession, Resolved, StepChange};
-pub use settings::{Method, RenderSettings, SPLAT_K};
+pub use settings::{Method, RenderSettings, SPLAT_K, VOXEL_GRID};

@@ -343,11 +343,18 @@ impl RenderSession {
         }
         for _ in 0..frames {
             let params = self.frame_params(settings, self.frames)?;
-            match settings.splat_k {
-                None => self.backend.render(&params)?,
-                Some(k) => {
+            match (settings.splat_k, settings.voxel_grid) {
+                (Some(k), _) => {
                     self.backend.render_splat(&params, k)?;
                 }
+                (None, Some(n)) => {
+                    // The grid holds this accumulation's step, field and colour map.
+                    if self.frames == 0 {
+                        self.backend.voxelize(&params, n)?;
+                    }
+                    self.backend.render_voxels(&params)?;
+                }
+                (None, None) => self.backend.render(&params)?,
             }
             self.frames += 1;
         }

@@ -187,6 +187,9 @@ pub struct RenderSection {
     /// Render with Knoll et al.'s splatter, this many hits per slab, instead of the RBFs
     /// (`aarbf render --method splat --splat-k K`).
     pub splat_k: Option<usize>,
+    /// Render the voxel-grid baseline, this many cells along the grid's longest side, instead
+    /// of the RBFs (`aarbf render --method voxel --voxel-grid N`).
+    pub voxel_grid: Option<usize>,
 }
 
 /// A scene file.
@@ -272,6 +275,12 @@ impl SceneFile {
             Some(spec) => spec.to_map().map_err(|e| e.to_string())?,
             None => PiecewiseLinear::ramp(0.0, 1.0),
         };
+        if let (Some(k), Some(n)) = (r.splat_k, r.voxel_grid) {
+            return Err(format!(
+                "[render] splat_k = {k} and voxel_grid = {n} each choose a baseline renderer \
+                 instead of the RBFs: give at most one"
+            ));
+        }
         Ok(RenderSettings {
             width: r.width.unwrap_or(d.width),
             height: r.height.unwrap_or(d.height),
@@ -288,6 +297,7 @@ impl SceneFile {
             background: r.background.unwrap_or(d.background),
             opacity_threshold: r.opacity_threshold.unwrap_or(d.opacity_threshold),
             splat_k: r.splat_k,
+            voxel_grid: r.voxel_grid,
         })
     }
 
@@ -335,6 +345,7 @@ impl SceneFile {
                 time_budget: None,
                 error_metric: None,
                 splat_k: settings.splat_k,
+                voxel_grid: settings.voxel_grid,
             },
         }
     }

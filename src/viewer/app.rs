@@ -15,7 +15,7 @@ use super::worker::{Interaction, RenderWorker, Shown, ShownImage};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
 use crate::field::Classification;
-use crate::render::StepChange;
+use crate::render::{Method, StepChange};
 use crate::scene::maps::{ColorMap, DensityMap, OpticalDensityMap, PRESETS, RadiusMap};
 use crate::scene::{Camera, TimeSeries};
 use crate::scene_file::resolve::{DataArgs, FieldOptions, Resolved as Loaded, resolve};
@@ -593,26 +593,50 @@ impl ViewerApp {
 
     fn quality_controls(&mut self, ui: &mut egui::Ui) {
         let s = &mut self.state.settings;
-        // The Table 3 baseline, to look at its artefacts beside the RBF image.
-        let mut splatting = s.splat_k.is_some();
-        ui.checkbox(&mut splatting, "splat (Knoll et al.'s baseline)")
-            .on_hover_text(
-                "each ray cut into slabs one step long, at most k particles a slab, sorted and \
-                 composited front to back (emission-absorption)",
-            );
-        s.splat_k = if splatting {
-            let mut k = s.splat_k.unwrap_or(crate::render::SPLAT_K);
-            ui.add(
-                egui::Slider::new(
-                    &mut k,
-                    1..=crate::values::shader_constants::SPLAT_K_MAX as usize,
-                )
-                .text("hits per slab"),
-            );
-            Some(k)
-        } else {
-            None
+        // The Table 3 baselines, to look at their artefacts beside the RBF image.
+        let mut method = match (s.splat_k, s.voxel_grid) {
+            (Some(_), _) => Method::Splat,
+            (None, Some(_)) => Method::Voxel,
+            (None, None) => Method::Rbf,
         };
+        egui::ComboBox::new("method", "renderer")
+            .selected_text(method_name(method))
+            .show_ui(ui, |ui| {
+                for m in [Method::Rbf, Method::Voxel, Method::Splat] {
+                    ui.selectable_value(&mut method, m, method_name(m));
+                }
+            })
+            .response
+            .on_hover_text(
+                "RBF: the particles queried at every sample (the paper's method). Voxel grid: \
+                 the particles splatted into a grid, re-voxelised on every change, then \
+                 marched. Splat: each ray cut into slabs one step long, at most k particles a \
+                 slab, sorted and composited front to back (emission-absorption).",
+            );
+        (s.splat_k, s.voxel_grid) = match method {
+            Method::Rbf => (None, None),
+            Method::Voxel => {
+                let mut n = s.voxel_grid.unwrap_or(crate::render::VOXEL_GRID);
+                ui.add(
+                    egui::Slider::new(&mut n, 8..=crate::backend::voxel::MAX_GRID)
+                        .logarithmic(true)
+                        .text("cells along the longest side"),
+                );
+                (None, Some(n))
+            }
+            Method::Splat => {
+                let mut k = s.splat_k.unwrap_or(crate::render::SPLAT_K);
+                ui.add(
+                    egui::Slider::new(
+                        &mut k,
+                        1..=crate::values::shader_constants::SPLAT_K_MAX as usize,
+                    )
+                    .text("hits per slab"),
+                );
+                (Some(k), None)
+            }
+        };
+        let splatting = method == Method::Splat;
         ui.add_enabled_ui(!splatting, |ui| {
             egui::ComboBox::new("integrator", "integrator")
                 .selected_text(integrator_name(s.integrator))
@@ -895,4 +919,12 @@ fn ms(d: Duration) -> f64 {
 
 fn mib(bytes: usize) -> f64 {
     bytes as f64 / f64::from(1u32 << 20)
+}
+
+fn method_name(m: Method) -> &'static str {
+    match m {
+        Method::Rbf => "RBF (attribute-aware)",
+        Method::Voxel => "voxel grid (baseline)",
+        Method::Splat => "splat (Knoll et al.'s baseline)",
+    }
 }
