@@ -110,9 +110,6 @@ pub struct Capabilities {
     /// Whether [`Backend::query_grid`] scatters the uploaded particles onto the grid, so that
     /// a grid needs no [`Backend::build`] first (the CPU backend).
     pub scatters_grids: bool,
-    /// Whether the backend runs the voxel-grid baseline ([`Backend::voxelize`],
-    /// [`Backend::render_voxels`]); one that does not refuses both with an error saying so.
-    pub voxel_grids: bool,
     /// How the backend's frame times ([`Timings::frame`]) are taken (on the GPU backends also
     /// their builds, refits and queries).
     pub frame_timer: FrameTimer,

@@ -103,7 +103,6 @@ impl CpuBackend {
                 software: false,
                 max_particles: None,
                 scatters_grids: true,
-                voxel_grids: true,
                 frame_timer: super::FrameTimer::WallClock,
             },
             uploaded: None,

@@ -145,7 +145,6 @@ impl WgpuBackend {
                     (util::part_limit(max_binding) / CLUSTER_BYTES * PARTS) as usize,
                 ),
                 scatters_grids: false,
-                voxel_grids: true,
                 frame_timer: if ctx.timestamps.is_some() {
                     super::FrameTimer::DeviceTimestamps
                 } else {
