@@ -203,6 +203,10 @@ fn the_device_grid_equals_the_cpu_grid() {
             );
             gpu.voxelize(&frame, n).unwrap();
             let grid = gpu.voxel_grid().unwrap();
+            assert!(
+                gpu.memory().voxel_bytes >= grid.bytes(),
+                "{name}: the grid's memory is reported"
+            );
             let (worst, finite) = grid_difference(&grid, &reference);
             eprintln!(
                 "{name}, grid {n} {:?}: largest relative difference per channel {worst:?}",

@@ -159,6 +159,9 @@ pub struct MemoryReport {
     /// What preparing a step on the device keeps between steps: staging memory, the step's
     /// arrays in its own order and the sort's buffers (0 where the CPU prepares).
     pub preparation_bytes: usize,
+    /// The voxel baseline's grid and what splatting it keeps (slab and staging buffers on
+    /// wgpu); 0 before a [`Backend::voxelize`].
+    pub voxel_bytes: usize,
 }
 
 /// One step as a backend receives it.

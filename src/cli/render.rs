@@ -563,10 +563,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                     args.voxel_grid,
                 )?;
                 tracing::info!(
-                    "voxelised step {step} on {} into {:?} cells ({:.1} MiB) in {:.3} s",
+                    "voxelised step {step} on {} into {:?} cells ({:.1} MiB of sums, {:.1} MiB held) in {:.3} s",
                     session.backend().capabilities().name,
                     geometry.dims,
                     geometry.bytes() as f64 / 1048576.0,
+                    session.backend().memory().voxel_bytes as f64 / 1048576.0,
                     session.backend().timings().voxelize.as_secs_f64()
                 );
                 for f in 0..spp {

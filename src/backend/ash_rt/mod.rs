@@ -775,6 +775,7 @@ impl Backend for AshBackend {
                 .accum_size
                 .map_or(0, |(w, h)| (w as usize) * (h as usize) * 16),
             preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
+            voxel_bytes: self.voxels.as_ref().map_or(0, voxel::Voxels::bytes),
         }
     }
 }

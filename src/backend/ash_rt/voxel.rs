@@ -30,6 +30,10 @@ impl Voxels {
     pub(super) fn address(&self) -> u64 {
         self.buffer.address
     }
+
+    pub(super) fn bytes(&self) -> usize {
+        self.buffer.size as usize
+    }
 }
 
 /// Where the grid's constants (`Voxels` in bindings.glsl's `Params`) start in the parameter

@@ -665,6 +665,7 @@ impl Backend for WgpuBackend {
                 .as_ref()
                 .map_or(0, |a| a.sums.size() as usize),
             preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
+            voxel_bytes: self.voxel_bytes(),
         }
     }
 }

@@ -432,6 +432,16 @@ impl WgpuBackend {
         Ok(VoxelGrid::from_sums(voxels.geometry, sums))
     }
 
+    /// Bytes of the grid's texture and of the splat's buffers.
+    pub(super) fn voxel_bytes(&self) -> usize {
+        let b = &self.splat_buffers;
+        self.voxels.as_ref().map_or(0, |v| v.geometry.bytes())
+            + [&b.slab, &b.splats, &b.ranges]
+                .into_iter()
+                .map(|b| b.as_ref().map_or(0, |b| b.size() as usize))
+                .sum::<usize>()
+    }
+
     /// Fills the grid's texture with 0xFF (NaN) (tests: the next voxelisation must write every
     /// cell).
     pub fn poison_voxels(&self) -> Result<(), BackendError> {
