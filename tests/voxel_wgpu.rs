@@ -203,6 +203,10 @@ fn the_device_grid_equals_the_cpu_grid() {
             wgpu.poison_voxels().unwrap();
             wgpu.voxelize(&frame, n).unwrap();
             let grid = wgpu.voxel_grid().unwrap();
+            assert!(
+                wgpu.memory().voxel_bytes >= grid.bytes(),
+                "{name}: the grid's memory is reported"
+            );
             let (worst, finite) = grid_difference(&grid, &reference);
             eprintln!(
                 "{name}, grid {n} {:?}: largest relative difference per channel {worst:?}",

@@ -20,6 +20,7 @@
 layout(std140, set = 0, binding = 1) uniform Params {
     Frame frame;
     Field field_params;
+    Voxels voxels;  // the voxel baseline's grid (voxel_splat.comp, voxel_render.comp)
 };
 
 layout(std430, set = 0, binding = 4) readonly buffer MapTables { float map_tables[]; };
@@ -49,6 +50,7 @@ layout(push_constant) uniform Push {
     uvec2 boxes_address;        // the BLAS input boxes, 6 floats each (boxes.comp writes them)
     uvec2 accum_address;        // Vec4Array: the frame's f32 RGBA sums per pixel
     uvec2 particle_lo_address;  // ParticleArray of the lo parts (POSITION_DS; else 0)
+    uvec2 voxel_address;        // the voxel baseline's grid: 4 f32 sums per cell (else 0)
 } push;
 
 // Query points (query launches): one vec4 each, or with double-single positions two, hi then

@@ -110,9 +110,6 @@ pub struct Capabilities {
     /// Whether [`Backend::query_grid`] scatters the uploaded particles onto the grid, so that
     /// a grid needs no [`Backend::build`] first (the CPU backend).
     pub scatters_grids: bool,
-    /// Whether the backend runs the voxel-grid baseline ([`Backend::voxelize`],
-    /// [`Backend::render_voxels`]); one that does not refuses both with an error saying so.
-    pub voxel_grids: bool,
     /// How the backend's frame times ([`Timings::frame`]) are taken (on the GPU backends also
     /// their builds, refits and queries).
     pub frame_timer: FrameTimer,
@@ -162,6 +159,9 @@ pub struct MemoryReport {
     /// What preparing a step on the device keeps between steps: staging memory, the step's
     /// arrays in its own order and the sort's buffers (0 where the CPU prepares).
     pub preparation_bytes: usize,
+    /// The voxel baseline's grid and what splatting it keeps (slab and staging buffers on
+    /// wgpu); 0 before a [`Backend::voxelize`].
+    pub voxel_bytes: usize,
 }
 
 /// One step as a backend receives it.

@@ -40,12 +40,12 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendKind,
     /// How the image is made: `rbf`, the paper's method (every sample queries the particles);
-    /// `voxel`, a Table 3 baseline (the particles splatted into a grid with the same kernel
-    /// through the backend, then the grid ray-marched on the CPU with the same integrator,
-    /// noise and transfer functions; re-voxelised for every step); or `splat`, the other
-    /// Table 3 baseline, Knoll et al.'s RT splatter (slabs one march step long, at most
-    /// --splat-k particles each, sorted and composited front to back; emission-absorption,
-    /// cpu backend).
+    /// `voxel`, a Table 3 baseline (the particles splatted into a grid with the same kernel,
+    /// then the grid ray-marched with the same integrator, noise and transfer functions, both
+    /// by the backend: on the GPU backends with atomics on the device; re-voxelised for every
+    /// step); or `splat`, the other Table 3 baseline, Knoll et al.'s RT splatter (slabs one
+    /// march step long, at most --splat-k particles each, sorted and composited front to back;
+    /// emission-absorption).
     #[arg(long, value_enum, default_value = "rbf")]
     pub method: Method,
     /// For `--method voxel`: cells along the grid's longest side (cubic cells over the march
@@ -572,10 +572,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                     n,
                 )?;
                 tracing::info!(
-                    "voxelised step {step} on {} into {:?} cells ({:.1} MiB) in {:.3} s",
+                    "voxelised step {step} on {} into {:?} cells ({:.1} MiB of sums, {:.1} MiB held) in {:.3} s",
                     session.backend().capabilities().name,
                     geometry.dims,
                     geometry.bytes() as f64 / 1048576.0,
+                    session.backend().memory().voxel_bytes as f64 / 1048576.0,
                     session.backend().timings().voxelize.as_secs_f64()
                 );
                 session.image()?

@@ -169,14 +169,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
             bar.inc(1);
             // The voxel grids, splatted and marched by the backend itself (the GPU backends on
             // the device, timed by its timestamps where it has them).
-            let voxel_grids: &[usize] = if session.backend().capabilities().voxel_grids {
-                &o.voxel_grids
-            } else {
-                tracing::warn!("baselines: no voxel rows on {kind}: it has no voxel-grid path");
-                bar.inc(o.voxel_grids.len() as u64);
-                &[]
-            };
-            for &n in voxel_grids {
+            for &n in &o.voxel_grids {
                 let variant = format!("voxel {n}");
                 let frame0 = session.frame_params(&at(orbit[0]), 0)?;
                 // The warm-up: one voxelisation and frame.

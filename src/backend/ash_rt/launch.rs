@@ -20,6 +20,8 @@ pub(super) enum Launch {
     Render,
     /// A frame of Knoll et al.'s splatter.
     Splat,
+    /// A frame over the voxel baseline's grid (a compute kernel whatever the traversal).
+    Voxels,
 }
 
 impl AshBackend {
@@ -86,6 +88,7 @@ impl AshBackend {
             boxes_address: self.buffers.boxes.address,
             accum_address: self.buffers.accum.address,
             particle_lo_address: self.buffers.points_lo.address,
+            voxel_address: self.voxels.as_ref().map_or(0, |v| v.address()),
             ..push
         };
         let device = &self.ctx.device;
@@ -123,23 +126,28 @@ impl AshBackend {
     ) -> Result<Duration, BackendError> {
         let (w, h) = match launch {
             Launch::Query => (size.0.min(QUERY_WIDTH), size.0.div_ceil(QUERY_WIDTH)),
-            Launch::Render | Launch::Splat => size,
+            Launch::Render | Launch::Splat | Launch::Voxels => size,
         };
         enum Work {
             Rays(vk::Pipeline, [vk::StridedDeviceAddressRegionKHR; 3]),
             Compute(vk::Pipeline, [u32; 2]),
         }
         let work = match self.traversal {
+            _ if launch == Launch::Voxels => {
+                let pipeline =
+                    pipelines::compute_pipeline(&self.ctx, ComputeKind::VoxelRender, spec)?;
+                Work::Compute(pipeline, [w.div_ceil(8), h.div_ceil(8)])
+            }
             Traversal::RtPipeline => {
                 let program = match launch {
                     Launch::Splat => RtProgram::Splat,
-                    Launch::Query | Launch::Render => RtProgram::Field,
+                    Launch::Query | Launch::Render | Launch::Voxels => RtProgram::Field,
                 };
                 let (pipeline, table) = self.rt(spec, program)?;
                 // The field pipeline's raygens: render, then query.
                 let raygen = match launch {
                     Launch::Query => table.raygens[1],
-                    Launch::Render | Launch::Splat => table.raygens[0],
+                    Launch::Render | Launch::Splat | Launch::Voxels => table.raygens[0],
                 };
                 Work::Rays(pipeline, [raygen, table.miss, table.hit])
             }
@@ -149,6 +157,7 @@ impl AshBackend {
                     Launch::Query => (ComputeKind::LbvhQuery, [64, 1]),
                     Launch::Render => (ComputeKind::LbvhRender, [8, 8]),
                     Launch::Splat => (ComputeKind::LbvhSplat, [8, 8]),
+                    Launch::Voxels => (ComputeKind::VoxelRender, [8, 8]),
                 };
                 let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
                 Work::Compute(pipeline, [w.div_ceil(group[0]), h.div_ceil(group[1])])

@@ -38,6 +38,7 @@ pub mod pipelines;
 mod prepare;
 pub mod resources;
 pub mod structure;
+mod voxel;
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -57,7 +58,7 @@ use self::structure::{BOX_BYTES, Structure};
 use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::backend::shaders::cpu::Lbvh;
-use crate::backend::shaders::{GpuField, GpuFrame, SpecConstants};
+use crate::backend::shaders::{GpuFrame, GpuVoxels, SpecConstants};
 use crate::field::FieldSettings;
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
@@ -161,6 +162,8 @@ pub struct AshBackend {
     hit_reports: HitReports,
     /// The LBVH over the current particles and radii, when built (`Traversal::Lbvh`).
     lbvh: Option<Lbvh>,
+    /// The voxel baseline's grid of the last [`Backend::voxelize`].
+    voxels: Option<voxel::Voxels>,
 }
 
 impl AshBackend {
@@ -181,7 +184,7 @@ impl AshBackend {
             params: Buffer::new(
                 &ctx,
                 "parameters",
-                (std::mem::size_of::<GpuFrame>() + std::mem::size_of::<GpuField>()) as u64,
+                voxel::VOXELS_OFFSET + std::mem::size_of::<GpuVoxels>() as u64,
                 vk::BufferUsageFlags::UNIFORM_BUFFER,
                 MemoryLocation::GpuOnly,
             )?,
@@ -248,7 +251,6 @@ impl AshBackend {
                 (ctx.info.max_allocation / BOX_BYTES).min(ctx.info.max_primitive_count) as usize,
             ),
             scatters_grids: false,
-            voxel_grids: false,
             frame_timer: if ctx.info.timestamp_period.is_some() {
                 super::FrameTimer::DeviceTimestamps
             } else {
@@ -277,6 +279,7 @@ impl AshBackend {
             traversal: Traversal::default(),
             hit_reports: HitReports::default(),
             lbvh: None,
+            voxels: None,
         };
         backend.write_descriptors();
         Ok(backend)
@@ -476,7 +479,10 @@ impl AshBackend {
         launch: Launch,
         splat_k: usize,
     ) -> Result<(), BackendError> {
-        self.built()?;
+        // The voxel march reads the grid, not the structure.
+        if launch != Launch::Voxels {
+            self.built()?;
+        }
         let (w, h) = (frame.width, frame.height);
         let invocations = u64::from(w) * u64::from(h);
         if w == 0 || h == 0 || invocations > u64::from(self.ctx.info.max_dispatch_invocations) {
@@ -704,19 +710,22 @@ impl Backend for AshBackend {
         Ok(None)
     }
 
-    fn voxelize(&mut self, _frame: &FrameParams, _n: usize) -> Result<(), BackendError> {
-        Err(BackendError::Device {
-            backend: NAME,
-            message: "the voxel-grid baseline does not run on the ash backend yet (use --backend cpu or wgpu)".into(),
-        })
+    /// `voxel_splat.comp`: one dispatch into a grid buffer reached by device address; needs
+    /// no build.
+    fn voxelize(&mut self, frame: &FrameParams, n: usize) -> Result<(), BackendError> {
+        self.run_voxelize(frame, n)
     }
 
-    fn render_voxels(&mut self, _frame: &FrameParams) -> Result<(), BackendError> {
-        Err(BackendError::NoVoxelGrid(NAME))
+    /// `voxel_render.comp`: the shared integrators over the grid.
+    fn render_voxels(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
+        if self.voxels.is_none() {
+            return Err(BackendError::NoVoxelGrid(NAME));
+        }
+        self.render_launch(frame, Launch::Voxels, 0)
     }
 
     fn voxel_grid(&mut self) -> Result<super::voxel::VoxelGrid, BackendError> {
-        Err(BackendError::NoVoxelGrid(NAME))
+        self.read_voxels()
     }
 
     fn reset(&mut self) {
@@ -766,6 +775,7 @@ impl Backend for AshBackend {
                 .accum_size
                 .map_or(0, |(w, h)| (w as usize) * (h as usize) * 16),
             preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
+            voxel_bytes: self.voxels.as_ref().map_or(0, voxel::Voxels::bytes),
         }
     }
 }

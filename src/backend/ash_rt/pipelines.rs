@@ -60,6 +60,8 @@ const SORT_SCAN: &[u8] = spirv!("sort_scan.comp");
 const SORT_SCATTER: &[u8] = spirv!("sort_scatter.comp");
 const GATHER_WORDS: &[u8] = spirv!("gather_words.comp");
 const GATHER_VEC4S: &[u8] = spirv!("gather_vec4s.comp");
+const VOXEL_SPLAT: &[u8] = spirv!("voxel_splat.comp");
+const VOXEL_RENDER: &[u8] = spirv!("voxel_render.comp");
 
 /// Descriptor bindings (set 0); `shaders_glsl/vulkan/bindings.glsl` declares the same.
 /// Bindings 2, 3 and 9 (particles, radius attributes, boxes) are gone: those arrays grow with
@@ -104,6 +106,8 @@ pub struct Push {
     pub boxes_address: u64,
     pub accum_address: u64,
     pub particle_lo_address: u64,
+    /// The voxel baseline's grid (0 before a voxelisation).
+    pub voxel_address: u64,
 }
 
 /// The push constants of the kernels that prepare a step (`PreparePush` in
@@ -213,6 +217,10 @@ pub enum ComputeKind {
     LbvhRender,
     /// One splatted frame by LBVH traversal (`lbvh_splat.comp`).
     LbvhSplat,
+    /// The voxel baseline: the particles added to the grid (`voxel_splat.comp`), and one
+    /// frame over the grid (`voxel_render.comp`).
+    VoxelSplat,
+    VoxelRender,
     /// Preparing a step (`PreparePush`): Hilbert keys, the radix sort's three passes, and the
     /// gathers of words and of vec4s.
     HilbertKeys,
@@ -232,6 +240,8 @@ impl ComputeKind {
                 | ComputeKind::LbvhQuery
                 | ComputeKind::LbvhRender
                 | ComputeKind::LbvhSplat
+                | ComputeKind::VoxelSplat
+                | ComputeKind::VoxelRender
         )
     }
 }
@@ -407,6 +417,23 @@ pub fn compute_pipeline(
             noise_kind: 0,
             ..spec
         },
+        ComputeKind::VoxelSplat => SpecConstants {
+            integrator: 0,
+            noise_kind: 0,
+            cluster_size: 0,
+            rt_hit_per_particle: 0,
+            ..spec
+        },
+        // The march reads no particle.
+        ComputeKind::VoxelRender => SpecConstants {
+            cluster_size: 0,
+            radius_map_varies: 0,
+            density_map_varies: 0,
+            has_radius_attribute: 0,
+            position_ds: 0,
+            rt_hit_per_particle: 0,
+            ..spec
+        },
         ComputeKind::LbvhRender | ComputeKind::LbvhSplat => spec,
         // Their code reads no specialisation constant: one pipeline each.
         _ => UNSPECIALISED,
@@ -427,6 +454,8 @@ pub fn compute_pipeline(
         ComputeKind::LbvhQuery => LBVH_QUERY,
         ComputeKind::LbvhRender => LBVH_RENDER,
         ComputeKind::LbvhSplat => LBVH_SPLAT,
+        ComputeKind::VoxelSplat => VOXEL_SPLAT,
+        ComputeKind::VoxelRender => VOXEL_RENDER,
         ComputeKind::HilbertKeys => HILBERT_KEYS,
         ComputeKind::SortCount => SORT_COUNT,
         ComputeKind::SortScan => SORT_SCAN,

@@ -103,7 +103,6 @@ impl CpuBackend {
                 software: false,
                 max_particles: None,
                 scatters_grids: true,
-                voxel_grids: true,
                 frame_timer: super::FrameTimer::WallClock,
             },
             uploaded: None,
@@ -519,6 +518,7 @@ impl Backend for CpuBackend {
             structure_bytes,
             image_bytes: self.accumulator.as_ref().map_or(0, Accumulator::bytes),
             preparation_bytes: 0,
+            voxel_bytes: self.voxels.as_ref().map_or(0, VoxelGrid::bytes),
         }
     }
 }

@@ -145,7 +145,6 @@ impl WgpuBackend {
                     (util::part_limit(max_binding) / CLUSTER_BYTES * PARTS) as usize,
                 ),
                 scatters_grids: false,
-                voxel_grids: true,
                 frame_timer: if ctx.timestamps.is_some() {
                     super::FrameTimer::DeviceTimestamps
                 } else {
@@ -666,6 +665,7 @@ impl Backend for WgpuBackend {
                 .as_ref()
                 .map_or(0, |a| a.sums.size() as usize),
             preparation_bytes: self.prepare.as_ref().map_or(0, Prepare::bytes),
+            voxel_bytes: self.voxel_bytes(),
         }
     }
 }

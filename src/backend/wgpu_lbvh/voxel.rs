@@ -38,12 +38,13 @@ pub(super) struct Voxels {
     march_uniform: wgpu::Buffer,
 }
 
-/// Buffers the splat reuses between voxelisations: the slab and the particles as the kernel
-/// sees them, each kept at the largest size used.
+/// Buffers the splat reuses between voxelisations: the slab, the particles as the kernel
+/// sees them, and the passes' uniform entries, each kept at the largest size used.
 #[derive(Default)]
 pub(super) struct SplatBuffers {
     slab: Option<wgpu::Buffer>,
     splats: Option<wgpu::Buffer>,
+    ranges: Option<wgpu::Buffer>,
 }
 
 /// Cells per row of the slab buffer: the grid's row padded to the copy alignment.
@@ -60,16 +61,18 @@ fn channels(colour: ColourMode) -> u32 {
     }
 }
 
+/// Makes `slot` a buffer of at least `bytes` (by `make`) unless it is one.
 fn buffer_at_least(
     ctx: &super::GpuContext,
     slot: &mut Option<wgpu::Buffer>,
     label: &str,
     bytes: u64,
+    make: fn(&super::GpuContext, &str, u64) -> wgpu::Buffer,
 ) -> Result<(), BackendError> {
     if slot.as_ref().is_none_or(|b| b.size() < bytes) {
         *slot = None;
         *slot = Some(ctx.scoped(&format!("{label} ({bytes} bytes)"), || {
-            storage(ctx, label, bytes)
+            make(ctx, label, bytes)
         })?);
     }
     Ok(())
@@ -152,12 +155,14 @@ impl WgpuBackend {
             &mut self.splat_buffers.slab,
             "voxel slab",
             layers_per_slab as u64 * layer_bytes,
+            storage,
         )?;
         buffer_at_least(
             &ctx,
             &mut self.splat_buffers.splats,
             "voxel splats",
             chunk as u64 * SPLAT_BYTES,
+            storage,
         )?;
         let scene = self.scene.as_ref().expect("checked above");
         scene.write_maps(&ctx, self.tree.as_ref(), &self.optical, &frame.colour_table);
@@ -190,10 +195,15 @@ impl WgpuBackend {
                     .copy_from_slice(bytemuck::bytes_of(&v));
             }
         }
-        let ranges = ctx.scoped("voxel pass ranges", || {
-            util::uniform(&ctx, "voxel pass ranges", entries.len() as u64)
-        })?;
-        write(&ctx, &ranges, &entries);
+        buffer_at_least(
+            &ctx,
+            &mut self.splat_buffers.ranges,
+            "voxel pass ranges",
+            entries.len() as u64,
+            util::uniform,
+        )?;
+        let ranges = self.splat_buffers.ranges.as_ref().expect("made above");
+        write(&ctx, ranges, &entries);
 
         let mut variant = scene.variant(frame.integrator, colour, frame.noise);
         // Neither pass integrates or draws noise: one variant per scene and colour mode.
@@ -215,7 +225,7 @@ impl WgpuBackend {
                     let pass = (s * chunks + c) as u64;
                     let in_chunk = chunk.min(count - c * chunk) as u64;
                     let range = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &ranges,
+                        buffer: ranges,
                         offset: pass * entry,
                         size: wgpu::BufferSize::new(std::mem::size_of::<GpuVoxels>() as u64),
                     });
@@ -420,6 +430,16 @@ impl WgpuBackend {
             .flat_map(|r| r[..dims[0]].iter().copied())
             .collect();
         Ok(VoxelGrid::from_sums(voxels.geometry, sums))
+    }
+
+    /// Bytes of the grid's texture and of the splat's buffers.
+    pub(super) fn voxel_bytes(&self) -> usize {
+        let b = &self.splat_buffers;
+        self.voxels.as_ref().map_or(0, |v| v.geometry.bytes())
+            + [&b.slab, &b.splats, &b.ranges]
+                .into_iter()
+                .map(|b| b.as_ref().map_or(0, |b| b.size() as usize))
+                .sum::<usize>()
     }
 
     /// Fills the grid's texture with 0xFF (NaN) (tests: the next voxelisation must write every
