@@ -18,7 +18,7 @@ use super::{AshBackend, QUERY_WIDTH, TS_END, TS_START};
 use crate::backend::BackendError;
 use crate::backend::shaders::{GpuField, GpuFrame, GpuVoxels, SpecConstants};
 use crate::backend::voxel::{VoxelGeometry, VoxelGrid};
-use crate::values::{ColourMode, FrameParams};
+use crate::values::FrameParams;
 
 /// The grid the backend holds.
 pub(super) struct Voxels {
@@ -86,12 +86,7 @@ impl AshBackend {
         }
         self.voxels.as_mut().expect("made above").geometry = geometry;
         self.write_params(Some(frame))?;
-        let channels = match frame.colour {
-            ColourMode::Density => 1,
-            ColourMode::Post => 2,
-            ColourMode::Pre => 4,
-        };
-        let constants = GpuVoxels::new(&geometry, origin, geometry.dims[0] as u32, channels);
+        let constants = GpuVoxels::new(&geometry, origin, geometry.dims[0] as u32, frame.colour);
         self.buffers
             .params
             .write(VOXELS_OFFSET, bytemuck::bytes_of(&constants))?;

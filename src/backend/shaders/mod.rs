@@ -208,13 +208,19 @@ pub struct GpuVoxels {
 impl GpuVoxels {
     /// The grid of `geometry` in local coordinates (data coordinates minus `origin`, in f64
     /// before rounding; the first centre also as a double-single pair), with rows of
-    /// `row_cells` cells in the slab buffer and `channels` sums per cell.
+    /// `row_cells` cells in the splat's buffer, each cell receiving the sums `colour` needs.
     pub fn new(
         geometry: &crate::backend::voxel::VoxelGeometry,
         origin: DVec3,
         row_cells: u32,
-        channels: u32,
+        colour: ColourMode,
     ) -> GpuVoxels {
+        // Phi, and a scalar (post-classification) or RGB (pre-) Theta numerator.
+        let channels = match colour {
+            ColourMode::Density => 1,
+            ColourMode::Post => 2,
+            ColourMode::Pre => 4,
+        };
         let first = geometry.first_centre() - origin;
         let hi = first.as_vec3().as_dvec3();
         let d = geometry.dims;

@@ -18,8 +18,8 @@ use super::util::{self, bind, dispatch, grid, storage, write};
 use crate::backend::BackendError;
 use crate::backend::shaders::{GpuFrame, GpuVoxels};
 use crate::backend::voxel::{VoxelGeometry, VoxelGrid};
+use crate::values::FrameParams;
 use crate::values::shader_constants::spec;
-use crate::values::{ColourMode, FrameParams};
 
 /// Bytes per cell of the grid and of the slab buffer (four f32 sums).
 const CELL_BYTES: u64 = 16;
@@ -50,15 +50,6 @@ pub(super) struct SplatBuffers {
 /// Cells per row of the slab buffer: the grid's row padded to the copy alignment.
 fn row_cells(dims: [usize; 3]) -> u64 {
     (dims[0] as u64 * CELL_BYTES).next_multiple_of(ROW_ALIGNMENT) / CELL_BYTES
-}
-
-/// The sums the splat writes per cell for a colour mode: Phi, and a scalar or RGB Theta.
-fn channels(colour: ColourMode) -> u32 {
-    match colour {
-        ColourMode::Density => 1,
-        ColourMode::Post => 2,
-        ColourMode::Pre => 4,
-    }
 }
 
 /// Makes `slot` a buffer of at least `bytes` (by `make`) unless it is one.
@@ -167,7 +158,7 @@ impl WgpuBackend {
         let scene = self.scene.as_ref().expect("checked above");
         scene.write_maps(&ctx, self.tree.as_ref(), &self.optical, &frame.colour_table);
         let colour = frame.colour;
-        let base = GpuVoxels::new(&geometry, scene.data.origin, row as u32, channels(colour));
+        let base = GpuVoxels::new(&geometry, scene.data.origin, row as u32, colour);
         let voxels = self.voxels.as_mut().expect("made above");
         voxels.geometry = geometry;
         write(&ctx, &voxels.march_uniform, bytemuck::bytes_of(&base));
