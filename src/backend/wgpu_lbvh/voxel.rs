@@ -111,8 +111,8 @@ impl WgpuBackend {
         if self.voxels.as_ref().is_none_or(|v| v.geometry.dims != dims) {
             self.voxels = None;
             let bytes = geometry.bytes();
-            let (texture, march_uniform) =
-                ctx.scoped(&format!("voxel grid texture ({bytes} bytes)"), || {
+            let (texture, march_uniform) = ctx
+                .scoped(&format!("voxel grid texture ({bytes} bytes)"), || {
                     let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
                         label: Some("voxel grid"),
                         size: wgpu::Extent3d {
@@ -132,6 +132,18 @@ impl WgpuBackend {
                     let uniform =
                         util::uniform(&ctx, "voxel grid", std::mem::size_of::<GpuVoxels>() as u64);
                     (texture, uniform)
+                })
+                .map_err(|e| {
+                    let e = match e {
+                        BackendError::Device { message, .. } => message,
+                        other => other.to_string(),
+                    };
+                    device_error(format!(
+                        "{e} (a voxel grid of {dims:?} cells is one rgba32float 3D texture of \
+                         {} MiB, more than {} allocates: use a smaller --voxel-grid)",
+                        bytes >> 20,
+                        ctx.info.name
+                    ))
                 })?;
             let view = texture.create_view(&Default::default());
             self.voxels = Some(Voxels {
