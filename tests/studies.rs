@@ -511,12 +511,27 @@ fn the_traversal_study_compares_the_rt_pipeline_and_the_lbvh_on_the_ash_device()
         "cameras",
         "step_size",
     ];
-    let rows = check_study(dir.path(), "traversal", &frame, 2, &["ash"], 1);
-    let variants: Vec<&str> = rows.iter().map(|r| r[8].as_str()).collect();
-    assert_eq!(variants, ["rt pipeline", "lbvh compute"]);
-    // Same device for both, and device timestamps.
-    assert_eq!(rows[0][5], rows[1][5]);
-    assert_eq!(rows[0][7], "device timestamps");
+    // Both traversals on every Vulkan device with ray-tracing pipelines (here one).
+    let devices: Vec<String> = aarbf::backend::ash_rt::context::on_every_device()
+        .into_iter()
+        .map(|c| c.expect("the device opens").info.name.clone())
+        .collect();
+    assert!(!devices.is_empty());
+    let rows = check_study(
+        dir.path(),
+        "traversal",
+        &frame,
+        2 * devices.len(),
+        &["ash"],
+        1,
+    );
+    for (pair, device) in rows.chunks(2).zip(&devices) {
+        let variants: Vec<&str> = pair.iter().map(|r| r[8].as_str()).collect();
+        assert_eq!(variants, ["rt pipeline", "lbvh compute"]);
+        // Same device for both, and device timestamps.
+        assert_eq!((&pair[0][5], &pair[1][5]), (device, device));
+        assert_eq!(pair[0][7], "device timestamps");
+    }
     let md = std::fs::read_to_string(dir.path().join("traversal/traversal.md")).unwrap();
     assert!(md.contains("speed-up of the RT pipeline"), "{md}");
 }

@@ -9,6 +9,7 @@ use super::plot::{self, Figure, Panel};
 use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of, frame_times, value};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
+use crate::backend::ash_rt::context::Context as AshContext;
 use crate::backend::ash_rt::{AshBackend, Traversal};
 use crate::backend::wgpu_lbvh::GpuContext;
 use crate::field::FieldSettings;
@@ -38,7 +39,8 @@ pub const DESCRIPTION: Description = Description {
 
 /// How a row's session is made.
 enum Maker {
-    Ash(Traversal),
+    /// The ash backend on one device, with one traversal.
+    Ash(Traversal, std::sync::Arc<AshContext>),
     /// The wgpu backend on one adapter.
     Wgpu(std::sync::Arc<GpuContext>),
     Default,
@@ -49,12 +51,27 @@ enum Maker {
 /// so every data set runs on the same ones).
 /// The wgpu rows' variants name the graphics API, so two adapters (say Vulkan and GL on one
 /// GPU) stay apart in the table and the plot.
-fn variants(kind: BackendKind, adapters: &[std::sync::Arc<GpuContext>]) -> Vec<(String, Maker)> {
+fn variants(
+    kind: BackendKind,
+    adapters: &[std::sync::Arc<GpuContext>],
+    devices: &[std::sync::Arc<AshContext>],
+) -> Vec<(String, Maker)> {
     match kind {
-        BackendKind::Ash => vec![
-            ("rt pipeline".into(), Maker::Ash(Traversal::RtPipeline)),
-            ("lbvh compute".into(), Maker::Ash(Traversal::Lbvh)),
-        ],
+        BackendKind::Ash => devices
+            .iter()
+            .flat_map(|d| {
+                [
+                    (
+                        "rt pipeline".into(),
+                        Maker::Ash(Traversal::RtPipeline, d.clone()),
+                    ),
+                    (
+                        "lbvh compute".into(),
+                        Maker::Ash(Traversal::Lbvh, d.clone()),
+                    ),
+                ]
+            })
+            .collect(),
         BackendKind::Wgpu => adapters
             .iter()
             .map(|a| {
@@ -85,6 +102,27 @@ fn wgpu_adapters() -> Result<Vec<std::sync::Arc<GpuContext>>, StudyError> {
     Ok(out)
 }
 
+/// A context on every Vulkan device with ray-tracing pipelines (those that fail to open are
+/// logged).
+fn ash_devices() -> Result<Vec<std::sync::Arc<AshContext>>, StudyError> {
+    let mut out = Vec::new();
+    let mut first_error = None;
+    for opened in crate::backend::ash_rt::context::on_every_device() {
+        match opened {
+            Ok(ctx) => out.push(ctx),
+            Err(e) => {
+                tracing::warn!("traversal: a Vulkan device did not open: {e}");
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    match (out.is_empty(), first_error) {
+        (true, Some(e)) => Err(e.into()),
+        (true, None) => Err(StudyError::Invalid("no Vulkan device opened".into())),
+        (false, _) => Ok(out),
+    }
+}
+
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let adapters = if ctx.backends.contains(&BackendKind::Wgpu) {
@@ -92,10 +130,15 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     } else {
         Vec::new()
     };
+    let devices = if ctx.backends.contains(&BackendKind::Ash) {
+        ash_devices()?
+    } else {
+        Vec::new()
+    };
     let total: usize = ctx
         .backends
         .iter()
-        .map(|&b| variants(b, &adapters).len())
+        .map(|&b| variants(b, &adapters, &devices).len())
         .sum();
     let bar = ctx.bar(ctx.data.len() * total, "traversal");
     let cluster = ClusterSize::new(1).map_err(StudyError::Invalid)?;
@@ -104,10 +147,10 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
         let orbit = cameras(ds.bounds, o.cameras);
         let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
         for &kind in ctx.backends {
-            for (variant, maker) in variants(kind, &adapters) {
+            for (variant, maker) in variants(kind, &adapters, &devices) {
                 let mut session = match maker {
-                    Maker::Ash(t) => {
-                        let mut b = AshBackend::new()?;
+                    Maker::Ash(t, device) => {
+                        let mut b = AshBackend::on(device)?;
                         b.set_traversal(t);
                         RenderSession::new(Box::new(b), &ds.series)
                     }

@@ -129,6 +129,20 @@ pub struct DeviceInfo {
 enum ContextError {
     Unavailable(String),
     Device(String),
+    /// [`DeviceChoice::Index`] past the last device with ray-tracing pipelines.
+    NoSuchDevice {
+        index: usize,
+        count: usize,
+    },
+}
+
+/// Which of the devices with ray-tracing pipelines a context opens.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum DeviceChoice {
+    /// A discrete GPU before an integrated one, before a virtual one, before a CPU's.
+    Best,
+    /// The i-th such device in the loader's order.
+    Index(usize),
 }
 
 impl From<ContextError> for BackendError {
@@ -139,6 +153,12 @@ impl From<ContextError> for BackendError {
                 backend: NAME,
                 message,
             },
+            ContextError::NoSuchDevice { index, count } => BackendError::Unavailable(
+                NAME,
+                format!(
+                    "no Vulkan device {index} with ray-tracing pipelines (this machine has {count})"
+                ),
+            ),
         }
     }
 }
@@ -169,16 +189,41 @@ static SHARED: OnceLock<Result<Arc<Context>, ContextError>> = OnceLock::new();
 /// tracing) is remembered: later calls return it at once.
 pub fn shared() -> Result<Arc<Context>, BackendError> {
     SHARED
-        .get_or_init(|| {
-            let validation = match std::env::var("AARBF_VK_VALIDATION").as_deref() {
-                Ok("0") => false,
-                Ok("1") => true,
-                _ => cfg!(debug_assertions),
-            };
-            Context::new(validation).map(Arc::new)
-        })
+        .get_or_init(|| Context::new(validation_wanted(), DeviceChoice::Best).map(Arc::new))
         .clone()
         .map_err(BackendError::from)
+}
+
+/// Whether contexts run the Khronos validation layer: `AARBF_VK_VALIDATION=0|1`, else in
+/// builds with debug assertions.
+fn validation_wanted() -> bool {
+    match std::env::var("AARBF_VK_VALIDATION").as_deref() {
+        Ok("0") => false,
+        Ok("1") => true,
+        _ => cfg!(debug_assertions),
+    }
+}
+
+/// A context on every device with ray-tracing pipelines, in the loader's order (a study
+/// compares them, as the paper's Fig. 10a compares vendors): each its own instance and device,
+/// apart from the shared one. A device that fails to open is its entry's error; none at all is
+/// one error saying why.
+pub fn on_every_device() -> Vec<Result<Arc<Context>, BackendError>> {
+    let validation = validation_wanted();
+    let mut out = Vec::new();
+    // No machine has 64 GPUs; the bound keeps a loader that fails before counting finite.
+    for index in 0..64 {
+        match Context::new(validation, DeviceChoice::Index(index)) {
+            Ok(ctx) => out.push(Ok(Arc::new(ctx))),
+            Err(ContextError::NoSuchDevice { .. }) => break,
+            Err(e @ ContextError::Unavailable(_)) if index == 0 => {
+                out.push(Err(e.into()));
+                break;
+            }
+            Err(e) => out.push(Err(e.into())),
+        }
+    }
+    out
 }
 
 /// Why no device qualifies, per device.
@@ -241,7 +286,7 @@ fn device_name(props: &vk::PhysicalDeviceProperties) -> String {
 }
 
 impl Context {
-    fn new(validation: bool) -> Result<Context, ContextError> {
+    fn new(validation: bool, choice: DeviceChoice) -> Result<Context, ContextError> {
         let unavailable = |m: String| ContextError::Unavailable(m);
         let failed = |what: &str, e: vk::Result| ContextError::Device(format!("{what}: {e}"));
         // SAFETY: loading the system's Vulkan loader; nothing else runs its code concurrently.
@@ -338,6 +383,7 @@ impl Context {
         }
         let mut reasons = Vec::new();
         let mut best: Option<(u32, vk::PhysicalDevice, u32)> = None;
+        let mut qualifying = 0;
         for &pd in &devices {
             // SAFETY: pd comes from this instance.
             let props = unsafe { instance.get_physical_device_properties(pd) };
@@ -374,9 +420,23 @@ impl Context {
                 vk::PhysicalDeviceType::CPU => 1,
                 _ => 0,
             };
-            if best.is_none_or(|b| rank > b.0) {
+            let chosen = match choice {
+                DeviceChoice::Best => best.is_none_or(|b| rank > b.0),
+                DeviceChoice::Index(i) => qualifying == i,
+            };
+            if chosen {
                 best = Some((rank, pd, family));
             }
+            qualifying += 1;
+        }
+        if let DeviceChoice::Index(index) = choice
+            && best.is_none()
+            && qualifying > 0
+        {
+            return Err(ContextError::NoSuchDevice {
+                index,
+                count: qualifying,
+            });
         }
         let Some((_, physical, queue_family)) = best else {
             return Err(unavailable(format!(
@@ -591,6 +651,34 @@ impl Drop for InstanceGuard {
             if let Some(i) = self.instance.take() {
                 i.destroy_instance(None);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every device with ray-tracing pipelines opens on its own (here lavapipe, so one), the
+    /// best of them is among them, and an index past the last is refused with the count.
+    #[test]
+    fn a_context_opens_on_every_ray_tracing_device() {
+        let every = on_every_device();
+        assert!(!every.is_empty());
+        let names: Vec<String> = every
+            .iter()
+            .map(|c| c.as_ref().expect("the device opens").describe())
+            .collect();
+        let best = shared().expect("a device").describe();
+        assert!(names.contains(&best), "{best} not in {names:?}");
+        match Context::new(false, DeviceChoice::Index(names.len())) {
+            Err(ContextError::NoSuchDevice { index, count }) => {
+                assert_eq!((index, count), (names.len(), names.len()));
+                let e = BackendError::from(ContextError::NoSuchDevice { index, count });
+                assert!(e.to_string().contains(&format!("has {count}")), "{e}");
+            }
+            Err(e) => panic!("{e:?}"),
+            Ok(_) => panic!("a device past the last opened"),
         }
     }
 }

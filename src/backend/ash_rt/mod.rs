@@ -170,7 +170,11 @@ impl AshBackend {
     /// A backend on the process's shared Vulkan device; `Unavailable` when this machine has no
     /// device with ray-tracing pipelines (the message says what each device lacks).
     pub fn new() -> Result<AshBackend, BackendError> {
-        let ctx = context::shared()?;
+        Self::on(context::shared()?)
+    }
+
+    /// A backend on the device `ctx` opened ([`context::on_every_device`]).
+    pub fn on(ctx: Arc<context::Context>) -> Result<AshBackend, BackendError> {
         let commands = Commands::new(&ctx, TS_COUNT)?;
         let mask = BlueNoiseMask::builtin();
         if (mask.width, mask.height, mask.depth) != (STBN_WIDTH, STBN_HEIGHT, STBN_DEPTH) {
