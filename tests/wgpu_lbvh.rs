@@ -393,6 +393,56 @@ fn device_preparation_equals_the_cpu_preparation() {
     assert_no_driver_messages();
 }
 
+/// Both ways a step reaches the device: written straight into mappable storage buffers where
+/// device memory is the host's (lavapipe here: no staging copy), and through staging buffers
+/// and a copy (a discrete GPU's way, forced here): the same preparation, in one part and split
+/// over several, outputs poisoned between steps.
+#[test]
+fn a_step_reaches_the_device_alike_with_and_without_a_staging_copy() {
+    let shared = gpu();
+    let unified = matches!(
+        shared.info.device_type,
+        wgpu::DeviceType::Cpu | wgpu::DeviceType::IntegratedGpu
+    ) && shared
+        .adapter
+        .features()
+        .contains(wgpu::Features::MAPPABLE_PRIMARY_BUFFERS);
+    assert_eq!(shared.unified_memory, unified);
+    if shared.info.driver == "llvmpipe" && shared.info.backend == wgpu::Backend::Vulkan {
+        assert!(shared.unified_memory, "lavapipe maps its storage buffers");
+    }
+    let mut copying = GpuContext::with_limits(shared.limits.clone()).unwrap();
+    copying.unified_memory = false;
+    let copying = Arc::new(copying);
+    let mut with_radius = field(0.01, true);
+    with_radius.attribute_range = None;
+    with_radius.radius_attribute = Some("h".into());
+    for (name, ctx) in [("unified", &shared), ("staged", &copying)] {
+        for limit in [None, Some(65_536)] {
+            let mut b = backend(ctx, limit);
+            for (i, &n) in [10_001usize, 4097, 9000].iter().enumerate() {
+                let step = Arc::new(simulation_step(n, 700 + i as u64));
+                let precision = if i == 1 {
+                    Precision::RENDER
+                } else {
+                    Precision::DoubleSingle
+                };
+                let input = simulation_input(&step, &with_radius, precision);
+                if i > 0 {
+                    b.poison_prepared().unwrap();
+                }
+                b.upload(&input).unwrap();
+                assert_prepared_like_the_cpu(
+                    &b,
+                    &input,
+                    &format!("{name}, binding limit {limit:?}, step {i} ({n} particles)"),
+                );
+            }
+        }
+    }
+    assert_no_driver_messages();
+}
+
 /// Once the series' maximum is reserved, stepping makes no buffer: the staging memory, the
 /// step's arrays on the device, the sort's and the tree's buffers are all made by the first
 /// upload (here one with every optional array: a radius attribute and double-single

@@ -258,6 +258,10 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     /// Timestamp queries, where the adapter has them inside command encoders.
     pub timestamps: Option<Timestamps>,
+    /// The device's memory is the host's (a CPU or integrated adapter that lets storage
+    /// buffers be mapped): a step is written straight into the buffers the kernels read,
+    /// without a staging copy.
+    pub unified_memory: bool,
     lost: Arc<Mutex<Option<String>>>,
     modules: Mutex<HashMap<(ShaderFile, Layout), Arc<wgpu::ShaderModule>>>,
     pipelines: Mutex<HashMap<(Kernel, Variant, Layout), Arc<wgpu::ComputePipeline>>>,
@@ -372,13 +376,25 @@ impl GpuContext {
         let timestamp_features =
             wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
         let timed = adapter.features().contains(timestamp_features);
+        // Where device memory is host memory, a copy from staging memory is a CPU's memcpy
+        // (lavapipe: on the same cores): storage buffers the host maps skip it. Not on a
+        // discrete GPU, where mapped device memory is slow to read and the copy is a DMA.
+        let unified_memory = matches!(
+            info.device_type,
+            wgpu::DeviceType::Cpu | wgpu::DeviceType::IntegratedGpu
+        ) && adapter
+            .features()
+            .contains(wgpu::Features::MAPPABLE_PRIMARY_BUFFERS);
+        let mut required_features = wgpu::Features::empty();
+        if timed {
+            required_features |= timestamp_features;
+        }
+        if unified_memory {
+            required_features |= wgpu::Features::MAPPABLE_PRIMARY_BUFFERS;
+        }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("aarbf wgpu"),
-            required_features: if timed {
-                timestamp_features
-            } else {
-                wgpu::Features::empty()
-            },
+            required_features,
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -412,6 +428,7 @@ impl GpuContext {
             info,
             limits,
             timestamps,
+            unified_memory,
             lost,
             modules: Mutex::new(HashMap::new()),
             pipelines: Mutex::new(HashMap::new()),

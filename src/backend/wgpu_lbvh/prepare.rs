@@ -85,16 +85,30 @@ fn split(
     capacity: usize,
     max_binding: u64,
 ) -> Result<Raw<SplitBuffer>, BackendError> {
-    let device = SplitBuffer::new(ctx, label, capacity as u64, PARTICLE_BYTES, max_binding)
-        .ok_or_else(|| {
-            device_error(format!(
-                "{capacity} particles do not fit the {label}' parts"
-            ))
-        })?;
-    Ok(Raw {
-        staging: Staging::for_split(ctx, label, &device),
-        device,
-    })
+    let extra = if ctx.unified_memory {
+        wgpu::BufferUsages::MAP_WRITE
+    } else {
+        wgpu::BufferUsages::empty()
+    };
+    let device = SplitBuffer::with_usage(
+        ctx,
+        label,
+        capacity as u64,
+        PARTICLE_BYTES,
+        max_binding,
+        extra,
+    )
+    .ok_or_else(|| {
+        device_error(format!(
+            "{capacity} particles do not fit the {label}' parts"
+        ))
+    })?;
+    let staging = if ctx.unified_memory {
+        Staging::aliasing(&device)
+    } else {
+        Staging::for_split(ctx, label, &device)
+    };
+    Ok(Raw { staging, device })
 }
 
 impl Prepare {
@@ -138,13 +152,14 @@ impl Prepare {
     /// Bytes the preparation holds beside the scene: the raw arrays on the device, as much
     /// again in their staging memory, and the sort's buffers.
     pub(super) fn bytes(&self) -> usize {
-        let raw = 2
-            * (self.points.device.size()
-                + self.points_lo.as_ref().map_or(0, |r| r.device.size())
-                + self
-                    .radius_attribute
-                    .as_ref()
-                    .map_or(0, |r| r.device.size()));
+        // The particles' staging is their device buffers themselves on unified memory.
+        let points_copies = if self.points.staging.aliases() { 1 } else { 2 };
+        let raw = points_copies
+            * (self.points.device.size() + self.points_lo.as_ref().map_or(0, |r| r.device.size()))
+            + 2 * self
+                .radius_attribute
+                .as_ref()
+                .map_or(0, |r| r.device.size());
         let sort = [
             &self.keys,
             &self.values,

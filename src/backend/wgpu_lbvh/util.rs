@@ -324,6 +324,26 @@ impl SplitBuffer {
         elem_bytes: u64,
         max_binding: u64,
     ) -> Option<SplitBuffer> {
+        Self::with_usage(
+            ctx,
+            label,
+            elems,
+            elem_bytes,
+            max_binding,
+            wgpu::BufferUsages::empty(),
+        )
+    }
+
+    /// [`Self::new`], the parts also having `extra` usages (`MAP_WRITE` for
+    /// [`Staging::aliasing`]).
+    pub fn with_usage(
+        ctx: &GpuContext,
+        label: &str,
+        elems: u64,
+        elem_bytes: u64,
+        max_binding: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Option<SplitBuffer> {
         let needed = parts_needed(elems, elem_bytes, max_binding);
         if needed > PARTS {
             return None;
@@ -337,7 +357,15 @@ impl SplitBuffer {
                 } else {
                     16
                 };
-                storage(ctx, &format!("{label} (part {i})"), size)
+                ctx.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("{label} (part {i})")),
+                    size: size.max(16).next_multiple_of(16),
+                    usage: wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::COPY_DST
+                        | wgpu::BufferUsages::COPY_SRC
+                        | extra,
+                    mapped_at_creation: false,
+                })
             })
             .collect();
         Some(SplitBuffer {
@@ -453,6 +481,9 @@ pub struct Staging {
     parts: Vec<wgpu::Buffer>,
     part_bytes: u64,
     mapped: bool,
+    /// The parts are the destination's own (mappable storage on a unified-memory device):
+    /// nothing to copy.
+    aliases: bool,
 }
 
 impl Staging {
@@ -477,6 +508,19 @@ impl Staging {
             parts,
             part_bytes,
             mapped: true,
+            aliases: false,
+        }
+    }
+
+    /// Staging that is `dst` itself, whose parts were made mappable
+    /// ([`SplitBuffer::with_usage`] with `MAP_WRITE`): views write into the buffers the
+    /// kernels read, and [`Self::encode_copy`] only unmaps them.
+    pub fn aliasing(dst: &SplitBuffer) -> Staging {
+        Staging {
+            parts: dst.buffers()[..dst.parts_used().max(1)].to_vec(),
+            part_bytes: dst.part_bytes,
+            mapped: false,
+            aliases: true,
         }
     }
 
@@ -488,6 +532,11 @@ impl Staging {
     /// Bytes per part (all but the last are full).
     pub fn part_bytes(&self) -> u64 {
         self.part_bytes
+    }
+
+    /// Whether this staging is its destination's own memory ([`Self::aliasing`]).
+    pub fn aliases(&self) -> bool {
+        self.aliases
     }
 
     /// Maps every part again (after the device's last copy from them, which it waits for).
@@ -552,6 +601,9 @@ impl Staging {
             b.unmap();
         }
         self.mapped = false;
+        if self.aliases {
+            return;
+        }
         let mut left = bytes;
         for (src, dst) in self.parts.iter().zip(dst) {
             if left == 0 {
