@@ -67,7 +67,7 @@ use crate::values::shader_constants::{TABLE_FLOATS, TABLE_SIZE, spec};
 use crate::values::{ColourMode, Integrator, NoiseKind};
 use context::device_error;
 use prepare::Prepare;
-use scene::{Scene, check_fits};
+use scene::{MapsWritten, Scene, check_fits};
 use tree::{GpuTree, SceneBindings};
 use util::{PARTS, SplitBuffer, storage, uniform};
 
@@ -435,47 +435,54 @@ impl Backend for WgpuBackend {
             n
         };
         let old = self.scene.take();
-        let (particles, particles_lo, particle_capacity, maps, field_uniform, radius_attribute) =
-            match old {
-                Some(s) if s.particle_capacity >= n => (
-                    s.particles,
-                    s.particles_lo,
-                    s.particle_capacity,
-                    s.maps,
-                    s.field_uniform,
-                    s.radius_attribute,
-                ),
-                _ => {
-                    let need = capacity as u64 * PARTICLE_BYTES;
-                    ctx.scoped(
-                        &format!(
-                            "step '{}': particle buffers ({need} bytes for {capacity} particles)",
-                            input.step.name
-                        ),
-                        || {
+        let (
+            particles,
+            particles_lo,
+            particle_capacity,
+            (maps, field_uniform, maps_written),
+            radius_attribute,
+        ) = match old {
+            Some(s) if s.particle_capacity >= n => (
+                s.particles,
+                s.particles_lo,
+                s.particle_capacity,
+                (s.maps, s.field_uniform, s.maps_written),
+                s.radius_attribute,
+            ),
+            _ => {
+                let need = capacity as u64 * PARTICLE_BYTES;
+                ctx.scoped(
+                    &format!(
+                        "step '{}': particle buffers ({need} bytes for {capacity} particles)",
+                        input.step.name
+                    ),
+                    || {
+                        (
+                            SplitBuffer::new(
+                                &ctx,
+                                "particles",
+                                capacity as u64,
+                                PARTICLE_BYTES,
+                                max_binding,
+                            ),
+                            capacity,
                             (
-                                SplitBuffer::new(
-                                    &ctx,
-                                    "particles",
-                                    capacity as u64,
-                                    PARTICLE_BYTES,
-                                    max_binding,
-                                ),
-                                capacity,
                                 storage(&ctx, "map tables", TABLE_FLOATS as u64 * 4),
                                 uniform(&ctx, "field", 32),
-                                None,
-                            )
-                        },
-                    )
-                    .and_then(|(p, c, m, f, r)| {
-                        let p = p.ok_or_else(|| {
-                            device_error(format!("{capacity} particles do not fit {PARTS} parts"))
-                        })?;
-                        Ok((p, None, c, m, f, r))
-                    })?
-                }
-            };
+                                MapsWritten::default(),
+                            ),
+                            None,
+                        )
+                    },
+                )
+                .and_then(|(p, c, m, r)| {
+                    let p = p.ok_or_else(|| {
+                        device_error(format!("{capacity} particles do not fit {PARTS} parts"))
+                    })?;
+                    Ok((p, None, c, m, r))
+                })?
+            }
+        };
         if self
             .prepare
             .as_ref()
@@ -508,6 +515,7 @@ impl Backend for WgpuBackend {
             radius_attribute,
             maps,
             field_uniform,
+            maps_written,
         };
         scene.ensure_points_lo(&ctx, max_binding)?;
         scene.ensure_radius_attribute(&ctx)?;
@@ -517,9 +525,11 @@ impl Backend for WgpuBackend {
         let prepared = started.elapsed();
         self.timings.device_prepare = prepared - copied;
         tracing::debug!(
-            "wgpu: step '{}' ({n} particles): CPU {:.1} ms, copy {:.1} ms, device preparation {:.1} ms",
+            "wgpu: step '{}' ({n} particles): CPU {:.1} ms (check {:.1}), staging mapped after {:.1} ms, copy {:.1} ms, device preparation {:.1} ms",
             input.step.name,
             self.timings.prepare.as_secs_f64() * 1e3,
+            checked.as_secs_f64() * 1e3,
+            (allocated - checked).as_secs_f64() * 1e3,
             (copied - staged).as_secs_f64() * 1e3,
             self.timings.device_prepare.as_secs_f64() * 1e3
         );

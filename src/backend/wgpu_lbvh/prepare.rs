@@ -156,10 +156,10 @@ impl Prepare {
         let points_copies = if self.points.staging.aliases() { 1 } else { 2 };
         let raw = points_copies
             * (self.points.device.size() + self.points_lo.as_ref().map_or(0, |r| r.device.size()))
-            + 2 * self
-                .radius_attribute
-                .as_ref()
-                .map_or(0, |r| r.device.size());
+            + self.radius_attribute.as_ref().map_or(0, |r| {
+                let copies = if r.staging.aliases() { 1 } else { 2 };
+                copies * r.device.size()
+            });
         let sort = [
             &self.keys,
             &self.values,
@@ -213,9 +213,29 @@ impl Prepare {
     fn radius(&mut self, ctx: &GpuContext) -> Result<&mut Raw<wgpu::Buffer>, BackendError> {
         if self.radius_attribute.is_none() {
             let bytes = self.capacity.max(1) as u64 * WORD_BYTES;
-            self.radius_attribute = Some(ctx.scoped("raw radius attribute", || Raw {
-                staging: Staging::new(ctx, "raw radius attribute", bytes, bytes),
-                device: storage(ctx, "raw radius attribute", bytes),
+            let unified = ctx.unified_memory;
+            self.radius_attribute = Some(ctx.scoped("raw radius attribute", || {
+                if unified {
+                    // As the points' (`split`): the kernels read the memory the pass writes.
+                    let device = ctx.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("raw radius attribute"),
+                        size: bytes.max(16).next_multiple_of(16),
+                        usage: wgpu::BufferUsages::STORAGE
+                            | wgpu::BufferUsages::COPY_DST
+                            | wgpu::BufferUsages::COPY_SRC
+                            | wgpu::BufferUsages::MAP_WRITE,
+                        mapped_at_creation: false,
+                    });
+                    Raw {
+                        staging: Staging::aliasing_buffer(&device),
+                        device,
+                    }
+                } else {
+                    Raw {
+                        staging: Staging::new(ctx, "raw radius attribute", bytes, bytes),
+                        device: storage(ctx, "raw radius attribute", bytes),
+                    }
+                }
             })?);
         }
         self.radius_attribute
@@ -277,33 +297,45 @@ impl Prepare {
         Ok(data)
     }
 
-    /// Copies what [`Self::stage`] wrote to the device, and waits.
+    /// Copies what [`Self::stage`] wrote to the device, and waits; on unified memory, where
+    /// the staging is the device's buffers ([`Staging::aliasing`]), only unmaps them: no
+    /// command buffer, nothing to submit, no round trip to the device's queue.
     pub(super) fn copy(
         &mut self,
         ctx: &GpuContext,
         data: &GpuStepData,
     ) -> Result<(), BackendError> {
         let n = data.count as u64;
+        let lo = self.points_lo.as_mut().filter(|_| data.double_single);
+        let radius = self
+            .radius_attribute
+            .as_mut()
+            .filter(|_| data.has_radius_attribute);
+        let mut copies: Vec<(&mut Staging, &[wgpu::Buffer], u64)> = vec![(
+            &mut self.points.staging,
+            self.points.device.buffers(),
+            n * PARTICLE_BYTES,
+        )];
+        if let Some(lo) = lo {
+            copies.push((&mut lo.staging, lo.device.buffers(), n * PARTICLE_BYTES));
+        }
+        if let Some(r) = radius {
+            copies.push((
+                &mut r.staging,
+                std::slice::from_ref(&r.device),
+                n * WORD_BYTES,
+            ));
+        }
+        if copies.iter().all(|(staging, ..)| staging.aliases()) {
+            for (staging, ..) in copies {
+                staging.unmap();
+            }
+            return Ok(());
+        }
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         ctx.scoped("step upload", || {
-            let points = &mut self.points;
-            points
-                .staging
-                .encode_copy(&mut encoder, points.device.buffers(), n * PARTICLE_BYTES);
-            if data.double_single
-                && let Some(lo) = &mut self.points_lo
-            {
-                lo.staging
-                    .encode_copy(&mut encoder, lo.device.buffers(), n * PARTICLE_BYTES);
-            }
-            if data.has_radius_attribute
-                && let Some(r) = &mut self.radius_attribute
-            {
-                r.staging.encode_copy(
-                    &mut encoder,
-                    std::slice::from_ref(&r.device),
-                    n * WORD_BYTES,
-                );
+            for (staging, dst, bytes) in copies {
+                staging.encode_copy(&mut encoder, dst, bytes);
             }
         })?;
         submit_and_wait(ctx, "step upload", encoder)

@@ -524,6 +524,17 @@ impl Staging {
         }
     }
 
+    /// Staging that is the one buffer `dst` itself, made with `MAP_WRITE` ([`Self::aliasing`]
+    /// for an array in one buffer).
+    pub fn aliasing_buffer(dst: &wgpu::Buffer) -> Staging {
+        Staging {
+            parts: vec![dst.clone()],
+            part_bytes: dst.size(),
+            mapped: false,
+            aliases: true,
+        }
+    }
+
     /// Staging for the whole of `dst`, in its parts.
     pub fn for_split(ctx: &GpuContext, label: &str, dst: &SplitBuffer) -> Staging {
         Staging::new(ctx, label, dst.size(), dst.part_bytes)
@@ -589,18 +600,23 @@ impl Staging {
         Ok(out)
     }
 
+    /// Unmaps the parts (after writing through [`Self::views`]).
+    pub fn unmap(&mut self) {
+        for b in &self.parts {
+            b.unmap();
+        }
+        self.mapped = false;
+    }
+
     /// Unmaps the parts and encodes copying bytes `0 .. bytes` into `dst` (buffers cut into the
-    /// same parts).
+    /// same parts; nothing when the parts are `dst`'s own).
     pub fn encode_copy(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         dst: &[wgpu::Buffer],
         bytes: u64,
     ) {
-        for b in &self.parts {
-            b.unmap();
-        }
-        self.mapped = false;
+        self.unmap();
         if self.aliases {
             return;
         }
