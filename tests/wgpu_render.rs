@@ -16,6 +16,7 @@ use aarbf::backend::{self, BackendKind};
 use aarbf::field::{Classification, FieldSettings};
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
+use aarbf::scene::maps::{OpticalDensityMap, PiecewiseLinear};
 use aarbf::scene::synth::Generator;
 use aarbf::values::Image;
 use aarbf::values::{Integrator, NoiseKind};
@@ -140,6 +141,50 @@ fn images_match_the_cpu_backend_at_equal_samples_and_seed() {
             max_flip,
         );
     }
+    assert_no_driver_messages();
+}
+
+/// A transfer-function change between frames of one uploaded step reaches the device (the
+/// backend writes its map tables only when their bytes change), and changing back gives the
+/// first image again bit for bit: each frame matches the CPU backend's.
+#[test]
+fn frames_follow_transfer_function_changes_without_a_new_upload() {
+    gpu();
+    let series = demo();
+    let f = field(&series);
+    let mut cpu = session(BackendKind::Cpu, &series, &f);
+    let mut wgpu = session(BackendKind::Wgpu, &series, &f);
+    let settings_with = |optical: &str, scale: f64| RenderSettings {
+        width: 48,
+        height: 32,
+        integrator: Integrator::Ea,
+        noise: NoiseKind::White,
+        seed: 5,
+        camera: Some(close_view(&series)),
+        optical: OpticalDensityMap::new(optical.parse::<PiecewiseLinear>().unwrap(), Some(scale))
+            .unwrap(),
+        ..RenderSettings::default()
+    };
+    let ramp = settings_with("0:0,1:1", 2.0);
+    let step = settings_with("0:0.4,0.5:0,1:0.6", 6.0);
+    let mut images = Vec::new();
+    for (name, settings) in [("ramp", &ramp), ("step", &step), ("ramp again", &ramp)] {
+        let a = cpu.render(settings, 1).unwrap();
+        let b = wgpu.render(settings, 1).unwrap();
+        compare(
+            &format!("wgpu-transfer-{name}").replace(' ', "-"),
+            &a,
+            &b,
+            1e-4,
+            1e-3,
+        );
+        images.push(b);
+    }
+    assert_ne!(
+        images[0], images[1],
+        "the transfer function changed the image"
+    );
+    assert_eq!(images[0], images[2], "back to the first transfer function");
     assert_no_driver_messages();
 }
 
