@@ -146,8 +146,8 @@ impl F32Field {
         4 * self.start.len() + self.reached.len()
     }
 
-    /// The cell holding local point `l`, if it is in the grid.
-    fn cell_at(&self, l: DVec3) -> Option<usize> {
+    /// The cell holding local point `l` (its index and coordinates), if it is in the grid.
+    fn cell_at(&self, l: DVec3) -> Option<(usize, [usize; 3])> {
         let g = (l - self.corner) * self.inv_cell;
         let mut idx = [0usize; 3];
         for a in 0..3 {
@@ -157,16 +157,22 @@ impl F32Field {
             }
             idx[a] = g[a] as usize;
         }
-        Some(cell_index(self.dims, idx))
+        Some((cell_index(self.dims, idx), idx))
     }
 
-    /// The particles of cell `c`'s 27 neighbours, as nine runs of particle indices.
-    fn runs(&self, c: usize, out: &mut Vec<(u32, u32)>) {
+    /// The particles of the 27 neighbours of cell `ijk`, as nine runs of particle indices
+    /// (a row of three cells is one run: cells are x fastest).
+    fn runs(&self, ijk: [usize; 3], out: &mut Vec<(u32, u32)>) {
         out.clear();
-        for (a, b) in neighbour_rows(self.dims, cell_coords(self.dims, c)) {
-            let run = (self.start[a], self.start[b + 1]);
-            if run.1 > run.0 {
-                out.push(run);
+        let [nx, ny, nz] = self.dims;
+        let (i0, i1) = (ijk[0].saturating_sub(1), (ijk[0] + 1).min(nx - 1));
+        for k in ijk[2].saturating_sub(1)..=(ijk[2] + 1).min(nz - 1) {
+            for j in ijk[1].saturating_sub(1)..=(ijk[1] + 1).min(ny - 1) {
+                let row = nx * (j + ny * k);
+                let run = (self.start[row + i0], self.start[row + i1 + 1]);
+                if run.1 > run.0 {
+                    out.push(run);
+                }
             }
         }
     }
@@ -175,14 +181,14 @@ impl F32Field {
     /// cell's runs: a query in the same cell looks nothing up.
     pub fn eval_sums(&self, x: DVec3, scratch: &mut F32Ray) -> (f64, [f64; 3]) {
         let l = x - self.origin;
-        let Some(c) = self.cell_at(l) else {
+        let Some((c, ijk)) = self.cell_at(l) else {
             return (0.0, [0.0; 3]);
         };
         if !self.reached[c] {
             return (0.0, [0.0; 3]);
         }
         if scratch.cell != Some(c) {
-            self.runs(c, &mut scratch.runs);
+            self.runs(ijk, &mut scratch.runs);
             scratch.cell = Some(c);
         }
         self.particles
@@ -215,7 +221,8 @@ impl F32Field {
         let mut delta = [f64::INFINITY; 3];
         let mut step = [0i64; 3];
         for ax in 0..3 {
-            cell[ax] = (p[ax].floor() as i64).clamp(0, self.dims[ax] as i64 - 1);
+            // Truncation, not floor: they differ only below 0, which the clamp maps to 0.
+            cell[ax] = (p[ax] as i64).clamp(0, self.dims[ax] as i64 - 1);
             if d[ax] > 0.0 {
                 step[ax] = 1;
                 delta[ax] = inv[ax];

@@ -21,7 +21,9 @@ fn position<F: Float>(t: F, len: usize) -> (usize, F) {
         F::zero()
     };
     let x = c * F::from(len - 1).expect("a table size fits any float");
-    let i = x.floor().to_usize().unwrap_or(0).min(len - 2);
+    // x >= 0 (NaN is gone above), so truncation is the floor, without a libm call on
+    // targets without SSE4.1.
+    let i = x.to_usize().unwrap_or(0).min(len - 2);
     (i, x - F::from(i).expect("an index fits any float"))
 }
 
