@@ -12,16 +12,14 @@
 //!   second halves is not: blue-noise frames are anti-correlated within a mask cycle, and the
 //!   halves' difference overstated the noise up to 2.3x in the tests.)
 //! - **Step bias**, which no number of samples removes: from images at `dt0`, `2 dt0` and
-//!   `4 dt0`, see [`StepBias`] (for the RMSE metric at half the frame's width and height: the
-//!   bias is an RMSE over the image, which a quarter of its pixels estimates for a quarter of
-//!   the work).
+//!   `4 dt0`, see [`StepBias`].
 //!
 //! From those, [`render_to_target`] picks the step (`dt0 · 2^j`, `j` in -3..=2, unless the
 //! user fixed it) whose predicted time to the target is least, with the noise's measured rate
 //! of fall ([`Convergence`]), renders to the predicted frames, checks the estimate and goes on
 //! if it falls short. A time budget picks the step with the least predicted error for the time
 //! left and renders until it is spent. The calibration is part of what a target costs; its
-//! frame-sized images at `dt0` are kept, so when `dt0` is chosen they are not rendered twice.
+//! images at `dt0` are kept, so when `dt0` is chosen nothing is rendered twice.
 
 use std::time::{Duration, Instant};
 
@@ -240,8 +238,6 @@ pub struct Targeted {
     pub work: f64,
 }
 
-/// The smallest side of a reduced calibration image (smaller frames calibrate at their size).
-const MIN_CALIBRATION_SIDE: u32 = 16;
 /// Frames each sequence of a calibration image starts with.
 const CALIBRATION_FRAMES: u32 = 2;
 /// The most frames a calibration sequence takes while the noise hides whether a coarser step
@@ -296,9 +292,6 @@ impl Sequence {
 /// Two independent sequences at one step: the image is their mean.
 struct Pair {
     dt: f64,
-    /// The images' size: the frame's, or a reduced one for the step bias's calibration.
-    width: u32,
-    height: u32,
     a: Sequence,
     b: Sequence,
     /// (frames per sequence, noise of the mean) at each check, oldest first.
@@ -308,11 +301,9 @@ struct Pair {
 }
 
 impl Pair {
-    fn new(dt: f64, seed: u32, (width, height): (u32, u32)) -> Pair {
+    fn new(dt: f64, seed: u32) -> Pair {
         Pair {
             dt,
-            width,
-            height,
             a: Sequence::new(seed),
             b: Sequence::new(seed ^ SECOND_SEED),
             history: Vec::new(),
@@ -329,19 +320,14 @@ impl Pair {
         self.seconds / f64::from(self.spp().max(1))
     }
 
-    fn images(&self) -> (Image, Image) {
-        let (w, h) = (self.width, self.height);
+    fn images(&self, settings: &RenderSettings) -> (Image, Image) {
+        let (w, h) = (settings.width, settings.height);
         (self.a.image(w, h), self.b.image(w, h))
     }
 
-    fn image(&self) -> Image {
-        let (a, b) = self.images();
+    fn image(&self, settings: &RenderSettings) -> Image {
+        let (a, b) = self.images(settings);
         a.offset_by(&a, &b, -0.5)
-    }
-
-    /// Whether the images are the frame's size (they can become the result).
-    fn full_size(&self, settings: &RenderSettings) -> bool {
-        (self.width, self.height) == (settings.width, settings.height)
     }
 
     fn noise(&self) -> f64 {
@@ -384,11 +370,6 @@ impl Run<'_> {
         }
     }
 
-    /// The frame's size.
-    fn full(&self) -> (u32, u32) {
-        (self.settings.width, self.settings.height)
-    }
-
     fn out_of_time(&self) -> bool {
         self.target
             .time_budget
@@ -420,23 +401,17 @@ impl Run<'_> {
             }
             let started = Instant::now();
             for sequence in [&mut pair.a, &mut pair.b] {
-                let settings = RenderSettings {
-                    width: pair.width,
-                    height: pair.height,
-                    ..self.at(pair.dt, sequence.seed)
-                };
+                let settings = self.at(pair.dt, sequence.seed);
                 let image = self
                     .session
                     .render_frames(&settings, sequence.frames, count)?;
                 sequence.add(&image, count);
             }
             pair.seconds += started.elapsed().as_secs_f64();
-            let pixels = f64::from(pair.width) * f64::from(pair.height)
-                / (f64::from(self.settings.width) * f64::from(self.settings.height));
-            self.work += 2.0 * f64::from(count) * self.dt0 / pair.dt * pixels;
+            self.work += 2.0 * f64::from(count) * self.dt0 / pair.dt;
         }
         if pair.a.frames > before || pair.history.is_empty() {
-            let (a, b) = pair.images();
+            let (a, b) = pair.images(&self.settings);
             pair.history.push((pair.a.frames, noise_of_pair(&a, &b)));
         }
         Ok(())
@@ -472,46 +447,27 @@ pub fn render_to_target(
     // all of them (the noise's rate of fall from the two). Two frames a sequence to start: a
     // loose target is then met by the finest level's own 4 samples, where 8 a sequence cost
     // 3.5 times the front's 4 (the study's 4-spp target).
-    //
-    // The step bias is an RMSE over the image: for the RMSE metric the coarser steps, and a
-    // second image at dt0 to compare them with, are rendered at half the frame's width and
-    // height (a quarter of the work), the finest at the frame's size (it is the likely
-    // result). FLIP needs the bias's picture at the frame's size, so it calibrates there.
-    let reduced = target.metric == ErrorMetric::Rmse
-        && settings.width >= 2 * MIN_CALIBRATION_SIDE
-        && settings.height >= 2 * MIN_CALIBRATION_SIDE;
-    let bias_size = if reduced {
-        (settings.width / 2, settings.height / 2)
-    } else {
-        run.full()
-    };
-    let mut levels = [
-        Pair::new(dt0, seed, run.full()),
-        Pair::new(2.0 * dt0, seed, bias_size),
-        Pair::new(4.0 * dt0, seed, bias_size),
-    ];
-    let mut reduced_fine = reduced.then(|| Pair::new(dt0, seed, bias_size));
+    let mut levels = [dt0, 2.0 * dt0, 4.0 * dt0].map(|dt| Pair::new(dt, seed));
     let mut frames = CALIBRATION_FRAMES;
     let (bias, e_rmse) = loop {
-        for level in levels.iter_mut().chain(reduced_fine.as_mut()) {
+        for level in &mut levels {
             if level.history.is_empty() {
                 run.extend(level, frames / 2)?;
             }
             run.extend(level, frames)?;
         }
-        let finest = reduced_fine.as_ref().unwrap_or(&levels[0]);
-        let images = [finest, &levels[1], &levels[2]].map(Pair::image);
+        let images = levels.each_ref().map(|l| l.image(&run.settings));
         let bias = StepBias::calibrate(
             dt0,
             [&images[0], &images[1], &images[2]],
-            [finest, &levels[1], &levels[2]].map(Pair::noise),
+            levels.each_ref().map(Pair::noise),
         );
         // More calibration frames only while the noise hides whether four times the step
         // would meet the target, and while that costs little beside the frames the target
         // needs (the grown images' samples at most an eighth of them).
         let e_rmse = target
             .error
-            .map(|e| e * rmse_per_unit(target.metric, &levels[0]));
+            .map(|e| e * rmse_per_unit(target.metric, &levels[0], &run.settings));
         let unclear = e_rmse.is_some_and(|e| {
             bias.bound(4.0 * dt0) > BIAS_SHARE.sqrt() * e
                 && bias.at(4.0 * dt0) < BIAS_SHARE.sqrt() * e
@@ -548,17 +504,14 @@ pub fn render_to_target(
             continue;
         }
         let level = usize::try_from(j).ok().and_then(|j| levels.get(j));
-        // A reduced level's noise per pixel falls as the frame's would (its convergence
-        // holds); its frames are not the frame's (its time and its samples do not).
-        let kept = level.filter(|l| l.full_size(&run.settings));
         let convergence = level.map_or(fine.convergence(), Pair::convergence);
-        let frame_time = kept.map_or(fine.frame_time() * 2f64.powi(-j), Pair::frame_time);
+        let frame_time = level.map_or(fine.frame_time() * 2f64.powi(-j), Pair::frame_time);
         let b = bias.at(dt);
         // Twice dt0 on its estimated bias (the default step resolves the kernel with room to
         // spare: its doubling's bias stayed below 0.3 of the noise in every scene measured);
         // four times only where the bias is known to fit, noise and all.
         let b_choice = if j > 1 { bias.bound(dt) } else { b };
-        let held = kept.map_or(0, Pair::spp);
+        let held = level.map_or(0, Pair::spp);
         let (score, spp) = match (e_rmse, target.time_budget) {
             (Some(e), _) => {
                 if b_choice * b_choice > BIAS_SHARE * e * e {
@@ -597,13 +550,12 @@ pub fn render_to_target(
     let dt = dt0 * 2f64.powi(j);
     let b = bias.at(dt);
     let [fine, middle, coarse] = levels;
-    let bias_images = (middle.image(), fine.image());
-    let full = (run.settings.width, run.settings.height);
+    let bias_images = (middle.image(&run.settings), fine.image(&run.settings));
     let mut pair = match j {
         0 => fine,
-        1 if middle.full_size(&run.settings) => middle,
-        2 if coarse.full_size(&run.settings) => coarse,
-        _ => Pair::new(dt, seed, full),
+        1 => middle,
+        2 => coarse,
+        _ => Pair::new(dt, seed),
     };
 
     // Render, check, and go on while the estimate falls short.
@@ -612,14 +564,14 @@ pub fn render_to_target(
         let frames = ((spp / 2.0).ceil() as u32).clamp(1, target.max_spp / 2);
         let frames = frames.max(pair.a.frames);
         run.extend(&mut pair, frames)?;
-        let image = pair.image();
+        let image = pair.image(&run.settings);
         let noise = pair.noise();
         let estimate = match target.metric {
             ErrorMetric::Rmse => noise.hypot(b),
             ErrorMetric::Flip => {
                 // One realisation of the noise ((A - B) / 2) and of the bias (the calibration
                 // difference from dt0 to 2 dt0, scaled to the bias at this step) added.
-                let (a, bb) = pair.images();
+                let (a, bb) = pair.images(&run.settings);
                 let scale = b / bias_images.0.rmse(&bias_images.1).max(1e-30);
                 let disturbed =
                     image
@@ -680,12 +632,12 @@ pub fn render_to_target(
 
 /// RMSE per unit of the target's metric, from a calibration pair's noise (FLIP grows about
 /// linearly with small errors).
-fn rmse_per_unit(metric: ErrorMetric, pair: &Pair) -> f64 {
+fn rmse_per_unit(metric: ErrorMetric, pair: &Pair, settings: &RenderSettings) -> f64 {
     match metric {
         ErrorMetric::Rmse => 1.0,
         ErrorMetric::Flip => {
-            let (a, b) = pair.images();
-            let image = pair.image();
+            let (a, b) = pair.images(settings);
+            let image = pair.image(settings);
             let flip = image.flip(&image.offset_by(&a, &b, 0.5));
             if flip > 0.0 && pair.noise().is_finite() {
                 pair.noise() / flip
