@@ -160,19 +160,13 @@ impl F32Field {
         Some((cell_index(self.dims, idx), idx))
     }
 
-    /// The particles of the 27 neighbours of cell `ijk`, as nine runs of particle indices
-    /// (a row of three cells is one run: cells are x fastest).
+    /// The particles of the 27 neighbours of cell `ijk`, as nine runs of particle indices.
     fn runs(&self, ijk: [usize; 3], out: &mut Vec<(u32, u32)>) {
         out.clear();
-        let [nx, ny, nz] = self.dims;
-        let (i0, i1) = (ijk[0].saturating_sub(1), (ijk[0] + 1).min(nx - 1));
-        for k in ijk[2].saturating_sub(1)..=(ijk[2] + 1).min(nz - 1) {
-            for j in ijk[1].saturating_sub(1)..=(ijk[1] + 1).min(ny - 1) {
-                let row = nx * (j + ny * k);
-                let run = (self.start[row + i0], self.start[row + i1 + 1]);
-                if run.1 > run.0 {
-                    out.push(run);
-                }
+        for (a, b) in neighbour_rows(self.dims, ijk) {
+            let run = (self.start[a], self.start[b + 1]);
+            if run.1 > run.0 {
+                out.push(run);
             }
         }
     }

@@ -21,7 +21,8 @@ use bytemuck::{Pod, Zeroable};
 use super::context::{GpuContext, Kernel, Layout, device_error};
 use super::sort::RadixSort;
 use super::util::{
-    SplitBuffer, Staging, encode_pass, grid, poison, read_u32, storage, submit_and_wait, write,
+    SplitBuffer, Staging, encode_pass, grid, poison, read_u32, storage, storage_with_usage,
+    submit_and_wait, write,
 };
 use super::{PARTICLE_BYTES, WORD_BYTES};
 use crate::accel::HilbertQuantizer;
@@ -79,24 +80,29 @@ pub(super) struct Prepare {
     sort: RadixSort,
 }
 
+/// The usages a raw array's device buffer has beside storage: on unified memory it is its own
+/// staging ([`Staging::aliasing`]), so the host maps it.
+fn raw_usage(ctx: &GpuContext) -> wgpu::BufferUsages {
+    if ctx.unified_memory {
+        wgpu::BufferUsages::MAP_WRITE
+    } else {
+        wgpu::BufferUsages::empty()
+    }
+}
+
 fn split(
     ctx: &GpuContext,
     label: &str,
     capacity: usize,
     max_binding: u64,
 ) -> Result<Raw<SplitBuffer>, BackendError> {
-    let extra = if ctx.unified_memory {
-        wgpu::BufferUsages::MAP_WRITE
-    } else {
-        wgpu::BufferUsages::empty()
-    };
     let device = SplitBuffer::with_usage(
         ctx,
         label,
         capacity as u64,
         PARTICLE_BYTES,
         max_binding,
-        extra,
+        raw_usage(ctx),
     )
     .ok_or_else(|| {
         device_error(format!(
@@ -213,29 +219,14 @@ impl Prepare {
     fn radius(&mut self, ctx: &GpuContext) -> Result<&mut Raw<wgpu::Buffer>, BackendError> {
         if self.radius_attribute.is_none() {
             let bytes = self.capacity.max(1) as u64 * WORD_BYTES;
-            let unified = ctx.unified_memory;
             self.radius_attribute = Some(ctx.scoped("raw radius attribute", || {
-                if unified {
-                    // As the points' (`split`): the kernels read the memory the pass writes.
-                    let device = ctx.create_buffer(&wgpu::BufferDescriptor {
-                        label: Some("raw radius attribute"),
-                        size: bytes.max(16).next_multiple_of(16),
-                        usage: wgpu::BufferUsages::STORAGE
-                            | wgpu::BufferUsages::COPY_DST
-                            | wgpu::BufferUsages::COPY_SRC
-                            | wgpu::BufferUsages::MAP_WRITE,
-                        mapped_at_creation: false,
-                    });
-                    Raw {
-                        staging: Staging::aliasing_buffer(&device),
-                        device,
-                    }
+                let device = storage_with_usage(ctx, "raw radius attribute", bytes, raw_usage(ctx));
+                let staging = if ctx.unified_memory {
+                    Staging::aliasing_buffer(&device)
                 } else {
-                    Raw {
-                        staging: Staging::new(ctx, "raw radius attribute", bytes, bytes),
-                        device: storage(ctx, "raw radius attribute", bytes),
-                    }
-                }
+                    Staging::new(ctx, "raw radius attribute", bytes, bytes)
+                };
+                Raw { staging, device }
             })?);
         }
         self.radius_attribute

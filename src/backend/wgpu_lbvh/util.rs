@@ -24,12 +24,24 @@ pub fn interleave(groups: u32) -> (u32, u32, u32) {
 
 /// A storage buffer of at least `bytes` (rounded up to 16, never 0), copyable both ways.
 pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
+    storage_with_usage(ctx, label, bytes, wgpu::BufferUsages::empty())
+}
+
+/// [`storage`], the buffer also having `extra` usages (`MAP_WRITE` for
+/// [`Staging::aliasing_buffer`]).
+pub fn storage_with_usage(
+    ctx: &GpuContext,
+    label: &str,
+    bytes: u64,
+    extra: wgpu::BufferUsages,
+) -> wgpu::Buffer {
     ctx.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16).next_multiple_of(16),
         usage: wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_DST
-            | wgpu::BufferUsages::COPY_SRC,
+            | wgpu::BufferUsages::COPY_SRC
+            | extra,
         mapped_at_creation: false,
     })
 }
@@ -516,20 +528,22 @@ impl Staging {
     /// ([`SplitBuffer::with_usage`] with `MAP_WRITE`): views write into the buffers the
     /// kernels read, and [`Self::encode_copy`] only unmaps them.
     pub fn aliasing(dst: &SplitBuffer) -> Staging {
-        Staging {
-            parts: dst.buffers()[..dst.parts_used().max(1)].to_vec(),
-            part_bytes: dst.part_bytes,
-            mapped: false,
-            aliases: true,
-        }
+        Self::aliasing_parts(
+            dst.buffers()[..dst.parts_used().max(1)].to_vec(),
+            dst.part_bytes,
+        )
     }
 
     /// Staging that is the one buffer `dst` itself, made with `MAP_WRITE` ([`Self::aliasing`]
     /// for an array in one buffer).
     pub fn aliasing_buffer(dst: &wgpu::Buffer) -> Staging {
+        Self::aliasing_parts(vec![dst.clone()], dst.size())
+    }
+
+    fn aliasing_parts(parts: Vec<wgpu::Buffer>, part_bytes: u64) -> Staging {
         Staging {
-            parts: vec![dst.clone()],
-            part_bytes: dst.size(),
+            parts,
+            part_bytes,
             mapped: false,
             aliases: true,
         }
