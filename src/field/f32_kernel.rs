@@ -145,6 +145,9 @@ unsafe fn sums_avx2<const C: usize>(
 
 /// The kernel, in lanes: the baseline build, and the body of the AVX2 one. A run's last
 /// chunk reads past its end (into the next particles, or the padding) and masks those lanes.
+/// Masks are all-ones or zero lanes of `u32`, as vector compares make them, so the compiler
+/// keeps them in vector registers (a `[bool; 8]` became shuffles and scalar bit tests: the
+/// field queries ran 1.3-1.4x slower).
 #[inline(always)]
 fn sums_lanes<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (f64, [f64; 3]) {
     let mut phi = [0f32; LANES];
@@ -152,38 +155,16 @@ fn sums_lanes<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
         let mut at = a;
-        while at < b {
-            let from = at;
-            let valid = (b - from).min(LANES);
-            let lanes =
-                |v: &[f32]| -> [f32; LANES] { v[from..from + LANES].try_into().expect("padded") };
-            let (x, y, z) = (lanes(&p.x), lanes(&p.y), lanes(&p.z));
-            let (r2, k, w) = (lanes(&p.r2), lanes(&p.k), lanes(&p.w));
-            let mut d2 = [0f32; LANES];
-            let mut reached = [false; LANES];
-            for l in 0..LANES {
-                let (dx, dy, dz) = (x[l] - q[0], y[l] - q[1], z[l] - q[2]);
-                d2[l] = dx * dx + dy * dy + dz * dz;
-                reached[l] = d2[l] <= r2[l] && l < valid;
-            }
+        // Whole chunks, then the run's tail with the lanes past its end masked off.
+        while at + LANES <= b {
+            chunk::<C>(p, at, q, [u32::MAX; LANES], &mut phi, &mut num);
             at += LANES;
-            // Most candidates lie beyond their radius (the cells overfetch): a chunk that
-            // reaches nothing skips the exponentials.
-            if !reached.iter().any(|&r| r) {
-                continue;
-            }
-            let mut term = [0f32; LANES];
-            for l in 0..LANES {
-                let e = w[l] * exp_neg(-k[l] * d2[l]);
-                term[l] = if reached[l] { e } else { 0.0 };
-                phi[l] += term[l];
-            }
-            for (ch, acc) in num.iter_mut().enumerate().take(C) {
-                let t = lanes(&p.theta[ch]);
-                for l in 0..LANES {
-                    acc[l] += t[l] * term[l];
-                }
-            }
+        }
+        if at < b {
+            let valid = (b - at) as u32;
+            let live: [u32; LANES] =
+                std::array::from_fn(|l| if (l as u32) < valid { u32::MAX } else { 0 });
+            chunk::<C>(p, at, q, live, &mut phi, &mut num);
         }
     }
     let total = |v: &[f32; LANES]| v.iter().map(|&x| f64::from(x)).sum::<f64>();
@@ -192,6 +173,45 @@ fn sums_lanes<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (
         *t = total(&num[ch]);
     }
     (total(&phi), theta)
+}
+
+/// Eight particles from `from` on, the lanes outside `live` left out.
+#[inline(always)]
+fn chunk<const C: usize>(
+    p: &Packed,
+    from: usize,
+    q: [f32; 3],
+    live: [u32; LANES],
+    phi: &mut [f32; LANES],
+    num: &mut [[f32; LANES]; 3],
+) {
+    let lanes = |v: &[f32]| -> [f32; LANES] { v[from..from + LANES].try_into().expect("padded") };
+    let (x, y, z, r2) = (lanes(&p.x), lanes(&p.y), lanes(&p.z), lanes(&p.r2));
+    let mut d2 = [0f32; LANES];
+    let mut reached = [0u32; LANES];
+    for l in 0..LANES {
+        let (dx, dy, dz) = (x[l] - q[0], y[l] - q[1], z[l] - q[2]);
+        d2[l] = dx * dx + dy * dy + dz * dz;
+        reached[l] = if d2[l] <= r2[l] { live[l] } else { 0 };
+    }
+    // Most candidates lie beyond their radius (the cells overfetch): a chunk that reaches
+    // nothing skips the exponentials.
+    if reached.iter().fold(0, |any, &m| any | m) == 0 {
+        return;
+    }
+    let (k, w) = (lanes(&p.k), lanes(&p.w));
+    let mut term = [0f32; LANES];
+    for l in 0..LANES {
+        let e = w[l] * exp_neg(-k[l] * d2[l]);
+        term[l] = f32::from_bits(e.to_bits() & reached[l]);
+        phi[l] += term[l];
+    }
+    for (ch, acc) in num.iter_mut().enumerate().take(C) {
+        let t = lanes(&p.theta[ch]);
+        for l in 0..LANES {
+            acc[l] += t[l] * term[l];
+        }
+    }
 }
 
 #[cfg(test)]
