@@ -6,7 +6,9 @@
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind, Positions, Precision, StepInput};
 use aarbf::field::f32_kernel;
-use aarbf::field::{Classification, F32Field, F32Ray, FieldSettings, Particles, ReferenceField};
+use aarbf::field::{
+    Classification, F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField,
+};
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
@@ -128,6 +130,115 @@ fn check_against_reference(
         );
     }
     Ok(())
+}
+
+/// Packets of points as neighbouring rays' samples lie: around a centre (near particles, or
+/// anywhere), spread from well within a cell to several cells (then the packet falls back to
+/// one point at a time), some slots empty; each packet's values against each point evaluated
+/// alone, the outputs poisoned first. Returns how many packets were evaluated together, and
+/// how many fell back to one point at a time with more than one point in reach of particles.
+fn check_packets(
+    n: usize,
+    seed: u64,
+    offset: f64,
+    radius: f64,
+    channels: Classification,
+) -> Result<(usize, usize), TestCaseError> {
+    let step = step(n, seed, offset, 1.0);
+    let bounds = Bounds::of_points(&step.positions);
+    let mut field = FieldSettings::new(Some("s"), radius);
+    field.radius_attribute = Some("h".into());
+    field.classification = channels;
+    let particles = Particles::prepare(&step, &field, bounds, Some((-3.0, 5.0))).unwrap();
+    let f32_field = F32Field::new(&particles);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0xbac4);
+    let mut packet = F32Packet::default();
+    let mut rays: [F32Ray; 8] = Default::default();
+    let mut alone = F32Ray::default();
+    let (mut shared, mut fell_back) = (0, 0);
+    for round in 0..120 {
+        let centre = if round % 3 == 0 {
+            DVec3::splat(offset) + DVec3::new(rng.random(), rng.random(), rng.random())
+        } else {
+            step.positions[rng.random_range(0..n)]
+        };
+        // From a tenth of the radius to the radius (cells are at least as wide as the
+        // largest), and every fourth packet spread over the cube, each point near a particle
+        // of its own (the packet falls back to one point at a time).
+        let spread = [0.1, 0.5, 1.0, 0.1][round % 4] * radius;
+        let points: [Option<DVec3>; 8] = std::array::from_fn(|_| {
+            let u = DVec3::new(rng.random(), rng.random(), rng.random()) - 0.5;
+            let centre = if round % 4 == 3 {
+                step.positions[rng.random_range(0..n)]
+            } else {
+                centre
+            };
+            (rng.random::<f64>() < 0.85).then_some(centre + u * spread)
+        });
+        let mut out = [(f64::NAN, [f64::NAN; 3]); 8];
+        let together = f32_field.eval_sums_packet(&points, &mut packet, &mut rays, &mut out);
+        let live = points.iter().flatten().count();
+        let mut reached = 0;
+        for (i, point) in points.iter().enumerate() {
+            let Some(x) = point else {
+                prop_assert!(out[i].0.is_nan(), "an empty slot was written");
+                continue;
+            };
+            let (phi, num) = f32_field.eval_sums(*x, &mut alone);
+            reached += usize::from(phi > 0.0);
+            let (got_phi, got_num) = out[i];
+            // The same f32 terms, summed in another order (the f32 path's arithmetic tolerance).
+            prop_assert!(
+                (got_phi - phi).abs() <= 1e-5 * phi + 1e-37,
+                "Phi {got_phi} in a packet of {live}, {phi} alone at {x} (spread {spread:e})"
+            );
+            let channels = if channels == Classification::Pre {
+                3
+            } else {
+                1
+            };
+            for ch in 0..channels {
+                prop_assert!(
+                    (got_num[ch] - num[ch]).abs() <= 1e-5 * num[ch].abs().max(phi) + 1e-37,
+                    "Theta[{ch}] {} in a packet, {} alone at {x}",
+                    got_num[ch],
+                    num[ch]
+                );
+            }
+        }
+        if together > 1 {
+            shared += 1;
+        } else if reached > 1 {
+            fell_back += 1;
+        }
+    }
+    Ok((shared, fell_back))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// A packet of points evaluated together equals each point evaluated alone (to the order
+    /// of summation), whatever the spread, offset, radius and number of channels.
+    #[test]
+    fn a_packet_equals_its_points_alone(
+        n in 1usize..2500,
+        seed in 0u64..1000,
+        offset_exp in prop_oneof![Just(None), (0i32..=6).prop_map(Some)],
+        radius_exp in -6.0f64..0.0,
+        pre in any::<bool>(),
+    ) {
+        let offset = offset_exp.map_or(0.0, |e| -(10f64.powi(e)));
+        let classification = if pre { Classification::Pre } else { Classification::Post };
+        let (shared, fell_back) =
+            check_packets(n, seed, offset, 10f64.powf(radius_exp), classification)?;
+        prop_assert!(shared > 0, "no packet was evaluated together");
+        // Particles spread over more than two cells a side (the cells are as wide as the
+        // largest radius, or wider in a sparse set): the packets over the cube fall back.
+        if n >= 200 && radius_exp < -2.0 {
+            prop_assert!(fell_back > 0, "no packet fell back with points in reach");
+        }
+    }
 }
 
 proptest! {

@@ -174,6 +174,7 @@ impl VoxelGrid {
 
 impl FieldSampler for VoxelGrid {
     type Ray = ();
+    type Packet = ();
 
     /// The whole interval: the grid does not skip empty space (as the baseline it models).
     fn begin(

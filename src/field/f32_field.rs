@@ -19,7 +19,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::f32_kernel::Packed;
+use super::f32_kernel::{LANES, Packed};
 use super::{Particles, Theta};
 
 /// Cells per particle at most (the grid's index costs 5 bytes a cell): a sparse scene gets
@@ -189,6 +189,70 @@ impl F32Field {
             .sums(&scratch.runs, [l.x as f32, l.y as f32, l.z as f32])
     }
 
+    /// [`F32Field::eval_sums`] at each of `points` (`None`: no sample; its value is left as
+    /// it is), close together (a packet of neighbouring rays' samples): where they lie within
+    /// two cells a side, their candidates are found once and evaluated a point per lane
+    /// ([`Packed::packet_sums`]); otherwise, or for a lone point, each is evaluated alone with
+    /// its ray's `rays[i]`. Returns how many points were evaluated together (0: each alone).
+    pub fn eval_sums_packet(
+        &self,
+        points: &[Option<DVec3>; LANES],
+        packet: &mut F32Packet,
+        rays: &mut [F32Ray; LANES],
+        out: &mut [(f64, [f64; 3]); LANES],
+    ) -> usize {
+        let mut q = [[0f32; 3]; LANES];
+        let mut live = [0u32; LANES];
+        let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+        let mut count = 0;
+        for (i, point) in points.iter().enumerate() {
+            let Some(x) = point else { continue };
+            let l = *x - self.origin;
+            match self.cell_at(l) {
+                Some((c, ijk)) if self.reached[c] => {
+                    q[i] = [l.x as f32, l.y as f32, l.z as f32];
+                    live[i] = u32::MAX;
+                    count += 1;
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(ijk[a]);
+                        hi[a] = hi[a].max(ijk[a]);
+                    }
+                }
+                _ => out[i] = (0.0, [0.0; 3]),
+            }
+        }
+        if count == 0 {
+            return 0;
+        }
+        if count == 1 || (0..3).any(|a| hi[a] - lo[a] > 1) {
+            for (i, x) in points.iter().enumerate() {
+                if let (Some(x), true) = (x, live[i] != 0) {
+                    out[i] = self.eval_sums(*x, &mut rays[i]);
+                }
+            }
+            return 0;
+        }
+        if packet.cells != Some((lo, hi)) {
+            packet.runs.clear();
+            for (a, b) in rows_around(self.dims, lo, hi) {
+                let run = (self.start[a], self.start[b + 1]);
+                if run.1 > run.0 {
+                    packet.runs.push(run);
+                }
+            }
+            packet.cells = Some((lo, hi));
+        }
+        let sums = self
+            .particles
+            .packet_sums(&packet.runs, &q, live, &mut packet.candidates);
+        for (i, s) in sums.into_iter().enumerate() {
+            if live[i] != 0 {
+                out[i] = s;
+            }
+        }
+        count
+    }
+
     /// Appends the disjoint, ordered sub-intervals of `[t0, t1]` along `origin + t dir` (data
     /// coordinates) that cross a cell some particle may reach: outside them the field is 0.
     /// A 3D DDA over the cells (Amanatides and Woo).
@@ -282,11 +346,20 @@ fn grid_over(lo: DVec3, hi: DVec3, r_max: f64, particles: usize) -> (DVec3, f64,
 /// The nine x-runs of cells around cell `ijk` (clipped to the grid), as the first and last
 /// cell index of each run.
 fn neighbour_rows(dims: [usize; 3], ijk: [usize; 3]) -> impl Iterator<Item = (usize, usize)> {
-    let span = |v: usize, n: usize| v.saturating_sub(1)..=(v + 1).min(n - 1);
-    let (i0, i1) = (ijk[0].saturating_sub(1), (ijk[0] + 1).min(dims[0] - 1));
-    span(ijk[2], dims[2]).flat_map(move |k| {
-        span(ijk[1], dims[1])
-            .map(move |j| (cell_index(dims, [i0, j, k]), cell_index(dims, [i1, j, k])))
+    rows_around(dims, ijk, ijk)
+}
+
+/// The x-runs of cells around the block of cells `lo..=hi` (one cell beyond it on every side,
+/// clipped to the grid), as the first and last cell index of each run.
+fn rows_around(
+    dims: [usize; 3],
+    lo: [usize; 3],
+    hi: [usize; 3],
+) -> impl Iterator<Item = (usize, usize)> {
+    let span = move |a: usize| lo[a].saturating_sub(1)..=(hi[a] + 1).min(dims[a] - 1);
+    let (i0, i1) = (lo[0].saturating_sub(1), (hi[0] + 1).min(dims[0] - 1));
+    span(2).flat_map(move |k| {
+        span(1).map(move |j| (cell_index(dims, [i0, j, k]), cell_index(dims, [i1, j, k])))
     })
 }
 
@@ -304,6 +377,15 @@ fn cell_coords(dims: [usize; 3], c: usize) -> [usize; 3] {
         (c / dims[0]) % dims[1],
         c / (dims[0] * dims[1]),
     ]
+}
+
+/// Sampling a packet of rays together: the runs of candidates of the last block of cells its
+/// samples fell in, and the candidates gathered for the last packet. Made once per thread.
+#[derive(Debug, Default)]
+pub struct F32Packet {
+    cells: Option<([usize; 3], [usize; 3])>,
+    runs: Vec<(u32, u32)>,
+    candidates: Vec<u32>,
 }
 
 /// Sampling along rays (and point queries): the runs of candidates of the last cell visited,

@@ -123,6 +123,155 @@ impl Packed {
     }
 }
 
+impl Packed {
+    /// [`Packed::sums`] at up to [`LANES`] points at once (`q[l]` where `live[l]` is all ones,
+    /// a point per lane), over the particles of `runs`: those within their radius of the
+    /// points' bounding box are gathered into `candidates` first (the points lie close
+    /// together: a packet of neighbouring rays' samples), then each is evaluated at every
+    /// point. A term is the same f32 value [`Packed::sums`] computes for its point and
+    /// particle (the box test never leaves out a particle that reaches a point: its distance
+    /// rounds no larger); only the order of summation differs.
+    pub fn packet_sums(
+        &self,
+        runs: &[(u32, u32)],
+        q: &[[f32; 3]; LANES],
+        live: [u32; LANES],
+        candidates: &mut Vec<u32>,
+    ) -> [(f64, [f64; 3]); LANES] {
+        match self.channels {
+            0 => packet_sums::<0>(self, runs, q, live, candidates),
+            1 => packet_sums::<1>(self, runs, q, live, candidates),
+            _ => packet_sums::<3>(self, runs, q, live, candidates),
+        }
+    }
+}
+
+#[inline]
+fn packet_sums<const C: usize>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    q: &[[f32; 3]; LANES],
+    live: [u32; LANES],
+    candidates: &mut Vec<u32>,
+) -> [(f64, [f64; 3]); LANES] {
+    #[cfg(target_arch = "x86_64")]
+    if simd_in_use() {
+        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `simd_in_use`).
+        return unsafe { packet_sums_avx2::<C>(p, runs, q, live, candidates) };
+    }
+    packet_sums_lanes::<C>(p, runs, q, live, candidates)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn packet_sums_avx2<const C: usize>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    q: &[[f32; 3]; LANES],
+    live: [u32; LANES],
+    candidates: &mut Vec<u32>,
+) -> [(f64, [f64; 3]); LANES] {
+    packet_sums_lanes::<C>(p, runs, q, live, candidates)
+}
+
+/// The packet kernel, in lanes (the baseline build, and the body of the AVX2 one): the
+/// candidates' box test with particles in lanes, then the terms with points in lanes.
+#[inline(always)]
+fn packet_sums_lanes<const C: usize>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    q: &[[f32; 3]; LANES],
+    live: [u32; LANES],
+    candidates: &mut Vec<u32>,
+) -> [(f64, [f64; 3]); LANES] {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for (point, &m) in q.iter().zip(&live) {
+        if m != 0 {
+            for a in 0..3 {
+                lo[a] = lo[a].min(point[a]);
+                hi[a] = hi[a].max(point[a]);
+            }
+        }
+    }
+    let total: usize = runs.iter().map(|&(a, b)| (b - a) as usize).sum();
+    candidates.clear();
+    candidates.resize(total + LANES, 0);
+    let mut n = 0;
+    // How far `v` lies outside [lo, hi] (plain compares: `f32::max` would add NaN handling).
+    let gap = |v: f32, lo: f32, hi: f32| -> f32 {
+        let (below, above) = (lo - v, v - hi);
+        let g = if below > above { below } else { above };
+        if g > 0.0 { g } else { 0.0 }
+    };
+    for &(a, b) in runs {
+        let (mut at, b) = (a as usize, b as usize);
+        while at < b {
+            let valid = (b - at).min(LANES);
+            let lanes =
+                |v: &[f32]| -> [f32; LANES] { v[at..at + LANES].try_into().expect("padded") };
+            let (x, y, z, r2) = (lanes(&p.x), lanes(&p.y), lanes(&p.z), lanes(&p.r2));
+            let mut keep = [0u32; LANES];
+            for l in 0..LANES {
+                let (ex, ey, ez) = (
+                    gap(x[l], lo[0], hi[0]),
+                    gap(y[l], lo[1], hi[1]),
+                    gap(z[l], lo[2], hi[2]),
+                );
+                let d2 = ex * ex + ey * ey + ez * ez;
+                keep[l] = u32::from(d2 <= r2[l] && l < valid);
+            }
+            // Branch-free compaction: every lane is written, the kept ones advance.
+            for (l, &k) in keep.iter().enumerate() {
+                candidates[n] = (at + l) as u32;
+                n += k as usize;
+            }
+            at += LANES;
+        }
+    }
+    let (qx, qy, qz): ([f32; LANES], [f32; LANES], [f32; LANES]) = (
+        std::array::from_fn(|l| q[l][0]),
+        std::array::from_fn(|l| q[l][1]),
+        std::array::from_fn(|l| q[l][2]),
+    );
+    // Each point's terms in f32 over eight candidates at a time, those sums added in f64: a
+    // point's sum rounds no worse than in [`Packed::sums`] (whose lanes hold an eighth of it).
+    let mut phi = [0f64; LANES];
+    let mut num = [[0f64; LANES]; 3];
+    for block in candidates[..n].chunks(LANES) {
+        let mut block_phi = [0f32; LANES];
+        let mut block_num = [[0f32; LANES]; 3];
+        for &j in block {
+            let j = j as usize;
+            let (x, y, z, r2, k, w) = (p.x[j], p.y[j], p.z[j], p.r2[j], p.k[j], p.w[j]);
+            let mut term = [0f32; LANES];
+            for l in 0..LANES {
+                let (dx, dy, dz) = (x - qx[l], y - qy[l], z - qz[l]);
+                let d2 = dx * dx + dy * dy + dz * dz;
+                let reached = if d2 <= r2 { live[l] } else { 0 };
+                let e = w * exp_neg(-k * d2);
+                term[l] = f32::from_bits(e.to_bits() & reached);
+                block_phi[l] += term[l];
+            }
+            for (ch, acc) in block_num.iter_mut().enumerate().take(C) {
+                let t = p.theta[ch][j];
+                for l in 0..LANES {
+                    acc[l] += t * term[l];
+                }
+            }
+        }
+        for l in 0..LANES {
+            phi[l] += f64::from(block_phi[l]);
+        }
+        for ch in 0..C {
+            for l in 0..LANES {
+                num[ch][l] += f64::from(block_num[ch][l]);
+            }
+        }
+    }
+    std::array::from_fn(|l| (phi[l], [0, 1, 2].map(|ch| num[ch][l])))
+}
+
 #[inline]
 fn sums<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (f64, [f64; 3]) {
     #[cfg(target_arch = "x86_64")]

@@ -51,6 +51,42 @@ pub trait FieldSampler: Sync {
     /// Phi and the Theta numerator (Σ theta_i phi_i: normalised attribute in `[0]`, or
     /// linear RGB) at `origin + t dir`, `t` at or after the ray's last sample.
     fn sample(&self, ray: &mut Self::Ray, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]);
+
+    /// What sampling a packet of rays together keeps ([`FieldSampler::sample_packet`]).
+    type Packet: Default + Send;
+
+    /// [`FieldSampler::sample`] for the next sample of each ray of a packet (neighbouring
+    /// pixels, marched in step: their samples lie close together), `None` for a ray that has
+    /// none. The default samples each ray alone; a sampler whose cost is in finding
+    /// candidates shares that work between the rays.
+    fn sample_packet(
+        &self,
+        _packet: &mut Self::Packet,
+        rays: &mut [Self::Ray; PACKET],
+        samples: &[Option<RaySample>; PACKET],
+        out: &mut [(f64, [f64; 3]); PACKET],
+    ) {
+        for ((ray, sample), out) in rays.iter_mut().zip(samples).zip(out) {
+            if let Some(s) = sample {
+                *out = self.sample(ray, s.origin, s.dir, s.t);
+            }
+        }
+    }
+}
+
+/// Rays marched together: a 4 x 2 block of pixels (neighbouring rays' samples at the same
+/// step share their candidates), as many as the f32 kernel has lanes.
+pub const PACKET: usize = crate::field::f32_kernel::LANES;
+
+/// The block of pixels a packet covers.
+pub const PACKET_SIZE: (u32, u32) = (4, 2);
+
+/// One ray's next sample: the point `origin + t dir`.
+#[derive(Clone, Copy, Debug)]
+pub struct RaySample {
+    pub origin: DVec3,
+    pub dir: DVec3,
+    pub t: f64,
 }
 
 /// The integrator math on a frame (kept here, beside its only users, rather than with the
@@ -108,8 +144,59 @@ pub fn ray_box(origin: DVec3, dir: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, 
     (t_enter < t_exit && t_exit.is_finite() && !lo.cmpgt(hi).any()).then_some((t_enter, t_exit))
 }
 
-/// Calls `visit(t)` at every march sample `t = t0 + (k + jitter) dt` (k >= 0) that lies in
-/// one of `intervals` and before `t1`, in order, until `visit` returns false.
+/// The march samples `t = t0 + (k + jitter) dt` (k >= 0) that lie in one of a ray's ordered,
+/// disjoint intervals and before `t1`, in order: the one rule every marching integrator
+/// samples by, kept as a cursor so that rays of a packet can advance in step.
+#[derive(Clone, Copy, Debug)]
+struct MarchSamples {
+    t0: f64,
+    t1: f64,
+    dt: f64,
+    jitter: f64,
+    interval: usize,
+    /// The next k to try in the current interval (None: start the interval).
+    k: Option<f64>,
+}
+
+impl MarchSamples {
+    fn new(t0: f64, t1: f64, dt: f64, jitter: f64) -> MarchSamples {
+        MarchSamples {
+            t0,
+            t1,
+            dt,
+            jitter,
+            interval: 0,
+            k: None,
+        }
+    }
+
+    /// The next sample in `intervals` (the same ones at every call), if any.
+    fn next(&mut self, intervals: &[(f64, f64)]) -> Option<f64> {
+        while let Some(&(a, b)) = intervals.get(self.interval) {
+            let b = b.min(self.t1);
+            let mut k = self
+                .k
+                .unwrap_or_else(|| ((a - self.t0) / self.dt - self.jitter).ceil().max(0.0));
+            loop {
+                let t = self.t0 + (k + self.jitter) * self.dt;
+                if t >= b {
+                    break;
+                }
+                k += 1.0;
+                if t >= a {
+                    self.k = Some(k);
+                    return Some(t);
+                }
+            }
+            self.interval += 1;
+            self.k = None;
+        }
+        None
+    }
+}
+
+/// Calls `visit(t)` at every march sample ([`MarchSamples`]) in order, until `visit` returns
+/// false.
 fn march(
     t0: f64,
     t1: f64,
@@ -118,19 +205,10 @@ fn march(
     intervals: &[(f64, f64)],
     mut visit: impl FnMut(f64) -> bool,
 ) {
-    for &(a, b) in intervals {
-        let b = b.min(t1);
-        let first = ((a - t0) / dt - jitter).ceil().max(0.0);
-        let mut k = first;
-        loop {
-            let t = t0 + (k + jitter) * dt;
-            if t >= b {
-                break;
-            }
-            if t >= a && !visit(t) {
-                return;
-            }
-            k += 1.0;
+    let mut samples = MarchSamples::new(t0, t1, dt, jitter);
+    while let Some(t) = samples.next(intervals) {
+        if !visit(t) {
+            return;
         }
     }
 }
@@ -188,14 +266,26 @@ fn shadow<F: FieldSampler>(
     (-tau).exp()
 }
 
-/// What a pixel's rays keep while they are marched (their samplers' state and their
-/// intervals), made once per thread and reused for every pixel.
-#[derive(Default)]
-pub struct PixelScratch<R> {
-    primary: R,
-    shadow: R,
-    intervals: Vec<(f64, f64)>,
+/// What a packet's rays keep while they are marched (their samplers' state and their
+/// intervals, the packet's shared state, a shadow ray), made once per thread and reused.
+pub struct PixelScratch<F: FieldSampler> {
+    primary: [F::Ray; PACKET],
+    intervals: [Vec<(f64, f64)>; PACKET],
+    packet: F::Packet,
+    shadow: F::Ray,
     shadow_intervals: Vec<(f64, f64)>,
+}
+
+impl<F: FieldSampler> Default for PixelScratch<F> {
+    fn default() -> Self {
+        PixelScratch {
+            primary: std::array::from_fn(|_| F::Ray::default()),
+            intervals: std::array::from_fn(|_| Vec::new()),
+            packet: F::Packet::default(),
+            shadow: F::Ray::default(),
+            shadow_intervals: Vec::new(),
+        }
+    }
 }
 
 /// The radiance of pixel (x, y) in this frame: linear RGB and opacity (scratch made for the
@@ -204,14 +294,198 @@ pub fn render_pixel<F: FieldSampler>(p: &FrameParams, field: &F, x: u32, y: u32)
     render_pixel_with(p, field, x, y, &mut PixelScratch::default())
 }
 
+/// The radiance of each of `pixels` (at most [`PACKET`], neighbours: a block of
+/// [`PACKET_SIZE`]) into `out`: the marching integrators march them as one packet, the others
+/// one pixel at a time. Each pixel's value is what [`render_pixel_with`] gives it, up to the
+/// order a sampler sums a sample's terms in.
+pub fn render_pixels_with<F: FieldSampler>(
+    p: &FrameParams,
+    field: &F,
+    pixels: &[(u32, u32)],
+    scratch: &mut PixelScratch<F>,
+    out: &mut [[f64; 4]],
+) {
+    match p.integrator {
+        Integrator::Ea | Integrator::SsReference => march_packet(p, field, pixels, scratch, out),
+        Integrator::Marching | Integrator::Delta => {
+            for (o, &(x, y)) in out.iter_mut().zip(pixels) {
+                *o = render_pixel_with(p, field, x, y, scratch);
+            }
+        }
+    }
+}
+
+/// Light reaching `at` (shadowed by the field, plus ambient) times `albedo`.
+fn radiance<F: FieldSampler>(
+    p: &FrameParams,
+    field: &F,
+    shadow_ray: &mut F::Ray,
+    scratch: &mut Vec<(f64, f64)>,
+    at: DVec3,
+    albedo: [f64; 3],
+    shadow_jitter: f64,
+) -> [f64; 3] {
+    let light =
+        p.light_intensity * shadow(p, field, shadow_ray, at, shadow_jitter, scratch) + p.ambient;
+    albedo.map(|a| a * light)
+}
+
+/// A ray of a marched packet: where it is and what it has gathered.
+#[derive(Clone, Copy)]
+struct MarchedRay {
+    origin: DVec3,
+    dir: DVec3,
+
+    /// Whether a sample where Phi is 0 adds nothing ([`march_intervals`]).
+    clear_where_empty: bool,
+    samples: MarchSamples,
+    shadow_jitter: f64,
+    colour: [f64; 3],
+    transmittance: f64,
+}
+
+impl MarchedRay {
+    /// The pixel's value: what the ray gathered over the background.
+    fn finish(&self, bg: [f64; 3]) -> [f64; 4] {
+        let c = self.colour;
+        let tr = self.transmittance;
+        [
+            c[0] + tr * bg[0],
+            c[1] + tr * bg[1],
+            c[2] + tr * bg[2],
+            1.0 - tr,
+        ]
+    }
+}
+
+/// Emission–absorption (with a shadow ray per sample for the single-scattering reference):
+/// front-to-back compositing of `pixels`' rays, marched in step so the field samples their
+/// k-th samples together ([`FieldSampler::sample_packet`]); a ray leaves the packet when it
+/// reaches the opacity threshold or its last sample.
+fn march_packet<F: FieldSampler>(
+    p: &FrameParams,
+    field: &F,
+    pixels: &[(u32, u32)],
+    scratch: &mut PixelScratch<F>,
+    out: &mut [[f64; 4]],
+) {
+    assert!(pixels.len() <= PACKET && out.len() >= pixels.len());
+    let bg = p.background;
+    let scatter = p.integrator == Integrator::SsReference;
+    let PixelScratch {
+        primary,
+        intervals,
+        packet,
+        shadow: shadow_ray,
+        shadow_intervals,
+    } = scratch;
+    let mut rays: [Option<MarchedRay>; PACKET] = [None; PACKET];
+    for (i, &(x, y)) in pixels.iter().enumerate() {
+        let (origin, dir) = p.primary_ray(x, y);
+        out[i] = [bg[0], bg[1], bg[2], 0.0];
+        let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
+            continue;
+        };
+        intervals[i].clear();
+        let clear_where_empty = march_intervals(
+            p,
+            field,
+            &mut primary[i],
+            origin,
+            dir,
+            t_enter,
+            t_exit,
+            &mut intervals[i],
+        );
+        let jitter = p.random(x, y, if scatter { 1 } else { 0 });
+        rays[i] = Some(MarchedRay {
+            origin,
+            dir,
+            clear_where_empty,
+            samples: MarchSamples::new(t_enter, t_exit, p.dt, jitter),
+            shadow_jitter: p.random(x, y, 2),
+            colour: [0.0; 3],
+            transmittance: 1.0,
+        });
+    }
+    let mut samples: [Option<RaySample>; PACKET] = [None; PACKET];
+    let mut values = [(0.0, [0.0; 3]); PACKET];
+    loop {
+        let mut any = false;
+        for i in 0..PACKET {
+            samples[i] = None;
+            let Some(ray) = &mut rays[i] else { continue };
+            match ray.samples.next(&intervals[i]) {
+                Some(t) => {
+                    samples[i] = Some(RaySample {
+                        origin: ray.origin,
+                        dir: ray.dir,
+                        t,
+                    });
+                    any = true;
+                }
+                None => {
+                    out[i] = ray.finish(bg);
+                    rays[i] = None;
+                }
+            }
+        }
+        if !any {
+            return;
+        }
+        field.sample_packet(packet, primary, &samples, &mut values);
+        for i in 0..PACKET {
+            let (Some(ray), Some(sample)) = (&mut rays[i], samples[i]) else {
+                continue;
+            };
+            let (phi, num) = values[i];
+            if phi == 0.0 && ray.clear_where_empty {
+                continue;
+            }
+            let (sigma, rgb) = p.shade(phi, num);
+            if sigma <= 0.0 {
+                continue;
+            }
+            let alpha = 1.0 - (-sigma * p.dt).exp();
+            let emitted = if scatter {
+                let at = ray.origin + ray.dir * sample.t;
+                radiance(
+                    p,
+                    field,
+                    shadow_ray,
+                    shadow_intervals,
+                    at,
+                    rgb,
+                    ray.shadow_jitter,
+                )
+            } else {
+                rgb
+            };
+            for (c, e) in ray.colour.iter_mut().zip(emitted) {
+                *c += ray.transmittance * alpha * e;
+            }
+            ray.transmittance *= 1.0 - alpha;
+            if 1.0 - ray.transmittance >= p.opacity_threshold {
+                out[i] = ray.finish(bg);
+                rays[i] = None;
+            }
+        }
+    }
+}
+
 /// The radiance of pixel (x, y) in this frame: linear RGB and opacity.
 pub fn render_pixel_with<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
     x: u32,
     y: u32,
-    pixel: &mut PixelScratch<F::Ray>,
+    scratch: &mut PixelScratch<F>,
 ) -> [f64; 4] {
+    if matches!(p.integrator, Integrator::Ea | Integrator::SsReference) {
+        let mut out = [[0.0; 4]];
+        march_packet(p, field, &[(x, y)], scratch, &mut out);
+        return out[0];
+    }
     let (origin, dir) = p.primary_ray(x, y);
     let bg = p.background;
     let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
@@ -219,57 +493,21 @@ pub fn render_pixel_with<F: FieldSampler>(
     };
     let PixelScratch {
         primary,
-        shadow: shadow_ray,
         intervals,
+        shadow: shadow_ray,
         shadow_intervals: scratch,
-    } = pixel;
+        ..
+    } = scratch;
+    let (primary, intervals) = (&mut primary[0], &mut intervals[0]);
     intervals.clear();
     let clear_where_empty =
         march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
-    let mut radiance =
-        |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, shadow_jitter: f64| {
-            let light = p.light_intensity
-                * shadow(p, field, shadow_ray, at, shadow_jitter, scratch)
-                + p.ambient;
-            albedo.map(|a| a * light)
-        };
+    let mut lit = |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, jitter: f64| {
+        radiance(p, field, shadow_ray, scratch, at, albedo, jitter)
+    };
 
     match p.integrator {
-        Integrator::Ea | Integrator::SsReference => {
-            let scatter = p.integrator == Integrator::SsReference;
-            let jitter = p.random(x, y, if scatter { 1 } else { 0 });
-            let shadow_jitter = p.random(x, y, 2);
-            let mut colour = [0.0; 3];
-            let mut transmittance = 1.0;
-            march(t_enter, t_exit, p.dt, jitter, intervals, |t| {
-                let (phi, num) = field.sample(primary, origin, dir, t);
-                if phi == 0.0 && clear_where_empty {
-                    return true;
-                }
-                let (sigma, rgb) = p.shade(phi, num);
-                if sigma <= 0.0 {
-                    return true;
-                }
-                let at = origin + dir * t;
-                let alpha = 1.0 - (-sigma * p.dt).exp();
-                let emitted = if scatter {
-                    radiance(at, rgb, scratch, shadow_jitter)
-                } else {
-                    rgb
-                };
-                for c in 0..3 {
-                    colour[c] += transmittance * alpha * emitted[c];
-                }
-                transmittance *= 1.0 - alpha;
-                1.0 - transmittance < p.opacity_threshold
-            });
-            [
-                colour[0] + transmittance * bg[0],
-                colour[1] + transmittance * bg[1],
-                colour[2] + transmittance * bg[2],
-                1.0 - transmittance,
-            ]
-        }
+        Integrator::Ea | Integrator::SsReference => unreachable!("marched as a packet above"),
         Integrator::Marching => {
             let xi = p.random(x, y, 0);
             let jitter = p.random(x, y, 1);
@@ -292,7 +530,7 @@ pub fn render_pixel_with<F: FieldSampler>(
             });
             match hit {
                 Some((at, albedo)) => {
-                    let l = radiance(at, albedo, scratch, p.random(x, y, 2));
+                    let l = lit(at, albedo, scratch, p.random(x, y, 2));
                     [l[0], l[1], l[2], 1.0]
                 }
                 None => [bg[0], bg[1], bg[2], 0.0],
@@ -329,7 +567,7 @@ pub fn render_pixel_with<F: FieldSampler>(
                 let accept = p.random(x, y, dim);
                 dim += 1;
                 if accept * p.majorant < sigma {
-                    let l = radiance(at, rgb, scratch, p.random(x, y, 2));
+                    let l = lit(at, rgb, scratch, p.random(x, y, 2));
                     return [l[0], l[1], l[2], 1.0];
                 }
                 if dim > 100_000 {
@@ -355,6 +593,7 @@ mod tests {
 
     impl<F: Fn(DVec3) -> f64 + Sync> FieldSampler for Analytic<F> {
         type Ray = ();
+        type Packet = ();
 
         fn begin(
             &self,

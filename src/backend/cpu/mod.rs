@@ -20,12 +20,14 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use self::accumulator::Accumulator;
-use self::integrators::{FieldSampler, PixelScratch, render_pixel_with};
+use self::integrators::{
+    FieldSampler, PACKET, PACKET_SIZE, PixelScratch, RaySample, render_pixels_with,
+};
 use super::gpu_data::f32_phi_error;
 use super::voxel::{VoxelGeometry, VoxelGrid};
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
 use crate::field::splat::{SplatCounts, SplatScratch};
-use crate::field::{F32Field, F32Ray, FieldSettings, Particles, ReferenceField};
+use crate::field::{F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField};
 use crate::values::{FrameParams, Image, Step};
 
 const TILE: u32 = 16;
@@ -191,6 +193,7 @@ enum Sampler<'a> {
 
 impl FieldSampler for ReferenceField {
     type Ray = ();
+    type Packet = ();
 
     fn begin(
         &self,
@@ -227,10 +230,25 @@ impl FieldSampler for F32Field {
     fn sample(&self, ray: &mut F32Ray, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
         self.eval_sums(origin + dir * t, ray)
     }
+
+    type Packet = F32Packet;
+
+    fn sample_packet(
+        &self,
+        packet: &mut F32Packet,
+        rays: &mut [F32Ray; PACKET],
+        samples: &[Option<RaySample>; PACKET],
+        out: &mut [(f64, [f64; 3]); PACKET],
+    ) {
+        let points = samples.map(|s| s.map(|s| s.origin + s.dir * s.t));
+        // How many were evaluated together is for tests.
+        let _ = self.eval_sums_packet(&points, packet, rays, out);
+    }
 }
 
-/// Renders one frame's pixels with `field`, rayon over tiles, each tile's rays reused for its
-/// pixels; None when `abandoned` said so before a tile.
+/// Renders one frame's pixels with `field`, rayon over tiles, each tile's pixels in packets
+/// of [`PACKET_SIZE`] (neighbouring rays, marched together), the rays' state reused; None when
+/// `abandoned` said so before a tile.
 fn render_tiles<F: FieldSampler>(
     frame: &FrameParams,
     field: &F,
@@ -239,35 +257,69 @@ fn render_tiles<F: FieldSampler>(
     tiles_of(
         frame,
         abandoned,
-        |scratch: &mut PixelScratch<F::Ray>, x, y| render_pixel_with(frame, field, x, y, scratch),
+        |scratch: &mut PixelScratch<F>, lo: [u32; 2], hi: [u32; 2], out: &mut [[f64; 4]]| {
+            let width = (hi[0] - lo[0]) as usize;
+            let (pw, ph) = PACKET_SIZE;
+            let mut values = [[0.0; 4]; PACKET];
+            let mut pixels = Vec::with_capacity(PACKET);
+            for by in (lo[1]..hi[1]).step_by(ph as usize) {
+                for bx in (lo[0]..hi[0]).step_by(pw as usize) {
+                    pixels.clear();
+                    for y in by..(by + ph).min(hi[1]) {
+                        for x in bx..(bx + pw).min(hi[0]) {
+                            pixels.push((x, y));
+                        }
+                    }
+                    render_pixels_with(frame, field, &pixels, scratch, &mut values);
+                    for (&(x, y), v) in pixels.iter().zip(values) {
+                        out[(y - lo[1]) as usize * width + (x - lo[0]) as usize] = v;
+                    }
+                }
+            }
+        },
     )
 }
 
-/// Each tile's pixels (row-major within the tile), rayon over tiles, `pixel` called with a
-/// scratch made once per rayon job; a tile started after `abandoned` said so is left empty.
+/// Each tile's pixels (row-major within the tile), rayon over tiles, `tile` called with the
+/// tile's corners (`lo` inclusive, `hi` exclusive), its row-major pixels to fill and a scratch
+/// made once per rayon job; a tile started after `abandoned` said so is left empty.
 fn tiles_of<S: Default + Send>(
     frame: &FrameParams,
     abandoned: &(dyn Fn() -> bool + Sync),
-    pixel: impl Fn(&mut S, u32, u32) -> [f64; 4] + Sync,
+    tile: impl Fn(&mut S, [u32; 2], [u32; 2], &mut [[f64; 4]]) + Sync,
 ) -> Vec<Vec<[f64; 4]>> {
     let (w, h) = (frame.width, frame.height);
     let tiles_x = w.div_ceil(TILE);
     (0..tiles_x * h.div_ceil(TILE))
         .into_par_iter()
-        .map_init(S::default, |scratch, tile| {
-            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+        .map_init(S::default, |scratch, index| {
+            let (tx, ty) = (index % tiles_x, index / tiles_x);
             if abandoned() {
                 return Vec::new();
             }
-            let mut out = Vec::with_capacity((TILE * TILE) as usize);
-            for y in ty * TILE..((ty + 1) * TILE).min(h) {
-                for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                    out.push(pixel(scratch, x, y));
-                }
-            }
+            let lo = [tx * TILE, ty * TILE];
+            let hi = [((tx + 1) * TILE).min(w), ((ty + 1) * TILE).min(h)];
+            let mut out = vec![[0.0; 4]; ((hi[0] - lo[0]) * (hi[1] - lo[1])) as usize];
+            tile(scratch, lo, hi, &mut out);
             out
         })
         .collect()
+}
+
+/// [`tiles_of`] with `pixel` called for each pixel of a tile in row-major order.
+fn pixels_of<S: Default + Send>(
+    frame: &FrameParams,
+    abandoned: &(dyn Fn() -> bool + Sync),
+    pixel: impl Fn(&mut S, u32, u32) -> [f64; 4] + Sync,
+) -> Vec<Vec<[f64; 4]>> {
+    tiles_of(frame, abandoned, |scratch: &mut S, lo, hi, out| {
+        let mut values = out.iter_mut();
+        for y in lo[1]..hi[1] {
+            for x in lo[0]..hi[0] {
+                *values.next().expect("one value per pixel") = pixel(scratch, x, y);
+            }
+        }
+    })
 }
 
 impl CpuBackend {
@@ -425,7 +477,7 @@ impl Backend for CpuBackend {
         };
         let (kept, lost) = (AtomicU64::new(0), AtomicU64::new(0));
         let abandoned = || self.abandoned();
-        let tiles = tiles_of(frame, &abandoned, |scratch: &mut SplatScratch, x, y| {
+        let tiles = pixels_of(frame, &abandoned, |scratch: &mut SplatScratch, x, y| {
             let (pixel, counts) = splat::splat_pixel(frame, field, x, y, k, scratch);
             kept.fetch_add(counts.kept, Ordering::Relaxed);
             lost.fetch_add(counts.lost, Ordering::Relaxed);
