@@ -195,24 +195,6 @@ impl MarchSamples {
     }
 }
 
-/// Calls `visit(t)` at every march sample ([`MarchSamples`]) in order, until `visit` returns
-/// false.
-fn march(
-    t0: f64,
-    t1: f64,
-    dt: f64,
-    jitter: f64,
-    intervals: &[(f64, f64)],
-    mut visit: impl FnMut(f64) -> bool,
-) {
-    let mut samples = MarchSamples::new(t0, t1, dt, jitter);
-    while let Some(t) = samples.next(intervals) {
-        if !visit(t) {
-            return;
-        }
-    }
-}
-
 /// Starts sampling `ray` and gives the sub-intervals of `[t0, t1]` along it to march: those
 /// where the field has particles, when space without particles is truly empty (the optical
 /// map's D(0) is 0); otherwise the whole interval, since extinction there is `scale · D(0)`
@@ -240,6 +222,8 @@ fn march_intervals<F: FieldSampler>(
 }
 
 /// Transmittance from `x` towards the light to the march box's exit: `exp(-Σ sigma dt)`.
+/// (Shadow rays marched as packets were measured and not kept: a packet's scattering points
+/// lie at different depths, so their samples rarely share cells.)
 fn shadow<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
@@ -254,15 +238,18 @@ fn shadow<F: FieldSampler>(
     scratch.clear();
     let clear_where_empty = march_intervals(p, field, ray, x, p.light_dir, 0.0, t_exit, scratch);
     let mut tau = 0.0;
-    march(0.0, t_exit, p.dt, jitter, scratch, |t| {
+    let mut samples = MarchSamples::new(0.0, t_exit, p.dt, jitter);
+    while let Some(t) = samples.next(scratch) {
         let (phi, num) = field.sample(ray, x, p.light_dir, t);
         if phi == 0.0 && clear_where_empty {
-            return true;
+            continue;
         }
         tau += p.shade(phi, num).0 * p.dt;
         // Beyond this the light is gone to f64 precision; stop marching.
-        tau < 745.0
-    });
+        if tau >= 745.0 {
+            break;
+        }
+    }
     (-tau).exp()
 }
 
@@ -306,8 +293,10 @@ pub fn render_pixels_with<F: FieldSampler>(
     out: &mut [[f64; 4]],
 ) {
     match p.integrator {
-        Integrator::Ea | Integrator::SsReference => march_packet(p, field, pixels, scratch, out),
-        Integrator::Marching | Integrator::Delta => {
+        Integrator::Ea | Integrator::SsReference | Integrator::Marching => {
+            march_packet(p, field, pixels, scratch, out)
+        }
+        Integrator::Delta => {
             for (o, &(x, y)) in out.iter_mut().zip(pixels) {
                 *o = render_pixel_with(p, field, x, y, scratch);
             }
@@ -335,13 +324,16 @@ fn radiance<F: FieldSampler>(
 struct MarchedRay {
     origin: DVec3,
     dir: DVec3,
-
     /// Whether a sample where Phi is 0 adds nothing ([`march_intervals`]).
     clear_where_empty: bool,
     samples: MarchSamples,
     shadow_jitter: f64,
+    /// Emission–absorption: the colour gathered and the transmittance so far.
     colour: [f64; 3],
     transmittance: f64,
+    /// Stochastic marching: the optical depth so far and the one it stops at.
+    tau: f64,
+    target_tau: f64,
 }
 
 impl MarchedRay {
@@ -358,10 +350,12 @@ impl MarchedRay {
     }
 }
 
-/// Emission–absorption (with a shadow ray per sample for the single-scattering reference):
-/// front-to-back compositing of `pixels`' rays, marched in step so the field samples their
-/// k-th samples together ([`FieldSampler::sample_packet`]); a ray leaves the packet when it
-/// reaches the opacity threshold or its last sample.
+/// The marching integrators on `pixels`' rays, marched in step so the field samples their
+/// k-th samples together ([`FieldSampler::sample_packet`]): emission–absorption (with a
+/// shadow ray per sample for the single-scattering reference), front-to-back compositing until
+/// the opacity threshold; stochastic marching, until the optical depth passes `-ln(1 - xi)`,
+/// then one shadow ray from there. A ray leaves the packet when it is done or has no samples
+/// left.
 fn march_packet<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
@@ -397,7 +391,12 @@ fn march_packet<F: FieldSampler>(
             t_exit,
             &mut intervals[i],
         );
-        let jitter = p.random(x, y, if scatter { 1 } else { 0 });
+        // Dimension 0 is the primary decision: emission–absorption's jitter, or stochastic
+        // marching's free-flight number (its jitter is dimension 1, as the reference's).
+        let (jitter, target_tau) = match p.integrator {
+            Integrator::Marching => (p.random(x, y, 1), -(1.0 - p.random(x, y, 0)).ln()),
+            _ => (p.random(x, y, if scatter { 1 } else { 0 }), f64::INFINITY),
+        };
         rays[i] = Some(MarchedRay {
             origin,
             dir,
@@ -406,6 +405,8 @@ fn march_packet<F: FieldSampler>(
             shadow_jitter: p.random(x, y, 2),
             colour: [0.0; 3],
             transmittance: 1.0,
+            tau: 0.0,
+            target_tau,
         });
     }
     let mut samples: [Option<RaySample>; PACKET] = [None; PACKET];
@@ -443,6 +444,24 @@ fn march_packet<F: FieldSampler>(
                 continue;
             }
             let (sigma, rgb) = p.shade(phi, num);
+            if p.integrator == Integrator::Marching {
+                ray.tau += sigma * p.dt;
+                if ray.tau > ray.target_tau {
+                    let at = ray.origin + ray.dir * sample.t;
+                    let l = radiance(
+                        p,
+                        field,
+                        shadow_ray,
+                        shadow_intervals,
+                        at,
+                        rgb,
+                        ray.shadow_jitter,
+                    );
+                    out[i] = [l[0], l[1], l[2], 1.0];
+                    rays[i] = None;
+                }
+                continue;
+            }
             if sigma <= 0.0 {
                 continue;
             }
@@ -473,7 +492,8 @@ fn march_packet<F: FieldSampler>(
     }
 }
 
-/// The radiance of pixel (x, y) in this frame: linear RGB and opacity.
+/// The radiance of pixel (x, y) in this frame: linear RGB and opacity. The marching
+/// integrators march it as a packet of one ([`march_packet`]); delta tracking is here.
 pub fn render_pixel_with<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
@@ -481,7 +501,10 @@ pub fn render_pixel_with<F: FieldSampler>(
     y: u32,
     scratch: &mut PixelScratch<F>,
 ) -> [f64; 4] {
-    if matches!(p.integrator, Integrator::Ea | Integrator::SsReference) {
+    if matches!(
+        p.integrator,
+        Integrator::Ea | Integrator::SsReference | Integrator::Marching
+    ) {
         let mut out = [[0.0; 4]];
         march_packet(p, field, &[(x, y)], scratch, &mut out);
         return out[0];
@@ -500,82 +523,46 @@ pub fn render_pixel_with<F: FieldSampler>(
     } = scratch;
     let (primary, intervals) = (&mut primary[0], &mut intervals[0]);
     intervals.clear();
-    let clear_where_empty =
-        march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
-    let mut lit = |at: DVec3, albedo: [f64; 3], scratch: &mut Vec<(f64, f64)>, jitter: f64| {
-        radiance(p, field, shadow_ray, scratch, at, albedo, jitter)
+    // Delta tracking: free flights skip the space outside the intervals (null collisions
+    // only), so whether empty space is clear does not matter to it.
+    march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
+    if p.majorant <= 0.0 {
+        return [bg[0], bg[1], bg[2], 0.0];
+    }
+    let Some(&(first, _)) = intervals.first() else {
+        return [bg[0], bg[1], bg[2], 0.0];
     };
-
-    match p.integrator {
-        Integrator::Ea | Integrator::SsReference => unreachable!("marched as a packet above"),
-        Integrator::Marching => {
-            let xi = p.random(x, y, 0);
-            let jitter = p.random(x, y, 1);
-            let target = -(1.0 - xi).ln();
-            let mut tau = 0.0;
-            let mut hit = None;
-            march(t_enter, t_exit, p.dt, jitter, intervals, |t| {
-                let (phi, num) = field.sample(primary, origin, dir, t);
-                if phi == 0.0 && clear_where_empty {
-                    return true;
-                }
-                let at = origin + dir * t;
-                let (sigma, rgb) = p.shade(phi, num);
-                tau += sigma * p.dt;
-                if tau > target {
-                    hit = Some((at, rgb));
-                    return false;
-                }
-                true
-            });
-            match hit {
-                Some((at, albedo)) => {
-                    let l = lit(at, albedo, scratch, p.random(x, y, 2));
-                    [l[0], l[1], l[2], 1.0]
-                }
-                None => [bg[0], bg[1], bg[2], 0.0],
+    let mut dim = 0;
+    let mut interval = 0;
+    let mut t = first;
+    loop {
+        let xi = p.random(x, y, dim);
+        dim = if dim == 0 { 3 } else { dim + 1 };
+        t -= (1.0 - xi).ln() / p.majorant;
+        // Skip empty space: a flight through it is a run of null collisions, and what
+        // overshoots an interval's end carries on from the next one's start (the
+        // exponential distribution is memoryless).
+        while t >= intervals[interval].1 {
+            let over = t - intervals[interval].1;
+            interval += 1;
+            if interval == intervals.len() {
+                return [bg[0], bg[1], bg[2], 0.0];
             }
+            t = intervals[interval].0 + over;
         }
-        Integrator::Delta => {
-            if p.majorant <= 0.0 {
-                return [bg[0], bg[1], bg[2], 0.0];
-            }
-            let Some(&(first, _)) = intervals.first() else {
-                return [bg[0], bg[1], bg[2], 0.0];
-            };
-            let mut dim = 0;
-            let mut interval = 0;
-            let mut t = first;
-            loop {
-                let xi = p.random(x, y, dim);
-                dim = if dim == 0 { 3 } else { dim + 1 };
-                t -= (1.0 - xi).ln() / p.majorant;
-                // Skip empty space: a flight through it is a run of null collisions, and what
-                // overshoots an interval's end carries on from the next one's start (the
-                // exponential distribution is memoryless).
-                while t >= intervals[interval].1 {
-                    let over = t - intervals[interval].1;
-                    interval += 1;
-                    if interval == intervals.len() {
-                        return [bg[0], bg[1], bg[2], 0.0];
-                    }
-                    t = intervals[interval].0 + over;
-                }
-                let at = origin + dir * t;
-                let (phi, num) = field.sample(primary, origin, dir, t);
-                let (sigma, rgb) = p.shade(phi, num);
-                let accept = p.random(x, y, dim);
-                dim += 1;
-                if accept * p.majorant < sigma {
-                    let l = lit(at, rgb, scratch, p.random(x, y, 2));
-                    return [l[0], l[1], l[2], 1.0];
-                }
-                if dim > 100_000 {
-                    // Bounded work per pixel: a majorant far above the real extinction would
-                    // otherwise take arbitrarily many null collisions.
-                    return [bg[0], bg[1], bg[2], 0.0];
-                }
-            }
+        let at = origin + dir * t;
+        let (phi, num) = field.sample(primary, origin, dir, t);
+        let (sigma, rgb) = p.shade(phi, num);
+        let accept = p.random(x, y, dim);
+        dim += 1;
+        if accept * p.majorant < sigma {
+            let l = radiance(p, field, shadow_ray, scratch, at, rgb, p.random(x, y, 2));
+            return [l[0], l[1], l[2], 1.0];
+        }
+        if dim > 100_000 {
+            // Bounded work per pixel: a majorant far above the real extinction would
+            // otherwise take arbitrarily many null collisions.
+            return [bg[0], bg[1], bg[2], 0.0];
         }
     }
 }
