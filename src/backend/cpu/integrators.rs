@@ -409,6 +409,19 @@ fn march_packet<F: FieldSampler>(
             target_tau,
         });
     }
+    // What a ray's sample at t scatters towards the camera, `albedo` under the light there.
+    let mut lit = |ray: &MarchedRay, t: f64, albedo: [f64; 3]| {
+        let at = ray.origin + ray.dir * t;
+        radiance(
+            p,
+            field,
+            shadow_ray,
+            shadow_intervals,
+            at,
+            albedo,
+            ray.shadow_jitter,
+        )
+    };
     let mut samples: [Option<RaySample>; PACKET] = [None; PACKET];
     let mut values = [(0.0, [0.0; 3]); PACKET];
     loop {
@@ -447,16 +460,7 @@ fn march_packet<F: FieldSampler>(
             if p.integrator == Integrator::Marching {
                 ray.tau += sigma * p.dt;
                 if ray.tau > ray.target_tau {
-                    let at = ray.origin + ray.dir * sample.t;
-                    let l = radiance(
-                        p,
-                        field,
-                        shadow_ray,
-                        shadow_intervals,
-                        at,
-                        rgb,
-                        ray.shadow_jitter,
-                    );
+                    let l = lit(ray, sample.t, rgb);
                     out[i] = [l[0], l[1], l[2], 1.0];
                     rays[i] = None;
                 }
@@ -467,16 +471,7 @@ fn march_packet<F: FieldSampler>(
             }
             let alpha = 1.0 - (-sigma * p.dt).exp();
             let emitted = if scatter {
-                let at = ray.origin + ray.dir * sample.t;
-                radiance(
-                    p,
-                    field,
-                    shadow_ray,
-                    shadow_intervals,
-                    at,
-                    rgb,
-                    ray.shadow_jitter,
-                )
+                lit(ray, sample.t, rgb)
             } else {
                 rgb
             };
