@@ -15,6 +15,9 @@
 //! DDA over the cells some particle may reach). The cost is overfetch: candidates fill the
 //! 3x3x3 cells around a point, about 27 / (4/3 π) = 6.4 times the particles within the
 //! largest radius; eight lanes at a time pay for it several times over (`benches/cpu_roofline`).
+//! A packet of neighbouring rays' samples ([`F32Field::eval_sums_packet`]) shares one lookup
+//! and one narrowing of its candidates to those within reach of all of them, and evaluates
+//! them a sample per lane: samples along rays lie much closer together than a radius.
 
 use glam::DVec3;
 use rayon::prelude::*;

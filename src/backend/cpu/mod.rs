@@ -1,5 +1,6 @@
 //! The CPU backend: the field of a step and the integrators of [`integrators`] (the twin of
-//! `shaders_glsl/shared/integrators.glsl`), rayon over image tiles. It is the reference
+//! `shaders_glsl/shared/integrators.glsl`), rayon over image tiles, each tile's pixels in
+//! packets of 4 x 2 whose rays the marching integrators advance in step. It is the reference
 //! renderer GPU backends are compared with, and the renderer where no GPU driver exists. Two
 //! precisions, chosen per scene by the rule the GPU backends use for their positions
 //! ([`Precision`]): the f64 reference ([`ReferenceField`]: a BVH over Hilbert-sorted cluster
