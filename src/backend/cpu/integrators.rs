@@ -488,7 +488,7 @@ fn march_packet<F: FieldSampler>(
 }
 
 /// The radiance of pixel (x, y) in this frame: linear RGB and opacity. The marching
-/// integrators march it as a packet of one ([`march_packet`]); delta tracking is here.
+/// integrators march it as a packet of one (`march_packet`); delta tracking is here.
 pub fn render_pixel_with<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
