@@ -121,9 +121,7 @@ impl Packed {
             _ => sums::<3>(self, runs, q),
         }
     }
-}
 
-impl Packed {
     /// [`Packed::sums`] at up to [`LANES`] points at once (`q[l]` where `live[l]` is all ones,
     /// a point per lane), over the particles of `runs`: those within their radius of the
     /// points' bounding box are gathered into `candidates` first (the points lie close
@@ -195,8 +193,11 @@ fn packet_sums_lanes<const C: usize>(
         }
     }
     let total: usize = runs.iter().map(|&(a, b)| (b - a) as usize).sum();
-    candidates.clear();
-    candidates.resize(total + LANES, 0);
+    // Room for every candidate and a chunk's stray writes; what is there is overwritten
+    // (filling it anew each packet would be a second pass over it).
+    if candidates.len() < total + LANES {
+        candidates.resize(total + LANES, 0);
+    }
     let mut n = 0;
     // How far `v` lies outside [lo, hi] (plain compares: `f32::max` would add NaN handling).
     let gap = |v: f32, lo: f32, hi: f32| -> f32 {
