@@ -1,7 +1,8 @@
-//! A BVH over cluster boxes (obvhs' PLOC builder) for point queries on the CPU. obvhs works in
-//! f32: the boxes are held relative to a local origin (their centre), rounded outward, so the
-//! tree keeps its resolution far from the data's origin and never misses a box a point lies
-//! in; the f64 tests of the particles themselves decide.
+//! A BVH over cluster boxes (obvhs' PLOC builder) for rays on the CPU (the occupied intervals
+//! along a ray, the splatter). obvhs works in f32: the boxes are held relative to a local
+//! origin (their centre), rounded outward, so the tree keeps its resolution far from the
+//! data's origin and never misses a box a ray crosses; the f64 tests of the particles
+//! themselves decide.
 
 use glam::{DVec3, Vec3A};
 use obvhs::{Boundable, BvhBuildParams, aabb::Aabb, bvh2::Bvh2};
@@ -56,24 +57,6 @@ impl ClusterBvh {
             clusters,
             leaf_boxes,
         }
-    }
-
-    /// Calls `visit` with the index of every cluster whose box may contain `x` (every one that
-    /// does, and possibly some within an f32 rounding of it).
-    pub fn for_each_cluster_at(&self, x: DVec3, mut visit: impl FnMut(usize)) {
-        let Some(bvh) = &self.bvh else { return };
-        let local = x - self.origin;
-        let query = Aabb::new(down(local), up(local));
-        bvh.aabb_traverse(query, |bvh, node_index| {
-            let node = &bvh.nodes[node_index as usize];
-            for i in node.first_index..node.first_index + node.prim_count {
-                let prim = bvh.primitive_indices[i as usize] as usize;
-                if self.leaf_boxes[prim].intersect_aabb(&query) {
-                    visit(self.clusters[prim] as usize);
-                }
-            }
-            true
-        });
     }
 
     /// Appends `(t_in, t_out, cluster)` for every cluster box the ray `origin + t dir` crosses

@@ -1,10 +1,13 @@
 //! Acceleration structures on the CPU: Hilbert keys and order, clusters of K consecutive
-//! Hilbert-sorted particles with their bounding boxes, and a BVH (obvhs) over those boxes.
+//! Hilbert-sorted particles with their bounding boxes, a BVH (obvhs) over those boxes, and a
+//! uniform grid of cells for point queries.
 
 pub mod bvh;
+pub mod cells;
 pub mod clusters;
 pub mod hilbert;
 
 pub use bvh::ClusterBvh;
+pub use cells::{CellGrid, CellRuns};
 pub use clusters::{ClusterBoxes, ClusterSize};
 pub use hilbert::{HilbertQuantizer, hilbert_key, hilbert_order};

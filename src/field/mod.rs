@@ -15,6 +15,7 @@
 
 pub mod f32_field;
 pub mod f32_kernel;
+mod f64_kernel;
 mod grid;
 mod inputs;
 mod particles;

@@ -1,11 +1,13 @@
-//! The reference field of one step: Phi and Theta at points, through a BVH over the cluster
-//! boxes or by brute force, in f64.
+//! The reference field of one step: Phi and Theta at points, in f64, through a grid of cells
+//! (point queries, `f64_kernel`) or by brute force; and the cluster boxes with their BVH,
+//! which rays walk (the occupied intervals along a ray, the splatter).
 
 use glam::DVec3;
 use rayon::prelude::*;
 
+use super::f64_kernel::Packed64;
 use super::{FieldError, FieldSettings, Particles, Theta};
-use crate::accel::{ClusterBoxes, ClusterBvh, ClusterSize, hilbert_order};
+use crate::accel::{CellGrid, CellRuns, ClusterBoxes, ClusterBvh, ClusterSize, hilbert_order};
 use crate::values::{Bounds, Step};
 
 #[derive(Default)]
@@ -75,22 +77,30 @@ pub fn finish_sums(phi: f64, num: [f64; 3], post: bool, range: (f64, f64)) -> Sa
     Sample { phi, theta }
 }
 
-/// The reference field of one step: prepared particles, cluster boxes and their BVH (both in
-/// the particles' local coordinates; every method takes data coordinates).
+/// The reference field of one step: prepared particles, cluster boxes and their BVH, and the
+/// particles again in a grid of cells for point queries (all in the particles' local
+/// coordinates; every method takes data coordinates).
 pub struct ReferenceField {
     pub particles: Particles,
     pub boxes: ClusterBoxes,
     pub(super) bvh: ClusterBvh,
+    cells: CellGrid,
+    /// The particles cell by cell, as the point queries' kernel reads them.
+    by_cell: Packed64,
 }
 
 impl ReferenceField {
     pub fn new(particles: Particles, cluster: ClusterSize) -> ReferenceField {
         let boxes = ClusterBoxes::build(&particles.centers, &particles.radii, cluster);
         let bvh = ClusterBvh::build(&boxes);
+        let (cells, order) = CellGrid::build(&particles.centers, &particles.radii);
+        let by_cell = Packed64::gather(&particles, &order);
         ReferenceField {
             particles,
             boxes,
             bvh,
+            cells,
+            by_cell,
         }
     }
 
@@ -106,24 +116,37 @@ impl ReferenceField {
         Ok(ReferenceField::new(particles, cluster))
     }
 
-    /// The field at `x` through the BVH.
+    /// The field at `x`.
     pub fn eval(&self, x: DVec3) -> Sample {
-        let (phi, theta) = self.eval_sums(x);
+        self.eval_with(x, &mut CellRuns::default())
+    }
+
+    /// [`ReferenceField::eval`] with the runs of the last cell kept in `scratch` (made once per
+    /// thread: a query in the same cell as the last looks nothing up).
+    pub fn eval_with(&self, x: DVec3, scratch: &mut CellRuns) -> Sample {
+        let (phi, theta) = self.eval_sums_with(x, scratch);
         self.finish(Accumulator { phi, theta })
     }
 
     /// Phi and the Theta numerator at `x` as the renderer uses them: Σ phi_i and
     /// Σ theta_i phi_i with theta_i the normalised attribute t_i (post) or linear RGB (pre).
     pub fn eval_sums(&self, x: DVec3) -> (f64, [f64; 3]) {
-        let x = x - self.particles.origin;
-        let mut acc = Accumulator::default();
-        let n = self.particles.len();
-        self.bvh.for_each_cluster_at(x, |c| {
-            for i in self.boxes.members(c, n) {
-                self.particles.accumulate(i, x, &mut acc);
-            }
-        });
-        (acc.phi, acc.theta)
+        self.eval_sums_with(x, &mut CellRuns::default())
+    }
+
+    /// [`ReferenceField::eval_sums`] with the runs of the last cell kept in `scratch`. Each
+    /// term is `Particles::accumulate`'s, bit for bit (`f64_kernel`); the candidates are the
+    /// particles of the 27 cells around `x`'s.
+    pub fn eval_sums_with(&self, x: DVec3, scratch: &mut CellRuns) -> (f64, [f64; 3]) {
+        let l = x - self.particles.origin;
+        let Some((c, ijk)) = self.cells.cell_at(l) else {
+            return (0.0, [0.0; 3]);
+        };
+        if !self.cells.is_reached(c) {
+            return (0.0, [0.0; 3]);
+        }
+        let runs = self.cells.runs_around(ijk, ijk, scratch);
+        self.by_cell.sums(runs, l)
     }
 
     /// The disjoint, ordered sub-intervals of `[t0, t1]` along a ray that cross any cluster
@@ -148,9 +171,12 @@ impl ReferenceField {
         }
     }
 
-    /// Bytes of the cluster boxes and the BVH.
+    /// Bytes of the cluster boxes, the BVH, the cells and the particles sorted into them.
     pub fn structure_bytes(&self) -> usize {
-        self.boxes.len() * std::mem::size_of::<Bounds>() + self.bvh.bytes()
+        self.boxes.len() * std::mem::size_of::<Bounds>()
+            + self.bvh.bytes()
+            + self.cells.bytes()
+            + self.by_cell.bytes()
     }
 
     /// The field at `x` by visiting every particle.
@@ -164,7 +190,7 @@ impl ReferenceField {
     }
 
     /// The field at many points, in parallel, with a progress bar for long runs. Queries are
-    /// visited in Hilbert order (neighbouring queries share tree nodes, about 2x faster) and
+    /// visited in Hilbert order (neighbouring queries share cells and their candidates stay in cache) and
     /// the results returned in input order.
     pub fn eval_many(&self, queries: &[DVec3]) -> Vec<Sample> {
         let order = hilbert_order(queries, Bounds::of_points(queries));
@@ -173,7 +199,11 @@ impl ReferenceField {
         let sorted: Vec<Sample> = order
             .par_chunks(chunk)
             .flat_map_iter(|c| {
-                let r: Vec<Sample> = c.iter().map(|&i| self.eval(queries[i as usize])).collect();
+                let mut scratch = CellRuns::default();
+                let r: Vec<Sample> = c
+                    .iter()
+                    .map(|&i| self.eval_with(queries[i as usize], &mut scratch))
+                    .collect();
                 bar.inc(c.len() as u64);
                 r
             })

@@ -27,6 +27,7 @@ use self::integrators::{
 use super::gpu_data::f32_phi_error;
 use super::voxel::{VoxelGeometry, VoxelGrid};
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
+use crate::accel::CellRuns;
 use crate::field::splat::{SplatCounts, SplatScratch};
 use crate::field::{F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField};
 use crate::values::{FrameParams, Image, Step};
@@ -193,12 +194,12 @@ enum Sampler<'a> {
 }
 
 impl FieldSampler for ReferenceField {
-    type Ray = ();
+    type Ray = CellRuns;
     type Packet = ();
 
     fn begin(
         &self,
-        _: &mut (),
+        _: &mut CellRuns,
         origin: DVec3,
         dir: DVec3,
         t0: f64,
@@ -208,8 +209,8 @@ impl FieldSampler for ReferenceField {
         self.occupied_intervals(origin, dir, t0, t1, occupied);
     }
 
-    fn sample(&self, _: &mut (), origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
-        self.eval_sums(origin + dir * t)
+    fn sample(&self, ray: &mut CellRuns, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
+        self.eval_sums_with(origin + dir * t, ray)
     }
 }
 
@@ -422,7 +423,12 @@ impl Backend for CpuBackend {
     fn query(&mut self, points: &[DVec3]) -> Result<Vec<(f64, [f64; 3])>, BackendError> {
         let started = Instant::now();
         let out = match self.sampler()? {
-            Sampler::F64(field) => points.par_iter().map(|&x| field.eval_sums(x)).collect(),
+            Sampler::F64(field) => points
+                .par_iter()
+                .map_init(CellRuns::default, |scratch, &x| {
+                    field.eval_sums_with(x, scratch)
+                })
+                .collect(),
             Sampler::F32(field) => points
                 .par_iter()
                 .map_init(F32Ray::default, |scratch, &x| field.eval_sums(x, scratch))
