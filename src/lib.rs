@@ -8,7 +8,7 @@
 //!   and [`noise`] (blue and white noise) at the bottom;
 //! - [`io`]: readers and writers;
 //! - [`scene`]: time series, maps, cameras, synthetic data;
-//! - [`accel`]: Hilbert keys, clusters, the CPU BVH;
+//! - [`accel`]: Hilbert keys, clusters, the CPU BVH, the grid of cells;
 //! - [`field`]: the f64 reference field every backend is tested against;
 //! - [`backend`]: the `Backend` trait, its CPU, wgpu and ash implementations, and the shaders
 //!   with their CPU twins;

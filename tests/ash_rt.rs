@@ -163,7 +163,7 @@ fn boxes_match_the_cpu_cluster_boxes() {
             None,
         )
         .unwrap();
-        let cpu: &ClusterBoxes = &reference.boxes;
+        let cpu: &ClusterBoxes = reference.boxes();
         let gpu = b.read_boxes().unwrap();
         let (data, particles) = GpuStepData::prepare(&input(&step, &field, k)).unwrap();
         let rule = RadiusRule {

@@ -391,11 +391,11 @@ fn the_cell_walk_misses_no_density() {
     assert!(checked > 1000, "rays met density ({checked} samples)");
 }
 
-/// A map change and a radius change on the f32 path give exactly what a fresh upload with the
-/// new field gives, and the f32 path builds only its cells: no BVH (its structure is the
-/// grid, smaller than the reference's tree over the same particles).
+/// A map change and a radius change give exactly what a fresh upload with the new field gives,
+/// on the f32 path and on the f64 reference (both keep copies of the weights and theta in
+/// their cells), and the f32 path's structure is smaller than the reference's.
 #[test]
-fn changes_rebuild_the_cells_and_nothing_else_is_built() {
+fn map_and_radius_changes_equal_a_fresh_upload() {
     let step = std::sync::Arc::new(step(2047, 31, 1e4, 2.0));
     let bounds = Bounds::of_points(&step.positions);
     let range = Some((-3.0, 5.0));
@@ -417,22 +417,32 @@ fn changes_rebuild_the_cells_and_nothing_else_is_built() {
     let base = FieldSettings::new(Some("s"), 0.3);
     let mut mapped = base.clone();
     mapped.density_map = aarbf::scene::maps::DensityMap::new("ramp".parse().unwrap()).unwrap();
+    mapped.color_map = aarbf::scene::maps::ColorMap::preset("viridis").unwrap();
     let mut wider = mapped.clone();
     wider.radius = 0.45;
     let queries: Vec<DVec3> = step.positions.iter().step_by(7).copied().collect();
-    let mut b = make(&base, Precision::F32);
-    b.update_maps(&mapped).unwrap();
-    assert_eq!(
-        b.query(&queries).unwrap(),
-        make(&mapped, Precision::F32).query(&queries).unwrap(),
-        "after a map change"
-    );
-    b.refit(&wider).unwrap();
-    assert_eq!(
-        b.query(&queries).unwrap(),
-        make(&wider, Precision::F32).query(&queries).unwrap(),
-        "after a radius change"
-    );
+    for precision in [Precision::F32, Precision::F64] {
+        for classification in [Classification::Post, Classification::Pre] {
+            let with = |f: &FieldSettings| FieldSettings {
+                classification,
+                ..f.clone()
+            };
+            let mut b = make(&with(&base), precision);
+            b.update_maps(&with(&mapped)).unwrap();
+            assert_eq!(
+                b.query(&queries).unwrap(),
+                make(&with(&mapped), precision).query(&queries).unwrap(),
+                "{precision:?}, {classification:?}: after a map change"
+            );
+            b.refit(&with(&wider)).unwrap();
+            assert_eq!(
+                b.query(&queries).unwrap(),
+                make(&with(&wider), precision).query(&queries).unwrap(),
+                "{precision:?}, {classification:?}: after a radius change"
+            );
+        }
+    }
+    let b = make(&wider, Precision::F32);
     let (f32_memory, f64_memory) = (b.memory(), make(&wider, Precision::F64).memory());
     assert!(
         f32_memory.structure_bytes < f64_memory.structure_bytes,

@@ -106,7 +106,9 @@ fn two_overlapping_particles_blend_by_weight() {
     let mut settings = FieldSettings::new(Some("s"), 0.5);
     settings.radius_map = RadiusMap::new("ramp".parse().unwrap()).unwrap();
     let f0 = field(&s, &settings, 1);
-    assert!(f0.boxes.boxes[f0.particles.radii.iter().position(|r| *r == 0.0).unwrap()].is_empty());
+    assert!(
+        f0.boxes().boxes[f0.particles.radii.iter().position(|r| *r == 0.0).unwrap()].is_empty()
+    );
     assert!(close(f0.eval(x).phi, p2, 1e-12));
 
     // Pre-classification averages the linear colours of a grayscale map: C(0) = 0, C(1) = 1.
@@ -172,7 +174,7 @@ fn every_cluster_size_gives_the_same_field() {
             assert!(
                 close(got.phi, reference.phi, 1e-12),
                 "K = {}: {got:?} vs {reference:?}",
-                f.boxes.size
+                f.boxes().size
             );
             assert!(close(got.theta[0], reference.theta[0], 1e-12));
         }

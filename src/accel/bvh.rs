@@ -1,5 +1,5 @@
-//! A BVH over cluster boxes (obvhs' PLOC builder) for rays on the CPU (the occupied intervals
-//! along a ray, the splatter). obvhs works in f32: the boxes are held relative to a local
+//! A BVH over cluster boxes (obvhs' PLOC builder) for rays on the CPU (the splatter walks the
+//! boxes along a ray in order). obvhs works in f32: the boxes are held relative to a local
 //! origin (their centre), rounded outward, so the tree keeps its resolution far from the
 //! data's origin and never misses a box a ray crosses; the f64 tests of the particles
 //! themselves decide.

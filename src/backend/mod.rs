@@ -42,7 +42,8 @@ pub enum BackendKind {
     /// (software devices such as lavapipe are skipped: the CPU backend is faster there).
     #[default]
     Auto,
-    /// CPU: rayon over tiles, a BVH over cluster boxes, f64 throughout (the reference).
+    /// CPU: rayon over tiles, the particles in a grid of cells; the f64 reference, or f32 where
+    /// the scene allows.
     Cpu,
     /// wgpu compute: a GPU-built LBVH (Karras 2012) with stack traversal; any GPU (or lavapipe).
     Wgpu,

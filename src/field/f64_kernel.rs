@@ -98,7 +98,7 @@ unsafe fn sums_avx2<const C: usize>(
 }
 
 /// Reached candidates held before their terms are computed: a flush computes them in order.
-const HELD: usize = 128;
+const HELD: usize = 32;
 
 /// The distance tests in lanes, the reached candidates compacted (branch-free) into a small
 /// buffer, then their terms in the order of the runs. Two passes because the standard

@@ -1,6 +1,6 @@
 //! The f64 reference field (method.md §2): density Phi and attribute field Theta at query
-//! points, by brute force over all particles and through a BVH over cluster boxes. This is the
-//! oracle every GPU stage is tested against.
+//! points, by brute force over all particles and through a grid of cells (each term computed
+//! exactly as the brute-force sum does). This is the oracle every GPU stage is tested against.
 //!
 //! For particle i with centre c_i, attribute s_i, normalised t_i = (s_i - s_min) / (s_max -
 //! s_min), radius r_i = R · m(t_i) · h_i (h_i the per-particle radius when the data has one):

@@ -1,6 +1,8 @@
 //! The reference field of one step: Phi and Theta at points, in f64, through a grid of cells
-//! (point queries, `f64_kernel`) or by brute force; and the cluster boxes with their BVH,
-//! which rays walk (the occupied intervals along a ray, the splatter).
+//! (point queries, `f64_kernel`) or by brute force; the empty space along rays from the same
+//! cells; and the cluster boxes with their BVH, which the splatter walks.
+
+use std::sync::OnceLock;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -77,31 +79,65 @@ pub fn finish_sums(phi: f64, num: [f64; 3], post: bool, range: (f64, f64)) -> Sa
     Sample { phi, theta }
 }
 
-/// The reference field of one step: prepared particles, cluster boxes and their BVH, and the
-/// particles again in a grid of cells for point queries (all in the particles' local
-/// coordinates; every method takes data coordinates).
+/// The reference field of one step: prepared particles and, for point queries and the empty
+/// space along rays, the particles again in a grid of cells; the cluster boxes and their BVH
+/// are built when first asked for (the splatter walks them). All in the particles' local
+/// coordinates; every method takes data coordinates.
 pub struct ReferenceField {
     pub particles: Particles,
-    pub boxes: ClusterBoxes,
-    pub(super) bvh: ClusterBvh,
+    cluster: ClusterSize,
+    clusters: OnceLock<(ClusterBoxes, ClusterBvh)>,
     cells: CellGrid,
+    /// `cell_order[p]` is the particle at position `p` of `by_cell`.
+    cell_order: Vec<u32>,
     /// The particles cell by cell, as the point queries' kernel reads them.
     by_cell: Packed64,
 }
 
 impl ReferenceField {
     pub fn new(particles: Particles, cluster: ClusterSize) -> ReferenceField {
-        let boxes = ClusterBoxes::build(&particles.centers, &particles.radii, cluster);
-        let bvh = ClusterBvh::build(&boxes);
-        let (cells, order) = CellGrid::build(&particles.centers, &particles.radii);
-        let by_cell = Packed64::gather(&particles, &order);
+        let (cells, cell_order) = CellGrid::build(&particles.centers, &particles.radii);
+        let by_cell = Packed64::gather(&particles, &cell_order);
         ReferenceField {
             particles,
-            boxes,
-            bvh,
+            cluster,
+            clusters: OnceLock::new(),
             cells,
+            cell_order,
             by_cell,
         }
+    }
+
+    /// To be called after the particles' weights or theta changed (a map, not their centres
+    /// or radii): the cells' copies of them are gathered again.
+    pub fn values_changed(&mut self) {
+        self.by_cell = Packed64::gather(&self.particles, &self.cell_order);
+    }
+
+    /// The clusters of K consecutive particles and their boxes (built on first use).
+    pub fn boxes(&self) -> &ClusterBoxes {
+        &self.clusters().0
+    }
+
+    /// The BVH over [`ReferenceField::boxes`] (built on first use).
+    pub(super) fn bvh(&self) -> &ClusterBvh {
+        &self.clusters().1
+    }
+
+    /// Builds the cluster boxes and their BVH if they were not yet; whether it built them.
+    pub fn build_clusters(&self) -> bool {
+        let built = self.clusters.get().is_none();
+        self.clusters();
+        built
+    }
+
+    fn clusters(&self) -> &(ClusterBoxes, ClusterBvh) {
+        self.clusters.get_or_init(|| {
+            let boxes =
+                ClusterBoxes::build(&self.particles.centers, &self.particles.radii, self.cluster);
+            let bvh = ClusterBvh::build(&boxes);
+            (boxes, bvh)
+        })
     }
 
     /// Builds the field of `step` in one call.
@@ -149,8 +185,8 @@ impl ReferenceField {
         self.by_cell.sums(runs, l)
     }
 
-    /// The disjoint, ordered sub-intervals of `[t0, t1]` along a ray that cross any cluster
-    /// box: outside them the field is 0.
+    /// The disjoint, ordered sub-intervals of `[t0, t1]` along a ray that cross a cell some
+    /// particle may reach: outside them the field is 0.
     pub fn occupied_intervals(
         &self,
         origin: DVec3,
@@ -159,24 +195,17 @@ impl ReferenceField {
         t1: f64,
         out: &mut Vec<(f64, f64)>,
     ) {
-        let mut hits = Vec::new();
-        self.bvh
-            .ray_boxes(origin - self.particles.origin, dir, t0, t1, &mut hits);
-        hits.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (a, b, _) in hits {
-            match out.last_mut() {
-                Some(last) if a <= last.1 => last.1 = last.1.max(b),
-                _ => out.push((a, b)),
-            }
-        }
+        self.cells
+            .occupied(origin - self.particles.origin, dir, t0, t1, out);
     }
 
-    /// Bytes of the cluster boxes, the BVH, the cells and the particles sorted into them.
+    /// Bytes of the cells and the particles sorted into them, and of the cluster boxes and
+    /// their BVH where they were built.
     pub fn structure_bytes(&self) -> usize {
-        self.boxes.len() * std::mem::size_of::<Bounds>()
-            + self.bvh.bytes()
-            + self.cells.bytes()
-            + self.by_cell.bytes()
+        let clusters = self.clusters.get().map_or(0, |(boxes, bvh)| {
+            boxes.len() * std::mem::size_of::<Bounds>() + bvh.bytes()
+        });
+        clusters + self.cells.bytes() + self.by_cell.bytes() + 4 * self.cell_order.len()
     }
 
     /// The field at `x` by visiting every particle.

@@ -124,7 +124,7 @@ impl ReferenceField {
         candidates.clear();
         // The boxes in order of entry: the near-first traversal's order, which is the order an
         // RT traversal of one slab meets them in (closely; the loss rule below is the same).
-        self.bvh.ray_boxes(local, dir, t0, t1, boxes);
+        self.bvh().ray_boxes(local, dir, t0, t1, boxes);
         boxes.sort_by(|a, b| a.0.total_cmp(&b.0));
         let slab_of = |t: f64| ((t - t0) / slab).floor() as u64;
         let n = self.particles.len();
@@ -148,7 +148,7 @@ impl ReferenceField {
                     break;
                 }
                 next_box += 1;
-                for i in self.boxes.members(cluster as usize, n) {
+                for i in self.boxes().members(cluster as usize, n) {
                     let r = self.particles.radii[i];
                     if r <= 0.0 {
                         continue;

@@ -3,11 +3,12 @@
 //! packets of 4 x 2 whose rays the marching integrators advance in step. It is the reference
 //! renderer GPU backends are compared with, and the renderer where no GPU driver exists. Two
 //! precisions, chosen per scene by the rule the GPU backends use for their positions
-//! ([`Precision`]): the f64 reference ([`ReferenceField`]: a BVH over Hilbert-sorted cluster
-//! boxes; what every test compares against), and f32 ([`F32Field`]: the same particles in a
-//! grid of cells, evaluated eight at a time), where the scene's positions and radii let f32
-//! keep the error asked for. Each skips empty space along rays with its own structure (the
-//! image is unchanged: the field there is 0), and a scene builds only the one it uses.
+//! ([`Precision`]): the f64 reference ([`ReferenceField`]: the particles in a grid of cells,
+//! each term computed exactly, four distance tests at a time; what every test compares
+//! against), and f32 ([`F32Field`]: the same cells, evaluated eight at a time with a polynomial
+//! exponential), where the scene's positions and radii let f32 keep the error asked for. Both
+//! skip empty space along rays cell by cell (the image is unchanged: the field there is 0),
+//! and a scene builds only the one it uses (the splatter adds the reference's cluster BVH).
 
 mod accumulator;
 pub mod integrators;
@@ -46,7 +47,7 @@ struct Uploaded {
 }
 
 /// The particles, sorted once per upload, and the structure built over them for the precision
-/// the scene gets: nothing yet, the f64 reference's BVH, or the f32 cells (one at a time, so
+/// the scene gets: nothing yet, the f64 reference's cells, or the f32 cells (one at a time, so
 /// a scene pays only for the structure it renders with).
 #[allow(clippy::large_enum_variant)]
 enum Prepared {
@@ -140,7 +141,7 @@ impl CpuBackend {
 
     /// Builds the structure for the scene's precision ([`Precision`], decided by the f32
     /// error bound of `gpu_data`, one rule for every backend): the f32 cells where f32 is
-    /// allowed, the f64 reference's BVH otherwise.
+    /// allowed, the f64 reference otherwise.
     fn build_structure(&mut self) -> Result<(), BackendError> {
         let (Some(up), Some(prepared)) = (&self.uploaded, self.prepared.take()) else {
             return Err(BackendError::NothingUploaded("cpu"));
@@ -402,10 +403,8 @@ impl Backend for CpuBackend {
     fn refit(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         let started = Instant::now();
         self.apply_field(field)?;
-        // The structure follows the radii: the CPU BVH is rebuilt over the new boxes (obvhs
-        // builds in tens of milliseconds per million boxes, and clusters that became empty
-        // leave the tree), the cells are made again (their width is the largest radius), and
-        // the precision decided again.
+        // The structure follows the radii: the cells are made again (their width is the
+        // largest radius), and the precision decided again.
         self.build_structure()?;
         self.timings.refit = started.elapsed();
         Ok(())
@@ -413,9 +412,11 @@ impl Backend for CpuBackend {
 
     fn update_maps(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         self.apply_field(field)?;
-        // The cells hold copies of the weights and theta the maps gave; the BVH holds none.
-        if let Some(Prepared::Cells(particles, cells)) = &mut self.prepared {
-            *cells = F32Field::new(particles);
+        // The cells hold copies of the weights and theta the maps gave.
+        match &mut self.prepared {
+            Some(Prepared::Cells(particles, cells)) => *cells = F32Field::new(particles),
+            Some(Prepared::Reference(field)) => field.values_changed(),
+            _ => {}
         }
         Ok(())
     }
@@ -460,15 +461,17 @@ impl Backend for CpuBackend {
         Ok(())
     }
 
-    /// The splatter collects its hits through the f64 reference's BVH: a scene prepared in f32
-    /// cells gets that BVH built first (timed as a build), and keeps it.
+    /// The splatter collects its hits through the f64 reference's cluster BVH: a scene
+    /// prepared in f32 cells gets the reference first, and the reference its BVH (timed as a
+    /// build), and keeps them.
     fn render_splat(
         &mut self,
         frame: &FrameParams,
         k: usize,
     ) -> Result<Option<SplatCounts>, BackendError> {
+        let started = Instant::now();
+        let mut built = false;
         if let Some(Prepared::Cells(..)) = &self.prepared {
-            let started = Instant::now();
             let (Some(up), Some(prepared)) = (&self.uploaded, self.prepared.take()) else {
                 unreachable!("checked above")
             };
@@ -476,6 +479,12 @@ impl Backend for CpuBackend {
                 prepared.into_particles(),
                 up.cluster,
             )));
+            built = true;
+        }
+        if let Some(Prepared::Reference(field)) = &self.prepared {
+            built |= field.build_clusters();
+        }
+        if built {
             self.timings.build = started.elapsed();
         }
         let started = Instant::now();
