@@ -10,6 +10,15 @@
 //! looks nothing up. Empty space along a ray is skipped cell by cell (a 3D DDA over the cells
 //! some particle may reach). The cost is overfetch: candidates fill the 3x3x3 cells around a
 //! point, about 27 / (4/3 π) = 6.4 times the particles within the largest radius.
+//!
+//! Radii that vary (SPH smoothing lengths: small in dense regions, large in sparse ones)
+//! would make cells as wide as the largest radius hold whole dense regions, so particles are
+//! sorted into levels by radius, each a factor of two below the last, each with its own grid
+//! as wide as its largest radius: a point's candidates are the 27 cells around it on every
+//! level. Radii within a factor of two of the largest make one level (the common case: nothing
+//! changes); a dense clump of small particles in a halo of large ones (100K of radius 0.002 in
+//! a cube of 0.05, 100K of radius 0.06 in the unit cube) no longer hands every query in the
+//! clump the whole clump.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -18,55 +27,264 @@ use rayon::prelude::*;
 /// wider cells rather than a grid larger than its particles.
 const CELLS_PER_PARTICLE: usize = 4;
 
-/// The grid: which particles each cell holds (as a range of the cell-sorted order) and whether
-/// any particle may reach into it. Coordinates are the particles' (local) coordinates.
+/// Levels of radii at most (the last holds every radius below its bound).
+const MAX_LEVELS: usize = 12;
+
+/// The grids, one per level of radii, largest radii first.
 #[derive(Clone, Debug)]
 pub struct CellGrid {
+    levels: Vec<Level>,
+}
+
+/// One level's grid: which particles each cell holds (as a range of the cell-sorted order) and
+/// whether any particle of the level may reach into it. Coordinates are the particles' (local)
+/// coordinates.
+#[derive(Clone, Debug)]
+struct Level {
     /// Cell (i, j, k) spans `corner + [i, i+1) h` on x, and so on.
     corner: DVec3,
     cell: f64,
     inv_cell: f64,
     dims: [usize; 3],
     /// Particles of cell c are `start[c] .. start[c + 1]` of the cell-sorted order (cells x
-    /// fastest, then y, then z).
+    /// fastest, then y, then z; the level's particles after the levels before it).
     start: Vec<u32>,
     /// Whether any particle may reach into the cell (it or a neighbour holds one).
     reached: Vec<bool>,
 }
 
-/// The runs of candidates of the last cell (or block of cells) a query fell in, kept for the
+/// A block of cells on a level, as the indices of its first and last cell (they determine
+/// it, and compare in two instructions).
+type Block = (usize, usize);
+
+/// No block of cells on a level (the point lies outside its grid or where none of its
+/// particles reaches).
+const NO_BLOCK: Block = (usize::MAX, 0);
+
+/// The runs of candidates of the last cells (or blocks of cells) a query fell in, kept for the
 /// next query there. Made once per thread (or ray) and reused.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct CellRuns {
     runs: Vec<(u32, u32)>,
-    cells: Option<([usize; 3], [usize; 3])>,
+    /// The block of cells on each level the runs are of.
+    blocks: [Block; MAX_LEVELS],
+    /// Whether `runs` are `blocks`' (false before the first query).
+    current: bool,
+}
+
+impl Default for CellRuns {
+    fn default() -> Self {
+        CellRuns {
+            runs: Vec::new(),
+            blocks: [NO_BLOCK; MAX_LEVELS],
+            current: false,
+        }
+    }
+}
+
+impl CellRuns {
+    /// Sets level `i`'s block, noting whether it changed.
+    #[inline]
+    fn set(&mut self, i: usize, block: Block) {
+        if self.blocks[i] != block {
+            self.blocks[i] = block;
+            self.current = false;
+        }
+    }
+
+    /// The runs of the blocks set, made again only when one changed.
+    #[inline]
+    fn runs_for(&mut self, grid: &CellGrid) -> &[(u32, u32)] {
+        if !self.current {
+            self.current = true;
+            self.runs.clear();
+            for (level, &(lo, hi)) in grid.levels.iter().zip(&self.blocks) {
+                if (lo, hi) == NO_BLOCK {
+                    continue;
+                }
+                let (lo, hi) = (cell_coords(level.dims, lo), cell_coords(level.dims, hi));
+                for_rows_around(level.dims, lo, hi, |a, b| {
+                    let run = (level.start[a], level.start[b + 1]);
+                    if run.1 > run.0 {
+                        self.runs.push(run);
+                    }
+                });
+            }
+        }
+        &self.runs
+    }
 }
 
 impl CellGrid {
-    /// Sorts the particles of radius > 0 (the others reach nothing) into cells. Returns the
-    /// grid and the particles' indices cell by cell: position `p` of the cell-sorted order is
-    /// particle `order[p]`, and within a cell the input order is kept.
+    /// Sorts the particles of radius > 0 (the others reach nothing) into cells, on levels by
+    /// radius. Returns the grid and the particles' indices level by level and cell by cell:
+    /// position `p` of the cell-sorted order is particle `order[p]`, and within a cell the
+    /// input order is kept.
     pub fn build(centers: &[DVec3], radii: &[f64]) -> (CellGrid, Vec<u32>) {
-        let live: Vec<u32> = (0..centers.len() as u32)
+        let r_max = radii
+            .par_iter()
+            .copied()
+            .filter(|&r| r > 0.0)
+            .reduce(|| 0.0, f64::max);
+        // Level l holds radii in (r_max / 2^(l+1), r_max / 2^l]; the last, everything below.
+        let level_of = |r: f64| -> usize {
+            let l = (r_max / r).log2().floor();
+            if l >= (MAX_LEVELS - 1) as f64 {
+                MAX_LEVELS - 1
+            } else {
+                l.max(0.0) as usize
+            }
+        };
+        let live: Vec<(u32, u32)> = (0..centers.len() as u32)
             .into_par_iter()
             .filter(|&i| radii[i as usize] > 0.0)
+            .map(|i| (level_of(radii[i as usize]) as u32, i))
             .collect();
-        let r_max = live
+        let mut levels = Vec::new();
+        let mut order = Vec::with_capacity(live.len());
+        for level in 0..MAX_LEVELS as u32 {
+            let members: Vec<u32> = live
+                .par_iter()
+                .filter(|&&(l, _)| l == level)
+                .map(|&(_, i)| i)
+                .collect();
+            if members.is_empty() {
+                continue;
+            }
+            levels.push(Level::build(
+                centers,
+                radii,
+                &members,
+                order.len() as u32,
+                &mut order,
+            ));
+        }
+        tracing::debug!(
+            "cells: {} particles on {} levels of radii ({})",
+            order.len(),
+            levels.len(),
+            levels
+                .iter()
+                .map(|l| format!(
+                    "{}x{}x{} cells of {:.3e}",
+                    l.dims[0], l.dims[1], l.dims[2], l.cell
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        (CellGrid { levels }, order)
+    }
+
+    /// Bytes of the grids (the cells' starts and whether each is reached).
+    pub fn bytes(&self) -> usize {
+        self.levels
+            .iter()
+            .map(|l| 4 * l.start.len() + l.reached.len())
+            .sum()
+    }
+
+    /// Whether any particle may reach point `l`'s cell on some level.
+    #[inline]
+    pub fn reaches(&self, l: DVec3) -> bool {
+        self.levels
+            .iter()
+            .any(|level| level.cell_at(l).is_some_and(|(c, _)| level.reached[c]))
+    }
+
+    /// The candidates of point `l`: the particles of the 27 cells around its cell on every
+    /// level, as runs of the cell-sorted order (none where no particle reaches). Kept in
+    /// `scratch`: a point in the same cells again looks nothing up.
+    #[inline]
+    pub fn runs_at<'s>(&self, l: DVec3, scratch: &'s mut CellRuns) -> &'s [(u32, u32)] {
+        for (i, level) in self.levels.iter().enumerate() {
+            let block = match level.cell_at(l) {
+                Some((c, _)) if level.reached[c] => (c, c),
+                _ => NO_BLOCK,
+            };
+            scratch.set(i, block);
+        }
+        scratch.runs_for(self)
+    }
+
+    /// The candidates of every point in `points` together: the particles of the cells around
+    /// the block of cells they fall in, on every level; `None` where they spread over more than
+    /// two cells a side on some level (evaluating them together would then cost more than one
+    /// at a time).
+    pub fn runs_around_points<'s>(
+        &self,
+        points: &[DVec3],
+        scratch: &'s mut CellRuns,
+    ) -> Option<&'s [(u32, u32)]> {
+        for (i, level) in self.levels.iter().enumerate() {
+            let (mut lo, mut hi) = ([usize::MAX; 3], [0; 3]);
+            for &l in points {
+                if let Some((_, ijk)) = level.cell_at(l) {
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(ijk[a]);
+                        hi[a] = hi[a].max(ijk[a]);
+                    }
+                }
+            }
+            let block = if lo[0] == usize::MAX {
+                NO_BLOCK
+            } else if (0..3).any(|a| hi[a] - lo[a] > 1) {
+                return None;
+            } else {
+                (cell_index(level.dims, lo), cell_index(level.dims, hi))
+            };
+            scratch.set(i, block);
+        }
+        Some(scratch.runs_for(self))
+    }
+
+    /// Appends the disjoint, ordered sub-intervals of `[t0, t1]` along `origin + t dir` (the
+    /// grid's coordinates) that cross a cell some particle may reach: outside them the field is
+    /// 0. A 3D DDA over each level's cells (Amanatides and Woo), the levels' intervals merged.
+    pub fn occupied(&self, origin: DVec3, dir: DVec3, t0: f64, t1: f64, out: &mut Vec<(f64, f64)>) {
+        let from = out.len();
+        for level in &self.levels {
+            level.occupied(origin, dir, t0, t1, out);
+        }
+        if self.levels.len() > 1 {
+            let merged = &mut out[from..];
+            merged.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let mut kept = from;
+            for i in from..out.len() {
+                let (a, b) = out[i];
+                if kept > from && a <= out[kept - 1].1 {
+                    out[kept - 1].1 = out[kept - 1].1.max(b);
+                } else {
+                    out[kept] = (a, b);
+                    kept += 1;
+                }
+            }
+            out.truncate(kept);
+        }
+    }
+}
+
+impl Level {
+    /// Sorts `members` into cells as wide as their largest radius; appends them, cell by cell,
+    /// to `order`, whose first `base` entries are the levels before.
+    fn build(
+        centers: &[DVec3],
+        radii: &[f64],
+        members: &[u32],
+        base: u32,
+        order: &mut Vec<u32>,
+    ) -> Level {
+        let r_max = members
             .par_iter()
             .map(|&i| radii[i as usize])
             .reduce(|| 0.0, f64::max);
-        let (lo, hi) = live
+        let (lo, hi) = members
             .par_iter()
             .map(|&i| (centers[i as usize], centers[i as usize]))
             .reduce(
                 || (DVec3::INFINITY, DVec3::NEG_INFINITY),
                 |a, b| (a.0.min(b.0), a.1.max(b.1)),
             );
-        let (corner, cell, dims) = if live.is_empty() {
-            (DVec3::ZERO, 1.0, [1, 1, 1])
-        } else {
-            grid_over(lo, hi, r_max, live.len())
-        };
+        let (corner, cell, dims) = grid_over(lo, hi, r_max, members.len());
         let inv = 1.0 / cell;
         let cell_of = |c: DVec3| -> usize {
             let g = ((c - corner) * inv).floor();
@@ -75,7 +293,7 @@ impl CellGrid {
                 [0, 1, 2].map(|a| (g[a].max(0.0) as usize).min(dims[a] - 1)),
             )
         };
-        let mut keyed: Vec<(u32, u32)> = live
+        let mut keyed: Vec<(u32, u32)> = members
             .par_iter()
             .map(|&i| (cell_of(centers[i as usize]) as u32, i))
             .collect();
@@ -83,6 +301,7 @@ impl CellGrid {
         keyed.par_sort_by_key(|&(c, _)| c);
         let cells = dims[0] * dims[1] * dims[2];
         let mut start = vec![0u32; cells + 1];
+        start[0] = base;
         for &(c, _) in &keyed {
             start[c as usize + 1] += 1;
         }
@@ -98,34 +317,20 @@ impl CellGrid {
                 any
             })
             .collect();
-        tracing::debug!(
-            "cells: {} particles in {}x{}x{} cells of {cell:.3e} (largest radius {r_max:.3e}), {} cells reached",
-            keyed.len(),
-            dims[0],
-            dims[1],
-            dims[2],
-            reached.iter().filter(|&&r| r).count()
-        );
-        let order = keyed.into_iter().map(|(_, i)| i).collect();
-        let grid = CellGrid {
+        order.extend(keyed.into_iter().map(|(_, i)| i));
+        Level {
             corner,
             cell,
             inv_cell: inv,
             dims,
             start,
             reached,
-        };
-        (grid, order)
-    }
-
-    /// Bytes of the grid (the cells' starts and whether each is reached).
-    pub fn bytes(&self) -> usize {
-        4 * self.start.len() + self.reached.len()
+        }
     }
 
     /// The cell holding point `l` (its index and coordinates), if it is in the grid.
     #[inline]
-    pub fn cell_at(&self, l: DVec3) -> Option<(usize, [usize; 3])> {
+    fn cell_at(&self, l: DVec3) -> Option<(usize, [usize; 3])> {
         let g = (l - self.corner) * self.inv_cell;
         let mut idx = [0usize; 3];
         for a in 0..3 {
@@ -140,40 +345,9 @@ impl CellGrid {
         Some((cell_index(self.dims, idx), idx))
     }
 
-    /// Whether any particle may reach into cell `c`.
-    #[inline]
-    pub fn is_reached(&self, c: usize) -> bool {
-        self.reached[c]
-    }
-
-    /// The candidates of the block of cells `lo..=hi`: the particles of the cells around it
-    /// (one cell beyond it on every side: the 27 neighbours of a cell), as runs of the
-    /// cell-sorted order, one per row of cells. Kept in `scratch`: the same block again looks
-    /// nothing up.
-    #[inline]
-    pub fn runs_around<'s>(
-        &self,
-        lo: [usize; 3],
-        hi: [usize; 3],
-        scratch: &'s mut CellRuns,
-    ) -> &'s [(u32, u32)] {
-        if scratch.cells != Some((lo, hi)) {
-            scratch.runs.clear();
-            for_rows_around(self.dims, lo, hi, |a, b| {
-                let run = (self.start[a], self.start[b + 1]);
-                if run.1 > run.0 {
-                    scratch.runs.push(run);
-                }
-            });
-            scratch.cells = Some((lo, hi));
-        }
-        &scratch.runs
-    }
-
-    /// Appends the disjoint, ordered sub-intervals of `[t0, t1]` along `origin + t dir` (the
-    /// grid's coordinates) that cross a cell some particle may reach: outside them the field is
-    /// 0. A 3D DDA over the cells (Amanatides and Woo).
-    pub fn occupied(&self, origin: DVec3, dir: DVec3, t0: f64, t1: f64, out: &mut Vec<(f64, f64)>) {
+    /// [`CellGrid::occupied`] on this level alone.
+    fn occupied(&self, origin: DVec3, dir: DVec3, t0: f64, t1: f64, out: &mut Vec<(f64, f64)>) {
+        let from = out.len();
         // Grid coordinates: cell (i, j, k) is [i, i+1) x [j, j+1) x [k, k+1).
         let o = (origin - self.corner) / self.cell;
         let d = dir / self.cell;
@@ -223,7 +397,8 @@ impl CellGrid {
             };
             let leave = next[ax].min(exit);
             if self.reached[c as usize] && leave > t {
-                match out.last_mut() {
+                // Merged only with this level's own intervals.
+                match out[from..].last_mut() {
                     Some(last) if last.1 >= t => last.1 = leave,
                     _ => out.push((t, leave)),
                 }
@@ -302,4 +477,76 @@ fn cell_coords(dims: [usize; 3], c: usize) -> [usize; 3] {
         (c / dims[0]) % dims[1],
         c / (dims[0] * dims[1]),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// A dense clump of small particles in a halo of large ones (as SPH smoothing lengths make
+    /// them): the clump's points get their clump neighbours, not the whole clump, and every
+    /// particle that reaches a point is among its candidates; along a ray, every point some
+    /// particle reaches lies in an occupied interval.
+    #[test]
+    fn levels_of_radii_keep_a_clump_from_flooding_its_cells() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let mut centers = Vec::new();
+        let mut radii = Vec::new();
+        for _ in 0..20_000 {
+            centers.push(
+                DVec3::splat(0.5) + DVec3::new(rng.random(), rng.random(), rng.random()) * 0.05,
+            );
+            radii.push(0.002 * (1.0 + rng.random::<f64>()));
+        }
+        for _ in 0..2_000 {
+            centers.push(DVec3::new(rng.random(), rng.random(), rng.random()));
+            radii.push(0.1);
+        }
+        centers.push(DVec3::splat(0.2));
+        radii.push(0.0);
+        let (grid, order) = CellGrid::build(&centers, &radii);
+        assert_eq!(order.len(), centers.len() - 1, "radius 0 is left out");
+        assert!(grid.levels.len() >= 2, "{} levels", grid.levels.len());
+        let mut scratch = CellRuns::default();
+        let mut most = 0;
+        for _ in 0..500 {
+            let x = DVec3::splat(0.5) + DVec3::new(rng.random(), rng.random(), rng.random()) * 0.05;
+            let runs = grid.runs_at(x, &mut scratch);
+            let candidates: Vec<u32> = runs
+                .iter()
+                .flat_map(|&(a, b)| (a..b).map(|p| order[p as usize]))
+                .collect();
+            most = most.max(candidates.len());
+            for (i, (c, r)) in centers.iter().zip(&radii).enumerate() {
+                if *r > 0.0 && (x - *c).length_squared() <= r * r {
+                    assert!(candidates.contains(&(i as u32)), "particle {i} reaches {x}");
+                }
+            }
+        }
+        // One level as wide as the halo's radius would hand every point the whole clump.
+        assert!(most < 2_000, "{most} candidates at most");
+        // A ray through the clump: wherever a particle reaches, an interval holds it.
+        let (origin, dir) = (DVec3::new(0.0, 0.52, 0.53), DVec3::X);
+        let mut intervals = Vec::new();
+        grid.occupied(origin, dir, 0.0, 1.0, &mut intervals);
+        assert!(
+            intervals.windows(2).all(|w| w[0].1 < w[1].0),
+            "{intervals:?}"
+        );
+        for k in 0..10_000 {
+            let t = k as f64 / 1e4;
+            let x = origin + dir * t;
+            let reached = centers
+                .iter()
+                .zip(&radii)
+                .any(|(c, r)| *r > 0.0 && (x - *c).length_squared() <= r * r);
+            if reached {
+                assert!(
+                    intervals.iter().any(|&(a, b)| a <= t && t <= b),
+                    "t = {t} is reached but in no interval"
+                );
+            }
+        }
+    }
 }

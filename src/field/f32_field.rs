@@ -1,6 +1,6 @@
 //! The field in f32 on the CPU: a step's particles (the reference's, already evaluated:
 //! radius, weight and theta) packed as f32 structure-of-arrays in local coordinates, sorted
-//! into a uniform grid of cells at least as wide as the largest radius, and evaluated eight
+//! into grids of cells (one per level of radii, each at least as wide as its largest radius), and evaluated eight
 //! at a time by [`f32_kernel`](super::f32_kernel). What it costs in error is the GPU backends'
 //! f32 rule (`backend::gpu_data::f32_phi_error` for the positions, about 1e-6 for the
 //! arithmetic); the CPU backend uses it where that rule allows, and the f64 reference
@@ -75,13 +75,10 @@ impl F32Field {
     /// cell's runs: a query in the same cell looks nothing up.
     pub fn eval_sums(&self, x: DVec3, scratch: &mut F32Ray) -> (f64, [f64; 3]) {
         let l = x - self.origin;
-        let Some((c, ijk)) = self.cells.cell_at(l) else {
-            return (0.0, [0.0; 3]);
-        };
-        if !self.cells.is_reached(c) {
+        let runs = self.cells.runs_at(l, scratch);
+        if runs.is_empty() {
             return (0.0, [0.0; 3]);
         }
-        let runs = self.cells.runs_around(ijk, ijk, scratch);
         self.particles
             .sums(runs, [l.x as f32, l.y as f32, l.z as f32])
     }
@@ -100,36 +97,37 @@ impl F32Field {
     ) -> usize {
         let mut q = [[0f32; 3]; LANES];
         let mut live = [0u32; LANES];
-        let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+        let mut local = [DVec3::ZERO; LANES];
         let mut count = 0;
         for (i, point) in points.iter().enumerate() {
             let Some(x) = point else { continue };
             let l = *x - self.origin;
-            match self.cells.cell_at(l) {
-                Some((c, ijk)) if self.cells.is_reached(c) => {
-                    q[i] = [l.x as f32, l.y as f32, l.z as f32];
-                    live[i] = u32::MAX;
-                    count += 1;
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(ijk[a]);
-                        hi[a] = hi[a].max(ijk[a]);
-                    }
-                }
-                _ => out[i] = (0.0, [0.0; 3]),
+            if self.cells.reaches(l) {
+                q[i] = [l.x as f32, l.y as f32, l.z as f32];
+                live[i] = u32::MAX;
+                local[count] = l;
+                count += 1;
+            } else {
+                out[i] = (0.0, [0.0; 3]);
             }
         }
         if count == 0 {
             return 0;
         }
-        if count == 1 || (0..3).any(|a| hi[a] - lo[a] > 1) {
+        let runs = match count {
+            1 => None,
+            _ => self
+                .cells
+                .runs_around_points(&local[..count], &mut packet.runs),
+        };
+        let Some(runs) = runs else {
             for (i, x) in points.iter().enumerate() {
                 if let (Some(x), true) = (x, live[i] != 0) {
                     out[i] = self.eval_sums(*x, &mut rays[i]);
                 }
             }
             return 0;
-        }
-        let runs = self.cells.runs_around(lo, hi, &mut packet.runs);
+        };
         let sums = self
             .particles
             .packet_sums(runs, &q, live, &mut packet.candidates);

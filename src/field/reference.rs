@@ -172,16 +172,10 @@ impl ReferenceField {
 
     /// [`ReferenceField::eval_sums`] with the runs of the last cell kept in `scratch`. Each
     /// term is `Particles::accumulate`'s, bit for bit (`f64_kernel`); the candidates are the
-    /// particles of the 27 cells around `x`'s.
+    /// particles of the 27 cells around `x`'s on each level of radii (`accel::cells`).
     pub fn eval_sums_with(&self, x: DVec3, scratch: &mut CellRuns) -> (f64, [f64; 3]) {
         let l = x - self.particles.origin;
-        let Some((c, ijk)) = self.cells.cell_at(l) else {
-            return (0.0, [0.0; 3]);
-        };
-        if !self.cells.is_reached(c) {
-            return (0.0, [0.0; 3]);
-        }
-        let runs = self.cells.runs_around(ijk, ijk, scratch);
+        let runs = self.cells.runs_at(l, scratch);
         self.by_cell.sums(runs, l)
     }
 
