@@ -142,7 +142,9 @@ impl CellGrid {
             .collect();
         let mut levels = Vec::new();
         let mut order = Vec::with_capacity(live.len());
-        for level in 0..MAX_LEVELS as u32 {
+        // A pass per level up to the last one used (one, where radii are within 2x).
+        let deepest = live.par_iter().map(|&(l, _)| l).max().unwrap_or(0);
+        for level in 0..=deepest {
             let members: Vec<u32> = live
                 .par_iter()
                 .filter(|&&(l, _)| l == level)
