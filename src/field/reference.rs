@@ -213,8 +213,8 @@ impl ReferenceField {
     }
 
     /// The field at many points, in parallel, with a progress bar for long runs. Queries are
-    /// visited in Hilbert order (neighbouring queries share cells and their candidates stay in cache) and
-    /// the results returned in input order.
+    /// visited in Hilbert order (neighbouring queries share cells, and their candidates stay in
+    /// cache) and the results returned in input order.
     pub fn eval_many(&self, queries: &[DVec3]) -> Vec<Sample> {
         let order = hilbert_order(queries, Bounds::of_points(queries));
         let bar = crate::progress::bar(queries.len() as u64, "evaluating");

@@ -403,8 +403,8 @@ impl Backend for CpuBackend {
     fn refit(&mut self, field: &FieldSettings) -> Result<(), BackendError> {
         let started = Instant::now();
         self.apply_field(field)?;
-        // The structure follows the radii: the cells are made again (their width is the
-        // largest radius), and the precision decided again.
+        // The structure follows the radii: the cells are made again (their levels and widths
+        // follow the radii), and the precision decided again.
         self.build_structure()?;
         self.timings.refit = started.elapsed();
         Ok(())
