@@ -138,6 +138,25 @@ impl StepBias {
     }
 }
 
+impl StepBias {
+    /// The bias from images at `2 dt0` and `4 dt0` alone (a loose target's calibration, which
+    /// skips the default step): their difference, its noise subtracted in quadrature, taken as
+    /// the bias at `2 dt0`, as if it grew only linearly with the step (order 1: the largest
+    /// of any bias that grows at least as fast, as the march's does).
+    pub fn calibrate_coarse(dt0: f64, images: [&Image; 2], noise: [f64; 2]) -> StepBias {
+        let d = images[1].rmse(images[0]);
+        let n = noise[1].hypot(noise[0]);
+        let b1 = (d * d - n * n).max(0.0).sqrt();
+        StepBias {
+            dt0,
+            levels: [0.5 * b1, b1, 2.0 * b1],
+            hidden: [0.5 * n, n, 2.0 * n],
+            order: 1.0,
+            resolved: d > 2.0 * n,
+        }
+    }
+}
+
 /// How the noise of an accumulated image falls with its frames: `noise(N) ∝ N^-rate`
 /// (0.5 for independent samples; blue noise falls faster while its mask stratifies).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -243,6 +262,10 @@ const CALIBRATION_FRAMES: u32 = 2;
 /// The most frames a calibration sequence takes while the noise hides whether a coarser step
 /// would do.
 const MAX_CALIBRATION_FRAMES: u32 = 64;
+/// A target that twice the default step meets within this many times the calibration's
+/// samples there is loose: the default step's calibration images would cost a large share of
+/// the whole render, and the coarser steps' difference decides alone.
+const LOOSE: f64 = 4.0;
 /// The share of the squared target error the bias may take (the rest is left to the noise).
 const BIAS_SHARE: f64 = 0.75;
 /// The second sequence's seed is the first's with these bits flipped.
@@ -449,6 +472,53 @@ pub fn render_to_target(
     // 3.5 times the front's 4 (the study's 4-spp target).
     let mut levels = [dt0, 2.0 * dt0, 4.0 * dt0].map(|dt| Pair::new(dt, seed));
     let mut frames = CALIBRATION_FRAMES;
+
+    // A loose target first: the coarser steps alone, and twice the default step chosen on
+    // their difference when it meets the target within a few times their samples (the front's
+    // cheapest there is a handful of samples at a coarse step, which the default step's
+    // calibration images alone would cost twice over). Otherwise they are the full
+    // calibration's first images. RMSE targets only: a FLIP target's estimate takes its
+    // scale from the default step's images (from the coarser ones it overstated a loose
+    // target's FLIP 3x).
+    if let (Some(e), false, ErrorMetric::Rmse) = (target.error, step_fixed, target.metric)
+        && target.time_budget.is_none()
+        && run.allowed(2.0 * dt0)
+        && run.allowed(4.0 * dt0)
+    {
+        for level in &mut levels[1..] {
+            run.extend(level, frames / 2)?;
+            run.extend(level, frames)?;
+        }
+        let (middle, coarse) = (&levels[1], &levels[2]);
+        let bias = StepBias::calibrate_coarse(
+            dt0,
+            [&middle.image(&run.settings), &coarse.image(&run.settings)],
+            [middle.noise(), coarse.noise()],
+        );
+        let b = bias.at(2.0 * dt0);
+        if b * b <= BIAS_SHARE * e * e {
+            let needed = middle.convergence().frames_for((e * e - b * b).sqrt());
+            if needed <= LOOSE * f64::from(middle.spp()) {
+                tracing::debug!(
+                    "targeted: loose: twice the step, bias {b:.3e}, {needed:.1} spp predicted"
+                );
+                let calibration = run.started.elapsed();
+                let [_, middle, coarse] = levels;
+                let bias_images = (coarse.image(&run.settings), middle.image(&run.settings));
+                return finish(
+                    &mut run,
+                    middle,
+                    needed,
+                    Chosen {
+                        bias,
+                        b,
+                        bias_images,
+                        calibration,
+                    },
+                );
+            }
+        }
+    }
     let (bias, e_rmse) = loop {
         for level in &mut levels {
             if level.history.is_empty() {
@@ -528,12 +598,21 @@ pub fn render_to_target(
             }
             (None, None) => unreachable!("checked: a target has an error or a budget"),
         };
+        tracing::debug!(
+            "targeted: step x{:.3}: bias {b:.3e} (bound {:.3e}), noise {:.3e} at {} spp falling at rate {:.2}, frame {:.3e} s: {spp} spp, score {score:.3e}",
+            2f64.powi(j),
+            bias.bound(dt),
+            convergence.noise,
+            convergence.frames,
+            convergence.rate,
+            frame_time,
+        );
         if best.is_none_or(|(s, _, _)| score < s) {
             best = Some((score, j, spp));
         }
     }
     // A target no step reaches within its bias share: the finest allowed step.
-    let (j, mut spp) = match best {
+    let (j, spp) = match best {
         Some((_, j, spp)) => (j, spp),
         None => {
             let j = steps
@@ -551,13 +630,52 @@ pub fn render_to_target(
     let b = bias.at(dt);
     let [fine, middle, coarse] = levels;
     let bias_images = (middle.image(&run.settings), fine.image(&run.settings));
-    let mut pair = match j {
+    let pair = match j {
         0 => fine,
         1 => middle,
         2 => coarse,
         _ => Pair::new(dt, seed),
     };
+    finish(
+        &mut run,
+        pair,
+        spp,
+        Chosen {
+            bias,
+            b,
+            bias_images,
+            calibration,
+        },
+    )
+}
 
+/// What the calibration chose, for the render to the target.
+struct Chosen {
+    bias: StepBias,
+    /// The estimated bias at the chosen step.
+    b: f64,
+    /// Two calibration images a step apart (the coarser first): a realisation of the bias
+    /// for the FLIP estimate.
+    bias_images: (Image, Image),
+    calibration: Duration,
+}
+
+/// Renders `pair` from `spp` samples on, checking the estimate and going on while it falls
+/// short of the target.
+fn finish(
+    run: &mut Run<'_>,
+    mut pair: Pair,
+    mut spp: f64,
+    chosen: Chosen,
+) -> Result<Targeted, RenderError> {
+    let Chosen {
+        bias,
+        b,
+        bias_images,
+        calibration,
+    } = chosen;
+    let target = run.target;
+    let dt = pair.dt;
     // Render, check, and go on while the estimate falls short.
     let spinner = crate::progress::spinner("rendering to the target");
     loop {
