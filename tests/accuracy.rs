@@ -276,6 +276,46 @@ fn targeted_renders_estimate_their_error_within_2x() {
 }
 
 #[test]
+fn a_loose_target_skips_the_default_steps_calibration() {
+    // The error the defaults reach at 4 spp: the front's cheapest reaches it in a handful of
+    // samples, which the full calibration (4 spp at each of dt0, 2 dt0 and 4 dt0: 7 frames'
+    // work at dt0) alone would exceed.
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let s = settings(Integrator::Marching);
+    let truth = reference(&ds, &s);
+    let mut session = cpu_session(&ds);
+    let dt0 = session.resolve(&s).unwrap().step_size;
+    session.accumulate(&s, 4).unwrap();
+    let e = session.image().unwrap().rmse(truth.image());
+    let done = render_to_target(
+        &mut session,
+        &s,
+        &Target {
+            error: Some(e),
+            time_budget: None,
+            metric: ErrorMetric::Rmse,
+            max_spp: 4096,
+        },
+    )
+    .unwrap();
+    let true_error = done.image.rmse(truth.image());
+    println!(
+        "target {e:.3e}: estimate {:.3e}, true {true_error:.3e}; step x{}, {} spp, work {}",
+        done.estimate,
+        done.step_size / dt0,
+        done.spp,
+        done.work
+    );
+    assert!(
+        done.met && true_error <= 1.5 * e,
+        "true error {true_error:.3e}"
+    );
+    assert!((0.5..=2.0).contains(&(done.estimate / true_error)));
+    assert_eq!(done.step_size, 2.0 * dt0);
+    assert!(done.work < 7.0, "work {}", done.work);
+}
+
+#[test]
 fn a_time_budget_is_kept_and_estimated() {
     let ds = dataset(Generator::DambreakDemo, 3000);
     let s = settings(Integrator::Marching);

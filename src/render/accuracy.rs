@@ -807,6 +807,28 @@ mod tests {
     }
 
     #[test]
+    fn the_coarser_steps_alone_bound_the_bias_as_if_linear() {
+        // bias(dt) = 0.01 (dt / dt0)^2: 0.04 at 2 dt0, 0.16 at 4 dt0; the difference, 0.12,
+        // is taken as the bias at 2 dt0, an overestimate for any bias growing faster than
+        // linearly (the true one is 0.04).
+        let images = [flat(0.54), flat(0.66)];
+        let bias = StepBias::calibrate_coarse(1.0, [&images[0], &images[1]], [0.0; 2]);
+        assert!(bias.resolved);
+        assert!((bias.at(2.0) - 0.12).abs() < 1e-6, "{bias:?}");
+        assert!(bias.at(2.0) >= 0.04 && bias.at(4.0) >= 0.16);
+        assert!(
+            (bias.at(1.0) - 0.06).abs() < 1e-6,
+            "order 1 below: {}",
+            bias.at(1.0)
+        );
+        // Within the noise: no bias estimated, the noise's share bounded.
+        let bias = StepBias::calibrate_coarse(1.0, [&flat(0.5), &flat(0.501)], [0.01; 2]);
+        assert!(!bias.resolved);
+        assert_eq!(bias.at(2.0), 0.0);
+        assert!(bias.bound(2.0) >= 0.01, "{}", bias.bound(2.0));
+    }
+
+    #[test]
     fn the_noise_falls_at_its_measured_rate() {
         let blue = Convergence::of((4, 0.1), (16, 0.025));
         assert!((blue.rate - 1.0).abs() < 1e-12);
