@@ -485,10 +485,11 @@ pub fn render_to_target(
         && run.allowed(2.0 * dt0)
         && run.allowed(4.0 * dt0)
     {
-        for level in &mut levels[1..] {
-            run.extend(level, frames / 2)?;
-            run.extend(level, frames)?;
-        }
+        // Four times the step at half the frames: only its difference from twice the step is
+        // used here (the full calibration extends it if this is not enough).
+        run.extend(&mut levels[1], frames / 2)?;
+        run.extend(&mut levels[1], frames)?;
+        run.extend(&mut levels[2], frames / 2)?;
         let (middle, coarse) = (&levels[1], &levels[2]);
         let bias = StepBias::calibrate_coarse(
             dt0,
