@@ -139,9 +139,7 @@ impl StepBias {
             resolved: r1,
         }
     }
-}
 
-impl StepBias {
     /// The bias from images at `2 dt0` and `4 dt0` alone (a loose target's calibration, which
     /// skips the default step): their difference, its noise subtracted in quadrature, taken as
     /// the bias at `2 dt0`, as if it grew only linearly with the step (order 1: the largest
