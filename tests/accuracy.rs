@@ -316,6 +316,49 @@ fn a_loose_target_skips_the_default_steps_calibration() {
 }
 
 #[test]
+fn a_one_cycle_target_stops_at_the_cycle_end() {
+    // The error the defaults reach in one whole cycle of the blue-noise mask (64 frames). A
+    // sequence is stratified at the cycle's end only: the noise falls steeply over its last
+    // frames, and the first frames of the next cycle make it worse again. Both sequences stop
+    // at the cycle's end and meet the target there (work 69 at twice the step). Before, the
+    // power law fitted to the calibration sent them past the cycle's end, where the pair was
+    // noisier than at it, and they rendered on to 107 frames each (214 spp, work 127).
+    let cycle = aarbf::noise::BlueNoiseMask::builtin().depth;
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let s = settings(Integrator::Marching);
+    let truth = reference(&ds, &s);
+    let mut session = cpu_session(&ds);
+    let dt0 = session.resolve(&s).unwrap().step_size;
+    session.accumulate(&s, cycle).unwrap();
+    let e = session.image().unwrap().rmse(truth.image());
+    let done = render_to_target(
+        &mut session,
+        &s,
+        &Target {
+            error: Some(e),
+            time_budget: None,
+            metric: ErrorMetric::Rmse,
+            max_spp: 4096,
+        },
+    )
+    .unwrap();
+    let true_error = done.image.rmse(truth.image());
+    println!(
+        "target {e:.3e}: estimate {:.3e}, true {true_error:.3e}; step x{}, {} spp, work {}",
+        done.estimate,
+        done.step_size / dt0,
+        done.spp,
+        done.work
+    );
+    assert!(
+        done.met && true_error <= 1.5 * e,
+        "true error {true_error:.3e}"
+    );
+    assert!((0.5..=2.0).contains(&(done.estimate / true_error)));
+    assert_eq!(done.spp, 2 * cycle, "one whole cycle a sequence");
+}
+
+#[test]
 fn a_time_budget_is_kept_and_estimated() {
     let ds = dataset(Generator::DambreakDemo, 3000);
     let s = settings(Integrator::Marching);

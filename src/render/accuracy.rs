@@ -18,11 +18,12 @@
 //! user fixed it) whose predicted time to the target is least, with the noise's measured rate
 //! of fall ([`Convergence`]), renders to the predicted frames, checks the estimate and goes on
 //! if it falls short. A time budget picks the step with the least predicted error for the time
-//! left and renders until it is spent. The calibration is part of what a target costs; its
-//! images are kept, so the chosen step's are never rendered twice, and a loose RMSE target
-//! that twice the step meets in a few samples is decided from `2 dt0` and `4 dt0` alone
-//! ([`StepBias::calibrate_coarse`]): the images at `dt0` would cost it more than its own
-//! frames.
+//! left and renders until it is spent. Blue-noise sequences stop at the ends of mask cycles
+//! once they need most of one (`stop_at`): a sequence is stratified there and only there.
+//! The calibration is part of what a target costs; its images are kept, so the chosen step's
+//! are never rendered twice, and a loose RMSE target that twice the step meets in a few
+//! samples is decided from `2 dt0` and `4 dt0` alone ([`StepBias::calibrate_coarse`]): the
+//! images at `dt0` would cost it more than its own frames.
 
 use std::time::{Duration, Instant};
 
@@ -30,7 +31,8 @@ use serde::{Deserialize, Serialize};
 
 use super::session::{RenderError, RenderSession};
 use super::settings::RenderSettings;
-use crate::values::Image;
+use crate::noise::BlueNoiseMask;
+use crate::values::{Image, NoiseKind};
 
 /// The measure of an image's error against the reference.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -267,6 +269,10 @@ const MAX_CALIBRATION_FRAMES: u32 = 64;
 /// samples there is loose: the default step's calibration images would cost a large share of
 /// the whole render, and the coarser steps' difference decides alone.
 const LOOSE: f64 = 4.0;
+/// The least rate of fall of the noise over a sequence's first mask cycle at which its
+/// renders stop only at whole cycles (independent samples fall at 0.5; the dam break's
+/// marching at about 1.0 from 8 to 64 frames, and 2.9 over the cycle's last quarter).
+const STRATIFIED_RATE: f64 = 0.75;
 /// The share of the squared target error the bias may take (the rest is left to the noise).
 const BIAS_SHARE: f64 = 0.75;
 /// The second sequence's seed is the first's with these bits flipped.
@@ -376,9 +382,43 @@ impl Pair {
     }
 }
 
+/// The frames of one mask cycle where `settings` draw blue noise (every backend draws from the
+/// built-in mask), `None` for white noise.
+fn mask_cycle(settings: &RenderSettings) -> Option<u32> {
+    match settings.noise {
+        NoiseKind::Stbn => Some(BlueNoiseMask::builtin().depth),
+        NoiseKind::White => None,
+    }
+}
+
+/// Where a sequence that has `reached` frames and is predicted to need `wanted` stops next.
+///
+/// A blue-noise sequence is stratified at the end of each mask cycle, and only there: the
+/// frames of an incomplete cycle add far more noise than their number suggests (on the dam
+/// break one sequence's noise fell 1.7e-3 -> 7.4e-4 from 48 to 64 frames, and a pair at 70
+/// frames a sequence was noisier than at 64). So a sequence predicted to need most of its first
+/// cycle or more stops at the cycle's end first (the power law measured early on cannot see
+/// that drop), and past it only at whole cycles, where the cycles' means are independent
+/// (each has its own shift of the mask) and the noise falls as `N^-1/2`.
+fn stop_at(wanted: u32, reached: u32, cycle: Option<u32>) -> u32 {
+    match cycle {
+        None => wanted,
+        Some(d) if reached < d => {
+            if 4 * wanted >= 3 * d {
+                d
+            } else {
+                wanted
+            }
+        }
+        Some(d) => wanted.div_ceil(d).max(1) * d,
+    }
+}
+
 struct Run<'a> {
     session: &'a mut RenderSession,
     settings: RenderSettings,
+    /// [`mask_cycle`] of the settings.
+    cycle: Option<u32>,
     target: Target,
     started: Instant,
     dt0: f64,
@@ -465,6 +505,7 @@ pub fn render_to_target(
         started: Instant::now(),
         dt0,
         work: 0.0,
+        cycle: mask_cycle(settings),
     };
 
     // Calibrate: both sequences at dt0, 2 dt0 and 4 dt0, read at half their frames and at
@@ -540,9 +581,15 @@ pub fn render_to_target(
         let e_rmse = target
             .error
             .map(|e| e * rmse_per_unit(target.metric, &levels[0], &run.settings));
+        // (Unclear only where four times the frames could settle it: the noise's part of the
+        // bound falls at most fourfold with them, at the fastest rate `Convergence` allows.)
         let unclear = e_rmse.is_some_and(|e| {
-            bias.bound(4.0 * dt0) > BIAS_SHARE.sqrt() * e
-                && bias.at(4.0 * dt0) < BIAS_SHARE.sqrt() * e
+            let (room, at, bound) = (
+                BIAS_SHARE.sqrt() * e,
+                bias.at(4.0 * dt0),
+                bias.bound(4.0 * dt0),
+            );
+            bound > room && at < room && at + 0.25 * (bound - at) <= room
         });
         let needed = e_rmse.map_or(0.0, |e| {
             levels[0]
@@ -680,9 +727,24 @@ fn finish(
     let dt = pair.dt;
     // Render, check, and go on while the estimate falls short.
     let spinner = crate::progress::spinner("rendering to the target");
+    // Whether the sequences stop only at the ends of mask cycles (see `stop_at`).
+    let mut cycle = run.cycle;
     loop {
-        let frames = ((spp / 2.0).ceil() as u32).clamp(1, target.max_spp / 2);
-        let frames = frames.max(pair.a.frames);
+        let before = pair.a.frames;
+        let mut frames = stop_at((spp / 2.0).ceil() as u32, before, cycle)
+            .clamp(1, target.max_spp / 2)
+            .max(before);
+        // Past the first cycle a budget starts only the cycles that fit in the time left: an
+        // incomplete one would make the image worse, not better.
+        let mut no_cycle_fits = false;
+        if let (Some(budget), Some(d)) = (target.time_budget, cycle)
+            && before >= d
+        {
+            let left = budget.saturating_sub(run.started.elapsed()).as_secs_f64();
+            let cycles = (left / (2.0 * f64::from(d) * pair.frame_time()).max(1e-9)).floor();
+            frames = frames.min(before + d * cycles.min(f64::from(u32::MAX / d)) as u32);
+            no_cycle_fits = frames == before;
+        }
         run.extend(&mut pair, frames)?;
         let image = pair.image(&run.settings);
         let noise = pair.noise();
@@ -709,10 +771,24 @@ fn finish(
         ));
         let met = target.error.is_none_or(|e| estimate <= e);
         let reached = pair.a.frames;
+        // Where completing the first cycle brought the noise down no faster than independent
+        // samples would (the integrator draws most of its numbers from white noise, as delta
+        // tracking does), whole cycles buy nothing: stop anywhere from here.
+        if let (Some(d), [.., earlier, now]) = (cycle, pair.history.as_slice())
+            && now.0 == d
+            && earlier.0 < d
+            && Convergence::of(*earlier, *now).rate < STRATIFIED_RATE
+        {
+            cycle = None;
+        }
+        tracing::debug!(
+            "targeted: {reached} frames a sequence at step {dt:.3e}: noise {noise:.3e}, estimate {estimate:.3e}"
+        );
         let finished = (target.error.is_some() && met)
             || run.out_of_time()
             || 2 * reached >= target.max_spp
-            || reached < frames;
+            || reached < frames
+            || no_cycle_fits;
         if finished {
             spinner.finish_and_clear();
             return Ok(Targeted {
@@ -730,9 +806,16 @@ fn finish(
             });
         }
         // Short: predict again from the noise measured now (a budget alone renders on until
-        // the time is spent).
-        let convergence = pair.convergence();
+        // the time is spent). At whole mask cycles the noise falls as N^-1/2 from here.
         let now = f64::from(pair.spp());
+        let convergence = match cycle {
+            Some(d) if reached >= d && reached.is_multiple_of(d) => Convergence {
+                frames: pair.spp(),
+                noise,
+                rate: 0.5,
+            },
+            _ => pair.convergence(),
+        };
         let predicted = match (target.error, target.metric) {
             (Some(e), ErrorMetric::Rmse) => {
                 convergence.frames_for((e * e - b * b).max(0.1 * e * e).sqrt())
@@ -741,8 +824,7 @@ fn finish(
             (None, _) => 2.0 * now,
         };
         spp = if predicted.is_finite() {
-            // At most doubling: the prediction's rate is of the frames so far, and a sequence
-            // of blue noise slows once a mask cycle is complete.
+            // At most doubling: the prediction's rate is of the frames so far.
             predicted.clamp(now + 2.0, 2.0 * now)
         } else {
             2.0 * now
@@ -841,6 +923,33 @@ mod tests {
         // Rates outside what sampling gives are clamped.
         assert_eq!(Convergence::of((4, 0.1), (16, 0.001)).rate, 1.0);
         assert_eq!(Convergence::of((4, 0.1), (16, 0.2)).rate, 0.5);
+    }
+
+    #[test]
+    fn blue_noise_sequences_stop_at_whole_mask_cycles() {
+        let d = Some(64);
+        // Early in the first cycle: where the prediction says.
+        assert_eq!(stop_at(12, 4, d), 12);
+        assert_eq!(stop_at(47, 8, d), 47);
+        // Most of the first cycle or beyond it: its end first, whatever the power law says.
+        assert_eq!(stop_at(48, 8, d), 64);
+        assert_eq!(stop_at(70, 8, d), 64);
+        assert_eq!(stop_at(500, 2, d), 64);
+        // Past it, whole cycles only.
+        assert_eq!(stop_at(65, 64, d), 128);
+        assert_eq!(stop_at(128, 64, d), 128);
+        assert_eq!(stop_at(129, 128, d), 192);
+        // White noise has no cycle.
+        assert_eq!(stop_at(70, 8, None), 70);
+        assert_eq!(stop_at(65, 64, None), 65);
+        // The cycle of the settings: the built-in mask's depth, for blue noise only.
+        let blue = RenderSettings::default();
+        assert_eq!(mask_cycle(&blue), Some(BlueNoiseMask::builtin().depth));
+        let white = RenderSettings {
+            noise: NoiseKind::White,
+            ..blue
+        };
+        assert_eq!(mask_cycle(&white), None);
     }
 
     #[test]
