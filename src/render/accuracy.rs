@@ -21,9 +21,9 @@
 //! left and renders until it is spent. Blue-noise sequences stop at the ends of mask cycles
 //! once they need most of one (`stop_at`): a sequence is stratified there and only there.
 //! The calibration is part of what a target costs; its images are kept, so the chosen step's
-//! are never rendered twice, and a loose RMSE target that twice the step meets in a few
-//! samples is decided from `2 dt0` and `4 dt0` alone ([`StepBias::calibrate_coarse`]): the
-//! images at `dt0` would cost it more than its own frames.
+//! are never rendered twice, and a loose RMSE target that twice the step meets within
+//! `LOOSE` times its calibration samples is decided from `2 dt0` and `4 dt0` alone
+//! ([`StepBias::calibrate_coarse`]): the images at `dt0` would cost a large share of its frames.
 
 use std::time::{Duration, Instant};
 
@@ -518,7 +518,7 @@ pub fn render_to_target(
     let mut frames = CALIBRATION_FRAMES;
 
     // A loose target first: the coarser steps alone, and twice the default step chosen on
-    // their difference when it meets the target within a few times their samples (the front's
+    // their difference when it meets the target within `LOOSE` times their samples (the front's
     // cheapest there is a handful of samples at a coarse step, which the default step's
     // calibration images alone would cost twice over). Otherwise they are the full
     // calibration's first images. RMSE targets only: a FLIP target's estimate takes its
