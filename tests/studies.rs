@@ -359,8 +359,9 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
         median_of("splat 15", "lost")
     );
     assert!(median_of("splat 1", "rmse") >= median_of("splat 15", "rmse"));
-    // 2 backends x (5 configurations (defaults, step x2, white noise, K=16 or 1, delta tracking)
-    // x 2 spp x (time, rmse, blurred rmse, flip) + 1 target x (time, rmse, estimate)).
+    // 2 backends x (7 configurations (defaults, step x2, white noise, K=16 or 1, delta tracking,
+    // voxel 8 and 16; no splatter: it renders emission-absorption only) x 2 spp x (time, rmse,
+    // blurred rmse, flip) + 1 target x (time, rmse, estimate)).
     let rows = check_study(
         p,
         "accuracy",
@@ -372,19 +373,20 @@ fn every_study_runs_tiny_on_the_cpu_and_wgpu_backends() {
             "k",
             "noise",
             "integrator",
+            "method",
             "width",
             "height",
             "target_error",
             "reference_spp",
             "reference_step",
         ],
-        86,
+        118,
         &b,
         2,
     );
     assert_eq!(
         rows.iter()
-            .filter(|r| r[12] == "target-error" && r[24] == "estimate")
+            .filter(|r| r[12] == "target-error" && r[25] == "estimate")
             .count(),
         2
     );

@@ -83,11 +83,11 @@ pub struct StudyArgs {
     /// scaling: query points per timed query.
     #[arg(long, default_value_t = 100_000)]
     pub queries: usize,
-    /// baselines: the voxel grids, cells along the longest side (the paper: 512).
+    /// baselines and accuracy: the voxel grids, cells along the longest side (the paper: 512).
     #[arg(long, value_delimiter = ',', default_value = "64,128,256,512")]
     pub voxel_grids: Vec<usize>,
-    /// baselines: the splatter's hits per slab (the RBF paper's port: 15; Knoll et al.'s book
-    /// chapter: 31).
+    /// baselines and accuracy (emission–absorption only): the splatter's hits per slab (the RBF
+    /// paper's port: 15; Knoll et al.'s book chapter: 31).
     #[arg(long, value_delimiter = ',', default_value = "4,15,31")]
     pub splat_ks: Vec<usize>,
     /// accuracy: the march steps, as multiples of the default step (1 must be among them).

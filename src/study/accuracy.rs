@@ -8,7 +8,11 @@
 //! white instead of blue noise, the other end of the cluster sizes (16 particles per cluster,
 //! or 1 where the data's default is 16), and the other stochastic
 //! single-scattering integrator (delta tracking for marching and the reverse; emission–absorption
-//! converges to another image, so it is compared only with itself). Each configuration is
+//! converges to another image, so it is compared only with itself), and the other methods: the
+//! voxel-grid baseline at each of `--voxel-grids` (cells along its longest side; marched with
+//! the same integrators; its time includes voxelising, as a step change would), and, where the
+//! study's integrator is emission–absorption (the only one it renders), Knoll et al.'s
+//! splatter at each of `--splat-ks` (hits a slab). Each configuration is
 //! rendered `--seeds` times; a row holds one value per seed: the time to accumulate the samples
 //! (ms, wall clock, the image read back outside it), and the image's RMSE over linear RGB, its
 //! RMSE after a 1-pixel blur (what an observer sees of blue noise) and its mean FLIP against
@@ -40,6 +44,7 @@ pub const DESCRIPTION: Description = Description {
         "k",
         "noise",
         "integrator",
+        "method",
         "width",
         "height",
         "target_error",
@@ -61,6 +66,19 @@ struct Config {
     k: u32,
     noise: NoiseKind,
     integrator: Integrator,
+    /// `RenderSettings::voxel_grid` and `splat_k`: the method (neither: the RBFs).
+    voxel_grid: Option<usize>,
+    splat_k: Option<usize>,
+}
+
+impl Config {
+    fn method(&self) -> String {
+        match (self.voxel_grid, self.splat_k) {
+            (Some(n), _) => format!("voxel {n}"),
+            (None, Some(k)) => format!("splat {k}"),
+            (None, None) => "rbf".into(),
+        }
+    }
 }
 
 /// The configurations, around the defaults for data whose default cluster size is `k`
@@ -72,6 +90,8 @@ fn configs(o: &Options, k: u32) -> Vec<Config> {
         k,
         noise: NoiseKind::Stbn,
         integrator: o.integrator,
+        voxel_grid: None,
+        splat_k: None,
     };
     let mut out: Vec<Config> = o
         .step_factors
@@ -106,8 +126,24 @@ fn configs(o: &Options, k: u32) -> Vec<Config> {
         out.push(Config {
             name: format!("{integrator:?}").to_lowercase(),
             integrator,
-            ..base
+            ..base.clone()
         });
+    }
+    for &n in &o.voxel_grids {
+        out.push(Config {
+            name: format!("voxel {n}"),
+            voxel_grid: Some(n),
+            ..base.clone()
+        });
+    }
+    if o.integrator == Integrator::Ea {
+        for &k in &o.splat_ks {
+            out.push(Config {
+                name: format!("splat {k}"),
+                splat_k: Some(k),
+                ..base.clone()
+            });
+        }
     }
     out
 }
@@ -180,6 +216,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         ("k", c.k.to_string()),
                         ("noise", c.noise.name().into()),
                         ("integrator", format!("{:?}", c.integrator).to_lowercase()),
+                        ("method", c.method()),
                         ("width", o.noise_image.0.to_string()),
                         ("height", o.noise_image.1.to_string()),
                         ("target_error", target.map(value).unwrap_or_default()),
@@ -202,6 +239,8 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                     step_size: Some(dt),
                     integrator: c.integrator,
                     noise: c.noise,
+                    voxel_grid: c.voxel_grid,
+                    splat_k: c.splat_k,
                     seed: u32::MAX,
                     ..base.clone()
                 };
@@ -339,11 +378,35 @@ fn front<'a>(points: &[Point<'a>]) -> Vec<Point<'a>> {
 
 /// The least time on `front` that reaches error `e` or better.
 fn front_time_at(front: &[Point<'_>], e: f64) -> Option<f64> {
+    cheapest_at(front, e).map(|p| p.time)
+}
+
+/// The point of least time on `front` that reaches error `e` or better.
+fn cheapest_at<'p, 'a>(front: &'p [Point<'a>], e: f64) -> Option<&'p Point<'a>> {
     front
         .iter()
         .filter(|p| p.error <= e)
-        .map(|p| p.time)
-        .min_by(f64::total_cmp)
+        .min_by(|a, b| a.time.total_cmp(&b.time))
+}
+
+/// Whether a point renders the RBFs (rows written before the study had methods did).
+fn is_rbf(p: &Point<'_>) -> bool {
+    p.time_row.setting("method").is_none_or(|m| m == "rbf")
+}
+
+/// "voxel 512 at 64 spp: 2255.1 ms, 2.36x": where every method's front is cheaper than the
+/// RBF settings' own at error `e`, what reaches it and its time against `time`.
+fn other_method_note(all: &[Point<'_>], rbf: &[Point<'_>], e: f64, time: f64) -> String {
+    match (cheapest_at(all, e), front_time_at(rbf, e)) {
+        (Some(p), Some(t)) if !is_rbf(p) && p.time < t => format!(
+            "; every method's front: {} at {} spp, {:.1} ms ({:.2}x of it)",
+            p.time_row.variant,
+            p.time_row.setting("spp").unwrap_or("?"),
+            p.time,
+            time / p.time
+        ),
+        _ => String::new(),
+    }
 }
 
 /// `--target-error`'s renders of one device and data set: (time, true error, estimate) rows.
@@ -388,6 +451,10 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
         let mut series = Vec::new();
         let pts = points(rows, g);
         let front = front(&pts);
+        // The defaults and --target-error choose among the RBF settings: they are held to
+        // those settings' front, and every method's is stated beside it.
+        let rbf_points: Vec<Point<'_>> = pts.iter().filter(|p| is_rbf(p)).cloned().collect();
+        let rbf_front = self::front(&rbf_points);
         notes.push(format!(
             "{} on {}: the Pareto front (time to the image, RMSE over linear RGB): {}",
             g.device.backend,
@@ -404,23 +471,36 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
                 .collect::<Vec<_>>()
                 .join("; ")
         ));
-        // The defaults against the front at equal error.
-        let ratios: Vec<f64> = pts
+        // The defaults against the RBF front at equal error (and every method's).
+        let defaults: Vec<&Point<'_>> = pts
             .iter()
             .filter(|p| p.time_row.variant == "defaults")
-            .filter_map(|p| Some(p.time / front_time_at(&front, p.error)?))
             .collect();
+        let ratios_against = |front: &[Point<'_>]| -> Vec<f64> {
+            defaults
+                .iter()
+                .filter_map(|p| Some(p.time / front_time_at(front, p.error)?))
+                .collect()
+        };
+        let (ratios, all_ratios) = (ratios_against(&rbf_front), ratios_against(&front));
+        let list = |r: &[f64]| {
+            r.iter()
+                .map(|r| format!("{r:.2}x"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         if !ratios.is_empty() {
             notes.push(format!(
-                "{} on {}: the defaults take {} the front's time at their error (worst {:.2}x; goal: within 1.5x)",
+                "{} on {}: the defaults take {} the RBF front's time at their error (worst {:.2}x; goal: within 1.5x){}",
                 g.device.backend,
                 g.data,
-                ratios
-                    .iter()
-                    .map(|r| format!("{r:.2}x"))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                ratios.iter().copied().fold(0.0, f64::max)
+                list(&ratios),
+                ratios.iter().copied().fold(0.0, f64::max),
+                if all_ratios == ratios {
+                    String::new()
+                } else {
+                    format!("; {} every method's", list(&all_ratios))
+                }
             ));
         }
         // --target-error: its cost against the front, and its estimate against the truth.
@@ -433,7 +513,7 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
                 .and_then(|v| v.parse().ok())
                 .unwrap_or(f64::NAN);
             notes.push(format!(
-                "{} on {}: --target-error {}: {:.1} ms at step x{} and {} spp; true error {} (estimate {}, estimate / true {:.2}); the front's cheapest at error <= target: {} ({})",
+                "{} on {}: --target-error {}: {:.1} ms at step x{} and {} spp; true error {} (estimate {}, estimate / true {:.2}); the RBF front's cheapest at error <= target: {} ({}){}",
                 g.device.backend,
                 g.data,
                 super::report::number(e),
@@ -443,8 +523,9 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
                 super::report::number(truth.median()),
                 super::report::number(estimate.median()),
                 estimate.median() / truth.median(),
-                front_time_at(&front, e).map_or("none".into(), |f| format!("{f:.1} ms")),
-                front_time_at(&front, e).map_or("-".into(), |f| format!("{:.2}x of it; goal 1.5x", t.median() / f)),
+                front_time_at(&rbf_front, e).map_or("none".into(), |f| format!("{f:.1} ms")),
+                front_time_at(&rbf_front, e).map_or("-".into(), |f| format!("{:.2}x of it; goal 1.5x", t.median() / f)),
+                other_method_note(&front, &rbf_front, e, t.median()),
             ));
         }
         // One line per configuration through its spp sweep, and the front.
@@ -509,4 +590,66 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
         ],
     };
     (notes, figure)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::study::record::Device;
+
+    /// A (time, rmse) pair of rows for a configuration at one spp.
+    fn measured(variant: &str, method: &str, spp: u32, time: f64, rmse: f64) -> [Row; 2] {
+        let row = |metric, values: Vec<f64>| Row {
+            device: Device {
+                backend: "ash".into(),
+                adapter: "a".into(),
+                driver: "d".into(),
+                timer: "device timestamps",
+            },
+            variant: variant.into(),
+            data: "dambreak-demo".into(),
+            step: 0,
+            n: 1,
+            settings: vec![
+                ("spp", spp.to_string()),
+                ("step_size", "0.01".into()),
+                ("method", method.into()),
+            ],
+            metric,
+            unit: "",
+            values,
+        };
+        [row("time", vec![time]), row("rmse", vec![rmse])]
+    }
+
+    #[test]
+    fn the_defaults_are_held_to_the_rbf_front_and_every_method_is_stated_beside_it() {
+        let rows: Vec<Row> = [
+            measured("defaults", "rbf", 4, 10.0, 0.02),
+            measured("defaults", "rbf", 64, 100.0, 0.001),
+            measured("step x2", "rbf", 64, 60.0, 0.0015),
+            // Cheaper at the defaults' 64-spp error, by another method.
+            measured("voxel 512", "voxel 512", 64, 40.0, 0.0009),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        let (notes, _) = summarise(&rows, &Options::default());
+        let defaults = notes
+            .iter()
+            .find(|n| n.contains("the defaults take"))
+            .expect("a defaults line");
+        // Against the RBF settings: on their front at both errors; against every method's,
+        // 2.5x at 64 spp.
+        assert!(
+            defaults.contains("1.00x, 1.00x the RBF front's time")
+                && defaults.contains("1.00x, 2.50x every method's"),
+            "{defaults}"
+        );
+        let front = notes
+            .iter()
+            .find(|n| n.contains("the Pareto front"))
+            .expect("a front line");
+        assert!(front.contains("voxel 512 at 64 spp"), "{front}");
+    }
 }

@@ -178,9 +178,10 @@ pub struct Options {
     pub max_n: usize,
     /// Query points per timed query in the `scaling` study.
     pub queries: usize,
-    /// Grid sizes (cells along the longest side) of the `baselines` study's voxel grids.
+    /// Grid sizes (cells along the longest side) of the `baselines` and `accuracy` studies'
+    /// voxel grids.
     pub voxel_grids: Vec<usize>,
-    /// The `baselines` study's splatter buffer sizes (hits per slab).
+    /// The `baselines` and `accuracy` studies' splatter buffer sizes (hits per slab).
     pub splat_ks: Vec<usize>,
     /// The `accuracy` study's march steps, as multiples of the default step.
     pub step_factors: Vec<f64>,
