@@ -419,8 +419,6 @@ fn stop_at(wanted: u32, reached: u32, cycle: Option<u32>) -> u32 {
 struct Run<'a> {
     session: &'a mut RenderSession,
     settings: RenderSettings,
-    /// [`mask_cycle`] of the settings.
-    cycle: Option<u32>,
     target: Target,
     started: Instant,
     dt0: f64,
@@ -507,7 +505,6 @@ pub fn render_to_target(
         started: Instant::now(),
         dt0,
         work: 0.0,
-        cycle: mask_cycle(settings),
     };
 
     // Calibrate: both sequences at dt0, 2 dt0 and 4 dt0, read at half their frames and at
@@ -730,7 +727,7 @@ fn finish(
     // Render, check, and go on while the estimate falls short.
     let spinner = crate::progress::spinner("rendering to the target");
     // Whether the sequences stop only at the ends of mask cycles (see `stop_at`).
-    let mut cycle = run.cycle;
+    let mut cycle = mask_cycle(&run.settings);
     loop {
         let before = pair.a.frames;
         let mut frames = stop_at((spp / 2.0).ceil() as u32, before, cycle)

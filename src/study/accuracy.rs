@@ -451,11 +451,11 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     for g in groups(rows) {
         let mut series = Vec::new();
         let pts = points(rows, g);
-        let front = front(&pts);
         // The defaults and --target-error choose among the RBF settings: they are held to
         // those settings' front, and every method's is stated beside it.
         let rbf_points: Vec<Point<'_>> = pts.iter().filter(|p| is_rbf(p)).cloned().collect();
-        let rbf_front = self::front(&rbf_points);
+        let rbf_front = front(&rbf_points);
+        let front = front(&pts);
         notes.push(format!(
             "{} on {}: the Pareto front (time to the image, RMSE over linear RGB): {}",
             g.device.backend,
