@@ -16,7 +16,7 @@ use aarbf::render::reference::{ReferenceOptions, converged_reference};
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::synth::Generator;
 use aarbf::study::{DataSpec, Dataset};
-use aarbf::values::Integrator;
+use aarbf::values::{Image, Integrator};
 
 const SIZE: u32 = 32;
 const TOLERANCE: f64 = 5e-4;
@@ -334,6 +334,105 @@ fn a_one_cycle_target_stops_at_the_cycle_end() {
     let cycle = aarbf::noise::BlueNoiseMask::builtin().depth;
     let (done, _) = dambreak_to_the_defaults_error_at(cycle);
     assert_eq!(done.spp, 2 * cycle, "one whole cycle a sequence");
+}
+
+#[test]
+fn more_frames_never_make_a_blue_noise_image_noisier() {
+    // Past the first mask cycle the plain mean of the frames was noisier than the whole cycle
+    // (on the dam break, marching, 72 frames: about 1.5x the noise of 64). The session's image
+    // weights the incomplete cycle by its measured noise: never noisier than the whole cycles
+    // alone, and no noisier than the plain mean where the frames are barely stratified (the
+    // clusters scene's marching). The noise of one accumulation is measured without a
+    // reference, as half the difference of two seeds' images (they are independent).
+    let cycle = aarbf::noise::BlueNoiseMask::builtin().depth;
+    let checked = [
+        cycle,
+        cycle + 8,
+        cycle + 16,
+        cycle + 32,
+        cycle + 48,
+        2 * cycle - 1,
+        2 * cycle + 32,
+    ];
+    for (name, ds, integrator) in [
+        (
+            "dambreak",
+            dataset(Generator::DambreakDemo, 3000),
+            Integrator::Marching,
+        ),
+        ("uniform", dataset(Generator::Uniform, 4000), Integrator::Ea),
+        (
+            "dambreak",
+            dataset(Generator::DambreakDemo, 3000),
+            Integrator::SsReference,
+        ),
+        (
+            "clusters",
+            dataset(Generator::Clusters, 4000),
+            Integrator::Marching,
+        ),
+    ] {
+        // (image, plain mean) at each checked count, for each seed.
+        let mut images: [Vec<(Image, Image)>; 2] = Default::default();
+        for (seed, images) in [1, 2].into_iter().zip(&mut images) {
+            let mut s = RenderSettings {
+                seed,
+                width: 96,
+                height: 96,
+                ..settings(integrator)
+            };
+            let mut session = cpu_session(&ds);
+            // Emission-absorption's noise (its march's jitter) at the default step is at the
+            // level of f32 rounding in the accumulation: coarsen the step to see it.
+            if integrator == Integrator::Ea {
+                s.step_size = Some(4.0 * session.resolve(&s).unwrap().step_size);
+            }
+            for &n in &checked {
+                session.accumulate(&s, n - session.frames_of(&s)).unwrap();
+                let plain = session.backend_mut().image().unwrap();
+                images.push((session.image().unwrap(), plain));
+            }
+        }
+        let noise = |i: usize| 0.5 * images[0][i].0.rmse(&images[1][i].0);
+        let plain_noise = |i: usize| 0.5 * images[0][i].1.rmse(&images[1][i].1);
+        let whole = noise(0);
+        for (i, n) in checked.iter().enumerate().skip(1) {
+            println!(
+                "{name} {integrator:?} {n} frames: noise {:.3e} (plain mean {:.3e}), one cycle {whole:.3e}",
+                noise(i),
+                plain_noise(i)
+            );
+            assert!(
+                noise(i) <= 1.02 * whole && noise(i) <= 1.10 * plain_noise(i),
+                "{name} {integrator:?} at {n} frames: noise {:.3e}, plain mean {:.3e}, one cycle {whole:.3e}",
+                noise(i),
+                plain_noise(i)
+            );
+        }
+    }
+}
+
+#[test]
+fn delta_tracking_and_white_noise_images_are_the_plain_mean() {
+    // Their frames are not stratified over a mask cycle: the mean is the best image.
+    let ds = dataset(Generator::DambreakDemo, 3000);
+    let mut session = cpu_session(&ds);
+    for s in [
+        settings(Integrator::Delta),
+        RenderSettings {
+            noise: aarbf::values::NoiseKind::White,
+            ..settings(Integrator::Marching)
+        },
+    ] {
+        session.accumulate(&s, 72).unwrap();
+        let image = session.image().unwrap();
+        let mean = session.render_frames(&s, 0, 72).unwrap();
+        assert_eq!(
+            image.pixels, mean.pixels,
+            "{:?} {:?}",
+            s.integrator, s.noise
+        );
+    }
 }
 
 #[test]

@@ -29,10 +29,10 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
+use super::cycles::mask_cycle;
 use super::session::{RenderError, RenderSession};
 use super::settings::RenderSettings;
-use crate::noise::BlueNoiseMask;
-use crate::values::{Image, NoiseKind};
+use crate::values::Image;
 
 /// The measure of an image's error against the reference.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -381,15 +381,6 @@ impl Pair {
                 rate: 0.5,
             },
         }
-    }
-}
-
-/// The frames of one mask cycle where `settings` draw blue noise (every backend draws from the
-/// built-in mask), `None` for white noise.
-fn mask_cycle(settings: &RenderSettings) -> Option<u32> {
-    match settings.noise {
-        NoiseKind::Stbn => Some(BlueNoiseMask::builtin().depth),
-        NoiseKind::White => None,
     }
 }
 
@@ -852,6 +843,8 @@ fn rmse_per_unit(metric: ErrorMetric, pair: &Pair, settings: &RenderSettings) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::noise::BlueNoiseMask;
+    use crate::values::NoiseKind;
 
     fn flat(value: f32) -> Image {
         Image {

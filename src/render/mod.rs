@@ -6,6 +6,7 @@
 
 pub mod accuracy;
 pub mod auto;
+mod cycles;
 pub mod reference;
 pub mod session;
 pub mod settings;

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use glam::DVec3;
 
 use super::auto::AutoValues;
+use super::cycles::CycleWeights;
 use super::settings::RenderSettings;
 use crate::accel::ClusterSize;
 use crate::backend::{Backend, BackendError, Precision, StepInput};
@@ -76,6 +77,9 @@ pub struct RenderSession {
     /// The automatic values of the series under the loaded field ([`AutoValues`]).
     auto: Option<(FieldSettings, AutoValues)>,
     frames: u32,
+    /// How the accumulation's whole mask cycles and its incomplete one combine into its image
+    /// (`None`: the plain mean).
+    cycles: Option<CycleWeights>,
     last_frame_key: Option<(RenderSettings, Loaded)>,
     warned_coarse_step: std::sync::atomic::AtomicBool,
 }
@@ -92,6 +96,7 @@ impl RenderSession {
             loaded: None,
             auto: None,
             frames: 0,
+            cycles: None,
             last_frame_key: None,
             warned_coarse_step: std::sync::atomic::AtomicBool::new(false),
         }
@@ -318,10 +323,17 @@ impl RenderSession {
         self.image()
     }
 
-    /// The mean of the frames accumulated so far, read back from the backend: the one copy
-    /// of the image a batch render makes, when it writes the image.
+    /// The image of the frames accumulated so far, read back from the backend: the one copy
+    /// of the image a batch render makes, when it writes the image. It is their mean, except
+    /// that past the first blue-noise mask cycle the incomplete cycle's frames are weighted by
+    /// their measured noise, so that more frames never make a noisier image
+    /// ([`super::cycles`]).
     pub fn image(&mut self) -> Result<Image, RenderError> {
-        Ok(self.backend.image()?)
+        let mean = self.backend.image()?;
+        Ok(match &self.cycles {
+            Some(cycles) => cycles.image(self.frames, mean),
+            None => mean,
+        })
     }
 
     /// Renders `frames` more frames into the accumulation (restarted if anything changed since
@@ -339,9 +351,16 @@ impl RenderSession {
         if self.last_frame_key.as_ref() != Some(&key) {
             self.backend.reset();
             self.frames = 0;
+            self.cycles = CycleWeights::of(settings);
             self.last_frame_key = Some(key);
         }
         for _ in 0..frames {
+            // The means the cycles' weights need, read back once each (a few per accumulation).
+            if let Some(cycles) = &mut self.cycles
+                && cycles.wants_mean_at(self.frames)
+            {
+                cycles.took_mean(self.frames, self.backend.image()?);
+            }
             let params = self.frame_params(settings, self.frames)?;
             match (settings.splat_k, settings.voxel_grid) {
                 (Some(k), _) => {
@@ -378,6 +397,7 @@ impl RenderSession {
         }
         self.backend.reset();
         self.frames = 0;
+        self.cycles = None;
         self.last_frame_key = None;
         for frame in first..first.saturating_add(count) {
             let params = self.frame_params(settings, frame)?;
