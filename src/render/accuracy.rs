@@ -847,11 +847,7 @@ mod tests {
     use crate::values::NoiseKind;
 
     fn flat(value: f32) -> Image {
-        Image {
-            width: 4,
-            height: 3,
-            pixels: vec![[value, value, value, 1.0]; 12],
-        }
+        Image::flat(4, 3, value)
     }
 
     #[test]

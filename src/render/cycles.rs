@@ -186,11 +186,7 @@ mod tests {
     use super::*;
 
     fn constant(value: f32) -> Image {
-        Image {
-            width: 2,
-            height: 1,
-            pixels: vec![[value, value, value, 1.0]; 2],
-        }
+        Image::flat(2, 1, value)
     }
 
     #[test]

@@ -82,6 +82,16 @@ impl Image {
         }
     }
 
+    /// An opaque image of one grey `value` (unit tests).
+    #[cfg(test)]
+    pub(crate) fn flat(width: u32, height: u32, value: f32) -> Image {
+        Image {
+            width,
+            height,
+            pixels: vec![[value, value, value, 1.0]; (width * height) as usize],
+        }
+    }
+
     /// Root-mean-square difference over RGB.
     pub fn rmse(&self, other: &Image) -> f64 {
         assert_eq!((self.width, self.height), (other.width, other.height));
