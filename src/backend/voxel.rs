@@ -192,9 +192,8 @@ impl FieldSampler for VoxelGrid {
     /// Trilinear interpolation of the sums between cell centres (clamped to the outer cells'
     /// centres at the grid's faces). Twin: `voxel_field` in
     /// `shaders_glsl/shared/voxel_sample.glsl`, statement for statement.
-    fn sample(&self, _: &mut (), origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
+    fn sample(&self, _: &mut (), x: DVec3) -> (f64, [f64; 3]) {
         let dims = self.geometry.dims;
-        let x = origin + dir * t;
         let g = (x - self.origin) / self.cell;
         let mut base = [0usize; 3];
         let mut frac = [0.0f64; 3];
@@ -275,12 +274,12 @@ mod tests {
             DVec3::new(0.5, 0.5, 0.5),
             DVec3::new(4.5, 3.5, 2.5),
         ] {
-            let (phi, num) = grid.sample(&mut (), p, DVec3::X, 0.0);
+            let (phi, num) = grid.sample(&mut (), p);
             assert!((phi - (p.x + 2.0 * p.y + 3.0 * p.z)).abs() < 1e-4, "{p}");
             assert!((num[0] - 1.0).abs() < 1e-6);
         }
         // Outside, the faces' values.
-        let (phi, _) = grid.sample(&mut (), DVec3::new(-3.0, 0.5, 0.5), DVec3::X, 0.0);
+        let (phi, _) = grid.sample(&mut (), DVec3::new(-3.0, 0.5, 0.5));
         assert!((phi - (0.5 + 1.0 + 1.5)).abs() < 1e-4);
     }
 }

@@ -49,13 +49,13 @@ pub trait FieldSampler: Sync {
     );
 
     /// Phi and the Theta numerator (Σ theta_i phi_i: normalised attribute in `[0]`, or
-    /// linear RGB) at `origin + t dir`, `t` at or after the ray's last sample.
-    fn sample(&self, ray: &mut Self::Ray, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]);
+    /// linear RGB) at `x`, the ray's point `origin + t dir` at or after its last sample.
+    fn sample(&self, ray: &mut Self::Ray, x: DVec3) -> (f64, [f64; 3]);
 
     /// What sampling a packet of rays together keeps ([`FieldSampler::sample_packet`]).
     type Packet: Default + Send;
 
-    /// [`FieldSampler::sample`] for the next sample of each ray of a packet (neighbouring
+    /// [`FieldSampler::sample`] at the next sample of each ray of a packet (neighbouring
     /// pixels, marched in step: their samples lie close together), `None` for a ray that has
     /// none. The default samples each ray alone; a sampler whose cost is in finding
     /// candidates shares that work between the rays.
@@ -63,12 +63,12 @@ pub trait FieldSampler: Sync {
         &self,
         _packet: &mut Self::Packet,
         rays: &mut [Self::Ray; PACKET],
-        samples: &[Option<RaySample>; PACKET],
+        points: &[Option<DVec3>; PACKET],
         out: &mut [(f64, [f64; 3]); PACKET],
     ) {
-        for ((ray, sample), out) in rays.iter_mut().zip(samples).zip(out) {
-            if let Some(s) = sample {
-                *out = self.sample(ray, s.origin, s.dir, s.t);
+        for ((ray, x), out) in rays.iter_mut().zip(points).zip(out) {
+            if let Some(x) = x {
+                *out = self.sample(ray, *x);
             }
         }
     }
@@ -80,14 +80,6 @@ pub const PACKET: usize = crate::field::f32_kernel::LANES;
 
 /// The block of pixels a packet covers.
 pub const PACKET_SIZE: (u32, u32) = (4, 2);
-
-/// One ray's next sample: the point `origin + t dir`.
-#[derive(Clone, Copy, Debug)]
-pub struct RaySample {
-    pub origin: DVec3,
-    pub dir: DVec3,
-    pub t: f64,
-}
 
 /// The integrator math on a frame (kept here, beside its only users, rather than with the
 /// plain value type).
@@ -240,7 +232,7 @@ fn shadow<F: FieldSampler>(
     let mut tau = 0.0;
     let mut samples = MarchSamples::new(0.0, t_exit, p.dt, jitter);
     while let Some(t) = samples.next(scratch) {
-        let (phi, num) = field.sample(ray, x, p.light_dir, t);
+        let (phi, num) = field.sample(ray, x + p.light_dir * t);
         if phi == 0.0 && clear_where_empty {
             continue;
         }
@@ -409,9 +401,8 @@ fn march_packet<F: FieldSampler>(
             target_tau,
         });
     }
-    // What a ray's sample at t scatters towards the camera, `albedo` under the light there.
-    let mut lit = |ray: &MarchedRay, t: f64, albedo: [f64; 3]| {
-        let at = ray.origin + ray.dir * t;
+    // What a ray's sample at `at` scatters towards the camera, `albedo` under the light there.
+    let mut lit = |ray: &MarchedRay, at: DVec3, albedo: [f64; 3]| {
         radiance(
             p,
             field,
@@ -422,20 +413,17 @@ fn march_packet<F: FieldSampler>(
             ray.shadow_jitter,
         )
     };
-    let mut samples: [Option<RaySample>; PACKET] = [None; PACKET];
+    // Each ray's next sample point (kept small: a packet's points are rewritten every step).
+    let mut points: [Option<DVec3>; PACKET] = [None; PACKET];
     let mut values = [(0.0, [0.0; 3]); PACKET];
     loop {
         let mut any = false;
         for i in 0..PACKET {
-            samples[i] = None;
+            points[i] = None;
             let Some(ray) = &mut rays[i] else { continue };
             match ray.samples.next(&intervals[i]) {
                 Some(t) => {
-                    samples[i] = Some(RaySample {
-                        origin: ray.origin,
-                        dir: ray.dir,
-                        t,
-                    });
+                    points[i] = Some(ray.origin + ray.dir * t);
                     any = true;
                 }
                 None => {
@@ -447,9 +435,9 @@ fn march_packet<F: FieldSampler>(
         if !any {
             return;
         }
-        field.sample_packet(packet, primary, &samples, &mut values);
+        field.sample_packet(packet, primary, &points, &mut values);
         for i in 0..PACKET {
-            let (Some(ray), Some(sample)) = (&mut rays[i], samples[i]) else {
+            let (Some(ray), Some(at)) = (&mut rays[i], points[i]) else {
                 continue;
             };
             let (phi, num) = values[i];
@@ -460,7 +448,7 @@ fn march_packet<F: FieldSampler>(
             if p.integrator == Integrator::Marching {
                 ray.tau += sigma * p.dt;
                 if ray.tau > ray.target_tau {
-                    let l = lit(ray, sample.t, rgb);
+                    let l = lit(ray, at, rgb);
                     out[i] = [l[0], l[1], l[2], 1.0];
                     rays[i] = None;
                 }
@@ -471,7 +459,7 @@ fn march_packet<F: FieldSampler>(
             }
             let alpha = 1.0 - (-sigma * p.dt).exp();
             let emitted = if scatter {
-                lit(ray, sample.t, rgb)
+                lit(ray, at, rgb)
             } else {
                 rgb
             };
@@ -546,7 +534,7 @@ pub fn render_pixel_with<F: FieldSampler>(
             t = intervals[interval].0 + over;
         }
         let at = origin + dir * t;
-        let (phi, num) = field.sample(primary, origin, dir, t);
+        let (phi, num) = field.sample(primary, at);
         let (sigma, rgb) = p.shade(phi, num);
         let accept = p.random(x, y, dim);
         dim += 1;
@@ -589,8 +577,8 @@ mod tests {
             occupied.push((t0, t1));
         }
 
-        fn sample(&self, _: &mut (), origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
-            let phi = (self.0)(origin + dir * t);
+        fn sample(&self, _: &mut (), x: DVec3) -> (f64, [f64; 3]) {
+            let phi = (self.0)(x);
             (phi, [0.5 * phi, 0.0, 0.0])
         }
     }

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 
 use self::accumulator::Accumulator;
 use self::integrators::{
-    FieldSampler, PACKET, PACKET_SIZE, PixelScratch, RaySample, render_pixels_with,
+    FieldSampler, PACKET, PACKET_SIZE, PixelScratch, render_pixels_with,
 };
 use super::gpu_data::f32_phi_error;
 use super::voxel::{VoxelGeometry, VoxelGrid};
@@ -210,8 +210,8 @@ impl FieldSampler for ReferenceField {
         self.occupied_intervals(origin, dir, t0, t1, occupied);
     }
 
-    fn sample(&self, ray: &mut CellRuns, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
-        self.eval_sums_with(origin + dir * t, ray)
+    fn sample(&self, ray: &mut CellRuns, x: DVec3) -> (f64, [f64; 3]) {
+        self.eval_sums_with(x, ray)
     }
 }
 
@@ -230,8 +230,8 @@ impl FieldSampler for F32Field {
         self.occupied(origin, dir, t0, t1, occupied);
     }
 
-    fn sample(&self, ray: &mut F32Ray, origin: DVec3, dir: DVec3, t: f64) -> (f64, [f64; 3]) {
-        self.eval_sums(origin + dir * t, ray)
+    fn sample(&self, ray: &mut F32Ray, x: DVec3) -> (f64, [f64; 3]) {
+        self.eval_sums(x, ray)
     }
 
     type Packet = F32Packet;
@@ -240,12 +240,11 @@ impl FieldSampler for F32Field {
         &self,
         packet: &mut F32Packet,
         rays: &mut [F32Ray; PACKET],
-        samples: &[Option<RaySample>; PACKET],
+        points: &[Option<DVec3>; PACKET],
         out: &mut [(f64, [f64; 3]); PACKET],
     ) {
-        let points = samples.map(|s| s.map(|s| s.origin + s.dir * s.t));
         // How many were evaluated together is for tests.
-        let _ = self.eval_sums_packet(&points, packet, rays, out);
+        let _ = self.eval_sums_packet(points, packet, rays, out);
     }
 }
 
