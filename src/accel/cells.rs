@@ -370,34 +370,39 @@ impl Level {
         let mut cell = [0i64; 3];
         let mut next = [f64::INFINITY; 3];
         let mut delta = [f64::INFINITY; 3];
+        // Cell index steps along each axis, and the steps left on it before the grid's face.
+        let stride = [1, self.dims[0] as i64, (self.dims[0] * self.dims[1]) as i64];
         let mut step = [0i64; 3];
+        let mut left = [i64::MAX; 3];
         for ax in 0..3 {
             // Truncation, not floor: they differ only below 0, which the clamp maps to 0.
             cell[ax] = (p[ax] as i64).clamp(0, self.dims[ax] as i64 - 1);
             if d[ax] > 0.0 {
-                step[ax] = 1;
+                step[ax] = stride[ax];
+                left[ax] = self.dims[ax] as i64 - 1 - cell[ax];
                 delta[ax] = inv[ax];
                 next[ax] = enter + ((cell[ax] + 1) as f64 - p[ax]) * inv[ax];
             } else if d[ax] < 0.0 {
-                step[ax] = -1;
+                step[ax] = -stride[ax];
+                left[ax] = cell[ax];
                 delta[ax] = -inv[ax];
                 next[ax] = enter + (cell[ax] as f64 - p[ax]) * inv[ax];
             }
         }
         let mut t = enter;
-        // The cell's index, stepped along with its coordinates.
-        let stride = [1, self.dims[0] as i64, (self.dims[0] * self.dims[1]) as i64];
         let mut c = cell_index(self.dims, cell.map(|v| v as usize)) as i64;
+        // The walk's state in registers (arrays indexed by the axis went through memory, a
+        // store and a dependent load each step), the axis chosen by selects rather than
+        // branches: which one it is changes unpredictably along a ray.
+        let [mut nx, mut ny, mut nz] = next;
+        let [mut lx, mut ly, mut lz] = left;
         loop {
-            // The axis whose boundary comes first (the lowest on ties), as index arithmetic
-            // rather than branches: which one it is changes unpredictably along a ray.
-            let first_of_two = usize::from(next[1] < next[0]);
-            let ax = if next[2] < next[first_of_two] {
-                2
-            } else {
-                first_of_two
-            };
-            let leave = next[ax].min(exit);
+            // The axis whose boundary comes first, the lowest on ties.
+            let y_first = ny < nx;
+            let first_of_two = if y_first { ny } else { nx };
+            let z_first = nz < first_of_two;
+            let boundary = if z_first { nz } else { first_of_two };
+            let leave = if boundary < exit { boundary } else { exit };
             if self.reached[c as usize] && leave > t {
                 // Merged only with this level's own intervals.
                 match out[from..].last_mut() {
@@ -409,12 +414,29 @@ impl Level {
                 return;
             }
             t = leave;
-            cell[ax] += step[ax];
-            if cell[ax] < 0 || cell[ax] >= self.dims[ax] as i64 {
+            let (on_x, on_y) = (!y_first && !z_first, y_first && !z_first);
+            if on_x {
+                nx += delta[0];
+            }
+            if on_y {
+                ny += delta[1];
+            }
+            if z_first {
+                nz += delta[2];
+            }
+            lx -= i64::from(on_x);
+            ly -= i64::from(on_y);
+            lz -= i64::from(z_first);
+            if (lx | ly | lz) < 0 {
                 return;
             }
-            c += step[ax] * stride[ax];
-            next[ax] += delta[ax];
+            c += if z_first {
+                step[2]
+            } else if y_first {
+                step[1]
+            } else {
+                step[0]
+            };
         }
     }
 }
