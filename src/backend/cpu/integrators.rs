@@ -458,11 +458,7 @@ fn march_packet<F: FieldSampler>(
                 continue;
             }
             let alpha = 1.0 - (-sigma * p.dt).exp();
-            let emitted = if scatter {
-                lit(ray, at, rgb)
-            } else {
-                rgb
-            };
+            let emitted = if scatter { lit(ray, at, rgb) } else { rgb };
             for (c, e) in ray.colour.iter_mut().zip(emitted) {
                 *c += ray.transmittance * alpha * e;
             }

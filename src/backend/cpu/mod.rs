@@ -22,9 +22,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use self::accumulator::Accumulator;
-use self::integrators::{
-    FieldSampler, PACKET, PACKET_SIZE, PixelScratch, render_pixels_with,
-};
+use self::integrators::{FieldSampler, PACKET, PACKET_SIZE, PixelScratch, render_pixels_with};
 use super::gpu_data::f32_phi_error;
 use super::voxel::{VoxelGeometry, VoxelGrid};
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
