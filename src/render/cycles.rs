@@ -213,6 +213,40 @@ mod tests {
     }
 
     #[test]
+    fn the_cycle_variance_bound_is_below_the_variance_and_near_it() {
+        use rand::{Rng, SeedableRng};
+        // Per pixel and channel: the first cycle's mean M1 = s + m (variance v_d), its prefix
+        // P1 = M1 + e (correlated with M1, as a prefix is), the second cycle's prefix P2 =
+        // s + m' + e', independent of both, with P1's variance.
+        let bound_with = |prefix_noise: f64| {
+            let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+            let mut u = |a: f64| rng.random_range(-a..a);
+            let mut images = [(); 3].map(|_| Image::flat(200, 200, 0.0));
+            for i in 0..images[0].pixels.len() {
+                for c in 0..3 {
+                    let m = 0.5 + u(0.01);
+                    images[0].pixels[i][c] = m as f32;
+                    images[1].pixels[i][c] = (m + u(prefix_noise)) as f32;
+                    images[2].pixels[i][c] = (0.5 + u(0.01) + u(prefix_noise)) as f32;
+                }
+            }
+            let [m1, p1, p2] = &images;
+            cycle_variance_bound(m1, p1, p2)
+        };
+        let v_d = 0.01f64 * 0.01 / 3.0;
+        // A prefix with 10 times the cycle's variance: the bound is close below it.
+        let bound = bound_with(0.03);
+        assert!(
+            bound <= v_d && bound > 0.6 * v_d,
+            "bound {bound:.3e}, variance {v_d:.3e}"
+        );
+        // With 10,000 times: the bound says "about none" rather than a variance it cannot
+        // resolve (the image then keeps the whole cycles).
+        let bound = bound_with(1.0);
+        assert!(bound < 0.5 * v_d, "bound {bound:.3e}, variance {v_d:.3e}");
+    }
+
+    #[test]
     fn white_noise_and_delta_tracking_keep_the_plain_mean() {
         let white = RenderSettings {
             noise: NoiseKind::White,
