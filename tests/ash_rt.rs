@@ -812,6 +812,20 @@ fn renders_match_the_wgpu_backend() {
         let name = format!("wgpu-{integrator:?}").to_lowercase();
         assert_images_close(&name, &expected, &actual, max_rmse, max_flip);
     }
+    // The half-resolution lattice a targeted render measures its noise on (odd sizes).
+    let settings = RenderSettings {
+        width: 47,
+        height: 39,
+        seed: 5,
+        camera: Some(close_view(&series)),
+        ..RenderSettings::default()
+    };
+    let expected = other
+        .render_frames_on_half_lattice(&settings, 0, 2)
+        .unwrap();
+    let actual = gpu.render_frames_on_half_lattice(&settings, 0, 2).unwrap();
+    assert_eq!((actual.width, actual.height), (24, 20));
+    assert_images_close("wgpu-lattice", &expected, &actual, 1e-4, 1e-3);
     assert_no_validation_messages();
 }
 

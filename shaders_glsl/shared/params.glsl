@@ -6,7 +6,7 @@
 
 struct Frame {
     vec4 eye;        // xyz camera position
-    vec4 forward;    // xyz unit view direction
+    vec4 forward;    // xyz view direction at the image centre (unit except on a half lattice)
     vec4 right;      // xyz, scaled by tan(fovy / 2) * aspect
     vec4 up;         // xyz, scaled by tan(fovy / 2)
     vec4 box_min;    // xyz march box; w = dt (march step)

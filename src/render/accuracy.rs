@@ -2,15 +2,26 @@
 //! time (`aarbf render --target-error E`, `--time-budget S`, the scene file's `target_error`
 //! and `time_budget`).
 //!
-//! A targeted render accumulates two independent sequences of frames, A and B (the same
-//! settings under two seeds), and shows their mean. Its error against the converged reference
-//! has two parts whose squares add (the noise has zero mean, so it is uncorrelated with the
-//! bias):
+//! A targeted render's error against the converged reference has two parts whose squares add
+//! (the noise has zero mean, so it is uncorrelated with the bias):
 //!
-//! - **Noise**, from the image itself (the dual-buffer estimate): `rmse(A, B) / 2`, exact in
-//!   expectation because A and B are independent. (Splitting one sequence into its first and
-//!   second halves is not: blue-noise frames are anti-correlated within a mask cycle, and the
-//!   halves' difference overstated the noise up to 2.3x in the tests.)
+//! - **Noise**, measured on the render itself by a second, independent sequence of frames (the
+//!   same settings under another seed), in one of two ways (`Companion`):
+//!   - where the frames are stratified over the blue-noise mask's cycle (blue noise, any
+//!     integrator but delta tracking) and the metric is RMSE, the image is one sequence, A,
+//!     and the second, B, is rendered on its half-resolution lattice (the rays of A's even
+//!     pixels, a quarter of the work): the noise is `rmse(A on the lattice, B) / sqrt 2`, exact
+//!     in expectation because A and B are independent. Two independent sequences of N frames
+//!     each lose the stratification one sequence of 2N has within a cycle (a target the
+//!     defaults reach at 32 spp took two sequences of 24 frames), and splitting one sequence
+//!     into halves overstates its noise (its frames are anti-correlated within a cycle: up to
+//!     2.3x in the tests). Once A is two or more whole cycles, the spread of the cycles' means
+//!     (independent: each reads the mask at its own shift) measures its noise and the lattice
+//!     stops; a sequence predicted to need more than one cycle is measured by a pair instead,
+//!     where the lattice would only add its first cycle's cost;
+//!   - otherwise (white noise, delta tracking, FLIP targets, which need a full-resolution
+//!     realisation of the noise) the image is the mean of A and B, both whole images, and its
+//!     noise `rmse(A, B) / 2` (the dual-buffer estimate).
 //! - **Step bias**, which no number of samples removes: from images at `dt0`, `2 dt0` and
 //!   `4 dt0`, see [`StepBias`].
 //!
@@ -29,10 +40,11 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use super::cycles::mask_cycle;
+use super::cycles::{mask_cycle, stratified_cycle};
 use super::session::{RenderError, RenderSession};
 use super::settings::RenderSettings;
 use crate::values::Image;
+use crate::values::frame::half_lattice_size;
 
 /// The measure of an image's error against the reference.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -286,6 +298,21 @@ struct Sequence {
     seed: u32,
     frames: u32,
     mean: Vec<[f64; 4]>,
+    /// The means of its whole mask cycles, where they measure its noise.
+    cycles: Option<WholeCycles>,
+}
+
+/// What a sequence keeps of its whole mask cycles' means: each cycle reads the mask at its own
+/// shift, so they are independent, and their spread measures the noise of a sequence of
+/// whole cycles.
+#[derive(Clone)]
+struct WholeCycles {
+    /// Frames of a mask cycle.
+    length: u32,
+    /// The sequence's mean at the end of its last whole cycle.
+    last_mean: Vec<[f64; 4]>,
+    /// The sum over whole cycles of the square of each cycle's mean, per pixel (RGB).
+    squares: Vec<[f64; 3]>,
 }
 
 impl Sequence {
@@ -294,11 +321,34 @@ impl Sequence {
             seed,
             frames: 0,
             mean: Vec::new(),
+            cycles: None,
         }
+    }
+
+    /// A sequence that keeps its whole `length`-frame cycles' spread ([`Self::whole_cycles_noise`]);
+    /// it takes its frames in chunks within one cycle each.
+    fn with_cycles(seed: u32, length: u32) -> Sequence {
+        Sequence {
+            cycles: Some(WholeCycles {
+                length,
+                last_mean: Vec::new(),
+                squares: Vec::new(),
+            }),
+            ..Sequence::new(seed)
+        }
+    }
+
+    /// The most frames the next chunk may have (a chunk never spans two mask cycles where the
+    /// cycles are kept).
+    fn chunk_room(&self) -> u32 {
+        self.cycles
+            .as_ref()
+            .map_or(u32::MAX, |c| c.length - self.frames % c.length)
     }
 
     /// Folds in `image`, the mean of this sequence's next `count` frames.
     fn add(&mut self, image: &Image, count: u32) {
+        debug_assert!(count <= self.chunk_room(), "a chunk spans two mask cycles");
         let total = f64::from(self.frames + count);
         let (w_old, w_new) = (f64::from(self.frames) / total, f64::from(count) / total);
         if self.mean.len() != image.pixels.len() {
@@ -310,6 +360,51 @@ impl Sequence {
             }
         }
         self.frames += count;
+        if let Some(cycles) = &mut self.cycles
+            && self.frames.is_multiple_of(cycles.length)
+        {
+            // The cycle just ended: its mean is k M_k - (k - 1) M_(k-1).
+            let k = f64::from(self.frames / cycles.length);
+            if cycles.last_mean.len() != self.mean.len() {
+                cycles.last_mean = vec![[0.0; 4]; self.mean.len()];
+                cycles.squares = vec![[0.0; 3]; self.mean.len()];
+            }
+            for ((m, last), sq) in self
+                .mean
+                .iter()
+                .zip(cycles.last_mean.iter_mut())
+                .zip(cycles.squares.iter_mut())
+            {
+                for c in 0..3 {
+                    let cycle_mean = k * m[c] - (k - 1.0) * last[c];
+                    sq[c] += cycle_mean * cycle_mean;
+                }
+                *last = *m;
+            }
+        }
+    }
+
+    /// The noise (RMSE over RGB) of this sequence's image where it is two or more whole mask
+    /// cycles kept by [`Self::with_cycles`]: from the spread of the cycles' means (per pixel,
+    /// their sample variance over the cycles, divided by the cycles).
+    fn whole_cycles_noise(&self) -> Option<f64> {
+        let cycles = self.cycles.as_ref()?;
+        let k = self.frames / cycles.length;
+        if k < 2 || !self.frames.is_multiple_of(cycles.length) {
+            return None;
+        }
+        let k = f64::from(k);
+        let sum: f64 = self
+            .mean
+            .iter()
+            .zip(&cycles.squares)
+            .map(|(m, sq)| {
+                (0..3)
+                    .map(|c| ((sq[c] - k * m[c] * m[c]) / (k - 1.0)).max(0.0))
+                    .sum::<f64>()
+            })
+            .sum();
+        Some((sum / (3 * self.mean.len().max(1)) as f64 / k).sqrt())
     }
 
     fn image(&self, width: u32, height: u32) -> Image {
@@ -321,57 +416,143 @@ impl Sequence {
     }
 }
 
-/// Two independent sequences at one step: the image is their mean.
-struct Pair {
+/// What measures the noise of a level's image beside its sequence of frames.
+enum Companion {
+    /// A second independent sequence of the whole image: the image is the mean of both and
+    /// its noise half their RMS difference (the dual-buffer estimate). For frames that are not
+    /// stratified, where the mean of two sequences is as good as one of twice the frames, and
+    /// for FLIP targets, whose estimate needs a full-resolution realisation of the noise.
+    Pair(Sequence),
+    /// A sequence of the image's half-resolution lattice (the rays of its even pixels, a
+    /// quarter of the work): the image is the first sequence alone, stratified over the mask's
+    /// cycle as one sequence is and two independent ones are not, and its noise is that of
+    /// the two sequences' difference on the lattice over sqrt 2. Once the image is two or more
+    /// whole mask cycles their spread measures its noise instead, and the lattice stops.
+    Lattice(Sequence),
+}
+
+/// The frames of one step: the image's sequence and its companion.
+struct Level {
     dt: f64,
     a: Sequence,
-    b: Sequence,
-    /// (frames per sequence, noise of the mean) at each check, oldest first.
+    companion: Companion,
+    /// (frames of the image's sequence, noise of the image) at each check, oldest first.
     history: Vec<(u32, f64)>,
-    /// Seconds per frame, over all frames rendered.
+    /// Seconds rendering, over all frames of both sequences.
     seconds: f64,
 }
 
-impl Pair {
-    fn new(dt: f64, seed: u32) -> Pair {
-        Pair {
+impl Level {
+    /// A level at step `dt` whose noise is measured on the half-resolution lattice where
+    /// `lattice` is `Some(mask cycle)`, by a pair otherwise.
+    fn new(dt: f64, seed: u32, lattice: Option<u32>) -> Level {
+        let second = Sequence::new(seed ^ SECOND_SEED);
+        let (a, companion) = match lattice {
+            Some(cycle) => (
+                Sequence::with_cycles(seed, cycle),
+                Companion::Lattice(second),
+            ),
+            None => (Sequence::new(seed), Companion::Pair(second)),
+        };
+        Level {
             dt,
-            a: Sequence::new(seed),
-            b: Sequence::new(seed ^ SECOND_SEED),
+            a,
+            companion,
             history: Vec::new(),
             seconds: 0.0,
         }
     }
 
-    /// Frames of both sequences together (the image's samples per pixel).
-    fn spp(&self) -> u32 {
-        self.a.frames + self.b.frames
+    /// From now on, the noise is measured by a second sequence of the whole image (rendered
+    /// from its first frame at the next extension) instead of the lattice.
+    fn measure_by_pair(&mut self, seed: u32) {
+        if matches!(self.companion, Companion::Lattice(_)) {
+            self.companion = Companion::Pair(Sequence::new(seed ^ SECOND_SEED));
+            // The noise so far was of one sequence, not of a pair's mean.
+            self.history.clear();
+        }
     }
 
+    /// The image's samples per pixel from `frames` frames of its sequence.
+    fn spp_at(&self, frames: u32) -> u32 {
+        match self.companion {
+            Companion::Pair(_) => 2 * frames,
+            Companion::Lattice(_) => frames,
+        }
+    }
+
+    /// The image's samples per pixel.
+    fn spp(&self) -> u32 {
+        self.spp_at(self.a.frames)
+    }
+
+    /// Frames of the image's sequence for `spp` samples per pixel (rounded up).
+    fn frames_for(&self, spp: f64) -> u32 {
+        let per_frame = f64::from(self.spp_at(1));
+        (spp / per_frame).ceil().min(f64::from(u32::MAX)) as u32
+    }
+
+    /// Seconds per sample per pixel of the image, the companion's share included.
     fn frame_time(&self) -> f64 {
         self.seconds / f64::from(self.spp().max(1))
     }
 
-    fn images(&self, settings: &RenderSettings) -> (Image, Image) {
-        let (w, h) = (settings.width, settings.height);
-        (self.a.image(w, h), self.b.image(w, h))
+    /// Seconds per frame of the image's sequence, the companion's share included.
+    fn step_time(&self) -> f64 {
+        self.seconds / f64::from(self.a.frames.max(1))
+    }
+
+    /// Whether the noise at `frames` frames of the image's sequence needs the companion there.
+    fn needs_companion_at(&self, frames: u32) -> bool {
+        match (&self.companion, &self.a.cycles) {
+            (Companion::Lattice(_), Some(c)) => {
+                frames < 2 * c.length || !frames.is_multiple_of(c.length)
+            }
+            _ => true,
+        }
     }
 
     fn image(&self, settings: &RenderSettings) -> Image {
-        let (a, b) = self.images(settings);
-        a.offset_by(&a, &b, -0.5)
+        let a = self.a.image(settings.width, settings.height);
+        match &self.companion {
+            Companion::Pair(b) => a.offset_by(&a, &b.image(settings.width, settings.height), -0.5),
+            Companion::Lattice(_) => a,
+        }
+    }
+
+    /// The two sequences' images where the companion is a pair: their half difference is a
+    /// realisation of the image's noise.
+    fn pair_images(&self, settings: &RenderSettings) -> Option<(Image, Image)> {
+        let (w, h) = (settings.width, settings.height);
+        match &self.companion {
+            Companion::Pair(b) => Some((self.a.image(w, h), b.image(w, h))),
+            Companion::Lattice(_) => None,
+        }
+    }
+
+    /// The noise (RMSE over RGB) of the image now.
+    fn measure_noise(&self, settings: &RenderSettings) -> f64 {
+        let (w, h) = (settings.width, settings.height);
+        match &self.companion {
+            Companion::Pair(b) => noise_of_pair(&self.a.image(w, h), &b.image(w, h)),
+            Companion::Lattice(b) => self.a.whole_cycles_noise().unwrap_or_else(|| {
+                debug_assert_eq!(b.frames, self.a.frames);
+                let (lw, lh) = half_lattice_size(w, h);
+                noise_on_lattice(&self.a.image(w, h), &b.image(lw, lh))
+            }),
+        }
     }
 
     fn noise(&self) -> f64 {
         self.history.last().map_or(f64::INFINITY, |h| h.1)
     }
 
-    /// How the noise fell over the last two checks (samples per pixel, both sequences).
+    /// How the noise fell over the last two checks (in the image's samples per pixel).
     fn convergence(&self) -> Convergence {
         match self.history.as_slice() {
-            [.., a, b] => Convergence::of((2 * a.0, a.1), (2 * b.0, b.1)),
+            [.., a, b] => Convergence::of((self.spp_at(a.0), a.1), (self.spp_at(b.0), b.1)),
             [b] => Convergence {
-                frames: 2 * b.0,
+                frames: self.spp_at(b.0),
                 noise: b.1,
                 rate: 0.5,
             },
@@ -382,6 +563,13 @@ impl Pair {
             },
         }
     }
+}
+
+/// The noise (RMSE over RGB) of `image`, one sequence of frames, from `lattice`, an independent
+/// sequence of as many frames on its half-resolution lattice: their difference there has
+/// twice the variance of either.
+pub fn noise_on_lattice(image: &Image, lattice: &Image) -> f64 {
+    image.half_lattice().rmse(lattice) * std::f64::consts::FRAC_1_SQRT_2
 }
 
 /// Where a sequence that has `reached` frames and is predicted to need `wanted` stops next.
@@ -431,15 +619,17 @@ impl Run<'_> {
             .is_some_and(|b| self.started.elapsed() >= b)
     }
 
-    /// Extends both sequences of `pair` to `frames` frames each (or fewer when the time
-    /// budget runs out: whole chunks of one frame per sequence then) and records the noise.
-    fn extend(&mut self, pair: &mut Pair, frames: u32) -> Result<(), RenderError> {
-        let before = pair.a.frames;
-        while pair.a.frames < frames {
-            let mut count = frames - pair.a.frames;
+    /// Extends the image's sequence of `level` to `frames` frames (or fewer when the time
+    /// budget runs out: whole chunks of one frame then), and its companion where the noise
+    /// needs it, and records the noise.
+    fn extend(&mut self, level: &mut Level, frames: u32) -> Result<(), RenderError> {
+        let before = level.a.frames;
+        let companion_follows = level.needs_companion_at(frames);
+        while level.a.frames < frames {
+            let mut count = frames - level.a.frames;
             if let Some(budget) = self.target.time_budget {
-                if pair.a.frames == 0 {
-                    // A fresh pair's frame time is unknown: one frame a sequence measures it.
+                if level.a.frames == 0 {
+                    // A fresh level's frame time is unknown: one frame measures it.
                     count = 1;
                 } else {
                     // Chunks of at most half the time left, at the frame time measured so
@@ -447,28 +637,67 @@ impl Run<'_> {
                     // the budget by at most its share of that half, and the next one measures
                     // again.
                     let left = budget.saturating_sub(self.started.elapsed()).as_secs_f64();
-                    let pair_time = (2.0 * pair.frame_time()).max(1e-9);
-                    if left < pair_time {
+                    let step_time = level.step_time().max(1e-9);
+                    if left < step_time {
                         break;
                     }
-                    count = count.min(((0.5 * left / pair_time).floor() as u32).max(1));
+                    count = count.min(((0.5 * left / step_time).floor() as u32).max(1));
                 }
             }
+            count = count.min(level.a.chunk_room());
             let started = Instant::now();
-            for sequence in [&mut pair.a, &mut pair.b] {
-                let settings = self.at(pair.dt, sequence.seed);
-                let image = self
-                    .session
-                    .render_frames(&settings, sequence.frames, count)?;
-                sequence.add(&image, count);
+            let settings = self.at(level.dt, level.a.seed);
+            let image = self
+                .session
+                .render_frames(&settings, level.a.frames, count)?;
+            level.a.add(&image, count);
+            level.seconds += started.elapsed().as_secs_f64();
+            self.work += f64::from(count) * self.dt0 / level.dt;
+            if companion_follows {
+                self.extend_companion(level)?;
             }
-            pair.seconds += started.elapsed().as_secs_f64();
-            self.work += 2.0 * f64::from(count) * self.dt0 / pair.dt;
         }
-        if pair.a.frames > before || pair.history.is_empty() {
-            let (a, b) = pair.images(&self.settings);
-            pair.history.push((pair.a.frames, noise_of_pair(&a, &b)));
+        // A budget that stopped the sequence short of `frames` may need the companion where
+        // it did not follow.
+        if level.needs_companion_at(level.a.frames) {
+            self.extend_companion(level)?;
         }
+        if level.a.frames > before || level.history.is_empty() {
+            let noise = level.measure_noise(&self.settings);
+            level.history.push((level.a.frames, noise));
+        }
+        Ok(())
+    }
+
+    /// Brings the companion of `level` to as many frames as its image's sequence.
+    fn extend_companion(&mut self, level: &mut Level) -> Result<(), RenderError> {
+        let started = Instant::now();
+        let (to, dt) = (level.a.frames, level.dt);
+        let (sequence, on_lattice) = match &mut level.companion {
+            Companion::Pair(b) => (b, false),
+            Companion::Lattice(b) => (b, true),
+        };
+        if sequence.frames >= to {
+            return Ok(());
+        }
+        let count = to - sequence.frames;
+        let settings = self.at(dt, sequence.seed);
+        let (image, share) = if on_lattice {
+            let (w, h) = (settings.width, settings.height);
+            let (lw, lh) = half_lattice_size(w, h);
+            let image =
+                self.session
+                    .render_frames_on_half_lattice(&settings, sequence.frames, count)?;
+            (image, f64::from(lw * lh) / f64::from(w * h))
+        } else {
+            let image = self
+                .session
+                .render_frames(&settings, sequence.frames, count)?;
+            (image, 1.0)
+        };
+        sequence.add(&image, count);
+        level.seconds += started.elapsed().as_secs_f64();
+        self.work += share * f64::from(count) * self.dt0 / dt;
         Ok(())
     }
 
@@ -502,7 +731,13 @@ pub fn render_to_target(
     // all of them (the noise's rate of fall from the two). Two frames a sequence to start: a
     // loose target is then met by the finest level's own 4 samples, where 8 a sequence cost
     // 3.5 times the front's 4 (the study's 4-spp target).
-    let mut levels = [dt0, 2.0 * dt0, 4.0 * dt0].map(|dt| Pair::new(dt, seed));
+    // One stratified sequence and the lattice that measures its noise where its frames are
+    // stratified and the metric is RMSE; a pair of sequences otherwise.
+    let lattice = match target.metric {
+        ErrorMetric::Rmse => stratified_cycle(settings),
+        ErrorMetric::Flip => None,
+    };
+    let mut levels = [dt0, 2.0 * dt0, 4.0 * dt0].map(|dt| Level::new(dt, seed, lattice));
     let mut frames = CALIBRATION_FRAMES;
 
     // A loose target first: the coarser steps alone, and twice the default step chosen on
@@ -563,7 +798,7 @@ pub fn render_to_target(
         let bias = StepBias::calibrate(
             dt0,
             [&images[0], &images[1], &images[2]],
-            levels.each_ref().map(Pair::noise),
+            levels.each_ref().map(Level::noise),
         );
         // More calibration frames only while the noise hides whether four times the step
         // would meet the target, and while that costs little beside the frames the target
@@ -589,7 +824,7 @@ pub fn render_to_target(
         if !unclear
             || step_fixed
             || frames >= MAX_CALIBRATION_FRAMES
-            || 8.0 * f64::from(frames) > 0.125 * needed
+            || f64::from(levels[0].spp_at(4 * frames)) > 0.125 * needed
             || run.out_of_time()
         {
             break (bias, e_rmse);
@@ -613,14 +848,14 @@ pub fn render_to_target(
             continue;
         }
         let level = usize::try_from(j).ok().and_then(|j| levels.get(j));
-        let convergence = level.map_or(fine.convergence(), Pair::convergence);
-        let frame_time = level.map_or(fine.frame_time() * 2f64.powi(-j), Pair::frame_time);
+        let convergence = level.map_or(fine.convergence(), Level::convergence);
+        let frame_time = level.map_or(fine.frame_time() * 2f64.powi(-j), Level::frame_time);
         let b = bias.at(dt);
         // Twice dt0 on its estimated bias (the default step resolves the kernel with room to
         // spare: its doubling's bias stayed below 0.3 of the noise in every scene measured);
         // four times only where the bias is known to fit, noise and all.
         let b_choice = if j > 1 { bias.bound(dt) } else { b };
-        let held = level.map_or(0, Pair::spp);
+        let held = level.map_or(0, Level::spp);
         let (score, spp) = match (e_rmse, target.time_budget) {
             (Some(e), _) => {
                 if b_choice * b_choice > BIAS_SHARE * e * e {
@@ -669,15 +904,23 @@ pub fn render_to_target(
     let b = bias.at(dt);
     let [fine, middle, coarse] = levels;
     let bias_images = (middle.image(&run.settings), fine.image(&run.settings));
-    let pair = match j {
+    let mut level = match j {
         0 => fine,
         1 => middle,
         2 => coarse,
-        _ => Pair::new(dt, seed),
+        _ => Level::new(dt, seed, lattice),
     };
+    // Past its first mask cycle one sequence of whole cycles is no less noisy than two of
+    // half as many, so a sequence predicted to need more than one cycle gains nothing from the
+    // lattice and would pay it for its first cycle: a pair measures its noise instead.
+    if let Some(d) = lattice
+        && level.frames_for(spp) > d
+    {
+        level.measure_by_pair(seed);
+    }
     finish(
         &mut run,
-        pair,
+        level,
         spp,
         Chosen {
             bias,
@@ -699,11 +942,11 @@ struct Chosen {
     calibration: Duration,
 }
 
-/// Renders `pair` from `spp` samples on, checking the estimate and going on while it falls
+/// Renders `level` from `spp` samples on, checking the estimate and going on while it falls
 /// short of the target.
 fn finish(
     run: &mut Run<'_>,
-    mut pair: Pair,
+    mut level: Level,
     mut spp: f64,
     chosen: Chosen,
 ) -> Result<Targeted, RenderError> {
@@ -714,15 +957,15 @@ fn finish(
         calibration,
     } = chosen;
     let target = run.target;
-    let dt = pair.dt;
+    let dt = level.dt;
     // Render, check, and go on while the estimate falls short.
     let spinner = crate::progress::spinner("rendering to the target");
     // Whether the sequences stop only at the ends of mask cycles (see `stop_at`).
     let mut cycle = mask_cycle(&run.settings);
     loop {
-        let before = pair.a.frames;
-        let mut frames = stop_at((spp / 2.0).ceil() as u32, before, cycle)
-            .clamp(1, target.max_spp / 2)
+        let before = level.a.frames;
+        let mut frames = stop_at(level.frames_for(spp), before, cycle)
+            .clamp(1, target.max_spp / level.spp_at(1))
             .max(before);
         // Past the first cycle a budget starts only the cycles that fit in the time left: an
         // incomplete one would make the image worse, not better.
@@ -731,19 +974,21 @@ fn finish(
             && before >= d
         {
             let left = budget.saturating_sub(run.started.elapsed()).as_secs_f64();
-            let cycles = (left / (2.0 * f64::from(d) * pair.frame_time()).max(1e-9)).floor();
+            let cycles = (left / (f64::from(d) * level.step_time()).max(1e-9)).floor();
             frames = frames.min(before + d * cycles.min(f64::from(u32::MAX / d)) as u32);
             no_cycle_fits = frames == before;
         }
-        run.extend(&mut pair, frames)?;
-        let image = pair.image(&run.settings);
-        let noise = pair.noise();
+        run.extend(&mut level, frames)?;
+        let image = level.image(&run.settings);
+        let noise = level.noise();
         let estimate = match target.metric {
             ErrorMetric::Rmse => noise.hypot(b),
             ErrorMetric::Flip => {
                 // One realisation of the noise ((A - B) / 2) and of the bias (the calibration
                 // difference from dt0 to 2 dt0, scaled to the bias at this step) added.
-                let (a, bb) = pair.images(&run.settings);
+                let (a, bb) = level
+                    .pair_images(&run.settings)
+                    .expect("FLIP targets measure their noise by a pair");
                 let scale = b / bias_images.0.rmse(&bias_images.1).max(1e-30);
                 let disturbed =
                     image
@@ -754,17 +999,17 @@ fn finish(
         };
         spinner.set_message(format!(
             "{} spp at step {dt:.3e}: estimated error {estimate:.3e}{}",
-            pair.spp(),
+            level.spp(),
             target
                 .error
                 .map_or(String::new(), |e| format!(" (target {e:.3e})"))
         ));
         let met = target.error.is_none_or(|e| estimate <= e);
-        let reached = pair.a.frames;
+        let reached = level.a.frames;
         // Where completing the first cycle brought the noise down no faster than independent
         // samples would (the integrator draws most of its numbers from white noise, as delta
         // tracking does), whole cycles buy nothing: stop anywhere from here.
-        if let (Some(d), [.., earlier, now]) = (cycle, pair.history.as_slice())
+        if let (Some(d), [.., earlier, now]) = (cycle, level.history.as_slice())
             && now.0 == d
             && earlier.0 < d
             && Convergence::of(*earlier, *now).rate < STRATIFIED_RATE
@@ -776,7 +1021,7 @@ fn finish(
         );
         let finished = (target.error.is_some() && met)
             || run.out_of_time()
-            || 2 * reached >= target.max_spp
+            || level.spp() >= target.max_spp
             || reached < frames
             || no_cycle_fits;
         if finished {
@@ -784,11 +1029,11 @@ fn finish(
             return Ok(Targeted {
                 image,
                 step_size: dt,
-                spp: pair.spp(),
+                spp: level.spp(),
                 estimate,
                 noise_rmse: noise,
                 bias,
-                convergence: pair.convergence(),
+                convergence: level.convergence(),
                 met,
                 elapsed: run.started.elapsed(),
                 calibration,
@@ -797,14 +1042,14 @@ fn finish(
         }
         // Short: predict again from the noise measured now (a budget alone renders on until
         // the time is spent). At whole mask cycles the noise falls as N^-1/2 from here.
-        let now = f64::from(pair.spp());
+        let now = f64::from(level.spp());
         let convergence = match cycle {
             Some(d) if reached >= d && reached.is_multiple_of(d) => Convergence {
-                frames: pair.spp(),
+                frames: level.spp(),
                 noise,
                 rate: 0.5,
             },
-            _ => pair.convergence(),
+            _ => level.convergence(),
         };
         let predicted = match (target.error, target.metric) {
             (Some(e), ErrorMetric::Rmse) => {
@@ -822,17 +1067,19 @@ fn finish(
     }
 }
 
-/// RMSE per unit of the target's metric, from a calibration pair's noise (FLIP grows about
+/// RMSE per unit of the target's metric, from a calibration level's noise (FLIP grows about
 /// linearly with small errors).
-fn rmse_per_unit(metric: ErrorMetric, pair: &Pair, settings: &RenderSettings) -> f64 {
+fn rmse_per_unit(metric: ErrorMetric, level: &Level, settings: &RenderSettings) -> f64 {
     match metric {
         ErrorMetric::Rmse => 1.0,
         ErrorMetric::Flip => {
-            let (a, b) = pair.images(settings);
-            let image = pair.image(settings);
+            let (a, b) = level
+                .pair_images(settings)
+                .expect("FLIP targets measure their noise by a pair");
+            let image = level.image(settings);
             let flip = image.flip(&image.offset_by(&a, &b, 0.5));
-            if flip > 0.0 && pair.noise().is_finite() {
-                pair.noise() / flip
+            if flip > 0.0 && level.noise().is_finite() {
+                level.noise() / flip
             } else {
                 1.0
             }
@@ -911,6 +1158,80 @@ mod tests {
         // Rates outside what sampling gives are clamped.
         assert_eq!(Convergence::of((4, 0.1), (16, 0.001)).rate, 1.0);
         assert_eq!(Convergence::of((4, 0.1), (16, 0.2)).rate, 0.5);
+    }
+
+    /// A pixel value with Gaussian noise of standard deviation `sigma` (Box-Muller).
+    fn noisy(rng: &mut rand_pcg::Pcg64, value: f64, sigma: f64) -> f32 {
+        use rand::Rng;
+        let (u, v): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+        (value + sigma * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()) as f32
+    }
+
+    fn noisy_image(rng: &mut rand_pcg::Pcg64, w: u32, h: u32, sigma: f64) -> Image {
+        Image {
+            width: w,
+            height: h,
+            pixels: (0..w * h)
+                .map(|k| {
+                    // A smooth picture under the noise.
+                    let v = 0.5 + 0.3 * (f64::from(k % w) * 0.1).sin();
+                    [0, 1, 2, 3].map(|c| if c == 3 { 1.0 } else { noisy(rng, v, sigma) })
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn whole_cycles_measure_the_noise_of_their_mean() {
+        use rand::SeedableRng;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        let (w, h, d, sigma) = (61, 47, 4, 0.02);
+        let mut sequence = Sequence::with_cycles(1, d);
+        assert_eq!(sequence.chunk_room(), d);
+        for k in 1..=6u32 {
+            // Each cycle's mean carries independent noise of `sigma`, in chunks of 3 and 1
+            // frames whose own noise cancels over the cycle (stratified frames).
+            let cycle = noisy_image(&mut rng, w, h, sigma);
+            let spread = noisy_image(&mut rng, w, h, 0.3);
+            let first = cycle.offset_by(&spread, &cycle, 1.0 / 3.0);
+            let last = cycle.offset_by(&spread, &cycle, -1.0);
+            sequence.add(&first, 3);
+            assert_eq!(sequence.chunk_room(), 1);
+            assert_eq!(sequence.whole_cycles_noise(), None, "within a cycle");
+            sequence.add(&last, 1);
+            let noise = sequence.whole_cycles_noise();
+            if k < 2 {
+                assert_eq!(noise, None, "one cycle has no spread");
+                continue;
+            }
+            let want = sigma / f64::from(k).sqrt();
+            let noise = noise.expect("whole cycles");
+            assert!(
+                (noise / want - 1.0).abs() < 0.05,
+                "{k} cycles: {noise:.4e}, want {want:.4e}"
+            );
+        }
+        // A sequence that keeps no cycles measures nothing by them.
+        let mut plain = Sequence::new(1);
+        plain.add(&noisy_image(&mut rng, w, h, sigma), 8);
+        assert_eq!(plain.whole_cycles_noise(), None);
+    }
+
+    #[test]
+    fn the_lattice_measures_the_noise_of_the_whole_image() {
+        use rand::SeedableRng;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        for (w, h) in [(96, 64), (97, 33)] {
+            let sigma = 0.01;
+            let image = noisy_image(&mut rng, w, h, sigma);
+            // The lattice's own sequence: the same picture at the even pixels, its own noise.
+            let independent = noisy_image(&mut rng, w, h, sigma).half_lattice();
+            let estimate = noise_on_lattice(&image, &independent);
+            assert!(
+                (estimate / sigma - 1.0).abs() < 0.1,
+                "{w}x{h}: {estimate:.4e}"
+            );
+        }
     }
 
     #[test]

@@ -40,6 +40,15 @@ pub(crate) fn mask_cycle(settings: &RenderSettings) -> Option<u32> {
     }
 }
 
+/// The frames of one mask cycle where `settings`' frames are stratified over it (blue noise,
+/// and an integrator that draws its numbers from it: not delta tracking, which draws most of
+/// its numbers from white noise); `None` where its frames are as good as independent.
+pub(crate) fn stratified_cycle(settings: &RenderSettings) -> Option<u32> {
+    let cycle = mask_cycle(settings)?;
+    (settings.integrator != Integrator::Delta && cycle >= 4 && cycle.is_multiple_of(4))
+        .then_some(cycle)
+}
+
 /// The combination of one accumulation's whole mask cycles and its incomplete one (see the
 /// module's text). It holds the means read back at the frames [`wants_mean_at`] names.
 ///
@@ -60,10 +69,7 @@ impl CycleWeights {
     /// The weights of an accumulation of `settings`: `None` where its frames are not
     /// stratified over a mask cycle and the plain mean is the image.
     pub(crate) fn of(settings: &RenderSettings) -> Option<CycleWeights> {
-        let cycle = mask_cycle(settings)?;
-        if settings.integrator == Integrator::Delta || cycle < 4 || !cycle.is_multiple_of(4) {
-            return None;
-        }
+        let cycle = stratified_cycle(settings)?;
         Some(CycleWeights {
             cycle,
             whole: None,

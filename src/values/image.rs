@@ -92,6 +92,20 @@ impl Image {
         }
     }
 
+    /// The pixels of the half-resolution lattice (every other pixel in x and in y, from the
+    /// first: what [`crate::values::FrameParams::on_half_lattice`] renders).
+    pub fn half_lattice(&self) -> Image {
+        let (w, h) = crate::values::frame::half_lattice_size(self.width, self.height);
+        let pixels = (0..h)
+            .flat_map(|j| (0..w).map(move |i| self.pixels[(2 * j * self.width + 2 * i) as usize]))
+            .collect();
+        Image {
+            width: w,
+            height: h,
+            pixels,
+        }
+    }
+
     /// Root-mean-square difference over RGB.
     pub fn rmse(&self, other: &Image) -> f64 {
         assert_eq!((self.width, self.height), (other.width, other.height));
@@ -145,6 +159,33 @@ impl Image {
             width: self.width,
             height: self.height,
             pixels,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_half_lattice_is_every_other_pixel_from_the_first() {
+        for (w, h) in [(5u32, 3u32), (4, 4), (1, 1), (2, 7)] {
+            let image = Image {
+                width: w,
+                height: h,
+                pixels: (0..w * h)
+                    .map(|k| [(k % w) as f32, (k / w) as f32, 0.0, 1.0])
+                    .collect(),
+            };
+            let lattice = image.half_lattice();
+            assert_eq!(
+                (lattice.width, lattice.height),
+                (w.div_ceil(2), h.div_ceil(2))
+            );
+            for (k, p) in lattice.pixels.iter().enumerate() {
+                let (i, j) = (k as u32 % lattice.width, k as u32 / lattice.width);
+                assert_eq!(p[..2], [(2 * i) as f32, (2 * j) as f32], "{w}x{h}");
+            }
         }
     }
 }

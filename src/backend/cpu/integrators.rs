@@ -612,6 +612,34 @@ mod tests {
         }
     }
 
+    #[test]
+    fn the_half_lattice_looks_along_the_full_images_even_pixels_rays() {
+        for (w, h) in [(7, 5), (8, 6), (1, 1), (3, 10), (640, 361)] {
+            let mut full = params(Integrator::Ea, 1, 0.1, 1.0);
+            let camera = Camera {
+                eye: DVec3::new(0.3, -1.0, 5.0),
+                at: DVec3::new(0.1, 0.2, 0.0),
+                up: DVec3::new(0.1, 1.0, 0.0),
+                fovy: 37.0,
+            };
+            (full.width, full.height) = (w, h);
+            full.camera = camera.frame(w, h).unwrap();
+            let lattice = full.clone().on_half_lattice();
+            assert_eq!(
+                (lattice.width, lattice.height),
+                (w.div_ceil(2), h.div_ceil(2))
+            );
+            for j in 0..lattice.height {
+                for i in 0..lattice.width {
+                    let (o, d) = lattice.primary_ray(i, j);
+                    let (fo, fd) = full.primary_ray(2 * i, 2 * j);
+                    assert_eq!(o, fo);
+                    assert!((d - fd).length() < 1e-12, "{w}x{h} ({i}, {j}): {d} vs {fd}");
+                }
+            }
+        }
+    }
+
     fn mean_pixel(
         p: &mut FrameParams,
         field: &impl FieldSampler,
