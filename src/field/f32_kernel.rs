@@ -2,15 +2,18 @@
 //! particles at a time in f32, with a polynomial exponential. Written once as plain lane
 //! arithmetic over `[f32; 8]` and compiled twice: for the baseline x86-64 target (SSE2, and
 //! any other architecture) and, chosen at run time when the CPU has them, with AVX2 and FMA
-//! enabled, where the compiler turns each eight-lane step into one 256-bit instruction. Rust
-//! never contracts `a * b + c` into a fused multiply-add on its own, so both builds do the same
-//! roundings: their results are equal bit for bit (tested), and the choice is speed only.
+//! enabled, where the compiler turns each eight-lane step into one 256-bit instruction. The
+//! point kernel's AVX2 twin (`sums_avx2`) is written in `core::arch` intrinsics instead, to
+//! fuse its multiply-adds: Rust never contracts `a * b + c` on its own, and the vectoriser
+//! packed `f32::mul_add` lanes four wide (docs/benchmarks.md). Its results therefore differ
+//! from the baseline build's by their roundings (1.5e-8 at most on a test image, tested to
+//! 1e-6); the packet kernel's two builds stay equal bit for bit.
 //!
 //! Why this and not a SIMD crate: `wide` selects its instructions when the crate is compiled
 //! (this project builds for baseline x86-64, where its `f32x8` is two SSE halves), `pulp` and
 //! `multiversion` add dispatch machinery for one kernel; the kernel here is 40 lines of lane
-//! arithmetic the compiler vectorises, and a `#[target_feature]` twin of it is the whole
-//! dispatch. `benches/cpu_roofline.rs` measures both builds against the machine's peak.
+//! arithmetic, and a `#[target_feature]` twin of it is the whole dispatch.
+//! `benches/cpu_roofline.rs` measures both builds against the machine's peak.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -20,7 +23,8 @@ pub const LANES: usize = 8;
 static SIMD_ALLOWED: AtomicBool = AtomicBool::new(true);
 
 /// Allows or forbids the AVX2 build of the kernel (tests and benchmarks force the baseline
-/// build with `false`; the results are the same bit for bit, only slower).
+/// build with `false`; the results agree to the AVX2 point kernel's fused roundings, only
+/// slower).
 pub fn allow_simd(allowed: bool) {
     SIMD_ALLOWED.store(allowed, Ordering::Relaxed);
 }
@@ -290,7 +294,93 @@ unsafe fn sums_avx2<const C: usize>(
     runs: &[(u32, u32)],
     q: [f32; 3],
 ) -> (f64, [f64; 3]) {
-    sums_lanes::<C>(p, runs, q)
+    use core::arch::x86_64::*;
+    let (qx, qy, qz) = (
+        _mm256_set1_ps(q[0]),
+        _mm256_set1_ps(q[1]),
+        _mm256_set1_ps(q[2]),
+    );
+    let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let mut phi = _mm256_setzero_ps();
+    let mut num = [_mm256_setzero_ps(); 3];
+    for &(a, b) in runs {
+        let (mut at, b) = (a as usize, b as usize);
+        assert!(b + LANES <= p.x.len(), "runs within the padded particles");
+        while at < b {
+            let valid = (b - at).min(LANES) as i32;
+            let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(valid), iota));
+            let base = at;
+            // SAFETY: at < b and b + LANES <= len (asserted): eight floats from `at` are in
+            // every array (all have the length of `x`).
+            // A read through a packed (align 1) struct is an unaligned load with no check in
+            // builds with debug assertions (`_mm256_loadu_ps` is a `copy_nonoverlapping`,
+            // which checks its arguments there: the kernel ran at half speed in `checked`).
+            macro_rules! load {
+                ($v:expr) => {
+                    unsafe { (*($v.as_ptr().add(base) as *const Unaligned)).0 }
+                };
+            }
+            let dx = _mm256_sub_ps(load!(p.x), qx);
+            let dy = _mm256_sub_ps(load!(p.y), qy);
+            let dz = _mm256_sub_ps(load!(p.z), qz);
+            let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
+            let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, load!(p.r2)), live);
+            at += LANES;
+            if _mm256_movemask_ps(reached) == 0 {
+                continue;
+            }
+            let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), load!(p.k)), d2);
+            let term = _mm256_and_ps(_mm256_mul_ps(load!(p.w), exp_neg_avx2(x)), reached);
+            phi = _mm256_add_ps(phi, term);
+            for (ch, acc) in num.iter_mut().enumerate().take(C) {
+                *acc = _mm256_fmadd_ps(load!(p.theta[ch]), term, *acc);
+            }
+        }
+    }
+    let mut lanes = [[0f32; LANES]; 4];
+    // SAFETY: each row holds eight floats.
+    unsafe {
+        _mm256_storeu_ps(lanes[0].as_mut_ptr(), phi);
+        for ch in 0..C {
+            _mm256_storeu_ps(lanes[ch + 1].as_mut_ptr(), num[ch]);
+        }
+    }
+    let total = |v: &[f32; LANES]| v.iter().map(|&x| f64::from(x)).sum::<f64>();
+    let mut theta = [0.0; 3];
+    for (ch, t) in theta.iter_mut().enumerate().take(C) {
+        *t = total(&lanes[ch + 1]);
+    }
+    (total(&lanes[0]), theta)
+}
+
+/// Eight floats at any address.
+#[cfg(target_arch = "x86_64")]
+#[repr(C, packed)]
+struct Unaligned(core::arch::x86_64::__m256);
+
+/// [`exp_neg`] on eight lanes with fused multiply-adds.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn exp_neg_avx2(x: core::arch::x86_64::__m256) -> core::arch::x86_64::__m256 {
+    use core::arch::x86_64::*;
+    let c = _mm256_set1_ps;
+    let x = _mm256_max_ps(x, c(-87.0));
+    let round = c(12_582_912.0);
+    let shifted = _mm256_fmadd_ps(x, c(std::f32::consts::LOG2_E), round);
+    let n = _mm256_sub_ps(shifted, round);
+    let r = _mm256_fnmadd_ps(n, c(0.693_359_4), x);
+    let r = _mm256_fnmadd_ps(n, c(-2.121_944_4e-4), r);
+    let mut p = c(1.987_569_1e-4);
+    p = _mm256_fmadd_ps(p, r, c(1.398_199_9e-3));
+    p = _mm256_fmadd_ps(p, r, c(8.333_452e-3));
+    p = _mm256_fmadd_ps(p, r, c(4.166_579_6e-2));
+    p = _mm256_fmadd_ps(p, r, c(1.666_666_5e-1));
+    p = _mm256_fmadd_ps(p, r, c(0.5));
+    let e = _mm256_add_ps(_mm256_fmadd_ps(p, _mm256_mul_ps(r, r), r), c(1.0));
+    let n_int = _mm256_sub_epi32(_mm256_castps_si256(shifted), _mm256_castps_si256(round));
+    let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(n_int, _mm256_set1_epi32(127)));
+    _mm256_mul_ps(e, _mm256_castsi256_ps(scale))
 }
 
 /// The kernel, in lanes: the baseline build, and the body of the AVX2 one. A run's last
@@ -367,6 +457,55 @@ fn chunk<const C: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_avx2_point_kernel_agrees_with_the_lanes_to_their_roundings() {
+        if !simd_in_use() {
+            // The dispatch test (tests/cpu_f32.rs) holds `simd_in_use` to the CPU's features.
+            return;
+        }
+        // Particles around the origin, some out of reach; runs of awkward lengths.
+        let mut p = Packed {
+            channels: 3,
+            ..Packed::default()
+        };
+        let mut state = 12345u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for _ in 0..203 {
+            let r: f32 = 0.2 + 0.3 * next();
+            p.x.push(next() - 0.5);
+            p.y.push(next() - 0.5);
+            p.z.push(next() - 0.5);
+            p.r2.push(r * r);
+            p.k.push(4.5 / (r * r));
+            p.w.push(0.5 + next());
+            for ch in 0..3 {
+                p.theta[ch].push(next());
+            }
+        }
+        p.pad();
+        let runs = [(0u32, 13u32), (20, 21), (40, 203), (100, 108)];
+        for _ in 0..50 {
+            let q = [next() - 0.5, next() - 0.5, next() - 0.5].map(|v| 0.6 * v);
+            // SAFETY: `simd_in_use` checked the CPU's features above.
+            let fast = unsafe { sums_avx2::<3>(&p, &runs, q) };
+            let lanes = sums_lanes::<3>(&p, &runs, q);
+            assert!(lanes.0 > 0.0);
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1e-3);
+            assert!(close(fast.0, lanes.0), "phi {} vs {}", fast.0, lanes.0);
+            for ch in 0..3 {
+                assert!(
+                    close(fast.1[ch], lanes.1[ch]),
+                    "{ch}: {:?} vs {:?}",
+                    fast,
+                    lanes
+                );
+            }
+        }
+    }
 
     #[test]
     fn exp_neg_is_within_its_stated_error() {
