@@ -259,9 +259,9 @@ proptest! {
     }
 }
 
-/// The AVX2 build of the kernel and the baseline one give the same field and the same image,
-/// bit for bit (the dispatch forced off for the second), and the AVX2 build is the one used
-/// where the CPU has it.
+/// The AVX2 build of the kernel and the baseline one give the same image to their roundings
+/// (the dispatch forced off for the second; bit for bit where both are the baseline build),
+/// and the AVX2 build is the one used where the CPU has it.
 #[test]
 fn simd_and_baseline_builds_agree_to_their_roundings() {
     #[cfg(target_arch = "x86_64")]

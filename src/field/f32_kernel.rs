@@ -44,6 +44,23 @@ fn avx2_available() -> bool {
     false
 }
 
+/// The exponential's constants, one definition for its two builds ([`exp_neg`] and the AVX2
+/// point kernel's): the least input, 1.5 · 2^23 (adding it rounds to an integer, to nearest,
+/// ties to even, in the low bits), ln 2 in two parts (Cody–Waite) and Cephes' `expf`
+/// polynomial, highest degree first.
+const EXP_MIN: f32 = -87.0;
+const EXP_ROUND: f32 = 12_582_912.0;
+const LN2_HI: f32 = 0.693_359_4;
+const LN2_LO: f32 = -2.121_944_4e-4;
+const EXP_POLY: [f32; 6] = [
+    1.987_569_1e-4,
+    1.398_199_9e-3,
+    8.333_452e-3,
+    4.166_579_6e-2,
+    1.666_666_5e-1,
+    0.5,
+];
+
 /// `exp(x)` for `x <= 0` in f32, as a polynomial: Cody–Waite reduction to `r` in
 /// `[-ln 2 / 2, ln 2 / 2]` and Cephes' `expf` minimax polynomial, scaled by `2^n` built in the
 /// exponent bits. Relative error below 2.5e-7 (2 ulp) over the kernel's range `[-4.5, 0]` and
@@ -51,24 +68,17 @@ fn avx2_available() -> bool {
 /// they lie outside every particle's radius).
 #[inline(always)]
 pub fn exp_neg(x: f32) -> f32 {
-    const LOG2E: f32 = std::f32::consts::LOG2_E;
-    // 1.5 · 2^23: adding it rounds to an integer (to nearest, ties to even) in the low bits.
-    const ROUND: f32 = 12_582_912.0;
-    const LN2_HI: f32 = 0.693_359_4;
-    const LN2_LO: f32 = -2.121_944_4e-4;
-    let x = if x > -87.0 { x } else { -87.0 };
-    let shifted = x * LOG2E + ROUND;
-    let n = shifted - ROUND;
+    let x = if x > EXP_MIN { x } else { EXP_MIN };
+    let shifted = x * std::f32::consts::LOG2_E + EXP_ROUND;
+    let n = shifted - EXP_ROUND;
     let r = x - n * LN2_HI - n * LN2_LO;
-    let mut p = 1.987_569_1e-4f32;
-    p = p * r + 1.398_199_9e-3;
-    p = p * r + 8.333_452e-3;
-    p = p * r + 4.166_579_6e-2;
-    p = p * r + 1.666_666_5e-1;
-    p = p * r + 0.5;
+    let mut p = EXP_POLY[0];
+    for c in &EXP_POLY[1..] {
+        p = p * r + c;
+    }
     let e = p * (r * r) + r + 1.0;
     // n in [-126, 0]: 2^n is a normal f32 with biased exponent n + 127.
-    let n_int = shifted.to_bits().wrapping_sub(ROUND.to_bits()) as i32;
+    let n_int = shifted.to_bits().wrapping_sub(EXP_ROUND.to_bits()) as i32;
     // Wrapping: an overflow check would stop the compiler vectorising the lanes (n + 127 is
     // in [1, 127] anyway).
     e * f32::from_bits((n_int.wrapping_add(127) as u32).wrapping_shl(23))
@@ -303,15 +313,23 @@ unsafe fn sums_avx2<const C: usize>(
     let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let mut phi = _mm256_setzero_ps();
     let mut num = [_mm256_setzero_ps(); 3];
+    // The loads below read eight floats from every array the kernel uses: all of them must
+    // hold each run and its padding (checked once, on the shortest).
+    let len = [&p.x, &p.y, &p.z, &p.r2, &p.k, &p.w]
+        .into_iter()
+        .chain(&p.theta[..C])
+        .map(Vec::len)
+        .min()
+        .unwrap_or(0);
     for &(a, b) in runs {
         let (mut at, b) = (a as usize, b as usize);
-        assert!(b + LANES <= p.x.len(), "runs within the padded particles");
+        assert!(b + LANES <= len, "runs within the padded particles");
         while at < b {
             let valid = (b - at).min(LANES) as i32;
             let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(valid), iota));
             let base = at;
             // SAFETY: at < b and b + LANES <= len (asserted): eight floats from `at` are in
-            // every array (all have the length of `x`).
+            // every array read.
             // A read through a packed (align 1) struct is an unaligned load with no check in
             // builds with debug assertions (`_mm256_loadu_ps` is a `copy_nonoverlapping`,
             // which checks its arguments there: the kernel ran at half speed in `checked`).
@@ -365,25 +383,23 @@ struct Unaligned(core::arch::x86_64::__m256);
 fn exp_neg_avx2(x: core::arch::x86_64::__m256) -> core::arch::x86_64::__m256 {
     use core::arch::x86_64::*;
     let c = _mm256_set1_ps;
-    let x = _mm256_max_ps(x, c(-87.0));
-    let round = c(12_582_912.0);
+    let x = _mm256_max_ps(x, c(EXP_MIN));
+    let round = c(EXP_ROUND);
     let shifted = _mm256_fmadd_ps(x, c(std::f32::consts::LOG2_E), round);
     let n = _mm256_sub_ps(shifted, round);
-    let r = _mm256_fnmadd_ps(n, c(0.693_359_4), x);
-    let r = _mm256_fnmadd_ps(n, c(-2.121_944_4e-4), r);
-    let mut p = c(1.987_569_1e-4);
-    p = _mm256_fmadd_ps(p, r, c(1.398_199_9e-3));
-    p = _mm256_fmadd_ps(p, r, c(8.333_452e-3));
-    p = _mm256_fmadd_ps(p, r, c(4.166_579_6e-2));
-    p = _mm256_fmadd_ps(p, r, c(1.666_666_5e-1));
-    p = _mm256_fmadd_ps(p, r, c(0.5));
+    let r = _mm256_fnmadd_ps(n, c(LN2_HI), x);
+    let r = _mm256_fnmadd_ps(n, c(LN2_LO), r);
+    let mut p = c(EXP_POLY[0]);
+    for &k in &EXP_POLY[1..] {
+        p = _mm256_fmadd_ps(p, r, c(k));
+    }
     let e = _mm256_add_ps(_mm256_fmadd_ps(p, _mm256_mul_ps(r, r), r), c(1.0));
     let n_int = _mm256_sub_epi32(_mm256_castps_si256(shifted), _mm256_castps_si256(round));
     let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(n_int, _mm256_set1_epi32(127)));
     _mm256_mul_ps(e, _mm256_castsi256_ps(scale))
 }
 
-/// The kernel, in lanes: the baseline build, and the body of the AVX2 one. A run's last
+/// The kernel, in lanes: the baseline build (the AVX2 one is `sums_avx2`). A run's last
 /// chunk reads past its end (into the next particles, or the padding) and masks those lanes.
 /// Masks are all-ones or zero lanes of `u32`, as vector compares make them, so the compiler
 /// keeps them in vector registers (a `[bool; 8]` became shuffles and scalar bit tests: the

@@ -465,9 +465,11 @@ impl Level {
 
     /// From now on, the noise is measured by a second sequence of the whole image (rendered
     /// from its first frame at the next extension) instead of the lattice.
-    fn measure_by_pair(&mut self, seed: u32) {
+    fn measure_by_pair(&mut self) {
         if matches!(self.companion, Companion::Lattice(_)) {
-            self.companion = Companion::Pair(Sequence::new(seed ^ SECOND_SEED));
+            self.companion = Companion::Pair(Sequence::new(self.a.seed ^ SECOND_SEED));
+            // A pair needs no whole cycles' spread (nor chunks cut at cycle ends).
+            self.a.cycles = None;
             // The noise so far was of one sequence, not of a pair's mean.
             self.history.clear();
         }
@@ -916,7 +918,7 @@ pub fn render_to_target(
     if let Some(d) = lattice
         && level.frames_for(spp) > d
     {
-        level.measure_by_pair(seed);
+        level.measure_by_pair();
     }
     finish(
         &mut run,
