@@ -709,3 +709,102 @@ fn render_sequences_resume_orbit_and_write_images_with_alpha() {
     ]);
     assert!(e.contains("8 or 16"), "{e}");
 }
+
+/// `aarbf bench playback` as a user runs it on a series post-processing wrote: CSV steps with
+/// 17 significant digits, far from the origin, a different (awkward) count in each step. The
+/// CSV has a row per step and stage with the step's own count; the summary names the data,
+/// the steps played, the rate, the floors and the peak memory; a range beyond the series is
+/// refused, naming it; results are not overwritten without `--force`.
+#[test]
+fn bench_playback_reports_every_step_and_stage_of_a_series_as_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("run");
+    std::fs::create_dir(&data).unwrap();
+    let counts = [301usize, 257, 419];
+    for (k, &n) in counts.iter().enumerate() {
+        let mut text = String::from("x,y,z,temperature\n");
+        for i in 0..n {
+            let u = (i as f64 + 0.5) / n as f64;
+            let (x, y, z) = (
+                4.0e5 + 0.731 * (u * 37.0).sin() + 0.01 * k as f64,
+                -2.5e5 + 0.617 * (u * 53.0).cos(),
+                1.0e5 + 0.9 * u,
+            );
+            text += &format!("{x:.17e},{y:.17e},{z:.17e},{:.17e}\n", 300.0 + 50.0 * u);
+        }
+        std::fs::write(data.join(format!("step_{k}.csv")), text).unwrap();
+    }
+    let out = dir.path().join("pb");
+    let play = |extra: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "playback",
+            "--data",
+            s(&data),
+            "--attribute",
+            "temperature",
+            "--backend",
+            "cpu",
+            "--size",
+            "24x18",
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    let args = play(&[]);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+
+    let csv = std::fs::read_to_string(out.join("playback.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("step,particles,bytes,stage,seconds"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let stages: Vec<&str> = rows.iter().filter(|r| r[0] == "0").map(|r| r[3]).collect();
+    for stage in ["read+decode", "prepare (cpu)", "build", "frame"] {
+        assert!(stages.contains(&stage), "stage {stage} missing: {stages:?}");
+    }
+    for (k, &n) in counts.iter().enumerate() {
+        let of_step: Vec<_> = rows.iter().filter(|r| r[0] == k.to_string()).collect();
+        assert_eq!(of_step.len(), stages.len(), "step {k}: {of_step:?}");
+        for r in of_step {
+            assert_eq!(r[1], n.to_string(), "step {k}'s count: {r:?}");
+            let seconds: f64 = r[4].parse().unwrap();
+            assert!(seconds.is_finite() && seconds >= 0.0, "{r:?}");
+        }
+    }
+    assert_eq!(rows.len(), counts.len() * stages.len(), "{csv}");
+    // A frame was drawn for every step (the stage is never free).
+    assert!(
+        rows.iter()
+            .filter(|r| r[3] == "frame")
+            .all(|r| r[4].parse::<f64>().unwrap() > 0.0)
+    );
+
+    let md = std::fs::read_to_string(out.join("playback.md")).unwrap();
+    assert!(
+        md.starts_with(&format!("# Playback: {}\n", data.display())),
+        "{md}"
+    );
+    assert!(md.contains("3 steps of up to 419 particles"), "{md}");
+    assert!(md.contains("steps/s over steps"), "{md}");
+    assert!(md.contains("copying the step's bytes in memory"), "{md}");
+    assert!(md.contains("Peak resident memory"), "{md}");
+
+    // The results are there: not overwritten without --force, then a sub-range with it.
+    let again = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(again.contains("playback"), "{again}");
+    let args = play(&["--steps", "1..3", "--force"]);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let csv = std::fs::read_to_string(out.join("playback.csv")).unwrap();
+    let played: std::collections::BTreeSet<&str> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(played.into_iter().collect::<Vec<_>>(), ["1", "2"]);
+
+    let args = play(&["--steps", "2..9", "--force"]);
+    let err = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(err.contains("2..9") && err.contains("3 steps"), "{err}");
+}

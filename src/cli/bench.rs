@@ -402,7 +402,16 @@ fn summarise(s: &Summary<'_>) -> String {
     let steady_total: f64 = steady.iter().map(|t| t.total).sum();
     let mib = |b: usize| b as f64 / 1048576.0;
     let max_step = s.series.steps().iter().map(|i| i.bytes).max().unwrap_or(0);
-    let _ = writeln!(out, "# Playback: {}\n", s.series.steps()[0].name);
+    // The data as the user named it (a step's own name, e.g. `0000`, says nothing).
+    let source = [&s.args.data.data, &s.args.data.scene]
+        .into_iter()
+        .flatten()
+        .next()
+        .map_or_else(
+            || s.series.steps()[0].name.clone(),
+            |p| p.display().to_string(),
+        );
+    let _ = writeln!(out, "# Playback: {source}\n");
     let _ = writeln!(
         out,
         "{n} steps of up to {} particles ({:.1} MiB per step in memory), {}x{} at {} spp, \
