@@ -788,6 +788,8 @@ fn bench_playback_reports_every_step_and_stage_of_a_series_as_written() {
     );
     assert!(md.contains("3 steps of up to 419 particles"), "{md}");
     assert!(md.contains("steps/s over steps"), "{md}");
+    assert!(md.contains("- opening the series for playback: "), "{md}");
+    assert!(md.contains("with the settings taken from the data"), "{md}");
     assert!(md.contains("copying the step's bytes in memory"), "{md}");
     assert!(md.contains("Peak resident memory"), "{md}");
 

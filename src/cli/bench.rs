@@ -173,9 +173,9 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
         ..args.data.clone()
     };
     let resolved = resolve(&data, &args.field)?;
-    let open_time = opened.elapsed();
+    let resolve_time = opened.elapsed();
     let series = &resolved.series;
-    let open_decoded = series.steps_decoded();
+    let (open_time, open_decoded) = (resolved.opened_in, resolved.decoded_at_open);
     let steps: Vec<usize> = match &args.steps {
         Some(text) => step_range(text, series.len())?.collect(),
         None => (0..series.len()).collect(),
@@ -283,6 +283,7 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
         floors: &floors,
         open_time,
         open_decoded,
+        resolve_time,
         first_open,
         play_time,
         peak,
@@ -378,6 +379,8 @@ struct Summary<'a> {
     floors: &'a [Floor],
     open_time: Duration,
     open_decoded: usize,
+    /// Opening and the settings taken from the data (the cluster size, ranges) together.
+    resolve_time: Duration,
     first_open: Option<FirstOpen>,
     play_time: Duration,
     peak: Option<usize>,
@@ -425,10 +428,12 @@ fn summarise(s: &Summary<'_>) -> String {
     );
     let _ = writeln!(
         out,
-        "- opening the series for playback: {:.3} s, {} of {} steps decoded (the rest from the index)",
+        "- opening the series for playback: {:.3} s, {} of {} steps decoded (the rest from the \
+         index); with the settings taken from the data (cluster size, ranges): {:.3} s",
         s.open_time.as_secs_f64(),
         s.open_decoded,
-        s.series.len()
+        s.series.len(),
+        s.resolve_time.as_secs_f64()
     );
     if let Some(f) = &s.first_open {
         let read = median(s.times.iter().map(|t| t.stages[0]).collect());

@@ -98,6 +98,11 @@ pub struct Resolved {
     pub data_path: PathBuf,
     pub format: Option<Format>,
     pub colormap: Option<String>,
+    /// How long opening the series took, and the steps it decoded: the rest of resolving is
+    /// the settings taken from the data (the cluster size, ranges), which `bench playback`
+    /// reports apart.
+    pub opened_in: std::time::Duration,
+    pub decoded_at_open: usize,
 }
 
 impl Resolved {
@@ -184,6 +189,7 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             .cloned()
             .collect(),
     );
+    let opening = std::time::Instant::now();
     let series = TimeSeries::open(
         &path,
         &OpenOptions {
@@ -195,6 +201,8 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             rescan: data.rescan,
         },
     )?;
+    let opened_in = opening.elapsed();
+    let decoded_at_open = series.steps_decoded();
     let step = data.step.or(scene.data.step).unwrap_or(0);
     if step >= series.len() {
         bail!(
@@ -282,5 +290,7 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
         cluster,
         data_path: path,
         colormap,
+        opened_in,
+        decoded_at_open,
     })
 }
