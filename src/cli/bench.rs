@@ -277,6 +277,7 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
 
     let summary = summarise(&Summary {
         args: &args,
+        data: &resolved.data_path,
         device: &device,
         series,
         times: &times,
@@ -373,6 +374,9 @@ struct FirstOpen {
 
 struct Summary<'a> {
     args: &'a PlaybackArgs,
+    /// The data played (from `--data` or the scene file; a step's own name, e.g. `0000`,
+    /// says nothing).
+    data: &'a std::path::Path,
     device: &'a str,
     series: &'a TimeSeries,
     times: &'a [StepTimes],
@@ -405,16 +409,7 @@ fn summarise(s: &Summary<'_>) -> String {
     let steady_total: f64 = steady.iter().map(|t| t.total).sum();
     let mib = |b: usize| b as f64 / 1048576.0;
     let max_step = s.series.steps().iter().map(|i| i.bytes).max().unwrap_or(0);
-    // The data as the user named it (a step's own name, e.g. `0000`, says nothing).
-    let source = [&s.args.data.data, &s.args.data.scene]
-        .into_iter()
-        .flatten()
-        .next()
-        .map_or_else(
-            || s.series.steps()[0].name.clone(),
-            |p| p.display().to_string(),
-        );
-    let _ = writeln!(out, "# Playback: {source}\n");
+    let _ = writeln!(out, "# Playback: {}\n", s.data.display());
     let _ = writeln!(
         out,
         "{n} steps of up to {} particles ({:.1} MiB per step in memory), {}x{} at {} spp, \
