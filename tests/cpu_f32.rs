@@ -267,7 +267,9 @@ fn simd_and_baseline_builds_agree_to_their_roundings() {
     #[cfg(target_arch = "x86_64")]
     assert_eq!(
         f32_kernel::simd_in_use(),
-        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma"),
+        std::is_x86_feature_detected!("avx2")
+            && std::is_x86_feature_detected!("fma")
+            && std::is_x86_feature_detected!("popcnt"),
         "the dispatch uses AVX2 exactly where the CPU has it"
     );
     let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(2999, 3, 1));

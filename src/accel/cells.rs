@@ -68,6 +68,9 @@ pub struct CellRuns {
     runs: Vec<(u32, u32)>,
     /// The block of cells on each level the runs are of.
     blocks: [Block; MAX_LEVELS],
+    /// The same blocks' first and last cells as coordinates (what the runs are made from: an
+    /// index's coordinates would cost three divisions).
+    corners: [([usize; 3], [usize; 3]); MAX_LEVELS],
     /// Whether `runs` are `blocks`' (false before the first query).
     current: bool,
 }
@@ -77,17 +80,19 @@ impl Default for CellRuns {
         CellRuns {
             runs: Vec::new(),
             blocks: [NO_BLOCK; MAX_LEVELS],
+            corners: [([0; 3], [0; 3]); MAX_LEVELS],
             current: false,
         }
     }
 }
 
 impl CellRuns {
-    /// Sets level `i`'s block, noting whether it changed.
+    /// Sets level `i`'s block, its first and last cells `corners`, noting whether it changed.
     #[inline]
-    fn set(&mut self, i: usize, block: Block) {
+    fn set(&mut self, i: usize, block: Block, corners: ([usize; 3], [usize; 3])) {
         if self.blocks[i] != block {
             self.blocks[i] = block;
+            self.corners[i] = corners;
             self.current = false;
         }
     }
@@ -98,11 +103,12 @@ impl CellRuns {
         if !self.current {
             self.current = true;
             self.runs.clear();
-            for (level, &(lo, hi)) in grid.levels.iter().zip(&self.blocks) {
-                if (lo, hi) == NO_BLOCK {
+            for ((level, &block), &(lo, hi)) in
+                grid.levels.iter().zip(&self.blocks).zip(&self.corners)
+            {
+                if block == NO_BLOCK {
                     continue;
                 }
-                let (lo, hi) = (cell_coords(level.dims, lo), cell_coords(level.dims, hi));
                 for_rows_around(level.dims, lo, hi, |a, b| {
                     let run = (level.start[a], level.start[b + 1]);
                     if run.1 > run.0 {
@@ -199,11 +205,10 @@ impl CellGrid {
     #[inline]
     pub fn runs_at<'s>(&self, l: DVec3, scratch: &'s mut CellRuns) -> &'s [(u32, u32)] {
         for (i, level) in self.levels.iter().enumerate() {
-            let block = match level.cell_at(l) {
-                Some((c, _)) if level.reached[c] => (c, c),
-                _ => NO_BLOCK,
-            };
-            scratch.set(i, block);
+            match level.cell_at(l) {
+                Some((c, ijk)) if level.reached[c] => scratch.set(i, (c, c), (ijk, ijk)),
+                _ => scratch.set(i, NO_BLOCK, ([0; 3], [0; 3])),
+            }
         }
         scratch.runs_for(self)
     }
@@ -227,14 +232,14 @@ impl CellGrid {
                     }
                 }
             }
-            let block = if lo[0] == usize::MAX {
-                NO_BLOCK
+            if lo[0] == usize::MAX {
+                scratch.set(i, NO_BLOCK, ([0; 3], [0; 3]));
             } else if (0..3).any(|a| hi[a] - lo[a] > 1) {
                 return None;
             } else {
-                (cell_index(level.dims, lo), cell_index(level.dims, hi))
-            };
-            scratch.set(i, block);
+                let block = (cell_index(level.dims, lo), cell_index(level.dims, hi));
+                scratch.set(i, block, (lo, hi));
+            }
         }
         Some(scratch.runs_for(self))
     }

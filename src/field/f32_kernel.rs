@@ -36,7 +36,9 @@ pub fn simd_in_use() -> bool {
 
 #[cfg(target_arch = "x86_64")]
 fn avx2_available() -> bool {
-    std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+    std::is_x86_feature_detected!("avx2")
+        && std::is_x86_feature_detected!("fma")
+        && std::is_x86_feature_detected!("popcnt")
 }
 
 #[cfg(not(target_arch = "x86_64"))]
@@ -297,8 +299,41 @@ fn sums<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (f64, [
     sums_lanes::<C>(p, runs, q)
 }
 
+/// Reached candidates the AVX2 point kernel holds before computing their terms.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
+const HELD: usize = 64;
+
+/// For each mask of reached lanes (bit l: lane l), the permutation that moves those lanes to
+/// the front in order: the AVX2 point kernel's compaction.
+#[cfg(target_arch = "x86_64")]
+static PACK: [[u32; LANES]; 256] = pack_table();
+
+#[cfg(target_arch = "x86_64")]
+const fn pack_table() -> [[u32; LANES]; 256] {
+    let mut table = [[0u32; LANES]; 256];
+    let mut mask = 0;
+    while mask < 256 {
+        let (mut n, mut lane) = (0, 0);
+        while lane < LANES {
+            if (mask >> lane) & 1 == 1 {
+                table[mask][n] = lane as u32;
+                n += 1;
+            }
+            lane += 1;
+        }
+        mask += 1;
+    }
+    table
+}
+
+/// The point kernel with AVX2: the distance tests eight at a time with no branch on their
+/// outcome, the reached candidates' indices and squared distances packed to the front of a
+/// small buffer (a permutation per mask, [`PACK`]), then the terms eight reached candidates at
+/// a time. Why: the cells hand the kernel six times the particles within reach, and a branch
+/// per chunk on whether any lane reached mispredicted so often that it cost 60% of the
+/// queries' time (measured by removing it); packing also runs the exponentials on full lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,popcnt")]
 unsafe fn sums_avx2<const C: usize>(
     p: &Packed,
     runs: &[(u32, u32)],
@@ -321,15 +356,46 @@ unsafe fn sums_avx2<const C: usize>(
         .map(Vec::len)
         .min()
         .unwrap_or(0);
+    // A chunk's store writes eight slots from `n`, so the buffer holds HELD + LANES.
+    let mut held_index = [0i32; HELD + LANES];
+    let mut held_d2 = [0f32; HELD + LANES];
+    let mut n = 0usize;
+    // The terms of held candidates `0..count`, eight at a time, the lanes past `count`
+    // masked (their slots hold earlier writes or zeros: indices of real particles).
+    let mut flush = |held_index: &[i32; HELD + LANES], held_d2: &[f32; HELD + LANES], count| {
+        let mut i = 0;
+        while i < count {
+            // SAFETY: i + LANES <= HELD + LANES (count <= HELD); every held index is a
+            // particle's (below `len`), or 0.
+            unsafe {
+                let live = _mm256_cmpgt_epi32(_mm256_set1_epi32((count - i) as i32), iota);
+                let index = _mm256_loadu_si256(held_index.as_ptr().add(i).cast());
+                let d2 = _mm256_loadu_ps(held_d2.as_ptr().add(i));
+                let gather = |v: &Vec<f32>| _mm256_i32gather_ps::<4>(v.as_ptr(), index);
+                let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), gather(&p.k)), d2);
+                let term = _mm256_and_ps(
+                    _mm256_mul_ps(gather(&p.w), exp_neg_avx2(x)),
+                    _mm256_castsi256_ps(live),
+                );
+                phi = _mm256_add_ps(phi, term);
+                for (ch, acc) in num.iter_mut().enumerate().take(C) {
+                    *acc = _mm256_fmadd_ps(gather(&p.theta[ch]), term, *acc);
+                }
+            }
+            i += LANES;
+        }
+    };
     for &(a, b) in runs {
-        let (mut at, b) = (a as usize, b as usize);
-        assert!(b + LANES <= len, "runs within the padded particles");
-        while at < b {
-            let valid = (b - at).min(LANES) as i32;
-            let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(valid), iota));
+        let (mut at, end) = (a as usize, b as usize);
+        assert!(end + LANES <= len, "runs within the padded particles");
+        // The lanes' particle indices, and the run's end to mask them by.
+        let mut index = _mm256_add_epi32(_mm256_set1_epi32(a as i32), iota);
+        let end_v = _mm256_set1_epi32(b as i32);
+        while at < end {
+            let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
             let base = at;
-            // SAFETY: at < b and b + LANES <= len (asserted): eight floats from `at` are in
-            // every array read.
+            // SAFETY: at < end and end + LANES <= len (asserted): eight floats from `at` are
+            // in every array read.
             // A read through a packed (align 1) struct is an unaligned load with no check in
             // builds with debug assertions (`_mm256_loadu_ps` is a `copy_nonoverlapping`,
             // which checks its arguments there: the kernel ran at half speed in `checked`).
@@ -343,18 +409,34 @@ unsafe fn sums_avx2<const C: usize>(
             let dz = _mm256_sub_ps(load!(p.z), qz);
             let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
             let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, load!(p.r2)), live);
-            at += LANES;
-            if _mm256_movemask_ps(reached) == 0 {
-                continue;
+            let mask = _mm256_movemask_ps(reached) as usize;
+            // SAFETY: n <= HELD (flushed below otherwise): eight slots from n are in the
+            // buffers; the table row holds eight lanes.
+            unsafe {
+                let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
+                _mm256_storeu_si256(
+                    held_index.as_mut_ptr().add(n).cast(),
+                    _mm256_permutevar8x32_epi32(index, order),
+                );
+                _mm256_storeu_ps(
+                    held_d2.as_mut_ptr().add(n),
+                    _mm256_permutevar8x32_ps(d2, order),
+                );
             }
-            let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), load!(p.k)), d2);
-            let term = _mm256_and_ps(_mm256_mul_ps(load!(p.w), exp_neg_avx2(x)), reached);
-            phi = _mm256_add_ps(phi, term);
-            for (ch, acc) in num.iter_mut().enumerate().take(C) {
-                *acc = _mm256_fmadd_ps(load!(p.theta[ch]), term, *acc);
+            n += mask.count_ones() as usize;
+            at += LANES;
+            index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
+            if n > HELD - LANES {
+                // Whole chunks now; the rest moves to the front.
+                let whole = n / LANES * LANES;
+                flush(&held_index, &held_d2, whole);
+                held_index.copy_within(whole..n, 0);
+                held_d2.copy_within(whole..n, 0);
+                n -= whole;
             }
         }
     }
+    flush(&held_index, &held_d2, n);
     let mut lanes = [[0f32; LANES]; 4];
     // SAFETY: each row holds eight floats.
     unsafe {
@@ -399,8 +481,12 @@ fn exp_neg_avx2(x: core::arch::x86_64::__m256) -> core::arch::x86_64::__m256 {
     _mm256_mul_ps(e, _mm256_castsi256_ps(scale))
 }
 
-/// The kernel, in lanes: the baseline build (the AVX2 one is `sums_avx2`). A run's last
-/// chunk reads past its end (into the next particles, or the padding) and masks those lanes.
+/// The point kernel in lanes: the baseline build (the AVX2 one is `sums_avx2`), in one pass
+/// that skips the exponentials of a chunk reaching nothing. It does not compact like the AVX2
+/// build: without a lane permutation (SSE2 has none) the compaction is eight scalar stores a
+/// chunk, and the queries ran 1.5x slower with it than with this branch (docs/benchmarks.md).
+/// A run's last chunk reads past its end (into the next particles, or the padding) and masks
+/// those lanes.
 /// Masks are all-ones or zero lanes of `u32`, as vector compares make them, so the compiler
 /// keeps them in vector registers (a `[bool; 8]` became shuffles and scalar bit tests: the
 /// field queries ran 1.3-1.4x slower).
@@ -470,6 +556,65 @@ fn chunk<const C: usize>(
     }
 }
 
+/// Every particle of `from..to`'s term at `q` in eight lanes, with no compaction: the tight
+/// loop `benches/cpu_roofline.rs` takes as this machine's peak rate of terms, over particles
+/// that all reach. No field query runs it: the AVX2 point kernel's compaction pays only where
+/// most candidates lie out of reach (the baseline build is its point kernel, whose branch on a
+/// chunk reaching nothing is always taken the same way here).
+pub fn dense_sums(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if simd_in_use() {
+        assert!(to + LANES <= p.x.len().min(p.r2.len()).min(p.k.len()).min(p.w.len()));
+        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `simd_in_use`); every
+        // array read holds eight floats from any particle below `to` (asserted).
+        return unsafe { dense_sums_avx2(p, from, to, q) };
+    }
+    sums_lanes::<0>(p, &[(from as u32, to as u32)], q).0
+}
+
+/// [`dense_sums`] with AVX2 and fused multiply-adds.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn dense_sums_avx2(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f64 {
+    use core::arch::x86_64::*;
+    let (qx, qy, qz) = (
+        _mm256_set1_ps(q[0]),
+        _mm256_set1_ps(q[1]),
+        _mm256_set1_ps(q[2]),
+    );
+    let end = _mm256_set1_epi32(to as i32);
+    let mut index = _mm256_add_epi32(
+        _mm256_set1_epi32(from as i32),
+        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+    );
+    let mut phi = _mm256_setzero_ps();
+    let mut at = from;
+    while at < to {
+        let base = at;
+        // SAFETY: at < to, and to + LANES is within every array read (asserted by the caller).
+        macro_rules! load {
+            ($v:expr) => {
+                unsafe { (*($v.as_ptr().add(base) as *const Unaligned)).0 }
+            };
+        }
+        let dx = _mm256_sub_ps(load!(p.x), qx);
+        let dy = _mm256_sub_ps(load!(p.y), qy);
+        let dz = _mm256_sub_ps(load!(p.z), qz);
+        let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
+        let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end, index));
+        let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, load!(p.r2)), live);
+        let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), load!(p.k)), d2);
+        let term = _mm256_and_ps(_mm256_mul_ps(load!(p.w), exp_neg_avx2(x)), reached);
+        phi = _mm256_add_ps(phi, term);
+        at += LANES;
+        index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
+    }
+    let mut lanes = [0f32; LANES];
+    // SAFETY: eight floats.
+    unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), phi) };
+    lanes.iter().map(|&x| f64::from(x)).sum()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -521,6 +666,93 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Both builds of the point kernel against the sum as written in f64, over runs where far
+    /// more candidates reach than the kernel holds before computing (its flushes), runs that
+    /// reach nothing, runs of one particle, a particle in two runs (counted twice), and the
+    /// dense loop over one run.
+    #[test]
+    fn the_point_kernel_sums_every_reached_term_once() {
+        let mut p = Packed {
+            channels: 1,
+            ..Packed::default()
+        };
+        let mut state = 777u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        // 0..700: a clump within reach of the origin (radius 0.3..0.5, centres within 0.15);
+        // 700..1301: far away.
+        for i in 0..1301 {
+            let (spread, shift) = if i < 700 { (0.3, 0.0) } else { (1.0, 10.0) };
+            let r: f32 = 0.3 + 0.2 * next();
+            p.x.push(shift + spread * (next() - 0.5));
+            p.y.push(spread * (next() - 0.5));
+            p.z.push(spread * (next() - 0.5));
+            p.r2.push(r * r);
+            p.k.push(4.5 / (r * r));
+            p.w.push(0.25 + next());
+            p.theta[0].push(next() - 0.5);
+        }
+        p.pad();
+        let runs = [(0u32, 613u32), (700, 1301), (613, 614), (614, 700), (5, 17)];
+        let brute = |q: [f32; 3]| -> (f64, f64) {
+            let (mut phi, mut num) = (0.0, 0.0);
+            for &(a, b) in &runs {
+                for j in a as usize..b as usize {
+                    let d2 = [p.x[j] - q[0], p.y[j] - q[1], p.z[j] - q[2]]
+                        .map(|d| f64::from(d) * f64::from(d))
+                        .iter()
+                        .sum::<f64>();
+                    if d2 <= f64::from(p.r2[j]) {
+                        let term = f64::from(p.w[j]) * (-f64::from(p.k[j]) * d2).exp();
+                        phi += term;
+                        num += f64::from(p.theta[0][j]) * term;
+                    }
+                }
+            }
+            (phi, num)
+        };
+        let builds = if simd_in_use() { 2 } else { 1 };
+        for q in [
+            [0.0, 0.0, 0.0],
+            [0.05, -0.1, 0.02],
+            [10.2, 0.1, -0.3],
+            [3.0, 3.0, 3.0],
+        ] {
+            let (phi, num) = brute(q);
+            for simd in 0..builds {
+                allow_simd(simd == 1);
+                let (got_phi, got_num) = p.sums(&runs, q);
+                allow_simd(true);
+                let scale = phi.max(1e-30);
+                assert!(
+                    (got_phi - phi).abs() <= 1e-5 * scale,
+                    "{q:?}, AVX2 {simd}: phi {got_phi} vs {phi}"
+                );
+                assert!(
+                    (got_num[0] - num).abs() <= 1e-5 * scale,
+                    "{q:?}, AVX2 {simd}: theta {} vs {num}",
+                    got_num[0]
+                );
+            }
+            match q[0] {
+                // Hundreds of terms: the kernel flushes its held candidates several times.
+                x if x < 1.0 => assert!(phi > 100.0, "the clump reaches {q:?}: {phi}"),
+                x if x > 9.0 => assert!(phi > 1.0, "the far particles reach {q:?}: {phi}"),
+                _ => assert_eq!(phi, 0.0, "nothing reaches {q:?}"),
+            }
+        }
+        // The dense loop over one run equals the kernel over it.
+        let q = [0.02, 0.01, -0.03];
+        let dense = dense_sums(&p, 0, 613, q);
+        let kernel = p.sums(&[(0, 613)], q).0;
+        assert!(
+            (dense - kernel).abs() <= 1e-5 * kernel,
+            "{dense} vs {kernel}"
+        );
     }
 
     #[test]
