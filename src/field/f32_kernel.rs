@@ -168,36 +168,27 @@ fn packet_sums<const C: usize>(
     live: [u32; LANES],
     candidates: &mut Vec<u32>,
 ) -> [(f64, [f64; 3]); LANES] {
+    let (lo, hi) = bounding_box(q, live);
+    let total: usize = runs.iter().map(|&(a, b)| (b - a) as usize).sum();
+    // Room for every candidate and a chunk's stray writes; what is there is overwritten
+    // (filling it anew each packet would be a second pass over it).
+    if candidates.len() < total + LANES {
+        candidates.resize(total + LANES, 0);
+    }
     #[cfg(target_arch = "x86_64")]
     if simd_in_use() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `simd_in_use`).
-        return unsafe { packet_sums_avx2::<C>(p, runs, q, live, candidates) };
+        return unsafe {
+            let n = narrow_avx2(p, runs, lo, hi, candidates);
+            packet_terms_avx2::<C>(p, &candidates[..n], q, live)
+        };
     }
-    packet_sums_lanes::<C>(p, runs, q, live, candidates)
+    let n = narrow_lanes(p, runs, lo, hi, candidates);
+    packet_terms_lanes::<C>(p, &candidates[..n], q, live)
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn packet_sums_avx2<const C: usize>(
-    p: &Packed,
-    runs: &[(u32, u32)],
-    q: &[[f32; 3]; LANES],
-    live: [u32; LANES],
-    candidates: &mut Vec<u32>,
-) -> [(f64, [f64; 3]); LANES] {
-    packet_sums_lanes::<C>(p, runs, q, live, candidates)
-}
-
-/// The packet kernel, in lanes (the baseline build, and the body of the AVX2 one): the
-/// candidates' box test with particles in lanes, then the terms with points in lanes.
-#[inline(always)]
-fn packet_sums_lanes<const C: usize>(
-    p: &Packed,
-    runs: &[(u32, u32)],
-    q: &[[f32; 3]; LANES],
-    live: [u32; LANES],
-    candidates: &mut Vec<u32>,
-) -> [(f64, [f64; 3]); LANES] {
+/// The bounding box of the live points.
+fn bounding_box(q: &[[f32; 3]; LANES], live: [u32; LANES]) -> ([f32; 3], [f32; 3]) {
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for (point, &m) in q.iter().zip(&live) {
@@ -208,14 +199,23 @@ fn packet_sums_lanes<const C: usize>(
             }
         }
     }
-    let total: usize = runs.iter().map(|&(a, b)| (b - a) as usize).sum();
-    // Room for every candidate and a chunk's stray writes; what is there is overwritten
-    // (filling it anew each packet would be a second pass over it).
-    if candidates.len() < total + LANES {
-        candidates.resize(total + LANES, 0);
-    }
+    (lo, hi)
+}
+
+/// The particles of `runs` within their radius of the box `[lo, hi]`, written to the front of
+/// `candidates` (which holds every run's particles and [`LANES`] more); returns how many. In
+/// lanes: the baseline build.
+#[inline(always)]
+fn narrow_lanes(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    lo: [f32; 3],
+    hi: [f32; 3],
+    candidates: &mut [u32],
+) -> usize {
     let mut n = 0;
-    // How far `v` lies outside [lo, hi] (plain compares: `f32::max` would add NaN handling).
+    // How far `v` lies outside [lo, hi] (plain compares: `f32::max` would add NaN handling;
+    // they are also what `_mm256_max_ps` computes, so [`narrow_avx2`] keeps the same ones).
     let gap = |v: f32, lo: f32, hi: f32| -> f32 {
         let (below, above) = (lo - v, v - hi);
         let g = if below > above { below } else { above };
@@ -246,6 +246,95 @@ fn packet_sums_lanes<const C: usize>(
             at += LANES;
         }
     }
+    n
+}
+
+/// [`narrow_lanes`] with AVX2: the same operations in the same order (no fused multiply-adds),
+/// so the same particles are kept in the same order; each chunk's kept lanes moved to the
+/// front by one permutation ([`PACK`]) instead of eight scalar stores.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,popcnt")]
+fn narrow_avx2(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    lo: [f32; 3],
+    hi: [f32; 3],
+    candidates: &mut [u32],
+) -> usize {
+    use core::arch::x86_64::*;
+    let len = [&p.x, &p.y, &p.z, &p.r2]
+        .into_iter()
+        .map(Vec::len)
+        .min()
+        .unwrap_or(0);
+    let (lo, hi) = (lo.map(|v| _mm256_set1_ps(v)), hi.map(|v| _mm256_set1_ps(v)));
+    let zero = _mm256_setzero_ps();
+    let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let gap = |v, a: usize| {
+        let g = _mm256_max_ps(_mm256_sub_ps(lo[a], v), _mm256_sub_ps(v, hi[a]));
+        _mm256_max_ps(g, zero)
+    };
+    let mut n = 0;
+    for &(a, b) in runs {
+        let (mut at, end) = (a as usize, b as usize);
+        assert!(end + LANES <= len, "runs within the padded particles");
+        let mut index = _mm256_add_epi32(_mm256_set1_epi32(a as i32), iota);
+        let end_v = _mm256_set1_epi32(b as i32);
+        while at < end {
+            let base = at;
+            // SAFETY: at < end and end + LANES <= len (asserted): eight floats from `at` are
+            // in every array read.
+            macro_rules! load {
+                ($v:expr) => {
+                    unsafe { (*($v.as_ptr().add(base) as *const Unaligned)).0 }
+                };
+            }
+            let (ex, ey, ez) = (gap(load!(p.x), 0), gap(load!(p.y), 1), gap(load!(p.z), 2));
+            let d2 = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey)),
+                _mm256_mul_ps(ez, ez),
+            );
+            let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
+            let keep = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, load!(p.r2)), live);
+            let mask = _mm256_movemask_ps(keep) as usize;
+            assert!(n + LANES <= candidates.len(), "room for a chunk's writes");
+            // SAFETY: eight slots from n are in `candidates` (asserted); the table row holds
+            // eight lanes.
+            unsafe {
+                let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
+                _mm256_storeu_si256(
+                    candidates.as_mut_ptr().add(n).cast(),
+                    _mm256_permutevar8x32_epi32(index, order),
+                );
+            }
+            n += mask.count_ones() as usize;
+            at += LANES;
+            index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
+        }
+    }
+    n
+}
+
+/// [`packet_terms_lanes`] compiled with AVX2 (the same operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn packet_terms_avx2<const C: usize>(
+    p: &Packed,
+    candidates: &[u32],
+    q: &[[f32; 3]; LANES],
+    live: [u32; LANES],
+) -> [(f64, [f64; 3]); LANES] {
+    packet_terms_lanes::<C>(p, candidates, q, live)
+}
+
+/// The packet kernel's terms: each candidate evaluated at every point, a point per lane.
+#[inline(always)]
+fn packet_terms_lanes<const C: usize>(
+    p: &Packed,
+    candidates: &[u32],
+    q: &[[f32; 3]; LANES],
+    live: [u32; LANES],
+) -> [(f64, [f64; 3]); LANES] {
     let (qx, qy, qz): ([f32; LANES], [f32; LANES], [f32; LANES]) = (
         std::array::from_fn(|l| q[l][0]),
         std::array::from_fn(|l| q[l][1]),
@@ -255,7 +344,7 @@ fn packet_sums_lanes<const C: usize>(
     // point's sum rounds no worse than in [`Packed::sums`] (whose lanes hold an eighth of it).
     let mut phi = [0f64; LANES];
     let mut num = [[0f64; LANES]; 3];
-    for block in candidates[..n].chunks(LANES) {
+    for block in candidates.chunks(LANES) {
         let mut block_phi = [0f32; LANES];
         let mut block_num = [[0f32; LANES]; 3];
         for &j in block {
@@ -753,6 +842,49 @@ mod tests {
             (dense - kernel).abs() <= 1e-5 * kernel,
             "{dense} vs {kernel}"
         );
+    }
+
+    /// The packet kernel's narrowing with AVX2 keeps exactly the particles, in the order, that
+    /// the lanes keep (the same operations), into poisoned candidate slots, over boxes from a
+    /// point to wider than the particles, and runs of awkward lengths.
+    #[test]
+    fn the_avx2_narrowing_keeps_what_the_lanes_keep() {
+        if !simd_in_use() {
+            return;
+        }
+        let mut p = Packed::default();
+        let mut state = 4242u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for _ in 0..517 {
+            let r: f32 = 0.01 + 0.1 * next();
+            p.x.push(next());
+            p.y.push(next());
+            p.z.push(next());
+            p.r2.push(r * r);
+            p.k.push(4.5 / (r * r));
+            p.w.push(1.0);
+        }
+        p.pad();
+        let runs = [(0u32, 1u32), (3, 200), (200, 209), (300, 517), (17, 17)];
+        let total: usize = runs.iter().map(|&(a, b)| (b - a) as usize).sum();
+        let mut kept_any = false;
+        for size in [0.0, 0.01, 0.1, 0.3, 2.0] {
+            for _ in 0..20 {
+                let lo = [next(), next(), next()];
+                let hi = lo.map(|v| v + size * next());
+                let mut fast = vec![u32::MAX; total + LANES];
+                let mut lanes = vec![u32::MAX - 1; total + LANES];
+                // SAFETY: `simd_in_use` checked the CPU's features above.
+                let n_fast = unsafe { narrow_avx2(&p, &runs, lo, hi, &mut fast) };
+                let n_lanes = narrow_lanes(&p, &runs, lo, hi, &mut lanes);
+                assert_eq!(&fast[..n_fast], &lanes[..n_lanes], "box {lo:?} {hi:?}");
+                kept_any |= n_fast > 0;
+            }
+        }
+        assert!(kept_any, "some box keeps particles");
     }
 
     #[test]
