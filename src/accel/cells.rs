@@ -191,14 +191,6 @@ impl CellGrid {
             .sum()
     }
 
-    /// Whether any particle may reach point `l`'s cell on some level.
-    #[inline]
-    pub fn reaches(&self, l: DVec3) -> bool {
-        self.levels
-            .iter()
-            .any(|level| level.cell_at(l).is_some_and(|(c, _)| level.reached[c]))
-    }
-
     /// The candidates of point `l`: the particles of the 27 cells around its cell on every
     /// level, as runs of the cell-sorted order (none where no particle reaches). Kept in
     /// `scratch`: a point in the same cells again looks nothing up.
@@ -213,35 +205,54 @@ impl CellGrid {
         scratch.runs_for(self)
     }
 
-    /// The candidates of every point in `points` together: the particles of the cells around
-    /// the block of cells they fall in, on every level; `None` where they spread over more than
-    /// two cells a side on some level (evaluating them together would then cost more than one
-    /// at a time).
-    pub fn runs_around_points<'s>(
+    /// Which of `points` (local coordinates; `None`: no point) lie in a cell some particle may
+    /// reach on some level (bit i of the returned mask), and, where two or more do, their
+    /// candidates together: the particles of the cells around the block of cells those points
+    /// fall in, on every level. The runs are `None` for fewer than two such points, and where
+    /// they spread over more than two cells a side on some level (evaluating them together
+    /// would then cost more than one at a time). Each point's cells are found once.
+    pub fn runs_around_packet<'s, const N: usize>(
         &self,
-        points: &[DVec3],
+        points: &[Option<DVec3>; N],
         scratch: &'s mut CellRuns,
-    ) -> Option<&'s [(u32, u32)]> {
-        for (i, level) in self.levels.iter().enumerate() {
-            let (mut lo, mut hi) = ([usize::MAX; 3], [0; 3]);
-            for &l in points {
-                if let Some((_, ijk)) = level.cell_at(l) {
+    ) -> (u32, Option<&'s [(u32, u32)]>) {
+        const NONE: [u32; 3] = [u32::MAX; 3];
+        // Each point's cell on each level (NONE: outside that level's grid).
+        let mut cells = [[NONE; N]; MAX_LEVELS];
+        let mut reached = 0u32;
+        for (level, cells) in self.levels.iter().zip(&mut cells) {
+            for (i, point) in points.iter().enumerate() {
+                let Some(l) = point else { continue };
+                if let Some((c, ijk)) = level.cell_at(*l) {
+                    cells[i] = ijk.map(|v| v as u32);
+                    reached |= u32::from(level.reached[c]) << i;
+                }
+            }
+        }
+        if reached.count_ones() < 2 {
+            return (reached, None);
+        }
+        for (i, (level, cells)) in self.levels.iter().zip(&cells).enumerate() {
+            let (mut lo, mut hi) = ([u32::MAX; 3], [0; 3]);
+            for (p, ijk) in cells.iter().enumerate() {
+                if (reached >> p) & 1 == 1 && *ijk != NONE {
                     for a in 0..3 {
                         lo[a] = lo[a].min(ijk[a]);
                         hi[a] = hi[a].max(ijk[a]);
                     }
                 }
             }
-            if lo[0] == usize::MAX {
+            if lo[0] == u32::MAX {
                 scratch.set(i, NO_BLOCK, ([0; 3], [0; 3]));
             } else if (0..3).any(|a| hi[a] - lo[a] > 1) {
-                return None;
+                return (reached, None);
             } else {
+                let (lo, hi) = (lo.map(|v| v as usize), hi.map(|v| v as usize));
                 let block = (cell_index(level.dims, lo), cell_index(level.dims, hi));
                 scratch.set(i, block, (lo, hi));
             }
         }
-        Some(scratch.runs_for(self))
+        (reached, Some(scratch.runs_for(self)))
     }
 
     /// Appends the disjoint, ordered sub-intervals of `[t0, t1]` along `origin + t dir` (the

@@ -95,31 +95,19 @@ impl F32Field {
         rays: &mut [F32Ray; LANES],
         out: &mut [(f64, [f64; 3]); LANES],
     ) -> usize {
+        let local = points.map(|x| x.map(|x| x - self.origin));
+        let (reached, runs) = self.cells.runs_around_packet(&local, &mut packet.runs);
         let mut q = [[0f32; 3]; LANES];
         let mut live = [0u32; LANES];
-        let mut local = [DVec3::ZERO; LANES];
-        let mut count = 0;
-        for (i, point) in points.iter().enumerate() {
-            let Some(x) = point else { continue };
-            let l = *x - self.origin;
-            if self.cells.reaches(l) {
+        for (i, l) in local.iter().enumerate() {
+            let Some(l) = l else { continue };
+            if (reached >> i) & 1 == 1 {
                 q[i] = [l.x as f32, l.y as f32, l.z as f32];
                 live[i] = u32::MAX;
-                local[count] = l;
-                count += 1;
             } else {
                 out[i] = (0.0, [0.0; 3]);
             }
         }
-        if count == 0 {
-            return 0;
-        }
-        let runs = match count {
-            1 => None,
-            _ => self
-                .cells
-                .runs_around_points(&local[..count], &mut packet.runs),
-        };
         let Some(runs) = runs else {
             for (i, x) in points.iter().enumerate() {
                 if let (Some(x), true) = (x, live[i] != 0) {
@@ -136,7 +124,7 @@ impl F32Field {
                 out[i] = s;
             }
         }
-        count
+        reached.count_ones() as usize
     }
 
     /// Appends the disjoint, ordered sub-intervals of `[t0, t1]` along `origin + t dir` (data
