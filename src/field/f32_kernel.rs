@@ -4,10 +4,13 @@
 //! any other architecture) and, chosen at run time when the CPU has them, with AVX2 and FMA
 //! enabled, where the compiler turns each eight-lane step into one 256-bit instruction. The
 //! point kernel's AVX2 twin (`sums_avx2`) is written in `core::arch` intrinsics instead, to
-//! fuse its multiply-adds: Rust never contracts `a * b + c` on its own, and the vectoriser
-//! packed `f32::mul_add` lanes four wide (docs/benchmarks.md). Its results therefore differ
-//! from the baseline build's by their roundings (1.5e-8 at most on a test image, tested to
-//! 1e-6); the packet kernel's two builds stay equal bit for bit.
+//! fuse its multiply-adds (Rust never contracts `a * b + c` on its own, and the vectoriser
+//! packed `f32::mul_add` lanes four wide, docs/benchmarks.md) and to pack the candidates that
+//! reach into full lanes with a permutation before their exponentials, where the baseline
+//! build branches per chunk (SSE2 has no lane permutation). Its results therefore differ from
+//! the baseline build's by their roundings and order of summation (1.5e-8 at most on a test
+//! image, tested to 1e-6). The packet kernel's narrowing is in intrinsics too, for the same
+//! permutation, with the baseline build's operations: its two builds stay equal bit for bit.
 //!
 //! Why this and not a SIMD crate: `wide` selects its instructions when the crate is compiled
 //! (this project builds for baseline x86-64, where its `f32x8` is two SSE halves), `pulp` and
