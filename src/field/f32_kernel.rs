@@ -711,6 +711,28 @@ unsafe fn dense_sums_avx2(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f6
 mod tests {
     use super::*;
 
+    /// A reproducible stream of floats in [0, 1) (a linear congruential generator).
+    fn uniform(seed: u32) -> impl FnMut() -> f32 {
+        let mut state = seed;
+        move || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        }
+    }
+
+    /// Appends a particle at `c` of radius `r`, weight `w` and theta per channel.
+    fn push(p: &mut Packed, c: [f32; 3], r: f32, w: f32, theta: &[f32]) {
+        p.x.push(c[0]);
+        p.y.push(c[1]);
+        p.z.push(c[2]);
+        p.r2.push(r * r);
+        p.k.push(4.5 / (r * r));
+        p.w.push(w);
+        for (ch, &t) in theta.iter().enumerate() {
+            p.theta[ch].push(t);
+        }
+    }
+
     #[test]
     fn the_avx2_point_kernel_agrees_with_the_lanes_to_their_roundings() {
         if !simd_in_use() {
@@ -722,22 +744,11 @@ mod tests {
             channels: 3,
             ..Packed::default()
         };
-        let mut state = 12345u32;
-        let mut next = || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut next = uniform(12345);
         for _ in 0..203 {
             let r: f32 = 0.2 + 0.3 * next();
-            p.x.push(next() - 0.5);
-            p.y.push(next() - 0.5);
-            p.z.push(next() - 0.5);
-            p.r2.push(r * r);
-            p.k.push(4.5 / (r * r));
-            p.w.push(0.5 + next());
-            for ch in 0..3 {
-                p.theta[ch].push(next());
-            }
+            let c = [next() - 0.5, next() - 0.5, next() - 0.5];
+            push(&mut p, c, r, 0.5 + next(), &[next(), next(), next()]);
         }
         p.pad();
         let runs = [(0u32, 13u32), (20, 21), (40, 203), (100, 108)];
@@ -770,23 +781,18 @@ mod tests {
             channels: 1,
             ..Packed::default()
         };
-        let mut state = 777u32;
-        let mut next = || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut next = uniform(777);
         // 0..700: a clump within reach of the origin (radius 0.3..0.5, centres within 0.15);
         // 700..1301: far away.
         for i in 0..1301 {
             let (spread, shift) = if i < 700 { (0.3, 0.0) } else { (1.0, 10.0) };
             let r: f32 = 0.3 + 0.2 * next();
-            p.x.push(shift + spread * (next() - 0.5));
-            p.y.push(spread * (next() - 0.5));
-            p.z.push(spread * (next() - 0.5));
-            p.r2.push(r * r);
-            p.k.push(4.5 / (r * r));
-            p.w.push(0.25 + next());
-            p.theta[0].push(next() - 0.5);
+            let c = [
+                shift + spread * (next() - 0.5),
+                spread * (next() - 0.5),
+                spread * (next() - 0.5),
+            ];
+            push(&mut p, c, r, 0.25 + next(), &[next() - 0.5]);
         }
         p.pad();
         let runs = [(0u32, 613u32), (700, 1301), (613, 614), (614, 700), (5, 17)];
@@ -856,19 +862,10 @@ mod tests {
             return;
         }
         let mut p = Packed::default();
-        let mut state = 4242u32;
-        let mut next = || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut next = uniform(4242);
         for _ in 0..517 {
             let r: f32 = 0.01 + 0.1 * next();
-            p.x.push(next());
-            p.y.push(next());
-            p.z.push(next());
-            p.r2.push(r * r);
-            p.k.push(4.5 / (r * r));
-            p.w.push(1.0);
+            push(&mut p, [next(), next(), next()], r, 1.0, &[]);
         }
         p.pad();
         let runs = [(0u32, 1u32), (3, 200), (200, 209), (300, 517), (17, 17)];
