@@ -284,21 +284,23 @@ fn narrow_avx2(
         let mut index = _mm256_add_epi32(_mm256_set1_epi32(a as i32), iota);
         let end_v = _mm256_set1_epi32(b as i32);
         while at < end {
-            let base = at;
             // SAFETY: at < end and end + LANES <= len (asserted): eight floats from `at` are
             // in every array read.
-            macro_rules! load {
-                ($v:expr) => {
-                    unsafe { (*($v.as_ptr().add(base) as *const Unaligned)).0 }
-                };
-            }
-            let (ex, ey, ez) = (gap(load!(p.x), 0), gap(load!(p.y), 1), gap(load!(p.z), 2));
+            let (x, y, z, r2) = unsafe {
+                (
+                    lanes_at(&p.x, at),
+                    lanes_at(&p.y, at),
+                    lanes_at(&p.z, at),
+                    lanes_at(&p.r2, at),
+                )
+            };
+            let (ex, ey, ez) = (gap(x, 0), gap(y, 1), gap(z, 2));
             let d2 = _mm256_add_ps(
                 _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey)),
                 _mm256_mul_ps(ez, ez),
             );
             let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
-            let keep = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, load!(p.r2)), live);
+            let keep = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
             let mask = _mm256_movemask_ps(keep) as usize;
             assert!(n + LANES <= candidates.len(), "room for a chunk's writes");
             // SAFETY: eight slots from n are in `candidates` (asserted); the table row holds
@@ -485,22 +487,9 @@ unsafe fn sums_avx2<const C: usize>(
         let end_v = _mm256_set1_epi32(b as i32);
         while at < end {
             let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
-            let base = at;
             // SAFETY: at < end and end + LANES <= len (asserted): eight floats from `at` are
             // in every array read.
-            // A read through a packed (align 1) struct is an unaligned load with no check in
-            // builds with debug assertions (`_mm256_loadu_ps` is a `copy_nonoverlapping`,
-            // which checks its arguments there: the kernel ran at half speed in `checked`).
-            macro_rules! load {
-                ($v:expr) => {
-                    unsafe { (*($v.as_ptr().add(base) as *const Unaligned)).0 }
-                };
-            }
-            let dx = _mm256_sub_ps(load!(p.x), qx);
-            let dy = _mm256_sub_ps(load!(p.y), qy);
-            let dz = _mm256_sub_ps(load!(p.z), qz);
-            let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
-            let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, load!(p.r2)), live);
+            let (d2, reached) = unsafe { reach_avx2(p, at, [qx, qy, qz], live) };
             let mask = _mm256_movemask_ps(reached) as usize;
             // SAFETY: n <= HELD (flushed below otherwise): eight slots from n are in the
             // buffers; the table row holds eight lanes.
@@ -543,6 +532,55 @@ unsafe fn sums_avx2<const C: usize>(
         *t = total(&lanes[ch + 1]);
     }
     (total(&lanes[0]), theta)
+}
+
+/// Eight floats of `v` from `at`, at any alignment.
+///
+/// # Safety
+/// `at + LANES <= v.len()`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn lanes_at(v: &[f32], at: usize) -> core::arch::x86_64::__m256 {
+    // A read through a packed (align 1) struct is an unaligned load with no check in builds
+    // with debug assertions (`_mm256_loadu_ps` is a `copy_nonoverlapping`, which checks its
+    // arguments there: the kernel ran at half speed in `checked`).
+    // SAFETY: the caller keeps the eight floats within `v`.
+    unsafe { (*(v.as_ptr().add(at) as *const Unaligned)).0 }
+}
+
+/// Particles `at..at + 8`: their squared distances from `q` (fused), and which of the `live`
+/// lanes lie within their radius. The one reach test of the AVX2 point kernel and the dense
+/// loop.
+///
+/// # Safety
+/// Eight floats from `at` are in `p.x`, `p.y`, `p.z` and `p.r2`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn reach_avx2(
+    p: &Packed,
+    at: usize,
+    q: [core::arch::x86_64::__m256; 3],
+    live: core::arch::x86_64::__m256,
+) -> (core::arch::x86_64::__m256, core::arch::x86_64::__m256) {
+    use core::arch::x86_64::*;
+    // SAFETY: the caller keeps eight floats from `at` within each array.
+    let (x, y, z, r2) = unsafe {
+        (
+            lanes_at(&p.x, at),
+            lanes_at(&p.y, at),
+            lanes_at(&p.z, at),
+            lanes_at(&p.r2, at),
+        )
+    };
+    let (dx, dy, dz) = (
+        _mm256_sub_ps(x, q[0]),
+        _mm256_sub_ps(y, q[1]),
+        _mm256_sub_ps(z, q[2]),
+    );
+    let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
+    let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
+    (d2, reached)
 }
 
 /// Eight floats at any address.
@@ -682,21 +720,14 @@ unsafe fn dense_sums_avx2(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f6
     let mut phi = _mm256_setzero_ps();
     let mut at = from;
     while at < to {
-        let base = at;
-        // SAFETY: at < to, and to + LANES is within every array read (asserted by the caller).
-        macro_rules! load {
-            ($v:expr) => {
-                unsafe { (*($v.as_ptr().add(base) as *const Unaligned)).0 }
-            };
-        }
-        let dx = _mm256_sub_ps(load!(p.x), qx);
-        let dy = _mm256_sub_ps(load!(p.y), qy);
-        let dz = _mm256_sub_ps(load!(p.z), qz);
-        let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
         let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end, index));
-        let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, load!(p.r2)), live);
-        let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), load!(p.k)), d2);
-        let term = _mm256_and_ps(_mm256_mul_ps(load!(p.w), exp_neg_avx2(x)), reached);
+        // SAFETY: at < to, and to + LANES is within every array read (asserted by the caller).
+        let (d2, reached, k, w) = unsafe {
+            let (d2, reached) = reach_avx2(p, at, [qx, qy, qz], live);
+            (d2, reached, lanes_at(&p.k, at), lanes_at(&p.w, at))
+        };
+        let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), k), d2);
+        let term = _mm256_and_ps(_mm256_mul_ps(w, exp_neg_avx2(x)), reached);
         phi = _mm256_add_ps(phi, term);
         at += LANES;
         index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
