@@ -53,13 +53,13 @@ struct Level {
     reached: Vec<bool>,
 }
 
-/// A block of cells on a level, as the indices of its first and last cell (they determine
-/// it, and compare in two instructions).
-type Block = (usize, usize);
+/// A block of cells on a level, as the coordinates of its first and last cell (what its runs
+/// are made from; an index's coordinates would cost three divisions).
+type Block = ([u32; 3], [u32; 3]);
 
 /// No block of cells on a level (the point lies outside its grid or where none of its
 /// particles reaches).
-const NO_BLOCK: Block = (usize::MAX, 0);
+const NO_BLOCK: Block = ([u32::MAX; 3], [0; 3]);
 
 /// The runs of candidates of the last cells (or blocks of cells) a query fell in, kept for the
 /// next query there. Made once per thread (or ray) and reused.
@@ -68,9 +68,6 @@ pub struct CellRuns {
     runs: Vec<(u32, u32)>,
     /// The block of cells on each level the runs are of.
     blocks: [Block; MAX_LEVELS],
-    /// The same blocks' first and last cells as coordinates (what the runs are made from: an
-    /// index's coordinates would cost three divisions).
-    corners: [([usize; 3], [usize; 3]); MAX_LEVELS],
     /// Whether `runs` are `blocks`' (false before the first query).
     current: bool,
 }
@@ -80,19 +77,17 @@ impl Default for CellRuns {
         CellRuns {
             runs: Vec::new(),
             blocks: [NO_BLOCK; MAX_LEVELS],
-            corners: [([0; 3], [0; 3]); MAX_LEVELS],
             current: false,
         }
     }
 }
 
 impl CellRuns {
-    /// Sets level `i`'s block, its first and last cells `corners`, noting whether it changed.
+    /// Sets level `i`'s block, noting whether it changed.
     #[inline]
-    fn set(&mut self, i: usize, block: Block, corners: ([usize; 3], [usize; 3])) {
+    fn set(&mut self, i: usize, block: Block) {
         if self.blocks[i] != block {
             self.blocks[i] = block;
-            self.corners[i] = corners;
             self.current = false;
         }
     }
@@ -103,12 +98,11 @@ impl CellRuns {
         if !self.current {
             self.current = true;
             self.runs.clear();
-            for ((level, &block), &(lo, hi)) in
-                grid.levels.iter().zip(&self.blocks).zip(&self.corners)
-            {
+            for (level, &block) in grid.levels.iter().zip(&self.blocks) {
                 if block == NO_BLOCK {
                     continue;
                 }
+                let (lo, hi) = (block.0.map(|v| v as usize), block.1.map(|v| v as usize));
                 for_rows_around(level.dims, lo, hi, |a, b| {
                     let run = (level.start[a], level.start[b + 1]);
                     if run.1 > run.0 {
@@ -198,8 +192,11 @@ impl CellGrid {
     pub fn runs_at<'s>(&self, l: DVec3, scratch: &'s mut CellRuns) -> &'s [(u32, u32)] {
         for (i, level) in self.levels.iter().enumerate() {
             match level.cell_at(l) {
-                Some((c, ijk)) if level.reached[c] => scratch.set(i, (c, c), (ijk, ijk)),
-                _ => scratch.set(i, NO_BLOCK, ([0; 3], [0; 3])),
+                Some((c, ijk)) if level.reached[c] => {
+                    let ijk = ijk.map(|v| v as u32);
+                    scratch.set(i, (ijk, ijk));
+                }
+                _ => scratch.set(i, NO_BLOCK),
             }
         }
         scratch.runs_for(self)
@@ -232,7 +229,7 @@ impl CellGrid {
         if reached.count_ones() < 2 {
             return (reached, None);
         }
-        for (i, (level, cells)) in self.levels.iter().zip(&cells).enumerate() {
+        for (i, cells) in cells.iter().take(self.levels.len()).enumerate() {
             let (mut lo, mut hi) = ([u32::MAX; 3], [0; 3]);
             for (p, ijk) in cells.iter().enumerate() {
                 if (reached >> p) & 1 == 1 && *ijk != NONE {
@@ -243,13 +240,11 @@ impl CellGrid {
                 }
             }
             if lo[0] == u32::MAX {
-                scratch.set(i, NO_BLOCK, ([0; 3], [0; 3]));
+                scratch.set(i, NO_BLOCK);
             } else if (0..3).any(|a| hi[a] - lo[a] > 1) {
                 return (reached, None);
             } else {
-                let (lo, hi) = (lo.map(|v| v as usize), hi.map(|v| v as usize));
-                let block = (cell_index(level.dims, lo), cell_index(level.dims, hi));
-                scratch.set(i, block, (lo, hi));
+                scratch.set(i, (lo, hi));
             }
         }
         (reached, Some(scratch.runs_for(self)))
