@@ -518,20 +518,21 @@ unsafe fn sums_avx2<const C: usize>(
         }
     }
     flush(&held_index, &held_d2, n);
-    let mut lanes = [[0f32; LANES]; 4];
-    // SAFETY: each row holds eight floats.
-    unsafe {
-        _mm256_storeu_ps(lanes[0].as_mut_ptr(), phi);
-        for ch in 0..C {
-            _mm256_storeu_ps(lanes[ch + 1].as_mut_ptr(), num[ch]);
-        }
-    }
-    let total = |v: &[f32; LANES]| v.iter().map(|&x| f64::from(x)).sum::<f64>();
     let mut theta = [0.0; 3];
     for (ch, t) in theta.iter_mut().enumerate().take(C) {
-        *t = total(&lanes[ch + 1]);
+        *t = lane_total(num[ch]);
     }
-    (total(&lanes[0]), theta)
+    (lane_total(phi), theta)
+}
+
+/// The sum of eight f32 lanes in f64, lane 0 first: how every AVX2 kernel ends.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn lane_total(v: core::arch::x86_64::__m256) -> f64 {
+    let mut lanes = [0f32; LANES];
+    // SAFETY: eight floats; `_mm256_storeu_ps` needs only AVX, which every caller enables.
+    unsafe { core::arch::x86_64::_mm256_storeu_ps(lanes.as_mut_ptr(), v) };
+    lanes.iter().map(|&x| f64::from(x)).sum()
 }
 
 /// Eight floats of `v` from `at`, at any alignment.
@@ -732,10 +733,7 @@ unsafe fn dense_sums_avx2(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f6
         at += LANES;
         index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
     }
-    let mut lanes = [0f32; LANES];
-    // SAFETY: eight floats.
-    unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), phi) };
-    lanes.iter().map(|&x| f64::from(x)).sum()
+    lane_total(phi)
 }
 
 #[cfg(test)]
