@@ -52,6 +52,8 @@ impl F32Field {
             w: f32s(&|i| p.weights[i] as f32),
             theta,
             channels,
+            same_k: None,
+            same_w: None,
         };
         particles.pad();
         F32Field {
