@@ -52,8 +52,8 @@ impl F32Field {
             w: f32s(&|i| p.weights[i] as f32),
             theta,
             channels,
-            same_k: None,
-            same_w: None,
+            // same_k and same_w: set by `pad`.
+            ..Packed::default()
         };
         particles.pad();
         F32Field {
