@@ -260,23 +260,34 @@ proptest! {
 }
 
 /// The AVX2 build of the kernel and the baseline one give the same image to their roundings
-/// (the dispatch forced off for the second; bit for bit where both are the baseline build),
-/// and the AVX2 build is the one used where the CPU has it.
+/// (the dispatch forced off for the second; bit for bit where both are the baseline build);
+/// the AVX-512 build gives the AVX2 build's image bit for bit (the same lanes in the same
+/// order); and each build is the one used where the CPU has it.
 #[test]
 fn simd_and_baseline_builds_agree_to_their_roundings() {
     #[cfg(target_arch = "x86_64")]
-    assert_eq!(
-        f32_kernel::simd_in_use(),
-        std::is_x86_feature_detected!("avx2")
+    {
+        let avx2 = std::is_x86_feature_detected!("avx2")
             && std::is_x86_feature_detected!("fma")
-            && std::is_x86_feature_detected!("popcnt"),
-        "the dispatch uses AVX2 exactly where the CPU has it"
-    );
+            && std::is_x86_feature_detected!("popcnt");
+        assert_eq!(
+            f32_kernel::simd_in_use(),
+            avx2,
+            "the dispatch uses AVX2 exactly where the CPU has it"
+        );
+        assert_eq!(
+            f32_kernel::avx512_in_use(),
+            avx2 && std::is_x86_feature_detected!("avx512f")
+                && std::is_x86_feature_detected!("avx512vl"),
+            "the dispatch uses AVX-512 exactly where the CPU has it"
+        );
+    }
     let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(2999, 3, 1));
     let mut field = FieldSettings::new(Some("velocity"), 0.02 * series.bounds().diagonal());
     field.classification = Classification::Pre;
-    let run = |simd: bool| {
+    let run = |simd: bool, avx512: bool| {
         f32_kernel::allow_simd(simd);
+        f32_kernel::allow_avx512(avx512);
         let mut s = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
         s.set_precision(Precision::F32);
         s.show(&series, 2, &field, ClusterSize::new(4).unwrap())
@@ -294,12 +305,17 @@ fn simd_and_baseline_builds_agree_to_their_roundings() {
             )
             .unwrap();
         f32_kernel::allow_simd(true);
+        f32_kernel::allow_avx512(true);
         image
     };
-    let (fast, baseline) = (run(true), run(false));
+    let (fast, avx2, baseline) = (run(true, true), run(true, false), run(false, false));
     let bits = |i: &aarbf::values::Image| -> Vec<u32> {
         i.pixels.iter().flatten().map(|v| v.to_bits()).collect()
     };
+    assert!(
+        bits(&fast) == bits(&avx2),
+        "the AVX-512 and AVX2 builds (or, without AVX-512, the same build) give different images"
+    );
     // The AVX2 point kernel fuses its multiply-adds (one rounding where the baseline build
     // has two), so the builds agree to their roundings, not bit for bit: measured 1.5e-8
     // at most on this image.
@@ -324,6 +340,59 @@ fn simd_and_baseline_builds_agree_to_their_roundings() {
         fast.pixels.iter().any(|p| p[3] > 0.3),
         "the fluid is visible"
     );
+}
+
+/// The f32 field's point queries give the same bits in the AVX-512 and AVX2 builds of the
+/// kernel, in each of its forms: a common radius and weight (broadcast), per-particle radii
+/// with a density map (gathered), a scalar attribute and colours (one and three channels).
+#[test]
+fn avx512_and_avx2_queries_are_the_same_bits() {
+    let step = std::sync::Arc::new(step(1999, 17, -1234.5, 1.0));
+    let bounds = Bounds::of_points(&step.positions);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(99);
+    let queries: Vec<DVec3> = (0..3001)
+        .map(|i| {
+            let u = DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - 1.0;
+            step.positions[(i * 7) % step.positions.len()] + 0.02 * u
+        })
+        .collect();
+    for (per_particle, pre) in [(false, false), (true, false), (false, true), (true, true)] {
+        let mut field = FieldSettings::new(Some("s"), 0.03);
+        if per_particle {
+            field.radius_attribute = Some("h".into());
+            field.density_map =
+                aarbf::scene::maps::DensityMap::new("0:1,1:3".parse().unwrap()).unwrap();
+        }
+        if pre {
+            field.classification = Classification::Pre;
+        }
+        let mut cpu = backend::create(BackendKind::Cpu).unwrap();
+        cpu.upload(&StepInput {
+            step: &step,
+            field: &field,
+            cluster: ClusterSize::new(4).unwrap(),
+            series_bounds: bounds,
+            series_range: Some((-3.0, 5.0)),
+            precision: Precision::F32,
+        })
+        .unwrap();
+        cpu.build().unwrap();
+        let mut answers = |avx512: bool| {
+            f32_kernel::allow_avx512(avx512);
+            let got = cpu.query(&queries).unwrap();
+            f32_kernel::allow_avx512(true);
+            got.iter()
+                .map(|(phi, num)| (phi.to_bits(), num.map(f64::to_bits)))
+                .collect::<Vec<_>>()
+        };
+        let (wide, narrow) = (answers(true), answers(false));
+        let reached = wide.iter().filter(|a| f64::from_bits(a.0) > 0.0).count();
+        assert!(reached > 2000, "most queries lie in the field ({reached})");
+        assert!(
+            wide == narrow,
+            "per-particle radii {per_particle}, pre-classified {pre}: the builds differ"
+        );
+    }
 }
 
 /// The f32 image of the demo equals the f64 reference's to well below an 8-bit step (the same

@@ -11,12 +11,15 @@
 //! the baseline build's by their roundings and order of summation (1.5e-8 at most on a test
 //! image, tested to 1e-6). The packet kernel's narrowing is in intrinsics too, for the same
 //! permutation, with the baseline build's operations: its two builds stay equal bit for bit.
+//! Where the CPU has AVX-512 (F and VL), the point kernel runs a third build of the same body
+//! on the same eight lanes, packing with `vcompress` instead of the permutation: the same lanes
+//! in the same order, so the AVX2 build's bits, 1.1-1.2x faster on Zen 4 (docs/benchmarks.md).
 //!
 //! Why this and not a SIMD crate: `wide` selects its instructions when the crate is compiled
 //! (this project builds for baseline x86-64, where its `f32x8` is two SSE halves), `pulp` and
 //! `multiversion` add dispatch machinery for one kernel; the kernel here is 40 lines of lane
 //! arithmetic, and a `#[target_feature]` twin of it is the whole dispatch.
-//! `benches/cpu_roofline.rs` measures both builds against the machine's peak.
+//! `benches/cpu_roofline.rs` measures every build against the machine's peak.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -35,6 +38,30 @@ pub fn allow_simd(allowed: bool) {
 /// Whether field evaluation runs the AVX2 + FMA build of the kernel here.
 pub fn simd_in_use() -> bool {
     SIMD_ALLOWED.load(Ordering::Relaxed) && avx2_available()
+}
+
+static AVX512_ALLOWED: AtomicBool = AtomicBool::new(true);
+
+/// Allows or forbids the AVX-512 build of the point kernel and the dense loop (tests and
+/// benchmarks force the AVX2 build with `false`; the point kernel's results are the same bits).
+pub fn allow_avx512(allowed: bool) {
+    AVX512_ALLOWED.store(allowed, Ordering::Relaxed);
+}
+
+/// Whether field evaluation runs the AVX-512 (F and VL) build of the point kernel and the
+/// dense loop here: where [`simd_in_use`], AVX-512 is allowed, and the CPU has it.
+pub fn avx512_in_use() -> bool {
+    simd_in_use() && AVX512_ALLOWED.load(Ordering::Relaxed) && avx512_available()
+}
+
+#[cfg(target_arch = "x86_64")]
+fn avx512_available() -> bool {
+    std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512vl")
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn avx512_available() -> bool {
+    false
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -402,13 +429,24 @@ fn packet_terms_lanes<const C: usize>(
 fn sums<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (f64, [f64; 3]) {
     #[cfg(target_arch = "x86_64")]
     if simd_in_use() {
-        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `simd_in_use`).
+        // One build of the point kernel per common radius and weight (broadcast) or not.
+        macro_rules! by_broadcast {
+            ($build:ident) => {
+                match (p.same_k, p.same_w) {
+                    (Some(k), Some(w)) => $build::<C, true, true>(p, runs, q, k, w),
+                    (Some(k), None) => $build::<C, true, false>(p, runs, q, k, 0.0),
+                    (None, Some(w)) => $build::<C, false, true>(p, runs, q, 0.0, w),
+                    (None, None) => $build::<C, false, false>(p, runs, q, 0.0, 0.0),
+                }
+            };
+        }
+        // SAFETY: the CPU has AVX2 and FMA (checked at run time by `simd_in_use`), and AVX-512
+        // F and VL where `avx512_in_use`.
         return unsafe {
-            match (p.same_k, p.same_w) {
-                (Some(k), Some(w)) => sums_avx2::<C, true, true>(p, runs, q, k, w),
-                (Some(k), None) => sums_avx2::<C, true, false>(p, runs, q, k, 0.0),
-                (None, Some(w)) => sums_avx2::<C, false, true>(p, runs, q, 0.0, w),
-                (None, None) => sums_avx2::<C, false, false>(p, runs, q, 0.0, 0.0),
+            if avx512_in_use() {
+                by_broadcast!(sums_avx512)
+            } else {
+                by_broadcast!(sums_avx2)
             }
         };
     }
@@ -457,39 +495,188 @@ unsafe fn sums_avx2<const C: usize, const SAME_K: bool, const SAME_W: bool>(
     same_k: f32,
     same_w: f32,
 ) -> (f64, [f64; 3]) {
+    // SAFETY: the caller's CPU has AVX2 and FMA, which is all the body uses when its
+    // compaction is the permutation table's.
+    unsafe { point_sums::<C, SAME_K, SAME_W, false>(p, runs, q, same_k, same_w) }
+}
+
+/// [`sums_avx2`] with AVX-512 (F and VL) on the same eight lanes: the reach test writes a
+/// mask register, and the reached lanes are packed by `vcompress` instead of the mask moved to
+/// a general register, a permutation loaded from [`PACK`] and applied: the same lanes in the
+/// same order, so the same bits. Why: on this project's Zen 4 machines that chain was most of
+/// the test's time (the permutation and its store held 28% of the kernel's samples); the
+/// queries ran 1.2x faster with it (docs/benchmarks.md). Sixteen lanes ran slower: a query's
+/// nine runs of about 21 candidates fill sixteen lanes worse than eight.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma,popcnt")]
+unsafe fn sums_avx512<const C: usize, const SAME_K: bool, const SAME_W: bool>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    q: [f32; 3],
+    same_k: f32,
+    same_w: f32,
+) -> (f64, [f64; 3]) {
+    // SAFETY: the caller's CPU has AVX-512 F and VL, AVX2 and FMA.
+    unsafe { point_sums::<C, SAME_K, SAME_W, true>(p, runs, q, same_k, same_w) }
+}
+
+/// The body of [`sums_avx2`] (`COMPRESS` false) and [`sums_avx512`] (true), inlined into
+/// each so that its intrinsics take their features. The held indices are written only where
+/// the terms gather something by them (a radius or weight of each particle's own, or theta):
+/// a scene of one radius with no density map and no attribute keeps only the distances.
+///
+/// # Safety
+/// The CPU has AVX2, FMA and POPCNT, and AVX-512 F and VL where `COMPRESS`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn point_sums<
+    const C: usize,
+    const SAME_K: bool,
+    const SAME_W: bool,
+    const COMPRESS: bool,
+>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    q: [f32; 3],
+    same_k: f32,
+    same_w: f32,
+) -> (f64, [f64; 3]) {
     use core::arch::x86_64::*;
-    let (qx, qy, qz) = (
-        _mm256_set1_ps(q[0]),
-        _mm256_set1_ps(q[1]),
-        _mm256_set1_ps(q[2]),
-    );
-    let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    let mut phi = _mm256_setzero_ps();
-    let mut num = [_mm256_setzero_ps(); 3];
-    // The loads below read eight floats from every array the kernel uses: all of them must
-    // hold each run and its padding (checked once, on the shortest).
-    let len = [&p.x, &p.y, &p.z, &p.r2, &p.k, &p.w]
-        .into_iter()
-        .chain(&p.theta[..C])
-        .map(Vec::len)
-        .min()
-        .unwrap_or(0);
-    // A chunk's store writes eight slots from `n`, so the buffer holds HELD + LANES.
-    let mut held_index = [0i32; HELD + LANES];
-    let mut held_d2 = [0f32; HELD + LANES];
-    let mut n = 0usize;
-    // The terms of held candidates `0..count`, eight at a time, the lanes past `count`
-    // masked (their slots hold earlier writes or zeros: indices of real particles).
-    let mut flush = |held_index: &[i32; HELD + LANES], held_d2: &[f32; HELD + LANES], count| {
+    // SAFETY: the caller vouches for the CPU's features (the intrinsics need nothing else);
+    // each pointer's bounds are argued where it is made.
+    unsafe {
+        let gathers = C > 0 || !SAME_K || !SAME_W;
+        let (qx, qy, qz) = (
+            _mm256_set1_ps(q[0]),
+            _mm256_set1_ps(q[1]),
+            _mm256_set1_ps(q[2]),
+        );
+        let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let mut sums = HeldSums {
+            phi: _mm256_setzero_ps(),
+            num: [_mm256_setzero_ps(); 3],
+        };
+        // The loads below read eight floats from every array the kernel uses: all of them must
+        // hold each run and its padding (checked once, on the shortest).
+        let len = [&p.x, &p.y, &p.z, &p.r2, &p.k, &p.w]
+            .into_iter()
+            .chain(&p.theta[..C])
+            .map(Vec::len)
+            .min()
+            .unwrap_or(0);
+        // A chunk's store writes eight slots from `n`, so the buffer holds HELD + LANES.
+        let mut held_index = [0i32; HELD + LANES];
+        let mut held_d2 = [0f32; HELD + LANES];
+        let mut n = 0usize;
+        for &(a, b) in runs {
+            let (mut at, end) = (a as usize, b as usize);
+            assert!(end + LANES <= len, "runs within the padded particles");
+            // The lanes' particle indices, and the run's end to mask them by.
+            let mut index = _mm256_add_epi32(_mm256_set1_epi32(a as i32), iota);
+            let end_v = _mm256_set1_epi32(b as i32);
+            while at < end {
+                // Bounds: at < end and end + LANES <= len (asserted): eight floats from `at`
+                // are in every array read; n <= HELD (flushed below otherwise): eight slots
+                // from n are in the buffers; a table row holds eight lanes.
+                let count = {
+                    let (index_at, d2_at) = (
+                        held_index.as_mut_ptr().add(n).cast(),
+                        held_d2.as_mut_ptr().add(n),
+                    );
+                    if COMPRESS {
+                        let live = _mm256_cmpgt_epi32_mask(end_v, index);
+                        let (d2, r2) = distance2_avx2(p, at, [qx, qy, qz]);
+                        let reached = _mm256_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
+                        if gathers {
+                            _mm256_storeu_si256(
+                                index_at,
+                                _mm256_maskz_compress_epi32(reached, index),
+                            );
+                        }
+                        _mm256_storeu_ps(d2_at, _mm256_maskz_compress_ps(reached, d2));
+                        reached.count_ones()
+                    } else {
+                        let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
+                        let (d2, reached) = reach_avx2(p, at, [qx, qy, qz], live);
+                        let mask = _mm256_movemask_ps(reached) as usize;
+                        let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
+                        if gathers {
+                            _mm256_storeu_si256(
+                                index_at,
+                                _mm256_permutevar8x32_epi32(index, order),
+                            );
+                        }
+                        _mm256_storeu_ps(d2_at, _mm256_permutevar8x32_ps(d2, order));
+                        mask.count_ones()
+                    }
+                };
+                n += count as usize;
+                at += LANES;
+                index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
+                if n > HELD - LANES {
+                    // Whole chunks now; the rest moves to the front.
+                    let whole = n / LANES * LANES;
+                    // Bounds: whole <= HELD; held indices are particles' (below `len`) or 0.
+                    sums.add::<C, SAME_K, SAME_W>(p, &held_index, &held_d2, whole, same_k, same_w);
+                    if gathers {
+                        held_index.copy_within(whole..n, 0);
+                    }
+                    held_d2.copy_within(whole..n, 0);
+                    n -= whole;
+                }
+            }
+        }
+        sums.add::<C, SAME_K, SAME_W>(p, &held_index, &held_d2, n, same_k, same_w);
+        let mut theta = [0.0; 3];
+        for (ch, t) in theta.iter_mut().enumerate().take(C) {
+            *t = lane_total(sums.num[ch]);
+        }
+        (lane_total(sums.phi), theta)
+    }
+}
+
+/// The point kernel's sums in eight lanes: Phi and the Theta numerator per channel.
+#[cfg(target_arch = "x86_64")]
+struct HeldSums {
+    phi: core::arch::x86_64::__m256,
+    num: [core::arch::x86_64::__m256; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl HeldSums {
+    /// Adds the terms of held candidates `0..count`, eight at a time, the lanes past `count`
+    /// masked (their slots hold earlier writes or zeros: indices of real particles). The
+    /// indices are read only where the terms gather by them (see [`point_sums`]).
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA; `count <= HELD`; every held index is below the length of
+    /// every array gathered from.
+    #[inline(always)]
+    unsafe fn add<const C: usize, const SAME_K: bool, const SAME_W: bool>(
+        &mut self,
+        p: &Packed,
+        held_index: &[i32; HELD + LANES],
+        held_d2: &[f32; HELD + LANES],
+        count: usize,
+        same_k: f32,
+        same_w: f32,
+    ) {
+        use core::arch::x86_64::*;
+        // SAFETY: the caller vouches for the CPU's features.
+        let iota = unsafe { _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7) };
         let mut i = 0;
         while i < count {
-            // SAFETY: i + LANES <= HELD + LANES (count <= HELD); every held index is a
-            // particle's (below `len`), or 0.
+            // SAFETY: i + LANES <= HELD + LANES (count <= HELD); the caller vouches for the
+            // indices and the CPU.
             unsafe {
                 let live = _mm256_cmpgt_epi32(_mm256_set1_epi32((count - i) as i32), iota);
-                let index = _mm256_loadu_si256(held_index.as_ptr().add(i).cast());
                 let d2 = _mm256_loadu_ps(held_d2.as_ptr().add(i));
-                let gather = |v: &Vec<f32>| _mm256_i32gather_ps::<4>(v.as_ptr(), index);
+                // Read only where something is gathered (the held indices are not written
+                // otherwise).
+                let gather = |v: &Vec<f32>| {
+                    let index = _mm256_loadu_si256(held_index.as_ptr().add(i).cast());
+                    _mm256_i32gather_ps::<4>(v.as_ptr(), index)
+                };
                 // The same values either way: broadcast where every particle's are the same.
                 let k = if SAME_K {
                     _mm256_set1_ps(same_k)
@@ -504,58 +691,14 @@ unsafe fn sums_avx2<const C: usize, const SAME_K: bool, const SAME_W: bool>(
                 let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), k), d2);
                 let term =
                     _mm256_and_ps(_mm256_mul_ps(w, exp_neg_avx2(x)), _mm256_castsi256_ps(live));
-                phi = _mm256_add_ps(phi, term);
-                for (ch, acc) in num.iter_mut().enumerate().take(C) {
+                self.phi = _mm256_add_ps(self.phi, term);
+                for (ch, acc) in self.num.iter_mut().enumerate().take(C) {
                     *acc = _mm256_fmadd_ps(gather(&p.theta[ch]), term, *acc);
                 }
             }
             i += LANES;
         }
-    };
-    for &(a, b) in runs {
-        let (mut at, end) = (a as usize, b as usize);
-        assert!(end + LANES <= len, "runs within the padded particles");
-        // The lanes' particle indices, and the run's end to mask them by.
-        let mut index = _mm256_add_epi32(_mm256_set1_epi32(a as i32), iota);
-        let end_v = _mm256_set1_epi32(b as i32);
-        while at < end {
-            let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
-            // SAFETY: at < end and end + LANES <= len (asserted): eight floats from `at` are
-            // in every array read.
-            let (d2, reached) = unsafe { reach_avx2(p, at, [qx, qy, qz], live) };
-            let mask = _mm256_movemask_ps(reached) as usize;
-            // SAFETY: n <= HELD (flushed below otherwise): eight slots from n are in the
-            // buffers; the table row holds eight lanes.
-            unsafe {
-                let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
-                _mm256_storeu_si256(
-                    held_index.as_mut_ptr().add(n).cast(),
-                    _mm256_permutevar8x32_epi32(index, order),
-                );
-                _mm256_storeu_ps(
-                    held_d2.as_mut_ptr().add(n),
-                    _mm256_permutevar8x32_ps(d2, order),
-                );
-            }
-            n += mask.count_ones() as usize;
-            at += LANES;
-            index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
-            if n > HELD - LANES {
-                // Whole chunks now; the rest moves to the front.
-                let whole = n / LANES * LANES;
-                flush(&held_index, &held_d2, whole);
-                held_index.copy_within(whole..n, 0);
-                held_d2.copy_within(whole..n, 0);
-                n -= whole;
-            }
-        }
     }
-    flush(&held_index, &held_d2, n);
-    let mut theta = [0.0; 3];
-    for (ch, t) in theta.iter_mut().enumerate().take(C) {
-        *t = lane_total(num[ch]);
-    }
-    (lane_total(phi), theta)
 }
 
 /// The sum of eight f32 lanes in f64, lane 0 first: how every AVX2 kernel ends.
@@ -584,7 +727,7 @@ unsafe fn lanes_at(v: &[f32], at: usize) -> core::arch::x86_64::__m256 {
 
 /// Particles `at..at + 8`: their squared distances from `q` (fused), and which of the `live`
 /// lanes lie within their radius. The one reach test of the AVX2 point kernel and the dense
-/// loop.
+/// loop (the AVX-512 point kernel compares [`distance2_avx2`]'s pair into a mask register).
 ///
 /// # Safety
 /// Eight floats from `at` are in `p.x`, `p.y`, `p.z` and `p.r2`.
@@ -596,6 +739,25 @@ unsafe fn reach_avx2(
     at: usize,
     q: [core::arch::x86_64::__m256; 3],
     live: core::arch::x86_64::__m256,
+) -> (core::arch::x86_64::__m256, core::arch::x86_64::__m256) {
+    use core::arch::x86_64::*;
+    // SAFETY: the caller keeps eight floats from `at` within each array.
+    let (d2, r2) = unsafe { distance2_avx2(p, at, q) };
+    let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
+    (d2, reached)
+}
+
+/// Particles `at..at + 8`: their squared distances from `q` (fused), and their r².
+///
+/// # Safety
+/// Eight floats from `at` are in `p.x`, `p.y`, `p.z` and `p.r2`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn distance2_avx2(
+    p: &Packed,
+    at: usize,
+    q: [core::arch::x86_64::__m256; 3],
 ) -> (core::arch::x86_64::__m256, core::arch::x86_64::__m256) {
     use core::arch::x86_64::*;
     // SAFETY: the caller keeps eight floats from `at` within each array.
@@ -613,8 +775,7 @@ unsafe fn reach_avx2(
         _mm256_sub_ps(z, q[2]),
     );
     let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
-    let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
-    (d2, reached)
+    (d2, r2)
 }
 
 /// Eight floats at any address.
@@ -731,9 +892,68 @@ pub fn dense_sums(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f64 {
         assert!(to + LANES <= p.x.len().min(p.r2.len()).min(p.k.len()).min(p.w.len()));
         // SAFETY: the CPU has AVX2 and FMA (checked at run time by `simd_in_use`); every
         // array read holds eight floats from any particle below `to` (asserted).
+        if avx512_in_use() {
+            // SAFETY: and AVX-512 F (`avx512_in_use`).
+            return unsafe { dense_sums_avx512(p, from, to, q) };
+        }
         return unsafe { dense_sums_avx2(p, from, to, q) };
     }
     sums_lanes::<0>(p, &[(from as u32, to as u32)], q).0
+}
+
+/// [`dense_sums`] with AVX-512 in sixteen lanes (a run's last lanes masked): on this
+/// project's Zen 4 machines, which split 512-bit work in two 256-bit halves, it computes 1.8x
+/// the terms a second of the eight-lane loop (half the instructions for the same arithmetic),
+/// so it, not the AVX2 loop, is their peak (docs/benchmarks.md). The exponential is
+/// [`exp_neg`]'s, in sixteen lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn dense_sums_avx512(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f64 {
+    use core::arch::x86_64::*;
+    const WIDE: usize = 16;
+    let c = _mm512_set1_ps;
+    let (qx, qy, qz) = (c(q[0]), c(q[1]), c(q[2]));
+    let mut phi = _mm512_setzero_ps();
+    let mut at = from;
+    while at < to {
+        let live: __mmask16 = if to - at >= WIDE {
+            u16::MAX
+        } else {
+            (1u16 << (to - at)) - 1
+        };
+        // SAFETY: the lanes past `to` are masked off in every load (not read).
+        let lanes = |v: &Vec<f32>| unsafe { _mm512_maskz_loadu_ps(live, v.as_ptr().add(at)) };
+        let (dx, dy, dz) = (
+            _mm512_sub_ps(lanes(&p.x), qx),
+            _mm512_sub_ps(lanes(&p.y), qy),
+            _mm512_sub_ps(lanes(&p.z), qz),
+        );
+        let d2 = _mm512_fmadd_ps(dz, dz, _mm512_fmadd_ps(dy, dy, _mm512_mul_ps(dx, dx)));
+        let reached = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, lanes(&p.r2));
+        // The exponential as `exp_neg_avx2` computes it.
+        let x = _mm512_max_ps(
+            _mm512_mul_ps(_mm512_sub_ps(_mm512_setzero_ps(), lanes(&p.k)), d2),
+            c(EXP_MIN),
+        );
+        let round = c(EXP_ROUND);
+        let shifted = _mm512_fmadd_ps(x, c(std::f32::consts::LOG2_E), round);
+        let n = _mm512_sub_ps(shifted, round);
+        let r = _mm512_fnmadd_ps(n, c(LN2_LO), _mm512_fnmadd_ps(n, c(LN2_HI), x));
+        let mut poly = c(EXP_POLY[0]);
+        for &k in &EXP_POLY[1..] {
+            poly = _mm512_fmadd_ps(poly, r, c(k));
+        }
+        let e = _mm512_add_ps(_mm512_fmadd_ps(poly, _mm512_mul_ps(r, r), r), c(1.0));
+        let n_int = _mm512_sub_epi32(_mm512_castps_si512(shifted), _mm512_castps_si512(round));
+        let scale = _mm512_slli_epi32::<23>(_mm512_add_epi32(n_int, _mm512_set1_epi32(127)));
+        let term = _mm512_mul_ps(lanes(&p.w), _mm512_mul_ps(e, _mm512_castsi512_ps(scale)));
+        phi = _mm512_mask_add_ps(phi, reached, phi, term);
+        at += WIDE;
+    }
+    let mut lanes = [0f32; WIDE];
+    // SAFETY: sixteen floats.
+    unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), phi) };
+    lanes.iter().map(|&x| f64::from(x)).sum()
 }
 
 /// [`dense_sums`] with AVX2 and fused multiply-adds.
@@ -889,7 +1109,162 @@ mod tests {
         }
     }
 
-    /// Both builds of the point kernel against the sum as written in f64, over runs where far
+    /// The AVX-512 build of the point kernel packs the same lanes in the same order as the
+    /// AVX2 build, so it gives the same bits: for every channel count and every broadcast, over
+    /// runs of awkward lengths, runs that reach nothing and runs that fill the held candidates
+    /// several times over (flushes), in a scene of one radius and weight (where the broadcasts
+    /// apply) and one of each particle's own.
+    #[test]
+    fn the_avx512_point_kernel_gives_the_avx2_bits() {
+        if !avx512_in_use() {
+            // The dispatch test (tests/cpu_f32.rs) holds `avx512_in_use` to the CPU's features.
+            return;
+        }
+        let mut next = uniform(9001);
+        let scene = |common: bool, next: &mut dyn FnMut() -> f32| {
+            let mut p = Packed {
+                channels: 3,
+                ..Packed::default()
+            };
+            // 0..700 a clump about the origin, 700..1301 far away.
+            for i in 0..1301 {
+                let (spread, shift) = if i < 700 { (0.3, 0.0) } else { (1.0, 10.0) };
+                let (r, w) = if common {
+                    (0.4, 1.0)
+                } else {
+                    (0.3 + 0.2 * next(), 0.25 + next())
+                };
+                let c = [
+                    shift + spread * (next() - 0.5),
+                    spread * (next() - 0.5),
+                    spread * (next() - 0.5),
+                ];
+                push(&mut p, c, r, w, &[next(), next() - 0.5, next()]);
+            }
+            p.pad();
+            p
+        };
+        let runs = [
+            (0u32, 7u32),
+            (7, 150),
+            (150, 613),
+            (3, 4),
+            (700, 1301),
+            (613, 700),
+            (17, 17),
+        ];
+        let bits = |s: (f64, [f64; 3])| (s.0.to_bits(), s.1.map(f64::to_bits));
+        // SAFETY (each call below): `avx512_in_use` checked the CPU's features.
+        macro_rules! both {
+            ($c:literal, $same_k:literal, $same_w:literal, $p:expr, $q:expr, $k:expr, $w:expr) => {{
+                let wide = unsafe { sums_avx512::<$c, $same_k, $same_w>($p, &runs, $q, $k, $w) };
+                let narrow = unsafe { sums_avx2::<$c, $same_k, $same_w>($p, &runs, $q, $k, $w) };
+                assert_eq!(
+                    bits(wide),
+                    bits(narrow),
+                    "C {}, same k {}, same w {}, at {:?}",
+                    $c,
+                    $same_k,
+                    $same_w,
+                    $q
+                );
+                wide.0
+            }};
+        }
+        let mut reached = 0;
+        for common in [true, false] {
+            let p = scene(common, &mut next);
+            assert_eq!(p.same_k.is_some(), common);
+            let (k, w) = (p.same_k.unwrap_or(0.0), p.same_w.unwrap_or(0.0));
+            for i in 0..30 {
+                let q = if i % 3 == 2 {
+                    [10.0 + next() - 0.5, next() - 0.5, next() - 0.5]
+                } else {
+                    [next() - 0.5, next() - 0.5, next() - 0.5].map(|v| 0.5 * v)
+                };
+                let phi = both!(0, false, false, &p, q, 0.0, 0.0);
+                both!(1, false, false, &p, q, 0.0, 0.0);
+                both!(3, false, false, &p, q, 0.0, 0.0);
+                if common {
+                    both!(0, true, true, &p, q, k, w);
+                    both!(0, true, false, &p, q, k, 0.0);
+                    both!(0, false, true, &p, q, 0.0, w);
+                    both!(1, true, true, &p, q, k, w);
+                    both!(3, true, true, &p, q, k, w);
+                    both!(3, true, false, &p, q, k, 0.0);
+                    both!(3, false, true, &p, q, 0.0, w);
+                }
+                reached += usize::from(phi > 100.0);
+            }
+        }
+        assert!(reached > 10, "the clump reaches most queries ({reached})");
+    }
+
+    /// The AVX-512 dense loop (the peak on a CPU that has it) sums the terms the AVX2 loop and
+    /// the f64 sum do, to their roundings (sixteen lanes add in another order than eight), over
+    /// ranges whose ends are not multiples of sixteen, shorter than sixteen, and empty.
+    #[test]
+    fn the_avx512_dense_loop_sums_the_avx2_terms() {
+        if !avx512_in_use() {
+            return;
+        }
+        let mut p = Packed::default();
+        let mut next = uniform(31337);
+        for _ in 0..1000 {
+            let r: f32 = 0.2 + 0.4 * next();
+            push(
+                &mut p,
+                [next(), next(), next()].map(|v| v - 0.5),
+                r,
+                0.5 + next(),
+                &[],
+            );
+        }
+        p.pad();
+        for (from, to) in [
+            (0, 1000),
+            (3, 613),
+            (5, 16),
+            (100, 101),
+            (40, 40),
+            (999, 1000),
+        ] {
+            for _ in 0..10 {
+                let q = [next() - 0.5, next() - 0.5, next() - 0.5].map(|v| 0.5 * v);
+                // SAFETY: `avx512_in_use` checked the CPU's features; the padding holds
+                // eight (AVX2) floats past `to`, and the AVX-512 loop masks its last lanes.
+                let (wide, narrow) = unsafe {
+                    (
+                        dense_sums_avx512(&p, from, to, q),
+                        dense_sums_avx2(&p, from, to, q),
+                    )
+                };
+                let exact: f64 = (from..to)
+                    .map(|j| {
+                        let d2: f64 = [p.x[j] - q[0], p.y[j] - q[1], p.z[j] - q[2]]
+                            .map(|d| f64::from(d) * f64::from(d))
+                            .iter()
+                            .sum();
+                        if d2 <= f64::from(p.r2[j]) {
+                            f64::from(p.w[j]) * (-f64::from(p.k[j]) * d2).exp()
+                        } else {
+                            0.0
+                        }
+                    })
+                    .sum();
+                let tolerance = 1e-5 * exact.max(1e-30);
+                assert!(
+                    (wide - exact).abs() <= tolerance && (narrow - exact).abs() <= tolerance,
+                    "{from}..{to} at {q:?}: AVX-512 {wide}, AVX2 {narrow}, f64 {exact}"
+                );
+                if to == from {
+                    assert_eq!(wide, 0.0);
+                }
+            }
+        }
+    }
+
+    /// Every build of the point kernel against the sum as written in f64, over runs where far
     /// more candidates reach than the kernel holds before computing (its flushes), runs that
     /// reach nothing, runs of one particle, a particle in two runs (counted twice), and the
     /// dense loop over one run.
@@ -931,7 +1306,11 @@ mod tests {
             }
             (phi, num)
         };
-        let builds = if simd_in_use() { 2 } else { 1 };
+        // The baseline build, then AVX2, then AVX-512, as far as the CPU has them.
+        let builds = [true, simd_in_use(), avx512_in_use()]
+            .iter()
+            .filter(|&&available| available)
+            .count();
         for q in [
             [0.0, 0.0, 0.0],
             [0.05, -0.1, 0.02],
@@ -940,17 +1319,19 @@ mod tests {
         ] {
             let (phi, num) = brute(q);
             for simd in 0..builds {
-                allow_simd(simd == 1);
+                allow_simd(simd >= 1);
+                allow_avx512(simd == 2);
                 let (got_phi, got_num) = p.sums(&runs, q);
                 allow_simd(true);
+                allow_avx512(true);
                 let scale = phi.max(1e-30);
                 assert!(
                     (got_phi - phi).abs() <= 1e-5 * scale,
-                    "{q:?}, AVX2 {simd}: phi {got_phi} vs {phi}"
+                    "{q:?}, build {simd}: phi {got_phi} vs {phi}"
                 );
                 assert!(
                     (got_num[0] - num).abs() <= 1e-5 * scale,
-                    "{q:?}, AVX2 {simd}: theta {} vs {num}",
+                    "{q:?}, build {simd}: theta {} vs {num}",
                     got_num[0]
                 );
             }
