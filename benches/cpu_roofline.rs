@@ -1,9 +1,9 @@
 //! How close the CPU backend's field queries run to what this machine can do: the peak rate
 //! of RBF terms (w · exp(-4.5 d²/r²) for particles within r) in a tight loop over particles
-//! in cache (a scalar f64 loop as the reference evaluates a term; the f32 kernel's AVX2 and
-//! baseline builds), against the terms per second the backend achieves on N particles × M
-//! queries (~30 terms a query) in f64 and in f32 (in both builds of the f32 kernel), at every
-//! thread count up to the machine's.
+//! in cache (a scalar f64 loop as the reference evaluates a term; the f32 kernel's AVX-512,
+//! AVX2 and baseline builds: the widest the CPU has is its peak), against the terms per second
+//! the backend achieves on N particles × M queries (~30 terms a query) in f64 and in f32 (in
+//! each build of the f32 kernel), at every thread count up to the machine's.
 //! Results go to docs/benchmarks.md.
 //!
 //! cargo xtask bench cpu_roofline -- [N] [M]     (defaults: 1000000 1000000)
@@ -76,9 +76,9 @@ fn main() {
     );
 
     println!(
-        "| threads | peak, f64 scalar exp (G terms/s) | peak, f32 kernel AVX2 (G terms/s) | peak, f32 kernel baseline (G terms/s) | backend f64 (M terms/s) | backend f32 (M terms/s) | backend f32, baseline build (M terms/s) | f64 / f64 peak | f32 / AVX2 peak | f32 / f64 |"
+        "| threads | peak, f64 scalar exp (G terms/s) | peak, f32 kernel AVX-512 (G terms/s) | peak, f32 kernel AVX2 (G terms/s) | peak, f32 kernel baseline (G terms/s) | backend f64 (M terms/s) | backend f32 (M terms/s) | backend f32, AVX2 build (M terms/s) | backend f32, baseline build (M terms/s) | f64 / f64 peak | f32 / f32 peak | f32 / f64 |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut threads = vec![1];
     let mut t = 2;
     while t <= cores {
@@ -90,6 +90,7 @@ fn main() {
     }
     let mut achieved_by_threads = Vec::new();
     let simd = f32_kernel::simd_in_use();
+    let avx512 = f32_kernel::avx512_in_use();
     for &k in &threads {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(k)
@@ -97,7 +98,12 @@ fn main() {
             .unwrap();
         let row = pool.install(|| {
             let peak64 = best_rate(3, || peak_f64(k));
+            // The widest build the CPU has (AVX-512 where it has it: the machine's peak), then
+            // the AVX2 one.
+            let peak_widest = best_rate(3, || peak_f32_kernel(k));
+            f32_kernel::allow_avx512(false);
             let peak_avx2 = best_rate(3, || peak_f32_kernel(k));
+            f32_kernel::allow_avx512(true);
             f32_kernel::allow_simd(false);
             let peak_baseline = best_rate(3, || peak_f32_kernel(k));
             f32_kernel::allow_simd(true);
@@ -111,32 +117,44 @@ fn main() {
             };
             let a64 = achieved(&mut f64_backend);
             let a32 = achieved(&mut f32_backend);
+            // What a CPU with AVX2 and no AVX-512 gets.
+            f32_kernel::allow_avx512(false);
+            let a32_avx2 = achieved(&mut f32_backend);
+            f32_kernel::allow_avx512(true);
             // What a CPU without AVX2 gets (the dispatch forced off).
             f32_kernel::allow_simd(false);
             let a32_baseline = achieved(&mut f32_backend);
             f32_kernel::allow_simd(true);
-            (peak64, peak_avx2, peak_baseline, a64, a32, a32_baseline)
+            let peaks = (peak64, peak_widest, peak_avx2, peak_baseline);
+            (peaks, a64, a32, a32_avx2, a32_baseline)
         });
-        let (peak64, peak_avx2, peak_baseline, a64, a32, a32_baseline) = row;
+        let ((peak64, peak_widest, peak_avx2, peak_baseline), a64, a32, a32_avx2, a32_baseline) =
+            row;
         achieved_by_threads.push((a64, a32));
-        println!(
-            "| {k} | {:.3} | {} | {:.3} | {:.1} | {:.1} | {:.1} | {:.1}% | {} | {:.1}x |",
-            peak64 / 1e9,
-            if simd {
-                format!("{:.3}", peak_avx2 / 1e9)
+        let rate = |available: bool, v: f64| {
+            if available {
+                format!("{:.3}", v / 1e9)
             } else {
-                "(no AVX2)".into()
-            },
+                "-".into()
+            }
+        };
+        println!(
+            "| {k} | {:.3} | {} | {} | {:.3} | {:.1} | {:.1} | {} | {:.1} | {:.1}% | {:.1}% | {:.1}x |",
+            peak64 / 1e9,
+            rate(avx512, peak_widest),
+            rate(simd, peak_avx2),
             peak_baseline / 1e9,
             a64 / 1e6,
             a32 / 1e6,
-            a32_baseline / 1e6,
-            100.0 * a64 / peak64,
             if simd {
-                format!("{:.1}%", 100.0 * a32 / peak_avx2)
+                format!("{:.1}", a32_avx2 / 1e6)
             } else {
                 "-".into()
             },
+            a32_baseline / 1e6,
+            100.0 * a64 / peak64,
+            // Against the widest build's peak: what this CPU can do.
+            100.0 * a32 / peak_widest,
             a32 / a64
         );
     }
@@ -265,8 +283,8 @@ fn peak_f64(threads: usize) -> (u64, f64) {
 }
 
 /// Terms a second of the f32 kernel's arithmetic over the block in cache, every particle's term
-/// computed with no test of which reach (`f32_kernel::dense_sums`), in whichever build (AVX2 or
-/// baseline) the dispatch allows now: the ceiling of the kernel on this CPU.
+/// computed with no test of which reach (`f32_kernel::dense_sums`), in whichever build
+/// (AVX-512, AVX2 or baseline) the dispatch allows now: the ceiling of the kernel on this CPU.
 fn peak_f32_kernel(threads: usize) -> (u64, f64) {
     let (b, queries) = block::<f32>();
     let mut packed = Packed {
