@@ -902,7 +902,7 @@ pub fn dense_sums(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f64 {
 }
 
 /// [`dense_sums`] with AVX-512 in sixteen lanes (a run's last lanes masked): on this
-/// project's Zen 4 machines, which split 512-bit work in two 256-bit halves, it computes 1.8x
+/// project's Zen 4 machines, which split 512-bit work in two 256-bit halves, it computes 1.7x
 /// the terms a second of the eight-lane loop (half the instructions for the same arithmetic),
 /// so it, not the AVX2 loop, is their peak (docs/benchmarks.md). The exponential is
 /// [`exp_neg`]'s, in sixteen lanes.
