@@ -297,7 +297,7 @@ fn peak_f32_kernel(threads: usize) -> (u64, f64) {
         w: b.w,
         theta: [Vec::new(), Vec::new(), Vec::new()],
         channels: 0,
-        // same_k and same_w: set by `pad`.
+        // one_radius and same_w: set by `pad`.
         ..Packed::default()
     };
     packed.pad();

@@ -52,7 +52,7 @@ impl F32Field {
             w: f32s(&|i| p.weights[i] as f32),
             theta,
             channels,
-            // same_k and same_w: set by `pad`.
+            // one_radius and same_w: set by `pad`.
             ..Packed::default()
         };
         particles.pad();

@@ -133,18 +133,27 @@ pub struct Packed {
     /// theta per channel (the normalised attribute, or linear RGB); `channels` of them.
     pub theta: [Vec<f32>; 3],
     pub channels: usize,
-    /// `k` where every particle has the same (one radius: no radius map, no smoothing
-    /// lengths), and `w` likewise (no density map); set by [`Packed::pad`]. The AVX2 point
-    /// kernel then broadcasts it instead of gathering it for each term: a scene that models
-    /// neither pays for neither (the field queries ran 1.2x faster without both gathers,
-    /// docs/benchmarks.md).
-    pub same_k: Option<f32>,
+    /// `k` and `r2` where every particle has the same (one radius: no radius map, no
+    /// smoothing lengths), and `w` likewise (no density map); set by [`Packed::pad`]. The
+    /// SIMD point kernels then broadcast them instead of gathering `k` for each term and
+    /// loading `r2` for each test: a scene that models neither pays for neither (the field
+    /// queries ran 1.2x faster without both gathers, and the AVX-512 build 1.04-1.09x faster
+    /// again without the loads of r², docs/benchmarks.md).
+    pub one_radius: Option<OneRadius>,
     pub same_w: Option<f32>,
+}
+
+/// The kernel's constants of one radius r: `k` = 4.5 / r² and `r2` = r², as every particle's
+/// arrays hold them.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OneRadius {
+    pub k: f32,
+    pub r2: f32,
 }
 
 impl Packed {
     /// Appends the padding (call once, after the last particle), noting first whether every
-    /// particle has the same `k`, and the same `w` ([`Packed::same_k`]; bit for bit).
+    /// particle has the same `k` and `r2`, and the same `w` ([`Packed::one_radius`]; bit for bit).
     pub fn pad(&mut self) {
         let same = |v: &[f32]| -> Option<f32> {
             let first = *v.first()?;
@@ -152,7 +161,10 @@ impl Packed {
                 .all(|x| x.to_bits() == first.to_bits())
                 .then_some(first)
         };
-        (self.same_k, self.same_w) = (same(&self.k), same(&self.w));
+        self.one_radius = same(&self.k)
+            .zip(same(&self.r2))
+            .map(|(k, r2)| OneRadius { k, r2 });
+        self.same_w = same(&self.w);
         for _ in 0..LANES {
             self.x.push(0.0);
             self.y.push(0.0);
@@ -432,11 +444,15 @@ fn sums<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (f64, [
         // One build of the point kernel per common radius and weight (broadcast) or not.
         macro_rules! by_broadcast {
             ($build:ident) => {
-                match (p.same_k, p.same_w) {
+                match (p.one_radius, p.same_w) {
                     (Some(k), Some(w)) => $build::<C, true, true>(p, runs, q, k, w),
                     (Some(k), None) => $build::<C, true, false>(p, runs, q, k, 0.0),
-                    (None, Some(w)) => $build::<C, false, true>(p, runs, q, 0.0, w),
-                    (None, None) => $build::<C, false, false>(p, runs, q, 0.0, 0.0),
+                    (None, Some(w)) => {
+                        $build::<C, false, true>(p, runs, q, OneRadius::default(), w)
+                    }
+                    (None, None) => {
+                        $build::<C, false, false>(p, runs, q, OneRadius::default(), 0.0)
+                    }
                 }
             };
         }
@@ -488,16 +504,16 @@ const fn pack_table() -> [[u32; LANES]; 256] {
 /// queries' time (measured by removing it); packing also runs the exponentials on full lanes.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,popcnt")]
-unsafe fn sums_avx2<const C: usize, const SAME_K: bool, const SAME_W: bool>(
+unsafe fn sums_avx2<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
     p: &Packed,
     runs: &[(u32, u32)],
     q: [f32; 3],
-    same_k: f32,
+    one_radius: OneRadius,
     same_w: f32,
 ) -> (f64, [f64; 3]) {
     // SAFETY: the caller's CPU has AVX2 and FMA, which is all the body uses when its
     // compaction is the permutation table's.
-    unsafe { point_sums::<C, SAME_K, SAME_W, false>(p, runs, q, same_k, same_w) }
+    unsafe { point_sums::<C, ONE_RADIUS, SAME_W, false>(p, runs, q, one_radius, same_w) }
 }
 
 /// [`sums_avx2`] with AVX-512 (F and VL) on the same eight lanes: the reach test writes a
@@ -509,15 +525,15 @@ unsafe fn sums_avx2<const C: usize, const SAME_K: bool, const SAME_W: bool>(
 /// nine runs of about 21 candidates fill sixteen lanes worse than eight.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,avx2,fma,popcnt")]
-unsafe fn sums_avx512<const C: usize, const SAME_K: bool, const SAME_W: bool>(
+unsafe fn sums_avx512<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
     p: &Packed,
     runs: &[(u32, u32)],
     q: [f32; 3],
-    same_k: f32,
+    one_radius: OneRadius,
     same_w: f32,
 ) -> (f64, [f64; 3]) {
     // SAFETY: the caller's CPU has AVX-512 F and VL, AVX2 and FMA.
-    unsafe { point_sums::<C, SAME_K, SAME_W, true>(p, runs, q, same_k, same_w) }
+    unsafe { point_sums::<C, ONE_RADIUS, SAME_W, true>(p, runs, q, one_radius, same_w) }
 }
 
 /// The body of [`sums_avx2`] (`COMPRESS` false) and [`sums_avx512`] (true), inlined into
@@ -531,27 +547,28 @@ unsafe fn sums_avx512<const C: usize, const SAME_K: bool, const SAME_W: bool>(
 #[inline(always)]
 unsafe fn point_sums<
     const C: usize,
-    const SAME_K: bool,
+    const ONE_RADIUS: bool,
     const SAME_W: bool,
     const COMPRESS: bool,
 >(
     p: &Packed,
     runs: &[(u32, u32)],
     q: [f32; 3],
-    same_k: f32,
+    one_radius: OneRadius,
     same_w: f32,
 ) -> (f64, [f64; 3]) {
     use core::arch::x86_64::*;
     // SAFETY: the caller vouches for the CPU's features (the intrinsics need nothing else);
     // each pointer's bounds are argued where it is made.
     unsafe {
-        let gathers = C > 0 || !SAME_K || !SAME_W;
+        let gathers = C > 0 || !ONE_RADIUS || !SAME_W;
         let (qx, qy, qz) = (
             _mm256_set1_ps(q[0]),
             _mm256_set1_ps(q[1]),
             _mm256_set1_ps(q[2]),
         );
         let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let one_r2 = ONE_RADIUS.then(|| _mm256_set1_ps(one_radius.r2));
         let mut sums = HeldSums {
             phi: _mm256_setzero_ps(),
             num: [_mm256_setzero_ps(); 3],
@@ -585,7 +602,7 @@ unsafe fn point_sums<
                     );
                     if COMPRESS {
                         let live = _mm256_cmpgt_epi32_mask(end_v, index);
-                        let (d2, r2) = distance2_avx2(p, at, [qx, qy, qz]);
+                        let (d2, r2) = distance2_avx2(p, at, [qx, qy, qz], one_r2);
                         let reached = _mm256_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
                         if gathers {
                             _mm256_storeu_si256(
@@ -597,7 +614,7 @@ unsafe fn point_sums<
                         reached.count_ones()
                     } else {
                         let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
-                        let (d2, reached) = reach_avx2(p, at, [qx, qy, qz], live);
+                        let (d2, reached) = reach_avx2(p, at, [qx, qy, qz], live, one_r2);
                         let mask = _mm256_movemask_ps(reached) as usize;
                         let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
                         if gathers {
@@ -617,7 +634,14 @@ unsafe fn point_sums<
                     // Whole chunks now; the rest moves to the front.
                     let whole = n / LANES * LANES;
                     // Bounds: whole <= HELD; held indices are particles' (below `len`) or 0.
-                    sums.add::<C, SAME_K, SAME_W>(p, &held_index, &held_d2, whole, same_k, same_w);
+                    sums.add::<C, ONE_RADIUS, SAME_W>(
+                        p,
+                        &held_index,
+                        &held_d2,
+                        whole,
+                        one_radius,
+                        same_w,
+                    );
                     if gathers {
                         held_index.copy_within(whole..n, 0);
                     }
@@ -626,7 +650,7 @@ unsafe fn point_sums<
                 }
             }
         }
-        sums.add::<C, SAME_K, SAME_W>(p, &held_index, &held_d2, n, same_k, same_w);
+        sums.add::<C, ONE_RADIUS, SAME_W>(p, &held_index, &held_d2, n, one_radius, same_w);
         let mut theta = [0.0; 3];
         for (ch, t) in theta.iter_mut().enumerate().take(C) {
             *t = lane_total(sums.num[ch]);
@@ -652,13 +676,13 @@ impl HeldSums {
     /// The CPU has AVX2 and FMA; `count <= HELD`; every held index is below the length of
     /// every array gathered from.
     #[inline(always)]
-    unsafe fn add<const C: usize, const SAME_K: bool, const SAME_W: bool>(
+    unsafe fn add<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
         &mut self,
         p: &Packed,
         held_index: &[i32; HELD + LANES],
         held_d2: &[f32; HELD + LANES],
         count: usize,
-        same_k: f32,
+        one_radius: OneRadius,
         same_w: f32,
     ) {
         use core::arch::x86_64::*;
@@ -678,8 +702,8 @@ impl HeldSums {
                     _mm256_i32gather_ps::<4>(v.as_ptr(), index)
                 };
                 // The same values either way: broadcast where every particle's are the same.
-                let k = if SAME_K {
-                    _mm256_set1_ps(same_k)
+                let k = if ONE_RADIUS {
+                    _mm256_set1_ps(one_radius.k)
                 } else {
                     gather(&p.k)
                 };
@@ -726,11 +750,12 @@ unsafe fn lanes_at(v: &[f32], at: usize) -> core::arch::x86_64::__m256 {
 }
 
 /// Particles `at..at + 8`: their squared distances from `q` (fused), and which of the `live`
-/// lanes lie within their radius. The one reach test of the AVX2 point kernel and the dense
-/// loop (the AVX-512 point kernel compares [`distance2_avx2`]'s pair into a mask register).
+/// lanes lie within their radius (`one_r2`, or each one's). The one reach test of the AVX2
+/// point kernel and the dense loop (the AVX-512 point kernel compares [`distance2_avx2`]'s
+/// pair into a mask register).
 ///
 /// # Safety
-/// Eight floats from `at` are in `p.x`, `p.y`, `p.z` and `p.r2`.
+/// Eight floats from `at` are in `p.x`, `p.y`, `p.z` and (without `one_r2`) `p.r2`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
@@ -739,18 +764,20 @@ unsafe fn reach_avx2(
     at: usize,
     q: [core::arch::x86_64::__m256; 3],
     live: core::arch::x86_64::__m256,
+    one_r2: Option<core::arch::x86_64::__m256>,
 ) -> (core::arch::x86_64::__m256, core::arch::x86_64::__m256) {
     use core::arch::x86_64::*;
     // SAFETY: the caller keeps eight floats from `at` within each array.
-    let (d2, r2) = unsafe { distance2_avx2(p, at, q) };
+    let (d2, r2) = unsafe { distance2_avx2(p, at, q, one_r2) };
     let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
     (d2, reached)
 }
 
-/// Particles `at..at + 8`: their squared distances from `q` (fused), and their r².
+/// Particles `at..at + 8`: their squared distances from `q` (fused), and their r²: `one_r2`
+/// where every particle has it (one radius: its array is not read), or loaded.
 ///
 /// # Safety
-/// Eight floats from `at` are in `p.x`, `p.y`, `p.z` and `p.r2`.
+/// Eight floats from `at` are in `p.x`, `p.y`, `p.z` and (without `one_r2`) `p.r2`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
@@ -758,6 +785,7 @@ unsafe fn distance2_avx2(
     p: &Packed,
     at: usize,
     q: [core::arch::x86_64::__m256; 3],
+    one_r2: Option<core::arch::x86_64::__m256>,
 ) -> (core::arch::x86_64::__m256, core::arch::x86_64::__m256) {
     use core::arch::x86_64::*;
     // SAFETY: the caller keeps eight floats from `at` within each array.
@@ -766,7 +794,7 @@ unsafe fn distance2_avx2(
             lanes_at(&p.x, at),
             lanes_at(&p.y, at),
             lanes_at(&p.z, at),
-            lanes_at(&p.r2, at),
+            one_r2.unwrap_or_else(|| lanes_at(&p.r2, at)),
         )
     };
     let (dx, dy, dz) = (
@@ -977,7 +1005,7 @@ unsafe fn dense_sums_avx2(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f6
         let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end, index));
         // SAFETY: at < to, and to + LANES is within every array read (asserted by the caller).
         let (d2, reached, k, w) = unsafe {
-            let (d2, reached) = reach_avx2(p, at, [qx, qy, qz], live);
+            let (d2, reached) = reach_avx2(p, at, [qx, qy, qz], live, None);
             (d2, reached, lanes_at(&p.k, at), lanes_at(&p.w, at))
         };
         let x = _mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), k), d2);
@@ -1032,19 +1060,30 @@ mod tests {
             push(&mut p, c, r, 1.0, &[next(), next() - 0.5, next()]);
         }
         p.pad();
-        assert_eq!((p.same_k, p.same_w), (Some(4.5 / (r * r)), Some(1.0)));
+        assert_eq!(
+            (p.one_radius, p.same_w),
+            (
+                Some(OneRadius {
+                    k: 4.5 / (r * r),
+                    r2: r * r
+                }),
+                Some(1.0)
+            )
+        );
         if simd_in_use() {
             let runs = [(0u32, 7u32), (7, 150), (150, 301), (3, 4)];
             for _ in 0..40 {
                 let q = [next() - 0.5, next() - 0.5, next() - 0.5].map(|v| 0.3 * v);
-                let (k, w) = (p.same_k.unwrap(), p.same_w.unwrap());
+                let (k, w) = (p.one_radius.unwrap(), p.same_w.unwrap());
                 // SAFETY: `simd_in_use` checked the CPU's features.
-                let gathered = unsafe { sums_avx2::<3, false, false>(&p, &runs, q, 0.0, 0.0) };
+                let gathered = unsafe {
+                    sums_avx2::<3, false, false>(&p, &runs, q, OneRadius::default(), 0.0)
+                };
                 let each = unsafe {
                     [
                         sums_avx2::<3, true, true>(&p, &runs, q, k, w),
                         sums_avx2::<3, true, false>(&p, &runs, q, k, 0.0),
-                        sums_avx2::<3, false, true>(&p, &runs, q, 0.0, w),
+                        sums_avx2::<3, false, true>(&p, &runs, q, OneRadius::default(), w),
                     ]
                 };
                 assert!(gathered.0 > 0.0);
@@ -1063,12 +1102,69 @@ mod tests {
         push(&mut p2, [0.0; 3], r, 1.0, &[]);
         push(&mut p2, [0.01; 3], 0.2, 1.0, &[]);
         p2.pad();
-        assert_eq!((p2.same_k, p2.same_w), (None, Some(1.0)));
+        assert_eq!((p2.one_radius, p2.same_w), (None, Some(1.0)));
         let mut p3 = Packed::default();
         push(&mut p3, [0.0; 3], r, 1.0, &[]);
         push(&mut p3, [0.01; 3], r, 0.5, &[]);
         p3.pad();
-        assert_eq!((p3.same_k, p3.same_w), (Some(4.5 / (r * r)), None));
+        assert_eq!(
+            (p3.one_radius, p3.same_w),
+            (
+                Some(OneRadius {
+                    k: 4.5 / (r * r),
+                    r2: r * r
+                }),
+                None
+            )
+        );
+    }
+
+    /// One radius broadcast, not loaded, decides reach as the loaded radii do at the radius
+    /// itself: particles within 2% of r of a point, and on an axis at r and its neighbouring
+    /// floats (where `d² <= r²` is decided by the last bit), give the loaded build's bits in
+    /// both SIMD builds of the point kernel.
+    #[test]
+    fn one_radius_decides_reach_at_the_radius_as_the_loaded_radii_do() {
+        if !simd_in_use() {
+            // The dispatch test (tests/cpu_f32.rs) holds `simd_in_use` to the CPU's features.
+            return;
+        }
+        let r = 0.1f64 as f32;
+        let mut p = Packed::default();
+        // On the x axis from the origin: d² is x² rounded once, against r² rounded once.
+        let mut axis_reached = [0, 0];
+        for ulps in -40i32..40 {
+            let x = f32::from_bits((r.to_bits() as i32 + ulps) as u32);
+            axis_reached[usize::from(x * x <= r * r)] += 1;
+            push(&mut p, [x, 0.0, 0.0], r, 1.0, &[]);
+        }
+        assert!(
+            axis_reached[0] > 0 && axis_reached[1] > 0,
+            "{axis_reached:?}"
+        );
+        let mut next = uniform(2718);
+        for _ in 0..301 {
+            let u = [next() - 0.5, next() - 0.5, next() - 0.5];
+            let norm = u.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-3);
+            let s = r * (0.98 + 0.04 * next()) / norm;
+            push(&mut p, u.map(|v| v * s), r, 1.0, &[]);
+        }
+        p.pad();
+        let radius = p.one_radius.expect("one radius");
+        let runs = [(0u32, 80u32), (80, 381), (5, 6), (90, 97)];
+        let q = [0.0f32; 3];
+        let bits = |s: (f64, [f64; 3])| (s.0.to_bits(), s.1.map(f64::to_bits));
+        // SAFETY: `simd_in_use` checked AVX2 and FMA above, `avx512_in_use` AVX-512 below.
+        let loaded =
+            unsafe { sums_avx2::<0, false, true>(&p, &runs, q, OneRadius::default(), 1.0) };
+        assert!(loaded.0 > 0.0);
+        let broadcast = unsafe { sums_avx2::<0, true, true>(&p, &runs, q, radius, 1.0) };
+        assert_eq!(bits(broadcast), bits(loaded));
+        if avx512_in_use() {
+            let wide = unsafe { sums_avx512::<0, true, true>(&p, &runs, q, radius, 1.0) };
+            assert_eq!(bits(wide), bits(loaded));
+        }
+        assert_eq!(bits(p.sums(&runs, q)), bits(loaded));
     }
 
     #[test]
@@ -1093,7 +1189,8 @@ mod tests {
         for _ in 0..50 {
             let q = [next() - 0.5, next() - 0.5, next() - 0.5].map(|v| 0.6 * v);
             // SAFETY: `simd_in_use` checked the CPU's features above.
-            let fast = unsafe { sums_avx2::<3, false, false>(&p, &runs, q, 0.0, 0.0) };
+            let fast =
+                unsafe { sums_avx2::<3, false, false>(&p, &runs, q, OneRadius::default(), 0.0) };
             let lanes = sums_lanes::<3>(&p, &runs, q);
             assert!(lanes.0 > 0.0);
             let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1e-3);
@@ -1156,15 +1253,17 @@ mod tests {
         let bits = |s: (f64, [f64; 3])| (s.0.to_bits(), s.1.map(f64::to_bits));
         // SAFETY (each call below): `avx512_in_use` checked the CPU's features.
         macro_rules! both {
-            ($c:literal, $same_k:literal, $same_w:literal, $p:expr, $q:expr, $k:expr, $w:expr) => {{
-                let wide = unsafe { sums_avx512::<$c, $same_k, $same_w>($p, &runs, $q, $k, $w) };
-                let narrow = unsafe { sums_avx2::<$c, $same_k, $same_w>($p, &runs, $q, $k, $w) };
+            ($c:literal, $one_radius:literal, $same_w:literal, $p:expr, $q:expr, $k:expr, $w:expr) => {{
+                let wide =
+                    unsafe { sums_avx512::<$c, $one_radius, $same_w>($p, &runs, $q, $k, $w) };
+                let narrow =
+                    unsafe { sums_avx2::<$c, $one_radius, $same_w>($p, &runs, $q, $k, $w) };
                 assert_eq!(
                     bits(wide),
                     bits(narrow),
                     "C {}, same k {}, same w {}, at {:?}",
                     $c,
-                    $same_k,
+                    $one_radius,
                     $same_w,
                     $q
                 );
@@ -1174,25 +1273,25 @@ mod tests {
         let mut reached = 0;
         for common in [true, false] {
             let p = scene(common, &mut next);
-            assert_eq!(p.same_k.is_some(), common);
-            let (k, w) = (p.same_k.unwrap_or(0.0), p.same_w.unwrap_or(0.0));
+            assert_eq!(p.one_radius.is_some(), common);
+            let (k, w) = (p.one_radius.unwrap_or_default(), p.same_w.unwrap_or(0.0));
             for i in 0..30 {
                 let q = if i % 3 == 2 {
                     [10.0 + next() - 0.5, next() - 0.5, next() - 0.5]
                 } else {
                     [next() - 0.5, next() - 0.5, next() - 0.5].map(|v| 0.5 * v)
                 };
-                let phi = both!(0, false, false, &p, q, 0.0, 0.0);
-                both!(1, false, false, &p, q, 0.0, 0.0);
-                both!(3, false, false, &p, q, 0.0, 0.0);
+                let phi = both!(0, false, false, &p, q, OneRadius::default(), 0.0);
+                both!(1, false, false, &p, q, OneRadius::default(), 0.0);
+                both!(3, false, false, &p, q, OneRadius::default(), 0.0);
                 if common {
                     both!(0, true, true, &p, q, k, w);
                     both!(0, true, false, &p, q, k, 0.0);
-                    both!(0, false, true, &p, q, 0.0, w);
+                    both!(0, false, true, &p, q, OneRadius::default(), w);
                     both!(1, true, true, &p, q, k, w);
                     both!(3, true, true, &p, q, k, w);
                     both!(3, true, false, &p, q, k, 0.0);
-                    both!(3, false, true, &p, q, 0.0, w);
+                    both!(3, false, true, &p, q, OneRadius::default(), w);
                 }
                 reached += usize::from(phi > 100.0);
             }
