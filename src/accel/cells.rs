@@ -11,16 +11,6 @@
 //! some particle may reach). The cost is overfetch: candidates fill the 3x3x3 cells around a
 //! point, about 27 / (4/3 π) = 6.4 times the particles within the largest radius.
 //!
-//! Two layouts of the particles ([`Layout`]). In rows, each particle is held once, cell by
-//! cell (x fastest), and a point's candidates are nine runs, one per row of three cells. In
-//! stripes, stripe (j, k) holds the rows j-1, j and j+1 at z k merged cell column by cell
-//! column, so a point's nine rows are three runs, one per stripe; each particle is held three
-//! times. Why: the f32 point kernel's time follows its runs more than its candidates (each run
-//! starts its chain of loads, distances and compares afresh): three runs a query made the f32
-//! queries 1.14-1.19x faster, where cutting a quarter of the candidates in nine runs made them
-//! no faster (docs/benchmarks.md). The f64 reference keeps rows: it gained 1.03-1.12x, not
-//! worth three times its particles.
-//!
 //! Radii that vary (SPH smoothing lengths: small in dense regions, large in sparse ones)
 //! would make cells as wide as the largest radius hold whole dense regions, so particles are
 //! sorted into levels by radius, each a factor of two below the last, each with its own grid
@@ -46,16 +36,6 @@ pub struct CellGrid {
     levels: Vec<Level>,
 }
 
-/// How the particles lie in the cell-sorted order (see the module's doc).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Layout {
-    /// Each particle once, cell by cell: nine runs a point.
-    Rows,
-    /// Each particle in the stripes of its row and the rows either side of it on y: three
-    /// runs a point, three times the particles.
-    Stripes,
-}
-
 /// One level's grid: which particles each cell holds (as a range of the cell-sorted order) and
 /// whether any particle of the level may reach into it. Coordinates are the particles' (local)
 /// coordinates.
@@ -66,23 +46,11 @@ struct Level {
     cell: f64,
     inv_cell: f64,
     dims: [usize; 3],
-    /// Where the runs of a block's candidates are (the level's particles lie after the
-    /// levels before it in the order).
-    runs: LevelRuns,
+    /// Particles of cell c are `start[c] .. start[c + 1]` of the cell-sorted order (cells x
+    /// fastest, then y, then z; the level's particles after the levels before it).
+    start: Vec<u32>,
     /// Whether any particle may reach into the cell (it or a neighbour holds one).
     reached: Vec<bool>,
-}
-
-/// A level's index of the cell-sorted order, by [`Layout`].
-#[derive(Clone, Debug)]
-enum LevelRuns {
-    /// The particles of cell c are `start[c] .. start[c + 1]` (cells x fastest, then y, then
-    /// z).
-    Rows { start: Vec<u32> },
-    /// Column i of stripe (j, k) (the cells (i, j-1..=j+1, k), one after the other) starts at
-    /// `start[(k * ny + j) * (nx + 1) + i]`; entry nx ends the stripe. Cell c holds
-    /// `held[c + 1] - held[c]` particles.
-    Stripes { start: Vec<u32>, held: Vec<u32> },
 }
 
 /// A block of cells on a level, as the coordinates of its first and last cell (what its runs
@@ -135,35 +103,12 @@ impl CellRuns {
                     continue;
                 }
                 let (lo, hi) = (block.0.map(|v| v as usize), block.1.map(|v| v as usize));
-                let mut push = |run: (u32, u32)| {
+                for_rows_around(level.dims, lo, hi, |a, b| {
+                    let run = (level.start[a], level.start[b + 1]);
                     if run.1 > run.0 {
                         self.runs.push(run);
                     }
-                };
-                match &level.runs {
-                    LevelRuns::Rows { start } => {
-                        for_rows_around(level.dims, lo, hi, |a, b| push((start[a], start[b + 1])))
-                    }
-                    LevelRuns::Stripes { start, held } => {
-                        let d = level.dims;
-                        let (i0, i1) = (lo[0].saturating_sub(1), (hi[0] + 1).min(d[0] - 1));
-                        let j = lo[1];
-                        for k in lo[2].saturating_sub(1)..(hi[2] + 1).min(d[2] - 1) + 1 {
-                            let stripe = (k * d[1] + j) * (d[0] + 1);
-                            push((start[stripe + i0], start[stripe + i1 + 1]));
-                            // A block in two rows on y (j and j + 1, a packet's) needs row
-                            // j + 2 too: each of its cells ends its column of stripe j + 1.
-                            if hi[1] > j && j + 2 < d[1] {
-                                let next = stripe + d[0] + 1;
-                                for i in i0..=i1 {
-                                    let c = cell_index(d, [i, j + 2, k]);
-                                    let end = start[next + i + 1];
-                                    push((end - (held[c + 1] - held[c]), end));
-                                }
-                            }
-                        }
-                    }
-                }
+                });
             }
         }
         &self.runs
@@ -172,10 +117,10 @@ impl CellRuns {
 
 impl CellGrid {
     /// Sorts the particles of radius > 0 (the others reach nothing) into cells, on levels by
-    /// radius. Returns the grid and the particles' indices level by level and cell by cell in
-    /// `layout`: position `p` of the cell-sorted order is particle `order[p]`, and within a
-    /// cell the input order is kept (in stripes a particle is at three positions).
-    pub fn build(centers: &[DVec3], radii: &[f64], layout: Layout) -> (CellGrid, Vec<u32>) {
+    /// radius. Returns the grid and the particles' indices level by level and cell by cell:
+    /// position `p` of the cell-sorted order is particle `order[p]`, and within a cell the
+    /// input order is kept.
+    pub fn build(centers: &[DVec3], radii: &[f64]) -> (CellGrid, Vec<u32>) {
         let r_max = radii
             .par_iter()
             .copied()
@@ -208,7 +153,13 @@ impl CellGrid {
             if members.is_empty() {
                 continue;
             }
-            levels.push(Level::build(centers, radii, &members, layout, &mut order));
+            levels.push(Level::build(
+                centers,
+                radii,
+                &members,
+                order.len() as u32,
+                &mut order,
+            ));
         }
         tracing::debug!(
             "cells: {} particles on {} levels of radii ({})",
@@ -230,20 +181,13 @@ impl CellGrid {
     pub fn bytes(&self) -> usize {
         self.levels
             .iter()
-            .map(|l| {
-                let index = match &l.runs {
-                    LevelRuns::Rows { start } => start.len(),
-                    LevelRuns::Stripes { start, held } => start.len() + held.len(),
-                };
-                4 * index + l.reached.len()
-            })
+            .map(|l| 4 * l.start.len() + l.reached.len())
             .sum()
     }
 
     /// The candidates of point `l`: the particles of the 27 cells around its cell on every
-    /// level, as runs of the cell-sorted order (nine a level in rows, three in stripes; none
-    /// where no particle reaches). Kept in `scratch`: a point in the same cells again looks
-    /// nothing up.
+    /// level, as runs of the cell-sorted order (none where no particle reaches). Kept in
+    /// `scratch`: a point in the same cells again looks nothing up.
     #[inline]
     pub fn runs_at<'s>(&self, l: DVec3, scratch: &'s mut CellRuns) -> &'s [(u32, u32)] {
         for (i, level) in self.levels.iter().enumerate() {
@@ -333,16 +277,15 @@ impl CellGrid {
 }
 
 impl Level {
-    /// Sorts `members` into cells as wide as their largest radius; appends them, cell by cell
-    /// in `layout`, to `order`, which holds the levels before.
+    /// Sorts `members` into cells as wide as their largest radius; appends them, cell by cell,
+    /// to `order`, whose first `base` entries are the levels before.
     fn build(
         centers: &[DVec3],
         radii: &[f64],
         members: &[u32],
-        layout: Layout,
+        base: u32,
         order: &mut Vec<u32>,
     ) -> Level {
-        let base = order.len() as u32;
         let r_max = members
             .par_iter()
             .map(|&i| radii[i as usize])
@@ -370,8 +313,8 @@ impl Level {
         // Stable: particles of a cell keep their input (Hilbert) order.
         keyed.par_sort_by_key(|&(c, _)| c);
         let cells = dims[0] * dims[1] * dims[2];
-        // Cell c's particles are keyed[start[c]..start[c + 1]].
         let mut start = vec![0u32; cells + 1];
+        start[0] = base;
         for &(c, _) in &keyed {
             start[c as usize + 1] += 1;
         }
@@ -387,47 +330,13 @@ impl Level {
                 any
             })
             .collect();
-        let runs = match layout {
-            Layout::Rows => {
-                order.extend(keyed.iter().map(|&(_, i)| i));
-                LevelRuns::Rows {
-                    start: start.iter().map(|&s| base + s).collect(),
-                }
-            }
-            Layout::Stripes => {
-                let [nx, ny, nz] = dims;
-                let mut stripes = vec![0u32; nz * ny * (nx + 1)];
-                for k in 0..nz {
-                    for j in 0..ny {
-                        let at = (k * ny + j) * (nx + 1);
-                        for i in 0..nx {
-                            stripes[at + i] = order.len() as u32;
-                            for row in j.saturating_sub(1)..(j + 1).min(ny - 1) + 1 {
-                                let c = cell_index(dims, [i, row, k]);
-                                let held = &keyed[start[c] as usize..start[c + 1] as usize];
-                                order.extend(held.iter().map(|&(_, p)| p));
-                            }
-                        }
-                        stripes[at + nx] = order.len() as u32;
-                    }
-                }
-                assert!(
-                    u32::try_from(order.len()).is_ok(),
-                    "{} particles in stripes: more than a u32 indexes",
-                    order.len()
-                );
-                LevelRuns::Stripes {
-                    start: stripes,
-                    held: start,
-                }
-            }
-        };
+        order.extend(keyed.into_iter().map(|(_, i)| i));
         Level {
             corner,
             cell,
             inv_cell: inv,
             dims,
-            runs,
+            start,
             reached,
         }
     }
@@ -610,102 +519,6 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// Stripes hand a point every particle within its radius exactly once (a particle held in
-    /// two runs would be summed twice), in at most three runs a level, and the same candidates
-    /// as rows; a packet gets the union of its points' candidates, once each, and in two rows
-    /// on y the same candidates as rows.
-    /// Data as a simulation writes it: f64 coordinates off the origin, a radius that is no
-    /// binary fraction, a box that is no multiple of it, points on the grid's faces and its
-    /// cells' boundaries, and particles at the radius and the floats either side of it.
-    #[test]
-    fn stripes_hand_out_each_reached_particle_once_in_three_runs() {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-        let r = 0.047_318_291_377_4_f64;
-        let origin = DVec3::new(-3.071_952_7, 2.718_281_9, 0.577_215_664_9);
-        let size = DVec3::new(0.613, 0.297, 0.351);
-        let inside = |rng: &mut rand_pcg::Pcg64| {
-            origin + DVec3::new(rng.random(), rng.random(), rng.random()) * size
-        };
-        let mut centers: Vec<DVec3> = (0..6_007).map(|_| inside(&mut rng)).collect();
-        let mut points: Vec<DVec3> = (0..300).map(|_| inside(&mut rng)).collect();
-        for &q in &points[..60] {
-            for axis in [DVec3::X, DVec3::NEG_Y, DVec3::Y, DVec3::Z] {
-                let at = q + axis * r;
-                centers.push(at);
-                for ulps in [1i64, -1] {
-                    let step = |v: f64| f64::from_bits((v.to_bits() as i64 + ulps) as u64);
-                    centers.push(DVec3::new(step(at.x), step(at.y), step(at.z)));
-                }
-            }
-        }
-        let radii = vec![r; centers.len()];
-        let (stripes, striped) = CellGrid::build(&centers, &radii, Layout::Stripes);
-        let (rows, by_rows) = CellGrid::build(&centers, &radii, Layout::Rows);
-        // Each particle three times (the grid's margin holds stripes for the outer rows).
-        assert_eq!(striped.len(), 3 * centers.len());
-        // Points on the grid's faces and its cells' boundaries on every axis.
-        let level = &stripes.levels[0];
-        for s in 0..level.dims[1] {
-            let at = |a: usize, n: f64| level.corner[a] + level.cell * n;
-            points.push(DVec3::new(at(0, 2.0), at(1, s as f64), at(2, 3.0)));
-            points.push(DVec3::new(at(0, 1.5), at(1, s as f64 + 0.5), at(2, 1.0)));
-        }
-        let candidates = |runs: &[(u32, u32)], order: &[u32]| -> Vec<u32> {
-            let mut c: Vec<u32> = runs
-                .iter()
-                .flat_map(|&(a, b)| (a..b).map(|p| order[p as usize]))
-                .collect();
-            c.sort_unstable();
-            c
-        };
-        let (mut scratch, mut scratch_rows) = (CellRuns::default(), CellRuns::default());
-        for &x in &points {
-            let runs = stripes.runs_at(x, &mut scratch);
-            assert!(runs.len() <= 3, "{} runs at {x}", runs.len());
-            let held = candidates(runs, &striped);
-            assert!(
-                held.windows(2).all(|w| w[0] < w[1]),
-                "a particle twice at {x}"
-            );
-            assert_eq!(
-                held,
-                candidates(rows.runs_at(x, &mut scratch_rows), &by_rows)
-            );
-            for (i, c) in centers.iter().enumerate() {
-                if (x - *c).length_squared() <= r * r {
-                    assert!(held.binary_search(&(i as u32)).is_ok(), "{i} reaches {x}");
-                }
-            }
-        }
-        // A packet: eight points in one cell's row on y, two cells apart on x and z at most.
-        let cell = level.cell;
-        let base = level.corner + DVec3::new(3.2, 2.4, 2.1) * cell;
-        let packet: [Option<DVec3>; 8] = std::array::from_fn(|l| {
-            Some(base + DVec3::new((l % 2) as f64 * 0.9, 0.05 * l as f64, (l / 4) as f64) * cell)
-        });
-        let (_, runs) = stripes.runs_around_packet(&packet, &mut scratch);
-        let held = candidates(runs.expect("one row on y: evaluated together"), &striped);
-        assert!(
-            held.windows(2).all(|w| w[0] < w[1]),
-            "a particle twice in the packet"
-        );
-        for x in packet.iter().flatten() {
-            let own = candidates(stripes.runs_at(*x, &mut CellRuns::default()), &striped);
-            assert!(own.iter().all(|i| held.binary_search(i).is_ok()));
-        }
-        // Two rows on y: the stripe of the first and the cells of the fourth row, once each.
-        let mut across = packet;
-        across[7] = Some(base + DVec3::new(0.0, 1.0, 0.0) * cell);
-        let (_, runs) = stripes.runs_around_packet(&across, &mut scratch);
-        let held = candidates(runs.expect("two rows on y: evaluated together"), &striped);
-        assert!(
-            held.windows(2).all(|w| w[0] < w[1]),
-            "a particle twice in the packet"
-        );
-        let (_, by_row) = rows.runs_around_packet(&across, &mut scratch_rows);
-        assert_eq!(held, candidates(by_row.unwrap(), &by_rows));
-    }
-
     /// A dense clump of small particles in a halo of large ones (as SPH smoothing lengths make
     /// them): the clump's points get their clump neighbours, not the whole clump, and every
     /// particle that reaches a point is among its candidates; along a ray, every point some
@@ -727,7 +540,7 @@ mod tests {
         }
         centers.push(DVec3::splat(0.2));
         radii.push(0.0);
-        let (grid, order) = CellGrid::build(&centers, &radii, Layout::Rows);
+        let (grid, order) = CellGrid::build(&centers, &radii);
         assert_eq!(order.len(), centers.len() - 1, "radius 0 is left out");
         assert!(grid.levels.len() >= 2, "{} levels", grid.levels.len());
         let mut scratch = CellRuns::default();

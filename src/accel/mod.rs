@@ -8,6 +8,6 @@ pub mod clusters;
 pub mod hilbert;
 
 pub use bvh::ClusterBvh;
-pub use cells::{CellGrid, CellRuns, Layout};
+pub use cells::{CellGrid, CellRuns};
 pub use clusters::{ClusterBoxes, ClusterSize};
 pub use hilbert::{HilbertQuantizer, hilbert_key, hilbert_order};

@@ -6,10 +6,9 @@
 //! 1e-6 for the arithmetic); the CPU backend uses it where that rule allows, and the f64
 //! reference everywhere else.
 //!
-//! The particles lie in the order of a [`CellGrid`] in stripes (why cells, and why stripes:
-//! `accel::cells`): each particle is packed three times, so that a point's candidates are
-//! three runs instead of nine. The cells hand the kernel about 6.4 times the particles within
-//! reach, and eight lanes at a time pay for it several times over (`benches/cpu_roofline`). A packet of neighbouring rays' samples
+//! The particles lie in the order of a [`CellGrid`] (why cells: `accel::cells`); the cells
+//! hand the kernel about 6.4 times the particles within reach, and eight lanes at a time pay
+//! for it several times over (`benches/cpu_roofline`). A packet of neighbouring rays' samples
 //! ([`F32Field::eval_sums_packet`]) shares one lookup and one narrowing of its candidates to
 //! those within reach of all of them, and evaluates them a sample per lane: samples along rays
 //! lie much closer together than a radius.
@@ -19,7 +18,7 @@ use rayon::prelude::*;
 
 use super::f32_kernel::{LANES, Packed};
 use super::{Particles, Theta};
-use crate::accel::{CellGrid, CellRuns, Layout};
+use crate::accel::{CellGrid, CellRuns};
 
 /// A step's field for the f32 kernel.
 #[derive(Clone, Debug)]
@@ -27,7 +26,7 @@ pub struct F32Field {
     /// Local coordinates are data coordinates minus this (the reference's origin).
     origin: DVec3,
     cells: CellGrid,
-    /// The particles, stripe by stripe (each three times; in Hilbert order within a cell).
+    /// The particles, cell by cell (in Hilbert order within a cell).
     particles: Packed,
 }
 
@@ -35,7 +34,7 @@ impl F32Field {
     /// Packs `p` (with its field applied) into cells. Particles of radius 0 reach nothing and
     /// are left out, as in the reference.
     pub fn new(p: &Particles) -> F32Field {
-        let (cells, order) = CellGrid::build(&p.centers, &p.radii, Layout::Stripes);
+        let (cells, order) = CellGrid::build(&p.centers, &p.radii);
         let f32s = |f: &(dyn Fn(usize) -> f32 + Sync)| -> Vec<f32> {
             order.par_iter().map(|&i| f(i as usize)).collect()
         };

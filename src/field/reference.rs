@@ -9,9 +9,7 @@ use rayon::prelude::*;
 
 use super::f64_kernel::Packed64;
 use super::{FieldError, FieldSettings, Particles, Theta};
-use crate::accel::{
-    CellGrid, CellRuns, ClusterBoxes, ClusterBvh, ClusterSize, Layout, hilbert_order,
-};
+use crate::accel::{CellGrid, CellRuns, ClusterBoxes, ClusterBvh, ClusterSize, hilbert_order};
 use crate::values::{Bounds, Step};
 
 #[derive(Default)]
@@ -98,8 +96,7 @@ pub struct ReferenceField {
 
 impl ReferenceField {
     pub fn new(particles: Particles, cluster: ClusterSize) -> ReferenceField {
-        let (cells, cell_order) =
-            CellGrid::build(&particles.centers, &particles.radii, Layout::Rows);
+        let (cells, cell_order) = CellGrid::build(&particles.centers, &particles.radii);
         let by_cell = Packed64::gather(&particles, &cell_order);
         ReferenceField {
             particles,
