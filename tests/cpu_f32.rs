@@ -7,7 +7,7 @@ use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind, Positions, Precision, StepInput};
 use aarbf::field::f32_kernel;
 use aarbf::field::{
-    Classification, F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField,
+    Classification, F32Batch, F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField,
 };
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
@@ -213,6 +213,102 @@ fn check_packets(
         }
     }
     Ok((shared, fell_back))
+}
+
+/// Point queries in groups ([`F32Field::eval_sums_many`]) against each point alone: a
+/// group's candidates are a superset of each point's, in the same order, so the sums are the
+/// same bits, except where f32 counts a particle on the very edge of a point's cells that the
+/// point alone never looks at (what f32 cannot decide, `edge_allowance`): at most a few such
+/// points, each within one edge term. Queries as `aarbf field` sends them (Hilbert order),
+/// then in random order (few groups), with points outside the data. Returns how many points
+/// were grouped.
+fn check_groups(
+    n: usize,
+    seed: u64,
+    offset: f64,
+    radius: f64,
+    per_particle: bool,
+    channels: Classification,
+) -> Result<usize, TestCaseError> {
+    let step = step(n, seed, offset, 1.0);
+    let bounds = Bounds::of_points(&step.positions);
+    let mut field = FieldSettings::new(Some("s"), radius);
+    if per_particle {
+        field.radius_attribute = Some("h".into());
+    }
+    field.classification = channels;
+    let particles = Particles::prepare(&step, &field, bounds, Some((-3.0, 5.0))).unwrap();
+    let f32_field = F32Field::new(&particles);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x9e0);
+    let m = 64 + (n * 7) % 1713;
+    let queries: Vec<DVec3> = (0..m)
+        .map(|i| {
+            let u = DVec3::new(rng.random(), rng.random(), rng.random()) - 0.5;
+            match i % 5 {
+                // Outside the data (no cell, or cells no particle reaches).
+                0 => DVec3::splat(offset) + u * 3.0,
+                _ => step.positions[rng.random_range(0..n)] + u * radius,
+            }
+        })
+        .collect();
+    let order = aarbf::accel::hilbert_order(&queries, Bounds::of_points(&queries));
+    let hilbert: Vec<DVec3> = order.iter().map(|&i| queries[i as usize]).collect();
+    let mut grouped = 0;
+    let mut alone = F32Ray::default();
+    let mut batch = F32Batch::default();
+    for points in [&hilbert, &queries] {
+        let mut out = vec![(f64::NAN, [f64::NAN; 3]); points.len()];
+        grouped += f32_field.eval_sums_many(points, &mut batch, &mut out);
+        let mut edges = 0;
+        for (x, got) in points.iter().zip(&out) {
+            let want = f32_field.eval_sums(*x, &mut alone);
+            if (got.0.to_bits(), got.1.map(f64::to_bits))
+                == (want.0.to_bits(), want.1.map(f64::to_bits))
+            {
+                continue;
+            }
+            edges += 1;
+            // One edge term at most: w exp(-4.5), w <= 1 here (no density map).
+            let edge = (-4.5f64).exp() * (1.0 + 1e-5);
+            prop_assert!(
+                (got.0 - want.0).abs() <= edge + 1e-5 * want.0,
+                "Phi {} in a group, {} alone at {x}",
+                got.0,
+                want.0
+            );
+        }
+        prop_assert!(
+            edges <= 2 + points.len() / 1000,
+            "{edges} of {} points differ from their sums alone",
+            points.len()
+        );
+    }
+    Ok(grouped)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Point queries in groups equal each point alone, whatever the count, offset, radius,
+    /// radii (one level of cells or several) and channels; queries in Hilbert order are
+    /// grouped where the AVX2 build runs.
+    #[test]
+    fn point_queries_in_groups_equal_each_point_alone(
+        n in 1usize..2500,
+        seed in 0u64..1000,
+        offset_exp in prop_oneof![Just(None), (0i32..=6).prop_map(Some)],
+        radius_exp in -6.0f64..0.0,
+        per_particle in any::<bool>(),
+        pre in any::<bool>(),
+    ) {
+        let offset = offset_exp.map_or(0.0, |e| -(10f64.powi(e)));
+        let classification = if pre { Classification::Pre } else { Classification::Post };
+        let grouped =
+            check_groups(n, seed, offset, 10f64.powf(radius_exp), per_particle, classification)?;
+        if f32_kernel::simd_in_use() && n >= 50 {
+            prop_assert!(grouped > 0, "no point was evaluated in a group");
+        }
+    }
 }
 
 proptest! {

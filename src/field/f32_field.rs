@@ -16,7 +16,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::f32_kernel::{LANES, Packed};
+use super::f32_kernel::{GroupScratch, LANES, Packed, simd_in_use};
 use super::{Particles, Theta};
 use crate::accel::{CellGrid, CellRuns};
 
@@ -85,6 +85,77 @@ impl F32Field {
             .sums(runs, [l.x as f32, l.y as f32, l.z as f32])
     }
 
+    /// [`F32Field::eval_sums`] at each of `points` (point queries, in Hilbert order), into
+    /// `out` (as long). Up to [`GROUP`] consecutive points within two cells a side are
+    /// evaluated together ([`Packed::group_sums`]: their candidates found and narrowed once),
+    /// each to the bits it has alone (but for a particle on the very edge of a point's cells,
+    /// which f32 may count from a group's wider block: what f32 cannot decide, as in a packet);
+    /// a group that spreads wider is halved until it fits, or
+    /// its points evaluated one by one. Without the AVX2 build every point is evaluated alone.
+    /// Returns how many points were evaluated in groups.
+    pub fn eval_sums_many(
+        &self,
+        points: &[DVec3],
+        scratch: &mut F32Batch,
+        out: &mut [(f64, [f64; 3])],
+    ) -> usize {
+        assert_eq!(points.len(), out.len(), "a result per point");
+        let mut together = 0;
+        let grouped = simd_in_use();
+        let mut i = 0;
+        let mut size = GROUP;
+        while i < points.len() {
+            let g = if grouped {
+                size.min(points.len() - i)
+            } else {
+                1
+            };
+            if g >= 2 {
+                let mut local = [None; GROUP];
+                for (l, &x) in local.iter_mut().zip(&points[i..i + g]) {
+                    *l = Some(x - self.origin);
+                }
+                let (reached, runs) = self.cells.runs_around_packet(&local, &mut scratch.runs);
+                if let Some(runs) = runs {
+                    let mut qs = [[0f32; 3]; GROUP];
+                    let mut which = [0usize; GROUP];
+                    let mut m = 0;
+                    for (j, l) in local.iter().take(g).enumerate() {
+                        let l = l.expect("a point");
+                        if (reached >> j) & 1 == 1 {
+                            qs[m] = [l.x as f32, l.y as f32, l.z as f32];
+                            which[m] = j;
+                            m += 1;
+                        } else {
+                            out[i + j] = (0.0, [0.0; 3]);
+                        }
+                    }
+                    let mut sums = [(0.0, [0.0; 3]); GROUP];
+                    self.particles
+                        .group_sums(runs, &qs[..m], &mut scratch.group, &mut sums[..m]);
+                    for (s, &j) in sums.iter().zip(&which).take(m) {
+                        out[i + j] = *s;
+                    }
+                    together += m;
+                    i += g;
+                    size = GROUP;
+                    continue;
+                }
+                if reached.count_ones() >= 2 {
+                    // Spread over more than two cells a side: try half as many.
+                    size = g / 2;
+                    continue;
+                }
+            }
+            for (o, &x) in out[i..i + g].iter_mut().zip(&points[i..i + g]) {
+                *o = self.eval_sums(x, &mut scratch.ray);
+            }
+            i += g;
+            size = GROUP;
+        }
+        together
+    }
+
     /// [`F32Field::eval_sums`] at each of `points` (`None`: no sample; its value is left as
     /// it is), close together (a packet of neighbouring rays' samples): where they lie within
     /// two cells a side, their candidates are found once and evaluated a point per lane
@@ -142,6 +213,19 @@ impl F32Field {
 pub struct F32Packet {
     runs: CellRuns,
     candidates: Vec<u32>,
+}
+
+/// Point queries evaluated together: at most this many a group.
+pub const GROUP: usize = 8;
+
+/// Point queries in groups ([`F32Field::eval_sums_many`]): the runs of a group's block of
+/// cells, its narrowed candidates and reached ones, and a lone point's runs. Made once per
+/// thread and reused.
+#[derive(Debug, Default)]
+pub struct F32Batch {
+    runs: CellRuns,
+    group: GroupScratch,
+    ray: F32Ray,
 }
 
 /// Sampling along rays (and point queries): the runs of candidates of the last cell visited,

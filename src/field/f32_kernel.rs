@@ -659,6 +659,482 @@ unsafe fn point_sums<
     }
 }
 
+/// A group of points' shared candidates and their reached candidates between the two passes of
+/// [`Packed::group_sums`]. Made once per thread and reused.
+#[derive(Debug, Default)]
+pub struct GroupScratch {
+    /// The candidates within reach of the group's bounding box, with the arrays the point
+    /// kernel reads of them.
+    narrowed: Packed,
+    held_index: Vec<i32>,
+    held_d2: Vec<f32>,
+}
+
+impl Packed {
+    /// [`Packed::sums`] at each of `qs` (points close together: consecutive queries in Hilbert
+    /// order) into `out`, over the particles of `runs`, which hold each point's candidates in
+    /// the order the point's own runs list them (the runs around the block of cells the points
+    /// fall in, level by level). Those within their radius of the points' bounding box
+    /// are copied out contiguous once; then every point's reach tests run over that copy, and
+    /// every point's terms after all the tests. Why: a point's terms wait on its tests' packed
+    /// stores and on the exponential's chain, and one point after another left that wait
+    /// exposed; the copy also turns nine short runs into one and leaves out the candidates far
+    /// from every point. Each point's sums are the bits [`Packed::sums`] gives it alone: the
+    /// same reached particles (the box test never leaves out one a point's test keeps: it
+    /// computes the same fused distance of gaps no larger) in the same order. Where the AVX2
+    /// build is not in use ([`simd_in_use`]), each point is evaluated alone.
+    pub fn group_sums(
+        &self,
+        runs: &[(u32, u32)],
+        qs: &[[f32; 3]],
+        scratch: &mut GroupScratch,
+        out: &mut [(f64, [f64; 3])],
+    ) {
+        assert_eq!(qs.len(), out.len(), "a result per point");
+        #[cfg(target_arch = "x86_64")]
+        if simd_in_use() {
+            macro_rules! by_broadcast {
+                ($c:literal, $compress:literal) => {
+                    match (self.one_radius.is_some(), self.same_w.is_some()) {
+                        (true, true) => group_sums::<$c, true, true, $compress>,
+                        (true, false) => group_sums::<$c, true, false, $compress>,
+                        (false, true) => group_sums::<$c, false, true, $compress>,
+                        (false, false) => group_sums::<$c, false, false, $compress>,
+                    }
+                };
+            }
+            let build = match (self.channels, avx512_in_use()) {
+                (0, false) => by_broadcast!(0, false),
+                (1, false) => by_broadcast!(1, false),
+                (_, false) => by_broadcast!(3, false),
+                (0, true) => by_broadcast!(0, true),
+                (1, true) => by_broadcast!(1, true),
+                (_, true) => by_broadcast!(3, true),
+            };
+            // SAFETY: the CPU has AVX2 and FMA (`simd_in_use`), and AVX-512 F and VL where the
+            // build compresses (`avx512_in_use`).
+            unsafe { build(self, runs, qs, scratch, out) };
+            return;
+        }
+        for (q, o) in qs.iter().zip(out) {
+            *o = self.sums(runs, *q);
+        }
+    }
+}
+
+/// [`Packed::group_sums`] in one build: the point kernel's (`COMPRESS` as in [`point_sums`]).
+///
+/// # Safety
+/// The CPU has AVX2, FMA and POPCNT, and AVX-512 F and VL where `COMPRESS`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,popcnt")]
+unsafe fn group_sums<
+    const C: usize,
+    const ONE_RADIUS: bool,
+    const SAME_W: bool,
+    const COMPRESS: bool,
+>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    qs: &[[f32; 3]],
+    scratch: &mut GroupScratch,
+    out: &mut [(f64, [f64; 3])],
+) {
+    // SAFETY: the caller vouches for the CPU's features.
+    unsafe {
+        if COMPRESS {
+            group_sums_avx512::<C, ONE_RADIUS, SAME_W>(p, runs, qs, scratch, out)
+        } else {
+            group_sums_body::<C, ONE_RADIUS, SAME_W, false>(p, runs, qs, scratch, out)
+        }
+    }
+}
+
+/// [`group_sums`] with AVX-512 F and VL enabled (its packing by `vcompress`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma,popcnt")]
+unsafe fn group_sums_avx512<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    qs: &[[f32; 3]],
+    scratch: &mut GroupScratch,
+    out: &mut [(f64, [f64; 3])],
+) {
+    // SAFETY: the caller's CPU has AVX-512 F and VL, AVX2 and FMA.
+    unsafe { group_sums_body::<C, ONE_RADIUS, SAME_W, true>(p, runs, qs, scratch, out) }
+}
+
+/// The body of [`group_sums`], inlined into each build.
+///
+/// # Safety
+/// The CPU has AVX2, FMA and POPCNT, and AVX-512 F and VL where `COMPRESS`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn group_sums_body<
+    const C: usize,
+    const ONE_RADIUS: bool,
+    const SAME_W: bool,
+    const COMPRESS: bool,
+>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    qs: &[[f32; 3]],
+    scratch: &mut GroupScratch,
+    out: &mut [(f64, [f64; 3])],
+) {
+    use core::arch::x86_64::*;
+    let gathers = C > 0 || !ONE_RADIUS || !SAME_W;
+    let one_radius = p.one_radius.unwrap_or_default();
+    let same_w = p.same_w.unwrap_or(0.0);
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for q in qs {
+        for a in 0..3 {
+            lo[a] = lo[a].min(q[a]);
+            hi[a] = hi[a].max(q[a]);
+        }
+    }
+    // SAFETY: the caller vouches for the CPU's features; each pointer's bounds are argued
+    // where it is made.
+    unsafe {
+        let count =
+            narrow_copy::<C, ONE_RADIUS, SAME_W, COMPRESS>(p, runs, lo, hi, &mut scratch.narrowed);
+        let n = &scratch.narrowed;
+        // Each point's reached candidates start on a whole chunk (their lanes are then the
+        // ones `point_sums` gives them), and a chunk's store writes eight slots past them.
+        let need = qs.len() * (count + LANES) + LANES;
+        if scratch.held_d2.len() < need {
+            scratch.held_d2.resize(need, 0.0);
+            scratch.held_index.resize(need, 0);
+        }
+        // Pointers held in registers: stores through the buffers' would otherwise make the
+        // compiler load every array's address again each chunk.
+        let (held_index, held_d2) = (
+            scratch.held_index.as_mut_ptr(),
+            scratch.held_d2.as_mut_ptr(),
+        );
+        let (x, y, z, r2s) = (n.x.as_ptr(), n.y.as_ptr(), n.z.as_ptr(), n.r2.as_ptr());
+        let one_r2 = if ONE_RADIUS {
+            Some(_mm256_set1_ps(one_radius.r2))
+        } else {
+            None
+        };
+        let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let end_v = _mm256_set1_epi32(count as i32);
+        // First pass: every point's tests.
+        let mut spans = [(0usize, 0usize); 64];
+        assert!(qs.len() <= spans.len(), "at most 64 points a group");
+        let mut base = 0;
+        for (qf, span) in qs.iter().zip(&mut spans) {
+            let q = [
+                _mm256_set1_ps(qf[0]),
+                _mm256_set1_ps(qf[1]),
+                _mm256_set1_ps(qf[2]),
+            ];
+            let mut m = base;
+            let mut index = iota;
+            let mut at = 0;
+            while at < count {
+                // Bounds: at < count, and the copy holds LANES more: eight floats from `at`
+                // in every array read; m + LANES <= base + count + LANES <= need.
+                let d2 = distance2_from(
+                    [
+                        _mm256_loadu_ps(x.add(at)),
+                        _mm256_loadu_ps(y.add(at)),
+                        _mm256_loadu_ps(z.add(at)),
+                    ],
+                    q,
+                );
+                let r2 = match one_r2 {
+                    Some(r2) => r2,
+                    None => _mm256_loadu_ps(r2s.add(at)),
+                };
+                let (index_at, d2_at) = (held_index.add(m).cast(), held_d2.add(m));
+                let reached = if COMPRESS {
+                    let live = _mm256_cmpgt_epi32_mask(end_v, index);
+                    let reached = _mm256_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
+                    if gathers {
+                        _mm256_storeu_si256(index_at, _mm256_maskz_compress_epi32(reached, index));
+                    }
+                    _mm256_storeu_ps(d2_at, _mm256_maskz_compress_ps(reached, d2));
+                    reached.count_ones()
+                } else {
+                    let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
+                    let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
+                    let mask = _mm256_movemask_ps(reached) as usize;
+                    let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
+                    if gathers {
+                        _mm256_storeu_si256(index_at, _mm256_permutevar8x32_epi32(index, order));
+                    }
+                    _mm256_storeu_ps(d2_at, _mm256_permutevar8x32_ps(d2, order));
+                    mask.count_ones()
+                };
+                m += reached as usize;
+                at += LANES;
+                index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
+            }
+            *span = (base, m - base);
+            base += (m - base).div_ceil(LANES) * LANES;
+        }
+        // Second pass: every point's terms.
+        for (&(from, reached), o) in spans.iter().zip(out.iter_mut()) {
+            let mut sums = HeldSums {
+                phi: _mm256_setzero_ps(),
+                num: [_mm256_setzero_ps(); 3],
+            };
+            // Bounds: from + reached + LANES <= need; the held indices are the copy's.
+            sums.add::<C, ONE_RADIUS, SAME_W>(
+                n,
+                core::slice::from_raw_parts(held_index.add(from), need - from),
+                core::slice::from_raw_parts(held_d2.add(from), need - from),
+                reached,
+                one_radius,
+                same_w,
+            );
+            let mut theta = [0.0; 3];
+            for (ch, t) in theta.iter_mut().enumerate().take(C) {
+                *t = lane_total(sums.num[ch]);
+            }
+            *o = (lane_total(sums.phi), theta);
+        }
+    }
+}
+
+/// Copies into `out` the particles of `runs` within their radius of the box `[lo, hi]`, in
+/// order, with the arrays the point kernel reads of them (positions; r² and k where radii
+/// differ; w where weights do; theta), padded by [`LANES`]; returns how many. The arrays may
+/// hold more past the padding. The box test is the point test's
+/// arithmetic (the fused squared distance) on each axis's gap to the box, which is never
+/// larger than the distance to a point in it, so no particle a point of the box reaches is left
+/// out.
+///
+/// # Safety
+/// The CPU has AVX2 and FMA, and AVX-512 F and VL where `COMPRESS`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn narrow_copy<
+    const C: usize,
+    const ONE_RADIUS: bool,
+    const SAME_W: bool,
+    const COMPRESS: bool,
+>(
+    p: &Packed,
+    runs: &[(u32, u32)],
+    lo_f: [f32; 3],
+    hi_f: [f32; 3],
+    out: &mut Packed,
+) -> usize {
+    use core::arch::x86_64::*;
+    // The arrays the point kernel reads: positions always, r² and k where radii differ, w
+    // where weights do, theta per channel; the padding reaches nothing (r² = -1).
+    let used = [
+        true,
+        true,
+        true,
+        !ONE_RADIUS,
+        !ONE_RADIUS,
+        !SAME_W,
+        C > 0,
+        C > 1,
+        C > 1,
+    ];
+    let padding = [0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let from: [&Vec<f32>; 9] = [
+        &p.x,
+        &p.y,
+        &p.z,
+        &p.r2,
+        &p.k,
+        &p.w,
+        &p.theta[0],
+        &p.theta[1],
+        &p.theta[2],
+    ];
+    let Packed {
+        x,
+        y,
+        z,
+        r2,
+        k,
+        w,
+        theta: [t0, t1, t2],
+        ..
+    } = out;
+    let to: [&mut Vec<f32>; 9] = [x, y, z, r2, k, w, t0, t1, t2];
+    // The box test reads every position and r² (each particle's: the same floats as one
+    // radius broadcast); eight floats from each run's end must be there too.
+    let mut len = p.r2.len();
+    for (a, v) in from.iter().enumerate() {
+        if used[a] {
+            len = len.min(v.len());
+        }
+    }
+    let total: usize = runs.iter().map(|&(a, b)| (b - a) as usize).sum();
+    // Room for every candidate, and a chunk's sixteen writes past the last (grown, never
+    // cleared: what is there is overwritten, and the count is returned).
+    let mut dst = [core::ptr::null_mut::<f32>(); 9];
+    let mut src = [core::ptr::null::<f32>(); 9];
+    for a in 0..9 {
+        if used[a] {
+            if to[a].len() < total + 2 * LANES {
+                to[a].resize(total + 2 * LANES, 0.0);
+            }
+            dst[a] = to[a].as_mut_ptr();
+            src[a] = from[a].as_ptr();
+        } else {
+            to[a].clear();
+        }
+    }
+    // SAFETY (the intrinsics outside the loop's block): the caller vouches for the CPU.
+    // No closures: they would not take the caller's target features.
+    let (lo, hi, zero, iota) = unsafe {
+        (
+            [
+                _mm256_set1_ps(lo_f[0]),
+                _mm256_set1_ps(lo_f[1]),
+                _mm256_set1_ps(lo_f[2]),
+            ],
+            [
+                _mm256_set1_ps(hi_f[0]),
+                _mm256_set1_ps(hi_f[1]),
+                _mm256_set1_ps(hi_f[2]),
+            ],
+            _mm256_setzero_ps(),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        )
+    };
+    let mut n = 0;
+    if COMPRESS {
+        // Sixteen lanes a chunk (AVX-512 F): half the instructions a candidate.
+        // SAFETY: the caller's CPU has AVX-512 F and VL where COMPRESS; bounds as below.
+        unsafe {
+            let (lo, hi) = (
+                [
+                    _mm512_set1_ps(lo_f[0]),
+                    _mm512_set1_ps(lo_f[1]),
+                    _mm512_set1_ps(lo_f[2]),
+                ],
+                [
+                    _mm512_set1_ps(hi_f[0]),
+                    _mm512_set1_ps(hi_f[1]),
+                    _mm512_set1_ps(hi_f[2]),
+                ],
+            );
+            let zero = _mm512_setzero_ps();
+            for &(a, b) in runs {
+                let (mut at, end) = (a as usize, b as usize);
+                assert!(end + LANES <= len, "runs within the padded particles");
+                while at < end {
+                    let live: __mmask16 = if end - at >= 16 {
+                        u16::MAX
+                    } else {
+                        (1u16 << (end - at)) - 1
+                    };
+                    let mut e = [zero; 3];
+                    let mut xyz = [zero; 3];
+                    for (axis, e) in e.iter_mut().enumerate() {
+                        let v = _mm512_maskz_loadu_ps(live, src[axis].add(at));
+                        xyz[axis] = v;
+                        let g =
+                            _mm512_max_ps(_mm512_sub_ps(lo[axis], v), _mm512_sub_ps(v, hi[axis]));
+                        *e = _mm512_max_ps(g, zero);
+                    }
+                    let [ex, ey, ez] = e;
+                    let d2 =
+                        _mm512_fmadd_ps(ez, ez, _mm512_fmadd_ps(ey, ey, _mm512_mul_ps(ex, ex)));
+                    let r2 = _mm512_maskz_loadu_ps(live, p.r2.as_ptr().add(at));
+                    let keep = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
+                    for a in 0..9 {
+                        if used[a] {
+                            // The positions as loaded for the test.
+                            let v = if a < 3 {
+                                xyz[a]
+                            } else {
+                                _mm512_maskz_loadu_ps(live, src[a].add(at))
+                            };
+                            _mm512_storeu_ps(dst[a].add(n), _mm512_maskz_compress_ps(keep, v));
+                        }
+                    }
+                    n += keep.count_ones() as usize;
+                    at += 16;
+                }
+            }
+        }
+    } else {
+        for &(a, b) in runs {
+            let (mut at, end) = (a as usize, b as usize);
+            assert!(end + LANES <= len, "runs within the padded particles");
+            // SAFETY: the caller vouches for the CPU.
+            let (mut index, end_v) = unsafe {
+                (
+                    _mm256_add_epi32(_mm256_set1_epi32(a as i32), iota),
+                    _mm256_set1_epi32(b as i32),
+                )
+            };
+            while at < end {
+                // SAFETY: at < end and end + LANES <= len (asserted): eight floats from `at` are
+                // in every array read; n + LANES <= total + LANES: eight slots from n in every
+                // array written; a table row holds eight lanes.
+                unsafe {
+                    let (ex, ey, ez) = (
+                        box_gap(lanes_at(&p.x, at), lo[0], hi[0], zero),
+                        box_gap(lanes_at(&p.y, at), lo[1], hi[1], zero),
+                        box_gap(lanes_at(&p.z, at), lo[2], hi[2], zero),
+                    );
+                    let d2 =
+                        _mm256_fmadd_ps(ez, ez, _mm256_fmadd_ps(ey, ey, _mm256_mul_ps(ex, ex)));
+                    let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
+                    let keep =
+                        _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, lanes_at(&p.r2, at)), live);
+                    let mask = _mm256_movemask_ps(keep) as usize;
+                    let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
+                    for a in 0..9 {
+                        if used[a] {
+                            let v = _mm256_loadu_ps(src[a].add(at));
+                            let packed = if COMPRESS {
+                                _mm256_maskz_compress_ps(mask as __mmask8, v)
+                            } else {
+                                _mm256_permutevar8x32_ps(v, order)
+                            };
+                            _mm256_storeu_ps(dst[a].add(n), packed);
+                        }
+                    }
+                    n += mask.count_ones() as usize;
+                    index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
+                }
+                at += LANES;
+            }
+        }
+    }
+    for a in 0..9 {
+        if used[a] {
+            to[a][n..n + LANES].fill(padding[a]);
+        }
+    }
+    n
+}
+
+/// How far each of eight coordinates `v` lies outside `[lo, hi]` (0 inside): never more than
+/// its distance to any point's coordinate in the interval, as rounded.
+///
+/// # Safety
+/// The CPU has AVX.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn box_gap(
+    v: core::arch::x86_64::__m256,
+    lo: core::arch::x86_64::__m256,
+    hi: core::arch::x86_64::__m256,
+    zero: core::arch::x86_64::__m256,
+) -> core::arch::x86_64::__m256 {
+    use core::arch::x86_64::*;
+    // SAFETY: the caller vouches for the CPU.
+    unsafe {
+        let g = _mm256_max_ps(_mm256_sub_ps(lo, v), _mm256_sub_ps(v, hi));
+        _mm256_max_ps(g, zero)
+    }
+}
+
 /// The point kernel's sums in eight lanes: Phi and the Theta numerator per channel.
 #[cfg(target_arch = "x86_64")]
 struct HeldSums {
@@ -669,18 +1145,19 @@ struct HeldSums {
 #[cfg(target_arch = "x86_64")]
 impl HeldSums {
     /// Adds the terms of held candidates `0..count`, eight at a time, the lanes past `count`
-    /// masked (their slots hold earlier writes or zeros: indices of real particles). The
-    /// indices are read only where the terms gather by them (see [`point_sums`]).
+    /// masked (their indices read as 0: the slots may hold another call's). The indices are
+    /// read only where the terms gather by them (see [`point_sums`]).
     ///
     /// # Safety
-    /// The CPU has AVX2 and FMA; `count <= HELD`; every held index is below the length of
-    /// every array gathered from.
+    /// The CPU has AVX2 and FMA; `count + LANES` is within `held_d2` (and `held_index` where
+    /// it is read); every held index below `count` is below the length of every array
+    /// gathered from.
     #[inline(always)]
     unsafe fn add<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
         &mut self,
         p: &Packed,
-        held_index: &[i32; HELD + LANES],
-        held_d2: &[f32; HELD + LANES],
+        held_index: &[i32],
+        held_d2: &[f32],
         count: usize,
         one_radius: OneRadius,
         same_w: f32,
@@ -690,8 +1167,8 @@ impl HeldSums {
         let iota = unsafe { _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7) };
         let mut i = 0;
         while i < count {
-            // SAFETY: i + LANES <= HELD + LANES (count <= HELD); the caller vouches for the
-            // indices and the CPU.
+            // SAFETY: i < count, so i + LANES is within the buffers; the caller vouches for
+            // the indices and the CPU.
             unsafe {
                 let live = _mm256_cmpgt_epi32(_mm256_set1_epi32((count - i) as i32), iota);
                 let d2 = _mm256_loadu_ps(held_d2.as_ptr().add(i));
@@ -699,7 +1176,7 @@ impl HeldSums {
                 // otherwise).
                 let gather = |v: &Vec<f32>| {
                     let index = _mm256_loadu_si256(held_index.as_ptr().add(i).cast());
-                    _mm256_i32gather_ps::<4>(v.as_ptr(), index)
+                    _mm256_i32gather_ps::<4>(v.as_ptr(), _mm256_and_si256(index, live))
                 };
                 // The same values either way: broadcast where every particle's are the same.
                 let k = if ONE_RADIUS {
@@ -787,7 +1264,6 @@ unsafe fn distance2_avx2(
     q: [core::arch::x86_64::__m256; 3],
     one_r2: Option<core::arch::x86_64::__m256>,
 ) -> (core::arch::x86_64::__m256, core::arch::x86_64::__m256) {
-    use core::arch::x86_64::*;
     // SAFETY: the caller keeps eight floats from `at` within each array.
     let (x, y, z, r2) = unsafe {
         (
@@ -797,13 +1273,25 @@ unsafe fn distance2_avx2(
             one_r2.unwrap_or_else(|| lanes_at(&p.r2, at)),
         )
     };
+    (distance2_from([x, y, z], q), r2)
+}
+
+/// The squared distances of eight particles at `xyz` from `q`, fused: the point test's one
+/// definition (the point kernel's and the group kernel's).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn distance2_from(
+    xyz: [core::arch::x86_64::__m256; 3],
+    q: [core::arch::x86_64::__m256; 3],
+) -> core::arch::x86_64::__m256 {
+    use core::arch::x86_64::*;
     let (dx, dy, dz) = (
-        _mm256_sub_ps(x, q[0]),
-        _mm256_sub_ps(y, q[1]),
-        _mm256_sub_ps(z, q[2]),
+        _mm256_sub_ps(xyz[0], q[0]),
+        _mm256_sub_ps(xyz[1], q[1]),
+        _mm256_sub_ps(xyz[2], q[2]),
     );
-    let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
-    (d2, r2)
+    _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)))
 }
 
 /// Eight floats at any address.
@@ -1028,6 +1516,95 @@ mod tests {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (state >> 8) as f32 / (1u32 << 24) as f32
         }
+    }
+
+    /// Points evaluated together ([`Packed::group_sums`]) get the bits each gets alone
+    /// ([`Packed::sums`] over the same runs), in both SIMD builds, for every combination of a
+    /// common or own radius and weight and every number of channels, with particles placed on
+    /// the points' spheres to the last few floats (where a box test that rounded past the
+    /// point test would leave one out); groups of one to eight points, close or spread.
+    #[test]
+    fn a_group_gives_each_point_the_bits_it_has_alone() {
+        let mut next = uniform(777);
+        let mut scratch = GroupScratch::default();
+        let bits = |s: (f64, [f64; 3])| (s.0.to_bits(), s.1.map(f64::to_bits));
+        let mut compared = 0;
+        for round in 0..96 {
+            let channels = [0, 1, 3][round % 3];
+            let (own_radius, own_w) = ((round / 3) % 2 == 1, (round / 6) % 2 == 1);
+            let r0 = 0.05f64 as f32;
+            let spread = [0.002, 0.03, 0.2, 0.0][(round / 12) % 4];
+            let centre = [next(), next(), next()].map(|v| 0.3 * (v - 0.5));
+            let points = 1 + round % 8;
+            let qs: Vec<[f32; 3]> = (0..points)
+                .map(|_| [0, 1, 2].map(|a| centre[a] + spread * (next() - 0.5)))
+                .collect();
+            let mut p = Packed {
+                channels,
+                ..Packed::default()
+            };
+            let particle = |p: &mut Packed, c: [f32; 3], next: &mut dyn FnMut() -> f32| {
+                let r = if own_radius { r0 * (0.5 + next()) } else { r0 };
+                let w = if own_w { 0.5 + next() } else { 1.0 };
+                let theta = [next(), next() - 0.5, next()];
+                push(p, c, r, w, &theta[..channels]);
+                r
+            };
+            for i in 0..257 + round {
+                if i % 3 == 0 {
+                    // On a point's sphere, to a few floats: the particle's own radius along a
+                    // random direction, that distance stepped by -3..3 ulps.
+                    let q = qs[i % points];
+                    let u = [next() - 0.5, next() - 0.5, next() - 0.5];
+                    let norm = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt().max(1e-3);
+                    let r = if own_radius { r0 * (0.5 + next()) } else { r0 };
+                    let step = (i / 3 % 7) as i32 - 3;
+                    let d = f32::from_bits((r.to_bits() as i32 + step) as u32);
+                    let c = [0, 1, 2].map(|a| q[a] + u[a] / norm * d);
+                    let w = if own_w { 0.5 + next() } else { 1.0 };
+                    let theta = [next(), next() - 0.5, next()];
+                    push(&mut p, c, r, w, &theta[..channels]);
+                } else {
+                    let c = [0, 1, 2].map(|a| centre[a] + 0.4 * (next() - 0.5));
+                    particle(&mut p, c, &mut next);
+                }
+            }
+            p.pad();
+            let n = p.x.len() as u32 - LANES as u32;
+            let runs = [(0u32, 7u32), (9, n / 2), (n / 2, n), (7, 9)];
+            let alone: Vec<_> = qs.iter().map(|&q| bits(p.sums(&runs, q))).collect();
+            assert!(alone.iter().any(|a| f64::from_bits(a.0) > 0.0));
+            let mut out = vec![(f64::NAN, [f64::NAN; 3]); points];
+            p.group_sums(&runs, &qs, &mut scratch, &mut out);
+            let together: Vec<_> = out.iter().map(|&s| bits(s)).collect();
+            assert_eq!(together, alone, "round {round}");
+            // The AVX2 build where the dispatch chose AVX-512.
+            #[cfg(target_arch = "x86_64")]
+            if avx512_in_use() {
+                macro_rules! avx2 {
+                    ($c:literal) => {
+                        match (p.one_radius.is_some(), p.same_w.is_some()) {
+                            (true, true) => group_sums::<$c, true, true, false>,
+                            (true, false) => group_sums::<$c, true, false, false>,
+                            (false, true) => group_sums::<$c, false, true, false>,
+                            (false, false) => group_sums::<$c, false, false, false>,
+                        }
+                    };
+                }
+                let build = match channels {
+                    0 => avx2!(0),
+                    1 => avx2!(1),
+                    _ => avx2!(3),
+                };
+                let mut out = vec![(f64::NAN, [f64::NAN; 3]); points];
+                // SAFETY: `avx512_in_use` implies AVX2, FMA and POPCNT.
+                unsafe { build(&p, &runs, &qs, &mut scratch, &mut out) };
+                let narrow: Vec<_> = out.iter().map(|&s| bits(s)).collect();
+                assert_eq!(narrow, alone, "round {round}, AVX2 build");
+            }
+            compared += points;
+        }
+        assert!(compared > 300);
     }
 
     /// Appends a particle at `c` of radius `r`, weight `w` and theta per channel.

@@ -24,7 +24,7 @@ pub mod splat;
 
 use serde::{Deserialize, Serialize};
 
-pub use f32_field::{F32Field, F32Packet, F32Ray};
+pub use f32_field::{F32Batch, F32Field, F32Packet, F32Ray};
 pub use grid::RegularGrid;
 pub use inputs::{FieldInputs, normalise};
 pub use particles::{FieldTables, Particles, Theta, particle_radius};

@@ -26,9 +26,15 @@ use self::integrators::{FieldSampler, PACKET, PACKET_SIZE, PixelScratch, render_
 use super::gpu_data::f32_phi_error;
 use super::voxel::{VoxelGeometry, VoxelGrid};
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
+
+/// Point queries a task: consecutive ones (in Hilbert order) share cells, and enough tasks
+/// balance the threads.
+const QUERY_CHUNK: usize = 512;
 use crate::accel::CellRuns;
 use crate::field::splat::{SplatCounts, SplatScratch};
-use crate::field::{F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField};
+use crate::field::{
+    F32Batch, F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField,
+};
 use crate::values::{FrameParams, Image, Step};
 
 const TILE: u32 = 16;
@@ -427,10 +433,17 @@ impl Backend for CpuBackend {
                     field.eval_sums_with(x, scratch)
                 })
                 .collect(),
-            Sampler::F32(field) => points
-                .par_iter()
-                .map_init(F32Ray::default, |scratch, &x| field.eval_sums(x, scratch))
-                .collect(),
+            Sampler::F32(field) => {
+                let mut out = vec![(0.0, [0.0; 3]); points.len()];
+                // Consecutive points a task (queries come in Hilbert order): those close
+                // together are evaluated in groups.
+                out.par_chunks_mut(QUERY_CHUNK)
+                    .zip(points.par_chunks(QUERY_CHUNK))
+                    .for_each_init(F32Batch::default, |scratch, (out, points)| {
+                        field.eval_sums_many(points, scratch, out);
+                    });
+                out
+            }
         };
         self.timings.query = started.elapsed();
         Ok(out)
