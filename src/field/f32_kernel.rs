@@ -595,38 +595,16 @@ unsafe fn point_sums<
                 // Bounds: at < end and end + LANES <= len (asserted): eight floats from `at`
                 // are in every array read; n <= HELD (flushed below otherwise): eight slots
                 // from n are in the buffers; a table row holds eight lanes.
-                let count = {
-                    let (index_at, d2_at) = (
-                        held_index.as_mut_ptr().add(n).cast(),
-                        held_d2.as_mut_ptr().add(n),
-                    );
-                    if COMPRESS {
-                        let live = _mm256_cmpgt_epi32_mask(end_v, index);
-                        let (d2, r2) = distance2_avx2(p, at, [qx, qy, qz], one_r2);
-                        let reached = _mm256_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
-                        if gathers {
-                            _mm256_storeu_si256(
-                                index_at,
-                                _mm256_maskz_compress_epi32(reached, index),
-                            );
-                        }
-                        _mm256_storeu_ps(d2_at, _mm256_maskz_compress_ps(reached, d2));
-                        reached.count_ones()
-                    } else {
-                        let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
-                        let (d2, reached) = reach_avx2(p, at, [qx, qy, qz], live, one_r2);
-                        let mask = _mm256_movemask_ps(reached) as usize;
-                        let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
-                        if gathers {
-                            _mm256_storeu_si256(
-                                index_at,
-                                _mm256_permutevar8x32_epi32(index, order),
-                            );
-                        }
-                        _mm256_storeu_ps(d2_at, _mm256_permutevar8x32_ps(d2, order));
-                        mask.count_ones()
-                    }
-                };
+                let (d2, r2) = distance2_avx2(p, at, [qx, qy, qz], one_r2);
+                let count = pack_reached::<COMPRESS>(
+                    d2,
+                    r2,
+                    index,
+                    end_v,
+                    gathers,
+                    held_index.as_mut_ptr().add(n).cast(),
+                    held_d2.as_mut_ptr().add(n),
+                );
                 n += count as usize;
                 at += LANES;
                 index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
@@ -849,27 +827,15 @@ unsafe fn group_sums_body<
                     Some(r2) => r2,
                     None => _mm256_loadu_ps(r2s.add(at)),
                 };
-                let (index_at, d2_at) = (held_index.add(m).cast(), held_d2.add(m));
-                let reached = if COMPRESS {
-                    let live = _mm256_cmpgt_epi32_mask(end_v, index);
-                    let reached = _mm256_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
-                    if gathers {
-                        _mm256_storeu_si256(index_at, _mm256_maskz_compress_epi32(reached, index));
-                    }
-                    _mm256_storeu_ps(d2_at, _mm256_maskz_compress_ps(reached, d2));
-                    reached.count_ones()
-                } else {
-                    let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end_v, index));
-                    let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
-                    let mask = _mm256_movemask_ps(reached) as usize;
-                    let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
-                    if gathers {
-                        _mm256_storeu_si256(index_at, _mm256_permutevar8x32_epi32(index, order));
-                    }
-                    _mm256_storeu_ps(d2_at, _mm256_permutevar8x32_ps(d2, order));
-                    mask.count_ones()
-                };
-                m += reached as usize;
+                m += pack_reached::<COMPRESS>(
+                    d2,
+                    r2,
+                    index,
+                    end_v,
+                    gathers,
+                    held_index.add(m).cast(),
+                    held_d2.add(m),
+                ) as usize;
                 at += LANES;
                 index = _mm256_add_epi32(index, _mm256_set1_epi32(LANES as i32));
             }
@@ -1132,6 +1098,51 @@ unsafe fn box_gap(
     unsafe {
         let g = _mm256_max_ps(_mm256_sub_ps(lo, v), _mm256_sub_ps(v, hi));
         _mm256_max_ps(g, zero)
+    }
+}
+
+/// The reach test of eight candidates (`index` below `end`, `d2 <= r2`) and their packing: the
+/// reached lanes' squared distances written from `d2_at` (and their indices from `index_at`
+/// where `gathers`: the terms gather by them), in lane order, by `vcompress` (`COMPRESS`) or by a
+/// permutation from [`PACK`]: the same lanes either way. Returns how many. The point kernel's
+/// and the group kernel's one definition.
+///
+/// # Safety
+/// The CPU has AVX2 and POPCNT, and AVX-512 F and VL where `COMPRESS`; eight slots from
+/// `d2_at` are writable, and from `index_at` where `gathers`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn pack_reached<const COMPRESS: bool>(
+    d2: core::arch::x86_64::__m256,
+    r2: core::arch::x86_64::__m256,
+    index: core::arch::x86_64::__m256i,
+    end: core::arch::x86_64::__m256i,
+    gathers: bool,
+    index_at: *mut core::arch::x86_64::__m256i,
+    d2_at: *mut f32,
+) -> u32 {
+    use core::arch::x86_64::*;
+    // SAFETY: the caller vouches for the CPU and the pointers; a table row holds eight lanes.
+    unsafe {
+        if COMPRESS {
+            let live = _mm256_cmpgt_epi32_mask(end, index);
+            let reached = _mm256_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
+            if gathers {
+                _mm256_storeu_si256(index_at, _mm256_maskz_compress_epi32(reached, index));
+            }
+            _mm256_storeu_ps(d2_at, _mm256_maskz_compress_ps(reached, d2));
+            reached.count_ones()
+        } else {
+            let live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(end, index));
+            let reached = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(d2, r2), live);
+            let mask = _mm256_movemask_ps(reached) as usize;
+            let order = _mm256_loadu_si256(PACK[mask].as_ptr().cast());
+            if gathers {
+                _mm256_storeu_si256(index_at, _mm256_permutevar8x32_epi32(index, order));
+            }
+            _mm256_storeu_ps(d2_at, _mm256_permutevar8x32_ps(d2, order));
+            mask.count_ones()
+        }
     }
 }
 
