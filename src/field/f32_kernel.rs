@@ -327,10 +327,6 @@ fn narrow_avx2(
     let (lo, hi) = (lo.map(|v| _mm256_set1_ps(v)), hi.map(|v| _mm256_set1_ps(v)));
     let zero = _mm256_setzero_ps();
     let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    let gap = |v, a: usize| {
-        let g = _mm256_max_ps(_mm256_sub_ps(lo[a], v), _mm256_sub_ps(v, hi[a]));
-        _mm256_max_ps(g, zero)
-    };
     let mut n = 0;
     for &(a, b) in runs {
         let (mut at, end) = (a as usize, b as usize);
@@ -348,7 +344,14 @@ fn narrow_avx2(
                     lanes_at(&p.r2, at),
                 )
             };
-            let (ex, ey, ez) = (gap(x, 0), gap(y, 1), gap(z, 2));
+            // SAFETY: the CPU has AVX (this function's features).
+            let (ex, ey, ez) = unsafe {
+                (
+                    box_gap(x, lo[0], hi[0], zero),
+                    box_gap(y, lo[1], hi[1], zero),
+                    box_gap(z, lo[2], hi[2], zero),
+                )
+            };
             let d2 = _mm256_add_ps(
                 _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey)),
                 _mm256_mul_ps(ez, ez),
@@ -672,22 +675,22 @@ impl Packed {
         #[cfg(target_arch = "x86_64")]
         if simd_in_use() {
             macro_rules! by_broadcast {
-                ($c:literal, $compress:literal) => {
+                ($build:ident, $c:literal) => {
                     match (self.one_radius.is_some(), self.same_w.is_some()) {
-                        (true, true) => group_sums::<$c, true, true, $compress>,
-                        (true, false) => group_sums::<$c, true, false, $compress>,
-                        (false, true) => group_sums::<$c, false, true, $compress>,
-                        (false, false) => group_sums::<$c, false, false, $compress>,
+                        (true, true) => $build::<$c, true, true>,
+                        (true, false) => $build::<$c, true, false>,
+                        (false, true) => $build::<$c, false, true>,
+                        (false, false) => $build::<$c, false, false>,
                     }
                 };
             }
             let build = match (self.channels, avx512_in_use()) {
-                (0, false) => by_broadcast!(0, false),
-                (1, false) => by_broadcast!(1, false),
-                (_, false) => by_broadcast!(3, false),
-                (0, true) => by_broadcast!(0, true),
-                (1, true) => by_broadcast!(1, true),
-                (_, true) => by_broadcast!(3, true),
+                (0, false) => by_broadcast!(group_sums_avx2, 0),
+                (1, false) => by_broadcast!(group_sums_avx2, 1),
+                (_, false) => by_broadcast!(group_sums_avx2, 3),
+                (0, true) => by_broadcast!(group_sums_avx512, 0),
+                (1, true) => by_broadcast!(group_sums_avx512, 1),
+                (_, true) => by_broadcast!(group_sums_avx512, 3),
             };
             // SAFETY: the CPU has AVX2 and FMA (`simd_in_use`), and AVX-512 F and VL where the
             // build compresses (`avx512_in_use`).
@@ -700,35 +703,25 @@ impl Packed {
     }
 }
 
-/// [`Packed::group_sums`] in one build: the point kernel's (`COMPRESS` as in [`point_sums`]).
+/// [`Packed::group_sums`] with AVX2 (its packing by a permutation, as [`sums_avx2`]).
 ///
 /// # Safety
-/// The CPU has AVX2, FMA and POPCNT, and AVX-512 F and VL where `COMPRESS`.
+/// The CPU has AVX2, FMA and POPCNT.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,popcnt")]
-unsafe fn group_sums<
-    const C: usize,
-    const ONE_RADIUS: bool,
-    const SAME_W: bool,
-    const COMPRESS: bool,
->(
+unsafe fn group_sums_avx2<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
     p: &Packed,
     runs: &[(u32, u32)],
     qs: &[[f32; 3]],
     scratch: &mut GroupScratch,
     out: &mut [(f64, [f64; 3])],
 ) {
-    // SAFETY: the caller vouches for the CPU's features.
-    unsafe {
-        if COMPRESS {
-            group_sums_avx512::<C, ONE_RADIUS, SAME_W>(p, runs, qs, scratch, out)
-        } else {
-            group_sums_body::<C, ONE_RADIUS, SAME_W, false>(p, runs, qs, scratch, out)
-        }
-    }
+    // SAFETY: the caller's CPU has AVX2, FMA and POPCNT.
+    unsafe { group_sums_body::<C, ONE_RADIUS, SAME_W, false>(p, runs, qs, scratch, out) }
 }
 
-/// [`group_sums`] with AVX-512 F and VL enabled (its packing by `vcompress`).
+/// [`Packed::group_sums`] with AVX-512 F and VL (its packing by `vcompress`, as
+/// [`sums_avx512`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,avx2,fma,popcnt")]
 unsafe fn group_sums_avx512<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
@@ -742,7 +735,8 @@ unsafe fn group_sums_avx512<const C: usize, const ONE_RADIUS: bool, const SAME_W
     unsafe { group_sums_body::<C, ONE_RADIUS, SAME_W, true>(p, runs, qs, scratch, out) }
 }
 
-/// The body of [`group_sums`], inlined into each build.
+/// The body of [`group_sums_avx2`] (`COMPRESS` false) and [`group_sums_avx512`] (true),
+/// inlined into each.
 ///
 /// # Safety
 /// The CPU has AVX2, FMA and POPCNT, and AVX-512 F and VL where `COMPRESS`.
@@ -951,24 +945,7 @@ unsafe fn narrow_copy<
             to[a].clear();
         }
     }
-    // SAFETY (the intrinsics outside the loop's block): the caller vouches for the CPU.
-    // No closures: they would not take the caller's target features.
-    let (lo, hi, zero, iota) = unsafe {
-        (
-            [
-                _mm256_set1_ps(lo_f[0]),
-                _mm256_set1_ps(lo_f[1]),
-                _mm256_set1_ps(lo_f[2]),
-            ],
-            [
-                _mm256_set1_ps(hi_f[0]),
-                _mm256_set1_ps(hi_f[1]),
-                _mm256_set1_ps(hi_f[2]),
-            ],
-            _mm256_setzero_ps(),
-            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-        )
-    };
+    // No closures below: they would not take the caller's target features.
     let mut n = 0;
     if COMPRESS {
         // Sixteen lanes a chunk (AVX-512 F): half the instructions a candidate.
@@ -1027,6 +1004,23 @@ unsafe fn narrow_copy<
             }
         }
     } else {
+        // SAFETY: the caller vouches for the CPU.
+        let (lo, hi, zero, iota) = unsafe {
+            (
+                [
+                    _mm256_set1_ps(lo_f[0]),
+                    _mm256_set1_ps(lo_f[1]),
+                    _mm256_set1_ps(lo_f[2]),
+                ],
+                [
+                    _mm256_set1_ps(hi_f[0]),
+                    _mm256_set1_ps(hi_f[1]),
+                    _mm256_set1_ps(hi_f[2]),
+                ],
+                _mm256_setzero_ps(),
+                _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+            )
+        };
         for &(a, b) in runs {
             let (mut at, end) = (a as usize, b as usize);
             assert!(end + LANES <= len, "runs within the padded particles");
@@ -1057,12 +1051,7 @@ unsafe fn narrow_copy<
                     for a in 0..9 {
                         if used[a] {
                             let v = _mm256_loadu_ps(src[a].add(at));
-                            let packed = if COMPRESS {
-                                _mm256_maskz_compress_ps(mask as __mmask8, v)
-                            } else {
-                                _mm256_permutevar8x32_ps(v, order)
-                            };
-                            _mm256_storeu_ps(dst[a].add(n), packed);
+                            _mm256_storeu_ps(dst[a].add(n), _mm256_permutevar8x32_ps(v, order));
                         }
                     }
                     n += mask.count_ones() as usize;
@@ -1554,31 +1543,23 @@ mod tests {
                 channels,
                 ..Packed::default()
             };
-            let particle = |p: &mut Packed, c: [f32; 3], next: &mut dyn FnMut() -> f32| {
-                let r = if own_radius { r0 * (0.5 + next()) } else { r0 };
-                let w = if own_w { 0.5 + next() } else { 1.0 };
-                let theta = [next(), next() - 0.5, next()];
-                push(p, c, r, w, &theta[..channels]);
-                r
-            };
             for i in 0..257 + round {
-                if i % 3 == 0 {
+                let r = if own_radius { r0 * (0.5 + next()) } else { r0 };
+                let c = if i % 3 == 0 {
                     // On a point's sphere, to a few floats: the particle's own radius along a
                     // random direction, that distance stepped by -3..3 ulps.
                     let q = qs[i % points];
                     let u = [next() - 0.5, next() - 0.5, next() - 0.5];
                     let norm = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt().max(1e-3);
-                    let r = if own_radius { r0 * (0.5 + next()) } else { r0 };
                     let step = (i / 3 % 7) as i32 - 3;
                     let d = f32::from_bits((r.to_bits() as i32 + step) as u32);
-                    let c = [0, 1, 2].map(|a| q[a] + u[a] / norm * d);
-                    let w = if own_w { 0.5 + next() } else { 1.0 };
-                    let theta = [next(), next() - 0.5, next()];
-                    push(&mut p, c, r, w, &theta[..channels]);
+                    [0, 1, 2].map(|a| q[a] + u[a] / norm * d)
                 } else {
-                    let c = [0, 1, 2].map(|a| centre[a] + 0.4 * (next() - 0.5));
-                    particle(&mut p, c, &mut next);
-                }
+                    [0, 1, 2].map(|a| centre[a] + 0.4 * (next() - 0.5))
+                };
+                let w = if own_w { 0.5 + next() } else { 1.0 };
+                let theta = [next(), next() - 0.5, next()];
+                push(&mut p, c, r, w, &theta[..channels]);
             }
             p.pad();
             let n = p.x.len() as u32 - LANES as u32;
@@ -1595,10 +1576,10 @@ mod tests {
                 macro_rules! avx2 {
                     ($c:literal) => {
                         match (p.one_radius.is_some(), p.same_w.is_some()) {
-                            (true, true) => group_sums::<$c, true, true, false>,
-                            (true, false) => group_sums::<$c, true, false, false>,
-                            (false, true) => group_sums::<$c, false, true, false>,
-                            (false, false) => group_sums::<$c, false, false, false>,
+                            (true, true) => group_sums_avx2::<$c, true, true>,
+                            (true, false) => group_sums_avx2::<$c, true, false>,
+                            (false, true) => group_sums_avx2::<$c, false, true>,
+                            (false, false) => group_sums_avx2::<$c, false, false>,
                         }
                     };
                 }

@@ -26,10 +26,6 @@ use self::integrators::{FieldSampler, PACKET, PACKET_SIZE, PixelScratch, render_
 use super::gpu_data::f32_phi_error;
 use super::voxel::{VoxelGeometry, VoxelGrid};
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
-
-/// Point queries a task: consecutive ones (in Hilbert order) share cells, and enough tasks
-/// balance the threads.
-const QUERY_CHUNK: usize = 512;
 use crate::accel::CellRuns;
 use crate::field::splat::{SplatCounts, SplatScratch};
 use crate::field::{
@@ -38,6 +34,10 @@ use crate::field::{
 use crate::values::{FrameParams, Image, Step};
 
 const TILE: u32 = 16;
+
+/// Point queries a task: consecutive ones (in Hilbert order) share cells, and enough tasks
+/// balance the threads.
+const QUERY_CHUNK: usize = 512;
 
 /// The uploaded step (shared with the series' cache, never copied), kept to re-evaluate its
 /// particles' radii and maps when those change.
