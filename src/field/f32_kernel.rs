@@ -964,6 +964,7 @@ unsafe fn narrow_copy<
                 ],
             );
             let zero = _mm512_setzero_ps();
+            let one_r2 = _mm512_set1_ps(p.one_radius.unwrap_or_default().r2);
             for &(a, b) in runs {
                 let (mut at, end) = (a as usize, b as usize);
                 assert!(end + LANES <= len, "runs within the padded particles");
@@ -985,7 +986,11 @@ unsafe fn narrow_copy<
                     let [ex, ey, ez] = e;
                     let d2 =
                         _mm512_fmadd_ps(ez, ez, _mm512_fmadd_ps(ey, ey, _mm512_mul_ps(ex, ex)));
-                    let r2 = _mm512_maskz_loadu_ps(live, p.r2.as_ptr().add(at));
+                    let r2 = if ONE_RADIUS {
+                        one_r2
+                    } else {
+                        _mm512_maskz_loadu_ps(live, p.r2.as_ptr().add(at))
+                    };
                     let keep = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(live, d2, r2);
                     for a in 0..9 {
                         if used[a] {
@@ -1202,14 +1207,25 @@ impl HeldSums {
     }
 }
 
-/// The sum of eight f32 lanes in f64, lane 0 first: how every AVX2 kernel ends.
+/// The sum of eight f32 lanes in f64, as [`lanes_total`] adds them: how every AVX2 kernel
+/// ends. In pairs rather than lane after lane: three dependent additions instead of seven
+/// (the one-by-one sum held a tenth of the group kernel's samples).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn lane_total(v: core::arch::x86_64::__m256) -> f64 {
-    let mut lanes = [0f32; LANES];
-    // SAFETY: eight floats; `_mm256_storeu_ps` needs only AVX, which every caller enables.
-    unsafe { core::arch::x86_64::_mm256_storeu_ps(lanes.as_mut_ptr(), v) };
-    lanes.iter().map(|&x| f64::from(x)).sum()
+    use core::arch::x86_64::*;
+    // SAFETY: every caller enables AVX.
+    unsafe {
+        let halves = _mm256_add_pd(
+            _mm256_cvtps_pd(_mm256_castps256_ps128(v)),
+            _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v)),
+        );
+        let pairs = _mm_add_pd(
+            _mm256_castpd256_pd128(halves),
+            _mm256_extractf128_pd::<1>(halves),
+        );
+        _mm_cvtsd_f64(_mm_add_sd(pairs, _mm_unpackhi_pd(pairs, pairs)))
+    }
 }
 
 /// Eight floats of `v` from `at`, at any alignment.
@@ -1350,12 +1366,18 @@ fn sums_lanes<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (
             chunk::<C>(p, at, q, live, &mut phi, &mut num);
         }
     }
-    let total = |v: &[f32; LANES]| v.iter().map(|&x| f64::from(x)).sum::<f64>();
     let mut theta = [0.0; 3];
     for (ch, t) in theta.iter_mut().enumerate().take(C) {
-        *t = total(&num[ch]);
+        *t = lanes_total(&num[ch]);
     }
-    (total(&phi), theta)
+    (lanes_total(&phi), theta)
+}
+
+/// The sum of eight f32 lanes in f64: lane i and lane i + 4 added, then those pairs two
+/// apart, then the last two (the order [`lane_total`] adds a vector's lanes in).
+fn lanes_total(v: &[f32; LANES]) -> f64 {
+    let l = v.map(f64::from);
+    ((l[0] + l[4]) + (l[2] + l[6])) + ((l[1] + l[5]) + (l[3] + l[7]))
 }
 
 /// Eight particles from `from` on, the lanes outside `live` left out.
