@@ -594,6 +594,29 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
+    /// A clump of `count` particles of radius r to 2r in a cube of side `side` from (0.5, 0.5,
+    /// 0.5), then `halo` particles of radius `big_r` over the unit cube: what SPH
+    /// smoothing lengths make of a dense region in a sparse one.
+    fn clump_in_halo(
+        rng: &mut impl Rng,
+        (count, side, r): (usize, f64, f64),
+        (halo, big_r): (usize, f64),
+    ) -> (Vec<DVec3>, Vec<f64>) {
+        let mut centers = Vec::new();
+        let mut radii = Vec::new();
+        for _ in 0..count {
+            centers.push(
+                DVec3::splat(0.5) + DVec3::new(rng.random(), rng.random(), rng.random()) * side,
+            );
+            radii.push(r * (1.0 + rng.random::<f64>()));
+        }
+        for _ in 0..halo {
+            centers.push(DVec3::new(rng.random(), rng.random(), rng.random()));
+            radii.push(big_r);
+        }
+        (centers, radii)
+    }
+
     /// A dense clump of small particles in a halo of large ones (as SPH smoothing lengths make
     /// them): the clump's points get their clump neighbours, not the whole clump, and every
     /// particle that reaches a point is among its candidates; along a ray, every point some
@@ -601,18 +624,7 @@ mod tests {
     #[test]
     fn levels_of_radii_keep_a_clump_from_flooding_its_cells() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
-        let mut centers = Vec::new();
-        let mut radii = Vec::new();
-        for _ in 0..20_000 {
-            centers.push(
-                DVec3::splat(0.5) + DVec3::new(rng.random(), rng.random(), rng.random()) * 0.05,
-            );
-            radii.push(0.002 * (1.0 + rng.random::<f64>()));
-        }
-        for _ in 0..2_000 {
-            centers.push(DVec3::new(rng.random(), rng.random(), rng.random()));
-            radii.push(0.1);
-        }
+        let (mut centers, mut radii) = clump_in_halo(&mut rng, (20_000, 0.05, 0.002), (2_000, 0.1));
         centers.push(DVec3::splat(0.2));
         radii.push(0.0);
         let (grid, order) = CellGrid::build(&centers, &radii);
@@ -668,18 +680,7 @@ mod tests {
     #[test]
     fn a_group_takes_points_until_its_block_would_pass_two_cells() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
-        let mut centers = Vec::new();
-        let mut radii = Vec::new();
-        for _ in 0..3_000 {
-            centers.push(
-                DVec3::splat(0.5) + DVec3::new(rng.random(), rng.random(), rng.random()) * 0.1,
-            );
-            radii.push(0.01 * (1.0 + rng.random::<f64>()));
-        }
-        for _ in 0..1_000 {
-            centers.push(DVec3::new(rng.random(), rng.random(), rng.random()));
-            radii.push(0.05);
-        }
+        let (centers, radii) = clump_in_halo(&mut rng, (3_000, 0.1, 0.01), (1_000, 0.05));
         let (grid, order) = CellGrid::build(&centers, &radii);
         assert!(grid.levels.len() >= 2, "{} levels", grid.levels.len());
         let cells_of = |l: DVec3| -> Vec<Option<(bool, [usize; 3])>> {
