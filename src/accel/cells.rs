@@ -301,7 +301,7 @@ impl CellGrid {
             }
             count = i + 1;
         }
-        let count = count.max(1).min(points.len());
+        // At least one point (the first widens nothing), unless there are none.
         if reached.count_ones() < 2 {
             return (count, reached, None);
         }

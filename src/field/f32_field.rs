@@ -107,6 +107,8 @@ impl F32Field {
         let mut local = [DVec3::ZERO; GROUP];
         while i < points.len() {
             let g = GROUP.min(points.len() - i);
+            // Points evaluated alone from i: one, unless a lookup says how many.
+            let mut alone = 1;
             if grouped && g >= 2 {
                 for (l, &x) in local.iter_mut().zip(&points[i..i + g]) {
                     *l = x - self.origin;
@@ -127,22 +129,17 @@ impl F32Field {
                             out[i + j] = (0.0, [0.0; 3]);
                         }
                     }
-                    if m == count {
-                        // Every point reached (the common case): straight into `out`.
-                        self.particles.group_sums(
-                            runs,
-                            &qs[..m],
-                            &mut scratch.group,
-                            &mut out[i..i + count],
-                        );
+                    // Every point reached (the common case): straight into `out`.
+                    let mut sums = [(0.0, [0.0; 3]); GROUP];
+                    let every = m == count;
+                    let to = if every {
+                        &mut out[i..i + count]
                     } else {
-                        let mut sums = [(0.0, [0.0; 3]); GROUP];
-                        self.particles.group_sums(
-                            runs,
-                            &qs[..m],
-                            &mut scratch.group,
-                            &mut sums[..m],
-                        );
+                        &mut sums[..m]
+                    };
+                    self.particles
+                        .group_sums(runs, &qs[..m], &mut scratch.group, to);
+                    if !every {
                         for (s, &j) in sums.iter().zip(&which).take(m) {
                             out[i + j] = *s;
                         }
@@ -151,14 +148,12 @@ impl F32Field {
                     i += count;
                     continue;
                 }
-                for (o, &x) in out[i..i + count].iter_mut().zip(&points[i..i + count]) {
-                    *o = self.eval_sums(x, &mut scratch.ray);
-                }
-                i += count;
-                continue;
+                alone = count;
             }
-            out[i] = self.eval_sums(points[i], &mut scratch.ray);
-            i += 1;
+            for (o, &x) in out[i..i + alone].iter_mut().zip(&points[i..i + alone]) {
+                *o = self.eval_sums(x, &mut scratch.ray);
+            }
+            i += alone;
         }
         together
     }

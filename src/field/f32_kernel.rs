@@ -572,10 +572,7 @@ unsafe fn point_sums<
         );
         let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
         let one_r2 = ONE_RADIUS.then(|| _mm256_set1_ps(one_radius.r2));
-        let mut sums = HeldSums {
-            phi: _mm256_setzero_ps(),
-            num: [_mm256_setzero_ps(); 3],
-        };
+        let mut sums = HeldSums::zero();
         // The loads below read eight floats from every array the kernel uses: all of them must
         // hold each run and its padding (checked once, on the shortest).
         let len = [&p.x, &p.y, &p.z, &p.r2, &p.k, &p.w]
@@ -632,11 +629,7 @@ unsafe fn point_sums<
             }
         }
         sums.add::<C, ONE_RADIUS, SAME_W>(p, &held_index, &held_d2, n, one_radius, same_w);
-        let mut theta = [0.0; 3];
-        for (ch, t) in theta.iter_mut().enumerate().take(C) {
-            *t = lane_total(sums.num[ch]);
-        }
-        (lane_total(sums.phi), theta)
+        sums.totals::<C>()
     }
 }
 
@@ -838,10 +831,7 @@ unsafe fn group_sums_body<
         }
         // Second pass: every point's terms.
         for (&(from, reached), o) in spans.iter().zip(out.iter_mut()) {
-            let mut sums = HeldSums {
-                phi: _mm256_setzero_ps(),
-                num: [_mm256_setzero_ps(); 3],
-            };
+            let mut sums = HeldSums::zero();
             // Bounds: from + reached + LANES <= need; the held indices are the copy's.
             sums.add::<C, ONE_RADIUS, SAME_W>(
                 n,
@@ -851,11 +841,7 @@ unsafe fn group_sums_body<
                 one_radius,
                 same_w,
             );
-            let mut theta = [0.0; 3];
-            for (ch, t) in theta.iter_mut().enumerate().take(C) {
-                *t = lane_total(sums.num[ch]);
-            }
-            *o = (lane_total(sums.phi), theta);
+            *o = sums.totals::<C>();
         }
     }
 }
@@ -1149,6 +1135,27 @@ struct HeldSums {
 
 #[cfg(target_arch = "x86_64")]
 impl HeldSums {
+    /// Nothing summed yet.
+    #[inline(always)]
+    fn zero() -> HeldSums {
+        // SAFETY: every caller enables AVX.
+        let zero = unsafe { core::arch::x86_64::_mm256_setzero_ps() };
+        HeldSums {
+            phi: zero,
+            num: [zero; 3],
+        }
+    }
+
+    /// Phi and the first `C` channels' Theta numerators, each vector's lanes summed in f64.
+    #[inline(always)]
+    fn totals<const C: usize>(&self) -> (f64, [f64; 3]) {
+        let mut theta = [0.0; 3];
+        for (ch, t) in theta.iter_mut().enumerate().take(C) {
+            *t = lane_total(self.num[ch]);
+        }
+        (lane_total(self.phi), theta)
+    }
+
     /// Adds the terms of held candidates `0..count`, eight at a time, the lanes past `count`
     /// masked (their indices read as 0: the slots may hold another call's). The indices are
     /// read only where the terms gather by them (see [`point_sums`]).
