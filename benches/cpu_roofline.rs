@@ -3,7 +3,9 @@
 //! in cache (a scalar f64 loop as the reference evaluates a term; the f32 kernel's AVX-512,
 //! AVX2 and baseline builds: the widest the CPU has is its peak), against the terms per second
 //! the backend achieves on N particles × M queries (~30 terms a query) in f64 and in f32 (in
-//! each build of the f32 kernel), at every thread count up to the machine's.
+//! each build of the f32 kernel), at every thread count up to the machine's. Each rate is the
+//! best run of a stretch of runs, and each peak is measured before and after the backend, the
+//! higher kept: what the machine does when no other process holds its cores.
 //! Results go to docs/benchmarks.md.
 //!
 //! cargo xtask bench cpu_roofline -- [N] [M]     (defaults: 1000000 1000000)
@@ -89,6 +91,8 @@ fn main() {
         threads.push(cores);
     }
     let mut achieved_by_threads = Vec::new();
+    // Each row's widest peak, to check that the peaks grew with the threads.
+    let mut peak_by_threads = Vec::new();
     let simd = f32_kernel::simd_in_use();
     let avx512 = f32_kernel::avx512_in_use();
     for &k in &threads {
@@ -97,18 +101,22 @@ fn main() {
             .build()
             .unwrap();
         let row = pool.install(|| {
-            let peak64 = best_rate(3, || peak_f64(k));
-            // The widest build the CPU has (AVX-512 where it has it: the machine's peak), then
-            // the AVX2 one.
-            let peak_widest = best_rate(3, || peak_f32_kernel(k));
-            f32_kernel::allow_avx512(false);
-            let peak_avx2 = best_rate(3, || peak_f32_kernel(k));
-            f32_kernel::allow_avx512(true);
-            f32_kernel::allow_simd(false);
-            let peak_baseline = best_rate(3, || peak_f32_kernel(k));
-            f32_kernel::allow_simd(true);
+            // Every build's peak: the widest the CPU has (AVX-512 where it has it: the
+            // machine's peak), then AVX2 and baseline.
+            let peaks = || {
+                let peak64 = best_rate(PEAK_SECONDS, || peak_f64(k));
+                let peak_widest = best_rate(PEAK_SECONDS, || peak_f32_kernel(k));
+                f32_kernel::allow_avx512(false);
+                let peak_avx2 = best_rate(PEAK_SECONDS, || peak_f32_kernel(k));
+                f32_kernel::allow_avx512(true);
+                f32_kernel::allow_simd(false);
+                let peak_baseline = best_rate(PEAK_SECONDS, || peak_f32_kernel(k));
+                f32_kernel::allow_simd(true);
+                [peak64, peak_widest, peak_avx2, peak_baseline]
+            };
+            let before = peaks();
             let achieved = |b: &mut Box<dyn Backend>| {
-                best_rate(2, || {
+                best_rate(BACKEND_SECONDS, || {
                     let t = Instant::now();
                     let sum: f64 = b.query(&queries).unwrap().iter().map(|s| s.0).sum();
                     std::hint::black_box(sum);
@@ -125,12 +133,18 @@ fn main() {
             f32_kernel::allow_simd(false);
             let a32_baseline = achieved(&mut f32_backend);
             f32_kernel::allow_simd(true);
+            // The peaks again after the backend, the higher of each kept: a peak read while
+            // another process held a core would make every share of it too high.
+            let after = peaks();
+            let [peak64, peak_widest, peak_avx2, peak_baseline] =
+                [0, 1, 2, 3].map(|i| before[i].max(after[i]));
             let peaks = (peak64, peak_widest, peak_avx2, peak_baseline);
             (peaks, a64, a32, a32_avx2, a32_baseline)
         });
         let ((peak64, peak_widest, peak_avx2, peak_baseline), a64, a32, a32_avx2, a32_baseline) =
             row;
         achieved_by_threads.push((a64, a32));
+        peak_by_threads.push((k, peak_widest));
         let rate = |available: bool, v: f64| {
             if available {
                 format!("{:.3}", v / 1e9)
@@ -167,17 +181,50 @@ fn main() {
         last.0 / first.0,
         last.1 / first.1
     );
+    // Peak loops over data in cache scale with the cores: a k-thread peak well off k times the
+    // 1-thread one is what another process holding a core gives (too low a peak makes every
+    // share of it too high), or threads that share a core's units.
+    let one = peak_by_threads[0].1;
+    for &(k, peak) in &peak_by_threads[1..] {
+        let grew = peak / (k as f64 * one);
+        if !(0.9..=1.1).contains(&grew) {
+            println!(
+                "WARNING: the {k}-thread peak of the widest build is {grew:.2} of {k} times the \
+                 1-thread one. Another process held a core while the {} row was measured, so \
+                 its shares (and the scaling) are not this machine's: run it again. (Or the \
+                 threads share cores' units: SMT.)",
+                if grew < 1.0 {
+                    format!("{k}-thread")
+                } else {
+                    "1-thread".into()
+                }
+            );
+        }
+    }
 }
 
-/// The best rate of `runs` runs of `f`, which returns (work, seconds).
-fn best_rate(runs: usize, mut f: impl FnMut() -> (u64, f64)) -> f64 {
-    (0..runs)
-        .map(|_| {
-            let (work, s) = f();
-            work as f64 / s
-        })
-        .fold(0.0, f64::max)
+/// The best rate of runs of `f` (which returns work and seconds) over `seconds`, at least
+/// three runs. The machine is shared: three runs, of under a millisecond each for a peak loop,
+/// once let a peak be read while another process held a core (the 2-thread AVX-512 peak read
+/// 2.48 G terms/s, half its 4.8, and the share of it printed 25.0%); the best of many is the
+/// machine's.
+fn best_rate(seconds: f64, mut f: impl FnMut() -> (u64, f64)) -> f64 {
+    let started = Instant::now();
+    let mut best: f64 = 0.0;
+    let mut runs = 0;
+    while runs < 3 || started.elapsed().as_secs_f64() < seconds {
+        let (work, s) = f();
+        best = best.max(work as f64 / s);
+        runs += 1;
+    }
+    best
 }
+
+/// Seconds of runs each peak loop is given (runs of about a millisecond).
+const PEAK_SECONDS: f64 = 0.25;
+
+/// Seconds of runs each of the backend's rates is given (runs of 0.05-0.5 s).
+const BACKEND_SECONDS: f64 = 1.0;
 
 /// Every (query, particle) pair within `r`, counted on a grid of cells of side r.
 fn count_terms(points: &[DVec3], queries: &[DVec3], r: f64) -> u64 {
