@@ -92,7 +92,7 @@ fn main() {
     }
     let mut achieved_by_threads = Vec::new();
     // Each row's widest peak, to check that the peaks grew with the threads.
-    let mut peak_by_threads = Vec::new();
+    let mut widest_peaks = Vec::new();
     let simd = f32_kernel::simd_in_use();
     let avx512 = f32_kernel::avx512_in_use();
     for &k in &threads {
@@ -136,15 +136,13 @@ fn main() {
             // The peaks again after the backend, the higher of each kept: a peak read while
             // another process held a core would make every share of it too high.
             let after = peaks();
-            let [peak64, peak_widest, peak_avx2, peak_baseline] =
-                [0, 1, 2, 3].map(|i| before[i].max(after[i]));
-            let peaks = (peak64, peak_widest, peak_avx2, peak_baseline);
+            let peaks = [0, 1, 2, 3].map(|i| before[i].max(after[i]));
             (peaks, a64, a32, a32_avx2, a32_baseline)
         });
-        let ((peak64, peak_widest, peak_avx2, peak_baseline), a64, a32, a32_avx2, a32_baseline) =
+        let ([peak64, peak_widest, peak_avx2, peak_baseline], a64, a32, a32_avx2, a32_baseline) =
             row;
         achieved_by_threads.push((a64, a32));
-        peak_by_threads.push((k, peak_widest));
+        widest_peaks.push(peak_widest);
         let rate = |available: bool, v: f64| {
             if available {
                 format!("{:.3}", v / 1e9)
@@ -184,8 +182,8 @@ fn main() {
     // Peak loops over data in cache scale with the cores: a k-thread peak well off k times the
     // 1-thread one is what another process holding a core gives (too low a peak makes every
     // share of it too high), or threads that share a core's units.
-    let one = peak_by_threads[0].1;
-    for &(k, peak) in &peak_by_threads[1..] {
+    let one = widest_peaks[0];
+    for (&k, &peak) in threads.iter().zip(&widest_peaks).skip(1) {
         let grew = peak / (k as f64 * one);
         if !(0.9..=1.1).contains(&grew) {
             println!(
