@@ -1,4 +1,3 @@
-use clap::Parser;
 use tracing_subscriber::EnvFilter;
 
 fn main() -> std::process::ExitCode {
@@ -10,7 +9,7 @@ fn main() -> std::process::ExitCode {
         .with_target(false)
         .without_time()
         .init();
-    let cli = aarbf::cli::Cli::parse();
+    let cli = aarbf::cli::Cli::parse_args();
     match aarbf::cli::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

@@ -1,11 +1,12 @@
 //! Acceleration structures on the CPU: Hilbert keys and order, clusters of K consecutive
 //! Hilbert-sorted particles with their bounding boxes, a BVH (obvhs) over those boxes, and a
-//! uniform grid of cells for point queries.
+//! uniform grid of cells for point queries; the particles' spacing (nearest-neighbour distances).
 
 pub mod bvh;
 pub mod cells;
 pub mod clusters;
 pub mod hilbert;
+pub mod spacing;
 
 pub use bvh::ClusterBvh;
 pub use cells::{CellGrid, CellRuns};

@@ -61,6 +61,28 @@ pub enum Command {
     Bench(BenchArgs),
 }
 
+impl Cli {
+    /// The command line as typed, or the process exits with clap's message. Every option that
+    /// takes a value accepts a negative number, so `--radius -1` reaches the option's own
+    /// check (which says what a valid value is) instead of clap's "unexpected argument".
+    pub fn parse_args() -> Cli {
+        use clap::{CommandFactory, FromArgMatches};
+        fn negatives(command: clap::Command) -> clap::Command {
+            command
+                .mut_args(|arg| {
+                    if arg.get_action().takes_values() {
+                        arg.allow_negative_numbers(true)
+                    } else {
+                        arg
+                    }
+                })
+                .mut_subcommands(negatives)
+        }
+        let mut matches = negatives(Cli::command()).get_matches();
+        Cli::from_arg_matches_mut(&mut matches).unwrap_or_else(|e| e.exit())
+    }
+}
+
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(a) => info::run(a),

@@ -13,7 +13,7 @@ use crate::render::accuracy::{ErrorMetric, render_to_target};
 use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
 use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
-use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve};
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
 
@@ -23,6 +23,8 @@ pub struct RenderArgs {
     pub data: DataArgs,
     #[command(flatten)]
     pub field: FieldOptions,
+    #[command(flatten)]
+    pub view: ViewFlags,
     /// A range of steps, `a..b` (b excluded) or `a..=b`, optionally every n-th (`0..48:4`):
     /// writes OUT_<step>.<ext> for each. Frames already written are kept (a sequence resumes
     /// where it stopped) unless --force.
@@ -241,11 +243,23 @@ fn apply_flags(args: &RenderArgs, scene: &mut SceneFile) -> anyhow::Result<()> {
     if let Some(text) = &args.background {
         r.background = Some(numbers::<3>("background", text)?);
     }
+    if args.camera.is_some() as u8
+        + args.orbit.is_some() as u8
+        + args.view.camera_from.is_some() as u8
+        > 1
+    {
+        bail!("--camera, --orbit and --camera-from each place the camera: give one");
+    }
     if let Some(camera) = args.camera {
+        ensure!(
+            args.view.up.is_none(),
+            "--camera gives its own up vector; drop --up"
+        );
         scene.camera = CameraSection::of(camera);
     } else if let Some(orbit) = &args.orbit {
         scene.camera.orbit = Some(orbit.clone());
     }
+    args.view.apply(&mut scene.camera)?;
     Ok(())
 }
 
@@ -316,6 +330,18 @@ impl OutputFormat {
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    // The flags are checked before the data is opened or a device is probed.
+    {
+        let mut flags = match &args.data.scene {
+            Some(path) => SceneFile::load(path)?,
+            None => SceneFile::default(),
+        };
+        apply_flags(&args, &mut flags)?;
+        let unit = crate::values::Bounds::of_points(&[glam::DVec3::ZERO, glam::DVec3::ONE]);
+        flags.render_settings(unit).map_err(anyhow::Error::msg)?;
+        ensure!(flags.spp() > 0, "--spp must be at least 1");
+        OutputFormat::of(&args.out, args.bit_depth)?;
+    }
     let mut resolved = resolve(&args.data, &args.field)?;
     apply_flags(&args, &mut resolved.scene)?;
     match args.method {
@@ -464,12 +490,21 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         if k == 0 {
             // Series-wide values: the same for every step, so printed (and saved) once.
             let used = session.resolve(&settings)?;
+            // A targeted or reference render chooses its own step (printed with each image).
+            let step_size = if (target.is_some() || args.reference) && settings.step_size.is_none()
+            {
+                "chosen per image (below)".to_owned()
+            } else {
+                format!(
+                    "{} ({})",
+                    used.step_size,
+                    set_or_auto(settings.step_size.is_some())
+                )
+            };
             tracing::info!(
-                "settings used: phi_ref {} ({}), step size {} ({}), density scale {} ({}), radius {}, march box margin {}",
+                "settings used: phi_ref {} ({}), step size {step_size}, density scale {} ({}), radius {}, march box margin {}",
                 used.phi_ref,
                 set_or_auto(settings.phi_ref.is_some()),
-                used.step_size,
-                set_or_auto(settings.step_size.is_some()),
                 used.density_scale,
                 set_or_auto(settings.optical.scale().is_some()),
                 resolved.field.radius,
@@ -638,10 +673,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         }
         let t = session.backend().timings();
         tracing::info!(
-            "step {step}: {} ({}x{}, {spp} spp, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",
+            "step {step}: {} ({}x{}, {used_spp} spp{}, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",
             path.display(),
             settings.width,
             settings.height,
+            used_step.map_or(String::new(), |dt| format!(", step size {dt:.4e}")),
             settings.integrator,
             t.build.as_secs_f64(),
             t.frame.as_secs_f64(),

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use crate::backend::BackendKind;
-use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve};
 use crate::viewer::{ViewOptions, WindowOptions};
 
 #[derive(Debug, Args)]
@@ -14,6 +14,8 @@ pub struct ViewArgs {
     pub data: DataArgs,
     #[command(flatten)]
     pub field: FieldOptions,
+    #[command(flatten)]
+    pub view: ViewFlags,
     /// The backend to start with (switchable in the window). `auto` picks the CPU backend
     /// where the only GPU is a software one, as `aarbf render` does.
     #[arg(long, value_enum, default_value = "auto")]
@@ -48,6 +50,7 @@ fn parse_size(text: &str) -> Result<[f32; 2], String> {
 
 pub fn run(args: ViewArgs) -> anyhow::Result<()> {
     let mut loaded = resolve(&args.data, &args.field)?;
+    args.view.apply(&mut loaded.scene.camera)?;
     if let Some(spp) = args.spp {
         anyhow::ensure!(spp > 0, "--spp must be at least 1");
         loaded.scene.render.spp = Some(spp);

@@ -3,7 +3,9 @@
 //! Every reader turns one file (or one step of a `.particles` header) into a [`Step`], through
 //! [`finish_step`], which checks array lengths, keeps the attributes asked for, drops particles
 //! with NaN/Inf values (with a warning that counts them) and refuses empty steps. A series is a
-//! file, a directory or a glob, sorted naturally (`step2` before `step10`).
+//! file, a directory or a glob, sorted naturally (`step2` before `step10`); in a folder of
+//! several name patterns (boundary, restart, species files beside the steps), the pattern with
+//! the most steps.
 
 pub mod csv;
 pub mod error;
@@ -15,6 +17,7 @@ pub mod particles;
 pub mod ply;
 pub mod raw;
 mod scalar;
+pub mod stems;
 pub mod vtk;
 mod vtk_appended;
 
@@ -150,7 +153,8 @@ impl StepRef {
 /// Lists the steps of the series at `path`: a file, a directory or a glob pattern.
 ///
 /// `format` overrides detection by extension. A directory may hold other files too; only
-/// those of the (single) particle format in it are taken.
+/// particle files are taken, and of those the files of one name pattern, the one with the
+/// most steps ([`stems::choose_series`]; the others are named in a warning).
 pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, DataError> {
     let at = At::new(path, None);
     let text = path.to_string_lossy();
@@ -211,6 +215,10 @@ pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, D
         };
         return Err(at.err(Problem::UnknownFormat(what)));
     }
+    if let Some((chosen, left_out)) = stems::choose_series(&typed) {
+        report_left_out(path, &chosen, &left_out);
+        typed.retain(|(p, _)| chosen.files.contains(p));
+    }
     let first = typed[0].1;
     if let Some((other, _)) = typed.iter().find(|(_, f)| *f != first) {
         return Err(at.err(Problem::UnknownFormat(format!(
@@ -251,6 +259,26 @@ pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, D
             format,
         })
         .collect())
+}
+
+/// Says which files of a folder or glob were not taken as the series, and how to take them.
+fn report_left_out(path: &Path, chosen: &stems::StemGroup, left_out: &[stems::StemGroup]) {
+    let groups: Vec<String> = left_out
+        .iter()
+        .map(|g| match g.files.len() {
+            1 => format!("'{}'", g.pattern),
+            n => format!("'{}' ({n} files)", g.pattern),
+        })
+        .collect();
+    tracing::warn!(
+        "{}: the series is '{}' ({} steps, the most of any name in it); left out: {}. To open \
+         another, name it: --data '{}'",
+        path.display(),
+        chosen.pattern,
+        chosen.files.len(),
+        groups.join(", "),
+        left_out[0].data_argument()
+    );
 }
 
 /// Reads one step, keeping the attributes `selection` names.

@@ -38,8 +38,11 @@ pub fn read_step(
         Some(appended_raw_to_base64(&bytes).map_err(|e| at.malformed(e))?)
     };
     if let Some(text) = &xml {
-        check_inflation(text.as_deref().unwrap_or(&bytes), bytes.len())
-            .map_err(|e| at.malformed(e))?;
+        let text = text.as_deref().unwrap_or(&bytes);
+        if let Some(cut) = where_xml_ends_early(text) {
+            return Err(at.malformed(cut));
+        }
+        check_inflation(text, bytes.len()).map_err(|e| at.malformed(e))?;
     }
     // vtkio is not hardened against every hostile input; a panic inside it becomes an error.
     let parsed = std::panic::catch_unwind(|| match xml {
@@ -374,6 +377,54 @@ fn appended_raw_to_base64(bytes: &[u8]) -> Result<Option<Vec<u8>>, String> {
     out.push_str(&encoded);
     out.push_str("\n</AppendedData>\n</VTKFile>\n");
     Ok(Some(out.into_bytes()))
+}
+
+/// If the XML document stops before its elements close (a copy cut short, a file still being
+/// written), where: the byte, the line and the element it stops in. `None` for a complete
+/// document, and for malformed ones the parser reports itself.
+fn where_xml_ends_early(text: &[u8]) -> Option<String> {
+    use quick_xml::events::Event;
+    // A complete VTK file ends with its root's closing tag; only files without one are walked.
+    let tail = &text[text.len().saturating_sub(4096)..];
+    if tail.windows(10).any(|w| w == b"</VTKFile>") {
+        return None;
+    }
+    let mut reader = quick_xml::Reader::from_reader(text);
+    let mut open: Vec<String> = Vec::new();
+    let mut buf = Vec::new();
+    loop {
+        match reader.read_event_into(&mut buf) {
+            Ok(Event::Start(e)) => {
+                let name = String::from_utf8_lossy(e.name().as_ref()).into_owned();
+                let label = e
+                    .try_get_attribute("Name")
+                    .ok()
+                    .flatten()
+                    .map(|a| String::from_utf8_lossy(&a.value).into_owned());
+                open.push(match label {
+                    Some(l) => format!("<{name} Name=\"{l}\">"),
+                    None => format!("<{name}>"),
+                });
+            }
+            Ok(Event::End(_)) => {
+                open.pop();
+            }
+            Ok(Event::Eof) => break,
+            Ok(_) => {}
+            // A truncated element (`<DataArr`) or text cut inside a tag: still truncation.
+            Err(_) if reader.buffer_position() as usize + 1 >= text.len() => break,
+            Err(_) => return None,
+        }
+        buf.clear();
+    }
+    let inside = open.last()?;
+    let line = 1 + text.iter().filter(|&&c| c == b'\n').count();
+    Some(format!(
+        "the file ends early, at byte {} (line {line}), inside {inside} ({} elements left \
+         open): the copy was cut short or the file is still being written",
+        text.len(),
+        open.len()
+    ))
 }
 
 fn load<P: PieceData>(at: At<'_>, piece: Piece<P>, source: Option<&Path>) -> Result<P, DataError> {

@@ -261,16 +261,7 @@ impl RenderSession {
             return Err(BackendError::NothingUploaded("session").into());
         };
         let resolved = self.resolve(settings)?;
-        if settings.width == 0
-            || settings.height == 0
-            || settings.width > 16384
-            || settings.height > 16384
-        {
-            return Err(RenderError::Settings(format!(
-                "image size {}x{} must lie in 1..=16384",
-                settings.width, settings.height
-            )));
-        }
+        settings.check().map_err(RenderError::Settings)?;
         let camera = settings
             .camera
             .unwrap_or_else(|| Camera::default_for(self.bounds));

@@ -36,6 +36,38 @@ pub struct RenderSettings {
     pub voxel_grid: Option<usize>,
 }
 
+impl RenderSettings {
+    /// The largest image side a render accepts.
+    pub const MAX_SIDE: u32 = 16384;
+
+    /// Checks what can be checked before any data or device is touched, so a bad flag is
+    /// reported at once (not after opening the data and probing the GPUs).
+    pub fn check(&self) -> Result<(), String> {
+        let side = 1..=Self::MAX_SIDE;
+        if !side.contains(&self.width) || !side.contains(&self.height) {
+            return Err(format!(
+                "image size {}x{} (--width, --height): each side must lie in 1..={}",
+                self.width,
+                self.height,
+                Self::MAX_SIDE
+            ));
+        }
+        if !(self.opacity_threshold > 0.0 && self.opacity_threshold <= 1.0) {
+            return Err(format!(
+                "opacity threshold {} must lie in (0, 1]",
+                self.opacity_threshold
+            ));
+        }
+        if !self.background.iter().all(|c| c.is_finite()) {
+            return Err(format!(
+                "background {:?} (--background): each channel must be a finite number",
+                self.background
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {

@@ -66,26 +66,53 @@ impl Camera {
         })
     }
 
-    /// A camera at azimuth/elevation (degrees, y up) around `bounds`, far enough back that the
-    /// bounding sphere fills the view.
-    pub fn orbit(bounds: Bounds, azimuth: f64, elevation: f64, fovy: f64) -> Camera {
-        let centre = bounds.center();
+    /// A camera at azimuth/elevation (degrees) about the `up` axis around `bounds`, far enough
+    /// back that the bounding sphere fills the view. Azimuth 0 looks along the axis the
+    /// [`UpAxis::horizontal`] frame puts in front (from -y with z up, from +z with y up).
+    pub fn orbit(bounds: Bounds, up: UpAxis, azimuth: f64, elevation: f64, fovy: f64) -> Camera {
         let radius = (bounds.diagonal() * 0.5).max(1e-9);
         // The bounding sphere just fits; its corners are rarely occupied, so crop them a little.
         let distance = radius / (fovy.to_radians() * 0.5).sin() * 0.9;
+        Camera::from_angles(bounds, up, azimuth, elevation, distance, fovy)
+    }
+
+    /// A camera at azimuth/elevation (degrees) about the `up` axis, `distance` from the
+    /// bounds' centre, looking at it.
+    pub fn from_angles(
+        bounds: Bounds,
+        up: UpAxis,
+        azimuth: f64,
+        elevation: f64,
+        distance: f64,
+        fovy: f64,
+    ) -> Camera {
+        let (side, front) = up.horizontal();
         let (a, e) = (azimuth.to_radians(), elevation.to_radians());
-        let dir = DVec3::new(e.cos() * a.sin(), e.sin(), e.cos() * a.cos());
+        let dir = e.cos() * (a.sin() * side + a.cos() * front) + e.sin() * up.vector();
+        let centre = bounds.center();
         Camera {
             eye: centre + dir * distance,
             at: centre,
-            up: DVec3::Y,
+            up: up.vector(),
             fovy,
         }
     }
 
-    /// The default view of a data set: from the front right, slightly above.
+    /// The default view of a data set: upright along [`UpAxis::of_bounds`], from the front
+    /// right and slightly above; planar data (a 2D simulation) face on.
     pub fn default_for(bounds: Bounds) -> Camera {
-        Camera::orbit(bounds, 35.0, 25.0, 40.0)
+        match planar_axis(bounds) {
+            // Face on: along the flat axis, with y up (z when y is the flat one).
+            Some(2) => Camera::orbit(bounds, UpAxis::Y, 0.0, 0.0, 40.0),
+            Some(1) => Camera::orbit(bounds, UpAxis::Z, 0.0, 0.0, 40.0),
+            Some(_) => Camera::orbit(bounds, UpAxis::Z, 90.0, 0.0, 40.0),
+            None => Camera::default_upright(bounds, UpAxis::Z),
+        }
+    }
+
+    /// The default view with `up` as the user gave it.
+    pub fn default_upright(bounds: Bounds, up: UpAxis) -> Camera {
+        Camera::orbit(bounds, up, 35.0, 25.0, 40.0)
     }
 
     /// Camera `index` of the paper's benchmark orbit: `count` points on a Fibonacci sphere
@@ -108,6 +135,109 @@ impl Camera {
             up,
             fovy,
         }
+    }
+}
+
+/// The axis along which the data has no extent (a 2D simulation written in 3D), if any.
+fn planar_axis(bounds: Bounds) -> Option<usize> {
+    if bounds.is_empty() {
+        return None;
+    }
+    let e = bounds.extent().to_array();
+    let largest = e.iter().copied().fold(0.0, f64::max);
+    let flat: Vec<usize> = (0..3).filter(|&i| e[i] <= 1e-6 * largest).collect();
+    match flat[..] {
+        [axis] => Some(axis),
+        _ => None,
+    }
+}
+
+/// The axis a view stands upright along: simulation data is usually z-up (gravity along -z),
+/// graphics data y-up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UpAxis {
+    X,
+    Y,
+    Z,
+    NegX,
+    NegY,
+    NegZ,
+}
+
+impl UpAxis {
+    pub const ALL: [UpAxis; 6] = [
+        UpAxis::X,
+        UpAxis::Y,
+        UpAxis::Z,
+        UpAxis::NegX,
+        UpAxis::NegY,
+        UpAxis::NegZ,
+    ];
+
+    pub fn vector(self) -> DVec3 {
+        match self {
+            UpAxis::X => DVec3::X,
+            UpAxis::Y => DVec3::Y,
+            UpAxis::Z => DVec3::Z,
+            UpAxis::NegX => DVec3::NEG_X,
+            UpAxis::NegY => DVec3::NEG_Y,
+            UpAxis::NegZ => DVec3::NEG_Z,
+        }
+    }
+
+    /// The axis a vector points along, if it points along one.
+    pub fn along(v: DVec3) -> Option<UpAxis> {
+        let v = v.normalize_or_zero();
+        UpAxis::ALL
+            .into_iter()
+            .find(|a| (a.vector() - v).length() < 1e-9)
+    }
+
+    /// The horizontal directions (side, front) of views upright along this axis, so that
+    /// (side, up, front) is right-handed: azimuth 0 looks from `front` with `side` to the
+    /// right. With y up: x and z (the graphics convention); with z up: x and -y (ParaView's
+    /// "-Y" view: x to the right, z up); with x up: y and -z.
+    pub fn horizontal(self) -> (DVec3, DVec3) {
+        let (side, front) = match self {
+            UpAxis::X | UpAxis::NegX => (DVec3::Y, DVec3::NEG_Z),
+            UpAxis::Y | UpAxis::NegY => (DVec3::X, DVec3::Z),
+            UpAxis::Z | UpAxis::NegZ => (DVec3::X, DVec3::NEG_Y),
+        };
+        // Upside down: the front turns round too, so the frame stays right-handed.
+        if self.vector().element_sum() < 0.0 {
+            (side, -front)
+        } else {
+            (side, front)
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            UpAxis::X => "x",
+            UpAxis::Y => "y",
+            UpAxis::Z => "z",
+            UpAxis::NegX => "-x",
+            UpAxis::NegY => "-y",
+            UpAxis::NegZ => "-z",
+        }
+    }
+}
+
+impl std::fmt::Display for UpAxis {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for UpAxis {
+    type Err = String;
+    fn from_str(s: &str) -> Result<UpAxis, String> {
+        let text = s.trim().to_ascii_lowercase();
+        let text = text.strip_prefix('+').unwrap_or(&text);
+        UpAxis::ALL
+            .into_iter()
+            .find(|a| a.name() == text)
+            .ok_or_else(|| format!("up axis '{s}': expected one of x, y, z, -x, -y, -z"))
     }
 }
 
@@ -167,6 +297,45 @@ mod tests {
         assert!(Camera { fovy: 180.0, ..c }.frame(1, 1).is_err());
         assert!("0,0,5,0,0,0,0,1,0,45".parse::<Camera>().is_ok());
         assert!("0,0,5,0,0,0".parse::<Camera>().is_err());
+    }
+
+    #[test]
+    fn views_stand_upright_along_their_axis() {
+        let b = Bounds {
+            min: DVec3::new(1e3, -2.0, 0.5),
+            max: DVec3::new(1e3 + 1.2, 0.4, 0.9),
+        };
+        for up in UpAxis::ALL {
+            let (side, front) = up.horizontal();
+            assert!(
+                (side.cross(up.vector()) - front).length() < 1e-12,
+                "{up}: right-handed"
+            );
+            let c = Camera::default_upright(b, up);
+            let f = c.frame(64, 64).unwrap();
+            // Upright: the image's up has a positive share of the axis, and the view is from
+            // above (elevation 25 degrees).
+            assert!(f.up.dot(up.vector()) > 0.5, "{up}");
+            assert!((c.eye - c.at).normalize().dot(up.vector()) > 0.4, "{up}");
+            assert_eq!(up.name().parse::<UpAxis>().unwrap(), up);
+            assert_eq!(UpAxis::along(up.vector() * 3.0), Some(up));
+        }
+        assert!("w".parse::<UpAxis>().is_err());
+        assert_eq!("+Z".parse::<UpAxis>().unwrap(), UpAxis::Z);
+        // Simulation data is z-up unless it is planar.
+        assert_eq!(Camera::default_for(b).up, DVec3::Z);
+        let z0 = Bounds {
+            min: DVec3::new(0.0, 0.0, 3.0),
+            max: DVec3::new(4.0, 2.0, 3.0),
+        };
+        let c = Camera::default_for(z0);
+        assert_eq!(c.up, DVec3::Y);
+        assert!((c.eye - c.at).normalize().dot(DVec3::Z) > 0.999, "face on");
+        // With z up, azimuth 0 looks from -y with x to the right.
+        let c = Camera::orbit(b, UpAxis::Z, 0.0, 0.0, 40.0);
+        let f = c.frame(64, 64).unwrap();
+        assert!((c.eye - c.at).normalize().dot(DVec3::NEG_Y) > 0.999);
+        assert!(f.right.normalize().dot(DVec3::X) > 0.999);
     }
 
     #[test]

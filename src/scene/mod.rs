@@ -8,5 +8,5 @@ pub mod prefetch;
 pub mod series;
 pub mod synth;
 
-pub use camera::{Camera, CameraError};
+pub use camera::{Camera, CameraError, UpAxis};
 pub use series::{AttributeInfo, OpenOptions, StepInfo, TimeSeries};

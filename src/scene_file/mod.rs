@@ -29,8 +29,8 @@ use crate::accel::ClusterSize;
 use crate::field::Classification;
 use crate::io::Format;
 use crate::render::{RenderSettings, Resolved};
-use crate::scene::Camera;
 use crate::scene::maps::{MapError, OpticalDensityMap, PiecewiseLinear};
+use crate::scene::{Camera, UpAxis};
 use crate::values::Bounds;
 
 /// Where the data comes from.
@@ -120,8 +120,18 @@ impl std::str::FromStr for RadiusSpec {
     }
 }
 
+impl std::fmt::Display for RadiusSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RadiusSpec::Absolute(r) => write!(f, "{r}"),
+            RadiusSpec::PercentOfDiagonal(p) => write!(f, "{p}%"),
+        }
+    }
+}
+
 impl RadiusSpec {
-    /// The paper's sample code's default: 1% of the bounding-box diagonal.
+    /// The paper's sample code's default, 1% of the bounding-box diagonal: ours only where the
+    /// data has no spacing to measure (see `resolve::default_radius`).
     pub const DEFAULT: RadiusSpec = RadiusSpec::PercentOfDiagonal(1.0);
 
     pub fn resolve(self, diagonal: f64) -> f64 {
@@ -155,6 +165,31 @@ pub struct CameraSection {
     pub fovy: Option<f64>,
     /// `"i/n"`: camera i of the n-camera benchmark orbit (instead of eye/at/up).
     pub orbit: Option<String>,
+    /// `"AZ,EL"` or `"AZ,EL,DIST"`: the camera at azimuth and elevation (degrees, about the up
+    /// axis) around the data's centre, DIST away (default: the data fills the view), instead
+    /// of eye/at.
+    pub from: Option<String>,
+}
+
+/// Parses `AZ,EL` or `AZ,EL,DIST` (degrees, degrees, data units).
+pub fn parse_camera_from(text: &str) -> Result<(f64, f64, Option<f64>), String> {
+    let bad = || {
+        format!(
+            "camera from '{text}': expected AZ,EL or AZ,EL,DIST (degrees, degrees, a positive distance)"
+        )
+    };
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad())?;
+    match v[..] {
+        [az, el] if az.is_finite() && el.is_finite() => Ok((az, el, None)),
+        [az, el, d] if az.is_finite() && el.is_finite() && d.is_finite() && d > 0.0 => {
+            Ok((az, el, Some(d)))
+        }
+        _ => Err(bad()),
+    }
 }
 
 /// How to render.
@@ -240,12 +275,36 @@ impl CameraSection {
             let (i, n) = parse_orbit(orbit)?;
             return Ok(Some(Camera::benchmark_orbit(bounds, i, n, fovy)));
         }
+        let up = self.up.map(DVec3::from);
+        let axis = || -> Result<UpAxis, String> {
+            match up {
+                Some(u) => UpAxis::along(u).ok_or_else(|| {
+                    format!("camera up {u} must point along an axis to place a view by angles")
+                }),
+                None => Ok(UpAxis::along(Camera::default_for(bounds).up).unwrap_or(UpAxis::Z)),
+            }
+        };
+        if let Some(from) = &self.from {
+            if self.eye.is_some() || self.at.is_some() {
+                return Err("camera: `from` and eye/at each place the camera; give one".into());
+            }
+            let (azimuth, elevation, distance) = parse_camera_from(from)?;
+            let camera = match distance {
+                Some(d) => Camera::from_angles(bounds, axis()?, azimuth, elevation, d, fovy),
+                None => Camera::orbit(bounds, axis()?, azimuth, elevation, fovy),
+            };
+            return Ok(Some(camera));
+        }
         Ok(match (self.eye, self.at) {
             (Some(eye), Some(at)) => Some(Camera {
                 eye: DVec3::from(eye),
                 at: DVec3::from(at),
-                up: DVec3::from(self.up.unwrap_or([0.0, 1.0, 0.0])),
+                up: up.unwrap_or_else(|| Camera::default_for(bounds).up),
                 fovy,
+            }),
+            (None, None) if up.is_some() => Some(Camera {
+                fovy,
+                ..Camera::default_upright(bounds, axis()?)
             }),
             (None, None) => None,
             _ => return Err("camera: eye and at go together".into()),
@@ -260,6 +319,7 @@ impl CameraSection {
             up: Some(camera.up.to_array()),
             fovy: Some(camera.fovy),
             orbit: None,
+            from: None,
         }
     }
 }
@@ -281,7 +341,7 @@ impl SceneFile {
                  instead of the RBFs: give at most one"
             ));
         }
-        Ok(RenderSettings {
+        let settings = RenderSettings {
             width: r.width.unwrap_or(d.width),
             height: r.height.unwrap_or(d.height),
             integrator: r.integrator.unwrap_or(d.integrator),
@@ -298,7 +358,9 @@ impl SceneFile {
             opacity_threshold: r.opacity_threshold.unwrap_or(d.opacity_threshold),
             splat_k: r.splat_k,
             voxel_grid: r.voxel_grid,
-        })
+        };
+        settings.check()?;
+        Ok(settings)
     }
 
     /// The samples per pixel the scene asks for.

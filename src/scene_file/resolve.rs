@@ -39,6 +39,38 @@ pub struct DataArgs {
     pub rescan: bool,
 }
 
+/// Where the view stands, for the commands that make images (render, view).
+#[derive(Debug, Clone, Default, Args)]
+pub struct ViewFlags {
+    /// The axis pointing up in the image: x, y, z, -x, -y or -z. Default: z (simulation data
+    /// is z-up, gravity along -z); planar (2D) data is viewed face on.
+    #[arg(long, value_name = "AXIS")]
+    pub up: Option<crate::scene::UpAxis>,
+    /// The camera at azimuth and elevation (degrees, about the up axis; 0,0 looks from -y with
+    /// z up) around the data's centre, and optionally its distance in data units (default:
+    /// the data fills the view).
+    #[arg(long, value_name = "AZ,EL[,DIST]")]
+    pub camera_from: Option<String>,
+}
+
+impl ViewFlags {
+    /// Writes these flags over a scene file's `[camera]` (flags win).
+    pub fn apply(&self, camera: &mut super::CameraSection) -> anyhow::Result<()> {
+        if let Some(up) = self.up {
+            camera.up = Some(up.vector().to_array());
+        }
+        if let Some(from) = &self.camera_from {
+            super::parse_camera_from(from).map_err(anyhow::Error::msg)?;
+            camera.from = Some(from.clone());
+            // The flag places the camera: a scene file's eye and target give way to it.
+            camera.eye = None;
+            camera.at = None;
+            camera.orbit = None;
+        }
+        Ok(())
+    }
+}
+
 /// How the field is defined.
 #[derive(Debug, Clone, Default, Args)]
 pub struct FieldOptions {
@@ -48,8 +80,9 @@ pub struct FieldOptions {
     /// Normalise the attribute over LO,HI instead of its range over the series.
     #[arg(long, value_parser = parse_range, value_name = "LO,HI")]
     pub attribute_range: Option<(f64, f64)>,
-    /// Global RBF radius: a length, or a percentage of the bounding-box diagonal ("1%",
-    /// the default).
+    /// Global RBF radius: a length, or a percentage of the series' bounding-box diagonal
+    /// ("1.5%"). Default: twice the particles' spacing (the median nearest-neighbour distance
+    /// in the first step), or 2 with --radius-attribute (radius 2h, the SPH kernel's support).
     #[arg(long)]
     pub radius: Option<RadiusSpec>,
     /// A per-particle radius (smoothing length) attribute, multiplied by the global radius.
@@ -72,6 +105,76 @@ pub struct FieldOptions {
     /// overlap (4 or more reach a particle centre on average), 4 where they barely do.
     #[arg(long)]
     pub cluster: Option<ClusterSize>,
+}
+
+/// The default global radius over the particles' spacing: twice the median nearest-neighbour
+/// distance joins neighbours (the particle's Gaussian then has a standard deviation of 2/3 of
+/// the spacing), as SPH users expect of a kernel.
+pub const RADIUS_PER_SPACING: f64 = 2.0;
+
+/// The default global radius with a per-particle smoothing length h: radius 2 h, the support
+/// of the cubic-spline SPH kernel as SWIFT and sarracen define h.
+pub const RADIUS_PER_SMOOTHING_LENGTH: f64 = 2.0;
+
+/// Names smoothing-length arrays go by in SPH codes' output (compared ignoring case).
+const SMOOTHING_LENGTH_NAMES: [&str; 6] = [
+    "h",
+    "hsml",
+    "smoothinglength",
+    "smoothinglengths",
+    "smoothing_length",
+    "smoothing_lengths",
+];
+
+/// The global radius when none is given, derived from the data as the other automatic values
+/// are, from the series' first step (so every step and command agrees), and said.
+fn default_radius(
+    series: &TimeSeries,
+    radius_attribute: Option<&str>,
+    names_in_data: &[String],
+) -> anyhow::Result<f64> {
+    if let Some(h) = radius_attribute {
+        tracing::info!(
+            "radius: {RADIUS_PER_SMOOTHING_LENGTH} x '{h}' for each particle (the SPH kernel's \
+             support, 2h; --radius sets the factor)"
+        );
+        return Ok(RADIUS_PER_SMOOTHING_LENGTH);
+    }
+    let smoothing_length = names_in_data
+        .iter()
+        .find(|n| SMOOTHING_LENGTH_NAMES.contains(&n.to_ascii_lowercase().as_str()));
+    let hint = match smoothing_length {
+        Some(h) => format!(
+            "; the data has '{h}', a smoothing length: --radius-attribute {h} makes each \
+             particle's radius {RADIUS_PER_SMOOTHING_LENGTH} x {h}"
+        ),
+        None => String::new(),
+    };
+    let spacing = if series.is_empty() {
+        None
+    } else {
+        crate::accel::spacing::median_nearest_distance(&series.step(0)?.positions)
+    };
+    Ok(match spacing {
+        Some(d) => {
+            let r = RADIUS_PER_SPACING * d;
+            tracing::info!(
+                "radius: {r:.6e}, {RADIUS_PER_SPACING} x the particles' spacing in step 0 \
+                 (median nearest-neighbour distance {d:.6e}); --radius sets a length or a \
+                 percentage of the diagonal (\"1.5%\"){hint}"
+            );
+            r
+        }
+        None => {
+            let r = RadiusSpec::DEFAULT.resolve(series.bounds().diagonal());
+            tracing::info!(
+                "radius: {r:.6e}, {} of the bounding-box diagonal (step 0 has no two particles \
+                 apart to measure a spacing); --radius sets it{hint}",
+                RadiusSpec::DEFAULT
+            );
+            r
+        }
+    })
 }
 
 fn parse_range(s: &str) -> Result<(f64, f64), String> {
@@ -234,11 +337,26 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
         Some(spec) => ColorMap::from_name_or_file(spec)?,
         None => ColorMap::default(),
     };
-    let radius = options
-        .radius
-        .or(scene.field.radius)
-        .unwrap_or(RadiusSpec::DEFAULT)
-        .resolve(series.bounds().diagonal());
+    let names_in_data = if attribute.is_none() || radius_attribute.is_none() {
+        series.attributes_in_data()?
+    } else {
+        Vec::new()
+    };
+    if attribute.is_none() {
+        tracing::info!(
+            "colour: by density (no --attribute given); the data's attributes: {} (--attribute \
+             NAME colours by one)",
+            if names_in_data.is_empty() {
+                "none".to_owned()
+            } else {
+                names_in_data.join(", ")
+            }
+        );
+    }
+    let radius = match options.radius.or(scene.field.radius) {
+        Some(spec) => spec.resolve(series.bounds().diagonal()),
+        None => default_radius(&series, radius_attribute.as_deref(), &names_in_data)?,
+    };
     let field = FieldSettings {
         attribute,
         attribute_range: options

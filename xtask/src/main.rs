@@ -510,6 +510,9 @@ fn demo() -> Result<()> {
             "attribute",
             "--radius",
             "1.5%",
+            // The demo's gravity points along -y (aarbf's default view is z-up).
+            "--up",
+            "y",
         ])
         .args([
             "--width",

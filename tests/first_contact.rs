@@ -1,0 +1,340 @@
+//! What a scientist meets first: `aarbf info` and `aarbf render` on a simulation's output
+//! folder as the code wrote it, with no flags beyond the data and the output.
+//!
+//! The folders under `tests/data/sph_runs/` were written by VTK's own XML writer and NumPy
+//! (`write_sph_folders.py` beside them): PySPH's fluid steps with a `boundary.vtp` and the run's
+//! log and info files, a SWIFT-like run directory (snapshots with statistics, parameter files, a
+//! dependency-graph CSV and restart files), and a GADGET-like one (snapshots, initial
+//! conditions, a restart snapshot). They are copied to a temporary folder first, so the index
+//! aarbf writes beside the data never lands in the repository.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use aarbf::scene::{Camera, UpAxis};
+use aarbf::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use glam::DVec3;
+
+fn aarbf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("AARBF_LOG", "info")
+        .env("NO_COLOR", "1")
+        .output()
+        .expect("the binary runs")
+}
+
+/// Runs aarbf, which must succeed; returns stdout and stderr.
+fn ok(args: &[&str]) -> (String, String) {
+    let out = aarbf(args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "aarbf {args:?} failed:\n{err}");
+    (String::from_utf8(out.stdout).unwrap(), err)
+}
+
+fn fails(args: &[&str]) -> String {
+    let out = aarbf(args);
+    assert!(!out.status.success(), "aarbf {args:?} should fail");
+    String::from_utf8(out.stderr).unwrap()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A copy of `tests/data/sph_runs/<name>` in a fresh temporary folder.
+fn run_folder(name: &str) -> (tempfile::TempDir, PathBuf) {
+    fn copy(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).unwrap();
+        for entry in std::fs::read_dir(from).unwrap() {
+            let entry = entry.unwrap();
+            let target = to.join(entry.file_name());
+            if entry.file_type().unwrap().is_dir() {
+                copy(&entry.path(), &target);
+            } else {
+                std::fs::copy(entry.path(), target).unwrap();
+            }
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/sph_runs")
+        .join(name);
+    let copy_at = dir.path().join(name);
+    copy(&source, &copy_at);
+    (dir, copy_at)
+}
+
+/// The step names `aarbf info` lists.
+fn step_names(info: &str) -> Vec<String> {
+    info.lines()
+        .skip_while(|l| !l.starts_with("steps:"))
+        .skip(1)
+        .filter_map(|l| {
+            let mut words = l.split_whitespace();
+            words.next()?.parse::<usize>().ok()?;
+            words.next().map(str::to_owned)
+        })
+        .collect()
+}
+
+#[test]
+fn a_simulation_folder_opens_as_its_longest_series_and_says_what_it_left_out() {
+    // (folder, the series' steps, files the warning must name)
+    let cases: [(&str, Vec<&str>, Vec<&str>); 3] = [
+        (
+            "pysph_dam_break",
+            vec![
+                "fluid_00000",
+                "fluid_00037",
+                "fluid_00074",
+                "fluid_00120",
+                "fluid_00171",
+                "fluid_00230",
+            ],
+            vec!["boundary.vtp"],
+        ),
+        (
+            "swift_like",
+            vec!["output_0000", "output_0001", "output_0002", "output_0003"],
+            vec!["dependency_graph_*.csv"],
+        ),
+        (
+            "gadget_like",
+            vec![
+                "snapshot_000",
+                "snapshot_001",
+                "snapshot_002",
+                "snapshot_003",
+                "snapshot_004",
+            ],
+            vec!["ics.npy", "restart_snapshot_*.npy"],
+        ),
+    ];
+    for (name, steps, left_out) in cases {
+        let (_keep, folder) = run_folder(name);
+        let (info, log) = ok(&["info", s(&folder)]);
+        assert_eq!(step_names(&info), steps, "{name}:\n{info}");
+        for file in &left_out {
+            assert!(
+                log.contains(file),
+                "{name}: the warning names {file}:\n{log}"
+            );
+        }
+        assert!(
+            log.contains("--data"),
+            "{name}: says how to pick another:\n{log}"
+        );
+        // The glob a user writes for the whole folder picks the same series.
+        let ext = Path::new(left_out[0])
+            .extension()
+            .unwrap()
+            .to_str()
+            .unwrap();
+        let glob = folder.join(format!("*.{ext}"));
+        let (info, _) = ok(&["info", s(&glob)]);
+        assert_eq!(step_names(&info), steps, "{name} by glob");
+    }
+
+    // The group left out opens when named, and a glob for the series alone warns of nothing.
+    let (_keep, folder) = run_folder("pysph_dam_break");
+    let (info, _) = ok(&["info", s(&folder.join("boundary.vtp"))]);
+    assert_eq!(step_names(&info), ["boundary"]);
+    assert!(info.contains("kind"), "{info}");
+    let (info, log) = ok(&["info", s(&folder.join("fluid_*.vtp"))]);
+    assert_eq!(step_names(&info).len(), 6);
+    assert!(!log.contains("left out"), "{log}");
+}
+
+#[test]
+fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
+    let (_keep, folder) = run_folder("pysph_dam_break");
+    let out = folder.parent().unwrap().join("a.png");
+    let (_, log) = ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--width",
+        "96",
+        "--height",
+        "80",
+        "--spp",
+        "2",
+    ]);
+    let image = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (96, 80));
+    // Every default is said: the series, the colour, the radius and where it came from.
+    for said in [
+        "left out: 'boundary.vtp'",
+        "colour: by density (no --attribute given); the data's attributes: rho, p, vel_x",
+        "2 x the particles' spacing in step 0",
+        "the data has 'h', a smoothing length: --radius-attribute h",
+    ] {
+        assert!(log.contains(said), "missing '{said}' in:\n{log}");
+    }
+
+    // The library's resolution of the same flags: the radius joins neighbours on the 0.04
+    // lattice (twice the spacing, not 1% of the diagonal, 0.0099), and the view is z-up.
+    let resolved = resolve(
+        &DataArgs {
+            scene: None,
+            data: Some(folder.clone()),
+            format: None,
+            step: None,
+            cache_mib: 64,
+            rescan: false,
+        },
+        &FieldOptions::default(),
+    )
+    .unwrap();
+    assert!(
+        (resolved.field.radius - 0.08).abs() < 1e-4,
+        "{}",
+        resolved.field.radius
+    );
+    let camera = Camera::default_for(resolved.series.bounds());
+    assert_eq!(camera.up, DVec3::Z);
+    // With a smoothing length per particle, the radius is 2h.
+    let with_h = resolve(
+        &DataArgs {
+            scene: None,
+            data: Some(folder.clone()),
+            format: None,
+            step: None,
+            cache_mib: 64,
+            rescan: false,
+        },
+        &FieldOptions {
+            radius_attribute: Some("h".into()),
+            ..FieldOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(with_h.field.radius, 2.0);
+
+    // The up axis is the user's to set, and it changes the view (and the image).
+    let turned = folder.parent().unwrap().join("b.png");
+    ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&turned),
+        "--width",
+        "96",
+        "--height",
+        "80",
+        "--spp",
+        "2",
+        "--up",
+        "y",
+    ]);
+    assert_ne!(
+        image::open(&turned).unwrap().to_rgb8().into_raw(),
+        image.into_raw(),
+        "--up y shows another view"
+    );
+    // --camera-from places the camera by angles about the up axis.
+    let from = folder.parent().unwrap().join("c.png");
+    ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&from),
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--spp",
+        "1",
+        "--camera-from",
+        "0,0",
+        "--save-scene",
+        s(&folder.parent().unwrap().join("c.toml")),
+    ]);
+    let saved =
+        aarbf::scene_file::SceneFile::load(&folder.parent().unwrap().join("c.toml")).unwrap();
+    let eye = DVec3::from(saved.camera.eye.unwrap());
+    let at = DVec3::from(saved.camera.at.unwrap());
+    assert!(
+        (eye - at).normalize().dot(DVec3::NEG_Y) > 0.999,
+        "0,0 looks from -y"
+    );
+    assert_eq!(saved.camera.up, Some(UpAxis::Z.vector().to_array()));
+}
+
+#[test]
+fn bad_input_is_named_before_any_device_is_probed() {
+    let (_keep, folder) = run_folder("pysph_dam_break");
+    let out = folder.parent().unwrap().join("x.png");
+    // A negative number reaches the option's own check.
+    let e = fails(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--radius",
+        "-1",
+    ]);
+    assert!(e.contains("radius '-1' must be positive"), "{e}");
+    assert!(!e.contains("unexpected argument"), "{e}");
+    // An image size is checked before the data is opened or a GPU looked for.
+    for backend in ["ash", "wgpu"] {
+        let e = fails(&[
+            "render",
+            "--data",
+            s(&folder),
+            "--out",
+            s(&out),
+            "--width",
+            "0",
+            "--backend",
+            backend,
+        ]);
+        assert!(
+            e.contains("image size 0x512") && e.contains("--width"),
+            "{e}"
+        );
+        assert!(!e.contains("llvmpipe") && !e.contains("colour:"), "{e}");
+    }
+    let e = fails(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--camera-from",
+        "1",
+    ]);
+    assert!(e.contains("AZ,EL"), "{e}");
+    let e = fails(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--up",
+        "w",
+    ]);
+    assert!(e.contains("x, y, z, -x, -y, -z"), "{e}");
+
+    // A step file cut short (a copy interrupted, a file still being written) says so, and
+    // where, instead of an XML parser's inner message.
+    let step = folder.join("fluid_00074.vtp");
+    let bytes = std::fs::read(&step).unwrap();
+    let head_end = bytes
+        .windows(15)
+        .position(|w| w == b"<AppendedData e")
+        .unwrap_or(bytes.len() / 2);
+    std::fs::write(&step, &bytes[..head_end - 40]).unwrap();
+    let e = fails(&["info", s(&folder.join("fluid_*.vtp"))]);
+    assert!(
+        e.contains("fluid_00074.vtp") && e.contains("the file ends early, at byte"),
+        "{e}"
+    );
+    assert!(!e.contains("MissingEndTag"), "{e}");
+}
