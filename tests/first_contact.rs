@@ -175,6 +175,40 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
         assert!(log.contains(said), "missing '{said}' in:\n{log}");
     }
 
+    // One automatic Phi_ref for the series: slices along any axis use the render's.
+    let phi_ref = |log: &str, key: &str| -> f64 {
+        let at = log
+            .find(key)
+            .unwrap_or_else(|| panic!("no '{key}' in:\n{log}"))
+            + key.len();
+        log[at..]
+            .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-'))
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let rendered = phi_ref(&log, "settings used: phi_ref ");
+    for axis in ["x", "y", "z"] {
+        let slice = folder.parent().unwrap().join(format!("slice-{axis}.png"));
+        let (_, slice_log) = ok(&[
+            "slice",
+            "--data",
+            s(&folder),
+            "--axis",
+            axis,
+            "--width",
+            "64",
+            "--out",
+            s(&slice),
+        ]);
+        let sliced = phi_ref(&slice_log, "Phi_ref ");
+        assert!(
+            (sliced - rendered).abs() <= 1e-4 * rendered,
+            "slice along {axis}: Phi_ref {sliced}, render {rendered}"
+        );
+    }
+
     // The library's resolution of the same flags: the radius joins neighbours on the 0.04
     // lattice (twice the spacing, not 1% of the diagonal, 0.0099), and the view is z-up.
     let resolved = resolve(
@@ -301,6 +335,62 @@ fn bad_input_is_named_before_any_device_is_probed() {
         );
         assert!(!e.contains("llvmpipe") && !e.contains("colour:"), "{e}");
     }
+    // An attribute only later steps could have: the message says which step was asked for
+    // and that the first step is where it is missing.
+    let e = fails(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--step",
+        "3",
+        "--attribute",
+        "kind",
+    ]);
+    assert!(
+        e.contains("step 3 was asked for") && e.contains("fluid_00000.vtp") && e.contains("'kind'"),
+        "{e}"
+    );
+    // A number column with a word in it is refused alike by every command.
+    let csv = folder.parent().unwrap().join("words.csv");
+    std::fs::write(
+        &csv,
+        "x,y,z,temperature\n0.10000000000000001,0.2,0.29999999999999999,1.5\n\
+         0.4,0.5,0.59999999999999998,abc\n0.7,0.1,0.9,3.5\n",
+    )
+    .unwrap();
+    let grid = folder.parent().unwrap().join("f.npy");
+    for args in [
+        vec!["info", s(&csv)],
+        vec![
+            "field",
+            "--data",
+            s(&csv),
+            "--grid",
+            "3x3x3",
+            "--out",
+            s(&grid),
+        ],
+        vec![
+            "render",
+            "--data",
+            s(&csv),
+            "--out",
+            s(&out),
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ],
+        vec!["slice", "--data", s(&csv), "--out", s(&out)],
+    ] {
+        let e = fails(&args);
+        assert!(
+            e.contains("words.csv") && e.contains("column 'temperature': 'abc' is not a number"),
+            "{args:?}: {e}"
+        );
+    }
     let e = fails(&[
         "render",
         "--data",
@@ -337,4 +427,56 @@ fn bad_input_is_named_before_any_device_is_probed() {
         "{e}"
     );
     assert!(!e.contains("MissingEndTag"), "{e}");
+}
+
+#[test]
+fn help_states_every_option_and_the_defaults_the_renderer_uses() {
+    let (help, _) = ok(&["render", "--help"]);
+    let d = aarbf::render::RenderSettings::default();
+    let light = d.light;
+    for default in [
+        format!(
+            "--width <WIDTH>\n          Image width in pixels [default: {}]",
+            d.width
+        ),
+        format!(
+            "--height <HEIGHT>\n          Image height in pixels [default: {}]",
+            d.height
+        ),
+        format!("[default: {}]", aarbf::scene_file::DEFAULT_SPP),
+        format!("[default: {}]", d.seed),
+        format!(
+            "[default: {},{},{}]",
+            light.azimuth, light.elevation, light.intensity
+        ),
+        format!("[default: {}]", light.ambient),
+        format!(
+            "[default: {}]",
+            clap::ValueEnum::to_possible_value(&d.integrator)
+                .unwrap()
+                .get_name()
+        ),
+    ] {
+        assert!(
+            help.contains(&default),
+            "render --help lacks '{default}':\n{help}"
+        );
+    }
+    // No option is left without a description, and no issue numbers reach users.
+    // In the long help an option's line is followed by its description's first line.
+    let lines: Vec<&str> = help.lines().collect();
+    let options: Vec<usize> = (0..lines.len())
+        .filter(|&i| {
+            let text = lines[i].trim_start();
+            text.starts_with('-') && lines[i].len() - text.len() <= 6
+        })
+        .collect();
+    assert!(options.len() > 40, "{} options in:\n{help}", options.len());
+    let blank: Vec<&str> = options
+        .iter()
+        .filter(|&&i| lines.get(i + 1).is_none_or(|next| next.trim().is_empty()))
+        .map(|&i| lines[i])
+        .collect();
+    assert!(blank.is_empty(), "options without a description: {blank:?}");
+    assert!(!help.to_lowercase().contains("issue"), "{help}");
 }

@@ -52,7 +52,7 @@ pub enum BenchCommand {
     Accuracy(super::bench_study::StudyArgs),
     /// The field error of the backends' f32 and double-single paths against the f64 reference
     /// at radii from 1e-6 to 1e2 of the domain, offsets up to 1e6 and Phi down to f32's
-    /// denormals, on f64 and on f32-exact inputs (not the paper's; issue 15).
+    /// denormals, on f64 and on f32-exact inputs (not the paper's).
     Extremes(super::bench_study::StudyArgs),
     /// Every study above in turn, with the same options.
     All(super::bench_study::StudyArgs),

@@ -35,6 +35,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         },
     )?;
     print!("{}", describe(data, &series));
+    print!("{}", defaults(&series)?);
     Ok(())
 }
 
@@ -81,6 +82,27 @@ pub fn devices() -> String {
             .unwrap_or_else(|e| e.to_string())
     );
     out
+}
+
+/// What `render`, `slice` and `view` choose for this data when not told.
+fn defaults(series: &TimeSeries) -> anyhow::Result<String> {
+    use std::fmt::Write;
+    let names = series.attributes_in_data()?;
+    let (_, radius) = crate::scene_file::resolve::default_radius(series, None, &names)?;
+    let camera = crate::scene::Camera::default_for(series.bounds());
+    let mut out = String::new();
+    let _ = writeln!(out, "defaults (render, slice, view):");
+    let _ = writeln!(
+        out,
+        "  colour:   by density; --attribute NAME colours by one of the attributes above"
+    );
+    let _ = writeln!(out, "  radius:   {radius}");
+    let _ = writeln!(
+        out,
+        "  up axis:  {} (--up x|y|z|-x|-y|-z)",
+        crate::scene::UpAxis::along(camera.up).map_or("?".into(), |a| a.to_string())
+    );
+    Ok(out)
 }
 
 fn mib(bytes: usize) -> String {

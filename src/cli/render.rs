@@ -39,6 +39,8 @@ pub struct RenderArgs {
     /// An .exr output is always linear 32-bit float RGBA with premultiplied alpha.
     #[arg(long, default_value_t = 8)]
     pub bit_depth: u8,
+    /// Which backend queries the field (`auto`: ash on a GPU with ray tracing, else wgpu on a
+    /// hardware GPU, else cpu).
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendKind,
     /// How the image is made: `rbf`, the paper's method (every sample queries the particles);
@@ -68,18 +70,23 @@ pub struct RenderArgs {
     /// --scene` of it renders the same image (for a sequence: its first step).
     #[arg(long)]
     pub save_scene: Option<PathBuf>,
+    /// Image width in pixels [default: 512].
     #[arg(long)]
     pub width: Option<u32>,
+    /// Image height in pixels [default: 512].
     #[arg(long)]
     pub height: Option<u32>,
-    /// Samples (frames) per pixel.
+    /// Samples (frames) per pixel [default: 16].
     #[arg(long)]
     pub spp: Option<u32>,
+    /// How a pixel's light is computed [default: ea].
     #[arg(long, value_enum)]
     pub integrator: Option<Integrator>,
+    /// Where the random numbers come from [default: stbn].
     #[arg(long, value_enum)]
     pub noise: Option<NoiseKind>,
-    /// Seed of the random numbers: the same seed gives the same image on the same backend.
+    /// Seed of the random numbers: the same seed gives the same image on the same backend
+    /// [default: 1].
     #[arg(long)]
     pub seed: Option<u32>,
     /// Camera: ex,ey,ez,ax,ay,az,ux,uy,uz,fovy (eye, target, up, vertical FOV in degrees).
@@ -103,12 +110,15 @@ pub struct RenderArgs {
     /// Colour by density (C(Phi / Phi_ref)) instead of the attribute.
     #[arg(long)]
     pub color_by_density: bool,
-    /// Light: azimuth,elevation,intensity (degrees, degrees, scale) for single scattering.
+    /// Light: azimuth,elevation,intensity (degrees, degrees, scale) for single scattering
+    /// [default: 45,60,1].
     #[arg(long, value_name = "AZ,EL,I")]
     pub light: Option<String>,
+    /// Light reaching every shaded sample whatever the shadows, as a fraction of the light's
+    /// intensity, for single scattering [default: 0.25].
     #[arg(long)]
     pub ambient: Option<f64>,
-    /// Background colour r,g,b (linear, 0..1).
+    /// Background colour r,g,b (linear, 0..1) [default: 0,0,0].
     #[arg(long, value_name = "R,G,B")]
     pub background: Option<String>,
     /// Render until the estimated error against the converged reference is at most E (in

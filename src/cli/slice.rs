@@ -7,6 +7,7 @@ use clap::Args;
 use glam::DVec3;
 
 use crate::field::{Classification, Particles, RegularGrid, normalise};
+use crate::render::auto::AutoValues;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::values::color_space::linear_to_srgb;
 
@@ -32,6 +33,11 @@ pub struct SliceArgs {
     /// Image width in pixels (the height follows the data's aspect ratio).
     #[arg(long, default_value_t = 512)]
     pub width: u32,
+    /// The density shown at full brightness (1 - exp(-2) of it) and, coloured by density, at
+    /// the top of the colour map. Default: the series' automatic value, the one `aarbf
+    /// render` and the viewer use for the same field.
+    #[arg(long)]
+    pub phi_ref: Option<f64>,
     /// Output PNG.
     #[arg(long)]
     pub out: PathBuf,
@@ -51,6 +57,12 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         "--width must lie in 1..=16384, got {}",
         args.width
     );
+    if let Some(p) = args.phi_ref {
+        anyhow::ensure!(
+            p.is_finite() && p > 0.0,
+            "--phi-ref must be a positive number, got {p}"
+        );
+    }
     crate::io::output::check_writable(&args.out, args.force)?;
     let resolved = resolve(&args.data, &args.field)?;
     let step = resolved.series.step(resolved.step)?;
@@ -86,13 +98,12 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
     };
     let samples = particles.eval_grid(&grid);
 
-    // Brightness: 1 - exp(-2 Phi / Phi_ref), Phi_ref the 95th percentile of non-zero Phi.
-    let mut nonzero: Vec<f64> = samples.iter().map(|s| s.phi).filter(|p| *p > 0.0).collect();
-    nonzero.sort_by(f64::total_cmp);
-    let phi_ref = nonzero
-        .get(nonzero.len() * 95 / 100)
-        .copied()
-        .unwrap_or(1.0);
+    // Brightness: 1 - exp(-2 Phi / Phi_ref), Phi_ref the series' (as a render of the same
+    // field uses), never one of this plane's: slices along other axes and the renders agree.
+    let phi_ref = match args.phi_ref {
+        Some(p) => p,
+        None => AutoValues::of(&resolved.series, &resolved.field)?.phi_ref,
+    };
     let pre = resolved.field.classification == Classification::Pre;
     let range = particles.range;
     let mut image = image::RgbImage::new(width as u32, height as u32);
@@ -121,14 +132,19 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
             .map_err(std::io::Error::other)
     })?;
     tracing::info!(
-        "slice of step {} ({} particles) at {:?} = {:.4}: {}x{} pixels, Phi_ref {:.4}",
+        "slice of step {} ({} particles) at {:?} = {:.4}: {}x{} pixels, Phi_ref {:.4} ({})",
         resolved.step,
         step.len(),
         args.axis,
         lo[normal] + args.position * extent[normal],
         width,
         height,
-        phi_ref
+        phi_ref,
+        if args.phi_ref.is_some() {
+            "set"
+        } else {
+            "automatic, the series'"
+        }
     );
     Ok(())
 }

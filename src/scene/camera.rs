@@ -315,7 +315,7 @@ mod tests {
             let f = c.frame(64, 64).unwrap();
             // Upright: the image's up has a positive share of the axis, and the view is from
             // above (elevation 25 degrees).
-            assert!(f.up.dot(up.vector()) > 0.5, "{up}");
+            assert!(f.up.normalize().dot(up.vector()) > 0.5, "{up}");
             assert!((c.eye - c.at).normalize().dot(up.vector()) > 0.4, "{up}");
             assert_eq!(up.name().parse::<UpAxis>().unwrap(), up);
             assert_eq!(UpAxis::along(up.vector() * 3.0), Some(up));

@@ -127,18 +127,21 @@ const SMOOTHING_LENGTH_NAMES: [&str; 6] = [
 ];
 
 /// The global radius when none is given, derived from the data as the other automatic values
-/// are, from the series' first step (so every step and command agrees), and said.
-fn default_radius(
+/// are, from the series' first step (so every step and command agrees), with a sentence saying
+/// how (for the log and `aarbf info`).
+pub fn default_radius(
     series: &TimeSeries,
     radius_attribute: Option<&str>,
     names_in_data: &[String],
-) -> anyhow::Result<f64> {
+) -> anyhow::Result<(f64, String)> {
     if let Some(h) = radius_attribute {
-        tracing::info!(
-            "radius: {RADIUS_PER_SMOOTHING_LENGTH} x '{h}' for each particle (the SPH kernel's \
-             support, 2h; --radius sets the factor)"
-        );
-        return Ok(RADIUS_PER_SMOOTHING_LENGTH);
+        return Ok((
+            RADIUS_PER_SMOOTHING_LENGTH,
+            format!(
+                "{RADIUS_PER_SMOOTHING_LENGTH} x '{h}' for each particle (the SPH kernel's \
+                 support, 2h; --radius sets the factor)"
+            ),
+        ));
     }
     let smoothing_length = names_in_data
         .iter()
@@ -158,21 +161,25 @@ fn default_radius(
     Ok(match spacing {
         Some(d) => {
             let r = RADIUS_PER_SPACING * d;
-            tracing::info!(
-                "radius: {r:.6e}, {RADIUS_PER_SPACING} x the particles' spacing in step 0 \
-                 (median nearest-neighbour distance {d:.6e}); --radius sets a length or a \
-                 percentage of the diagonal (\"1.5%\"){hint}"
-            );
-            r
+            (
+                r,
+                format!(
+                    "{r:.6e}, {RADIUS_PER_SPACING} x the particles' spacing in step 0 (median \
+                     nearest-neighbour distance {d:.6e}); --radius sets a length or a \
+                     percentage of the diagonal (\"1.5%\"){hint}"
+                ),
+            )
         }
         None => {
             let r = RadiusSpec::DEFAULT.resolve(series.bounds().diagonal());
-            tracing::info!(
-                "radius: {r:.6e}, {} of the bounding-box diagonal (step 0 has no two particles \
-                 apart to measure a spacing); --radius sets it{hint}",
-                RadiusSpec::DEFAULT
-            );
-            r
+            (
+                r,
+                format!(
+                    "{r:.6e}, {} of the bounding-box diagonal (step 0 has no two particles \
+                     apart to measure a spacing); --radius sets it{hint}",
+                    RadiusSpec::DEFAULT
+                ),
+            )
         }
     })
 }
@@ -293,6 +300,7 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             .collect(),
     );
     let opening = std::time::Instant::now();
+    let asked_step = data.step.or(scene.data.step).unwrap_or(0);
     let series = TimeSeries::open(
         &path,
         &OpenOptions {
@@ -303,10 +311,23 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             background_scan: false,
             rescan: data.rescan,
         },
-    )?;
+    )
+    .map_err(|e| {
+        // The series' first step is checked when it opens, whichever step was asked for: say
+        // so, or the message seems to be about the wrong step.
+        let missing = matches!(e.problem, crate::io::Problem::MissingAttribute { .. });
+        if missing && asked_step != 0 {
+            anyhow::Error::new(e).context(format!(
+                "the attributes asked for must be in every step of the series, and its first \
+                 step lacks one (step {asked_step} was asked for)"
+            ))
+        } else {
+            e.into()
+        }
+    })?;
     let opened_in = opening.elapsed();
     let decoded_at_open = series.steps_decoded();
-    let step = data.step.or(scene.data.step).unwrap_or(0);
+    let step = asked_step;
     if step >= series.len() {
         bail!(
             "{}: step {step} does not exist; the series has {} steps (0..{})",
@@ -355,7 +376,12 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
     }
     let radius = match options.radius.or(scene.field.radius) {
         Some(spec) => spec.resolve(series.bounds().diagonal()),
-        None => default_radius(&series, radius_attribute.as_deref(), &names_in_data)?,
+        None => {
+            let (radius, how) =
+                default_radius(&series, radius_attribute.as_deref(), &names_in_data)?;
+            tracing::info!("radius: {how}");
+            radius
+        }
     };
     let field = FieldSettings {
         attribute,
