@@ -301,6 +301,58 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
 }
 
 #[test]
+fn a_targeted_render_prints_one_truth_about_its_samples_and_step() {
+    let (_keep, folder) = run_folder("pysph_dam_break");
+    let out = folder.parent().unwrap().join("t.png");
+    let (_, log) = ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--time-budget",
+        "1",
+        "--backend",
+        "cpu",
+    ]);
+    // "... at step size S and N spp, in ..." (the estimate) and "(24x24, N spp, step size S,
+    // ...)" (the image written) must name the same N and S.
+    let estimate = log
+        .lines()
+        .find(|l| l.contains("estimated error"))
+        .expect(&log);
+    let written = log.lines().find(|l| l.contains("(24x24, ")).expect(&log);
+    let spp = |line: &str, before: &str| -> String {
+        let end = line.find(" spp").expect(line);
+        line[line[..end].rfind(before).expect(line) + before.len()..end].to_owned()
+    };
+    assert_eq!(spp(estimate, "and "), spp(written, ", "), "{log}");
+    let step_of = |line: &str| -> f64 {
+        let at = line.find("step size ").expect(line) + "step size ".len();
+        line[at..]
+            .split([' ', ','])
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let (a, b) = (step_of(estimate), step_of(written));
+    assert!((a - b).abs() <= 1e-3 * a, "{log}");
+    let settings = log
+        .lines()
+        .find(|l| l.contains("settings used"))
+        .expect(&log);
+    assert!(
+        settings.contains("step size chosen per image"),
+        "{settings}"
+    );
+}
+
+#[test]
 fn bad_input_is_named_before_any_device_is_probed() {
     let (_keep, folder) = run_folder("pysph_dam_break");
     let out = folder.parent().unwrap().join("x.png");
@@ -479,4 +531,208 @@ fn help_states_every_option_and_the_defaults_the_renderer_uses() {
         .collect();
     assert!(blank.is_empty(), "options without a description: {blank:?}");
     assert!(!help.to_lowercase().contains("issue"), "{help}");
+}
+
+#[test]
+fn robust_and_per_step_ranges_and_the_legend_say_what_the_colours_mean() {
+    use aarbf::io::{self, AttributeSelection};
+    use aarbf::scene::index::robust_range;
+    let (_keep, folder) = run_folder("pysph_dam_break");
+    let dir = folder.parent().unwrap().to_path_buf();
+    // The pressure of each step, read straight from its file.
+    let steps: Vec<Vec<f64>> = io::list_steps(&folder.join("fluid_*.vtp"), None)
+        .unwrap()
+        .iter()
+        .map(|r| {
+            let step = io::read_step(r, &AttributeSelection::Only(vec!["p".into()])).unwrap();
+            step.attribute("p").unwrap().values.clone()
+        })
+        .collect();
+    let resolve_range = |range: &str, step: usize| {
+        let r = resolve(
+            &DataArgs {
+                scene: None,
+                data: Some(folder.clone()),
+                format: None,
+                step: Some(step),
+                cache_mib: 64,
+                rescan: false,
+            },
+            &FieldOptions {
+                attribute: Some("p".into()),
+                attribute_range: Some(range.parse().unwrap()),
+                ..FieldOptions::default()
+            },
+        )
+        .unwrap();
+        r.field.attribute_range
+    };
+    // robust: from the lowest step's 1st percentile to the highest step's 99th.
+    let per_step: Vec<(f64, f64)> = steps.iter().map(|v| robust_range(v).unwrap()).collect();
+    let envelope = per_step
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(lo, hi)| {
+            (a.min(lo), b.max(hi))
+        });
+    assert_eq!(resolve_range("robust", 0), Some(envelope));
+    assert_eq!(resolve_range("robust-step", 3), Some(per_step[3]));
+    let (lo3, hi3) = steps[3]
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    assert_eq!(resolve_range("step", 3), Some((lo3, hi3)));
+    assert_eq!(
+        resolve_range("series", 3),
+        None,
+        "the series' range is the field's default"
+    );
+    assert_eq!(resolve_range("-5,7.5", 3), Some((-5.0, 7.5)));
+    // A step's robust range is far narrower than the series': it shows the step's gradient.
+    assert!(per_step[3].1 - per_step[3].0 < 0.2 * (22800.0 + 13800.0));
+
+    // A sequence with a per-step range says each frame's, and the legend draws it.
+    let out = dir.join("p.png");
+    let (_, log) = ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--attribute",
+        "p",
+        "--attribute-range",
+        "robust-step",
+        "--steps",
+        "2..=3",
+        "--legend",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--spp",
+        "1",
+    ]);
+    for k in [2, 3] {
+        let (lo, hi) = per_step[k];
+        assert!(
+            log.contains(&format!("range [{lo}, {hi}]")),
+            "step {k}:\n{log}"
+        );
+    }
+    let framed = image::open(dir.join("p_0003.png")).unwrap().to_rgb8();
+    let plain = dir.join("plain.png");
+    ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&plain),
+        "--attribute",
+        "p",
+        "--attribute-range",
+        "robust-step",
+        "--step",
+        "3",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--spp",
+        "1",
+    ]);
+    let plain = image::open(&plain).unwrap().to_rgb8();
+    // The legend covers the bottom-left corner, and nothing else.
+    let differs = |x0: u32, y0: u32, x1: u32, y1: u32| {
+        (x0..x1)
+            .flat_map(|x| (y0..y1).map(move |y| (x, y)))
+            .filter(|&(x, y)| framed.get_pixel(x, y) != plain.get_pixel(x, y))
+            .count()
+    };
+    assert!(differs(8, 120 - 60, 152, 112) > 1000);
+    assert_eq!(differs(0, 0, 160, 120 - 62), 0);
+    // Its bar runs through the colour map: viridis' dark end on the left, yellow on the right.
+    let bar_y = 120 - 8 - 52 + 21 + 5;
+    let left = framed.get_pixel(8 + 6, bar_y).0;
+    let right = framed.get_pixel(8 + 144 - 7, bar_y).0;
+    assert!(
+        left[2] > left[1] && right[0] > 200 && right[1] > 200,
+        "{left:?} {right:?}"
+    );
+
+    // A slice draws one too; outputs meant for compositing and images too small refuse.
+    ok(&[
+        "slice",
+        "--data",
+        s(&folder),
+        "--attribute",
+        "p",
+        "--axis",
+        "y",
+        "--legend",
+        "--out",
+        s(&dir.join("slice.png")),
+    ]);
+    let e = fails(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&dir.join("x.exr")),
+        "--legend",
+    ]);
+    assert!(e.contains("8-bit PNG"), "{e}");
+    let e = fails(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--legend",
+        "--width",
+        "64",
+    ]);
+    assert!(e.contains("at least 120x64"), "{e}");
+    let e = fails(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&out),
+        "--attribute-range",
+        "5,1",
+    ]);
+    assert!(e.contains("ascending"), "{e}");
+
+    // The scene file spells ranges the same way, and a saved render reproduces its numbers.
+    let scene = dir.join("s.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "[data]\npath = \"{}\"\nattribute = \"p\"\nattribute_range = \"robust\"\n",
+            folder.display()
+        ),
+    )
+    .unwrap();
+    let saved = dir.join("saved.toml");
+    ok(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--out",
+        s(&dir.join("scene.png")),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--spp",
+        "1",
+        "--save-scene",
+        s(&saved),
+    ]);
+    let saved = aarbf::scene_file::SceneFile::load(&saved).unwrap();
+    assert_eq!(
+        saved.data.attribute_range,
+        Some(aarbf::scene_file::RangeSpec::Fixed(envelope.0, envelope.1))
+    );
 }

@@ -10,6 +10,7 @@ use crate::backend::voxel::VoxelGeometry;
 use crate::backend::{self, BackendKind};
 use crate::render::RenderSession;
 use crate::render::accuracy::{ErrorMetric, render_to_target};
+use crate::render::legend::Legend;
 use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
 use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
@@ -148,6 +149,11 @@ pub struct RenderArgs {
     /// Overwrite existing outputs.
     #[arg(long)]
     pub force: bool,
+    /// Draw a colour legend over the image's bottom-left corner: the colour map as a bar, the
+    /// attribute and the range it is normalised over (or the density), and the values at its
+    /// ends (8-bit PNG only: 16-bit and .exr outputs are for compositing).
+    #[arg(long)]
+    pub legend: bool,
 }
 
 fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
@@ -328,10 +334,17 @@ impl OutputFormat {
         path: &Path,
         image: &crate::values::Image,
         background: [f64; 3],
+        legend: Option<&Legend>,
     ) -> anyhow::Result<()> {
         use crate::io::output;
         match self {
-            OutputFormat::Png8 => output::write_png(path, image, true)?,
+            OutputFormat::Png8 => {
+                let mut rgb = image.to_srgb8();
+                if let Some(legend) = legend {
+                    legend.draw(&mut rgb)?;
+                }
+                output::write_image(path, rgb.into(), image::ImageFormat::Png, true)?;
+            }
             OutputFormat::Png16 => output::write_png16_alpha(path, image, background, true)?,
             OutputFormat::Exr => output::write_exr(path, image, background, true)?,
         }
@@ -350,7 +363,21 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         let unit = crate::values::Bounds::of_points(&[glam::DVec3::ZERO, glam::DVec3::ONE]);
         flags.render_settings(unit).map_err(anyhow::Error::msg)?;
         ensure!(flags.spp() > 0, "--spp must be at least 1");
-        OutputFormat::of(&args.out, args.bit_depth)?;
+        let format = OutputFormat::of(&args.out, args.bit_depth)?;
+        ensure!(
+            !args.legend || format == OutputFormat::Png8,
+            "--legend draws on 8-bit PNG images only (16-bit and .exr outputs are for compositing)"
+        );
+        if args.legend {
+            let settings = flags.render_settings(unit).map_err(anyhow::Error::msg)?;
+            let (w, h) = crate::render::legend::MIN_SIZE;
+            ensure!(
+                settings.width >= w && settings.height >= h,
+                "--legend needs an image of at least {w}x{h} pixels, not {}x{}",
+                settings.width,
+                settings.height
+            );
+        }
     }
     let mut resolved = resolve(&args.data, &args.field)?;
     apply_flags(&args, &mut resolved.scene)?;
@@ -492,10 +519,12 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         },
     );
     let mut scene_used = None;
+    let mut scene_used_phi_ref = None;
     for (k, frame) in frames.iter().enumerate() {
         let started = Instant::now();
         let step = frame.step;
         settings.camera = Some(frame.camera);
+        resolved.range_for_step(step)?;
         session.show(&resolved.series, step, &resolved.field, resolved.cluster)?;
         if k == 0 {
             // Series-wide values: the same for every step, so printed (and saved) once.
@@ -520,6 +549,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
                 resolved.field.radius,
                 used.margin
             );
+            scene_used_phi_ref = Some(used.phi_ref);
             scene_used = Some(used);
         }
         let path = &frame.path;
@@ -653,7 +683,17 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             }
         };
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
-        format.write(path, &image, settings.background)?;
+        let legend = match (args.legend, &scene_used_phi_ref) {
+            (true, Some(phi_ref)) => Some(Legend::of_field(
+                &resolved.field,
+                resolved.series_range(),
+                resolved.range.label(),
+                settings.colour_by_density,
+                *phi_ref,
+            )),
+            _ => None,
+        };
+        format.write(path, &image, settings.background, legend.as_ref())?;
         if let (Some(path), Some(used)) = (&args.save_scene, scene_used.take()) {
             let (data, field) = resolved.scene_sections();
             let used = crate::render::Resolved {
@@ -683,11 +723,15 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         }
         let t = session.backend().timings();
         tracing::info!(
-            "step {step}: {} ({}x{}, {used_spp} spp{}, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",
+            "step {step}: {} ({}x{}, {used_spp} spp{}{}, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",
             path.display(),
             settings.width,
             settings.height,
             used_step.map_or(String::new(), |dt| format!(", step size {dt:.4e}")),
+            match resolved.field.attribute_range {
+                Some((lo, hi)) if resolved.range.per_step() => format!(", range [{lo}, {hi}]"),
+                _ => String::new(),
+            },
             settings.integrator,
             t.build.as_secs_f64(),
             t.frame.as_secs_f64(),

@@ -8,6 +8,7 @@ use glam::DVec3;
 
 use crate::field::{Classification, Particles, RegularGrid, normalise};
 use crate::render::auto::AutoValues;
+use crate::render::legend::Legend;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::values::color_space::linear_to_srgb;
 
@@ -44,6 +45,10 @@ pub struct SliceArgs {
     /// Overwrite an existing output.
     #[arg(long)]
     pub force: bool,
+    /// Draw a colour legend over the image's bottom-left corner (the attribute and its range,
+    /// or the density).
+    #[arg(long)]
+    pub legend: bool,
 }
 
 pub fn run(args: SliceArgs) -> anyhow::Result<()> {
@@ -61,6 +66,14 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         anyhow::ensure!(
             p.is_finite() && p > 0.0,
             "--phi-ref must be a positive number, got {p}"
+        );
+    }
+    if args.legend {
+        let (w, h) = crate::render::legend::MIN_SIZE;
+        anyhow::ensure!(
+            args.width >= w,
+            "--legend needs an image of at least {w}x{h} pixels: --width {} is too narrow",
+            args.width
         );
     }
     crate::io::output::check_writable(&args.out, args.force)?;
@@ -125,6 +138,16 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         *pixel = image::Rgb(
             colour.map(|c| (linear_to_srgb((c * alpha).clamp(0.0, 1.0)) * 255.0).round() as u8),
         );
+    }
+    if args.legend {
+        Legend::of_field(
+            &resolved.field,
+            Some(range),
+            resolved.range.label(),
+            false,
+            phi_ref,
+        )
+        .draw(&mut image)?;
     }
     crate::io::output::write_atomically(&args.out, args.force, |tmp| {
         image

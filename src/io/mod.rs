@@ -18,6 +18,7 @@ pub mod ply;
 pub mod raw;
 mod scalar;
 pub mod stems;
+pub mod text;
 pub mod vtk;
 mod vtk_appended;
 

@@ -7,6 +7,7 @@
 pub mod accuracy;
 pub mod auto;
 mod cycles;
+pub mod legend;
 pub mod reference;
 pub mod session;
 pub mod settings;

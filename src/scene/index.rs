@@ -22,7 +22,7 @@ pub const INDEX_FILE: &str = ".aarbf-index.json";
 
 /// Bumped whenever a reader's output or a statistic's definition changes, so an index written
 /// by another version is never trusted.
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 
 /// What a scan of one step learns.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -38,14 +38,38 @@ pub struct StepStats {
     pub all_attributes: bool,
 }
 
-/// One attribute's range and mean over one step.
+/// One attribute's range, robust range and mean over one step.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AttributeStats {
     pub name: String,
     pub min: f64,
     pub max: f64,
+    /// The 1st and 99th percentiles ([`robust_range`]).
+    pub p01: f64,
+    pub p99: f64,
     pub mean: f64,
     pub count: usize,
+}
+
+/// The 1st and 99th percentiles of `values` (nearest rank: the values at ranks
+/// floor(0.01 (n - 1)) and ceil(0.99 (n - 1)) in sorted order), the range a colour map spans
+/// without a few outliers washing the rest into one colour. `None` for no values.
+pub fn robust_range(values: &[f64]) -> Option<(f64, f64)> {
+    if values.is_empty() {
+        return None;
+    }
+    let last = values.len() - 1;
+    let (lo, hi) = (last / 100, (99 * last).div_ceil(100));
+    let mut v = values.to_vec();
+    let (_, &mut low, above) = v.select_nth_unstable_by(lo, f64::total_cmp);
+    let high = if hi == lo {
+        low
+    } else {
+        // The high rank lies in the part above the low one.
+        let k = hi - lo - 1;
+        *above.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    Some((low, high))
 }
 
 impl StepStats {
@@ -59,10 +83,13 @@ impl StepStats {
                 .iter()
                 .filter_map(|a| {
                     let (min, max) = value_range(&a.values)?;
+                    let (p01, p99) = robust_range(&a.values)?;
                     Some(AttributeStats {
                         name: a.name.clone(),
                         min,
                         max,
+                        p01,
+                        p99,
                         mean: a.values.iter().sum::<f64>() / a.values.len() as f64,
                         count: a.values.len(),
                     })
@@ -264,5 +291,38 @@ pub struct FileStamp(Stamp);
 impl FileStamp {
     pub fn of(path: &Path) -> Option<FileStamp> {
         Stamp::of(path).map(FileStamp)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::robust_range;
+
+    #[test]
+    fn robust_range_takes_the_nearest_ranks_and_leaves_outliers_out() {
+        assert_eq!(robust_range(&[]), None);
+        assert_eq!(robust_range(&[7.5]), Some((7.5, 7.5)));
+        assert_eq!(robust_range(&[2.0, -1.0]), Some((-1.0, 2.0)));
+        // 1001 values 0..=1000 shuffled, with two wild outliers replacing 0 and 1000.
+        let mut v: Vec<f64> = (0..=1000).map(|i| ((i * 389) % 1001) as f64).collect();
+        for x in &mut v {
+            if *x == 0.0 {
+                *x = -1e30;
+            } else if *x == 1000.0 {
+                *x = 1e30;
+            }
+        }
+        assert_eq!(robust_range(&v), Some((10.0, 990.0)));
+        // Against a full sort on an awkward size.
+        let w: Vec<f64> = (0..1237)
+            .map(|i| ((i * 7919) % 1237) as f64 * 0.5 - 17.0)
+            .collect();
+        let mut sorted = w.clone();
+        sorted.sort_by(f64::total_cmp);
+        let last = w.len() - 1;
+        assert_eq!(
+            robust_range(&w),
+            Some((sorted[last / 100], sorted[(99 * last).div_ceil(100)]))
+        );
     }
 }

@@ -83,6 +83,11 @@ pub struct AttributeInfo {
     pub name: String,
     pub min: f64,
     pub max: f64,
+    /// The robust range: from the lowest step's 1st percentile to the highest step's 99th
+    /// (`index::robust_range` of each step), so outliers in any step are left out while every
+    /// step's bulk is inside.
+    pub p01: f64,
+    pub p99: f64,
     pub mean: f64,
     /// Values the mean is over.
     pub count: usize,
@@ -583,6 +588,8 @@ fn merge_ranges(ranges: &mut Vec<AttributeInfo>, step: &StepStats) {
             Some(r) => {
                 r.min = r.min.min(a.min);
                 r.max = r.max.max(a.max);
+                r.p01 = r.p01.min(a.p01);
+                r.p99 = r.p99.max(a.p99);
                 let total = r.count + a.count;
                 r.mean = (r.mean * r.count as f64 + a.mean * a.count as f64) / total as f64;
                 r.count = total;
@@ -591,6 +598,8 @@ fn merge_ranges(ranges: &mut Vec<AttributeInfo>, step: &StepStats) {
                 name: a.name.clone(),
                 min: a.min,
                 max: a.max,
+                p01: a.p01,
+                p99: a.p99,
                 mean: a.mean,
                 count: a.count,
             }),

@@ -41,8 +41,146 @@ pub struct DataSection {
     pub format: Option<Format>,
     pub step: Option<usize>,
     pub attribute: Option<String>,
-    pub attribute_range: Option<[f64; 2]>,
+    /// `[lo, hi]`, or `"series"`, `"robust"`, `"step"`, `"robust-step"` ([`RangeSpec`]).
+    pub attribute_range: Option<RangeSpec>,
     pub radius_attribute: Option<String>,
+}
+
+/// The range of the attribute the colour map spans.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "RangeText", into = "RangeText")]
+pub enum RangeSpec {
+    /// `LO,HI`, as given.
+    Fixed(f64, f64),
+    /// From the least to the largest value in the series (the default).
+    Series,
+    /// From the lowest step's 1st percentile to the highest step's 99th: a few outliers in any
+    /// step do not wash the rest into one colour.
+    Robust,
+    /// From the least to the largest value of the step shown (each frame of a sequence its
+    /// own).
+    Step,
+    /// The 1st to the 99th percentile of the step shown.
+    RobustStep,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(untagged)]
+enum RangeText {
+    Pair([f64; 2]),
+    Text(String),
+}
+
+impl TryFrom<RangeText> for RangeSpec {
+    type Error = String;
+    fn try_from(r: RangeText) -> Result<Self, String> {
+        match r {
+            RangeText::Pair([lo, hi]) => format!("{lo},{hi}").parse(),
+            RangeText::Text(s) => s.parse(),
+        }
+    }
+}
+
+impl From<RangeSpec> for RangeText {
+    fn from(r: RangeSpec) -> Self {
+        match r {
+            RangeSpec::Fixed(lo, hi) => RangeText::Pair([lo, hi]),
+            other => RangeText::Text(other.to_string()),
+        }
+    }
+}
+
+impl std::str::FromStr for RangeSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s.trim() {
+            "series" => RangeSpec::Series,
+            "robust" => RangeSpec::Robust,
+            "step" => RangeSpec::Step,
+            "robust-step" => RangeSpec::RobustStep,
+            text => {
+                let v: Vec<f64> = text
+                    .split(',')
+                    .map(|x| x.trim().parse::<f64>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| {
+                        format!(
+                            "range '{s}': expected LO,HI or one of series, robust, step, \
+                             robust-step"
+                        )
+                    })?;
+                match v[..] {
+                    [lo, hi] if lo.is_finite() && hi.is_finite() && lo <= hi => {
+                        RangeSpec::Fixed(lo, hi)
+                    }
+                    _ => return Err(format!("range '{s}' is not an ascending pair LO,HI")),
+                }
+            }
+        })
+    }
+}
+
+impl std::fmt::Display for RangeSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RangeSpec::Fixed(lo, hi) => write!(f, "{lo},{hi}"),
+            RangeSpec::Series => f.write_str("series"),
+            RangeSpec::Robust => f.write_str("robust"),
+            RangeSpec::Step => f.write_str("step"),
+            RangeSpec::RobustStep => f.write_str("robust-step"),
+        }
+    }
+}
+
+impl RangeSpec {
+    /// A few words for a legend.
+    pub fn label(self) -> &'static str {
+        match self {
+            RangeSpec::Fixed(..) => "set range",
+            RangeSpec::Series => "series range",
+            RangeSpec::Robust => "series 1-99%",
+            RangeSpec::Step => "step range",
+            RangeSpec::RobustStep => "step 1-99%",
+        }
+    }
+
+    /// Whether each step has its own range.
+    pub fn per_step(self) -> bool {
+        matches!(self, RangeSpec::Step | RangeSpec::RobustStep)
+    }
+
+    /// The range of `attribute` this spells over `series` at step `step` (`None`: the series'
+    /// range, which the field takes by default), and what it is, for messages.
+    pub fn resolve(
+        self,
+        series: &crate::scene::TimeSeries,
+        attribute: Option<&str>,
+        step: usize,
+    ) -> Result<(Option<(f64, f64)>, &'static str), crate::io::DataError> {
+        let Some(name) = attribute else {
+            return Ok((None, "no attribute"));
+        };
+        let of_step = |robust: bool| -> Result<Option<(f64, f64)>, crate::io::DataError> {
+            let step = series.step(step)?;
+            Ok(step.attribute(name).and_then(|a| {
+                if robust {
+                    crate::scene::index::robust_range(&a.values)
+                } else {
+                    crate::values::value_range(&a.values)
+                }
+            }))
+        };
+        Ok(match self {
+            RangeSpec::Fixed(lo, hi) => (Some((lo, hi)), "set"),
+            RangeSpec::Series => (None, "the series' least to largest value"),
+            RangeSpec::Robust => (
+                series.attribute(name).map(|a| (a.p01, a.p99)),
+                "the series' 1st to 99th percentile (of its lowest and highest step)",
+            ),
+            RangeSpec::Step => (of_step(false)?, "this step's least to largest value"),
+            RangeSpec::RobustStep => (of_step(true)?, "this step's 1st to 99th percentile"),
+        })
+    }
 }
 
 /// A map written as CLI text (`"ramp"`, `"0:0,1:1"`, `1.0`) or as control points.
@@ -511,6 +649,31 @@ cluster = 8
         assert!(s.field.colormap.unwrap().ends_with("maps/m.json"));
         assert_eq!(s.field.classification, Some(Classification::Pre));
         assert_eq!(s.field.cluster.unwrap().get(), 8);
+    }
+
+    #[test]
+    fn ranges_read_as_pairs_or_words_and_write_back_the_same() {
+        for (text, spec) in [
+            ("[-13800.0, 22800.0]", RangeSpec::Fixed(-13800.0, 22800.0)),
+            ("\"series\"", RangeSpec::Series),
+            ("\"robust\"", RangeSpec::Robust),
+            ("\"step\"", RangeSpec::Step),
+            ("\"robust-step\"", RangeSpec::RobustStep),
+        ] {
+            let file: SceneFile =
+                toml::from_str(&format!("[data]\nattribute_range = {text}\n")).unwrap();
+            assert_eq!(file.data.attribute_range, Some(spec), "{text}");
+            let again: SceneFile = toml::from_str(&toml::to_string(&file).unwrap()).unwrap();
+            assert_eq!(again, file);
+            assert_eq!(spec.to_string().parse::<RangeSpec>().unwrap(), spec);
+        }
+        // 17 digits survive the round trip.
+        let tight = RangeSpec::Fixed(0.10000000000000001, 0.29999999999999999);
+        assert_eq!(tight.to_string().parse::<RangeSpec>().unwrap(), tight);
+        for bad in ["\"widest\"", "[2.0, 1.0]", "\"1,nan\""] {
+            let e = toml::from_str::<SceneFile>(&format!("[data]\nattribute_range = {bad}\n"));
+            assert!(e.is_err(), "{bad}");
+        }
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 
-use super::{DataSection, FieldSection, MapSpec, RadiusSpec, SceneFile};
+use super::{DataSection, FieldSection, MapSpec, RadiusSpec, RangeSpec, SceneFile};
 use crate::accel::ClusterSize;
 use crate::field::{Classification, FieldSettings};
 use crate::io::{AttributeSelection, Format};
@@ -77,9 +77,12 @@ pub struct FieldOptions {
     /// The attribute the field carries (its colour).
     #[arg(long)]
     pub attribute: Option<String>,
-    /// Normalise the attribute over LO,HI instead of its range over the series.
-    #[arg(long, value_parser = parse_range, value_name = "LO,HI")]
-    pub attribute_range: Option<(f64, f64)>,
+    /// The range the colour map spans: LO,HI; `series` (the least to the largest value over
+    /// the series, the default); `robust` (the series' 1st to 99th percentile: outliers do not
+    /// wash the rest into one colour); `step` or `robust-step` (the same over the step shown,
+    /// each frame of a sequence its own).
+    #[arg(long, value_name = "LO,HI|series|robust|step|robust-step")]
+    pub attribute_range: Option<RangeSpec>,
     /// Global RBF radius: a length, or a percentage of the series' bounding-box diagonal
     /// ("1.5%"). Default: twice the particles' spacing (the median nearest-neighbour distance
     /// in the first step), or 2 with --radius-attribute (radius 2h, the SPH kernel's support).
@@ -184,18 +187,6 @@ pub fn default_radius(
     })
 }
 
-fn parse_range(s: &str) -> Result<(f64, f64), String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("'{s}' is not LO,HI"))?;
-    match v[..] {
-        [lo, hi] if lo.is_finite() && hi.is_finite() && lo <= hi => Ok((lo, hi)),
-        _ => Err(format!("'{s}' is not an ascending pair LO,HI")),
-    }
-}
-
 /// Data and field settings after merging flags over the scene file.
 pub struct Resolved {
     /// The scene file (or an empty one), for the sections a command reads itself.
@@ -213,6 +204,9 @@ pub struct Resolved {
     /// reports apart.
     pub opened_in: std::time::Duration,
     pub decoded_at_open: usize,
+    /// How the attribute's range was chosen: a per-step range is chosen again for each step
+    /// shown ([`Resolved::range_for_step`]).
+    pub range: RangeSpec,
 }
 
 impl Resolved {
@@ -246,7 +240,7 @@ pub fn scene_sections(
             format,
             step: Some(step),
             attribute: f.attribute.clone(),
-            attribute_range: f.attribute_range.map(|(a, b)| [a, b]),
+            attribute_range: f.attribute_range.map(|(a, b)| RangeSpec::Fixed(a, b)),
             radius_attribute: f.radius_attribute.clone(),
         },
         FieldSection {
@@ -269,6 +263,18 @@ pub fn scene_sections(
 }
 
 impl Resolved {
+    /// Sets the field's range for step `step` where the range is per step (`--attribute-range
+    /// step` or `robust-step`); other ranges are the series' and stay.
+    pub fn range_for_step(&mut self, step: usize) -> anyhow::Result<()> {
+        if self.range.per_step() {
+            self.field.attribute_range = self
+                .range
+                .resolve(&self.series, self.field.attribute.as_deref(), step)?
+                .0;
+        }
+        Ok(())
+    }
+
     /// The series-wide range of the field's attribute.
     pub fn series_range(&self) -> Option<(f64, f64)> {
         let name = self.field.attribute.as_deref()?;
@@ -383,11 +389,28 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
             radius
         }
     };
+    let range = options
+        .attribute_range
+        .or(scene.data.attribute_range)
+        .unwrap_or(RangeSpec::Series);
+    let (attribute_range, range_is) = range.resolve(&series, attribute.as_deref(), step)?;
+    if let Some(name) = &attribute {
+        let (lo, hi) = attribute_range
+            .or_else(|| series.attribute(name).map(|a| (a.min, a.max)))
+            .unwrap_or((0.0, 0.0));
+        let over = if range.per_step() {
+            format!("{range_is}, each step its own (step {step}: [{lo}, {hi}])")
+        } else {
+            format!("[{lo}, {hi}], {range_is}")
+        };
+        tracing::info!(
+            "colour: '{name}' over {over} (--attribute-range LO,HI, series, robust, step or \
+             robust-step)"
+        );
+    }
     let field = FieldSettings {
         attribute,
-        attribute_range: options
-            .attribute_range
-            .or(scene.data.attribute_range.map(|[a, b]| (a, b))),
+        attribute_range,
         radius,
         radius_attribute,
         radius_map,
@@ -436,5 +459,6 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
         colormap,
         opened_in,
         decoded_at_open,
+        range,
     })
 }

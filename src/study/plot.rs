@@ -5,7 +5,6 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::Once;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -193,25 +192,7 @@ fn colour(i: usize) -> RGBColor {
     COLOURS[i % COLOURS.len()]
 }
 
-/// The plots' font: Hack, which egui ships (a monospace font: ab_glyph does not kern, which
-/// spoils proportional fonts at small sizes).
-const FONT: &str = "sans-serif";
-
-fn register_font() {
-    static REGISTERED: Once = Once::new();
-    REGISTERED.call_once(|| {
-        // The font egui ships; it parses (a test draws a figure), so this cannot fail.
-        if plotters::style::register_font(
-            FONT,
-            FontStyle::Normal,
-            epaint_default_fonts::HACK_REGULAR,
-        )
-        .is_err()
-        {
-            tracing::warn!("the plot font did not load: plots will have no text");
-        }
-    });
-}
+use crate::io::text::{FONT, register_font};
 
 fn plot_error(e: impl std::fmt::Display) -> StudyError {
     StudyError::Plot(e.to_string())

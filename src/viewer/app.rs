@@ -2,6 +2,7 @@
 //! at the bottom. The window only edits a [`ViewState`] and shows what the render worker
 //! publishes; it never waits for a frame.
 
+use crate::scene_file::RangeSpec;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -41,6 +42,10 @@ pub enum RangeMode {
     Series,
     /// Its range in the shown step, fixed when chosen.
     Step,
+    /// The series' 1st to 99th percentile (of its lowest and highest step).
+    Robust,
+    /// The shown step's 1st to 99th percentile, fixed when chosen.
+    RobustStep,
     /// A range the user types.
     Fixed,
 }
@@ -99,10 +104,12 @@ impl ViewerApp {
         };
         let series = Arc::new(loaded.series);
         let worker = spawn_worker(ctx, &series);
-        let range_mode = if state.field.attribute_range.is_some() {
-            RangeMode::Fixed
-        } else {
-            RangeMode::Series
+        let range_mode = match loaded.range {
+            RangeSpec::Series => RangeMode::Series,
+            RangeSpec::Robust => RangeMode::Robust,
+            RangeSpec::Step => RangeMode::Step,
+            RangeSpec::RobustStep => RangeMode::RobustStep,
+            RangeSpec::Fixed(..) => RangeMode::Fixed,
         };
         let scene_path = std::env::current_dir()
             .unwrap_or_default()
@@ -421,7 +428,22 @@ impl ViewerApp {
             ui.radio_value(&mut self.range_mode, RangeMode::Series, "series");
             ui.radio_value(&mut self.range_mode, RangeMode::Step, "this step");
             ui.radio_value(&mut self.range_mode, RangeMode::Fixed, "fixed");
-        });
+        })
+        .response
+        .on_hover_text("the range the colour map spans: the least to the largest value");
+        ui.horizontal(|ui| {
+            ui.label("robust");
+            ui.radio_value(&mut self.range_mode, RangeMode::Robust, "series 1-99%");
+            ui.radio_value(
+                &mut self.range_mode,
+                RangeMode::RobustStep,
+                "this step 1-99%",
+            );
+        })
+        .response
+        .on_hover_text(
+            "the 1st to the 99th percentile: a few outliers do not wash the rest into one colour",
+        );
         let histogram = self.shown.histogram.clone();
         match self.range_mode {
             RangeMode::Series => self.state.field.attribute_range = None,
@@ -430,6 +452,23 @@ impl ViewerApp {
                     && (previous != RangeMode::Step || self.state.field.attribute_range.is_none())
                 {
                     self.state.field.attribute_range = Some(h.step_range);
+                }
+            }
+            RangeMode::Robust => {
+                self.state.field.attribute_range = self
+                    .state
+                    .field
+                    .attribute
+                    .as_deref()
+                    .and_then(|a| self.series.attribute(a))
+                    .map(|a| (a.p01, a.p99));
+            }
+            RangeMode::RobustStep => {
+                if let Some(h) = &histogram
+                    && (previous != RangeMode::RobustStep
+                        || self.state.field.attribute_range.is_none())
+                {
+                    self.state.field.attribute_range = Some(h.step_robust_range);
                 }
             }
             RangeMode::Fixed => {

@@ -69,6 +69,8 @@ pub struct Histogram {
     pub counts: Vec<u32>,
     /// The attribute's range in this step (for "range: this step").
     pub step_range: (f64, f64),
+    /// Its 1st to 99th percentile in this step (for "range: robust step").
+    pub step_robust_range: (f64, f64),
 }
 
 /// What the worker has to show: the latest image and what it cost.
@@ -430,6 +432,8 @@ impl Worker<'_> {
             Arc::new(Histogram {
                 counts,
                 step_range: if lo <= hi { (lo, hi) } else { (0.0, 0.0) },
+                step_robust_range: crate::scene::index::robust_range(&a.values)
+                    .unwrap_or((0.0, 0.0)),
             })
         });
         self.histogram = Some((key, histogram.clone()));
