@@ -552,3 +552,34 @@ fn the_voxel_grid_is_one_choice_away_and_its_scene_reproduces_it() {
         "aarbf render --scene of the voxel state differs from the viewer's image"
     );
 }
+
+#[test]
+fn the_robust_ranges_are_one_click_away() {
+    use aarbf::io::AttributeSelection;
+    use aarbf::scene::index::robust_range;
+    use aarbf::scene::{OpenOptions, TimeSeries};
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = harness(open(dir.path(), BackendKind::Cpu));
+    settle(&mut h);
+    let series = TimeSeries::open(
+        &dir.path().join("cloud"),
+        &OpenOptions {
+            attributes: AttributeSelection::Only(vec!["temperature".into()]),
+            ..OpenOptions::default()
+        },
+    )
+    .unwrap();
+    let t = series.attribute("temperature").unwrap();
+    h.get_by_label("series 1-99%").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.field.attribute_range, Some((t.p01, t.p99)));
+    assert!(t.p01 > t.min && t.p99 < t.max, "{t:?}");
+    h.get_by_label("this step 1-99%").click();
+    settle(&mut h);
+    let step = series.step(0).unwrap();
+    let values = &step.attribute("temperature").unwrap().values;
+    assert_eq!(h.state().state.field.attribute_range, robust_range(values));
+    h.get_by_label("series").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.field.attribute_range, None);
+}

@@ -2,6 +2,7 @@
 //! at the bottom. The window only edits a [`ViewState`] and shows what the render worker
 //! publishes; it never waits for a frame.
 
+use crate::render::legend::Legend;
 use crate::scene_file::RangeSpec;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -68,6 +69,8 @@ pub struct ViewerApp {
     sent: Option<(ViewState, Interaction)>,
     worker: RenderWorker,
     texture: Option<TextureHandle>,
+    /// Whether the colour legend is drawn over the image.
+    show_legend: bool,
     texture_of: Option<Arc<ShownImage>>,
     /// What the worker had to show when this frame began.
     shown: Shown,
@@ -125,6 +128,7 @@ impl ViewerApp {
             sent: None,
             worker,
             texture: None,
+            show_legend: true,
             texture_of: None,
             shown: Shown::default(),
             playing: None,
@@ -326,6 +330,9 @@ impl ViewerApp {
                 egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
                 Color32::WHITE,
             );
+            if self.show_legend {
+                super::legend::paint(ui.painter(), rect, &self.legend());
+            }
         }
         let camera = self.state.camera();
         let delta = response.drag_delta() * ppp;
@@ -352,6 +359,31 @@ impl ViewerApp {
         if moved != camera {
             self.state.settings.camera = Some(moved);
         }
+    }
+
+    /// What the colours of the image show, as `--legend` says it.
+    fn legend(&self) -> Legend {
+        let series_range = self
+            .state
+            .field
+            .attribute
+            .as_deref()
+            .and_then(|a| self.series.attribute(a))
+            .map(|a| (a.min, a.max));
+        let range_is = match self.range_mode {
+            RangeMode::Series => "series range",
+            RangeMode::Step => "step range",
+            RangeMode::Robust => "series 1-99%",
+            RangeMode::RobustStep => "step 1-99%",
+            RangeMode::Fixed => "set range",
+        };
+        Legend::of_field(
+            &self.state.field,
+            series_range,
+            range_is,
+            self.state.settings.colour_by_density,
+            self.shown.used.map_or(1.0, |u| u.phi_ref),
+        )
     }
 
     fn controls(&mut self, ui: &mut egui::Ui) {
@@ -546,6 +578,7 @@ impl ViewerApp {
                 "colour by density",
             );
             ui.checkbox(&mut self.log_y, "histogram log scale");
+            ui.checkbox(&mut self.show_legend, "colour legend");
             ui.label("density map w(t)");
             let mut density = self.state.field.density_map.0.clone();
             let top = density.max_value().max(1.0);

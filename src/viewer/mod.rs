@@ -8,6 +8,7 @@
 //! - [`map_editor`]: the control-point editor for the density, radius and optical maps.
 
 pub mod app;
+pub mod legend;
 pub mod map_editor;
 pub mod navigation;
 pub mod state;
