@@ -736,3 +736,53 @@ fn robust_and_per_step_ranges_and_the_legend_say_what_the_colours_mean() {
         Some(aarbf::scene_file::RangeSpec::Fixed(envelope.0, envelope.1))
     );
 }
+
+#[test]
+fn each_study_lists_its_own_options_and_reads_a_radius_as_render_does() {
+    let (noise, _) = ok(&["bench", "noise", "--help"]);
+    assert!(
+        noise.contains("--noise-size") && noise.contains("--reference-spp"),
+        "{noise}"
+    );
+    assert!(
+        !noise.contains("--voxel-grids") && !noise.contains("--radii"),
+        "{noise}"
+    );
+    let (all, _) = ok(&["bench", "all", "--help"]);
+    for option in [
+        "--voxel-grids",
+        "--radii",
+        "--noise-size",
+        "--max-n",
+        "--offsets",
+    ] {
+        assert!(all.contains(option), "bench all lists {option}");
+    }
+    let e = fails(&["bench", "noise", "--voxel-grids", "64"]);
+    assert!(
+        e.contains("--voxel-grids is not an option of `aarbf bench noise`"),
+        "{e}"
+    );
+
+    // "3%" is of the series' diagonal, as for render; a plain number is a length.
+    let (_keep, folder) = run_folder("pysph_dam_break");
+    let spec = aarbf::study::DataSpec::Path(folder.clone());
+    let load = |radius: &str| {
+        aarbf::study::Dataset::load(
+            &spec,
+            None,
+            Some(3),
+            Some("p"),
+            Some(radius.parse().unwrap()),
+        )
+        .unwrap()
+    };
+    let ds = load("3%");
+    let series_diagonal = ds.series.bounds().diagonal();
+    assert!(
+        ds.bounds.diagonal() < series_diagonal,
+        "step 3 covers less than the series"
+    );
+    assert!((ds.radius - 0.03 * series_diagonal).abs() < 1e-12 * series_diagonal);
+    assert_eq!(load("0.05").radius, 0.05);
+}

@@ -38,10 +38,11 @@ pub struct StudyArgs {
     /// The attribute (default: the generator's, or the data's first).
     #[arg(long)]
     pub attribute: Option<String>,
-    /// The global radius as a percentage of the step's diagonal (default: ~30 particles per
-    /// point for uniform and random, 1.5% otherwise).
-    #[arg(long, value_name = "PERCENT")]
-    pub radius: Option<f64>,
+    /// The global radius, as `aarbf render --radius` reads it: a length, or a percentage of
+    /// the series' bounding-box diagonal ("1.5%"). Default: ~30 particles per point for
+    /// uniform and random, 1.5% otherwise.
+    #[arg(long)]
+    pub radius: Option<crate::scene_file::RadiusSpec>,
     /// Timed frames' size, WxH.
     #[arg(long, default_value = "256x256", value_parser = parse_size)]
     pub size: (u32, u32),
@@ -116,6 +117,92 @@ pub struct StudyArgs {
     pub weights: Vec<f64>,
 }
 
+/// The options only some studies read, and which studies: `aarbf bench STUDY --help` lists a
+/// study's own (and the options every study reads), and another study's is refused.
+const STUDY_OPTIONS: &[(&str, &[&str])] = &[
+    ("radius", &["radii"]),
+    ("cluster", &["clusters"]),
+    ("traversal", &[]),
+    ("noise", &["spp", "reference_spp", "seeds", "noise_size"]),
+    ("scaling", &["min_n", "max_n", "queries"]),
+    (
+        "baselines",
+        &[
+            "voxel_grids",
+            "splat_ks",
+            "reference_spp",
+            "seeds",
+            "noise_size",
+        ],
+    ),
+    (
+        "accuracy",
+        &[
+            "voxel_grids",
+            "splat_ks",
+            "step_factors",
+            "reference_tolerance",
+            "spp",
+            "seeds",
+            "noise_size",
+        ],
+    ),
+    ("extremes", &["radius_fractions", "offsets", "weights"]),
+];
+
+fn study_specific(id: &str) -> bool {
+    STUDY_OPTIONS.iter().any(|(_, own)| own.contains(&id))
+}
+
+/// `aarbf bench` with each study's help listing its own options (`all` lists every one).
+pub(super) fn tailor_help(bench: clap::Command) -> clap::Command {
+    STUDY_OPTIONS.iter().fold(bench, |bench, (study, own)| {
+        bench.mut_subcommand(study, |command| {
+            command.mut_args(|arg| {
+                let id = arg.get_id().as_str();
+                if study_specific(id) && !own.contains(&id) {
+                    arg.hide(true)
+                } else {
+                    arg
+                }
+            })
+        })
+    })
+}
+
+/// Refuses an option of another study (`aarbf bench noise --voxel-grids 64` would be ignored).
+pub(super) fn check_own_options(matches: &clap::ArgMatches) -> Result<(), String> {
+    let Some(("bench", bench)) = matches.subcommand() else {
+        return Ok(());
+    };
+    let Some((study, given)) = bench.subcommand() else {
+        return Ok(());
+    };
+    let Some((_, own)) = STUDY_OPTIONS.iter().find(|(s, _)| *s == study) else {
+        return Ok(());
+    };
+    for (_, options) in STUDY_OPTIONS {
+        for &id in *options {
+            if !own.contains(&id)
+                && given.value_source(id) == Some(clap::parser::ValueSource::CommandLine)
+            {
+                let users: Vec<&str> = STUDY_OPTIONS
+                    .iter()
+                    .filter(|(_, o)| o.contains(&id))
+                    .map(|(s, _)| *s)
+                    .collect();
+                return Err(format!(
+                    "--{} is not an option of `aarbf bench {study}` (it is {}'s); `aarbf bench \
+                     {study} --help` lists its options",
+                    id.replace('_', "-"),
+                    users.join(" and ")
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 impl StudyArgs {
     fn options(&self, command: String) -> Options {
         Options {
@@ -123,7 +210,7 @@ impl StudyArgs {
             count: self.count,
             step: self.step,
             attribute: self.attribute.clone(),
-            radius_pct: self.radius,
+            radius: self.radius,
             backends: self.backend.clone(),
             out: self.out.clone(),
             force: self.force,

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use super::StudyError;
 use crate::scene::synth::Generator;
 use crate::scene::{OpenOptions, TimeSeries};
+use crate::scene_file::RadiusSpec;
 use crate::values::{Bounds, Step};
 
 /// `--data`: a generator's name or a path.
@@ -60,14 +61,15 @@ const DAMBREAK_STEPS: usize = 15;
 impl Dataset {
     /// Generates or opens `spec`: `count` particles for a generator (its default if `None`),
     /// step `step` (default: the last), coloured by `attribute` (default: the generator's, or
-    /// the data's first attribute). `radius_pct`, if given, is the radius as a percentage of the
-    /// bounds' diagonal; otherwise [`default_radius`].
+    /// the data's first attribute). `radius`, if given, is read as `aarbf render --radius`
+    /// reads it (a length, or a percentage of the series' diagonal); otherwise
+    /// [`default_radius`].
     pub fn load(
         spec: &DataSpec,
         count: Option<usize>,
         step: Option<usize>,
         attribute: Option<&str>,
-        radius_pct: Option<f64>,
+        radius: Option<RadiusSpec>,
     ) -> Result<Dataset, StudyError> {
         let (series, generator) = match spec {
             DataSpec::Generated(g) => {
@@ -124,14 +126,9 @@ impl Dataset {
             )));
         }
         let bounds = data.bounds();
-        let radius = match radius_pct {
-            Some(p) if p.is_finite() && p > 0.0 => p / 100.0 * bounds.diagonal(),
-            Some(p) => {
-                return Err(StudyError::Invalid(format!(
-                    "--radius {p}%: a radius must be a positive percentage of the diagonal"
-                )));
-            }
-            None => default_radius(generator, data.len(), bounds),
+        let radius = match radius {
+            Some(r) => r.resolve(series.bounds().diagonal()),
+            None => default_radius(generator, data.len(), series.bounds()),
         };
         Ok(Dataset {
             name: spec.to_string(),
@@ -201,11 +198,11 @@ impl Dataset {
 
 /// The radius a study renders a data set at: for the unit-cube sets (`uniform`, `random`) the
 /// one at which about 30 particles reach a point, as the other benchmarks use; for every
-/// other data set 1.5% of the bounds' diagonal, the demo's radius.
-pub fn default_radius(generator: Option<Generator>, n: usize, bounds: Bounds) -> f64 {
+/// other data set 1.5% of the series' diagonal (`series_bounds`), the demo's radius.
+pub fn default_radius(generator: Option<Generator>, n: usize, series_bounds: Bounds) -> f64 {
     match generator {
         Some(Generator::Uniform | Generator::Random) => radius_for_overlap(30.0, n),
-        _ => 0.015 * bounds.diagonal(),
+        _ => RadiusSpec::PercentOfDiagonal(1.5).resolve(series_bounds.diagonal()),
     }
 }
 

@@ -148,7 +148,7 @@ pub struct Options {
     pub step: Option<usize>,
     pub attribute: Option<String>,
     /// The radius as a percentage of the step's diagonal (default: [`data::default_radius`]).
-    pub radius_pct: Option<f64>,
+    pub radius: Option<crate::scene_file::RadiusSpec>,
     /// The backends (empty: every backend this machine has).
     pub backends: Vec<BackendKind>,
     /// Results go to `out/<study>/`.
@@ -205,7 +205,7 @@ impl Default for Options {
             count: None,
             step: None,
             attribute: None,
-            radius_pct: None,
+            radius: None,
             backends: Vec::new(),
             out: PathBuf::from("studies"),
             force: false,
@@ -428,7 +428,7 @@ impl Ctx<'_> {
     /// Loads data set `spec` as the options ask.
     pub fn load(&self, spec: &DataSpec) -> Result<Dataset, StudyError> {
         let o = self.options;
-        Dataset::load(spec, o.count, o.step, o.attribute.as_deref(), o.radius_pct)
+        Dataset::load(spec, o.count, o.step, o.attribute.as_deref(), o.radius)
     }
 
     /// A progress bar over `len` measurements.

@@ -62,9 +62,8 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
         // whole step; a generator: its data generated at each N.
         let (whole, generator) = match spec {
             DataSpec::Path(_) => {
-                let load = |step| {
-                    super::Dataset::load(spec, None, step, o.attribute.as_deref(), o.radius_pct)
-                };
+                let load =
+                    |step| super::Dataset::load(spec, None, step, o.attribute.as_deref(), o.radius);
                 let ds = load(o.step)?;
                 let largest = ds.largest_step();
                 let ds = if o.step.is_none() && largest != ds.step {
@@ -82,16 +81,16 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
         };
         for &n in &ns {
             let ds = match (&whole, generator) {
-                (Some(whole), _) => whole.subset(n, 17, o.radius_pct.is_none())?,
+                (Some(whole), _) => whole.subset(n, 17, o.radius.is_none())?,
                 (None, generator) => {
                     let mut ds = super::Dataset::load(
                         spec,
                         Some(n),
                         o.step,
                         o.attribute.as_deref(),
-                        o.radius_pct,
+                        o.radius,
                     )?;
-                    if o.radius_pct.is_none()
+                    if o.radius.is_none()
                         && let Some(g) = generator
                         && !matches!(g, Generator::Uniform | Generator::Random)
                     {
