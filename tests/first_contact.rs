@@ -298,6 +298,16 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
         "0,0 looks from -y"
     );
     assert_eq!(saved.camera.up, Some(UpAxis::Z.vector().to_array()));
+    // The light's elevation is about the scene's vertical too: 60 degrees above the x-y plane.
+    assert_eq!(saved.camera.up_axis, Some(UpAxis::Z));
+    let settings = saved.render_settings(resolved.series.bounds()).unwrap();
+    assert_eq!(settings.up_axis, UpAxis::Z);
+    let (side, front) = settings.up_axis.horizontal();
+    let light = settings.light.direction_about(DVec3::Z, side, front);
+    assert!(
+        (light.z - settings.light.elevation.to_radians().sin()).abs() < 1e-12,
+        "{light}"
+    );
 }
 
 #[test]
@@ -758,9 +768,24 @@ fn each_study_lists_its_own_options_and_reads_a_radius_as_render_does() {
     ] {
         assert!(all.contains(option), "bench all lists {option}");
     }
-    let e = fails(&["bench", "noise", "--voxel-grids", "64"]);
+    // Another study's option is ignored, and said so (a script may pass one list to all).
+    let scratch = tempfile::tempdir().unwrap();
+    let out = aarbf(&[
+        "bench",
+        "noise",
+        "--voxel-grids",
+        "64",
+        "--data",
+        s(&scratch.path().join("no-such-data.csv")),
+        "--out",
+        s(scratch.path()),
+    ]);
+    assert!(!out.status.success(), "no data: the study stops");
+    let e = String::from_utf8_lossy(&out.stderr);
     assert!(
-        e.contains("--voxel-grids is not an option of `aarbf bench noise`"),
+        e.contains(
+            "`aarbf bench noise` does not read --voxel-grids (baselines and accuracy's): ignored"
+        ),
         "{e}"
     );
 

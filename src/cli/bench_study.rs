@@ -170,37 +170,47 @@ pub(super) fn tailor_help(bench: clap::Command) -> clap::Command {
     })
 }
 
-/// Refuses an option of another study (`aarbf bench noise --voxel-grids 64` would be ignored).
-pub(super) fn check_own_options(matches: &clap::ArgMatches) -> Result<(), String> {
+/// Says which options given are another study's, which this one does not read (`aarbf bench
+/// noise --voxel-grids 64`): a script may pass one list of options to every study, so they are
+/// ignored with a warning rather than refused.
+pub(super) fn warn_of_other_studies_options(matches: &clap::ArgMatches) {
     let Some(("bench", bench)) = matches.subcommand() else {
-        return Ok(());
+        return;
     };
     let Some((study, given)) = bench.subcommand() else {
-        return Ok(());
+        return;
     };
     let Some((_, own)) = STUDY_OPTIONS.iter().find(|(s, _)| *s == study) else {
-        return Ok(());
+        return;
     };
-    for (_, options) in STUDY_OPTIONS {
-        for &id in *options {
-            if !own.contains(&id)
-                && given.value_source(id) == Some(clap::parser::ValueSource::CommandLine)
-            {
-                let users: Vec<&str> = STUDY_OPTIONS
-                    .iter()
-                    .filter(|(_, o)| o.contains(&id))
-                    .map(|(s, _)| *s)
-                    .collect();
-                return Err(format!(
-                    "--{} is not an option of `aarbf bench {study}` (it is {}'s); `aarbf bench \
-                     {study} --help` lists its options",
-                    id.replace('_', "-"),
-                    users.join(" and ")
-                ));
-            }
+    let mut ignored = Vec::new();
+    let specific: std::collections::BTreeSet<&str> = STUDY_OPTIONS
+        .iter()
+        .flat_map(|(_, options)| options.iter().copied())
+        .collect();
+    for id in specific {
+        if !own.contains(&id)
+            && given.value_source(id) == Some(clap::parser::ValueSource::CommandLine)
+        {
+            let users: Vec<&str> = STUDY_OPTIONS
+                .iter()
+                .filter(|(_, o)| o.contains(&id))
+                .map(|(s, _)| *s)
+                .collect();
+            ignored.push(format!(
+                "--{} ({}'s)",
+                id.replace('_', "-"),
+                users.join(" and ")
+            ));
         }
     }
-    Ok(())
+    if !ignored.is_empty() {
+        tracing::warn!(
+            "`aarbf bench {study}` does not read {}: ignored (`aarbf bench {study} --help` lists \
+             its options)",
+            ignored.join(", ")
+        );
+    }
 }
 
 impl StudyArgs {

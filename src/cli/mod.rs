@@ -81,11 +81,7 @@ impl Cli {
         let mut command =
             negatives(Cli::command()).mut_subcommand("bench", bench_study::tailor_help);
         let mut matches = command.get_matches_mut();
-        if let Err(message) = bench_study::check_own_options(&matches) {
-            command
-                .error(clap::error::ErrorKind::ArgumentConflict, message)
-                .exit();
-        }
+        bench_study::warn_of_other_studies_options(&matches);
         Cli::from_arg_matches_mut(&mut matches).unwrap_or_else(|e| e.exit())
     }
 }

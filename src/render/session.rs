@@ -295,7 +295,12 @@ impl RenderSession {
             phi_ref: resolved.phi_ref,
             density_scale,
             majorant: density_scale * table_max(&optical_table),
-            light_dir: settings.light.direction(),
+            light_dir: {
+                let (side, front) = settings.up_axis.horizontal();
+                settings
+                    .light
+                    .direction_about(settings.up_axis.vector(), side, front)
+            },
             light_intensity: settings.light.intensity,
             ambient: settings.light.ambient,
             background: settings.background,

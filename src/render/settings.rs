@@ -1,6 +1,6 @@
 //! What a user chooses about a rendering.
 
-use crate::scene::camera::Camera;
+use crate::scene::camera::{Camera, UpAxis};
 use crate::scene::maps::OpticalDensityMap;
 use crate::values::frame::{Integrator, Light, NoiseKind};
 
@@ -24,6 +24,9 @@ pub struct RenderSettings {
     /// Colour by density instead of the attribute.
     pub colour_by_density: bool,
     pub light: Light,
+    /// The scene's vertical, which the light's azimuth and elevation are about (kept apart
+    /// from the camera's up vector, which turns as the viewer's trackball does).
+    pub up_axis: UpAxis,
     pub background: [f64; 3],
     /// Ray marching stops when a pixel's opacity reaches this.
     pub opacity_threshold: f64,
@@ -82,6 +85,7 @@ impl Default for RenderSettings {
             optical: OpticalDensityMap::default(),
             colour_by_density: false,
             light: Light::default(),
+            up_axis: UpAxis::Y,
             background: [0.0; 3],
             opacity_threshold: 0.99,
             splat_k: None,

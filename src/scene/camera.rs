@@ -154,7 +154,8 @@ fn planar_axis(bounds: Bounds) -> Option<usize> {
 
 /// The axis a view stands upright along: simulation data is usually z-up (gravity along -z),
 /// graphics data y-up.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub enum UpAxis {
     X,
     Y,
@@ -220,6 +221,19 @@ impl UpAxis {
             UpAxis::NegY => "-y",
             UpAxis::NegZ => "-z",
         }
+    }
+}
+
+impl TryFrom<String> for UpAxis {
+    type Error = String;
+    fn try_from(s: String) -> Result<UpAxis, String> {
+        s.parse()
+    }
+}
+
+impl From<UpAxis> for String {
+    fn from(a: UpAxis) -> String {
+        a.name().to_owned()
     }
 }
 

@@ -307,6 +307,10 @@ pub struct CameraSection {
     /// axis) around the data's centre, DIST away (default: the data fills the view), instead
     /// of eye/at.
     pub from: Option<String>,
+    /// The scene's vertical (`"z"`, `"-y"`, ...), which views by angles and the light are
+    /// about. Default: `up` where it points along an axis, else the data's default (z, or
+    /// face on to planar data).
+    pub up_axis: Option<UpAxis>,
 }
 
 /// Parses `AZ,EL` or `AZ,EL,DIST` (degrees, degrees, data units).
@@ -415,11 +419,12 @@ impl CameraSection {
         }
         let up = self.up.map(DVec3::from);
         let axis = || -> Result<UpAxis, String> {
-            match up {
-                Some(u) => UpAxis::along(u).ok_or_else(|| {
+            match (self.up_axis, up) {
+                (Some(a), _) => Ok(a),
+                (None, Some(u)) => UpAxis::along(u).ok_or_else(|| {
                     format!("camera up {u} must point along an axis to place a view by angles")
                 }),
-                None => Ok(UpAxis::along(Camera::default_for(bounds).up).unwrap_or(UpAxis::Z)),
+                (None, None) => Ok(self.up_axis(bounds)),
             }
         };
         if let Some(from) = &self.from {
@@ -440,13 +445,22 @@ impl CameraSection {
                 up: up.unwrap_or_else(|| Camera::default_for(bounds).up),
                 fovy,
             }),
-            (None, None) if up.is_some() => Some(Camera {
+            (None, None) if up.is_some() || self.up_axis.is_some() => Some(Camera {
                 fovy,
                 ..Camera::default_upright(bounds, axis()?)
             }),
             (None, None) => None,
             _ => return Err("camera: eye and at go together".into()),
         })
+    }
+
+    /// The scene's vertical over data with `bounds`: `up_axis`, else `up` where it points
+    /// along an axis, else the data's default view's.
+    pub fn up_axis(&self, bounds: Bounds) -> UpAxis {
+        self.up_axis
+            .or_else(|| self.up.and_then(|u| UpAxis::along(DVec3::from(u))))
+            .or_else(|| UpAxis::along(Camera::default_for(bounds).up))
+            .unwrap_or(UpAxis::Z)
     }
 
     /// A look-at camera, exactly.
@@ -458,6 +472,7 @@ impl CameraSection {
             fovy: Some(camera.fovy),
             orbit: None,
             from: None,
+            up_axis: None,
         }
     }
 }
@@ -492,6 +507,7 @@ impl SceneFile {
                 .map_err(|e| e.to_string())?,
             colour_by_density: r.color_by_density.unwrap_or(d.colour_by_density),
             light: r.light.unwrap_or(d.light),
+            up_axis: self.camera.up_axis(bounds),
             background: r.background.unwrap_or(d.background),
             opacity_threshold: r.opacity_threshold.unwrap_or(d.opacity_threshold),
             splat_k: r.splat_k,
@@ -522,7 +538,10 @@ impl SceneFile {
         SceneFile {
             data,
             field,
-            camera: CameraSection::of(camera),
+            camera: CameraSection {
+                up_axis: Some(settings.up_axis),
+                ..CameraSection::of(camera)
+            },
             render: RenderSection {
                 width: Some(settings.width),
                 height: Some(settings.height),

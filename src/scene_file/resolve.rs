@@ -58,6 +58,7 @@ impl ViewFlags {
     pub fn apply(&self, camera: &mut super::CameraSection) -> anyhow::Result<()> {
         if let Some(up) = self.up {
             camera.up = Some(up.vector().to_array());
+            camera.up_axis = Some(up);
         }
         if let Some(from) = &self.camera_from {
             super::parse_camera_from(from).map_err(anyhow::Error::msg)?;

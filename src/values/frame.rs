@@ -72,7 +72,7 @@ pub enum ColourMode {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Light {
-    /// Degrees around the vertical (y) axis.
+    /// Degrees around the scene's up axis (the render settings' `up_axis`).
     pub azimuth: f64,
     /// Degrees above the horizon.
     pub elevation: f64,
@@ -92,10 +92,16 @@ impl Default for Light {
 }
 
 impl Light {
-    /// Unit vector towards the light.
+    /// Unit vector towards the light, with y up (azimuth 0 towards +z, 90 towards +x).
     pub fn direction(&self) -> glam::DVec3 {
+        self.direction_about(DVec3::Y, DVec3::X, DVec3::Z)
+    }
+
+    /// Unit vector towards the light, the elevation measured from the plane normal to `up`
+    /// and the azimuth from `front` towards `side` (a right-handed frame side, up, front).
+    pub fn direction_about(&self, up: DVec3, side: DVec3, front: DVec3) -> DVec3 {
         let (a, e) = (self.azimuth.to_radians(), self.elevation.to_radians());
-        glam::DVec3::new(e.cos() * a.sin(), e.sin(), e.cos() * a.cos())
+        e.cos() * (a.sin() * side + a.cos() * front) + e.sin() * up
     }
 }
 
