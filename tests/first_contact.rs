@@ -168,7 +168,8 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
     // Every default is said: the series, the colour, the radius and where it came from.
     for said in [
         "left out: 'boundary.vtp'",
-        "colour: by density (no --attribute given); the data's attributes: rho, p, vel_x",
+        "colour: 'rho', the data's first attribute (no --attribute given); the others: p, vel_x",
+        "colour: 'rho' over [997.24, 1004.56], the series' least to largest value",
         "2 x the particles' spacing in step 0",
         "the data has 'h', a smoothing length: --radius-attribute h",
     ] {
@@ -208,6 +209,50 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
             "slice along {axis}: Phi_ref {sliced}, render {rendered}"
         );
     }
+
+    // The legend is drawn unless asked not to, and it names the attribute: the same render
+    // without it differs only in the bottom-left corner.
+    let bare = folder.parent().unwrap().join("bare.png");
+    ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&bare),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--spp",
+        "1",
+        "--no-legend",
+    ]);
+    let with = folder.parent().unwrap().join("with.png");
+    ok(&[
+        "render",
+        "--data",
+        s(&folder),
+        "--out",
+        s(&with),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--spp",
+        "1",
+    ]);
+    let (bare, with) = (
+        image::open(&bare).unwrap().to_rgb8(),
+        image::open(&with).unwrap().to_rgb8(),
+    );
+    let differ = |y0: u32, y1: u32| {
+        (0..160)
+            .flat_map(|x| (y0..y1).map(move |y| (x, y)))
+            .filter(|&(x, y)| bare.get_pixel(x, y) != with.get_pixel(x, y))
+            .count()
+    };
+    assert!(differ(120 - 60, 120) > 1000, "a legend is drawn by default");
+    assert_eq!(differ(0, 120 - 62), 0);
 
     // The library's resolution of the same flags: the radius joins neighbours on the 0.04
     // lattice (twice the spacing, not 1% of the diagonal, 0.0099), and the view is z-up.

@@ -14,7 +14,7 @@ use crate::render::legend::Legend;
 use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
 use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
-use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve, resolve_for_images};
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
 
@@ -149,11 +149,15 @@ pub struct RenderArgs {
     /// Overwrite existing outputs.
     #[arg(long)]
     pub force: bool,
-    /// Draw a colour legend over the image's bottom-left corner: the colour map as a bar, the
-    /// attribute and the range it is normalised over (or the density), and the values at its
-    /// ends (8-bit PNG only: 16-bit and .exr outputs are for compositing).
+    /// Draw the colour legend over the image's bottom-left corner (the colour map as a bar,
+    /// the attribute and the range it spans, or the density, and the values at its ends), and
+    /// fail where it cannot be drawn. Without --legend or --no-legend it is drawn on 8-bit PNG
+    /// images of at least 120x64 pixels (16-bit and .exr outputs are for compositing).
     #[arg(long)]
     pub legend: bool,
+    /// Draw no colour legend.
+    #[arg(long, conflicts_with = "legend")]
+    pub no_legend: bool,
 }
 
 fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
@@ -353,8 +357,9 @@ impl OutputFormat {
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    // The flags are checked before the data is opened or a device is probed.
-    {
+    // The flags are checked before the data is opened or a device is probed (and whether a
+    // legend is drawn decided).
+    let draw_legend = {
         let mut flags = match &args.data.scene {
             Some(path) => SceneFile::load(path)?,
             None => SceneFile::default(),
@@ -368,18 +373,22 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             !args.legend || format == OutputFormat::Png8,
             "--legend draws on 8-bit PNG images only (16-bit and .exr outputs are for compositing)"
         );
-        if args.legend {
-            let settings = flags.render_settings(unit).map_err(anyhow::Error::msg)?;
-            let (w, h) = crate::render::legend::MIN_SIZE;
-            ensure!(
-                settings.width >= w && settings.height >= h,
-                "--legend needs an image of at least {w}x{h} pixels, not {}x{}",
-                settings.width,
-                settings.height
-            );
-        }
-    }
-    let mut resolved = resolve(&args.data, &args.field)?;
+        let settings = flags.render_settings(unit).map_err(anyhow::Error::msg)?;
+        let (w, h) = crate::render::legend::MIN_SIZE;
+        let fits = settings.width >= w && settings.height >= h;
+        ensure!(
+            !args.legend || fits,
+            "--legend needs an image of at least {w}x{h} pixels, not {}x{}",
+            settings.width,
+            settings.height
+        );
+        !args.no_legend && format == OutputFormat::Png8 && fits
+    };
+    let mut resolved = if args.color_by_density {
+        resolve(&args.data, &args.field)?
+    } else {
+        resolve_for_images(&args.data, &args.field)?
+    };
     apply_flags(&args, &mut resolved.scene)?;
     match args.method {
         Method::Splat => {
@@ -683,7 +692,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             }
         };
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
-        let legend = match (args.legend, &scene_used_phi_ref) {
+        let legend = match (draw_legend, &scene_used_phi_ref) {
             (true, Some(phi_ref)) => Some(Legend::of_field(
                 &resolved.field,
                 resolved.series_range(),

@@ -9,7 +9,7 @@ use glam::DVec3;
 use crate::field::{Classification, Particles, RegularGrid, normalise};
 use crate::render::auto::AutoValues;
 use crate::render::legend::Legend;
-use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve_for_images};
 use crate::values::color_space::linear_to_srgb;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -45,10 +45,14 @@ pub struct SliceArgs {
     /// Overwrite an existing output.
     #[arg(long)]
     pub force: bool,
-    /// Draw a colour legend over the image's bottom-left corner (the attribute and its range,
-    /// or the density).
+    /// Draw the colour legend over the image's bottom-left corner (the attribute and its
+    /// range, or the density), and fail where it cannot be drawn. Without --legend or
+    /// --no-legend it is drawn on images of at least 120x64 pixels.
     #[arg(long)]
     pub legend: bool,
+    /// Draw no colour legend.
+    #[arg(long, conflicts_with = "legend")]
+    pub no_legend: bool,
 }
 
 pub fn run(args: SliceArgs) -> anyhow::Result<()> {
@@ -77,7 +81,7 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         );
     }
     crate::io::output::check_writable(&args.out, args.force)?;
-    let resolved = resolve(&args.data, &args.field)?;
+    let resolved = resolve_for_images(&args.data, &args.field)?;
     let step = resolved.series.step(resolved.step)?;
     // The particles alone: scattering them onto the pixels needs no tree.
     let particles = Particles::prepare(
@@ -139,7 +143,8 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
             colour.map(|c| (linear_to_srgb((c * alpha).clamp(0.0, 1.0)) * 255.0).round() as u8),
         );
     }
-    if args.legend {
+    let (min_w, min_h) = crate::render::legend::MIN_SIZE;
+    if args.legend || (!args.no_legend && width as u32 >= min_w && height as u32 >= min_h) {
         Legend::of_field(
             &resolved.field,
             Some(range),

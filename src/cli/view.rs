@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use crate::backend::BackendKind;
-use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve_for_images};
 use crate::viewer::{ViewOptions, WindowOptions};
 
 #[derive(Debug, Args)]
@@ -49,7 +49,7 @@ fn parse_size(text: &str) -> Result<[f32; 2], String> {
 }
 
 pub fn run(args: ViewArgs) -> anyhow::Result<()> {
-    let mut loaded = resolve(&args.data, &args.field)?;
+    let mut loaded = resolve_for_images(&args.data, &args.field)?;
     args.view.apply(&mut loaded.scene.camera)?;
     if let Some(spp) = args.spp {
         anyhow::ensure!(spp > 0, "--spp must be at least 1");

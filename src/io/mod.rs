@@ -271,7 +271,7 @@ fn report_left_out(path: &Path, chosen: &stems::StemGroup, left_out: &[stems::St
             n => format!("'{}' ({n} files)", g.pattern),
         })
         .collect();
-    tracing::warn!(
+    let message = format!(
         "{}: the series is '{}' ({} steps, the most of any name in it); left out: {}. To open \
          another, name it: --data '{}'",
         path.display(),
@@ -280,6 +280,14 @@ fn report_left_out(path: &Path, chosen: &stems::StemGroup, left_out: &[stems::St
         groups.join(", "),
         left_out[0].data_argument()
     );
+    // A command lists a series more than once (to learn its attributes, then to open it; the
+    // viewer on each change of attribute): said once per process.
+    static SAID: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+    let mut said = SAID.lock().unwrap_or_else(|e| e.into_inner());
+    if !said.contains(&message) {
+        tracing::warn!("{message}");
+        said.push(message);
+    }
 }
 
 /// Reads one step, keeping the attributes `selection` names.

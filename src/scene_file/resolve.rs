@@ -284,7 +284,25 @@ impl Resolved {
     }
 }
 
+/// Resolves the data and the field as [`resolve`] does, for a command that makes an image:
+/// without an attribute (flag or scene file), the image is coloured by the data's first
+/// attribute, which is said with the others (`--color-by-density` colours by density).
+pub fn resolve_for_images(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolved> {
+    resolve_choosing(data, options, true)
+}
+
+/// Resolves the data and the field: flags over the scene file, the series opened with the
+/// attributes the field uses, and the automatic values of the data (radius, cluster size,
+/// range) chosen and said. Without an attribute the field carries none (density only).
 pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolved> {
+    resolve_choosing(data, options, false)
+}
+
+fn resolve_choosing(
+    data: &DataArgs,
+    options: &FieldOptions,
+    first_attribute_by_default: bool,
+) -> anyhow::Result<Resolved> {
     let scene = match &data.scene {
         Some(path) => SceneFile::load(path)?,
         None => SceneFile::default(),
@@ -294,7 +312,35 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
         .clone()
         .or(scene.data.path.clone())
         .context("no data given: pass --data <path> or a --scene file with [data] path")?;
-    let attribute = options.attribute.clone().or(scene.data.attribute.clone());
+    let mut attribute = options.attribute.clone().or(scene.data.attribute.clone());
+    // The attributes the data holds (its first step's), read where a default needs them.
+    let mut names_in_data: Option<Vec<String>> = None;
+    if attribute.is_none() && first_attribute_by_default {
+        let refs = crate::io::list_steps(&path, data.format.or(scene.data.format))?;
+        let names: Vec<String> = match refs.first() {
+            Some(first) => crate::io::read_step(first, &AttributeSelection::All)?
+                .attribute_names()
+                .iter()
+                .map(|n| n.to_string())
+                .collect(),
+            None => Vec::new(),
+        };
+        attribute = names.first().cloned();
+        match &attribute {
+            Some(first) => tracing::info!(
+                "colour: '{first}', the data's first attribute (no --attribute given); the \
+                 others: {} (--attribute NAME picks one, --color-by-density colours by \
+                 density)",
+                if names.len() > 1 {
+                    names[1..].join(", ")
+                } else {
+                    "none".to_owned()
+                }
+            ),
+            None => tracing::info!("colour: by density (the data has no attributes)"),
+        }
+        names_in_data = Some(names);
+    }
     let radius_attribute = options
         .radius_attribute
         .clone()
@@ -365,12 +411,12 @@ pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolv
         Some(spec) => ColorMap::from_name_or_file(spec)?,
         None => ColorMap::default(),
     };
-    let names_in_data = if attribute.is_none() || radius_attribute.is_none() {
-        series.attributes_in_data()?
-    } else {
-        Vec::new()
+    let names_in_data = match names_in_data {
+        Some(names) => names,
+        None if attribute.is_none() || radius_attribute.is_none() => series.attributes_in_data()?,
+        None => Vec::new(),
     };
-    if attribute.is_none() {
+    if attribute.is_none() && !first_attribute_by_default {
         tracing::info!(
             "colour: by density (no --attribute given); the data's attributes: {} (--attribute \
              NAME colours by one)",
