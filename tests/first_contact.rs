@@ -695,6 +695,7 @@ fn robust_and_per_step_ranges_and_the_legend_say_what_the_colours_mean() {
         "120",
         "--spp",
         "1",
+        "--no-legend",
     ]);
     let plain = image::open(&plain).unwrap().to_rgb8();
     // The legend covers the bottom-left corner, and nothing else.

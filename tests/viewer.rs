@@ -147,7 +147,15 @@ fn pixels(path: &Path) -> image::RgbImage {
 
 fn render_scene(scene: &Path, out: &Path) {
     let status = Command::new(env!("CARGO_BIN_EXE_aarbf"))
-        .args(["render", "--backend", "cpu", "--force", "--scene"])
+        // The viewer draws its legend over the window, not into its image.
+        .args([
+            "render",
+            "--backend",
+            "cpu",
+            "--force",
+            "--no-legend",
+            "--scene",
+        ])
         .arg(scene)
         .arg("--out")
         .arg(out)
