@@ -132,6 +132,9 @@ impl std::fmt::Display for RangeSpec {
     }
 }
 
+/// A resolved range (`None`: the series', the field's default) and what it is, in words.
+pub type RangeAndMeaning = (Option<(f64, f64)>, &'static str);
+
 impl RangeSpec {
     /// A few words for a legend.
     pub fn label(self) -> &'static str {
@@ -156,7 +159,7 @@ impl RangeSpec {
         series: &crate::scene::TimeSeries,
         attribute: Option<&str>,
         step: usize,
-    ) -> Result<(Option<(f64, f64)>, &'static str), crate::io::DataError> {
+    ) -> Result<RangeAndMeaning, crate::io::DataError> {
         let Some(name) = attribute else {
             return Ok((None, "no attribute"));
         };
@@ -687,7 +690,8 @@ cluster = 8
             assert_eq!(spec.to_string().parse::<RangeSpec>().unwrap(), spec);
         }
         // 17 digits survive the round trip.
-        let tight = RangeSpec::Fixed(0.10000000000000001, 0.29999999999999999);
+        let tight: RangeSpec = "0.10000000000000001,0.29999999999999999".parse().unwrap();
+        assert_eq!(tight, RangeSpec::Fixed(0.1, 0.3));
         assert_eq!(tight.to_string().parse::<RangeSpec>().unwrap(), tight);
         for bad in ["\"widest\"", "[2.0, 1.0]", "\"1,nan\""] {
             let e = toml::from_str::<SceneFile>(&format!("[data]\nattribute_range = {bad}\n"));
