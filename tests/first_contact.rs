@@ -170,8 +170,8 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
         "left out: 'boundary.vtp'",
         "colour: 'rho', the data's first attribute (no --attribute given); the others: p, vel_x",
         "colour: 'rho' over [997.24, 1004.56], the series' least to largest value",
-        "2 x the particles' spacing in step 0",
-        "the data has 'h', a smoothing length: --radius-attribute h",
+        "2 x the median smoothing length 'h' in step 0",
+        "--radius-attribute h gives each particle its own",
     ] {
         assert!(log.contains(said), "missing '{said}' in:\n{log}");
     }
@@ -254,8 +254,8 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
     assert!(differ(120 - 60, 120) > 1000, "a legend is drawn by default");
     assert_eq!(differ(0, 120 - 62), 0);
 
-    // The library's resolution of the same flags: the radius joins neighbours on the 0.04
-    // lattice (twice the spacing, not 1% of the diagonal, 0.0099), and the view is z-up.
+    // The library's resolution of the same flags: the radius is the SPH kernel's support,
+    // 2h = 0.104 over the 0.04 lattice (not 1% of the diagonal, 0.0099), and the view is z-up.
     let resolved = resolve(
         &DataArgs {
             scene: None,
@@ -269,7 +269,7 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
     )
     .unwrap();
     assert!(
-        (resolved.field.radius - 0.08).abs() < 1e-4,
+        (resolved.field.radius - 2.0 * 0.052).abs() < 1e-12,
         "{}",
         resolved.field.radius
     );
@@ -352,6 +352,45 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
     assert!(
         (light.z - settings.light.elevation.to_radians().sin()).abs() < 1e-12,
         "{light}"
+    );
+}
+
+#[test]
+fn without_a_smoothing_length_the_radius_is_twice_the_particles_spacing() {
+    // The GADGET-like snapshots carry masses and densities but no smoothing length.
+    let (_keep, folder) = run_folder("gadget_like");
+    let data = DataArgs {
+        scene: None,
+        data: Some(folder.clone()),
+        format: None,
+        step: None,
+        cache_mib: 64,
+        rescan: false,
+    };
+    let resolved = resolve(&data, &FieldOptions::default()).unwrap();
+    // Brute force over every particle of step 0 (1000, so the sample is all of them): the
+    // distance to the nearest particle at another position, the upper median of those.
+    let step = resolved.series.step(0).unwrap();
+    let p = &step.positions;
+    let mut nearest: Vec<f64> = (0..p.len())
+        .filter_map(|i| {
+            (0..p.len())
+                .map(|j| p[i].distance(p[j]))
+                .filter(|&d| d > 0.0)
+                .min_by(f64::total_cmp)
+        })
+        .collect();
+    nearest.sort_by(f64::total_cmp);
+    let expected = 2.0 * nearest[nearest.len() / 2];
+    assert!(
+        (resolved.field.radius - expected).abs() <= 1e-12 * expected,
+        "{} against {expected}",
+        resolved.field.radius
+    );
+    let (info, _) = ok(&["info", s(&folder)]);
+    assert!(
+        info.contains("2 x the particles' spacing in step 0"),
+        "{info}"
     );
 }
 

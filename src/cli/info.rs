@@ -87,8 +87,8 @@ pub fn devices() -> String {
 /// What `render`, `slice` and `view` choose for this data when not told.
 fn defaults(series: &TimeSeries) -> anyhow::Result<String> {
     use std::fmt::Write;
-    let names = series.attributes_in_data()?;
-    let (_, radius) = crate::scene_file::resolve::default_radius(series, None, &names)?;
+    let first = series.first_step_in_full()?;
+    let (_, radius) = crate::scene_file::resolve::default_radius(series, None, first.as_deref())?;
     let camera = crate::scene::Camera::default_for(series.bounds());
     let mut out = String::new();
     let _ = writeln!(out, "defaults (render, slice, view):");

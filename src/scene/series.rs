@@ -373,18 +373,26 @@ impl TimeSeries {
     /// Every attribute the data holds, including those this series did not select (for
     /// errors that tell the user what to choose from): read from the first step's file.
     pub fn attributes_in_data(&self) -> Result<Vec<String>, DataError> {
-        let names = |step: &Step| {
-            step.attribute_names()
-                .iter()
-                .map(|n| n.to_string())
-                .collect()
-        };
+        Ok(self
+            .first_step_in_full()?
+            .map(|step| {
+                step.attribute_names()
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect()
+            })
+            .unwrap_or_default())
+    }
+
+    /// The first step with every attribute its file holds, including those this series did
+    /// not select (read again from the file; not cached).
+    pub fn first_step_in_full(&self) -> Result<Option<Arc<Step>>, DataError> {
         match &self.shared.source {
-            Source::Files { steps, .. } => match steps.first() {
-                Some(r) => Ok(names(&io::read_step(r, &AttributeSelection::All)?)),
-                None => Ok(Vec::new()),
-            },
-            Source::Memory(steps) => Ok(steps.first().map(|s| names(s)).unwrap_or_default()),
+            Source::Files { steps, .. } => steps
+                .first()
+                .map(|r| io::read_step(r, &AttributeSelection::All).map(Arc::new))
+                .transpose(),
+            Source::Memory(steps) => Ok(steps.first().cloned()),
         }
     }
 

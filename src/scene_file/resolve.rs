@@ -2,6 +2,7 @@
 //! (flags win), and resolved into an open series and its field.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use anyhow::{Context, bail};
 use clap::Args;
@@ -12,6 +13,7 @@ use crate::field::{Classification, FieldSettings};
 use crate::io::{AttributeSelection, Format};
 use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
 use crate::scene::{OpenOptions, TimeSeries};
+use crate::values::Step;
 
 /// Where the data comes from.
 #[derive(Debug, Clone, Args)]
@@ -85,8 +87,10 @@ pub struct FieldOptions {
     #[arg(long, value_name = "LO,HI|series|robust|step|robust-step")]
     pub attribute_range: Option<RangeSpec>,
     /// Global RBF radius: a length, or a percentage of the series' bounding-box diagonal
-    /// ("1.5%"). Default: twice the particles' spacing (the median nearest-neighbour distance
-    /// in the first step), or 2 with --radius-attribute (radius 2h, the SPH kernel's support).
+    /// ("1.5%"). Default: twice the median smoothing length (h, hsml, SmoothingLength) of the
+    /// first step where the data has one, else twice the particles' spacing (the median
+    /// nearest-neighbour distance in the first step); 2 with --radius-attribute (radius 2h,
+    /// the SPH kernel's support).
     #[arg(long)]
     pub radius: Option<RadiusSpec>,
     /// A per-particle radius (smoothing length) attribute, multiplied by the global radius.
@@ -132,11 +136,12 @@ const SMOOTHING_LENGTH_NAMES: [&str; 6] = [
 
 /// The global radius when none is given, derived from the data as the other automatic values
 /// are, from the series' first step (so every step and command agrees), with a sentence saying
-/// how (for the log and `aarbf info`).
+/// how (for the log and `aarbf info`). `first_in_full` is that step with every attribute its
+/// file holds (to find a smoothing length the field does not use).
 pub fn default_radius(
     series: &TimeSeries,
     radius_attribute: Option<&str>,
-    names_in_data: &[String],
+    first_in_full: Option<&Step>,
 ) -> anyhow::Result<(f64, String)> {
     if let Some(h) = radius_attribute {
         return Ok((
@@ -147,16 +152,35 @@ pub fn default_radius(
             ),
         ));
     }
-    let smoothing_length = names_in_data
-        .iter()
-        .find(|n| SMOOTHING_LENGTH_NAMES.contains(&n.to_ascii_lowercase().as_str()));
-    let hint = match smoothing_length {
-        Some(h) => format!(
-            "; the data has '{h}', a smoothing length: --radius-attribute {h} makes each \
-             particle's radius {RADIUS_PER_SMOOTHING_LENGTH} x {h}"
-        ),
-        None => String::new(),
-    };
+    // A smoothing length in the data: its median sets the radius (2h, the kernel's support).
+    let smoothing_length = first_in_full.and_then(|step| {
+        step.attributes
+            .iter()
+            .find(|a| SMOOTHING_LENGTH_NAMES.contains(&a.name.to_ascii_lowercase().as_str()))
+    });
+    if let Some(h) = smoothing_length {
+        let mut positive: Vec<f64> = h
+            .values
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .collect();
+        if !positive.is_empty() {
+            let middle = positive.len() / 2;
+            let (_, &mut median, _) = positive.select_nth_unstable_by(middle, f64::total_cmp);
+            let r = RADIUS_PER_SMOOTHING_LENGTH * median;
+            let name = &h.name;
+            return Ok((
+                r,
+                format!(
+                    "{r:.6e}, {RADIUS_PER_SMOOTHING_LENGTH} x the median smoothing length \
+                     '{name}' in step 0 ({median:.6e}); --radius-attribute {name} gives each \
+                     particle its own, --radius sets a length or a percentage of the diagonal \
+                     (\"1.5%\")"
+                ),
+            ));
+        }
+    }
     let spacing = if series.is_empty() {
         None
     } else {
@@ -170,7 +194,7 @@ pub fn default_radius(
                 format!(
                     "{r:.6e}, {RADIUS_PER_SPACING} x the particles' spacing in step 0 (median \
                      nearest-neighbour distance {d:.6e}); --radius sets a length or a \
-                     percentage of the diagonal (\"1.5%\"){hint}"
+                     percentage of the diagonal (\"1.5%\")"
                 ),
             )
         }
@@ -180,12 +204,18 @@ pub fn default_radius(
                 r,
                 format!(
                     "{r:.6e}, {} of the bounding-box diagonal (step 0 has no two particles \
-                     apart to measure a spacing); --radius sets it{hint}",
+                     apart to measure a spacing); --radius sets it",
                     RadiusSpec::DEFAULT
                 ),
             )
         }
     })
+}
+
+/// The names of a step's attributes (none without a step).
+fn names_of(step: Option<&Step>) -> Vec<String> {
+    step.map(|s| s.attribute_names().iter().map(|n| n.to_string()).collect())
+        .unwrap_or_default()
 }
 
 /// Data and field settings after merging flags over the scene file.
@@ -313,18 +343,17 @@ fn resolve_choosing(
         .or(scene.data.path.clone())
         .context("no data given: pass --data <path> or a --scene file with [data] path")?;
     let mut attribute = options.attribute.clone().or(scene.data.attribute.clone());
-    // The attributes the data holds (its first step's), read where a default needs them.
-    let mut names_in_data: Option<Vec<String>> = None;
+    // The first step with every attribute it holds, read where a default needs it.
+    let mut first_in_full: Option<Arc<Step>> = None;
     if attribute.is_none() && first_attribute_by_default {
         let refs = crate::io::list_steps(&path, data.format.or(scene.data.format))?;
-        let names: Vec<String> = match refs.first() {
-            Some(first) => crate::io::read_step(first, &AttributeSelection::All)?
-                .attribute_names()
-                .iter()
-                .map(|n| n.to_string())
-                .collect(),
-            None => Vec::new(),
-        };
+        if let Some(first) = refs.first() {
+            first_in_full = Some(Arc::new(crate::io::read_step(
+                first,
+                &AttributeSelection::All,
+            )?));
+        }
+        let names = names_of(first_in_full.as_deref());
         attribute = names.first().cloned();
         match &attribute {
             Some(first) => tracing::info!(
@@ -339,7 +368,6 @@ fn resolve_choosing(
             ),
             None => tracing::info!("colour: by density (the data has no attributes)"),
         }
-        names_in_data = Some(names);
     }
     let radius_attribute = options
         .radius_attribute
@@ -411,11 +439,12 @@ fn resolve_choosing(
         Some(spec) => ColorMap::from_name_or_file(spec)?,
         None => ColorMap::default(),
     };
-    let names_in_data = match names_in_data {
-        Some(names) => names,
-        None if attribute.is_none() || radius_attribute.is_none() => series.attributes_in_data()?,
-        None => Vec::new(),
+    let first_in_full = match first_in_full {
+        Some(step) => Some(step),
+        None if attribute.is_none() || radius_attribute.is_none() => series.first_step_in_full()?,
+        None => None,
     };
+    let names_in_data = names_of(first_in_full.as_deref());
     if attribute.is_none() && !first_attribute_by_default {
         tracing::info!(
             "colour: by density (no --attribute given); the data's attributes: {} (--attribute \
@@ -430,8 +459,11 @@ fn resolve_choosing(
     let radius = match options.radius.or(scene.field.radius) {
         Some(spec) => spec.resolve(series.bounds().diagonal()),
         None => {
-            let (radius, how) =
-                default_radius(&series, radius_attribute.as_deref(), &names_in_data)?;
+            let (radius, how) = default_radius(
+                &series,
+                radius_attribute.as_deref(),
+                first_in_full.as_deref(),
+            )?;
             tracing::info!("radius: {how}");
             radius
         }

@@ -361,15 +361,18 @@ impl ViewerApp {
         }
     }
 
-    /// What the colours of the image show, as `--legend` says it.
-    fn legend(&self) -> Legend {
-        let series_range = self
-            .state
+    /// The field's attribute over the whole series (its ranges), if the field carries one.
+    fn series_attribute(&self) -> Option<crate::scene::AttributeInfo> {
+        self.state
             .field
             .attribute
             .as_deref()
             .and_then(|a| self.series.attribute(a))
-            .map(|a| (a.min, a.max));
+    }
+
+    /// What the colours of the image show, as `--legend` says it.
+    fn legend(&self) -> Legend {
+        let series_range = self.series_attribute().map(|a| (a.min, a.max));
         let range_is = match self.range_mode {
             RangeMode::Series => "series range",
             RangeMode::Step => "step range",
@@ -487,13 +490,7 @@ impl ViewerApp {
                 }
             }
             RangeMode::Robust => {
-                self.state.field.attribute_range = self
-                    .state
-                    .field
-                    .attribute
-                    .as_deref()
-                    .and_then(|a| self.series.attribute(a))
-                    .map(|a| (a.p01, a.p99));
+                self.state.field.attribute_range = self.series_attribute().map(|a| (a.p01, a.p99));
             }
             RangeMode::RobustStep => {
                 if let Some(h) = &histogram
@@ -505,11 +502,7 @@ impl ViewerApp {
             }
             RangeMode::Fixed => {
                 let series_range = self
-                    .state
-                    .field
-                    .attribute
-                    .as_deref()
-                    .and_then(|a| self.series.attribute(a))
+                    .series_attribute()
                     .map_or((0.0, 1.0), |a| (a.min, a.max));
                 let (mut lo, mut hi) = self.state.field.attribute_range.unwrap_or(series_range);
                 ui.horizontal(|ui| {
