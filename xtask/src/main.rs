@@ -11,6 +11,10 @@
 //!   `args` instead) on every backend present, into `target/studies/`.
 //! - `fuzz [--seconds N] [TARGET...]`: run the reader fuzz targets (cargo fuzz, libFuzzer) for a
 //!   bounded time each, copy any finding into tests/fuzz_regressions/, print a summary.
+//! - `device-check --prepare`: build what `scripts/device-check.sh` needs on a GPU machine that
+//!   reaches no registry into `.device-check/` (the stripped release binary, the Vulkan
+//!   loader's Debian packages); `device-check --dry-run`: the same script here on lavapipe, at
+//!   a reduced size, into `target/device-check-dry/`.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -39,14 +43,16 @@ fn main() -> ExitCode {
         Some("demo") => demo(),
         Some("bench") if args.len() > 1 => bench(&args[1], &args[2..]),
         Some("fuzz") => fuzz(&args[1..]),
+        Some("device-check") => device_check(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <setup | test [cargo test args] | demo | bench NAME [args] | fuzz [--seconds N] [TARGET...]>\n\n  \
+                "usage: cargo xtask <setup | test [cargo test args] | demo | bench NAME [args] | fuzz [--seconds N] [TARGET...] | device-check --prepare|--dry-run>\n\n  \
                  setup  install the Vulkan driver (lavapipe) and tools if missing\n  \
                  test   setup, then run every test\n  \
                  demo   setup, then render the demo scene to demo.png\n  \
                  bench  run benches/NAME.rs (results belong in docs/benchmarks.md); `bench studies`\n         runs every study of the paper (aarbf bench all) into target/studies/\n  \
-                 fuzz   [--seconds N] [TARGET...]: fuzz the readers (default 600 s each)"
+                 fuzz   [--seconds N] [TARGET...]: fuzz the readers (default 600 s each)\n  \
+                 device-check --prepare | --dry-run: ready .device-check/ for a GPU machine, or\n         run scripts/device-check.sh here on lavapipe at a reduced size"
             );
             return ExitCode::from(2);
         }
@@ -527,5 +533,110 @@ fn demo() -> Result<()> {
         .args(["--force", "--out"])
         .arg(root.join("demo.png")))?;
     step(&format!("wrote {}", root.join("demo.png").display()));
+    Ok(())
+}
+
+/// What a GPU machine that reaches no registry needs, in one ignored folder.
+const DEVICE_CHECK_DIR: &str = ".device-check";
+/// The folder must travel with the working tree (64 MiB in all).
+const DEVICE_CHECK_MAX_BYTES: u64 = 60 << 20;
+
+fn device_check(args: &[String]) -> Result<()> {
+    match args.first().map(String::as_str) {
+        Some("--prepare") => device_check_prepare(),
+        Some("--dry-run") => device_check_dry_run(),
+        _ => bail!("usage: cargo xtask device-check --prepare | --dry-run"),
+    }
+}
+
+/// `.device-check/aarbf` (the release binary, stripped) and `.device-check/debs/` (the Vulkan
+/// loader for amd64, which the device machines lack).
+fn device_check_prepare() -> Result<()> {
+    let root = workspace_root();
+    let dir = root.join(DEVICE_CHECK_DIR);
+    let debs = dir.join("debs");
+    std::fs::create_dir_all(&debs).with_context(|| format!("cannot create {}", debs.display()))?;
+    run(cargo().args(["build", "--release", "--bin", "aarbf"]))?;
+    let binary = dir.join("aarbf");
+    std::fs::copy(root.join("target/release/aarbf"), &binary)
+        .context("cannot copy target/release/aarbf")?;
+    run(Command::new("strip").arg(&binary))?;
+    if std::fs::read_dir(&debs)?.next().is_none() {
+        step("downloading the Vulkan loader's Debian package (amd64)");
+        let lists = std::env::temp_dir().join("aarbf-amd64-lists");
+        std::fs::create_dir_all(lists.join("partial"))?;
+        let options = [
+            "-oAPT::Architecture=amd64".to_owned(),
+            "-oAPT::Architectures=amd64".to_owned(),
+            format!("-oDir::State::Lists={}", lists.display()),
+        ];
+        run(Command::new("apt-get").args(&options).arg("update"))?;
+        run(Command::new("apt-get")
+            .args(&options)
+            .args(["download", "libvulkan1"])
+            .current_dir(&debs))?;
+    } else {
+        step("the Vulkan loader's package is already in .device-check/debs");
+    }
+    let bytes = folder_bytes(&dir)?;
+    step(&format!(
+        "{} holds {:.1} MiB (at most {} MiB travel with the working tree)",
+        dir.display(),
+        bytes as f64 / 1048576.0,
+        DEVICE_CHECK_MAX_BYTES >> 20
+    ));
+    if bytes > DEVICE_CHECK_MAX_BYTES {
+        bail!(
+            "{} is larger than {} MiB",
+            dir.display(),
+            DEVICE_CHECK_MAX_BYTES >> 20
+        );
+    }
+    step("on a GPU machine: bash scripts/device-check.sh OUT (with .device-check/ beside it)");
+    Ok(())
+}
+
+fn folder_bytes(dir: &Path) -> Result<u64> {
+    let mut total = 0;
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let meta = entry.metadata()?;
+        total += if meta.is_dir() {
+            folder_bytes(&entry.path())?
+        } else {
+            meta.len()
+        };
+    }
+    Ok(total)
+}
+
+/// The device check's script, end to end, on this machine's lavapipe at the dry-run size.
+fn device_check_dry_run() -> Result<()> {
+    setup()?;
+    let root = workspace_root();
+    run(cargo().args(["build", "--profile", PROFILE, "--bin", "aarbf"]))?;
+    let out = root.join("target").join("device-check-dry");
+    if out.exists() {
+        std::fs::remove_dir_all(&out)?;
+    }
+    let started = std::time::Instant::now();
+    run(vulkan_env(&mut Command::new("bash"))
+        .arg(root.join("scripts/device-check.sh"))
+        .arg("--dry-run")
+        .arg(&out)
+        .env("AARBF", root.join("target").join(PROFILE).join("aarbf")))?;
+    let files = std::fs::read_dir(&out)?.count();
+    let stages = std::fs::read_to_string(out.join("stages.csv"))?;
+    let failed: Vec<&str> = stages.lines().filter(|l| l.contains(",failed")).collect();
+    step(&format!(
+        "dry run: {files} files in {} ({:.0} s)",
+        out.display(),
+        started.elapsed().as_secs_f64()
+    ));
+    if files > 8 || !out.join("report.md").is_file() || !failed.is_empty() {
+        bail!(
+            "the dry run did not give the real run's shape (at most 8 files, a report, no failed stage): {failed:?}"
+        );
+    }
     Ok(())
 }
