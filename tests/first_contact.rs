@@ -65,6 +65,18 @@ fn run_folder(name: &str) -> (tempfile::TempDir, PathBuf) {
     (dir, copy_at)
 }
 
+/// `--data FOLDER [--step STEP]` as the library takes it.
+fn data_args(folder: &Path, step: Option<usize>) -> DataArgs {
+    DataArgs {
+        scene: None,
+        data: Some(folder.to_path_buf()),
+        format: None,
+        step,
+        cache_mib: 64,
+        rescan: false,
+    }
+}
+
 /// The step names `aarbf info` lists.
 fn step_names(info: &str) -> Vec<String> {
     info.lines()
@@ -256,18 +268,7 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
 
     // The library's resolution of the same flags: the radius is the SPH kernel's support,
     // 2h = 0.104 over the 0.04 lattice (not 1% of the diagonal, 0.0099), and the view is z-up.
-    let resolved = resolve(
-        &DataArgs {
-            scene: None,
-            data: Some(folder.clone()),
-            format: None,
-            step: None,
-            cache_mib: 64,
-            rescan: false,
-        },
-        &FieldOptions::default(),
-    )
-    .unwrap();
+    let resolved = resolve(&data_args(&folder, None), &FieldOptions::default()).unwrap();
     assert!(
         (resolved.field.radius - 2.0 * 0.052).abs() < 1e-12,
         "{}",
@@ -277,14 +278,7 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
     assert_eq!(camera.up, DVec3::Z);
     // With a smoothing length per particle, the radius is 2h.
     let with_h = resolve(
-        &DataArgs {
-            scene: None,
-            data: Some(folder.clone()),
-            format: None,
-            step: None,
-            cache_mib: 64,
-            rescan: false,
-        },
+        &data_args(&folder, None),
         &FieldOptions {
             radius_attribute: Some("h".into()),
             ..FieldOptions::default()
@@ -359,14 +353,7 @@ fn render_with_no_flags_gives_the_fluid_joined_upright_and_says_its_defaults() {
 fn without_a_smoothing_length_the_radius_is_twice_the_particles_spacing() {
     // The GADGET-like snapshots carry masses and densities but no smoothing length.
     let (_keep, folder) = run_folder("gadget_like");
-    let data = DataArgs {
-        scene: None,
-        data: Some(folder.clone()),
-        format: None,
-        step: None,
-        cache_mib: 64,
-        rescan: false,
-    };
+    let data = data_args(&folder, None);
     let resolved = resolve(&data, &FieldOptions::default()).unwrap();
     // Brute force over every particle of step 0 (1000, so the sample is all of them): the
     // distance to the nearest particle at another position, the upper median of those.
@@ -644,14 +631,7 @@ fn robust_and_per_step_ranges_and_the_legend_say_what_the_colours_mean() {
         .collect();
     let resolve_range = |range: &str, step: usize| {
         let r = resolve(
-            &DataArgs {
-                scene: None,
-                data: Some(folder.clone()),
-                format: None,
-                step: Some(step),
-                cache_mib: 64,
-                rescan: false,
-            },
+            &data_args(&folder, Some(step)),
             &FieldOptions {
                 attribute: Some("p".into()),
                 attribute_range: Some(range.parse().unwrap()),
