@@ -14,7 +14,9 @@ use crate::render::legend::Legend;
 use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
 use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
-use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve, resolve_for_images};
+use crate::scene_file::resolve::{
+    DataArgs, FieldOptions, Resolved, ViewFlags, resolve, resolve_for_images,
+};
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
 
@@ -356,34 +358,81 @@ impl OutputFormat {
     }
 }
 
-pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    // The flags are checked before the data is opened or a device is probed (and whether a
-    // legend is drawn decided).
-    let draw_legend = {
-        let mut flags = match &args.data.scene {
-            Some(path) => SceneFile::load(path)?,
-            None => SceneFile::default(),
-        };
-        apply_flags(&args, &mut flags)?;
-        let unit = crate::values::Bounds::of_points(&[glam::DVec3::ZERO, glam::DVec3::ONE]);
-        flags.render_settings(unit).map_err(anyhow::Error::msg)?;
-        ensure!(flags.spp() > 0, "--spp must be at least 1");
-        let format = OutputFormat::of(&args.out, args.bit_depth)?;
-        ensure!(
-            !args.legend || format == OutputFormat::Png8,
-            "--legend draws on 8-bit PNG images only (16-bit and .exr outputs are for compositing)"
-        );
-        let settings = flags.render_settings(unit).map_err(anyhow::Error::msg)?;
-        let (w, h) = crate::render::legend::MIN_SIZE;
-        let fits = settings.width >= w && settings.height >= h;
-        ensure!(
-            !args.legend || fits,
-            "--legend needs an image of at least {w}x{h} pixels, not {}x{}",
-            settings.width,
-            settings.height
-        );
-        !args.no_legend && format == OutputFormat::Png8 && fits
+/// Checks the flags before the data is opened or a device is probed, and decides whether a
+/// legend is drawn (on 8-bit PNG images that hold it, unless --no-legend).
+fn check_flags(args: &RenderArgs) -> anyhow::Result<bool> {
+    let mut flags = match &args.data.scene {
+        Some(path) => SceneFile::load(path)?,
+        None => SceneFile::default(),
     };
+    apply_flags(args, &mut flags)?;
+    let unit = crate::values::Bounds::of_points(&[glam::DVec3::ZERO, glam::DVec3::ONE]);
+    let settings = flags.render_settings(unit).map_err(anyhow::Error::msg)?;
+    ensure!(flags.spp() > 0, "--spp must be at least 1");
+    let format = OutputFormat::of(&args.out, args.bit_depth)?;
+    ensure!(
+        !args.legend || format == OutputFormat::Png8,
+        "--legend draws on 8-bit PNG images only (16-bit and .exr outputs are for compositing)"
+    );
+    let (w, h) = crate::render::legend::MIN_SIZE;
+    let fits = settings.width >= w && settings.height >= h;
+    ensure!(
+        !args.legend || fits,
+        "--legend needs an image of at least {w}x{h} pixels, not {}x{}",
+        settings.width,
+        settings.height
+    );
+    Ok(!args.no_legend && format == OutputFormat::Png8 && fits)
+}
+
+/// The images a render writes: one step, a range of steps, or an orbit, each with its camera
+/// and file; and whether they are a sequence (frames numbered in their names).
+fn plan_frames(
+    args: &RenderArgs,
+    resolved: &Resolved,
+    start_camera: Camera,
+    format: OutputFormat,
+) -> anyhow::Result<(Vec<Frame>, bool)> {
+    let steps: Vec<usize> = match &args.steps {
+        Some(text) => step_range(text, resolved.series.len())?.collect(),
+        None => vec![resolved.step],
+    };
+    let sequence = args.steps.is_some() || args.orbit_sequence.is_some();
+    let frame_path = |index: usize| -> PathBuf {
+        if !sequence {
+            return args.out.clone();
+        }
+        let stem = args
+            .out
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "frame".into());
+        let dir = args.out.parent().unwrap_or(Path::new(""));
+        dir.join(format!("{stem}_{index:04}.{}", format.extension()))
+    };
+    let frames = match args.orbit_sequence {
+        Some(0) => bail!("--orbit-sequence needs at least 1 frame"),
+        Some(n) => (0..n)
+            .map(|k| Frame {
+                step: steps[k % steps.len()],
+                camera: turned(start_camera, 360.0 * k as f64 / n as f64),
+                path: frame_path(k),
+            })
+            .collect(),
+        None => steps
+            .iter()
+            .map(|&step| Frame {
+                step,
+                camera: start_camera,
+                path: frame_path(step),
+            })
+            .collect(),
+    };
+    Ok((frames, sequence))
+}
+
+pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    let draw_legend = check_flags(&args)?;
     let mut resolved = if args.color_by_density {
         resolve(&args.data, &args.field)?
     } else {
@@ -428,44 +477,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     }
 
     let format = OutputFormat::of(&args.out, args.bit_depth)?;
-    let steps: Vec<usize> = match &args.steps {
-        Some(text) => step_range(text, resolved.series.len())?.collect(),
-        None => vec![resolved.step],
-    };
-    let sequence = args.steps.is_some() || args.orbit_sequence.is_some();
-    let frame_path = |index: usize| -> PathBuf {
-        if !sequence {
-            return args.out.clone();
-        }
-        let stem = args
-            .out
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "frame".into());
-        let dir = args.out.parent().unwrap_or(Path::new(""));
-        dir.join(format!("{stem}_{index:04}.{}", format.extension()))
-    };
     let start_camera = settings
         .camera
         .unwrap_or_else(|| Camera::default_for(bounds));
-    let frames: Vec<Frame> = match args.orbit_sequence {
-        Some(0) => bail!("--orbit-sequence needs at least 1 frame"),
-        Some(n) => (0..n)
-            .map(|k| Frame {
-                step: steps[k % steps.len()],
-                camera: turned(start_camera, 360.0 * k as f64 / n as f64),
-                path: frame_path(k),
-            })
-            .collect(),
-        None => steps
-            .iter()
-            .map(|&step| Frame {
-                step,
-                camera: start_camera,
-                path: frame_path(step),
-            })
-            .collect(),
-    };
+    let (frames, sequence) = plan_frames(&args, &resolved, start_camera, format)?;
     // Check every output before rendering any, so a sequence never stops half way; a
     // sequence's frames already written are kept (outputs are written whole, atomically).
     let (done, frames): (Vec<Frame>, Vec<Frame>) = if sequence && !args.force {
