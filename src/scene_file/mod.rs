@@ -423,11 +423,10 @@ impl CameraSection {
         let up = self.up.map(DVec3::from);
         let axis = || -> Result<UpAxis, String> {
             match (self.up_axis, up) {
-                (Some(a), _) => Ok(a),
-                (None, Some(u)) => UpAxis::along(u).ok_or_else(|| {
-                    format!("camera up {u} must point along an axis to place a view by angles")
-                }),
-                (None, None) => Ok(self.up_axis(bounds)),
+                (None, Some(u)) if UpAxis::along(u).is_none() => Err(format!(
+                    "camera up {u} must point along an axis to place a view by angles"
+                )),
+                _ => Ok(self.up_axis(bounds)),
             }
         };
         if let Some(from) = &self.from {

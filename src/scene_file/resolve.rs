@@ -439,9 +439,15 @@ fn resolve_choosing(
         Some(spec) => ColorMap::from_name_or_file(spec)?,
         None => ColorMap::default(),
     };
+    let radius_spec = options.radius.or(scene.field.radius);
+    // The first step is read in full (every attribute its file holds) only where a message or
+    // a default needs what the series did not select: the data's attributes when the field
+    // carries none, a smoothing length for the default radius.
     let first_in_full = match first_in_full {
         Some(step) => Some(step),
-        None if attribute.is_none() || radius_attribute.is_none() => series.first_step_in_full()?,
+        None if attribute.is_none() || (radius_spec.is_none() && radius_attribute.is_none()) => {
+            series.first_step_in_full()?
+        }
         None => None,
     };
     let names_in_data = names_of(first_in_full.as_deref());
@@ -456,7 +462,7 @@ fn resolve_choosing(
             }
         );
     }
-    let radius = match options.radius.or(scene.field.radius) {
+    let radius = match radius_spec {
         Some(spec) => spec.resolve(series.bounds().diagonal()),
         None => {
             let (radius, how) = default_radius(
