@@ -6,9 +6,11 @@ pub mod bvh;
 pub mod cells;
 pub mod clusters;
 pub mod hilbert;
+pub mod overlap;
 pub mod spacing;
 
 pub use bvh::ClusterBvh;
 pub use cells::{CellGrid, CellRuns};
 pub use clusters::{ClusterBoxes, ClusterSize};
 pub use hilbert::{HilbertQuantizer, hilbert_key, hilbert_order};
+pub use overlap::max_reach_count;
