@@ -2,8 +2,9 @@
 //! time on every backend, side by side in one run, so a feature a scene does not use is seen
 //! to cost nothing. Results go to docs/benchmarks.md.
 //!
-//! cargo bench --bench feature_costs -- [N] [--frame-size S]
-//!     (defaults: N = 1000000 particles for the memory and build tables, S = 256)
+//! cargo bench --bench feature_costs -- [N] [--frame-size S] [--summation-only]
+//!     (defaults: N = 1000000 particles for the memory and build tables, S = 256;
+//!     `--summation-only` runs only the last table)
 //!
 //! - Memory and build/refit per feature at N uniform particles, K = 1: colouring by density
 //!   (no attribute), the attribute post- and pre-classified, a varying radius map, a varying
@@ -11,6 +12,10 @@
 //! - Boxes and structure bytes per cluster size K (N / K boxes).
 //! - Frame time per feature on the demo scene (dam break step 14, 20K particles): emission-
 //!   absorption against single scattering (shadow rays), and each map feature on or off.
+//!
+//! - Plain f32 sums against compensated ones (`--precision f32` and `f32c`) on the GPU
+//!   backends: query rate and frame time on the demo scene and on a scene whose radius covers
+//!   the whole domain (every particle in every sum), with the error each leaves.
 //!
 //! Rows marked "+" add one feature to the post-classified baseline (not to the row above).
 
@@ -105,8 +110,11 @@ fn main() {
     let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
     let mut n = 1_000_000usize;
     let mut frame_size = 256u32;
+    let mut summation_only = false;
     while let Some(a) = args.next() {
-        if a == "--frame-size" {
+        if a == "--summation-only" {
+            summation_only = true;
+        } else if a == "--frame-size" {
             frame_size = args
                 .next()
                 .and_then(|v| v.parse().ok())
@@ -126,6 +134,10 @@ fn main() {
         }
     }
 
+    if summation_only {
+        summation_costs(&mut backends, frame_size);
+        return;
+    }
     // Bytes and build times per feature.
     let step = std::sync::Arc::new(uniform_step(n, 7));
     let unit = Bounds {
@@ -352,8 +364,123 @@ fn main() {
             println!("{row}");
         }
     }
+    drop(sessions);
+    summation_costs(&mut backends, frame_size);
     println!(
         "\n{} rayon threads. Builds and refits are medians of 3; GPU times include submission and the wait for the device.",
         rayon::current_num_threads()
     );
+}
+
+/// Plain f32 sums against compensated ones on the GPU backends (the CPU's f32 kernel sums
+/// blocks of eight terms a lane and adds them in f64 always: its row is for scale): the query
+/// rate, the largest relative Phi error against the CPU's f64 reference, and the frame time, on
+/// the demo scene (tens of terms a sum) and on 2,000 particles whose radius is twice the domain
+/// (2,000 terms a sum).
+fn summation_costs(backends: &mut [(BackendKind, Box<dyn Backend>)], frame_size: u32) {
+    let demo = TimeSeries::from_steps(Generator::DambreakDemo.generate(20_000, 15, 1));
+    let demo_radius = 0.015 * demo.bounds().diagonal();
+    let whole = TimeSeries::from_steps(vec![uniform_step(2000, 13)]);
+    let scenes = [
+        (
+            "dam break step 14 (20K)",
+            &demo,
+            14,
+            "velocity",
+            demo_radius,
+        ),
+        (
+            "2,000 particles, radius 2x the domain",
+            &whole,
+            0,
+            "a",
+            2.0 * whole.bounds().diagonal(),
+        ),
+    ];
+    println!(
+        "\n### Summation: plain f32 against compensated ({frame_size}x{frame_size} EA frames, 1 spp; 20,000 Hilbert-ordered queries near particles; K = 4; medians of 3)\n"
+    );
+    println!("| scene | backend | sums | queries/s | worst relative Phi error | frame (ms) |");
+    println!("|---|---|---|---|---|---|");
+    let cluster = ClusterSize::new(4).unwrap();
+    for (name, series, step_index, attribute, radius) in scenes {
+        let step = series.step(step_index).unwrap();
+        let field = FieldSettings::new(Some(attribute), radius);
+        let mut r = rand_pcg::Pcg64::seed_from_u64(5);
+        let reach = radius.min(0.5 * series.bounds().diagonal());
+        let points: Vec<DVec3> = (0..20_000)
+            .map(|i| {
+                let d = DVec3::new(r.random(), r.random(), r.random()) * 2.0 - 1.0;
+                step.positions[i % step.len()] + d * 0.3 * reach
+            })
+            .collect();
+        let range = series.attribute(attribute).map(|a| (a.min, a.max));
+        let input = |precision| StepInput {
+            step: &step,
+            field: &field,
+            cluster,
+            series_bounds: series.bounds(),
+            series_range: range,
+            precision,
+        };
+        let mut reference = backend::create(BackendKind::Cpu).unwrap();
+        reference.upload(&input(Precision::F64)).unwrap();
+        reference.build().unwrap();
+        let truth = backend::query_in_hilbert_order(reference.as_mut(), &points, |_| {}).unwrap();
+        for (kind, b) in backends.iter_mut() {
+            let precisions: &[Precision] = if *kind == BackendKind::Cpu {
+                &[Precision::F32]
+            } else {
+                &[Precision::F32, Precision::F32Compensated]
+            };
+            for &precision in precisions {
+                b.upload(&input(precision)).unwrap();
+                b.build().unwrap();
+                let mut times = Vec::new();
+                let mut got = Vec::new();
+                for _ in 0..3 {
+                    got = backend::query_in_hilbert_order(b.as_mut(), &points, |_| {}).unwrap();
+                    times.push(b.timings().query);
+                }
+                let worst = got
+                    .iter()
+                    .zip(&truth)
+                    .filter(|(_, t)| t.0 > 0.0)
+                    .map(|(g, t)| (g.0 / t.0 - 1.0).abs())
+                    .fold(0.0, f64::max);
+                let sums = match b.representation().map(|r| r.summation) {
+                    Some(aarbf::backend::precision::Summation::Compensated { .. }) => "compensated",
+                    Some(aarbf::backend::precision::Summation::Blocked { .. }) => "blocked (f64)",
+                    _ => "plain f32",
+                };
+                let _ = name;
+                let frame = {
+                    let Ok(fresh) = backend::create(*kind) else {
+                        continue;
+                    };
+                    let mut s = RenderSession::new(fresh, series);
+                    s.set_precision(precision);
+                    s.show(series, step_index, &field, cluster).unwrap();
+                    let settings = RenderSettings {
+                        width: frame_size,
+                        height: frame_size,
+                        integrator: Integrator::Ea,
+                        noise: NoiseKind::Stbn,
+                        ..RenderSettings::default()
+                    };
+                    s.render(&settings, 1).unwrap();
+                    let mut frames = Vec::new();
+                    for _ in 0..3 {
+                        s.render(&settings, 1).unwrap();
+                        frames.push(s.backend().timings().frame);
+                    }
+                    median(frames) * 1e3
+                };
+                println!(
+                    "| {name} | {kind} | {sums} | {:.2} M | {worst:.1e} | {frame:.0} |",
+                    points.len() as f64 / median(times) / 1e6
+                );
+            }
+        }
+    }
 }

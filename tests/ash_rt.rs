@@ -1095,10 +1095,8 @@ fn device_preparation_equals_the_cpu_preparation_on(mut b: AshBackend) -> usize 
     b.refit(&tiny).unwrap();
     check(&mut b, &input(&tiny), "after a refit that needs lo parts");
     assert!(
-        matches!(
-            b.positions(),
-            Some(aarbf::backend::Positions::DoubleSingle { .. })
-        ),
+        b.representation().map(|r| r.positions)
+            == Some(aarbf::backend::precision::PositionKind::DoubleSingle),
         "the tiny radii need double-single positions"
     );
     assert_no_validation_messages();

@@ -4,7 +4,8 @@
 //! builds (AVX2 and baseline) against each other, bit for bit.
 
 use aarbf::accel::ClusterSize;
-use aarbf::backend::{self, BackendKind, Positions, Precision, StepInput};
+use aarbf::backend::precision::PositionKind;
+use aarbf::backend::{self, BackendKind, Precision, Representation, StepInput};
 use aarbf::field::f32_kernel;
 use aarbf::field::{
     Classification, F32Batch, F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField,
@@ -101,9 +102,15 @@ fn check_against_reference(
     })
     .unwrap();
     cpu.build().unwrap();
-    let Some(Positions::F32 { error_bound }) = cpu.positions() else {
-        panic!("f32 was asked for: {:?}", cpu.positions());
+    let Some(Representation {
+        positions: PositionKind::F32,
+        bound,
+        ..
+    }) = cpu.representation()
+    else {
+        panic!("f32 was asked for: {:?}", cpu.representation());
     };
+    let error_bound = bound.phi();
     // Points anywhere, and points within reach of particles (where tiny radii put the field).
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0x5eed);
     let mut queries: Vec<DVec3> = (0..200)
@@ -114,7 +121,8 @@ fn check_against_reference(
         queries.push(step.positions[i] + u * radius * 0.6);
     }
     let got = cpu.query(&queries).unwrap();
-    let tolerance = 1e-5 + error_bound;
+    // The whole bound the backend states: every source of f32 error.
+    let tolerance = error_bound;
     for (x, (phi, num)) in queries.iter().zip(got) {
         let (rphi, rnum) = reference.eval_sums(*x);
         let (edge_phi, edge_num) = edge_allowance(&reference, *x);
@@ -123,7 +131,7 @@ fn check_against_reference(
             "n {n}, offset {offset:e}, radius {radius:e}: Phi {phi} vs {rphi} at {x} (bound {error_bound:e})"
         );
         prop_assert!(
-            (num[0] - rnum[0]).abs() <= tolerance * rnum[0].abs().max(rphi) + edge_num + 1e-30,
+            (num[0] - rnum[0]).abs() <= bound.theta() * rnum[0].abs().max(rphi) + edge_num + 1e-30,
             "n {n}, offset {offset:e}, radius {radius:e}: Theta {} vs {} at {x}",
             num[0],
             rnum[0]
@@ -514,15 +522,15 @@ fn f32_and_f64_images_agree() {
                 2,
             )
             .unwrap();
-        (image, s.backend().positions())
+        (image, s.backend().representation().map(|r| r.positions))
     };
     let ((f32_image, f32_positions), (f64_image, f64_positions)) =
         (render(Precision::RENDER), render(Precision::F64));
     assert!(
-        matches!(f32_positions, Some(Positions::F32 { .. })),
+        matches!(f32_positions, Some(PositionKind::F32)),
         "{f32_positions:?}"
     );
-    assert_eq!(f64_positions, Some(Positions::F64));
+    assert_eq!(f64_positions, Some(PositionKind::F64));
     let worst = f32_image
         .pixels
         .iter()

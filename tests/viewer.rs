@@ -392,7 +392,14 @@ fn the_precision_switches_at_run_time() {
     settle(&mut h);
     h.state_mut().state.precision = "f64".into();
     let reference = settle(&mut h);
-    assert_eq!(reference.positions.as_deref(), Some("f64"));
+    assert!(
+        reference
+            .positions
+            .as_deref()
+            .is_some_and(|p| p.starts_with("f64")),
+        "{:?}",
+        reference.positions
+    );
     h.state_mut().state.precision = "f32".into();
     let fast = settle(&mut h);
     assert!(

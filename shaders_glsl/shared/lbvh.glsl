@@ -26,22 +26,25 @@ bool lbvh_contains(vec4 lo, vec4 hi, vec3 x) {
     return x.x >= lo.x && x.y >= lo.y && x.z >= lo.z && x.x <= hi.x && x.y <= hi.y && x.z <= hi.z;
 }
 
-// Adds every particle of cluster c to acc (those out of reach add nothing).
-void lbvh_visit_cluster(uint c, vec3 x, vec3 x_lo, inout vec4 acc) {
+// Adds every particle of cluster c to acc (those out of reach add nothing): their sum, then
+// that to the point's (sum_add: compensated where the scene needs it).
+void lbvh_visit_cluster(uint c, vec3 x, vec3 x_lo, inout vec4 acc, inout vec4 comp) {
     uint first = c * CLUSTER_SIZE;
     uint end = min(first + CLUSTER_SIZE, field_params.counts.x);
+    vec4 part = vec4(0.0);
     for (uint k = first; k < end; k++) {
         vec4 p = particle(k);
-        rbf_accumulate(acc, x, x_lo, p, k, particle_radius(p, k));
+        rbf_accumulate(part, x, x_lo, p, k, particle_radius(p, k));
     }
+    sum_add(acc, comp, part);
 }
 
 // Visits the cluster behind leaf pointer ptr. Its box is tested first, except for single
 // particles, whose own sphere test costs no more than the box test.
-void lbvh_visit_leaf(uint ptr, vec3 x, vec3 x_lo, inout vec4 acc) {
+void lbvh_visit_leaf(uint ptr, vec3 x, vec3 x_lo, inout vec4 acc, inout vec4 comp) {
     uint c = ptr & ~LBVH_LEAF;
     if (CLUSTER_SIZE == 1u || lbvh_contains(lbvh_box(2u * c), lbvh_box(2u * c + 1u), x)) {
-        lbvh_visit_cluster(c, x, x_lo, acc);
+        lbvh_visit_cluster(c, x, x_lo, acc, comp);
     }
 }
 
@@ -54,6 +57,7 @@ void lbvh_visit_leaf(uint ptr, vec3 x, vec3 x_lo, inout vec4 acc) {
 // demo scene, whose samples mostly lie inside the fluid.)
 vec4 lbvh_field(vec3 x, vec3 x_lo) {
     vec4 acc = vec4(0.0);
+    vec4 comp = vec4(0.0);
     uint ptr = floatBitsToUint(lbvh_node(0u).w);
     if (ptr == LBVH_NONE) {
         return acc;
@@ -62,7 +66,7 @@ vec4 lbvh_field(vec3 x, vec3 x_lo) {
     uint sp = 0u;
     for (;;) {
         if ((ptr & LBVH_LEAF) != 0u) {
-            lbvh_visit_leaf(ptr, x, x_lo, acc);
+            lbvh_visit_leaf(ptr, x, x_lo, acc, comp);
         } else {
             vec4 lo = lbvh_node(2u * ptr);
             vec4 hi = lbvh_node(2u * ptr + 1u);

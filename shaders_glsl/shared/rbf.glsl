@@ -43,11 +43,38 @@ bool rbf_inside(float d2, float r) {
     return r > 0.0 && d2 <= r * r;
 }
 
+// The exponent 4.5 d²/r² of a term. Where every particle has one radius (no radius map that
+// varies, no radius attribute) it is k d², k = 4.5 / (R m)² rounded once from f64 on the host:
+// one rounding where the division of f32 values has several, and no division (the error model
+// that counts them: src/backend/precision.rs).
+float rbf_exponent(float d2, float r) {
+    if (RADIUS_MAP_VARIES == 0u && HAS_RADIUS_ATTRIBUTE == 0u) {
+        return field_params.radius.w * d2;
+    }
+    return 4.5 * d2 / (r * r);
+}
+
 // Adds the contribution of particle p, at squared distance d2 (inside radius r), to acc.
 void rbf_add(inout vec4 acc, float d2, float r, vec4 p) {
-    float phi = particle_weight(p) * exp(-4.5 * d2 / (r * r));
+    float phi = particle_weight(p) * exp(-rbf_exponent(d2, r));
     acc.x += phi;
     acc.yzw += particle_theta(p) * phi;
+}
+
+// Adds v (a cluster's terms) to a point's sum acc: plainly, or with COMPENSATED_SUM = 1
+// compensated (Kahan), comp keeping what each addition rounded away (negated) and taking it
+// back at the next. A plain f32 sum of n positive terms errs by up to (n - 1) 2^-24 of it; the
+// compensated one by about 2^-23 whatever n (src/backend/precision.rs chooses per scene). The
+// CPU twin: Kahan in src/backend/shaders/cpu/rbf.rs.
+void sum_add(inout vec4 acc, inout vec4 comp, vec4 v) {
+    if (COMPENSATED_SUM == 1u) {
+        vec4 y = v - comp;
+        vec4 t = acc + y;
+        comp = (t - acc) - y;
+        acc = t;
+    } else {
+        acc += v;
+    }
 }
 
 // The offset from particle k (p) to the query point x (+ x_lo).

@@ -78,3 +78,10 @@ float radius_attribute(uint k) {
 #include "shared/noise.glsl"
 #include "shared/rbf.glsl"
 #include "shared/cluster_box.glsl"
+
+// The field query's ray payload: a point's sum (Phi, Theta numerator) and its compensation
+// (sum_add in rbf.glsl; zero unless COMPENSATED_SUM).
+struct FieldPayload {
+    vec4 sum;
+    vec4 comp;
+};

@@ -8,11 +8,12 @@
 //
 // The includer declares `accelerationStructureEXT tlas` before this file.
 
-layout(location = 0) rayPayloadEXT vec4 payload;
+layout(location = 0) rayPayloadEXT FieldPayload payload;
 
 vec4 field_query(vec3 x) {
-    payload = vec4(0.0);
+    payload.sum = vec4(0.0);
+    payload.comp = vec4(0.0);
     traceRayEXT(tlas, gl_RayFlagsNoOpaqueEXT | gl_RayFlagsSkipClosestHitShaderEXT, 0xffu,
                 0u, 0u, 0u, x, 0.0, vec3(1.0), 0.0, 0);
-    return payload;
+    return payload.sum;
 }

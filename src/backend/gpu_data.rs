@@ -20,9 +20,10 @@
 //! Local coordinates are the data's minus the series' centre, subtracted in f64, so offsets
 //! from the origin cost nothing. Rounded to f32 they still carry an absolute error of up to
 //! 2^-24 of the largest local coordinate, which a particle's radius may not tolerate: a
-//! radius of 1e-6 of the domain makes it a 6% error of the distance. [`f32_phi_error`] bounds
-//! the relative Phi error f32 positions can cause for a scene; where it exceeds the
-//! tolerance asked for (see [`Precision`]), positions go to the GPU as double-single pairs, hi
+//! radius of 1e-6 of the domain makes it a 6% error of the distance. `backend::precision` bounds
+//! the relative Phi error of every source (positions, kernel, terms, sums) for a scene; where
+//! f32 positions would exceed the tolerance asked for (see [`Precision`]), positions go to the
+//! GPU as double-single pairs, hi
 //! the f32 rounding and lo the f32 remainder (about 48 bits), and the shaders compute
 //! distances from both (`POSITION_DS`, `shaders_glsl/shared/rbf.glsl`). A scene that does not
 //! need it uploads no lo parts and runs kernels without the extra arithmetic. The lo parts are
@@ -33,14 +34,15 @@ use glam::DVec3;
 use rayon::prelude::*;
 use wgpu::WriteOnly;
 
+use super::precision::{PositionKind, Representation, SceneNumbers, Summation, choose_gpu};
 use super::shaders::GpuField;
 use super::shaders::cpu::gather::gather;
 use super::{Precision, StepInput};
-use crate::accel::{ClusterSize, HilbertQuantizer, hilbert_order};
+use crate::accel::{ClusterSize, HilbertQuantizer, hilbert_order, max_reach_count};
 use crate::field::{
     FieldError, FieldInputs, FieldSettings, FieldTables, normalise, particle_radius,
 };
-use crate::values::tables::lookup;
+use crate::values::tables::{lookup, steepest_relative_slope, value_extremes};
 use crate::values::{Attribute, Step};
 
 /// Write-only slots of an array of 16-byte elements (a particle's vec4) or 4-byte ones (its
@@ -74,10 +76,10 @@ pub struct GpuStepData {
     pub quantizer: HilbertQuantizer,
     /// Particles in the step.
     pub count: usize,
-    /// The precision asked for, and the bound on the relative Phi error f32 positions would
-    /// cause in this scene (what decided `double_single`).
+    /// The precision asked for, and what it chose for this scene: positions, sums and the
+    /// error bound that follows (`double_single` and `compensated` follow it).
     pub precision: Precision,
-    pub f32_error_bound: f64,
+    pub representation: Representation,
     /// The largest |local coordinate| (of the f32 positions), which the bound needs again when
     /// the radii change.
     pub largest_coordinate: f64,
@@ -392,7 +394,7 @@ impl StepStaging<'_> {
             quantizer: self.quantizer,
             count: step.len(),
             precision: self.input.precision,
-            f32_error_bound: 0.0,
+            representation: choose_gpu(Precision::F32, &SceneNumbers::EMPTY, 1),
             largest_coordinate: extremes.largest,
             double_single: false,
             has_radius_attribute: self.has_radius_attribute(),
@@ -403,7 +405,7 @@ impl StepStaging<'_> {
             tables: self.values.tables,
         };
         data.set_maps(self.values.settings);
-        data.choose_precision(extremes);
+        data.choose_precision(step, extremes);
         data
     }
 }
@@ -507,22 +509,47 @@ impl GpuStepData {
         self.tables = values.tables;
         self.set_maps(new);
         let had_lo = self.double_single;
-        self.choose_precision(extremes);
+        self.choose_precision(step, extremes);
         Ok(Changed {
             radius_attribute: radius_changed,
             positions_lo: self.double_single && !had_lo,
         })
     }
 
-    /// Bounds the Phi error of f32 positions for these extremes ([`f32_phi_error`]) and decides
-    /// whether the precision asked for needs double-single positions.
-    fn choose_precision(&mut self, extremes: Extremes) {
-        self.f32_error_bound = f32_phi_error(extremes.largest, extremes.r_min, extremes.r_max);
-        self.double_single = match self.precision {
-            Precision::F32 => false,
-            Precision::DoubleSingle | Precision::F64 => true,
-            Precision::Auto { tolerance } => self.f32_error_bound > tolerance,
+    /// Bounds the error of every representation of this scene ([`choose_gpu`]) and takes the
+    /// one the precision asked for: positions (`double_single`) and sums (`compensated`).
+    fn choose_precision(&mut self, step: &Step, extremes: Extremes) {
+        let (w_min, w_max) = if self.density_map_varies {
+            value_extremes(&self.tables.density)
+        } else {
+            let w = f64::from(self.field.radius[2]);
+            (w, w)
         };
+        let slope = |varies: bool, table: &[f32]| {
+            if varies {
+                steepest_relative_slope(table)
+            } else {
+                0.0
+            }
+        };
+        let scene = SceneNumbers {
+            largest: extremes.largest,
+            r_min: extremes.r_min,
+            r_max: extremes.r_max,
+            max_terms: max_reach_count(&step.positions, extremes.r_max),
+            w_min,
+            w_max,
+            radius_varies: self.radius_map_varies || self.has_radius_attribute,
+            density_slope: slope(self.density_map_varies, &self.tables.density),
+            radius_slope: slope(self.radius_map_varies, &self.tables.radius),
+        };
+        self.representation = choose_gpu(self.precision, &scene, self.cluster.get() as u32);
+        self.double_single = self.representation.positions == PositionKind::DoubleSingle;
+    }
+
+    /// Whether a point's clusters' sums are added compensated (`COMPENSATED_SUM`).
+    pub fn compensated(&self) -> bool {
+        matches!(self.representation.summation, Summation::Compensated { .. })
     }
 
     /// Whether positions are double-single pairs (`POSITION_DS`).
@@ -530,17 +557,10 @@ impl GpuStepData {
         self.double_single
     }
 
-    /// How the positions are held, for [`super::Backend::positions`].
-    pub fn positions(&self) -> super::Positions {
-        if self.double_single() {
-            super::Positions::DoubleSingle {
-                f32_error_bound: self.f32_error_bound,
-            }
-        } else {
-            super::Positions::F32 {
-                error_bound: self.f32_error_bound,
-            }
-        }
+    /// How the positions are held and the terms summed, for
+    /// [`super::Backend::representation`].
+    pub fn representation(&self) -> Representation {
+        self.representation
     }
 
     /// A query point as the query kernels read it: one vec4 (local coordinates, f32), or with
@@ -559,12 +579,13 @@ impl GpuStepData {
         let n = self.count;
         self.radius_map_varies = !settings.radius_map.0.is_constant();
         self.density_map_varies = !settings.density_map.0.is_constant();
+        let one_radius = settings.radius * f64::from(self.tables.radius[0]);
         self.field = GpuField {
             radius: [
                 settings.radius as f32,
                 self.tables.radius[0],
                 self.tables.density[0],
-                0.0,
+                (4.5 / (one_radius * one_radius)) as f32,
             ],
             counts: [n as u32, self.cluster.clusters_for(n) as u32, 0, 0],
         };
@@ -595,22 +616,6 @@ pub struct Changed {
     /// The precision now needs the lo parts of the positions, and they were not held (when it
     /// no longer needs them, the kernels stop reading them: nothing to upload).
     pub positions_lo: bool,
-}
-
-/// A bound on the relative error of Phi that rounding local positions to f32 causes, for
-/// particles with local coordinates up to `largest` (in magnitude) and radii `r_min` ..
-/// `r_max` (the positive ones). A query point within reach of a particle has coordinates up to
-/// `largest + r_max`; each coordinate of it and of the particle is rounded by up to 2^-24 of
-/// its magnitude, so their distance d by up to `δ = √3 · 2^-24 · (2 largest + r_max)`. Phi's
-/// term `w exp(-4.5 d² / r²)` then changes by a factor of up to `exp(9 d δ / r²)`, at most
-/// `9 δ / r_min` relative for d ≤ r. (The rest of the f32 arithmetic, the exponential and the
-/// sum, adds about 1e-6 whatever the positions.)
-pub fn f32_phi_error(largest: f64, r_min: f64, r_max: f64) -> f64 {
-    if !(r_min.is_finite() && r_min > 0.0) {
-        return 0.0;
-    }
-    let delta = 3f64.sqrt() * f64::from(f32::EPSILON) * 0.5 * (2.0 * largest + r_max);
-    9.0 * delta / r_min
 }
 
 #[cfg(test)]
@@ -762,10 +767,18 @@ mod tests {
     fn auto_precision_pays_for_pairs_only_where_the_scene_needs_them() {
         let unit = cube(2000, 1.0, 0.0);
         let (image, _) = prepared(&unit, 0.02, Precision::RENDER);
-        assert!(!image.double_single(), "bound {}", image.f32_error_bound);
+        assert!(
+            !image.double_single(),
+            "bound {}",
+            image.representation.bound.positions
+        );
         assert_eq!(image.particle_bytes(), 2000 * 16);
         let (field, _) = prepared(&unit, 0.02, Precision::FIELD);
-        assert!(field.double_single(), "bound {}", field.f32_error_bound);
+        assert!(
+            field.double_single(),
+            "bound {}",
+            field.representation.bound.positions
+        );
         assert_eq!(field.particle_bytes(), 2000 * 32);
         assert!(prepared(&unit, 1e-6, Precision::RENDER).0.double_single());
 
@@ -773,11 +786,11 @@ mod tests {
         let (far_image, _) = prepared(&far, 0.02, Precision::RENDER);
         assert!(!far_image.double_single(), "an offset alone needs no pairs");
         assert!(
-            (far_image.f32_error_bound - image.f32_error_bound).abs()
-                < 1e-3 * image.f32_error_bound,
+            (far_image.representation.bound.positions - image.representation.bound.positions).abs()
+                < 1e-3 * image.representation.bound.positions,
             "the bound depends on the local extent, not the offset: {} vs {}",
-            far_image.f32_error_bound,
-            image.f32_error_bound
+            far_image.representation.bound.positions,
+            image.representation.bound.positions
         );
         assert!(prepared(&far, 1e-4, Precision::RENDER).0.double_single());
 

@@ -10,6 +10,7 @@
 pub mod ash_rt;
 pub mod cpu;
 pub mod gpu_data;
+pub mod precision;
 pub mod shaders;
 pub mod voxel;
 pub mod wgpu_lbvh;
@@ -22,6 +23,8 @@ use glam::DVec3;
 use crate::accel::ClusterSize;
 use crate::field::{FieldError, FieldSettings};
 use crate::values::{Bounds, FrameParams, Image, Step};
+
+pub use precision::{Precision, Representation, parse_precision};
 
 /// Which backend.
 #[derive(
@@ -180,33 +183,6 @@ pub struct StepInput<'a> {
     pub precision: Precision,
 }
 
-/// How precisely a backend holds positions and computes the field (`gpu_data` explains the
-/// error f32 positions carry; one rule decides for every backend).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Precision {
-    /// f32 where this scene's positions and radii let it keep the relative error of Phi below
-    /// `tolerance`, otherwise double-single (GPU backends) or f64 (the CPU): what the scene
-    /// needs, no more.
-    Auto { tolerance: f64 },
-    /// f32 positions in local coordinates (and, on the CPU, the f32 kernel), whatever the
-    /// error.
-    F32,
-    /// Double-single positions (f32 hi + lo pairs, about 48 bits), whatever the scene.
-    DoubleSingle,
-    /// f64 throughout: the CPU backend's reference field, exactly what the tests compare
-    /// against. The GPU backends hold double-single positions for it, the most they have.
-    F64,
-}
-
-impl Precision {
-    /// For field values users read as numbers (`aarbf field`): 1e-5 relative.
-    pub const FIELD: Precision = Precision::Auto { tolerance: 1e-5 };
-    /// For images: 1e-3 relative, a quarter of an 8-bit step where density maps to colour
-    /// one to one, and well below the noise of a converging frame.
-    pub const RENDER: Precision = Precision::Auto { tolerance: 1e-3 };
-}
-
 /// Points per [`Backend::query`] call in [`query_in_hilbert_order`] (each call may be a GPU
 /// submission and readback).
 pub const QUERY_BATCH: usize = 1 << 18;
@@ -229,23 +205,6 @@ pub fn query_in_hilbert_order<B: Backend + ?Sized>(
         progress(indices.len());
     }
     Ok(out)
-}
-
-/// The CLI spelling: `auto` (with the default tolerance of the command), `f32`, `ds`, `f64`,
-/// or `auto:TOLERANCE`.
-pub fn parse_precision(text: &str, auto: Precision) -> Result<Precision, String> {
-    match text {
-        "auto" => Ok(auto),
-        "f32" => Ok(Precision::F32),
-        "ds" | "double-single" => Ok(Precision::DoubleSingle),
-        "f64" => Ok(Precision::F64),
-        t => match t.strip_prefix("auto:").map(str::parse::<f64>) {
-            Some(Ok(tolerance)) if tolerance > 0.0 => Ok(Precision::Auto { tolerance }),
-            _ => Err(format!(
-                "precision '{text}': expected auto, auto:TOLERANCE (e.g. auto:1e-4), f32, ds or f64"
-            )),
-        },
-    }
 }
 
 /// Why a backend cannot do what was asked.
@@ -374,33 +333,7 @@ pub trait Backend: Send {
 
     fn memory(&self) -> MemoryReport;
 
-    /// How the uploaded step's positions are held (`None` before an upload).
-    fn positions(&self) -> Option<Positions>;
-}
-
-/// How a backend holds the uploaded step's positions.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Positions {
-    /// f64 in data coordinates (the CPU backend).
-    F64,
-    /// f32 local coordinates; the bound on the relative Phi error that causes.
-    F32 { error_bound: f64 },
-    /// Double-single pairs; the bound f32 positions would have had.
-    DoubleSingle { f32_error_bound: f64 },
-}
-
-impl fmt::Display for Positions {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Positions::F64 => write!(f, "f64"),
-            Positions::F32 { error_bound } => write!(
-                f,
-                "f32 local coordinates (relative Phi error from position rounding at most {error_bound:.1e})"
-            ),
-            Positions::DoubleSingle { f32_error_bound } => write!(
-                f,
-                "double-single local coordinates (f32 would carry up to {f32_error_bound:.1e} relative Phi error)"
-            ),
-        }
-    }
+    /// How the uploaded step's positions are held and its terms summed, with the error bound
+    /// that follows (`None` before an upload).
+    fn representation(&self) -> Option<Representation>;
 }

@@ -36,10 +36,11 @@ pub struct FieldArgs {
     /// pipeline) evaluate in f32 on a GPU (or lavapipe); `auto` picks the best.
     #[arg(long, value_enum, default_value = "cpu")]
     pub backend: BackendKind,
-    /// Precision of positions and arithmetic: `auto` (f32 where the scene's positions and
-    /// radii allow a Phi error below 1e-5; otherwise double-single pairs on the GPU backends and
-    /// the f64 reference on the CPU), `auto:TOLERANCE`, `f32`, `ds` (double-single) or `f64`
-    /// (the CPU's reference, exact to rounding; double-single on the GPU backends).
+    /// Precision of positions and arithmetic: `auto` (the cheapest representation whose whole
+    /// error bound, printed, keeps Phi within 1e-5: f32, then compensated sums or double-single
+    /// pairs on the GPU backends, the f64 reference on the CPU), `auto:TOLERANCE`, `f32`,
+    /// `f32c` (compensated sums), `ds` (double-single, compensated) or `f64` (the CPU's
+    /// reference, exact to rounding; `ds` on the GPU backends).
     #[arg(long, default_value = "auto")]
     pub precision: String,
     /// Overwrite an existing output.
@@ -90,8 +91,15 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         backend.build()?;
     }
     let build_time = built.elapsed();
-    if let Some(p) = backend.positions() {
-        tracing::info!("{}: positions in {p}", backend.capabilities().name);
+    if let Some(r) = backend.representation() {
+        let name = backend.capabilities().name;
+        if r.meets_tolerance() {
+            tracing::info!("{name}: {r}");
+        } else {
+            tracing::warn!(
+                "{name}: {r}. This backend's f32 arithmetic cannot promise that tolerance for this scene: --backend cpu computes in f64, or --precision auto:TOL states a looser one"
+            );
+        }
     }
     // The attribute's normalisation range, as the backends use it (Particles::prepare).
     let range = resolved

@@ -62,10 +62,11 @@ pub struct RenderArgs {
     /// For `--method splat`: hits each slab's buffer holds (more are lost, by design).
     #[arg(long, default_value_t = SPLAT_K)]
     pub splat_k: usize,
-    /// Precision of positions and arithmetic: `auto` (f32 where the scene's positions and
-    /// radii allow a Phi error below 1e-3; otherwise double-single pairs on the GPU backends and
-    /// the f64 reference on the CPU; the default), `auto:TOLERANCE`, `f32`, `ds`
-    /// (double-single) or `f64` (the CPU's reference; double-single on the GPU backends).
+    /// Precision of positions and arithmetic: `auto` (the cheapest representation whose whole
+    /// error bound keeps Phi within 1e-3: f32, then compensated sums or double-single pairs on
+    /// the GPU backends, the f64 reference on the CPU; the default), `auto:TOLERANCE`, `f32`,
+    /// `f32c` (compensated sums), `ds` (double-single, compensated) or `f64` (the CPU's
+    /// reference; `ds` on the GPU backends).
     #[arg(long)]
     pub precision: Option<String>,
     /// Also write a scene file (TOML) holding every setting the image used, the automatic

@@ -2,9 +2,9 @@
 //! radius, weight and theta) packed as f32 structure-of-arrays in local coordinates, sorted
 //! into grids of cells (one per level of radii, each at least as wide as its largest radius),
 //! and evaluated eight at a time by [`f32_kernel`](super::f32_kernel). What it costs in error
-//! is the GPU backends' f32 rule (`backend::gpu_data::f32_phi_error` for the positions, about
-//! 1e-6 for the arithmetic); the CPU backend uses it where that rule allows, and the f64
-//! reference everywhere else.
+//! is bounded by one model of every source (`backend::precision`: positions, kernel, terms,
+//! and sums of at most eight terms a lane in f32, added in f64); the CPU backend uses it where
+//! that bound meets the tolerance asked for, and the f64 reference everywhere else.
 //!
 //! The particles lie in the order of a [`CellGrid`] (why cells: `accel::cells`); the cells
 //! hand the kernel about 6.4 times the particles within reach, and eight lanes at a time pay

@@ -24,8 +24,8 @@
 //! Phi_ref is 0 a non-zero Phi would count as 1, wholly wrong), Theta's error as a fraction of
 //! the attribute's range (maximum; Theta as [`finish_sums`] defines it, 0 where Phi is 0 or
 //! denormal in f64), the points whose Phi or Theta numerator is not finite (left out of the
-//! errors), and the bound on the relative Phi error that f32 positions cause which the backend
-//! states where it holds f32 positions ([`Positions::F32`]).
+//! errors), and the bound on the relative Phi error the backend states for its representation
+//! (`backend::precision`: positions, kernel, terms and sums; none for the f64 reference).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -39,7 +39,8 @@ use super::plot::{Figure, Panel, Scale, Series};
 use super::record::Device;
 use super::{Ctx, Description, Options, Row, StudyError, value};
 use crate::accel::ClusterSize;
-use crate::backend::{self, Backend, BackendKind, Positions, Precision, StepInput};
+use crate::backend::precision::PositionKind;
+use crate::backend::{self, Backend, BackendKind, Precision, Representation, StepInput};
 use crate::field::{FieldSettings, ReferenceField, finish_sums};
 use crate::scene::maps::{DensityMap, PiecewiseLinear};
 use crate::values::{Attribute, Bounds, Step};
@@ -434,18 +435,18 @@ pub fn measure_scene(
     scene: &Scene,
     precision: Precision,
     reference: &[(f64, [f64; 3])],
-) -> Result<(Errors, Option<Positions>), StudyError> {
+) -> Result<(Errors, Option<Representation>), StudyError> {
     backend.upload(&scene.input(precision))?;
     backend.build()?;
     let got = backend::query_in_hilbert_order(backend, &scene.queries, |_| {})?;
-    Ok((errors(reference, &got), backend.positions()))
+    Ok((errors(reference, &got), backend.representation()))
 }
 
-fn positions_name(p: Option<Positions>) -> &'static str {
-    match p {
-        Some(Positions::F64) => "f64",
-        Some(Positions::F32 { .. }) => "f32",
-        Some(Positions::DoubleSingle { .. }) => "ds",
+fn positions_name(p: Option<Representation>) -> &'static str {
+    match p.map(|r| r.positions) {
+        Some(PositionKind::F64) => "f64",
+        Some(PositionKind::F32) => "f32",
+        Some(PositionKind::DoubleSingle) => "ds",
         None => "none",
     }
 }
@@ -512,9 +513,12 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         .record(row("theta_max", "of range", e.theta_max))?;
                     ctx.recorder
                         .record(row("nonfinite", "points", e.nonfinite as f64))?;
-                    if let Some(Positions::F32 { error_bound }) = positions {
+                    // (None where terms leave f32's normal range: the bound is infinite.)
+                    if let Some(r) = positions
+                        .filter(|r| r.positions != PositionKind::F64 && r.bound.phi().is_finite())
+                    {
                         ctx.recorder
-                            .record(row("stated_bound", "relative", error_bound))?;
+                            .record(row("stated_bound", "relative", r.bound.phi()))?;
                     }
                     bar.inc(1);
                 }
@@ -539,10 +543,6 @@ fn x_of(r: &Row) -> f64 {
         _ => get("weight"),
     }
 }
-
-/// What f32 arithmetic adds to the position bound a backend states (`gpu_data::f32_phi_error`
-/// says about 1e-6; sums over thousands of terms reach a few times that).
-const ARITHMETIC: f64 = 1e-5;
 
 /// Errors below this are drawn at it (the CPU's automatic choice of f64 is the reference
 /// itself, with no error at all).
@@ -684,9 +684,8 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
                 sci(theta),
             ));
         }
-        // Does the bound a backend states for f32 positions hold, where terms stay normal (it
-        // bounds what position rounding does, not denormals)? Its docs add about 1e-6 for the
-        // rest of the arithmetic; sums over thousands of terms reach a few times that.
+        // Does the whole bound a backend states hold, where terms stay normal (it bounds every
+        // source of f32 error, not denormals)?
         let stated: Vec<(f64, f64)> = rows
             .iter()
             .filter(|r| r.series() == s && r.metric == "stated_bound" && normal(r))
@@ -702,14 +701,9 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
             })
             .collect();
         if !stated.is_empty() {
-            let held = stated
-                .iter()
-                .filter(|(err, bound)| *err <= bound + ARITHMETIC)
-                .count();
+            let held = stated.iter().filter(|(err, bound)| err <= bound).count();
             parts.push(format!(
-                "the stated f32 position bound (+{} for the arithmetic) held in {held} of {} cases \
-                 whose terms stay normal",
-                sci(ARITHMETIC),
+                "the stated error bound held in {held} of {} cases whose terms stay normal",
                 stated.len()
             ));
         }

@@ -82,7 +82,7 @@ pub const HILBERT_STEP: [u8; 192] = [
 
 /// The specialisation constants (Vulkan constant ids; wgpu's pipeline-overridable constants
 /// "0", "1", ...), in id order: their names and what their values mean.
-pub const SPEC_CONSTANTS: [(&str, &str); 9] = [
+pub const SPEC_CONSTANTS: [(&str, &str); 10] = [
     ("INTEGRATOR", "0 EA, 1 delta, 2 marching, 3 SS reference"),
     ("COLOUR_MODE", "0 post, 1 pre, 2 density"),
     ("NOISE_KIND", "0 STBN, 1 white"),
@@ -104,6 +104,10 @@ pub const SPEC_CONSTANTS: [(&str, &str); 9] = [
         "RT_HIT_PER_PARTICLE",
         "ray tracing: 0 one report per cluster with its sum, 1 one per particle (the paper's)",
     ),
+    (
+        "COMPENSATED_SUM",
+        "1: a point's clusters' sums added compensated (Kahan; backend::precision)",
+    ),
 ];
 /// Indices into [`SPEC_CONSTANTS`].
 pub mod spec {
@@ -116,6 +120,7 @@ pub mod spec {
     pub const HAS_RADIUS_ATTRIBUTE: usize = 6;
     pub const POSITION_DS: usize = 7;
     pub const RT_HIT_PER_PARTICLE: usize = 8;
+    pub const COMPENSATED_SUM: usize = 9;
 }
 
 /// Values of the `INTEGRATOR`, `COLOUR_MODE` and `NOISE_KIND` specialisation constants.

@@ -54,6 +54,46 @@ pub fn table_max(table: &[f32]) -> f64 {
         .fold(f64::NEG_INFINITY, |m, &v| m.max(f64::from(v)))
 }
 
+/// The steepest relative slope of the map behind `table`, per unit of t: the largest
+/// `|b - a| (len - 1) / min(a, b)` over neighbouring samples a, b (what a rounding of t costs
+/// a looked-up value, relative to it). Where a segment falls to 0 its larger end stands in for
+/// the smaller: the value near 0 adds nearly nothing beside its neighbours. 0 for a constant
+/// map.
+pub fn steepest_relative_slope(table: &[f32]) -> f64 {
+    let steps = table.len().saturating_sub(1) as f64;
+    table
+        .windows(2)
+        .map(|w| {
+            let (a, b) = (f64::from(w[0]).abs(), f64::from(w[1]).abs());
+            let base = if a.min(b) > 0.0 { a.min(b) } else { a.max(b) };
+            if base > 0.0 {
+                (b - a).abs() * steps / base
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The smallest positive and the largest value the map behind `table` can give: between a
+/// sample and a 0 the lookup's fraction (f32, at least 2^-24 where it is not 0) scales the
+/// sample. (0, 0) where every sample is 0.
+pub fn value_extremes(table: &[f32]) -> (f64, f64) {
+    let positive = || table.iter().map(|&v| f64::from(v)).filter(|&v| v > 0.0);
+    let smallest = positive().fold(f64::INFINITY, f64::min);
+    let largest = positive().fold(0.0, f64::max);
+    if !smallest.is_finite() {
+        return (0.0, 0.0);
+    }
+    let reaches_zero = table.iter().any(|&v| v <= 0.0);
+    let scale = if reaches_zero {
+        f64::from(f32::EPSILON) / 2.0
+    } else {
+        1.0
+    };
+    (smallest * scale, largest)
+}
+
 #[inline]
 fn as_float<F: Float>(v: f32) -> F {
     F::from(v).expect("an f32 fits any float")

@@ -956,14 +956,18 @@ fn spawn_worker(ctx: &egui::Context, series: &Arc<TimeSeries>) -> RenderWorker {
 
 /// The precisions the quality panel offers (`backend::parse_precision` spells them), and what
 /// each means.
-const PRECISIONS: [(&str, &str); 4] = [
+const PRECISIONS: [(&str, &str); 5] = [
     (
         "auto",
-        "f32 where this scene's positions and radii allow it, else double-single (GPU) or f64 (CPU)",
+        "the cheapest representation whose whole error bound meets the tolerance: f32, compensated sums or double-single (GPU), f64 (CPU)",
     ),
     (
         "f32",
-        "f32 local coordinates whatever the error: the fastest",
+        "f32 local coordinates and plain f32 sums whatever the error: the fastest",
+    ),
+    (
+        "f32c",
+        "f32 local coordinates, compensated sums (GPU; the CPU's f32 sums are blocked in f64 anyway)",
     ),
     ("f64", "the CPU's f64 reference (double-single on a GPU)"),
     ("ds", "double-single positions on a GPU (f64 on the CPU)"),

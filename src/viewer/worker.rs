@@ -378,7 +378,7 @@ impl Worker<'_> {
                 return Err(e);
             }
         };
-        let positions = session.backend().positions().map(|p| p.to_string());
+        let positions = session.backend().representation().map(|p| p.to_string());
         let histogram = self.histogram(state)?;
         self.applied = Some((state.clone(), generation));
         self.last_good = Some(state.clone());

@@ -47,6 +47,7 @@ impl AshBackend {
             has_radius_attribute: u32::from(d.has_radius_attribute),
             position_ds: u32::from(d.double_single()),
             rt_hit_per_particle: u32::from(self.hit_reports == HitReports::PerParticle),
+            compensated_sum: u32::from(d.compensated()),
         })
     }
 

@@ -759,8 +759,8 @@ impl Backend for AshBackend {
         self.timings
     }
 
-    fn positions(&self) -> Option<super::Positions> {
-        self.uploaded.as_ref().map(|u| u.data.positions())
+    fn representation(&self) -> Option<super::Representation> {
+        self.uploaded.as_ref().map(|u| u.data.representation())
     }
 
     fn memory(&self) -> MemoryReport {

@@ -422,6 +422,7 @@ pub fn compute_pipeline(
             noise_kind: 0,
             cluster_size: 0,
             rt_hit_per_particle: 0,
+            compensated_sum: 0,
             ..spec
         },
         // The march reads no particle.
@@ -432,6 +433,7 @@ pub fn compute_pipeline(
             has_radius_attribute: 0,
             position_ds: 0,
             rt_hit_per_particle: 0,
+            compensated_sum: 0,
             ..spec
         },
         ComputeKind::LbvhRender | ComputeKind::LbvhSplat => spec,
@@ -506,6 +508,7 @@ const UNSPECIALISED: SpecConstants = SpecConstants {
     has_radius_attribute: 0,
     position_ds: 0,
     rt_hit_per_particle: 0,
+    compensated_sum: 0,
 };
 
 fn align_up(x: u64, a: u64) -> u64 {

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 
 use self::accumulator::Accumulator;
 use self::integrators::{FieldSampler, PACKET, PACKET_SIZE, PixelScratch, render_pixels_with};
-use super::gpu_data::f32_phi_error;
+use super::precision::{PositionKind, Representation, SceneNumbers, choose_cpu};
 use super::voxel::{VoxelGeometry, VoxelGrid};
 use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
 use crate::accel::CellRuns;
@@ -87,8 +87,8 @@ pub struct CpuBackend {
     capabilities: Capabilities,
     uploaded: Option<Uploaded>,
     prepared: Option<Prepared>,
-    /// The bound on the relative Phi error f32 positions would cause in the uploaded scene.
-    f32_error_bound: f64,
+    /// How the uploaded scene is held and summed, with its error bound (`backend::precision`).
+    representation: Option<Representation>,
     accumulator: Option<Accumulator>,
     /// The voxel baseline's grid of the last [`Backend::voxelize`].
     voxels: Option<VoxelGrid>,
@@ -116,7 +116,7 @@ impl CpuBackend {
             },
             uploaded: None,
             prepared: None,
-            f32_error_bound: 0.0,
+            representation: None,
             accumulator: None,
             voxels: None,
             timings: Timings::default(),
@@ -151,15 +151,17 @@ impl CpuBackend {
             return Err(BackendError::NothingUploaded("cpu"));
         };
         let particles = prepared.into_particles();
-        let (r_min, r_max) = particles
-            .radii
-            .par_iter()
-            .filter(|&&r| r > 0.0)
-            .fold(
-                || (f64::INFINITY, 0.0f64),
-                |(lo, hi), &r| (lo.min(r), hi.max(r)),
-            )
-            .reduce(|| (f64::INFINITY, 0.0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+        let positive = |v: &[f64]| {
+            v.par_iter()
+                .filter(|&&x| x > 0.0)
+                .fold(
+                    || (f64::INFINITY, 0.0f64),
+                    |(lo, hi), &x| (lo.min(x), hi.max(x)),
+                )
+                .reduce(|| (f64::INFINITY, 0.0), |a, b| (a.0.min(b.0), a.1.max(b.1)))
+        };
+        let (r_min, r_max) = positive(&particles.radii);
+        let (w_min, w_max) = positive(&particles.weights);
         // Local coordinates are relative to the series' centre: none exceeds its half-extent.
         let b = up.series_bounds;
         let largest = if b.is_empty() {
@@ -167,12 +169,26 @@ impl CpuBackend {
         } else {
             (b.max - b.min).max_element() * 0.5
         };
-        self.f32_error_bound = f32_phi_error(largest, r_min, r_max);
-        let f32_allowed = match up.precision {
-            Precision::F32 => true,
-            Precision::DoubleSingle | Precision::F64 => false,
-            Precision::Auto { tolerance } => self.f32_error_bound <= tolerance,
+        // The f32 kernel takes radii and weights rounded from f64: no map slopes.
+        let scene = SceneNumbers {
+            largest,
+            r_min,
+            r_max,
+            max_terms: crate::accel::max_reach_count(&particles.centers, r_max),
+            w_min,
+            w_max,
+            radius_varies: false,
+            density_slope: 0.0,
+            radius_slope: 0.0,
         };
+        let representation = choose_cpu(
+            up.precision,
+            &scene,
+            crate::field::f32_kernel::LANE_TERMS as u32,
+            crate::field::f32_kernel::exp_error_in_use(),
+        );
+        self.representation = Some(representation);
+        let f32_allowed = representation.positions == PositionKind::F32;
         self.prepared = Some(if f32_allowed {
             let cells = F32Field::new(&particles);
             Prepared::Cells(particles, cells)
@@ -567,13 +583,8 @@ impl Backend for CpuBackend {
         self.timings
     }
 
-    fn positions(&self) -> Option<super::Positions> {
-        self.uploaded.as_ref().map(|_| match self.prepared {
-            Some(Prepared::Cells(..)) => super::Positions::F32 {
-                error_bound: self.f32_error_bound,
-            },
-            _ => super::Positions::F64,
-        })
+    fn representation(&self) -> Option<Representation> {
+        self.uploaded.as_ref().and(self.representation)
     }
 
     fn memory(&self) -> MemoryReport {

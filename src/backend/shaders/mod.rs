@@ -239,7 +239,9 @@ impl GpuVoxels {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuField {
-    /// Global radius R, constant radius-map value, constant density-map value, unused.
+    /// Global radius R, constant radius-map value, constant density-map value, and
+    /// k = 4.5 / (R m)² (rounded once from f64) for the exponent where every particle has that
+    /// radius (`rbf_exponent` in `rbf.glsl`).
     pub radius: [f32; 4],
     /// Particles, clusters; the wgpu backend's part lengths (`shaders_glsl/wgpu/split.glsl`;
     /// it sets them when it writes the uniform, the Vulkan kernels ignore them).
@@ -258,6 +260,7 @@ pub struct SpecConstants {
     pub has_radius_attribute: u32,
     pub position_ds: u32,
     pub rt_hit_per_particle: u32,
+    pub compensated_sum: u32,
 }
 
 impl SpecConstants {
@@ -274,6 +277,7 @@ impl SpecConstants {
         v[spec::HAS_RADIUS_ATTRIBUTE] = self.has_radius_attribute;
         v[spec::POSITION_DS] = self.position_ds;
         v[spec::RT_HIT_PER_PARTICLE] = self.rt_hit_per_particle;
+        v[spec::COMPENSATED_SUM] = self.compensated_sum;
         v
     }
 

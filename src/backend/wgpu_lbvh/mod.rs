@@ -301,6 +301,7 @@ impl WgpuBackend {
             spec::DENSITY_MAP_VARIES,
             spec::POSITION_DS,
             spec::RT_HIT_PER_PARTICLE,
+            spec::COMPENSATED_SUM,
         ] {
             v[unread] = 0;
         }
@@ -658,8 +659,8 @@ impl Backend for WgpuBackend {
         self.timings
     }
 
-    fn positions(&self) -> Option<super::Positions> {
-        self.scene.as_ref().map(|s| s.data.positions())
+    fn representation(&self) -> Option<super::Representation> {
+        self.scene.as_ref().map(|s| s.data.representation())
     }
 
     fn memory(&self) -> MemoryReport {

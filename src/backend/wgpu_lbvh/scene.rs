@@ -72,6 +72,7 @@ impl Scene {
             has_radius_attribute: u32::from(self.data.has_radius_attribute),
             position_ds: u32::from(self.data.double_single()),
             rt_hit_per_particle: 0,
+            compensated_sum: u32::from(self.data.compensated()),
         }
         .values()
     }

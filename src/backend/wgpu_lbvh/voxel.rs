@@ -345,6 +345,7 @@ impl WgpuBackend {
             spec::HAS_RADIUS_ATTRIBUTE,
             spec::POSITION_DS,
             spec::RT_HIT_PER_PARTICLE,
+            spec::COMPENSATED_SUM,
         ] {
             variant[unread] = 0;
         }

@@ -27,3 +27,71 @@ impl RadiusRule<'_> {
         r
     }
 }
+
+/// A point's sum as `rbf.glsl`'s `sum_add` keeps it: plainly (`compensated` false) or with
+/// Kahan's compensation, in f32, one cluster's sum at a time.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PointSum {
+    pub sum: [f32; 4],
+    pub comp: [f32; 4],
+}
+
+impl PointSum {
+    /// `sum_add(acc, comp, v)`.
+    pub fn add(&mut self, v: [f32; 4], compensated: bool) {
+        for ((sum, comp), v) in self.sum.iter_mut().zip(&mut self.comp).zip(v) {
+            if compensated {
+                let y = v - *comp;
+                let t = *sum + y;
+                *comp = (t - *sum) - y;
+                *sum = t;
+            } else {
+                *sum += v;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::{Rng, SeedableRng};
+
+    use super::*;
+    use crate::backend::precision::U;
+
+    /// Over many positive terms of a wide dynamic range, the plain f32 sum stays within its
+    /// bound ((n - 1) u) and the compensated one within 2u (plus n u², nothing here), far below
+    /// the plain one's error: what `backend::precision` counts on.
+    #[test]
+    fn compensated_sums_keep_their_bound_whatever_the_count() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        for n in [1usize, 7, 100, 2000, 30_000] {
+            let terms: Vec<f32> = (0..n)
+                .map(|_| (rng.random::<f32>() * -4.5).exp() * 10f32.powi(rng.random_range(-3..3)))
+                .collect();
+            let exact: f64 = terms.iter().map(|&t| f64::from(t)).sum();
+            let (mut plain, mut comp) = (PointSum::default(), PointSum::default());
+            for &t in &terms {
+                plain.add([t; 4], false);
+                comp.add([t; 4], true);
+            }
+            let plain_err = (f64::from(plain.sum[0]) / exact - 1.0).abs();
+            let comp_err = (f64::from(comp.sum[0]) / exact - 1.0).abs();
+            let n_u = (n.saturating_sub(1)) as f64 * U;
+            assert!(
+                plain_err <= n_u / (1.0 - n_u) + 1e-300,
+                "n {n}: plain {plain_err:e}"
+            );
+            assert!(
+                comp_err <= 2.0 * U + 4.0 * n as f64 * U * U,
+                "n {n}: compensated {comp_err:e}"
+            );
+            if n >= 2000 {
+                assert!(
+                    comp_err * 10.0 < plain_err,
+                    "n {n}: {comp_err:e} vs {plain_err:e}"
+                );
+            }
+        }
+    }
+}
