@@ -8,9 +8,9 @@ use rayon::prelude::*;
 
 use crate::values::Bounds;
 
-/// Cells per axis at most (a grid of 128³ counts in 8 MiB), and about two per cube root of the
-/// particles (so a small step's grid costs next to nothing beside its upload).
-const MAX_CELLS_PER_AXIS: f64 = 128.0;
+/// Cells per axis at most (a grid of 64³ counts in 1 MiB and is summed in a few ms), and about
+/// one per cube root of the particles (so a small step's grid costs next to nothing).
+const MAX_CELLS_PER_AXIS: f64 = 64.0;
 
 /// An upper bound on how many of `centres` lie within `reach` of any single point, inside their
 /// bounds or not. The centres are counted on a grid of cubic cells at least `reach / m` wide;
@@ -25,9 +25,7 @@ pub fn max_reach_count(centres: &[DVec3], reach: f64) -> usize {
     }
     let bounds = Bounds::of_points(centres);
     let extent = bounds.max - bounds.min;
-    let most = (2.0 * (n as f64).cbrt())
-        .ceil()
-        .clamp(1.0, MAX_CELLS_PER_AXIS);
+    let most = (n as f64).cbrt().ceil().clamp(1.0, MAX_CELLS_PER_AXIS);
     // As wide as the longest axis allows with `most` cells, and never wider than needed.
     let side = (extent.max_element() / most)
         .max(reach / most)

@@ -532,18 +532,30 @@ impl GpuStepData {
                 0.0
             }
         };
-        let scene = SceneNumbers {
+        let mut scene = SceneNumbers {
             largest: extremes.largest,
             r_min: extremes.r_min,
             r_max: extremes.r_max,
-            max_terms: max_reach_count(&step.positions, extremes.r_max),
+            // Every particle first: where even that meets the tolerance with plain sums (small
+            // steps, images), the count below is not needed.
+            max_terms: step.len(),
             w_min,
             w_max,
             radius_varies: self.radius_map_varies || self.has_radius_attribute,
             density_slope: slope(self.density_map_varies, &self.tables.density),
             radius_slope: slope(self.radius_map_varies, &self.tables.radius),
         };
-        self.representation = choose_gpu(self.precision, &scene, self.cluster.get() as u32);
+        let cluster = self.cluster.get() as u32;
+        self.representation = choose_gpu(self.precision, &scene, cluster);
+        // A forced precision states its bound over the count too (no choice rides on it).
+        let forced = !matches!(self.precision, Precision::Auto { .. });
+        if forced
+            || self.representation.summation != Summation::F32
+            || !self.representation.meets_tolerance()
+        {
+            scene.max_terms = max_reach_count(&step.positions, extremes.r_max);
+            self.representation = choose_gpu(self.precision, &scene, cluster);
+        }
         self.double_single = self.representation.positions == PositionKind::DoubleSingle;
     }
 

@@ -295,11 +295,15 @@ impl ErrorBound {
 
     /// The error of Theta as a fraction of the attribute's range: the numerator's relative
     /// error (Phi's, with t or its colour rounded and multiplied in) and Phi's, through the
-    /// ratio, plus the division.
+    /// ratio, plus the division; never more than the whole range (Theta is a weighted mean of
+    /// values within it).
     pub fn theta(&self) -> f64 {
         let phi = self.phi();
+        if phi >= 1.0 {
+            return 1.0;
+        }
         let numerator = phi + 2.0 * U;
-        (phi + numerator) / (1.0 - phi).max(f64::MIN_POSITIVE) + U
+        ((phi + numerator) / (1.0 - phi) + U).min(1.0)
     }
 }
 

@@ -169,12 +169,14 @@ impl CpuBackend {
         } else {
             (b.max - b.min).max_element() * 0.5
         };
-        // The f32 kernel takes radii and weights rounded from f64: no map slopes.
+        // The f32 kernel takes radii and weights rounded from f64: no map slopes. Its sums are
+        // blocked in f64, so the count of terms barely enters the bound: every particle bounds
+        // it (no count of the overlap needed).
         let scene = SceneNumbers {
             largest,
             r_min,
             r_max,
-            max_terms: crate::accel::max_reach_count(&particles.centers, r_max),
+            max_terms: particles.centers.len(),
             w_min,
             w_max,
             radius_varies: false,
