@@ -73,6 +73,8 @@ fn data_args(folder: &Path, step: Option<usize>) -> DataArgs {
         format: None,
         step,
         cache_mib: 64,
+        particle_type: None,
+        physical: false,
         rescan: false,
     }
 }

@@ -64,6 +64,8 @@ fn open(dir: &Path, backend: BackendKind) -> ViewerApp {
         format: None,
         step: Some(0),
         cache_mib: 256,
+        particle_type: None,
+        physical: false,
         rescan: false,
     };
     let field = FieldOptions {

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use rayon::prelude::*;
 
 use super::index::{FileStamp, SeriesIndex, StepStats};
-use crate::io::{self, AttributeSelection, DataError, Format, StepRef};
+use crate::io::{self, AttributeSelection, DataError, Format, ReadOptions, StepRef};
 use crate::progress;
 use crate::values::{Bounds, Step};
 
@@ -18,6 +18,8 @@ use crate::values::{Bounds, Step};
 pub struct OpenOptions {
     /// Force a format instead of detecting it from file extensions.
     pub format: Option<Format>,
+    /// What to read from files that hold a choice (HDF5 snapshots' particle types).
+    pub read: ReadOptions,
     /// The attributes to keep (everything else is not held in memory).
     pub attributes: AttributeSelection,
     /// The most bytes of loaded steps kept in memory; older steps are dropped first.
@@ -36,6 +38,7 @@ impl Default for OpenOptions {
     fn default() -> Self {
         OpenOptions {
             format: None,
+            read: ReadOptions::default(),
             attributes: AttributeSelection::All,
             cache_bytes: 2 << 30,
             background_scan: false,
@@ -182,7 +185,7 @@ impl TimeSeries {
     /// [`TimeSeries::wait_for_scan`] returns, [`TimeSeries::values`] are provisional. The final
     /// values are the same, bit for bit, however the statistics were gathered.
     pub fn open(path: &Path, options: &OpenOptions) -> Result<TimeSeries, DataError> {
-        let refs = io::list_steps(path, options.format)?;
+        let refs = io::list_steps_reading(path, options.format, options.read)?;
         let mut index = SeriesIndex::load(&refs);
         if options.rescan {
             index.forget();

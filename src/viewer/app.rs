@@ -104,6 +104,7 @@ impl ViewerApp {
         let source = DataSource {
             path: loaded.data_path.clone(),
             format: loaded.format,
+            read: loaded.read,
         };
         let series = Arc::new(loaded.series);
         let worker = spawn_worker(ctx, &series);
@@ -875,6 +876,8 @@ impl ViewerApp {
             format: None,
             step: None,
             cache_mib: self.options.cache_mib,
+            particle_type: None,
+            physical: false,
             rescan: false,
         };
         self.reload(&data, &FieldOptions::default())?;
@@ -905,6 +908,8 @@ impl ViewerApp {
                     format: None,
                     step: None,
                     cache_mib: self.options.cache_mib,
+                    particle_type: None,
+                    physical: false,
                     rescan: false,
                 };
                 self.reload(&data, &FieldOptions::default())
@@ -922,6 +927,7 @@ impl ViewerApp {
         state.settings.height = self.state.settings.height;
         let same_data = loaded.data_path == self.source.path
             && loaded.format == self.source.format
+            && loaded.read == self.source.read
             && loaded.series.len() == self.series.len()
             && loaded.field.attribute == self.state.field.attribute
             && loaded.field.radius_attribute == self.state.field.radius_attribute;
@@ -933,6 +939,7 @@ impl ViewerApp {
             self.source = DataSource {
                 path: loaded.data_path.clone(),
                 format: loaded.format,
+                read: loaded.read,
             };
             self.series = Arc::new(loaded.series);
             self.worker = spawn_worker(&self.ctx, &self.series);
