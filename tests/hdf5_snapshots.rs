@@ -412,6 +412,9 @@ fn a_folder_of_multi_file_gadget_snapshots_is_a_series_of_one_step_per_snapshot(
     assert_eq!(series.len(), 3);
     let counts: Vec<usize> = series.steps().iter().map(|s| s.count).collect();
     assert_eq!(counts, [723, 527, 1001]);
+    // The header's Time is each step's time (`--time`, the viewer's step slider).
+    assert_eq!(series.times(), Some(&[0.5, 0.6, 0.7][..]));
+    assert_eq!(series.step_at_time(0.64), Some((1, 0.6)));
     let temperature = series.attribute("Temperature").unwrap();
     assert_eq!(temperature.max, 10.0 * 1001.0);
 

@@ -561,6 +561,7 @@ fn particles_format_and_its_bad_inputs() {
         format: Format::Particles,
         name: name.into(),
         read: io::ReadOptions::default(),
+        time: None,
     };
     let read_named = |name: &str| {
         io::read_step(&step(name), &AttributeSelection::All)

@@ -9,6 +9,7 @@
 
 pub mod csv;
 pub mod error;
+mod hdf5_gate;
 #[cfg(feature = "hdf5")]
 pub mod hdf5_snapshot;
 mod mapped;
@@ -17,6 +18,7 @@ pub mod npy;
 pub mod output;
 pub mod particles;
 pub mod ply;
+pub mod pvd;
 pub mod raw;
 pub mod read_options;
 mod scalar;
@@ -147,7 +149,7 @@ impl AttributeSelection {
 }
 
 /// One step of a series on disk: the file it lives in, and its name.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct StepRef {
     /// The step's file (of a snapshot split over several files, the first).
     pub path: PathBuf,
@@ -155,6 +157,8 @@ pub struct StepRef {
     pub name: String,
     /// What to read from files that hold a choice (HDF5 snapshots' particle types).
     pub read: ReadOptions,
+    /// The step's time where the listing gives it (a `.pvd`'s `timestep`); see [`step_time`].
+    pub time: Option<f64>,
 }
 
 impl StepRef {
@@ -180,6 +184,9 @@ pub fn list_steps_reading(
     format: Option<Format>,
     read: ReadOptions,
 ) -> Result<Vec<StepRef>, DataError> {
+    if path.is_file() && pvd::is_collection(path) {
+        return pvd::steps(path, format, read);
+    }
     let at = At::new(path, None);
     let text = path.to_string_lossy();
     let files: Vec<PathBuf> = if text.contains(['*', '?', '[']) && !path.exists() {
@@ -272,6 +279,7 @@ pub fn list_steps_reading(
                 format: Format::Particles,
                 name,
                 read,
+                time: None,
             })
             .collect());
     }
@@ -286,8 +294,18 @@ pub fn list_steps_reading(
             path,
             format,
             read,
+            time: None,
         })
         .collect())
+}
+
+/// The time step `step` records, where its format records one: a `.pvd`'s `timestep`, an HDF5
+/// snapshot's `/Header` `Time` (read from the file).
+pub fn step_time(step: &StepRef) -> Option<f64> {
+    step.time.or_else(|| match step.format {
+        Format::Hdf5 => hdf5_gate::time(&step.path),
+        _ => None,
+    })
 }
 
 /// Says which files of a folder or glob were not taken as the series, and how to take them.
@@ -329,32 +347,9 @@ pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step,
         Format::Ply => ply::read_step(at, selection)?,
         Format::Raw => raw::read_step(at, selection)?,
         Format::Npy => npy::read_step(at, selection)?,
-        Format::Hdf5 => read_hdf5(at, &step.read, selection)?,
+        Format::Hdf5 => hdf5_gate::read_step(at, &step.read, selection)?,
     };
     finish_step(at, &step.name, columns, selection)
-}
-
-#[cfg(feature = "hdf5")]
-fn read_hdf5(
-    at: At<'_>,
-    read: &ReadOptions,
-    selection: &AttributeSelection,
-) -> Result<Columns, DataError> {
-    hdf5_snapshot::read_step(at, read, selection)
-}
-
-#[cfg(not(feature = "hdf5"))]
-fn read_hdf5(
-    at: At<'_>,
-    _read: &ReadOptions,
-    _selection: &AttributeSelection,
-) -> Result<Columns, DataError> {
-    Err(at.err(Problem::UnknownFormat(
-        "this aarbf was built without HDF5 support; build it with the default features \
-         (the `hdf5` feature, which needs the HDF5 library: `apt-get install libhdf5-dev` or \
-         `cargo xtask setup`), e.g. `cargo install --path . --features hdf5`"
-            .into(),
-    )))
 }
 
 /// What a reader hands over: positions and named columns, not yet checked.
@@ -673,6 +668,7 @@ pub fn read_bytes(format: Format, data: &[u8]) -> Result<Step, DataError> {
             format,
             name: "0".into(),
             read: ReadOptions::default(),
+            time: None,
         }
     } else {
         write(&path, data)?;
@@ -681,6 +677,7 @@ pub fn read_bytes(format: Format, data: &[u8]) -> Result<Step, DataError> {
             format,
             name: "input".into(),
             read: ReadOptions::default(),
+            time: None,
         }
     };
     read_step(&step, &AttributeSelection::All)

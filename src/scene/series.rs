@@ -165,6 +165,8 @@ struct Shared {
     decoded: AtomicUsize,
     /// The scan's error, for the first caller of `wait_for_scan` (later ones get its text).
     scan_error: Mutex<Option<DataError>>,
+    /// Each step's time, once asked for ([`TimeSeries::times`]).
+    times: std::sync::OnceLock<Option<Vec<f64>>>,
 }
 
 /// A time series of particle steps. Opening lists the step files and reads at most the first
@@ -308,6 +310,7 @@ impl TimeSeries {
                 loaded: Condvar::new(),
                 decoded: AtomicUsize::new(0),
                 scan_error: Mutex::new(None),
+                times: std::sync::OnceLock::new(),
             }),
             len,
             scanner: None,
@@ -362,6 +365,36 @@ impl TimeSeries {
     /// Per-step information (see [`SeriesValues::steps`]).
     pub fn steps(&self) -> Vec<StepInfo> {
         self.shared.values.read().unwrap().steps.clone()
+    }
+
+    /// Each step's time, where the data records one for every step (a `.pvd`'s timesteps, HDF5
+    /// snapshots' `Time`); read once, on the first call.
+    pub fn times(&self) -> Option<&[f64]> {
+        self.shared
+            .times
+            .get_or_init(|| match &self.shared.source {
+                Source::Files { steps, .. } => steps.iter().map(io::step_time).collect(),
+                Source::Memory(_) => None,
+            })
+            .as_deref()
+    }
+
+    /// The step whose time is nearest `time` (the earlier of two equally near), with the
+    /// time it has; without times, the time is the step's index.
+    pub fn step_at_time(&self, time: f64) -> Option<(usize, f64)> {
+        let indices: Vec<f64>;
+        let times = match self.times() {
+            Some(t) => t,
+            None => {
+                indices = (0..self.len).map(|i| i as f64).collect();
+                &indices
+            }
+        };
+        times
+            .iter()
+            .copied()
+            .enumerate()
+            .min_by(|a, b| (a.1 - time).abs().total_cmp(&(b.1 - time).abs()))
     }
 
     /// One step's information.

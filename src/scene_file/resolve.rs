@@ -28,8 +28,12 @@ pub struct DataArgs {
     #[arg(long, value_enum)]
     pub format: Option<Format>,
     /// The time step to use (0-based).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "time")]
     pub step: Option<usize>,
+    /// The step whose time is nearest T: the `timestep` of a `.pvd` collection, an HDF5
+    /// snapshot's `Time`; where the data records no times, a step's time is its index.
+    #[arg(long, value_name = "T")]
+    pub time: Option<f64>,
     /// The particle type of an HDF5 snapshot: 0..5 or gas, dm, disk, bulge, stars, bh
     /// (default gas).
     #[arg(long, value_name = "TYPE")]
@@ -409,7 +413,7 @@ fn resolve_choosing(
             .collect(),
     );
     let opening = std::time::Instant::now();
-    let asked_step = data.step.or(scene.data.step).unwrap_or(0);
+    let mut asked_step = data.step.or(scene.data.step).unwrap_or(0);
     let series = TimeSeries::open(
         &path,
         &OpenOptions {
@@ -435,6 +439,13 @@ fn resolve_choosing(
             e.into()
         }
     })?;
+    if let Some(time) = data.time {
+        let (step, at) = series
+            .step_at_time(time)
+            .with_context(|| format!("--time {time}: the series has no steps"))?;
+        tracing::info!("--time {time}: step {step} (time {at}), the nearest");
+        asked_step = step;
+    }
     let opened_in = opening.elapsed();
     let decoded_at_open = series.steps_decoded();
     let step = asked_step;

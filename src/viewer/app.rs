@@ -415,9 +415,14 @@ impl ViewerApp {
             .step_info(self.state.step)
             .map_or(0, |i| i.count);
         ui.label(format!("{len} steps · {count} particles in this step"));
+        // Where the data records times, the slider says the step's.
+        let label = match self.series.times().and_then(|t| t.get(self.state.step)) {
+            Some(time) => format!("step (time {time})"),
+            None => "step".to_owned(),
+        };
         ui.add_enabled(
             len > 1,
-            egui::Slider::new(&mut self.state.step, 0..=len.saturating_sub(1)).text("step"),
+            egui::Slider::new(&mut self.state.step, 0..=len.saturating_sub(1)).text(label),
         );
         ui.horizontal(|ui| {
             if ui.button("previous").clicked() && self.state.step > 0 {
@@ -875,6 +880,7 @@ impl ViewerApp {
             data: None,
             format: None,
             step: None,
+            time: None,
             cache_mib: self.options.cache_mib,
             particle_type: None,
             physical: false,
@@ -907,6 +913,7 @@ impl ViewerApp {
                     data: None,
                     format: None,
                     step: None,
+                    time: None,
                     cache_mib: self.options.cache_mib,
                     particle_type: None,
                     physical: false,

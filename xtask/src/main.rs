@@ -291,13 +291,14 @@ fn test(extra: &[String]) -> Result<()> {
         .args(extra))
 }
 
-const FUZZ_TARGETS: [&str; 7] = [
+const FUZZ_TARGETS: [&str; 8] = [
     "read_particles",
     "read_vtk_xml",
     "read_vtk_legacy",
     "read_csv",
     "read_ply",
     "read_raw",
+    "read_pvd",
     "read_npy",
 ];
 

@@ -392,6 +392,12 @@ fn type_counts(header: &Header) -> String {
     }
 }
 
+/// The snapshot's `/Header` `Time`, if it can be read.
+pub fn time(path: &Path) -> Option<f64> {
+    let at = At::new(path, None);
+    Header::read(at, &open(at).ok()?).ok()?.time
+}
+
 /// What `aarbf info` says of a snapshot: its code, time, box, units and particle types with
 /// their counts and the datasets that can be attributes.
 pub fn describe(path: &Path) -> Result<String, DataError> {
