@@ -32,6 +32,7 @@ fn data_args(data: &Path, step: Option<usize>, time: Option<f64>) -> DataArgs {
         cache_mib: 64,
         particle_type: None,
         physical: false,
+        smoothing: None,
         rescan: false,
     }
 }

@@ -76,6 +76,7 @@ fn data_args(folder: &Path, step: Option<usize>) -> DataArgs {
         cache_mib: 64,
         particle_type: None,
         physical: false,
+        smoothing: None,
         rescan: false,
     }
 }

@@ -67,6 +67,7 @@ fn open(dir: &Path, backend: BackendKind) -> ViewerApp {
         cache_mib: 256,
         particle_type: None,
         physical: false,
+        smoothing: None,
         rescan: false,
     };
     let field = FieldOptions {

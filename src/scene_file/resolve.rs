@@ -42,6 +42,12 @@ pub struct DataArgs {
     /// physical units (times the scale factor's power each has).
     #[arg(long)]
     pub physical: bool,
+    /// Smoothing lengths from neighbours for data without one: `knn:K` (K = 32 by default)
+    /// gives each particle h = the distance to its K-th nearest neighbour, as the attribute
+    /// `h_knnK`, the per-particle radius unless --radius-attribute names another. Cached in
+    /// `.aarbf-smoothing/` beside the data.
+    #[arg(long, value_name = "knn:K")]
+    pub smoothing: Option<crate::scene::smoothing::Smoothing>,
     /// The most memory, in MiB, that steps read from disk are kept in (the least recently
     /// used go first; a series larger than this plays with memory bounded by it).
     #[arg(long, default_value_t = 2048)]
@@ -404,7 +410,8 @@ fn resolve_choosing(
     let radius_attribute = options
         .radius_attribute
         .clone()
-        .or(scene.data.radius_attribute.clone());
+        .or(scene.data.radius_attribute.clone())
+        .or(data.smoothing.map(|s| s.attribute()));
     let selection = AttributeSelection::Only(
         attribute
             .iter()
@@ -419,6 +426,7 @@ fn resolve_choosing(
         &OpenOptions {
             format: data.format.or(scene.data.format),
             read,
+            smoothing: data.smoothing,
             attributes: selection,
             cache_bytes: data.cache_mib << 20,
             // A batch frame uses the final series values, never provisional ones.

@@ -884,6 +884,7 @@ impl ViewerApp {
             cache_mib: self.options.cache_mib,
             particle_type: None,
             physical: false,
+            smoothing: None,
             rescan: false,
         };
         self.reload(&data, &FieldOptions::default())?;
@@ -917,6 +918,7 @@ impl ViewerApp {
                     cache_mib: self.options.cache_mib,
                     particle_type: None,
                     physical: false,
+                    smoothing: None,
                     rescan: false,
                 };
                 self.reload(&data, &FieldOptions::default())
