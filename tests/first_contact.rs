@@ -72,7 +72,11 @@ fn data_args(folder: &Path, step: Option<usize>) -> DataArgs {
         data: Some(folder.to_path_buf()),
         format: None,
         step,
+        time: None,
         cache_mib: 64,
+        particle_type: None,
+        physical: false,
+        smoothing: None,
         rescan: false,
     }
 }

@@ -6,7 +6,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use aarbf::io::{Format, read_bytes};
+use aarbf::io::{Format, pvd, read_bytes};
 
 /// The system allocator, remembering the largest allocation since the last reset.
 struct Largest;
@@ -47,6 +47,40 @@ fn allowance(format: Format, len: usize) -> usize {
     (16 << 20) + per_byte * len
 }
 
+/// What a target reads: a particle format, or a `.pvd` collection's text.
+#[derive(Clone, Copy, PartialEq)]
+enum Input {
+    Particles(Format),
+    Collection,
+}
+
+impl Input {
+    fn of(target: &str) -> Option<Input> {
+        match target {
+            "read_pvd" => Some(Input::Collection),
+            _ => format_of(target).map(Input::Particles),
+        }
+    }
+
+    /// Reads `data`: the particles read, or the entries listed, or the error's text.
+    fn read(self, data: &[u8]) -> Result<usize, String> {
+        match self {
+            Input::Particles(format) => read_bytes(format, data)
+                .map(|s| s.len())
+                .map_err(|e| e.to_string()),
+            Input::Collection => pvd::parse(data).map(|e| e.len()),
+        }
+    }
+
+    fn allowance(self, len: usize) -> usize {
+        match self {
+            Input::Particles(format) => allowance(format, len),
+            // Entries hold the input's own strings.
+            Input::Collection => (16 << 20) + 256 * len,
+        }
+    }
+}
+
 fn format_of(target: &str) -> Option<Format> {
     Some(match target {
         "read_particles" => Format::Particles,
@@ -70,15 +104,14 @@ fn fuzz_findings_and_seeds_never_panic() {
         };
         for target in targets.flatten() {
             let name = target.file_name().to_string_lossy().into_owned();
-            let format = format_of(&name).unwrap_or_else(|| {
+            let input = Input::of(&name).unwrap_or_else(|| {
                 panic!("{}: unknown fuzz target directory", target.path().display())
             });
             for file in std::fs::read_dir(target.path()).unwrap().flatten() {
                 let data = std::fs::read(file.path()).unwrap();
                 LARGEST.store(0, Ordering::Relaxed);
                 let started = std::time::Instant::now();
-                let result =
-                    std::panic::catch_unwind(|| read_bytes(format, &data).map(|s| s.len()));
+                let result = std::panic::catch_unwind(|| input.read(&data));
                 // Not a performance check: a bound far above any honest read of a small file
                 // (the fuzzer's -timeout is 10 s), so a pathological parse or a loop fails.
                 assert!(
@@ -89,7 +122,7 @@ fn fuzz_findings_and_seeds_never_panic() {
                 );
                 let largest = LARGEST.load(Ordering::Relaxed);
                 assert!(
-                    largest <= allowance(format, data.len()),
+                    largest <= input.allowance(data.len()),
                     "{}: one allocation of {largest} bytes for a {}-byte input",
                     file.path().display(),
                     data.len()

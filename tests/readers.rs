@@ -560,6 +560,8 @@ fn particles_format_and_its_bad_inputs() {
         path: io::particles::step_path(&header, name),
         format: Format::Particles,
         name: name.into(),
+        read: io::ReadOptions::default(),
+        time: None,
     };
     let read_named = |name: &str| {
         io::read_step(&step(name), &AttributeSelection::All)

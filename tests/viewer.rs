@@ -63,7 +63,11 @@ fn open(dir: &Path, backend: BackendKind) -> ViewerApp {
         data: Some(write_series(dir)),
         format: None,
         step: Some(0),
+        time: None,
         cache_mib: 256,
+        particle_type: None,
+        physical: false,
+        smoothing: None,
         rescan: false,
     };
     let field = FieldOptions {

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use crate::io::Format;
+use crate::io::{Format, ParticleType, ReadOptions};
 use crate::scene::{OpenOptions, TimeSeries};
 
 #[derive(Debug, Args)]
@@ -18,6 +18,13 @@ pub struct InfoArgs {
     /// The file format, when the extension does not tell.
     #[arg(long, value_enum)]
     pub format: Option<Format>,
+    /// The particle type of an HDF5 snapshot described: 0..5 or gas, dm, disk, bulge, stars,
+    /// bh (default gas).
+    #[arg(long, value_name = "TYPE")]
+    pub particle_type: Option<ParticleType>,
+    /// An HDF5 snapshot's comoving quantities in physical units.
+    #[arg(long)]
+    pub physical: bool,
 }
 
 pub fn run(args: InfoArgs) -> anyhow::Result<()> {
@@ -27,16 +34,37 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
     let Some(data) = &args.data else {
         return Ok(());
     };
+    let read = ReadOptions {
+        particle_type: args.particle_type.unwrap_or_default(),
+        physical: args.physical,
+    };
+    // A snapshot's header first: it says which particle types there are, should the one
+    // asked for be absent.
+    let steps = crate::io::list_steps_reading(data, args.format, read)?;
+    if let Some(first) = steps.first().filter(|s| s.format == Format::Hdf5) {
+        print!("{}", snapshot(first)?);
+    }
     let series = TimeSeries::open(
         data,
         &OpenOptions {
             format: args.format,
+            read,
             ..OpenOptions::default()
         },
     )?;
     print!("{}", describe(data, &series));
     print!("{}", defaults(&series)?);
     Ok(())
+}
+
+#[cfg(feature = "hdf5")]
+fn snapshot(first: &crate::io::StepRef) -> anyhow::Result<String> {
+    Ok(crate::io::hdf5_snapshot::describe(&first.path)?)
+}
+
+#[cfg(not(feature = "hdf5"))]
+fn snapshot(_first: &crate::io::StepRef) -> anyhow::Result<String> {
+    Ok(String::new())
 }
 
 /// The adapters wgpu finds, with their features and the limits the backends depend on.

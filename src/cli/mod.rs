@@ -29,7 +29,8 @@ pub use view::ViewArgs;
     about = "Attribute-aware RBF volume rendering of time-series particle data",
     long_about = "Attribute-aware RBF volume rendering of time-series particle data \
                   (Morrical et al., IEEE VIS 2023).\n\nData: .particles, .vtp/.vtu/.vts, .vtk, \
-                  .csv, .ply, .raw, .npy; a file, a directory or a glob is a time series."
+                  .csv, .ply, .raw, .npy, HDF5 snapshots (.hdf5, .h5: SWIFT, GADGET, AREPO, GIZMO); a file, \
+                  a directory or a glob is a time series."
 )]
 pub struct Cli {
     #[command(subcommand)]

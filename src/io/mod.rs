@@ -9,13 +9,18 @@
 
 pub mod csv;
 pub mod error;
+mod hdf5_gate;
+#[cfg(feature = "hdf5")]
+pub mod hdf5_snapshot;
 mod mapped;
 pub mod natural;
 pub mod npy;
 pub mod output;
 pub mod particles;
 pub mod ply;
+pub mod pvd;
 pub mod raw;
+pub mod read_options;
 mod scalar;
 pub mod stems;
 pub mod text;
@@ -30,6 +35,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 pub use error::{At, DataError, Location, Problem};
+pub use read_options::{ParticleType, ReadOptions};
 
 use crate::values::{Attribute, Step};
 
@@ -51,10 +57,13 @@ pub enum Format {
     Raw,
     /// NumPy `.npy`, an N x (3 + k) array.
     Npy,
+    /// HDF5 snapshots of SWIFT, GADGET-2/3/4, AREPO and GIZMO (`.hdf5`, `.h5`), one file or
+    /// several per step.
+    Hdf5,
 }
 
 impl Format {
-    pub const ALL: [Format; 7] = [
+    pub const ALL: [Format; 8] = [
         Format::Particles,
         Format::VtkXml,
         Format::Vtk,
@@ -62,6 +71,7 @@ impl Format {
         Format::Ply,
         Format::Raw,
         Format::Npy,
+        Format::Hdf5,
     ];
 
     /// The format a file's extension names, if any.
@@ -75,6 +85,7 @@ impl Format {
             "ply" => Format::Ply,
             "raw" => Format::Raw,
             "npy" => Format::Npy,
+            "hdf5" | "h5" => Format::Hdf5,
             _ => return None,
         })
     }
@@ -88,6 +99,7 @@ impl Format {
             Format::Ply => "ply",
             Format::Raw => "raw",
             Format::Npy => "npy",
+            Format::Hdf5 => "hdf5",
         }
     }
 }
@@ -107,6 +119,7 @@ impl FromStr for Format {
             .find(|f| f.name() == lower)
             .or(match lower.as_str() {
                 "vtp" | "vtu" | "xml" => Some(Format::VtkXml),
+                "h5" => Some(Format::Hdf5),
                 _ => None,
             })
             .ok_or_else(|| {
@@ -136,11 +149,16 @@ impl AttributeSelection {
 }
 
 /// One step of a series on disk: the file it lives in, and its name.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct StepRef {
+    /// The step's file (of a snapshot split over several files, the first).
     pub path: PathBuf,
     pub format: Format,
     pub name: String,
+    /// What to read from files that hold a choice (HDF5 snapshots' particle types).
+    pub read: ReadOptions,
+    /// The step's time where the listing gives it (a `.pvd`'s `timestep`); see [`step_time`].
+    pub time: Option<f64>,
 }
 
 impl StepRef {
@@ -157,6 +175,18 @@ impl StepRef {
 /// particle files are taken, and of those the files of one name pattern, the one with the
 /// most steps ([`stems::choose_series`]; the others are named in a warning).
 pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, DataError> {
+    list_steps_reading(path, format, ReadOptions::default())
+}
+
+/// [`list_steps`], the steps to be read with `read`.
+pub fn list_steps_reading(
+    path: &Path,
+    format: Option<Format>,
+    read: ReadOptions,
+) -> Result<Vec<StepRef>, DataError> {
+    if path.is_file() && pvd::is_collection(path) {
+        return pvd::steps(path, format, read);
+    }
     let at = At::new(path, None);
     let text = path.to_string_lossy();
     let files: Vec<PathBuf> = if text.contains(['*', '?', '[']) && !path.exists() {
@@ -212,10 +242,12 @@ pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, D
                 "cannot tell the format from the extension; pass --format (one of: {})",
                 Format::ALL.map(|f| f.name()).join(", ")
             ),
-            None => "no particle files here (known extensions: .particles, .vtp, .vtu, .vts, .vtk, .csv, .ply, .raw, .npy)".into(),
+            None => "no particle files here (known extensions: .particles, .vtp, .vtu, .vts, .vtk, .csv, .ply, .raw, .npy, .hdf5, .h5)".into(),
         };
         return Err(at.err(Problem::UnknownFormat(what)));
     }
+    // A snapshot split over several files is one step, named by its first file.
+    let mut parts = stems::multi_file_sets(&mut typed);
     if let Some((chosen, left_out)) = stems::choose_series(&typed) {
         report_left_out(path, &chosen, &left_out);
         typed.retain(|(p, _)| chosen.files.contains(p));
@@ -246,20 +278,34 @@ pub fn list_steps(path: &Path, format: Option<Format>) -> Result<Vec<StepRef>, D
                 path: particles::step_path(header, &name),
                 format: Format::Particles,
                 name,
+                read,
+                time: None,
             })
             .collect());
     }
     Ok(typed
         .into_iter()
         .map(|(path, format)| StepRef {
-            name: path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            name: parts.remove(&path).unwrap_or_else(|| {
+                path.file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            }),
             path,
             format,
+            read,
+            time: None,
         })
         .collect())
+}
+
+/// The time step `step` records, where its format records one: a `.pvd`'s `timestep`, an HDF5
+/// snapshot's `/Header` `Time` (read from the file).
+pub fn step_time(step: &StepRef) -> Option<f64> {
+    step.time.or_else(|| match step.format {
+        Format::Hdf5 => hdf5_gate::time(&step.path),
+        _ => None,
+    })
 }
 
 /// Says which files of a folder or glob were not taken as the series, and how to take them.
@@ -301,6 +347,7 @@ pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step,
         Format::Ply => ply::read_step(at, selection)?,
         Format::Raw => raw::read_step(at, selection)?,
         Format::Npy => npy::read_step(at, selection)?,
+        Format::Hdf5 => hdf5_gate::read_step(at, &step.read, selection)?,
     };
     finish_step(at, &step.name, columns, selection)
 }
@@ -548,7 +595,7 @@ pub fn write_series(
         Format::Ply => "ply",
         Format::Raw => "raw",
         Format::Npy => "npy",
-        Format::Vtk | Format::Particles => {
+        Format::Vtk | Format::Particles | Format::Hdf5 => {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::Unsupported,
                 format!(
@@ -573,7 +620,7 @@ pub fn write_series(
                 }
                 npy::write_matrix(path, step.len(), cols, &data)
             }
-            Format::Vtk | Format::Particles => unreachable!("handled above"),
+            Format::Vtk | Format::Particles | Format::Hdf5 => unreachable!("handled above"),
         })
         .map_err(std::io::Error::other)?;
     }
@@ -607,6 +654,7 @@ pub fn read_bytes(format: Format, data: &[u8]) -> Result<Step, DataError> {
         Format::Ply => "ply",
         Format::Raw => "raw",
         Format::Npy => "npy",
+        Format::Hdf5 => "hdf5",
     };
     let path = dir.path().join(format!("input.{ext}"));
     let write = |p: &Path, bytes: &[u8]| {
@@ -619,6 +667,8 @@ pub fn read_bytes(format: Format, data: &[u8]) -> Result<Step, DataError> {
             path: particles::step_path(&path, "0"),
             format,
             name: "0".into(),
+            read: ReadOptions::default(),
+            time: None,
         }
     } else {
         write(&path, data)?;
@@ -626,6 +676,8 @@ pub fn read_bytes(format: Format, data: &[u8]) -> Result<Step, DataError> {
             path: path.clone(),
             format,
             name: "input".into(),
+            read: ReadOptions::default(),
+            time: None,
         }
     };
     read_step(&step, &AttributeSelection::All)

@@ -6,8 +6,11 @@
 //! (`fluid_00037.vtp` → `fluid_*.vtp`); the group with the most steps is the series, ties going
 //! to the group holding more bytes (more particles). Files with no number in their name form a
 //! series only when no file has one, as a folder of `early.csv`, `late.csv` does.
+//!
+//! A snapshot split over several HDF5 files (`snap_012.0.hdf5`, `snap_012.1.hdf5`, ...) is one
+//! step: its snapshot number, not its file number, is the step number.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 use super::Format;
@@ -49,6 +52,75 @@ pub fn name_pattern(name: &str) -> String {
     format!("{}*{}", &name[..start], &name[end + 1..])
 }
 
+/// A part of a multi-file HDF5 snapshot: `<prefix>.<file number>.<hdf5|h5>` where the prefix
+/// ends in the snapshot number (`snap_012.3.hdf5` is file 3 of `snap_012`).
+pub fn multi_file_part(name: &str) -> Option<(&str, u64, &str)> {
+    let (rest, ext) = name.rsplit_once('.')?;
+    if !matches!(ext.to_ascii_lowercase().as_str(), "hdf5" | "h5") {
+        return None;
+    }
+    let (prefix, number) = rest.rsplit_once('.')?;
+    if number.is_empty() || !number.bytes().all(|c| c.is_ascii_digit()) {
+        return None;
+    }
+    if !prefix.as_bytes().last()?.is_ascii_digit() {
+        return None;
+    }
+    Some((prefix, number.parse().ok()?, ext))
+}
+
+/// Keeps one file of each multi-file snapshot in `files`, the one with the lowest file number
+/// (the reader finds the others from its header), and returns the kept files' step names
+/// (the snapshot's name without the file number).
+pub fn multi_file_sets(files: &mut Vec<(PathBuf, Format)>) -> HashMap<PathBuf, String> {
+    let mut lowest: HashMap<(PathBuf, String, String), (u64, PathBuf)> = HashMap::new();
+    for (path, format) in files.iter() {
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+        let Some((prefix, number, ext)) = name
+            .as_deref()
+            .filter(|_| *format == Format::Hdf5)
+            .and_then(multi_file_part)
+        else {
+            continue;
+        };
+        let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        let key = (dir, prefix.to_owned(), ext.to_owned());
+        let entry = lowest.entry(key).or_insert((number, path.clone()));
+        if number < entry.0 {
+            *entry = (number, path.clone());
+        }
+    }
+    let names: HashMap<PathBuf, String> = lowest
+        .into_iter()
+        .map(|((_, prefix, _), (_, path))| (path, prefix))
+        .collect();
+    files.retain(|(path, format)| {
+        let part = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .filter(|_| *format == Format::Hdf5)
+            .and_then(multi_file_part)
+            .is_some();
+        !part || names.contains_key(path)
+    });
+    names
+}
+
+/// The pattern of a file's name: for a multi-file snapshot's file, the snapshot number as `*`
+/// (`snap_012.0.hdf5` → `snap_*.0.hdf5`), else [`name_pattern`] of the name before an
+/// extension with a digit in it (`.hdf5`, `.h5`: never the step number).
+fn step_pattern(name: &str, format: Format) -> String {
+    if let Some((prefix, number, ext)) = multi_file_part(name).filter(|_| format == Format::Hdf5) {
+        return format!("{}.{number}.{ext}", name_pattern(prefix));
+    }
+    match name.rsplit_once('.') {
+        Some((stem, ext)) if ext.bytes().any(|c| c.is_ascii_digit()) => {
+            format!("{}.{ext}", name_pattern(stem))
+        }
+        _ => name_pattern(name),
+    }
+}
+
 /// Splits `files` into groups of one name pattern and format, and returns the series (the
 /// numbered group with the most steps, then the most bytes) and the groups left out; with no
 /// numbered file, `None`: every file together is the series.
@@ -59,7 +131,7 @@ pub fn choose_series(files: &[(PathBuf, Format)]) -> Option<(StemGroup, Vec<Stem
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let pattern = name_pattern(&name);
+        let pattern = step_pattern(&name, *format);
         let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
         let group = groups
             .entry((pattern.clone(), format.name()))
@@ -105,6 +177,47 @@ mod tests {
         assert_eq!(name_pattern("12.csv"), "*.csv");
         assert_eq!(name_pattern("snap_012.npy"), "snap_*.npy");
         assert_eq!(name_pattern("ply"), "ply");
+        assert_eq!(
+            step_pattern("snap_012.3.hdf5", Format::Hdf5),
+            "snap_*.3.hdf5"
+        );
+        assert_eq!(step_pattern("snap_012.hdf5", Format::Hdf5), "snap_*.hdf5");
+        assert_eq!(step_pattern("output.h5", Format::Hdf5), "output.h5");
+        assert_eq!(step_pattern("out.3.hdf5", Format::Hdf5), "out.*.hdf5");
+        assert_eq!(
+            step_pattern("snap_012.3.csv", Format::Csv),
+            "snap_012.*.csv"
+        );
+    }
+
+    #[test]
+    fn a_multi_file_snapshot_is_one_step_named_by_its_snapshot() {
+        assert_eq!(
+            multi_file_part("snap_012.10.hdf5"),
+            Some(("snap_012", 10, "hdf5"))
+        );
+        assert_eq!(multi_file_part("snap_012.hdf5"), None);
+        assert_eq!(multi_file_part("snap.1.hdf5"), None);
+        assert_eq!(multi_file_part("snap_1.x.h5"), None);
+        let mut files: Vec<(PathBuf, Format)> = [
+            "d/snap_012.1.hdf5",
+            "d/snap_012.0.hdf5",
+            "d/snap_013.1.hdf5",
+            "d/snap_013.2.hdf5",
+            "d/other.hdf5",
+        ]
+        .iter()
+        .map(|p| (PathBuf::from(p), Format::Hdf5))
+        .collect();
+        let names = multi_file_sets(&mut files);
+        let kept: Vec<&str> = files.iter().map(|(p, _)| p.to_str().unwrap()).collect();
+        assert_eq!(
+            kept,
+            ["d/snap_012.0.hdf5", "d/snap_013.1.hdf5", "d/other.hdf5"]
+        );
+        assert_eq!(names[Path::new("d/snap_012.0.hdf5")], "snap_012");
+        assert_eq!(names[Path::new("d/snap_013.1.hdf5")], "snap_013");
+        assert_eq!(names.len(), 2);
     }
 
     #[test]

@@ -14,7 +14,7 @@ use std::time::UNIX_EPOCH;
 
 use serde::{Deserialize, Serialize};
 
-use crate::io::{AttributeSelection, Format, StepRef};
+use crate::io::{AttributeSelection, Format, ReadOptions, StepRef};
 use crate::values::{Bounds, Step, value_range};
 
 /// The index's file name, in the directory of the series' first step.
@@ -147,6 +147,9 @@ struct Entry {
     format: Format,
     /// The step's name (a `.particles` header names its steps).
     name: String,
+    /// What was read of a file that holds a choice (an HDF5 snapshot's particle type).
+    #[serde(default)]
+    read: ReadOptions,
     stamp: Stamp,
     stats: StepStats,
 }
@@ -216,7 +219,7 @@ impl SeriesIndex {
     /// as it is now.
     pub fn get(&self, step: &StepRef, selection: &AttributeSelection) -> Option<StepStats> {
         let entry = self.file.entries.get(&self.key(step))?;
-        if entry.format != step.format || entry.name != step.name {
+        if entry.format != step.format || entry.name != step.name || entry.read != step.read {
             return None;
         }
         if Stamp::of(&step.path)? != entry.stamp {
@@ -239,6 +242,7 @@ impl SeriesIndex {
         let mut stats = stats.clone();
         if let Some(old) = self.file.entries.get(&key)
             && old.stamp == stamp
+            && old.read == step.read
             && !stats.all_attributes
         {
             for a in &old.stats.attributes {
@@ -253,6 +257,7 @@ impl SeriesIndex {
             Entry {
                 format: step.format,
                 name: step.name.clone(),
+                read: step.read,
                 stamp,
                 stats,
             },

@@ -6,6 +6,7 @@ pub mod index;
 pub mod maps;
 pub mod prefetch;
 pub mod series;
+pub mod smoothing;
 pub mod synth;
 
 pub use camera::{Camera, CameraError, UpAxis};

@@ -9,15 +9,21 @@ use std::time::{Duration, Instant};
 use rayon::prelude::*;
 
 use super::index::{FileStamp, SeriesIndex, StepStats};
-use crate::io::{self, AttributeSelection, DataError, Format, StepRef};
+use super::smoothing::{self, Smoothing};
+use crate::io::{self, AttributeSelection, DataError, Format, ReadOptions, StepRef};
 use crate::progress;
-use crate::values::{Bounds, Step};
+use crate::values::{Attribute, Bounds, Step};
 
 /// How to open a series.
 #[derive(Clone, Debug)]
 pub struct OpenOptions {
     /// Force a format instead of detecting it from file extensions.
     pub format: Option<Format>,
+    /// What to read from files that hold a choice (HDF5 snapshots' particle types).
+    pub read: ReadOptions,
+    /// Smoothing lengths from neighbours, given as the attribute [`Smoothing::attribute`]
+    /// where the selection keeps it.
+    pub smoothing: Option<Smoothing>,
     /// The attributes to keep (everything else is not held in memory).
     pub attributes: AttributeSelection,
     /// The most bytes of loaded steps kept in memory; older steps are dropped first.
@@ -36,12 +42,44 @@ impl Default for OpenOptions {
     fn default() -> Self {
         OpenOptions {
             format: None,
+            read: ReadOptions::default(),
+            smoothing: None,
             attributes: AttributeSelection::All,
             cache_bytes: 2 << 30,
             background_scan: false,
             rescan: false,
         }
     }
+}
+
+/// Reads a step from its file, with the smoothing lengths from neighbours where `smoothing`
+/// asks for them and the selection keeps them (the file does not hold them: they are
+/// computed, or read from their cache, from the step's positions).
+fn read_file_step(
+    step: &StepRef,
+    selection: &AttributeSelection,
+    smoothing: Option<Smoothing>,
+) -> Result<Step, DataError> {
+    let Some(smoothing) = smoothing else {
+        return io::read_step(step, selection);
+    };
+    let name = smoothing.attribute();
+    let from_file = match selection {
+        AttributeSelection::All => AttributeSelection::All,
+        AttributeSelection::Only(names) => {
+            AttributeSelection::Only(names.iter().filter(|n| **n != name).cloned().collect())
+        }
+    };
+    let mut read = io::read_step(step, &from_file)?;
+    if selection.keeps(&name) {
+        let values = smoothing::lengths_for(step, &read.positions, smoothing.neighbours);
+        read.attributes.push(Attribute { name, values });
+        if let AttributeSelection::Only(names) = selection {
+            read.attributes
+                .sort_by_key(|a| names.iter().position(|n| *n == a.name));
+        }
+    }
+    Ok(read)
 }
 
 /// What is known about one step without holding it.
@@ -97,6 +135,7 @@ enum Source {
     Files {
         steps: Vec<StepRef>,
         selection: AttributeSelection,
+        smoothing: Option<Smoothing>,
     },
     Memory(Vec<Arc<Step>>),
 }
@@ -162,6 +201,8 @@ struct Shared {
     decoded: AtomicUsize,
     /// The scan's error, for the first caller of `wait_for_scan` (later ones get its text).
     scan_error: Mutex<Option<DataError>>,
+    /// Each step's time, once asked for ([`TimeSeries::times`]).
+    times: std::sync::OnceLock<Option<Vec<f64>>>,
 }
 
 /// A time series of particle steps. Opening lists the step files and reads at most the first
@@ -182,7 +223,7 @@ impl TimeSeries {
     /// [`TimeSeries::wait_for_scan`] returns, [`TimeSeries::values`] are provisional. The final
     /// values are the same, bit for bit, however the statistics were gathered.
     pub fn open(path: &Path, options: &OpenOptions) -> Result<TimeSeries, DataError> {
-        let refs = io::list_steps(path, options.format)?;
+        let refs = io::list_steps_reading(path, options.format, options.read)?;
         let mut index = SeriesIndex::load(&refs);
         if options.rescan {
             index.forget();
@@ -195,6 +236,7 @@ impl TimeSeries {
                 Source::Files {
                     steps: refs,
                     selection: options.attributes.clone(),
+                    smoothing: options.smoothing,
                 },
                 Vec::new(),
                 Vec::new(),
@@ -206,7 +248,7 @@ impl TimeSeries {
             Some(stats) => stats,
             None => {
                 let stamp = FileStamp::of(&first.path);
-                let step = io::read_step(first, &options.attributes)?;
+                let step = read_file_step(first, &options.attributes, options.smoothing)?;
                 decoded += 1;
                 let stats = StepStats::of(&step, &options.attributes);
                 cache.insert(0, Arc::new(step));
@@ -234,6 +276,7 @@ impl TimeSeries {
             Source::Files {
                 steps: refs,
                 selection,
+                smoothing: options.smoothing,
             },
             SeriesValues::of(infos, &stats),
             cache,
@@ -305,6 +348,7 @@ impl TimeSeries {
                 loaded: Condvar::new(),
                 decoded: AtomicUsize::new(0),
                 scan_error: Mutex::new(None),
+                times: std::sync::OnceLock::new(),
             }),
             len,
             scanner: None,
@@ -361,6 +405,36 @@ impl TimeSeries {
         self.shared.values.read().unwrap().steps.clone()
     }
 
+    /// Each step's time, where the data records one for every step (a `.pvd`'s timesteps, HDF5
+    /// snapshots' `Time`); read once, on the first call.
+    pub fn times(&self) -> Option<&[f64]> {
+        self.shared
+            .times
+            .get_or_init(|| match &self.shared.source {
+                Source::Files { steps, .. } => steps.iter().map(io::step_time).collect(),
+                Source::Memory(_) => None,
+            })
+            .as_deref()
+    }
+
+    /// The step whose time is nearest `time` (the earlier of two equally near), with the
+    /// time it has; without times, the time is the step's index.
+    pub fn step_at_time(&self, time: f64) -> Option<(usize, f64)> {
+        let indices: Vec<f64>;
+        let times = match self.times() {
+            Some(t) => t,
+            None => {
+                indices = (0..self.len).map(|i| i as f64).collect();
+                &indices
+            }
+        };
+        times
+            .iter()
+            .copied()
+            .enumerate()
+            .min_by(|a, b| (a.1 - time).abs().total_cmp(&(b.1 - time).abs()))
+    }
+
     /// One step's information.
     pub fn step_info(&self, index: usize) -> Option<StepInfo> {
         self.shared.values.read().unwrap().steps.get(index).cloned()
@@ -388,9 +462,11 @@ impl TimeSeries {
     /// not select (read again from the file; not cached).
     pub fn first_step_in_full(&self) -> Result<Option<Arc<Step>>, DataError> {
         match &self.shared.source {
-            Source::Files { steps, .. } => steps
+            Source::Files {
+                steps, smoothing, ..
+            } => steps
                 .first()
-                .map(|r| io::read_step(r, &AttributeSelection::All).map(Arc::new))
+                .map(|r| read_file_step(r, &AttributeSelection::All, *smoothing).map(Arc::new))
                 .transpose(),
             Source::Memory(steps) => Ok(steps.first().cloned()),
         }
@@ -425,7 +501,11 @@ impl TimeSeries {
         }
         match &self.shared.source {
             Source::Memory(steps) => Ok(steps[index].clone()),
-            Source::Files { steps, selection } => {
+            Source::Files {
+                steps,
+                selection,
+                smoothing,
+            } => {
                 // A step another thread (the prefetcher) is reading is waited for, not read twice.
                 let mut cache = self.shared.cache.lock().unwrap();
                 loop {
@@ -439,7 +519,7 @@ impl TimeSeries {
                 }
                 drop(cache);
                 let started = Instant::now();
-                let read = io::read_step(&steps[index], selection).map(Arc::new);
+                let read = read_file_step(&steps[index], selection, *smoothing).map(Arc::new);
                 let mut cache = self.shared.cache.lock().unwrap();
                 cache.loading.remove(&index);
                 if let Ok(step) = &read {
@@ -531,7 +611,12 @@ fn scan(
     missing: &[usize],
     mut index: SeriesIndex,
 ) {
-    let Source::Files { steps, selection } = &shared.source else {
+    let Source::Files {
+        steps,
+        selection,
+        smoothing,
+    } = &shared.source
+    else {
         unreachable!("only a series of files is scanned")
     };
     let failed = Mutex::new(None::<DataError>);
@@ -543,7 +628,7 @@ fn scan(
         }
         let r = &steps[i];
         let stamp = FileStamp::of(&r.path);
-        match io::read_step(r, selection) {
+        match read_file_step(r, selection, *smoothing) {
             Ok(step) => {
                 shared.decoded.fetch_add(1, Ordering::Relaxed);
                 let step_stats = StepStats::of(&step, selection);

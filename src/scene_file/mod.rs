@@ -27,7 +27,7 @@ use glam::DVec3;
 
 use crate::accel::ClusterSize;
 use crate::field::Classification;
-use crate::io::Format;
+use crate::io::{Format, ParticleType};
 use crate::render::{RenderSettings, Resolved};
 use crate::scene::maps::{MapError, OpticalDensityMap, PiecewiseLinear};
 use crate::scene::{Camera, UpAxis};
@@ -44,6 +44,10 @@ pub struct DataSection {
     /// `[lo, hi]`, or `"series"`, `"robust"`, `"step"`, `"robust-step"` ([`RangeSpec`]).
     pub attribute_range: Option<RangeSpec>,
     pub radius_attribute: Option<String>,
+    /// An HDF5 snapshot's particle type (`gas`, `dm`, ... or 0..5).
+    pub particle_type: Option<ParticleType>,
+    /// An HDF5 snapshot's comoving quantities in physical units.
+    pub physical: Option<bool>,
 }
 
 /// The range of the attribute the colour map spans.

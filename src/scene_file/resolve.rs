@@ -10,7 +10,7 @@ use clap::Args;
 use super::{DataSection, FieldSection, MapSpec, RadiusSpec, RangeSpec, SceneFile};
 use crate::accel::ClusterSize;
 use crate::field::{Classification, FieldSettings};
-use crate::io::{AttributeSelection, Format};
+use crate::io::{AttributeSelection, Format, ParticleType, ReadOptions};
 use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
 use crate::scene::{OpenOptions, TimeSeries};
 use crate::values::Step;
@@ -28,8 +28,26 @@ pub struct DataArgs {
     #[arg(long, value_enum)]
     pub format: Option<Format>,
     /// The time step to use (0-based).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "time")]
     pub step: Option<usize>,
+    /// The step whose time is nearest T: the `timestep` of a `.pvd` collection, an HDF5
+    /// snapshot's `Time`; where the data records no times, a step's time is its index.
+    #[arg(long, value_name = "T")]
+    pub time: Option<f64>,
+    /// The particle type of an HDF5 snapshot: 0..5 or gas, dm, disk, bulge, stars, bh
+    /// (default gas).
+    #[arg(long, value_name = "TYPE")]
+    pub particle_type: Option<ParticleType>,
+    /// Read an HDF5 snapshot's comoving positions, smoothing lengths and densities in
+    /// physical units (times the scale factor's power each has).
+    #[arg(long)]
+    pub physical: bool,
+    /// Smoothing lengths from neighbours for data without one: `knn:K` (K = 32 by default)
+    /// gives each particle h = the distance to its K-th nearest neighbour, as the attribute
+    /// `h_knnK`, the per-particle radius unless --radius-attribute names another. Cached in
+    /// `.aarbf-smoothing/` beside the data.
+    #[arg(long, value_name = "knn:K")]
+    pub smoothing: Option<crate::scene::smoothing::Smoothing>,
     /// The most memory, in MiB, that steps read from disk are kept in (the least recently
     /// used go first; a series larger than this plays with memory bounded by it).
     #[arg(long, default_value_t = 2048)]
@@ -39,6 +57,19 @@ pub struct DataArgs {
     /// size); the index is rewritten.
     #[arg(long)]
     pub rescan: bool,
+}
+
+impl DataArgs {
+    /// What to read from files that hold a choice: the flags over the scene file's.
+    pub fn read_options(&self, scene: &DataSection) -> ReadOptions {
+        ReadOptions {
+            particle_type: self
+                .particle_type
+                .or(scene.particle_type)
+                .unwrap_or_default(),
+            physical: self.physical || scene.physical.unwrap_or(false),
+        }
+    }
 }
 
 /// Where the view stands, for the commands that make images (render, view).
@@ -229,6 +260,8 @@ pub struct Resolved {
     /// Where the data came from, and how it was spelled, for writing a scene file back.
     pub data_path: PathBuf,
     pub format: Option<Format>,
+    /// What was read of files that hold a choice (an HDF5 snapshot's particle type).
+    pub read: ReadOptions,
     pub colormap: Option<String>,
     /// How long opening the series took, and the steps it decoded: the rest of resolving is
     /// the settings taken from the data (the cluster size, ranges), which `bench playback`
@@ -246,6 +279,7 @@ impl Resolved {
         scene_sections(
             &self.data_path,
             self.format,
+            self.read,
             self.step,
             &self.field,
             self.cluster,
@@ -259,6 +293,7 @@ impl Resolved {
 pub fn scene_sections(
     data_path: &std::path::Path,
     format: Option<Format>,
+    read: ReadOptions,
     step: usize,
     f: &FieldSettings,
     cluster: ClusterSize,
@@ -273,6 +308,8 @@ pub fn scene_sections(
             attribute: f.attribute.clone(),
             attribute_range: f.attribute_range.map(|(a, b)| RangeSpec::Fixed(a, b)),
             radius_attribute: f.radius_attribute.clone(),
+            particle_type: (read.particle_type != ParticleType::GAS).then_some(read.particle_type),
+            physical: read.physical.then_some(true),
         },
         FieldSection {
             radius: Some(RadiusSpec::Absolute(f.radius)),
@@ -342,11 +379,12 @@ fn resolve_choosing(
         .clone()
         .or(scene.data.path.clone())
         .context("no data given: pass --data <path> or a --scene file with [data] path")?;
+    let read = data.read_options(&scene.data);
     let mut attribute = options.attribute.clone().or(scene.data.attribute.clone());
     // The first step with every attribute it holds, read where a default needs it.
     let mut first_in_full: Option<Arc<Step>> = None;
     if attribute.is_none() && first_attribute_by_default {
-        let refs = crate::io::list_steps(&path, data.format.or(scene.data.format))?;
+        let refs = crate::io::list_steps_reading(&path, data.format.or(scene.data.format), read)?;
         if let Some(first) = refs.first() {
             first_in_full = Some(Arc::new(crate::io::read_step(
                 first,
@@ -372,7 +410,8 @@ fn resolve_choosing(
     let radius_attribute = options
         .radius_attribute
         .clone()
-        .or(scene.data.radius_attribute.clone());
+        .or(scene.data.radius_attribute.clone())
+        .or(data.smoothing.map(|s| s.attribute()));
     let selection = AttributeSelection::Only(
         attribute
             .iter()
@@ -381,11 +420,13 @@ fn resolve_choosing(
             .collect(),
     );
     let opening = std::time::Instant::now();
-    let asked_step = data.step.or(scene.data.step).unwrap_or(0);
+    let mut asked_step = data.step.or(scene.data.step).unwrap_or(0);
     let series = TimeSeries::open(
         &path,
         &OpenOptions {
             format: data.format.or(scene.data.format),
+            read,
+            smoothing: data.smoothing,
             attributes: selection,
             cache_bytes: data.cache_mib << 20,
             // A batch frame uses the final series values, never provisional ones.
@@ -406,6 +447,13 @@ fn resolve_choosing(
             e.into()
         }
     })?;
+    if let Some(time) = data.time {
+        let (step, at) = series
+            .step_at_time(time)
+            .with_context(|| format!("--time {time}: the series has no steps"))?;
+        tracing::info!("--time {time}: step {step} (time {at}), the nearest");
+        asked_step = step;
+    }
     let opened_in = opening.elapsed();
     let decoded_at_open = series.steps_decoded();
     let step = asked_step;
@@ -535,6 +583,7 @@ fn resolve_choosing(
     }
     Ok(Resolved {
         format: data.format.or(scene.data.format),
+        read,
         scene,
         series,
         step,

@@ -104,6 +104,7 @@ impl ViewerApp {
         let source = DataSource {
             path: loaded.data_path.clone(),
             format: loaded.format,
+            read: loaded.read,
         };
         let series = Arc::new(loaded.series);
         let worker = spawn_worker(ctx, &series);
@@ -414,9 +415,14 @@ impl ViewerApp {
             .step_info(self.state.step)
             .map_or(0, |i| i.count);
         ui.label(format!("{len} steps · {count} particles in this step"));
+        // Where the data records times, the slider says the step's.
+        let label = match self.series.times().and_then(|t| t.get(self.state.step)) {
+            Some(time) => format!("step (time {time})"),
+            None => "step".to_owned(),
+        };
         ui.add_enabled(
             len > 1,
-            egui::Slider::new(&mut self.state.step, 0..=len.saturating_sub(1)).text("step"),
+            egui::Slider::new(&mut self.state.step, 0..=len.saturating_sub(1)).text(label),
         );
         ui.horizontal(|ui| {
             if ui.button("previous").clicked() && self.state.step > 0 {
@@ -874,7 +880,11 @@ impl ViewerApp {
             data: None,
             format: None,
             step: None,
+            time: None,
             cache_mib: self.options.cache_mib,
+            particle_type: None,
+            physical: false,
+            smoothing: None,
             rescan: false,
         };
         self.reload(&data, &FieldOptions::default())?;
@@ -904,7 +914,11 @@ impl ViewerApp {
                     data: None,
                     format: None,
                     step: None,
+                    time: None,
                     cache_mib: self.options.cache_mib,
+                    particle_type: None,
+                    physical: false,
+                    smoothing: None,
                     rescan: false,
                 };
                 self.reload(&data, &FieldOptions::default())
@@ -922,6 +936,7 @@ impl ViewerApp {
         state.settings.height = self.state.settings.height;
         let same_data = loaded.data_path == self.source.path
             && loaded.format == self.source.format
+            && loaded.read == self.source.read
             && loaded.series.len() == self.series.len()
             && loaded.field.attribute == self.state.field.attribute
             && loaded.field.radius_attribute == self.state.field.radius_attribute;
@@ -933,6 +948,7 @@ impl ViewerApp {
             self.source = DataSource {
                 path: loaded.data_path.clone(),
                 format: loaded.format,
+                read: loaded.read,
             };
             self.series = Arc::new(loaded.series);
             self.worker = spawn_worker(&self.ctx, &self.series);

@@ -18,6 +18,7 @@ use crate::values::Bounds;
 pub struct DataSource {
     pub path: PathBuf,
     pub format: Option<Format>,
+    pub read: crate::io::ReadOptions,
 }
 
 /// Everything the viewer renders, as a scene file states it.
@@ -81,6 +82,7 @@ impl ViewState {
         let (data, field) = scene_sections(
             &source.path,
             source.format,
+            source.read,
             self.step,
             &self.field,
             self.cluster,

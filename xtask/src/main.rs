@@ -26,13 +26,16 @@ const PROFILE: &str = "checked";
 const BACKPORTS_FILE: &str = "/etc/apt/sources.list.d/bookworm-backports.sources";
 const MIN_MESA_MAJOR: u32 = 25;
 /// Debian packages the build and tests need besides the driver (xvfb: the viewer's window
-/// test opens a real X11 window on a virtual display).
-const TOOL_PACKAGES: [&str; 5] = [
+/// test opens a real X11 window on a virtual display; libhdf5-dev and pkg-config: the HDF5
+/// snapshot reader, the default `hdf5` feature, links the system's HDF5).
+const TOOL_PACKAGES: [&str; 7] = [
     "libvulkan1",
     "vulkan-tools",
     "vulkan-validationlayers",
     "glslc",
     "xvfb",
+    "libhdf5-dev",
+    "pkg-config",
 ];
 
 fn main() -> ExitCode {
@@ -288,13 +291,14 @@ fn test(extra: &[String]) -> Result<()> {
         .args(extra))
 }
 
-const FUZZ_TARGETS: [&str; 7] = [
+const FUZZ_TARGETS: [&str; 8] = [
     "read_particles",
     "read_vtk_xml",
     "read_vtk_legacy",
     "read_csv",
     "read_ply",
     "read_raw",
+    "read_pvd",
     "read_npy",
 ];
 

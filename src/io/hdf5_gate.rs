@@ -1,0 +1,41 @@
+//! The HDF5 reader where this build has it (the default feature `hdf5`), else an error that
+//! says how to get it.
+
+use std::path::Path;
+
+#[cfg(not(feature = "hdf5"))]
+use super::Problem;
+use super::{At, AttributeSelection, Columns, DataError, ReadOptions};
+
+#[cfg(feature = "hdf5")]
+pub fn read_step(
+    at: At<'_>,
+    read: &ReadOptions,
+    selection: &AttributeSelection,
+) -> Result<Columns, DataError> {
+    super::hdf5_snapshot::read_step(at, read, selection)
+}
+
+#[cfg(not(feature = "hdf5"))]
+pub fn read_step(
+    at: At<'_>,
+    _read: &ReadOptions,
+    _selection: &AttributeSelection,
+) -> Result<Columns, DataError> {
+    Err(at.err(Problem::UnknownFormat(
+        "this aarbf was built without HDF5 support; build it with the default features \
+         (the `hdf5` feature, which needs the HDF5 library: `apt-get install libhdf5-dev` or \
+         `cargo xtask setup`), e.g. `cargo install --path . --features hdf5`"
+            .into(),
+    )))
+}
+
+#[cfg(feature = "hdf5")]
+pub fn time(path: &Path) -> Option<f64> {
+    super::hdf5_snapshot::time(path)
+}
+
+#[cfg(not(feature = "hdf5"))]
+pub fn time(_path: &Path) -> Option<f64> {
+    None
+}

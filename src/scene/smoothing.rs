@@ -1,0 +1,183 @@
+//! Smoothing lengths from neighbours, for data that has none (N-body particles, point clouds):
+//! h_i is the distance from particle i to its K-th nearest neighbour, as yt and sarracen
+//! compute it, in parallel over a k-d tree. Each step's lengths are cached beside its file
+//! (`.aarbf-smoothing/`), keyed by the file's size and modification time, so a series is
+//! measured once.
+
+use std::num::NonZero;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::UNIX_EPOCH;
+
+use glam::DVec3;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+
+use crate::io::StepRef;
+
+/// The folder, beside the data, the lengths are cached in.
+pub const CACHE_DIR: &str = ".aarbf-smoothing";
+
+/// The length given where no neighbour is at a distance (a single particle, or all particles
+/// at one point): the data has no length scale, so one unit.
+pub const NO_SCALE: f64 = 1.0;
+
+/// `--smoothing knn:K`: h from the K-th nearest neighbour.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Smoothing {
+    pub neighbours: usize,
+}
+
+impl Smoothing {
+    pub const DEFAULT_NEIGHBOURS: usize = 32;
+
+    /// The attribute the lengths are given as (usable as `--radius-attribute`): `h_knn32`,
+    /// named with K so that the series index never mixes lengths of different K.
+    pub fn attribute(self) -> String {
+        format!("h_knn{}", self.neighbours)
+    }
+}
+
+impl FromStr for Smoothing {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("smoothing '{s}': expected knn or knn:K with K a whole number >= 1");
+        let rest = s.trim().strip_prefix("knn").ok_or_else(bad)?;
+        let neighbours = match rest.strip_prefix(':') {
+            None if rest.is_empty() => Smoothing::DEFAULT_NEIGHBOURS,
+            Some(k) => k.parse().map_err(|_| bad())?,
+            None => return Err(bad()),
+        };
+        if neighbours == 0 {
+            return Err(bad());
+        }
+        Ok(Smoothing { neighbours })
+    }
+}
+
+/// h_i = the distance from particle i to its K-th nearest other particle (K clipped to the
+/// particles there are). Where that distance is 0 (K or more copies of one position), the
+/// smallest positive h of the step; where there is none, [`NO_SCALE`]. Every h is finite and
+/// positive.
+pub fn knn_lengths(positions: &[DVec3], neighbours: usize) -> Vec<f64> {
+    let n = positions.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let k = neighbours.min(n - 1);
+    let mut h: Vec<f64> = if k == 0 {
+        vec![0.0; n]
+    } else {
+        let points: Vec<[f64; 3]> = positions.iter().map(|p| p.to_array()).collect();
+        let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points);
+        // The particle itself is among its nearest (at distance 0): one more is asked for.
+        let asked = NonZero::new(k + 1).expect("k + 1 >= 1");
+        points
+            .par_iter()
+            .map(|q| {
+                let found = tree.nearest_n::<SquaredEuclidean>(q, asked);
+                found.last().map_or(0.0, |n| n.distance.sqrt())
+            })
+            .collect()
+    };
+    let floor = h
+        .iter()
+        .copied()
+        .filter(|&v| v > 0.0 && v.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    let floor = if floor.is_finite() { floor } else { NO_SCALE };
+    for v in &mut h {
+        if !(*v > 0.0 && v.is_finite()) {
+            *v = floor;
+        }
+    }
+    h
+}
+
+/// Where step `step`'s lengths for K neighbours are cached.
+fn cache_path(step: &StepRef, neighbours: usize) -> Option<PathBuf> {
+    let dir = step.path.parent()?;
+    let name = step.path.file_name()?.to_string_lossy();
+    let read = &step.read;
+    let physical = if read.physical { ".physical" } else { "" };
+    Some(dir.join(CACHE_DIR).join(format!(
+        "{name}.{}.{}{physical}.k{neighbours}.f64",
+        step.name, read.particle_type
+    )))
+}
+
+const MAGIC: &[u8; 8] = b"AARBFKN1";
+
+/// The file's size and modification time, which a cached entry must match.
+fn stamp(path: &Path) -> Option<[u8; 20]> {
+    let m = std::fs::metadata(path).ok()?;
+    let t = m.modified().ok()?.duration_since(UNIX_EPOCH).ok()?;
+    let mut out = [0u8; 20];
+    out[..8].copy_from_slice(&m.len().to_le_bytes());
+    out[8..16].copy_from_slice(&t.as_secs().to_le_bytes());
+    out[16..].copy_from_slice(&t.subsec_nanos().to_le_bytes());
+    Some(out)
+}
+
+fn load(path: &Path, stamp: &[u8; 20], count: usize) -> Option<Vec<f64>> {
+    let bytes = std::fs::read(path).ok()?;
+    let header = 8 + 20 + 8;
+    if bytes.len() != header + 8 * count
+        || &bytes[..8] != MAGIC
+        || &bytes[8..28] != stamp
+        || u64::from_le_bytes(bytes[28..36].try_into().ok()?) != count as u64
+    {
+        return None;
+    }
+    Some(
+        bytes[header..]
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+            .collect(),
+    )
+}
+
+fn save(path: &Path, stamp: &[u8; 20], h: &[f64]) -> std::io::Result<()> {
+    let mut bytes = Vec::with_capacity(36 + 8 * h.len());
+    bytes.extend_from_slice(MAGIC);
+    bytes.extend_from_slice(stamp);
+    bytes.extend_from_slice(&(h.len() as u64).to_le_bytes());
+    bytes.extend(h.iter().flat_map(|v| v.to_le_bytes()));
+    std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
+    crate::io::output::write_atomically(path, true, |tmp| std::fs::write(tmp, &bytes))
+        .map_err(std::io::Error::other)
+}
+
+/// The lengths of `step` (read from `positions`), from the cache beside its file where it
+/// holds them for the file as it is, else computed and cached (a cache that cannot be
+/// written is skipped).
+pub fn lengths_for(step: &StepRef, positions: &[DVec3], neighbours: usize) -> Vec<f64> {
+    let stamp = stamp(&step.path);
+    let path = cache_path(step, neighbours);
+    if let (Some(stamp), Some(path)) = (&stamp, &path)
+        && let Some(h) = load(path, stamp, positions.len())
+    {
+        return h;
+    }
+    let h = knn_lengths(positions, neighbours);
+    if let (Some(stamp), Some(path)) = (stamp, path)
+        && let Err(e) = save(&path, &stamp, &h)
+    {
+        tracing::debug!("{}: smoothing lengths not cached ({e})", path.display());
+    }
+    h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_flag_spells_k() {
+        assert_eq!("knn".parse(), Ok(Smoothing { neighbours: 32 }));
+        assert_eq!("knn:7".parse(), Ok(Smoothing { neighbours: 7 }));
+        for bad in ["knn:0", "knn:x", "knn7", "sph", "knn:-3"] {
+            assert!(bad.parse::<Smoothing>().is_err(), "{bad}");
+        }
+    }
+}
