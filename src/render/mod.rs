@@ -11,6 +11,7 @@ pub mod legend;
 pub mod reference;
 pub mod session;
 pub mod settings;
+mod step_bias;
 
 pub use auto::AutoValues;
 pub use session::{RenderError, RenderSession, Resolved, StepChange};
