@@ -184,7 +184,9 @@ fn an_opaque_pysph_step_estimates_its_step_bias() {
     // at twice the step (order 1): the estimate was 0.51 of the true error (2.5e-3).
     let scene = pysph();
     let s = opaque(&scene, 64, 20.0);
-    let truth = reference(&scene, &s, 1e-4);
+    // Converged to 4e-4: a sixth of the true errors it is held against (2.5e-3), so it moves
+    // their ratio by under 2% (in quadrature), at a ninth of a 1e-4 reference's samples.
+    let truth = reference(&scene, &s, 4e-4);
     let mut session = session(&scene);
     for e in [0.01, 0.005] {
         let done = render_to_target(&mut session, &s, &target(e)).unwrap();
