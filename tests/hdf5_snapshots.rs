@@ -92,6 +92,12 @@ fn as_f32(v: &[f64]) -> Vec<f32> {
 /// A SWIFT snapshot of `n` gas and `n_dm` dark-matter particles: SWIFT's `Header`, `Units`,
 /// `Cosmology` (a = 0.5) and `Code` groups, datasets with their `a-scale exponent`.
 fn write_swift(path: &Path, n: usize, n_dm: usize) {
+    write_swift_with(path, n, n_dm, |_| {});
+}
+
+/// [`write_swift`], then `extra` on the open file (one handle: reopening a file just written
+/// can meet HDF5's file lock while the library still holds it).
+fn write_swift_with(path: &Path, n: usize, n_dm: usize, extra: impl FnOnce(&hdf5::File)) {
     let f = hdf5::File::create(path).unwrap();
     let h = f.create_group("Header").unwrap();
     attr(
@@ -164,6 +170,7 @@ fn write_swift(path: &Path, n: usize, n_dm: usize) {
         CONTIGUOUS,
     );
     dataset(&dm, "Masses", &vec![7.0f64; n_dm], 1, CONTIGUOUS);
+    extra(&f);
 }
 
 fn read_with(
@@ -281,11 +288,9 @@ fn a_swift_snapshot_reads_every_dataset_of_the_chosen_type() {
 fn only_the_datasets_a_scene_uses_are_read() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("snap_0000.hdf5");
-    write_swift(&path, 530, 0);
     // A chunked dataset whose chunks were never written: HDF5 would read fill values, the
     // reader refuses it, and a selection without it never touches it.
-    {
-        let f = hdf5::File::open_rw(&path).unwrap();
+    write_swift_with(&path, 530, 0, |f| {
         f.group("PartType0")
             .unwrap()
             .new_dataset::<f32>()
@@ -293,7 +298,7 @@ fn only_the_datasets_a_scene_uses_are_read() {
             .chunk([64])
             .create("Unwritten")
             .unwrap();
-    }
+    });
     let step = read_with(&path, ReadOptions::default(), &only(&["Temperatures"])).unwrap();
     assert_eq!(step.attribute_names(), ["Temperatures"]);
     let e = read_with(&path, ReadOptions::default(), &only(&["Unwritten"]))
