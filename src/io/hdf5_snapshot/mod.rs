@@ -20,6 +20,7 @@ pub use self::header::Header;
 use super::{At, AttributeSelection, Columns, DataError, ReadOptions};
 use crate::values::Attribute;
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Neighbours the derived smoothing length's support (2 h) holds: as many cells of volume
 /// m / rho as a sphere of radius 2 h has room for.
@@ -202,26 +203,27 @@ pub fn read_step(
     }
     let physical = Scaling::new(&header, options.physical);
     let read = |column: &Column| -> Result<Vec<f64>, DataError> {
-        let mut values = Vec::new();
+        // The first file's values are the array the others extend (a single-file snapshot's
+        // is used as read: no copy).
+        let mut values: Option<Vec<f64>> = None;
         for (path, file, count) in &parts {
             if *count > 0 {
-                values.extend(read_part(
-                    At::new(path, at.step),
-                    file,
-                    &catalog,
-                    column,
-                    *count,
-                )?);
+                let part = read_part(At::new(path, at.step), file, &catalog, column, *count)?;
+                match values.as_mut() {
+                    Some(v) => v.extend_from_slice(&part),
+                    None => values = Some(part),
+                }
             }
         }
+        let mut values = values.unwrap_or_default();
         let factor = physical.factor(&group, column)?;
         if factor != 1.0 {
-            values.iter_mut().for_each(|v| *v *= factor);
+            values.par_iter_mut().for_each(|v| *v *= factor);
         }
         Ok(values)
     };
     let positions: Vec<DVec3> = read(coordinates)?
-        .chunks_exact(3)
+        .par_chunks_exact(3)
         .map(|p| DVec3::new(p[0], p[1], p[2]))
         .collect();
     let attributes = read_attributes(at, &catalog, selection, positions.len(), &read)?;
