@@ -115,42 +115,6 @@ fn write_csv(path: &Path, particles: &[(DVec3, f64)]) {
     std::fs::write(path, text).unwrap();
 }
 
-/// A float64 array as `numpy.save` writes it: magic, version 1.0, a header dict padded with
-/// spaces to a multiple of 64 bytes and ended by a newline, then the row-major data.
-fn write_numpy(path: &Path, rows: usize, cols: usize, data: &[f64]) {
-    let mut header =
-        format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
-    let total = 10 + header.len() + 1;
-    header.push_str(&" ".repeat(total.next_multiple_of(64) - total));
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    for v in data {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    std::fs::write(path, bytes).unwrap();
-}
-
-/// x - c exactly, as the pair (s, e) with s + e = x - c (Knuth's two-sum).
-fn two_diff(x: f64, c: f64) -> (f64, f64) {
-    let s = x - c;
-    let bb = s - x;
-    let e = (x - (s - bb)) + (-c - bb);
-    (s, e)
-}
-
-/// |x - c|² to f64's relative precision, however large x and c are.
-fn exact_d2(x: DVec3, c: DVec3) -> f64 {
-    [(x.x, c.x), (x.y, c.y), (x.z, c.z)]
-        .iter()
-        .map(|&(a, b)| {
-            let (s, e) = two_diff(a, b);
-            s * s + 2.0 * s * e
-        })
-        .sum()
-}
-
 /// The oracle at `x`: (Phi, Theta), and what particles at the edge of their sphere (to within
 /// `edge` of their radius) contribute to Phi and could move Theta by.
 fn oracle(
@@ -163,7 +127,7 @@ fn oracle(
     let (mut phi, mut num) = (0.0, 0.0);
     let mut edge_terms = Vec::new();
     for &(c, s) in particles {
-        let d2 = exact_d2(x, c);
+        let d2 = common::exact_d2(x, c);
         let d = d2.sqrt();
         let t = (s - range.0) / (range.1 - range.0);
         if (d - radius).abs() <= edge {
@@ -299,12 +263,12 @@ fn double_precision_files_at_extreme_offsets_and_radii_on_every_backend() {
                 .iter()
                 .flat_map(|(c, s)| [c.x, c.y, c.z, *s])
                 .collect();
-            write_numpy(&p, particles.len(), 4, &flat);
+            common::write_numpy(&p, particles.len(), 4, &flat);
             p
         };
         let query_path = dir.path().join(format!("queries{k}.npy"));
         let flat: Vec<f64> = queries.iter().flat_map(|q| q.to_array()).collect();
-        write_numpy(&query_path, queries.len(), 3, &flat);
+        common::write_numpy(&query_path, queries.len(), 3, &flat);
         // A point on a sphere's edge may fall either side of it: within the rounding of the
         // positions in f32 (local coordinates, the hi parts in double-single) or f64.
         let local = 1.0 + case.radius.min(1.0);

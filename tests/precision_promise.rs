@@ -126,35 +126,6 @@ fn write_csv(path: &Path, scene: &Scene) {
     std::fs::write(path, text).unwrap();
 }
 
-/// A float64 array as `numpy.save` writes it (format 1.0, header padded to 64 bytes).
-fn write_numpy(path: &Path, rows: usize, cols: usize, data: &[f64]) {
-    let mut header =
-        format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
-    let total = 10 + header.len() + 1;
-    header.push_str(&" ".repeat(total.next_multiple_of(64) - total));
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    for v in data {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    std::fs::write(path, bytes).unwrap();
-}
-
-/// x - c as an exact pair (Knuth's two-sum): |x - c|² to f64's relative precision.
-fn exact_d2(x: DVec3, c: DVec3) -> f64 {
-    [(x.x, c.x), (x.y, c.y), (x.z, c.z)]
-        .iter()
-        .map(|&(a, b)| {
-            let s = a - b;
-            let bb = s - a;
-            let e = (a - (s - bb)) + (-b - bb);
-            s * s + 2.0 * s * e
-        })
-        .sum()
-}
-
 /// The oracle at x: Phi, Theta in [0, 1] of the range, and what particles within `edge` of
 /// their radius could add to Phi's and Theta's errors.
 struct Truth {
@@ -170,7 +141,7 @@ fn oracle(scene: &Scene, range: (f64, f64), edge: f64, x: DVec3) -> Truth {
     for (i, &(c, s)) in scene.particles.iter().enumerate() {
         let radius = scene.radius_of(i);
         let r2 = radius * radius;
-        let d2 = exact_d2(x, c);
+        let d2 = common::exact_d2(x, c);
         let t = (s - range.0) / (range.1 - range.0);
         if (d2.sqrt() - radius).abs() <= edge {
             edges.push(t);
@@ -355,12 +326,12 @@ fn every_backend_meets_its_printed_bound_and_the_tolerance_on_generated_scenes()
                         .chain(scene.h.as_ref().map(|h| h[i]))
                 })
                 .collect();
-            write_numpy(&p, scene.particles.len(), cols, &flat);
+            common::write_numpy(&p, scene.particles.len(), cols, &flat);
             p
         };
         let queries = dir.path().join(format!("queries{k}.npy"));
         let flat: Vec<f64> = scene.queries.iter().flat_map(|q| q.to_array()).collect();
-        write_numpy(&queries, scene.queries.len(), 3, &flat);
+        common::write_numpy(&queries, scene.queries.len(), 3, &flat);
         // Which side of a radius a point falls on is the positions' rounding's choice: f32
         // local coordinates (the domain is a unit cube about its centre), or a double-single
         // pair's hi part.

@@ -1,6 +1,7 @@
-//! What the GPU test files share: requiring a device (a GPU test fails without one, never
-//! passes without running), and capturing the messages of wgpu and of the Vulkan validation
-//! layers it routes through `log`, so a test can fail on any of them.
+//! What the test files share: requiring a device (a GPU test fails without one, never passes
+//! without running); capturing the messages of wgpu and of the Vulkan validation layers it
+//! routes through `log`, so a test can fail on any of them; and, for the precision tests,
+//! NumPy files as NumPy writes them and exact distances for their f64 oracles.
 
 #![allow(dead_code)] // each test file uses its own part
 
@@ -63,4 +64,40 @@ pub fn assert_no_driver_messages() {
         .unwrap_or_else(|e| e.into_inner())
         .clone();
     assert!(m.is_empty(), "validation / driver messages: {m:#?}");
+}
+
+/// A float64 array as `numpy.save` writes it: magic, version 1.0, a header dict padded with
+/// spaces to a multiple of 64 bytes and ended by a newline, then the row-major data.
+pub fn write_numpy(path: &std::path::Path, rows: usize, cols: usize, data: &[f64]) {
+    let mut header =
+        format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
+    let total = 10 + header.len() + 1;
+    header.push_str(&" ".repeat(total.next_multiple_of(64) - total));
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in data {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// x - c exactly, as the pair (s, e) with s + e = x - c (Knuth's two-sum).
+pub fn two_diff(x: f64, c: f64) -> (f64, f64) {
+    let s = x - c;
+    let bb = s - x;
+    let e = (x - (s - bb)) + (-c - bb);
+    (s, e)
+}
+
+/// |x - c|² to f64's relative precision, however large x and c are.
+pub fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
+    [(x.x, c.x), (x.y, c.y), (x.z, c.z)]
+        .iter()
+        .map(|&(a, b)| {
+            let (s, e) = two_diff(a, b);
+            s * s + 2.0 * s * e
+        })
+        .sum()
 }
