@@ -12,9 +12,7 @@
 //! edge a point falls on is decided by that rounding).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-use aarbf::io::{At, npy};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
@@ -153,12 +151,6 @@ fn oracle(
     (phi, theta, edge_phi, edge_theta)
 }
 
-fn aarbf() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_aarbf"));
-    c.env("XDG_RUNTIME_DIR", std::env::temp_dir());
-    c
-}
-
 fn field(
     data: &Path,
     queries: &Path,
@@ -173,34 +165,19 @@ fn field(
     } else {
         "s"
     };
-    let output = aarbf()
-        .args(["field", "--data"])
-        .arg(data)
-        .args(["--attribute", attribute, "--radius", &format!("{radius:e}")])
-        .arg("--queries")
-        .arg(queries)
-        .args([
-            "--backend",
-            backend,
-            "--precision",
-            precision,
-            "--force",
-            "--out",
-        ])
-        .arg(out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    if !output.status.success() && backend != "cpu" {
-        common::require::<(), _>(&format!("the {backend} backend"), Err(stderr.to_string()));
-    }
-    assert!(
-        output.status.success(),
-        "aarbf field --backend {backend}: {stderr}"
-    );
-    let m = npy::read_matrix(At::new(out, None)).unwrap();
-    assert_eq!(m.cols, 2);
-    (0..m.rows).map(|i| [m.row(i)[0], m.row(i)[1]]).collect()
+    let args: Vec<std::ffi::OsString> = vec![
+        "--data".into(),
+        data.into(),
+        "--attribute".into(),
+        attribute.into(),
+        "--radius".into(),
+        format!("{radius:e}").into(),
+        "--queries".into(),
+        queries.into(),
+        "--precision".into(),
+        precision.into(),
+    ];
+    common::aarbf_field(&args, backend, out).0
 }
 
 /// The worst errors of a backend on a case: (Phi relative, Theta over the range), and how many

@@ -19,9 +19,7 @@
 //! within the rounding of positions is allowed that particle's jump (`w exp(-4.5)`).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-use aarbf::io::{At, npy};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
@@ -211,32 +209,20 @@ fn field(
     let npy = data.extension().is_some_and(|e| e == "npy");
     let (attribute, h) = if npy { ("col3", "col4") } else { ("s", "h") };
     let radius = scene.radius;
-    let output = Command::new(env!("CARGO_BIN_EXE_aarbf"))
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .args(["field", "--data"])
-        .arg(data)
-        .args(["--attribute", attribute, "--radius", &format!("{radius:e}")])
-        .arg("--queries")
-        .arg(queries)
-        .args(if scene.h.is_some() {
-            vec!["--radius-attribute", h]
-        } else {
-            vec![]
-        })
-        .args(["--backend", backend, "--force", "--out"])
-        .arg(out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    if !output.status.success() && backend != "cpu" {
-        common::require::<(), _>(&format!("the {backend} backend"), Err(stderr.to_string()));
+    let mut args: Vec<std::ffi::OsString> = vec![
+        "--data".into(),
+        data.into(),
+        "--attribute".into(),
+        attribute.into(),
+        "--radius".into(),
+        format!("{radius:e}").into(),
+        "--queries".into(),
+        queries.into(),
+    ];
+    if scene.h.is_some() {
+        args.extend(["--radius-attribute".into(), h.into()]);
     }
-    assert!(
-        output.status.success(),
-        "aarbf field --backend {backend}: {stderr}"
-    );
-    let m = npy::read_matrix(At::new(out, None)).unwrap();
-    let got = (0..m.rows).map(|i| [m.row(i)[0], m.row(i)[1]]).collect();
+    let (got, stderr) = common::aarbf_field(&args, backend, out);
     (got, stated(&stderr, backend))
 }
 

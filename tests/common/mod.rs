@@ -101,3 +101,33 @@ pub fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
         })
         .sum()
 }
+
+/// `aarbf field ARGS --backend BACKEND --force --out OUT` as a user runs it: (Phi, Theta) per
+/// query from the output, and what it printed. A GPU backend that cannot start fails the test
+/// as [`require`] does.
+pub fn aarbf_field(
+    args: &[std::ffi::OsString],
+    backend: &str,
+    out: &std::path::Path,
+) -> (Vec<[f64; 2]>, String) {
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .arg("field")
+        .args(args)
+        .args(["--backend", backend, "--force", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    if !output.status.success() && backend != "cpu" {
+        require::<(), _>(&format!("the {backend} backend"), Err(stderr.clone()));
+    }
+    assert!(
+        output.status.success(),
+        "aarbf field --backend {backend}: {stderr}"
+    );
+    let m = aarbf::io::npy::read_matrix(aarbf::io::At::new(out, None)).unwrap();
+    assert_eq!(m.cols, 2);
+    let got = (0..m.rows).map(|i| [m.row(i)[0], m.row(i)[1]]).collect();
+    (got, stderr)
+}
