@@ -453,7 +453,6 @@ fn summation_costs(backends: &mut [(BackendKind, Box<dyn Backend>)], frame_size:
                     Some(aarbf::backend::precision::Summation::Blocked { .. }) => "blocked (f64)",
                     _ => "plain f32",
                 };
-                let _ = name;
                 let frame = {
                     let Ok(fresh) = backend::create(*kind) else {
                         continue;
