@@ -684,3 +684,37 @@ fn info_describes_and_render_draws_a_swift_and_a_multi_file_gadget_series() {
         }
     }
 }
+
+/// A new user's first render of a snapshot with several particle types, no flags: what is read
+/// (gas, the default) and what else the snapshot holds is said before anything is drawn.
+#[test]
+fn a_render_without_flags_says_which_particle_type_it_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    write_swift(&dir.path().join("snap_0000.hdf5"), 611, 40);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(["render", "--data"])
+        .arg(dir.path())
+        .args([
+            "--backend",
+            "cpu",
+            "--width",
+            "24",
+            "--height",
+            "16",
+            "--spp",
+            "1",
+        ])
+        .arg("--out")
+        .arg(dir.path().join("first.png"))
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(
+            "particles: gas (/PartType0); the snapshot holds 611 gas (type 0), 40 dm (type 1)"
+        ),
+        "{stderr}"
+    );
+}

@@ -34,18 +34,24 @@ const DENSITY_DATASETS: [&str; 2] = ["Density", "Densities"];
 const MASSES: &str = "Masses";
 const COORDINATES: &str = "Coordinates";
 
-/// Opens one file of a snapshot; the error says whether it is not HDF5 at all.
+/// Opens one file of a snapshot, read-only and without HDF5's file lock; the error says
+/// whether it is not HDF5 at all. (The lock is what h5py users turn off with
+/// `HDF5_USE_FILE_LOCKING=FALSE` on Lustre and NFS, where it fails; a reader gains nothing from
+/// it, and it refused a file another thread of the same process had just written and closed.)
 fn open(at: At<'_>) -> Result<File, DataError> {
-    File::open(at.file).map_err(|e| {
-        let text = e.to_string();
-        if text.contains("signature") {
-            at.malformed(format!("not an HDF5 file (no HDF5 signature): {text}"))
-        } else {
-            at.malformed(format!(
-                "cannot open as HDF5 (truncated or damaged?): {text}"
-            ))
-        }
-    })
+    File::with_options()
+        .with_fapl(|fapl| fapl.file_locking(false))
+        .open(at.file)
+        .map_err(|e| {
+            let text = e.to_string();
+            if text.contains("signature") {
+                at.malformed(format!("not an HDF5 file (no HDF5 signature): {text}"))
+            } else {
+                at.malformed(format!(
+                    "cannot open as HDF5 (truncated or damaged?): {text}"
+                ))
+            }
+        })
 }
 
 /// The files of the snapshot whose (first) file is `first`: itself, or for a header that
@@ -158,6 +164,7 @@ pub fn read_step(
             type_counts(&header)
         )));
     }
+    say_particle_type(options, &header);
     let mut parts = Vec::with_capacity(files.len());
     for (i, path) in files.iter().enumerate() {
         let part_at = At::new(path, at.step);
@@ -373,6 +380,21 @@ fn gadget_exponent(dataset: &str) -> Option<f64> {
         "Density" => Some(-3.0),
         "Velocities" => Some(0.5),
         _ => None,
+    }
+}
+
+/// Says once per process which particle type is read and which the snapshot holds (a default a
+/// user of a multi-type snapshot must see: gas unless `--particle-type` says otherwise).
+fn say_particle_type(options: &ReadOptions, header: &Header) {
+    static SAID: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !SAID.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        tracing::info!(
+            "particles: {} (/{}); the snapshot holds {} (--particle-type NAME or 0..5 reads \
+             another)",
+            options.particle_type,
+            options.particle_type.group(),
+            type_counts(header)
+        );
     }
 }
 
