@@ -43,7 +43,7 @@ use crate::field::{
     FieldError, FieldInputs, FieldSettings, FieldTables, normalise, particle_radius,
 };
 use crate::values::tables::{lookup, steepest_relative_slope, value_extremes};
-use crate::values::{Attribute, Step};
+use crate::values::{Kernel, Step};
 
 /// Write-only slots of an array of 16-byte elements (a particle's vec4) or 4-byte ones (its
 /// radius attribute): memory the device copies from (mapped staging buffers are write-only),
@@ -87,6 +87,11 @@ pub struct GpuStepData {
     pub double_single: bool,
     /// The scene has a per-particle radius attribute (the device holds it, in Hilbert order).
     pub has_radius_attribute: bool,
+    /// The kernel; an SPH kernel's per-particle volumes `m/ρ` follow the radius attribute in
+    /// the same buffer ([`Self::volume_offset`]).
+    pub kernel: Kernel,
+    /// The smallest positive and the largest volume (an SPH kernel's; (1, 1) otherwise).
+    pub volume_range: (f64, f64),
     pub cluster: ClusterSize,
     pub field: GpuField,
     pub radius_map_varies: bool,
@@ -107,6 +112,8 @@ pub struct SortedParticles {
     pub points_lo: Option<Vec<[f32; 4]>>,
     /// The radius attribute h, only when the scene uses one.
     pub radius_attribute: Option<Vec<f32>>,
+    /// An SPH kernel's volumes m/ρ, only with an SPH kernel.
+    pub volume: Option<Vec<f32>>,
     /// `order[k]` is the step's index of sorted particle k.
     pub order: Vec<u32>,
 }
@@ -355,6 +362,17 @@ impl StepStaging<'_> {
         self.values.inputs.radius.is_some()
     }
 
+    /// Floats of the radius-attribute buffer the pass writes: the radius attribute, then an
+    /// SPH kernel's volumes ([`factor_layout`]); 0 when neither.
+    pub fn factor_words(&self) -> usize {
+        factor_layout(
+            self.len(),
+            self.has_radius_attribute(),
+            self.input.field.kernel.is_sph(),
+        )
+        .1
+    }
+
     /// The staging pass: writes every particle, in the step's order, into `points` (slots for
     /// particles `first ..`, the parts in order and covering the step: xyz the f32 local
     /// position, w t) and, when the scene has one, its radius attribute into `radius`; and
@@ -363,11 +381,20 @@ impl StepStaging<'_> {
     pub fn write(
         self,
         points: Vec<(usize, Slots16<'_>)>,
-        radius: Option<Slots4<'_>>,
+        factors: Option<Slots4<'_>>,
     ) -> GpuStepData {
         let step = self.input.step;
         let origin = self.quantizer.origin();
-        let second = radius.filter(|_| self.has_radius_attribute());
+        let (second, volume) = split_factors(
+            factors,
+            step.len(),
+            self.has_radius_attribute(),
+            self.input.field.kernel.is_sph(),
+        );
+        let volume_range = match volume {
+            Some(slots) => write_volume(&self.values.inputs, slots),
+            None => (1.0, 1.0),
+        };
         // A scene whose radii are all equal (the common case) needs no radius per particle.
         let constant_radius = self.values.constant_radius();
         let mut extremes = for_each_particle(points, second, |i, e| {
@@ -398,6 +425,8 @@ impl StepStaging<'_> {
             largest_coordinate: extremes.largest,
             double_single: false,
             has_radius_attribute: self.has_radius_attribute(),
+            kernel: self.input.field.kernel,
+            volume_range,
             cluster: self.input.cluster,
             field: GpuField::default(),
             radius_map_varies: false,
@@ -433,10 +462,11 @@ impl GpuStepData {
         let staging = GpuStepData::check(input)?;
         let n = staging.len();
         let mut points = vec![[0.0f32; 4]; n];
-        let mut radius = staging.has_radius_attribute().then(|| vec![0.0f32; n]);
+        let words = staging.factor_words();
+        let mut factors = (words > 0).then(|| vec![0.0f32; words]);
         let data = staging.write(
             vec![(0, slots16(&mut points))],
-            radius.as_deref_mut().map(slots4),
+            factors.as_deref_mut().map(slots4),
         );
         let order = hilbert_order(&input.step.positions, input.series_bounds);
         let points_lo = data.double_single.then(|| {
@@ -447,7 +477,14 @@ impl GpuStepData {
         let sorted = SortedParticles {
             points: gather(&points, &order),
             points_lo,
-            radius_attribute: radius.map(|h| gather(&h, &order)),
+            radius_attribute: factors
+                .as_ref()
+                .filter(|_| data.has_radius_attribute)
+                .map(|f| gather(&f[..n], &order)),
+            volume: factors
+                .as_ref()
+                .filter(|_| data.kernel.is_sph())
+                .map(|f| gather(&f[data.volume_offset()..][..n], &order)),
             order,
         };
         Ok((data, sorted))
@@ -470,15 +507,49 @@ impl GpuStepData {
         });
     }
 
-    /// The radius attribute `settings` names, in the step's order, as f32 (after a change of
-    /// [`Self::apply_field`] says it changed); nothing when it names none.
-    pub fn write_radius_attribute(step: &Step, settings: &FieldSettings, slots: Slots4<'_>) {
-        let Some(h) = radius_attribute(step, settings) else {
-            return;
-        };
-        for_each_particle::<_, [u8; 4], _>(vec![(0, slots)], None, |i, _| {
-            (bytemuck::cast(h.values[i] as f32), None)
-        });
+    /// The radius attribute `settings` names and an SPH kernel's volumes, in the step's order,
+    /// as f32, laid out as [`Self::factor_words`] says (after a change of [`Self::apply_field`]
+    /// says they changed); nothing when there are neither.
+    pub fn write_factors(
+        &self,
+        step: &Step,
+        settings: &FieldSettings,
+        slots: Slots4<'_>,
+    ) -> Result<(), FieldError> {
+        let inputs = FieldInputs::check(step, settings, None)?;
+        let (radius, volume) = split_factors(
+            Some(slots),
+            step.len(),
+            self.has_radius_attribute,
+            self.kernel.is_sph(),
+        );
+        if let (Some(h), Some(slots)) = (inputs.radius, radius) {
+            for_each_particle::<_, [u8; 4], _>(vec![(0, slots)], None, |i, _| {
+                (bytemuck::cast(h.values[i] as f32), None)
+            });
+        }
+        if let Some(slots) = volume {
+            write_volume(&inputs, slots);
+        }
+        Ok(())
+    }
+
+    /// Where an SPH kernel's volumes start in the radius-attribute buffer (floats): after the
+    /// radius attribute's section, rounded up to 64 floats (256 bytes, the offset alignment
+    /// a storage binding needs), or at 0 without one.
+    pub fn volume_offset(&self) -> usize {
+        factor_layout(self.count, self.has_radius_attribute, self.kernel.is_sph()).0
+    }
+
+    /// Floats the radius-attribute buffer holds for this step (0: none is needed).
+    pub fn factor_words(&self) -> usize {
+        factor_layout(self.count, self.has_radius_attribute, self.kernel.is_sph()).1
+    }
+
+    /// Whether the step needs the radius-attribute buffer: a radius attribute, or an SPH
+    /// kernel's volumes.
+    pub fn has_factors(&self) -> bool {
+        self.factor_words() > 0
     }
 
     /// Applies field settings that keep the particles (the same attribute and range): checks
@@ -495,7 +566,16 @@ impl GpuStepData {
         series_range: Option<(f64, f64)>,
     ) -> Result<Changed, FieldError> {
         let inputs = FieldInputs::check(step, new, series_range)?;
-        let radius_changed = new.radius_attribute != old.radius_attribute;
+        let factors_changed = new.radius_attribute != old.radius_attribute
+            || new.kernel != old.kernel
+            || new.mass != old.mass
+            || new.density != old.density;
+        if factors_changed {
+            self.volume_range = match &inputs.volume {
+                Some(_) => volume_range(&inputs, step.len()),
+                None => (1.0, 1.0),
+            };
+        }
         let values = ParticleValues {
             inputs,
             settings: new,
@@ -506,12 +586,13 @@ impl GpuStepData {
             ..values.radius_extremes(step.len())
         };
         self.has_radius_attribute = values.inputs.radius.is_some();
+        self.kernel = new.kernel;
         self.tables = values.tables;
         self.set_maps(new);
         let had_lo = self.double_single;
         self.choose_precision(step, extremes);
         Ok(Changed {
-            radius_attribute: radius_changed,
+            factors: factors_changed,
             positions_lo: self.double_single && !had_lo,
         })
     }
@@ -519,12 +600,18 @@ impl GpuStepData {
     /// Bounds the error of every representation of this scene ([`choose_gpu`]) and takes the
     /// one the precision asked for: positions (`double_single`) and sums (`compensated`).
     fn choose_precision(&mut self, step: &Step, extremes: Extremes) {
-        let (w_min, w_max) = if self.density_map_varies {
+        let (mut w_min, mut w_max) = if self.density_map_varies {
             value_extremes(&self.tables.density)
         } else {
             let w = f64::from(self.field.radius[2]);
             (w, w)
         };
+        if self.kernel.is_sph() {
+            // A term's weight is w V σ s³ / r³ (`particle_weight`).
+            let (v_min, v_max) = self.volume_range;
+            w_min *= self.kernel.weight_factor(extremes.r_max, v_min);
+            w_max *= self.kernel.weight_factor(extremes.r_min, v_max);
+        }
         let slope = |varies: bool, table: &[f32]| {
             if varies {
                 steepest_relative_slope(table)
@@ -544,6 +631,7 @@ impl GpuStepData {
             radius_varies: self.radius_map_varies || self.has_radius_attribute,
             density_slope: slope(self.density_map_varies, &self.tables.density),
             radius_slope: slope(self.radius_map_varies, &self.tables.radius),
+            kernel: self.kernel,
         };
         let cluster = self.cluster.get() as u32;
         self.representation = choose_gpu(self.precision, &scene, cluster);
@@ -600,6 +688,7 @@ impl GpuStepData {
                 (4.5 / (one_radius * one_radius)) as f32,
             ],
             counts: [n as u32, self.cluster.clusters_for(n) as u32, 0, 0],
+            factors: [self.volume_offset() as u32, 0, 0, 0],
         };
     }
 
@@ -609,22 +698,82 @@ impl GpuStepData {
         self.count
             * (16
                 + 16 * usize::from(self.double_single)
-                + 4 * usize::from(self.has_radius_attribute))
+                + 4 * usize::from(self.has_radius_attribute)
+                + 4 * usize::from(self.kernel.is_sph()))
     }
 }
 
-/// The radius attribute `settings` names, if the step has it.
-fn radius_attribute<'a>(step: &'a Step, settings: &FieldSettings) -> Option<&'a Attribute> {
-    settings
-        .radius_attribute
-        .as_deref()
-        .and_then(|name| step.attribute(name))
+/// The radius-attribute buffer's layout for `n` particles: where the volumes start and the
+/// floats in all. The radius attribute takes floats `0..n`; an SPH kernel's volumes follow
+/// from the next multiple of 64 (a storage binding's offset must be a multiple of 256 bytes).
+pub fn factor_layout(n: usize, radius_attribute: bool, sph: bool) -> (usize, usize) {
+    let offset = if radius_attribute {
+        n.div_ceil(64) * 64
+    } else {
+        0
+    };
+    let words = match (radius_attribute, sph) {
+        (_, true) => offset + n,
+        (true, false) => n,
+        (false, false) => 0,
+    };
+    (offset, words)
+}
+
+/// The radius-attribute buffer's slots split into the radius attribute's section and the
+/// volumes' (each `None` where the scene has none).
+fn split_factors(
+    slots: Option<Slots4<'_>>,
+    n: usize,
+    radius_attribute: bool,
+    sph: bool,
+) -> (Option<Slots4<'_>>, Option<Slots4<'_>>) {
+    let Some(slots) = slots else {
+        return (None, None);
+    };
+    let (offset, words) = factor_layout(n, radius_attribute, sph);
+    assert!(
+        slots.len() >= words,
+        "the radius-attribute slots hold {words} floats"
+    );
+    let len = slots.len();
+    let (head, rest) = slots.split_at(offset.min(len));
+    let radius = radius_attribute.then(|| head.split_at(n).0);
+    let volume = sph.then(|| rest.split_at(n).0);
+    (radius, volume)
+}
+
+/// Writes every particle's volume `m/ρ` as f32 into `slots`, in the step's order, and returns
+/// the smallest positive and the largest.
+fn write_volume(inputs: &FieldInputs<'_>, slots: Slots4<'_>) -> (f64, f64) {
+    let n = slots.len();
+    for_each_particle::<_, [u8; 4], _>(vec![(0, slots)], None, |i, _| {
+        (bytemuck::cast(inputs.volume(i) as f32), None)
+    });
+    volume_range(inputs, n)
+}
+
+/// The smallest positive and the largest volume over `n` particles ((1, 1) where there are
+/// none).
+fn volume_range(inputs: &FieldInputs<'_>, n: usize) -> (f64, f64) {
+    let (lo, hi) = (0..n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| inputs.volume(i))
+        .filter(|&v| v > 0.0)
+        .fold(
+            || (f64::INFINITY, 0.0f64),
+            |(lo, hi), v| (lo.min(v), hi.max(v)),
+        )
+        .reduce(|| (f64::INFINITY, 0.0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+    if lo.is_finite() { (lo, hi) } else { (1.0, 1.0) }
 }
 
 /// What [`GpuStepData::apply_field`] changed that a backend must upload again.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Changed {
-    pub radius_attribute: bool,
+    /// The radius attribute or an SPH kernel's volumes ([`GpuStepData::write_factors`]).
+    pub factors: bool,
     /// The precision now needs the lo parts of the positions, and they were not held (when it
     /// no longer needs them, the kernels stop reading them: nothing to upload).
     pub positions_lo: bool,

@@ -261,6 +261,22 @@ impl Scatter<'_> {
         members: &[u32],
         rows: std::ops::Range<usize>,
     ) -> [Vec<f64>; S] {
+        if self.particles.kernel.is_sph() {
+            self.block_kernel::<S, true>(members, rows)
+        } else {
+            self.block_kernel::<S, false>(members, rows)
+        }
+    }
+
+    /// [`Self::block_lanes`] for the Gaussian (separable: `SPH` false) or an SPH kernel (its
+    /// profile per point, from the same d² the reference computes).
+    #[inline(always)]
+    fn block_kernel<const S: usize, const SPH: bool>(
+        &self,
+        members: &[u32],
+        rows: std::ops::Range<usize>,
+    ) -> [Vec<f64>; S] {
+        let kernel = self.particles.kernel;
         let [nx, ny, _] = self.grid.dims;
         let stride = nx + LANES;
         let particles = self.particles;
@@ -294,7 +310,12 @@ impl Scatter<'_> {
                         .map(|&x| (x - centre) * (x - centre)),
                 );
                 e[d].clear();
-                e[d].extend(t[d].iter().map(|&t| (-4.5 * t / r2).exp()));
+                if SPH {
+                    // Not separable: the profile is taken per point below.
+                    e[d].resize(t[d].len(), 1.0);
+                } else {
+                    e[d].extend(t[d].iter().map(|&t| (-4.5 * t / r2).exp()));
+                }
             }
             t[0].extend([f64::INFINITY; LANES]);
             e[0].extend([0.0; LANES]);
@@ -331,7 +352,13 @@ impl Scatter<'_> {
                             };
                             // Without a branch: a point beyond the radius adds 0 (the
                             // padding lies beyond every radius).
-                            phi[l] = if d2 <= r2 { weight * ex[l] } else { 0.0 };
+                            phi[l] = if d2 > r2 {
+                                0.0
+                            } else if SPH {
+                                weight * kernel.profile(d2, r2)
+                            } else {
+                                weight * ex[l]
+                            };
                         }
                         for (acc, g) in acc.iter_mut().zip(gain) {
                             let acc: &mut [f64; LANES] = (&mut acc

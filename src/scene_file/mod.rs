@@ -17,6 +17,7 @@
 //! cluster = 4
 //! ```
 
+mod kernel;
 pub mod resolve;
 
 use std::path::{Path, PathBuf};
@@ -26,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use glam::DVec3;
 
 use crate::accel::ClusterSize;
-use crate::field::Classification;
+use crate::field::{Classification, Kernel, PerParticle};
 use crate::io::{Format, ParticleType};
 use crate::render::{RenderSettings, Resolved};
 use crate::scene::maps::{MapError, OpticalDensityMap, PiecewiseLinear};
@@ -297,6 +298,12 @@ pub struct FieldSection {
     pub colormap: Option<String>,
     pub classification: Option<Classification>,
     pub cluster: Option<ClusterSize>,
+    /// The kernel (`gaussian-rbf`, `sph-cubic`, ...).
+    pub kernel: Option<Kernel>,
+    /// An SPH kernel's masses: an attribute's name or one value.
+    pub mass: Option<PerParticle>,
+    /// An SPH kernel's densities: an attribute's name or one value.
+    pub density: Option<PerParticle>,
 }
 
 /// The view: an explicit look-at camera, or a position on the benchmark orbit.

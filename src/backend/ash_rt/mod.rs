@@ -371,6 +371,15 @@ impl AshBackend {
                 true => Some(bytemuck::pod_collect_to_vec(&b.radius.read(n * 4)?)),
                 false => None,
             },
+            volume: match up.data.kernel.is_sph() {
+                true => {
+                    let offset = up.data.volume_offset();
+                    let words: Vec<f32> =
+                        bytemuck::pod_collect_to_vec(&b.radius.read((offset as u64 + n) * 4)?);
+                    Some(words[offset..].to_vec())
+                }
+                false => None,
+            },
             order: prepare.order(n as usize)?,
         })
     }
@@ -450,7 +459,11 @@ impl AshBackend {
         let changed = up
             .data
             .apply_field(&up.step, &up.field, field, up.series_range)?;
-        let radius = changed.radius_attribute && up.data.has_radius_attribute;
+        let radius = changed.factors && up.data.has_factors();
+        if radius {
+            self.buffers
+                .ensure_factors(&self.ctx, up.data.factor_words())?;
+        }
         if changed.positions_lo {
             ensure_points_lo(&self.ctx, &mut self.buffers.points_lo, self.capacity)?;
         }
@@ -582,6 +595,8 @@ impl Backend for AshBackend {
         if data.double_single {
             ensure_points_lo(&self.ctx, &mut self.buffers.points_lo, self.capacity)?;
         }
+        self.buffers
+            .ensure_factors(&self.ctx, data.factor_words())?;
         if let Some(s) = &mut self.structure {
             s.built = false;
         }
@@ -597,7 +612,7 @@ impl Backend for AshBackend {
             &Targets {
                 points: &self.buffers.points,
                 points_lo: data.double_single.then_some(&self.buffers.points_lo),
-                radius: data.has_radius_attribute.then_some(&self.buffers.radius),
+                radius: data.has_factors().then_some(&self.buffers.radius),
             },
         )?;
         self.commands.submit_and_wait()?;
