@@ -343,7 +343,7 @@ fn smallest_profile(kernel: Kernel) -> f64 {
 /// floor (the last few percent of the support, where `f` falls to 0 as a power of the distance
 /// to the edge) can err by more relative to itself: its absolute error is at most `κ ε_q` of
 /// the floor, which the bound leaves out, as it leaves out the truncation edge.
-fn sph_kernel_error(kernel: Kernel, argument: f64, glsl: bool) -> f64 {
+pub fn sph_kernel_error(kernel: Kernel, argument: f64, glsl: bool) -> f64 {
     let sqrt = if glsl { 2.0 * 2.5 * U } else { U };
     let q_error = 0.5 * argument + sqrt + U;
     sph_condition(kernel) * q_error + sph_evaluation(kernel) * U
@@ -563,6 +563,7 @@ mod tests {
             radius_varies: false,
             density_slope: 0.0,
             radius_slope: 0.0,
+            kernel: Kernel::GaussianRbf,
         }
     }
 

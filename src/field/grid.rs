@@ -392,6 +392,10 @@ mod tests {
     /// Particles as a simulation writes them (full f64 coordinates off the origin, radii of
     /// several sizes through a radius attribute), an awkward count.
     fn field(classification: Classification) -> ReferenceField {
+        field_with(classification, crate::field::Kernel::GaussianRbf)
+    }
+
+    fn field_with(classification: Classification, kernel: crate::field::Kernel) -> ReferenceField {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
         let n = 1237;
         let positions: Vec<DVec3> = (0..n)
@@ -402,21 +406,30 @@ mod tests {
             .collect();
         let s = (0..n).map(|_| rng.random::<f64>() * 40.0 - 3.0).collect();
         let h = (0..n).map(|_| 0.5 + rng.random::<f64>()).collect();
+        let m = (0..n).map(|_| 0.5 + rng.random::<f64>()).collect();
+        let rho = (0..n)
+            .map(|_| 900.0 + 200.0 * rng.random::<f64>())
+            .collect();
+        let attribute = |name: &str, values| Attribute {
+            name: name.into(),
+            values,
+        };
         let step = Step {
             name: "grid".into(),
             positions,
             attributes: vec![
-                Attribute {
-                    name: "s".into(),
-                    values: s,
-                },
-                Attribute {
-                    name: "h".into(),
-                    values: h,
-                },
+                attribute("s", s),
+                attribute("h", h),
+                attribute("m", m),
+                attribute("rho", rho),
             ],
         };
         let mut settings = FieldSettings::new(Some("s"), 0.11);
+        if kernel.is_sph() {
+            settings.kernel = kernel;
+            settings.mass = Some(crate::field::PerParticle::Attribute("m".into()));
+            settings.density = Some(crate::field::PerParticle::Attribute("rho".into()));
+        }
         settings.radius_attribute = Some("h".into());
         settings.classification = classification;
         settings.density_map =
@@ -477,6 +490,18 @@ mod tests {
                 dims: [30, 18, 1],
             };
             assert_matches_queries(&f, &slice);
+        }
+    }
+
+    /// An SPH kernel (not separable: its profile is taken per point) scatters onto the grid
+    /// the values a query per point gives.
+    #[test]
+    fn an_sph_kernel_scatters_what_the_queries_give() {
+        for kernel in crate::field::Kernel::ALL.into_iter().filter(|k| k.is_sph()) {
+            let f = field_with(Classification::Post, kernel);
+            let lo = DVec3::splat(1e3) - 0.05;
+            let hi = DVec3::splat(1e3) + DVec3::new(2.0, 1.0, 0.7) + 0.05;
+            assert_matches_queries(&f, &RegularGrid::cell_centred(lo, hi, [37, 23, 11]));
         }
     }
 

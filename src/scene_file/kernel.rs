@@ -13,6 +13,7 @@ const MASS_NAMES: [&str; 4] = ["masses", "mass", "m", "pmass"];
 const DENSITY_NAMES: [&str; 5] = ["densities", "density", "rho", "rhos", "dens"];
 
 /// An SPH kernel's inputs after defaults.
+#[derive(Debug)]
 pub struct SphInputs {
     pub radius_attribute: Option<String>,
     pub mass: PerParticle,
