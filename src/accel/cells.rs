@@ -553,8 +553,8 @@ fn grid_over(lo: DVec3, hi: DVec3, r_max: f64, particles: usize) -> (DVec3, f64,
 
 /// Calls `row(first, last)` with the first and last cell index of each x-row of cells around
 /// the block `lo..=hi` (one cell beyond it on every side, clipped to the grid: for one cell,
-/// its 27 neighbours in nine rows). Plain loops: an iterator chain of inclusive ranges cost
-/// 4% of a frame.
+/// its 27 neighbours in nine rows). Plain loops: an iterator chain of inclusive ranges showed
+/// in a frame's profile (docs/notes/2026-12-03-cpu-backend.md).
 #[inline]
 fn for_rows_around(
     dims: [usize; 3],

@@ -310,8 +310,9 @@ fn fill<A, B, F>(
 /// Copies `src` into `dst` (of equal length). Slots of 16 bytes at 16-byte addresses (the
 /// staging pass's particles) are written with non-temporal stores: the step goes to memory the
 /// device reads, not to the CPU's caches, and a plain store first reads each line it fills
-/// (16 MiB of writes per 1M particles cost 32 MiB of traffic). That made the pass 1.5-2.5x an
-/// in-memory copy of the step, which `memcpy` makes with the same stores.
+/// (16 MiB of writes per 1M particles cost 32 MiB of traffic), where an in-memory copy of the
+/// step (`memcpy`) uses the same stores (docs/notes/2026-12-03-playback.md, "Non-temporal
+/// stores in the staging pass").
 fn stream_into<A: Copy>(mut dst: WriteOnly<'_, [A]>, src: &[A]) {
     assert_eq!(dst.len(), src.len(), "a slot per value");
     #[cfg(target_arch = "x86_64")]

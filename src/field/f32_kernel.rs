@@ -5,15 +5,17 @@
 //! enabled, where the compiler turns each eight-lane step into one 256-bit instruction. The
 //! point kernel's AVX2 twin (`sums_avx2`) is written in `core::arch` intrinsics instead, to
 //! fuse its multiply-adds (Rust never contracts `a * b + c` on its own, and the vectoriser
-//! packed `f32::mul_add` lanes four wide, docs/benchmarks.md) and to pack the candidates that
-//! reach into full lanes with a permutation before their exponentials, where the baseline
-//! build branches per chunk (SSE2 has no lane permutation). Its results therefore differ from
-//! the baseline build's by their roundings and order of summation (1.5e-8 at most on a test
-//! image, tested to 1e-6). The packet kernel's narrowing is in intrinsics too, for the same
-//! permutation, with the baseline build's operations: its two builds stay equal bit for bit.
+//! packed `f32::mul_add` lanes four wide: docs/notes/2026-12-03-cpu-backend.md) and to pack
+//! the candidates that reach into full lanes with a permutation before their exponentials,
+//! where the baseline build branches per chunk (SSE2 has no lane permutation). Its results
+//! therefore differ from the baseline build's by their roundings and order of summation
+//! (1.5e-8 at most on a test image, tested to 1e-6). The packet kernel's narrowing is in
+//! intrinsics too, for the same permutation, with the baseline build's operations: its two
+//! builds stay equal bit for bit.
 //! Where the CPU has AVX-512 (F and VL), the point kernel runs a third build of the same body
 //! on the same eight lanes, packing with `vcompress` instead of the permutation: the same lanes
-//! in the same order, so the AVX2 build's bits, 1.1-1.2x faster on Zen 4 (docs/benchmarks.md).
+//! in the same order, so the AVX2 build's bits, and faster
+//! (docs/notes/2026-12-04-cpu-point-kernel.md).
 //!
 //! Why this and not a SIMD crate: `wide` selects its instructions when the crate is compiled
 //! (this project builds for baseline x86-64, where its `f32x8` is two SSE halves), `pulp` and
@@ -156,9 +158,9 @@ pub struct Packed {
     /// `k` and `r2` where every particle has the same (one radius: no radius map, no
     /// smoothing lengths), and `w` likewise (no density map); set by [`Packed::pad`]. The
     /// SIMD point kernels then broadcast them instead of gathering `k` for each term and
-    /// loading `r2` for each test: a scene that models neither pays for neither (the field
-    /// queries ran 1.2x faster without both gathers, and the AVX-512 build 1.04-1.09x faster
-    /// again without the loads of r², docs/benchmarks.md).
+    /// loading `r2` for each test: a scene that models neither pays for neither (measured in
+    /// docs/notes/2026-12-04-cpu-point-kernel.md, "What a term gathers" and "One radius
+    /// broadcasts r² too").
     pub one_radius: Option<OneRadius>,
     pub same_w: Option<f32>,
 }
@@ -523,8 +525,9 @@ const fn pack_table() -> [[u32; LANES]; 256] {
 /// outcome, the reached candidates' indices and squared distances packed to the front of a
 /// small buffer (a permutation per mask, [`PACK`]), then the terms eight reached candidates at
 /// a time. Why: the cells hand the kernel six times the particles within reach, and a branch
-/// per chunk on whether any lane reached mispredicted so often that it cost 60% of the
-/// queries' time (measured by removing it); packing also runs the exponentials on full lanes.
+/// per chunk on whether any lane reached mispredicted so often that it cost more than every
+/// exponential would (measured by removing it: docs/notes/2026-12-04-cpu-point-kernel.md);
+/// packing also runs the exponentials on full lanes.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,popcnt")]
 unsafe fn sums_avx2<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
@@ -542,10 +545,10 @@ unsafe fn sums_avx2<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
 /// [`sums_avx2`] with AVX-512 (F and VL) on the same eight lanes: the reach test writes a
 /// mask register, and the reached lanes are packed by `vcompress` instead of the mask moved to
 /// a general register, a permutation loaded from [`PACK`] and applied: the same lanes in the
-/// same order, so the same bits. Why: on this project's Zen 4 machines that chain was most of
-/// the test's time (the permutation and its store held 28% of the kernel's samples); the
-/// queries ran 1.2x faster with it (docs/benchmarks.md). Sixteen lanes ran slower: a query's
-/// nine runs of about 21 candidates fill sixteen lanes worse than eight.
+/// same order, so the same bits. Why: on a Zen 4 core that chain was most of the test's time,
+/// and the queries ran faster without it (docs/notes/2026-12-04-cpu-point-kernel.md, "The
+/// machine's peak measured in AVX-512"). Sixteen lanes ran slower: a query's nine runs of
+/// about 21 candidates fill sixteen lanes worse than eight.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,avx2,fma,popcnt")]
 unsafe fn sums_avx512<const C: usize, const ONE_RADIUS: bool, const SAME_W: bool>(
@@ -1391,12 +1394,13 @@ fn exp_neg_avx2(x: core::arch::x86_64::__m256) -> core::arch::x86_64::__m256 {
 /// The point kernel in lanes: the baseline build (the AVX2 one is `sums_avx2`), in one pass
 /// that skips the exponentials of a chunk reaching nothing. It does not compact like the AVX2
 /// build: without a lane permutation (SSE2 has none) the compaction is eight scalar stores a
-/// chunk, and the queries ran 1.5x slower with it than with this branch (docs/benchmarks.md).
+/// chunk, and the queries ran slower with it than with this branch
+/// (docs/notes/2026-12-04-cpu-point-kernel.md, "Not for the baseline build").
 /// A run's last chunk reads past its end (into the next particles, or the padding) and masks
 /// those lanes.
 /// Masks are all-ones or zero lanes of `u32`, as vector compares make them, so the compiler
-/// keeps them in vector registers (a `[bool; 8]` became shuffles and scalar bit tests: the
-/// field queries ran 1.3-1.4x slower).
+/// keeps them in vector registers (a `[bool; 8]` became shuffles and scalar bit tests, and
+/// slower queries: docs/notes/2026-12-03-cpu-backend.md).
 #[inline(always)]
 fn sums_lanes<const C: usize>(p: &Packed, runs: &[(u32, u32)], q: [f32; 3]) -> (f64, [f64; 3]) {
     let mut phi = [0f32; LANES];
@@ -1502,10 +1506,10 @@ pub fn dense_sums(p: &Packed, from: usize, to: usize, q: [f32; 3]) -> f64 {
     sums_lanes::<0>(p, &[(from as u32, to as u32)], q).0
 }
 
-/// [`dense_sums`] with AVX-512 in sixteen lanes (a run's last lanes masked): on this
-/// project's Zen 4 machines, which split 512-bit work in two 256-bit halves, it computes 1.7x
-/// the terms a second of the eight-lane loop (half the instructions for the same arithmetic),
-/// so it, not the AVX2 loop, is their peak (docs/benchmarks.md). The exponential is
+/// [`dense_sums`] with AVX-512 in sixteen lanes (a run's last lanes masked): on CPUs that
+/// split 512-bit work in two 256-bit halves (Zen 4) it still computes more terms a second than
+/// the eight-lane loop (half the instructions for the same arithmetic), so it, not the AVX2
+/// loop, is their peak (docs/benchmarks.md, "The CPU backend"). The exponential is
 /// [`exp_neg`]'s, in sixteen lanes.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]

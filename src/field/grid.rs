@@ -136,8 +136,8 @@ impl Particles {
         let particles = self;
         // A few blocks a thread, so that uneven data still shares out: each block repeats
         // the exponentials along x and y of the particles reaching it from a neighbour's
-        // planes, so many small blocks cost more than they balance (at 1M particles on a 100³
-        // grid, 16 a thread took 1.3x the time of 4).
+        // planes, so many small blocks cost more than they balance (measured: 16 a thread
+        // against 4, docs/notes/2026-12-01-field-grid.md).
         let blocks = (4 * rayon::current_num_threads()).min(rows).max(1);
         let rows_per_block = rows.div_ceil(blocks);
         let blocks = rows.div_ceil(rows_per_block);

@@ -47,7 +47,7 @@
 //! only along the paths above the pixels a point touches, so each step costs a few thousand
 //! operations instead of a scan of all W·H·D pixels (the trees are rebuilt, in parallel, when a
 //! band changes which columns are eligible); rayon builds the trees, the initial pattern and
-//! the final per-slice values. 128 x 128 x 64 takes about 16 s on one core.
+//! the final per-slice values.
 //!
 //! Ranks become values slice by slice (see [`mask_from_ranks`]): each slice's pixels, sorted by
 //! global rank, get `value = floor((rank_in_slice + 0.5) / (W·H) · 65536)`, so every slice's
@@ -1006,8 +1006,8 @@ mod tests {
         }
     }
 
-    /// Regenerates the shipped asset and compares (about 16 s on 2 cores, so it runs with the
-    /// rest of the suite: a generator change that alters the mask cannot go unnoticed).
+    /// Regenerates the shipped asset and compares (quick enough to run with the rest of the
+    /// suite: a generator change that alters the mask cannot go unnoticed).
     #[test]
     fn builtin_mask_is_reproducible() {
         let start = Instant::now();

@@ -38,7 +38,7 @@ pub(super) struct Scene {
 
 /// The bytes last written to a scene's map tables and field constants: a frame or a step
 /// whose maps did not change writes nothing (a `write_buffer` is a staging allocation and a
-/// copy; a step change on lavapipe spent 0.2-0.5 ms on these two).
+/// copy, which a step change paid for both: docs/notes/2026-12-03-playback.md).
 #[derive(Default)]
 pub(super) struct MapsWritten(std::sync::Mutex<(Vec<f32>, Vec<u8>)>);
 
