@@ -299,6 +299,12 @@ impl TimeSeries {
 
     /// A series held in memory (generated data, tests). Steps may be empty.
     pub fn from_steps(steps: Vec<Step>) -> TimeSeries {
+        TimeSeries::from_shared_steps(steps.into_iter().map(Arc::new).collect())
+    }
+
+    /// A series of steps held in memory and shared (the Python package's particles: the
+    /// series takes no copy of them).
+    pub fn from_shared_steps(steps: Vec<Arc<Step>>) -> TimeSeries {
         let stats: Vec<StepStats> = steps
             .iter()
             .map(|s| StepStats::of(s, &AttributeSelection::All))
@@ -315,7 +321,6 @@ impl TimeSeries {
             })
             .collect();
         let ranges = series_ranges(stats.iter());
-        let steps = steps.into_iter().map(Arc::new).collect();
         TimeSeries::assemble(Source::Memory(steps), infos, ranges, StepCache::new(0))
     }
 

@@ -402,23 +402,78 @@ fn resolve_choosing(
         Some(path) => SceneFile::load(path)?,
         None => SceneFile::default(),
     };
-    let path = data
-        .data
-        .clone()
-        .or(scene.data.path.clone())
-        .context("no data given: pass --data <path> or a --scene file with [data] path")?;
+    resolve_from(scene, None, data, options, first_attribute_by_default)
+}
+
+/// Resolves as [`resolve`] (or, with `first_attribute_by_default`, [`resolve_for_images`])
+/// does, with the scene file given as a value instead of `data.scene`'s path (the Python
+/// package builds one from its arguments).
+pub fn resolve_scene(
+    scene: SceneFile,
+    data: &DataArgs,
+    options: &FieldOptions,
+    first_attribute_by_default: bool,
+) -> anyhow::Result<Resolved> {
+    resolve_from(scene, None, data, options, first_attribute_by_default)
+}
+
+/// Resolves the field over a series already in memory ([`TimeSeries::from_steps`]: arrays the
+/// Python package was handed) exactly as [`resolve_scene`] does over data read from a path;
+/// `name` stands for the data's path in messages and in `Resolved::data_path`.
+pub fn resolve_in_memory(
+    series: TimeSeries,
+    name: &std::path::Path,
+    scene: SceneFile,
+    data: &DataArgs,
+    options: &FieldOptions,
+    first_attribute_by_default: bool,
+) -> anyhow::Result<Resolved> {
+    resolve_from(
+        scene,
+        Some((series, name.to_path_buf())),
+        data,
+        options,
+        first_attribute_by_default,
+    )
+}
+
+fn resolve_from(
+    scene: SceneFile,
+    memory: Option<(TimeSeries, PathBuf)>,
+    data: &DataArgs,
+    options: &FieldOptions,
+    first_attribute_by_default: bool,
+) -> anyhow::Result<Resolved> {
+    let (memory, path) = match memory {
+        Some((series, name)) => (Some(series), name),
+        None => (
+            None,
+            data.data
+                .clone()
+                .or(scene.data.path.clone())
+                .context("no data given: pass --data <path> or a --scene file with [data] path")?,
+        ),
+    };
+    // The first step with every attribute it holds: from memory, or read from its file.
+    let read_first_in_full = |read: ReadOptions| -> anyhow::Result<Option<Arc<Step>>> {
+        if let Some(series) = &memory {
+            return Ok(series.first_step_in_full()?);
+        }
+        let refs = crate::io::list_steps_reading(&path, data.format.or(scene.data.format), read)?;
+        Ok(match refs.first() {
+            Some(first) => Some(Arc::new(crate::io::read_step(
+                first,
+                &AttributeSelection::All,
+            )?)),
+            None => None,
+        })
+    };
     let read = data.read_options(&scene.data);
     let mut attribute = options.attribute.clone().or(scene.data.attribute.clone());
     // The first step with every attribute it holds, read where a default needs it.
     let mut first_in_full: Option<Arc<Step>> = None;
     if attribute.is_none() && first_attribute_by_default {
-        let refs = crate::io::list_steps_reading(&path, data.format.or(scene.data.format), read)?;
-        if let Some(first) = refs.first() {
-            first_in_full = Some(Arc::new(crate::io::read_step(
-                first,
-                &AttributeSelection::All,
-            )?));
-        }
+        first_in_full = read_first_in_full(read)?;
         let names = names_of(first_in_full.as_deref());
         attribute = names.first().cloned();
         match &attribute {
@@ -447,14 +502,7 @@ fn resolve_choosing(
         if first_in_full.is_none()
             && (radius_attribute.is_none() || mass.is_none() || density.is_none())
         {
-            let refs =
-                crate::io::list_steps_reading(&path, data.format.or(scene.data.format), read)?;
-            if let Some(first) = refs.first() {
-                first_in_full = Some(Arc::new(crate::io::read_step(
-                    first,
-                    &AttributeSelection::All,
-                )?));
-            }
+            first_in_full = read_first_in_full(read)?;
         }
         let sph = super::kernel::resolve(
             kernel,
@@ -485,32 +533,50 @@ fn resolve_choosing(
     );
     let opening = std::time::Instant::now();
     let mut asked_step = data.step.or(scene.data.step).unwrap_or(0);
-    let series = TimeSeries::open(
-        &path,
-        &OpenOptions {
-            format: data.format.or(scene.data.format),
-            read,
-            smoothing: data.smoothing,
-            attributes: selection,
-            cache_bytes: data.cache_mib << 20,
-            // A batch frame uses the final series values, never provisional ones.
-            background_scan: false,
-            rescan: data.rescan,
-        },
-    )
-    .map_err(|e| {
-        // The series' first step is checked when it opens, whichever step was asked for: say
-        // so, or the message seems to be about the wrong step.
-        let missing = matches!(e.problem, crate::io::Problem::MissingAttribute { .. });
-        if missing && asked_step != 0 {
-            anyhow::Error::new(e).context(format!(
-                "the attributes asked for must be in every step of the series, and its first \
-                 step lacks one (step {asked_step} was asked for)"
-            ))
-        } else {
-            e.into()
+    let series = match memory {
+        Some(series) => {
+            // Held whole in memory: every attribute is there; check the ones asked for.
+            if let (AttributeSelection::Only(names), Some(first)) =
+                (&selection, series.first_step_in_full()?)
+            {
+                for name in names {
+                    anyhow::ensure!(
+                        first.attribute(name).is_some(),
+                        "{}: no attribute '{name}'; the particles have: {}",
+                        path.display(),
+                        names_of(Some(&first)).join(", ")
+                    );
+                }
+            }
+            series
         }
-    })?;
+        None => TimeSeries::open(
+            &path,
+            &OpenOptions {
+                format: data.format.or(scene.data.format),
+                read,
+                smoothing: data.smoothing,
+                attributes: selection,
+                cache_bytes: data.cache_mib << 20,
+                // A batch frame uses the final series values, never provisional ones.
+                background_scan: false,
+                rescan: data.rescan,
+            },
+        )
+        .map_err(|e| {
+            // The series' first step is checked when it opens, whichever step was asked for: say
+            // so, or the message seems to be about the wrong step.
+            let missing = matches!(e.problem, crate::io::Problem::MissingAttribute { .. });
+            if missing && asked_step != 0 {
+                anyhow::Error::new(e).context(format!(
+                    "the attributes asked for must be in every step of the series, and its first \
+                 step lacks one (step {asked_step} was asked for)"
+                ))
+            } else {
+                e.into()
+            }
+        })?,
+    };
     if let Some(time) = data.time {
         let (step, at) = series
             .step_at_time(time)
