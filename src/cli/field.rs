@@ -10,7 +10,7 @@ use glam::DVec3;
 use crate::backend::{self, BackendKind, Precision, StepInput, parse_precision};
 use crate::field::{Classification, RegularGrid, finish_sums};
 use crate::io::{At, npy};
-use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, Resolved, resolve};
 
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("where").required(true).args(["queries", "grid"])))]
@@ -74,8 +74,66 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         (None, None) => anyhow::bail!("--queries or --grid is required"),
     };
 
+    let bar = crate::progress::bar(queries.len() as u64, "evaluating");
+    let evaluated = evaluate(&resolved, &queries, args.backend, &args.precision, |n| {
+        bar.inc(n as u64)
+    })?;
+    bar.finish_and_clear();
+    let Evaluated {
+        samples,
+        pre,
+        build_time,
+        eval_time,
+        count,
+        backend_name,
+    } = evaluated;
+    let cols = if pre { 4 } else { 2 };
+    let mut out = Vec::with_capacity(samples.len() * cols);
+    for s in &samples {
+        out.extend_from_slice(&s[..cols]);
+    }
+    crate::io::output::write_atomically(&args.out, args.force, |tmp| {
+        npy::write_matrix(tmp, samples.len(), cols, &out)
+    })?;
+    tracing::info!(
+        "{} particles ({} backend, K = {}, radius {:.6}), {} queries: build {:.3} s, evaluation {:.3} s ({:.3} M queries/s)",
+        count,
+        backend_name,
+        resolved.cluster,
+        resolved.field.radius,
+        queries.len(),
+        build_time.as_secs_f64(),
+        eval_time.as_secs_f64(),
+        queries.len() as f64 / eval_time.as_secs_f64().max(1e-9) / 1e6
+    );
+    Ok(())
+}
+
+/// The fields [`evaluate`] computed, as `aarbf field` writes them.
+pub struct Evaluated {
+    /// Per query: (Phi, Theta, 0, 0) for post-classification, (Phi, r, g, b) for pre.
+    pub samples: Vec<[f64; 4]>,
+    /// Whether the field is pre-classified (four columns, not two).
+    pub pre: bool,
+    pub build_time: std::time::Duration,
+    pub eval_time: std::time::Duration,
+    /// The step's particles.
+    pub count: usize,
+    pub backend_name: &'static str,
+}
+
+/// The density and attribute fields of `resolved`'s step at `queries` on backend `kind` at
+/// `precision` (spelled as `--precision`): what `aarbf field` writes, and what the Python
+/// package's `Scene.field` and `Scene.grid` return. `progress` is told of queries done.
+pub fn evaluate(
+    resolved: &Resolved,
+    queries: &Queries,
+    kind: BackendKind,
+    precision: &str,
+    progress: impl Fn(usize),
+) -> anyhow::Result<Evaluated> {
     let step = resolved.series.step(resolved.step)?;
-    let mut backend = backend::create(args.backend)?;
+    let mut backend = backend::create(kind)?;
     let built = Instant::now();
     backend.upload(&StepInput {
         step: &step,
@@ -83,8 +141,7 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         cluster: resolved.cluster,
         series_bounds: resolved.series.bounds(),
         series_range: resolved.series_range(),
-        precision: parse_precision(&args.precision, Precision::FIELD)
-            .map_err(anyhow::Error::msg)?,
+        precision: parse_precision(precision, Precision::FIELD).map_err(anyhow::Error::msg)?,
     })?;
     // A backend that scatters particles onto a grid builds no tree for one.
     if !(matches!(queries, Queries::Grid(_)) && backend.capabilities().scatters_grids) {
@@ -114,15 +171,13 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
     let pre = resolved.field.classification == Classification::Pre;
 
     let started = Instant::now();
-    let bar = crate::progress::bar(queries.len() as u64, "evaluating");
     let mut samples = vec![[0.0; 4]; queries.len()];
-    let sums = match &queries {
+    let sums = match queries {
         Queries::Points(points) => {
-            backend::query_in_hilbert_order(backend.as_mut(), points, |n| bar.inc(n as u64))?
+            backend::query_in_hilbert_order(backend.as_mut(), points, progress)?
         }
         Queries::Grid(grid) => backend.query_grid(grid)?,
     };
-    bar.finish_and_clear();
     samples
         .par_iter_mut()
         .zip(sums.into_par_iter())
@@ -131,36 +186,24 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
             *s = [f.phi, f.theta[0], f.theta[1], f.theta[2]];
         });
     let eval_time = started.elapsed();
-    let cols = if pre { 4 } else { 2 };
-    let mut out = Vec::with_capacity(samples.len() * cols);
-    for s in &samples {
-        out.extend_from_slice(&s[..cols]);
-    }
-    crate::io::output::write_atomically(&args.out, args.force, |tmp| {
-        npy::write_matrix(tmp, samples.len(), cols, &out)
-    })?;
-    tracing::info!(
-        "{} particles ({} backend, K = {}, radius {:.6}), {} queries: build {:.3} s, evaluation {:.3} s ({:.3} M queries/s)",
-        step.len(),
-        backend.capabilities().name,
-        resolved.cluster,
-        resolved.field.radius,
-        queries.len(),
-        build_time.as_secs_f64(),
-        eval_time.as_secs_f64(),
-        queries.len() as f64 / eval_time.as_secs_f64().max(1e-9) / 1e6
-    );
-    Ok(())
+    Ok(Evaluated {
+        samples,
+        pre,
+        build_time,
+        eval_time,
+        count: step.len(),
+        backend_name: backend.capabilities().name,
+    })
 }
 
 /// Where the field is evaluated.
-enum Queries {
+pub enum Queries {
     Points(Vec<DVec3>),
     Grid(RegularGrid),
 }
 
 impl Queries {
-    fn len(&self) -> usize {
+    pub fn len(&self) -> usize {
         match self {
             Queries::Points(p) => p.len(),
             Queries::Grid(g) => g.len(),

@@ -302,16 +302,17 @@ fn turned(camera: Camera, degrees: f64) -> Camera {
     }
 }
 
-/// The kind of image file a render writes, from its extension and --bit-depth.
+/// The kind of image file a render writes, from its extension and --bit-depth (the Python
+/// package's `Image.save` writes through it too).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum OutputFormat {
+pub enum OutputFormat {
     Png8,
     Png16,
     Exr,
 }
 
 impl OutputFormat {
-    fn of(path: &Path, bit_depth: u8) -> anyhow::Result<OutputFormat> {
+    pub fn of(path: &Path, bit_depth: u8) -> anyhow::Result<OutputFormat> {
         let ext = path
             .extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -336,7 +337,8 @@ impl OutputFormat {
         }
     }
 
-    fn write(
+    /// Writes `image` (composited over `background`) with `legend` drawn on an 8-bit PNG.
+    pub fn write(
         self,
         path: &Path,
         image: &crate::values::Image,
