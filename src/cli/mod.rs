@@ -3,10 +3,10 @@
 mod bench;
 mod bench_interactive;
 mod bench_study;
-mod field;
+pub mod field;
 mod generate;
 mod info;
-mod render;
+pub mod render;
 mod slice;
 mod stbn;
 mod view;
