@@ -16,6 +16,7 @@ import time
 CHILD = r"""
 import json, resource, sys, time
 import numpy as np
+import aarbf  # loaded before measuring, for every case alike
 n, what = int(sys.argv[1]), sys.argv[2]
 rng = np.random.default_rng(1)
 pos = rng.random((n, 3))
@@ -30,10 +31,8 @@ start = time.perf_counter()
 if what == "numpy.copy":
     out = (np.copy(pos), np.copy(t))
 elif what == "aarbf.Particles":
-    import aarbf
     out = aarbf.Particles(pos, attributes={"T": t})
 elif what == "aarbf.Particles(fortran)":
-    import aarbf
     f = np.asfortranarray(pos)
     before = rss_kib()
     start = time.perf_counter()

@@ -24,7 +24,8 @@ def main() -> None:
     args = dict(width=256, height=256, spp=16, integrator="marching", backend="cpu")
     cli = [binary, "render", "--data", data, "--step", "14", "--attribute", "attribute",
            "--radius", "1.5%", "--up", "y", "--width", "256", "--height", "256", "--spp", "16",
-           "--integrator", "marching", "--backend", "cpu", "--force", "--out", str(out / "cli.png")]
+           "--integrator", "marching", "--backend", "cpu", "--no-legend", "--force",
+           "--out", str(out / "cli.png")]
     times = {"aarbf render": [], "scene.render": []}
     for _ in range(repeats):
         start = time.perf_counter()

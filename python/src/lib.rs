@@ -141,6 +141,13 @@ fn detached<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Sen
 /// the library holds (float32 converts exactly).
 fn positions_of(array: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<DVec3>> {
     fn rows<T: Copy + Into<f64> + numpy::Element>(a: ArrayView2<'_, T>) -> Vec<DVec3> {
+        // C order: one pass over the memory as it lies.
+        if let Some(flat) = a.as_slice() {
+            return flat
+                .chunks_exact(3)
+                .map(|r| DVec3::new(r[0].into(), r[1].into(), r[2].into()))
+                .collect();
+        }
         a.axis_iter(Axis(0))
             .map(|r| DVec3::new(r[0].into(), r[1].into(), r[2].into()))
             .collect()
@@ -170,7 +177,10 @@ fn positions_of(array: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<DVec3>> {
 /// A per-particle array of `n` values, float32 or float64 of any stride: one copy into f64.
 fn values_of(array: &Bound<'_, PyAny>, what: &str, n: usize) -> PyResult<Vec<f64>> {
     fn copy<T: Copy + Into<f64> + numpy::Element>(a: ArrayView1<'_, T>) -> Vec<f64> {
-        a.iter().map(|&v| v.into()).collect()
+        match a.as_slice() {
+            Some(flat) => flat.iter().map(|&v| v.into()).collect(),
+            None => a.iter().map(|&v| v.into()).collect(),
+        }
     }
     let values = if let Ok(a) = array.extract::<PyReadonlyArray1<'_, f64>>() {
         copy(a.as_array())
