@@ -314,7 +314,15 @@ fn test(extra: &[String]) -> Result<()> {
     let mut cmd = cargo();
     // Set-up has just made a Vulkan device visible; a GPU test that finds none fails.
     run(cmd
-        .args(["test", "--workspace", "--profile", PROFILE])
+        // The Python package's tests are pytest's, below, on the wheel as installed.
+        .args([
+            "test",
+            "--workspace",
+            "--exclude",
+            "aarbf-python",
+            "--profile",
+            PROFILE,
+        ])
         .args(extra))?;
     // The Python package's tests, on the wheel as a user installs it; they compare it with the
     // CLI the cargo tests just built.
