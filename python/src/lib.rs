@@ -409,6 +409,7 @@ fn value_enum<T: clap::ValueEnum>(what: &str, text: &str) -> PyResult<T> {
 impl Series {
     #[new]
     #[pyo3(signature = (path, format=None, particle_type=None, physical=false, attributes=None, smoothing=None, cache_mib=2048))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         path: PathBuf,

@@ -209,6 +209,10 @@ impl Queries {
             Queries::Grid(g) => g.len(),
         }
     }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 /// The query points of an M x 3 `.npy` file, checked finite.
