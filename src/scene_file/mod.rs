@@ -49,6 +49,8 @@ pub struct DataSection {
     pub particle_type: Option<ParticleType>,
     /// An HDF5 snapshot's comoving quantities in physical units.
     pub physical: Option<bool>,
+    /// Smoothing lengths from neighbours (`"knn:32"`), as `--smoothing` gives them.
+    pub smoothing: Option<crate::scene::smoothing::Smoothing>,
 }
 
 /// The range of the attribute the colour map spans.

@@ -335,6 +335,10 @@ pub fn scene_sections(
             radius_attribute: f.radius_attribute.clone(),
             particle_type: (read.particle_type != ParticleType::GAS).then_some(read.particle_type),
             physical: read.physical.then_some(true),
+            smoothing: f
+                .radius_attribute
+                .as_deref()
+                .and_then(crate::scene::smoothing::Smoothing::of_attribute),
         },
         FieldSection {
             radius: Some(RadiusSpec::Absolute(f.radius)),
@@ -435,11 +439,12 @@ fn resolve_choosing(
             None => tracing::info!("colour: by density (the data has no attributes)"),
         }
     }
+    let smoothing = data.smoothing.or(scene.data.smoothing);
     let radius_attribute = options
         .radius_attribute
         .clone()
         .or(scene.data.radius_attribute.clone())
-        .or(data.smoothing.map(|s| s.attribute()));
+        .or(smoothing.map(|s| s.attribute()));
     let kernel = options.kernel.or(scene.field.kernel).unwrap_or_default();
     let (radius_attribute, mass, density) = if kernel.is_sph() {
         let mass = options.mass.clone().or(scene.field.mass.clone());
@@ -490,7 +495,7 @@ fn resolve_choosing(
         &OpenOptions {
             format: data.format.or(scene.data.format),
             read,
-            smoothing: data.smoothing,
+            smoothing,
             attributes: selection,
             cache_bytes: data.cache_mib << 20,
             // A batch frame uses the final series values, never provisional ones.
