@@ -316,7 +316,8 @@ impl GpuStepData {
         let n = staging.len();
         let mut points = vec![[0.0f32; 4]; n];
         let words = staging.factor_words();
-        let mut factors = (words > 0).then(|| vec![0.0f32; words]);
+        let has_factors = staging.has_radius_attribute() || input.field.kernel.is_sph();
+        let mut factors = has_factors.then(|| vec![0.0f32; words]);
         let data = staging.write(
             vec![(0, slots16(&mut points))],
             factors.as_deref_mut().map(slots4),
@@ -402,7 +403,7 @@ impl GpuStepData {
     /// Whether the step needs the radius-attribute buffer: a radius attribute, or an SPH
     /// kernel's volumes.
     pub fn has_factors(&self) -> bool {
-        self.factor_words() > 0
+        self.has_radius_attribute || self.kernel.is_sph()
     }
 
     /// Applies field settings that keep the particles (the same attribute and range): checks
