@@ -31,6 +31,22 @@ pub struct StepBias {
     pub order: f64,
     /// Whether the step's effect at `2 dt0` stood clear of the calibration images' noise.
     pub resolved: bool,
+    /// The differences the levels rest on ([`Difference`]): from `dt0` to `2 dt0` and from
+    /// `dt0` to `4 dt0` (the coarse calibration's one difference, from `2 dt0` to `4 dt0`,
+    /// twice).
+    pub differences: [Difference; 2],
+    /// The bias at `dt0`, `2 dt0`, `4 dt0` were it to fall at the slowest order the
+    /// calibration assumes ([`Self::MIN_ORDER`]) below `2 dt0`.
+    pub slow: [f64; 3],
+}
+
+/// One difference between two calibration images: its size with the noise subtracted in
+/// quadrature, the noise of the difference, and whether it stood clear of that noise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Difference {
+    pub size: f64,
+    pub noise: f64,
+    pub resolved: bool,
 }
 
 impl StepBias {
@@ -43,6 +59,9 @@ impl StepBias {
     /// The slowest fall the calibration assumes: that of a bias at step-like features (an
     /// error of fixed size over a band of pixels as wide as the step: RMSE ∝ dt^0.5).
     pub const MIN_ORDER: f64 = 0.5;
+    /// The share of its own noise above which an unresolved difference is a bias half seen
+    /// ([`Self::settled`]).
+    pub const HALF_SEEN: f64 = 0.5;
 
     /// The estimated bias at step `dt`.
     pub fn at(&self, dt: f64) -> f64 {
@@ -67,6 +86,38 @@ impl StepBias {
         let i = (x.floor() as usize).min(1);
         let f = x - i as f64;
         at[i] * (1.0 - f) + at[i + 1] * f
+    }
+
+    /// The calibration difference that fixes the bias at `dt`: from `dt0` to `4 dt0` for
+    /// steps coarser than `2 dt0`, from `dt0` to `2 dt0` otherwise (below `dt0` by the order).
+    pub fn difference_at(&self, dt: f64) -> Difference {
+        if dt > 2.0 * self.dt0 {
+            self.differences[1]
+        } else {
+            self.differences[0]
+        }
+    }
+
+    /// Whether the estimated bias at `dt` can stand in the error estimate of an image at `dt`
+    /// whose noise is `noise`: the difference it rests on stood clear of the calibration's
+    /// noise (its size known, and with it the order where both did), or it is small beside
+    /// the image's noise whatever the order: its own noise at most [`Self::SETTLED_NOISE`]
+    /// times the image's, and the bias it allows at the slowest order (2.41 times the
+    /// difference at `dt0`) at most sqrt 3 times the image's noise, where an estimate of the
+    /// noise alone is still within 2x of the truth.
+    ///
+    /// An unresolved difference hides a bias as large as its noise: at two calibration frames
+    /// on an opaque PySPH step the bias at `dt0` (1.6e-3) rested on a difference of 8.7e-4
+    /// within its noise (8.5e-4), taken at order 2 (2.9e-4): the estimate was 0.38 of the
+    /// truth (docs/notes/2026-12-07-target-error.md).
+    pub fn settled(&self, dt: f64, noise: f64) -> bool {
+        let d = self.difference_at(dt);
+        let slow = StepBias {
+            order: Self::MIN_ORDER,
+            ..*self
+        }
+        .interpolate(dt, self.slow);
+        d.resolved || d.size <= Self::HALF_SEEN * d.noise || slow <= 3f64.sqrt() * noise
     }
 
     /// The bias from images at `dt0`, `2 dt0` and `4 dt0` and their noise (RMSE).
@@ -94,12 +145,26 @@ impl StepBias {
         };
         let b0 = d1 / (order.exp2() - 1.0);
         let h0 = h1 / (order.exp2() - 1.0);
+        let slow = 1.0 / (Self::MIN_ORDER.exp2() - 1.0);
         StepBias {
             dt0,
             levels: [b0, b0 + d1, b0 + d2],
             hidden: [h0, h0 + h1, h0 + h2],
             order,
             resolved: r1,
+            differences: [
+                Difference {
+                    size: d1,
+                    noise: h1,
+                    resolved: r1,
+                },
+                Difference {
+                    size: d2,
+                    noise: h2,
+                    resolved: r2,
+                },
+            ],
+            slow: [slow * d1, (slow + 1.0) * d1, slow * d1 + d2],
         }
     }
 
@@ -118,12 +183,19 @@ impl StepBias {
         let b1 = (d * d - n * n).max(0.0).sqrt() * tail;
         let h1 = n * tail;
         let down = (-p).exp2();
+        let difference = Difference {
+            size: b1 / tail,
+            noise: n,
+            resolved: d > 2.0 * n,
+        };
         StepBias {
             dt0,
             levels: [b1 * down, b1, b1 + b1 / tail],
             hidden: [h1 * down, h1, h1 + n],
             order: p,
-            resolved: d > 2.0 * n,
+            resolved: difference.resolved,
+            differences: [difference; 2],
+            slow: [b1 * down, b1, b1 + b1 / tail],
         }
     }
 }
