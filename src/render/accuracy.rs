@@ -905,7 +905,7 @@ fn grow_calibration(
         }
         let level = &mut levels[i];
         let reached = level.a.frames;
-        let factor = if even { 2 } else { 4 };
+        let factor = if even { 3 } else { 4 };
         let mut wanted = f64::from(reached * factor);
         if !even {
             wanted =
