@@ -205,9 +205,8 @@ fn an_opaque_pysph_step_estimates_its_step_bias() {
         // left the difference from twice the step (8.7e-4) within its noise (8.5e-4): taken
         // at order 2, the estimate was 0.38 of the truth (1.47e-3). It grows them until the
         // difference is resolved (docs/notes/2026-12-07-target-error.md).
-        let least = if e < 0.005 { 0.5 } else { 0.7 };
         assert!(
-            (least..=2.0).contains(&ratio),
+            (0.7..=2.0).contains(&ratio),
             "E {e}: estimate {:.3e}, true {true_error:.3e}",
             done.estimate
         );
@@ -271,8 +270,10 @@ fn a_bias_hidden_in_a_coarse_steps_noise_is_measured() {
         done.work
     );
     assert!(done.met && true_error <= e, "true {true_error:.3e}");
+    // Within 2x is the promise; 0.7 as for the PySPH step, where the estimate now lies
+    // (0.53 before).
     assert!(
-        (0.5..=2.0).contains(&ratio),
+        (0.7..=2.0).contains(&ratio),
         "estimate {:.3e}, true {true_error:.3e}",
         done.estimate
     );
