@@ -758,7 +758,7 @@ pub fn render_to_target(
                 // the sharp-gradient scene its noise was 36 times twice the step's): where
                 // the difference leaves the bias unsettled beside the image's noise, the
                 // full calibration goes on from these images.
-                if !done.met || bias.settled(2.0 * dt0, done.noise_rmse) {
+                if !done.met || bias.settled(2.0 * dt0, done.noise_rmse, e) {
                     return Ok(done);
                 }
                 tracing::debug!(
@@ -858,7 +858,7 @@ pub fn render_to_target(
         // until it is, and the render goes on from the new estimate.
         let settled = !(done.met && target.error.is_some() && target.metric == ErrorMetric::Rmse)
             || step_fixed
-            || bias.settled(dt, done.noise_rmse)
+            || bias.settled(dt, done.noise_rmse, e_rmse.unwrap_or(f64::INFINITY))
             || run.out_of_time();
         if settled || !grow_calibration(&mut run, &mut levels, j)? {
             return Ok(Targeted {
