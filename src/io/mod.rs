@@ -299,6 +299,24 @@ pub fn list_steps_reading(
         .collect())
 }
 
+/// The simulation box a step's file states: an HDF5 snapshot's `BoxSize` (in the units the
+/// positions are read in) and whether its run is periodic, with what in the file says so.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimulationBox {
+    /// The box is `[0, size)` on each axis.
+    pub size: [f64; 3],
+    pub periodic: bool,
+    pub because: String,
+}
+
+/// The simulation box `step`'s file states, where its format states one (HDF5 snapshots).
+pub fn simulation_box(step: &StepRef) -> Result<Option<SimulationBox>, DataError> {
+    match step.format {
+        Format::Hdf5 => hdf5_gate::simulation_box(&step.path, &step.read),
+        _ => Ok(None),
+    }
+}
+
 /// The time step `step` records, where its format records one: a `.pvd`'s `timestep`, an HDF5
 /// snapshot's `/Header` `Time` (read from the file).
 pub fn step_time(step: &StepRef) -> Option<f64> {

@@ -17,6 +17,7 @@
 //! cluster = 4
 //! ```
 
+pub mod periodic;
 pub mod resolve;
 
 use std::path::{Path, PathBuf};

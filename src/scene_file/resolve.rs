@@ -48,6 +48,15 @@ pub struct DataArgs {
     /// `.aarbf-smoothing/` beside the data.
     #[arg(long, value_name = "knn:K")]
     pub smoothing: Option<crate::scene::smoothing::Smoothing>,
+    /// Wrap the field at the faces of a periodic box: particles near one face are felt across
+    /// it, so slices and renders of the box have no seam. `--periodic` alone takes the box an
+    /// HDF5 snapshot's header states; `--periodic L` or `LX,LY,LZ` gives the box [0, L) for
+    /// any format. Default: on where a snapshot's header says its box is periodic.
+    #[arg(long, value_name = "L|LX,LY,LZ", num_args = 0..=1, default_missing_value = "header")]
+    pub periodic: Option<super::periodic::PeriodicSpec>,
+    /// Treat the data's box as open, even where the snapshot says it is periodic.
+    #[arg(long, conflicts_with = "periodic")]
+    pub no_periodic: bool,
     /// The most memory, in MiB, that steps read from disk are kept in (the least recently
     /// used go first; a series larger than this plays with memory bounded by it).
     #[arg(long, default_value_t = 2048)]
@@ -271,9 +280,18 @@ pub struct Resolved {
     /// How the attribute's range was chosen: a per-step range is chosen again for each step
     /// shown ([`Resolved::range_for_step`]).
     pub range: RangeSpec,
+    /// The periodic box the field wraps at ([`super::periodic::choose`]), if any.
+    pub periodic: Option<crate::field::PeriodicBox>,
 }
 
 impl Resolved {
+    /// The domain an image or grid of the field covers: the periodic box where there is one,
+    /// else the series' bounds.
+    pub fn domain(&self) -> crate::values::Bounds {
+        self.periodic
+            .map_or_else(|| self.series.bounds(), |b| b.bounds())
+    }
+
     /// The data and field sections of a scene file that reproduces these settings.
     pub fn scene_sections(&self) -> (DataSection, FieldSection) {
         scene_sections(
@@ -456,6 +474,7 @@ fn resolve_choosing(
     }
     let opened_in = opening.elapsed();
     let decoded_at_open = series.steps_decoded();
+    let periodic = super::periodic::choose(&series, data.periodic, data.no_periodic)?;
     let step = asked_step;
     if step >= series.len() {
         bail!(
@@ -594,5 +613,6 @@ fn resolve_choosing(
         opened_in,
         decoded_at_open,
         range,
+        periodic,
     })
 }

@@ -416,6 +416,26 @@ fn type_counts(header: &Header) -> String {
     }
 }
 
+/// The simulation box the snapshot's header states (`BoxSize`, scaled by the scale factor
+/// under `--physical`) and whether it is periodic; `None` without a `BoxSize`.
+pub fn simulation_box(
+    path: &Path,
+    read: &ReadOptions,
+) -> Result<Option<super::SimulationBox>, DataError> {
+    let at = At::new(path, None);
+    let header = Header::read(at, &open(at)?)?;
+    let Some(size) = header.box_size else {
+        return Ok(None);
+    };
+    let scale = header.scale_factor.filter(|_| read.physical).unwrap_or(1.0);
+    let (periodic, because) = header.periodic;
+    Ok(Some(super::SimulationBox {
+        size: size.map(|s| s * scale),
+        periodic,
+        because: because.to_owned(),
+    }))
+}
+
 /// The snapshot's `/Header` `Time`, if it can be read.
 pub fn time(path: &Path) -> Option<f64> {
     let at = At::new(path, None);
@@ -459,6 +479,12 @@ pub fn describe(path: &Path) -> Result<String, DataError> {
             "{} x {} x {}",
             b[0], b[1], b[2]
         ))
+    );
+    let _ = writeln!(
+        out,
+        "  periodic:     {} ({}; --periodic or --no-periodic overrides)",
+        if header.periodic.0 { "yes" } else { "no" },
+        header.periodic.1
     );
     for (name, value) in &header.units {
         let _ = writeln!(out, "  unit:         {name} = {value:e}");
