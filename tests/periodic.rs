@@ -479,3 +479,53 @@ fn a_swift_snapshot_is_periodic_by_default_and_no_periodic_opens_it() {
         "{e}"
     );
 }
+
+/// `aarbf slice` of a periodic box: the pixels either side of a face (the image's first and
+/// last columns, one pixel apart across the face) match, and the edges are as bright as the
+/// middle; the open box's slice fades at its faces, which this test must see.
+#[test]
+fn a_slice_of_a_periodic_box_has_no_seam() {
+    let f = fixture();
+    let slice = |extra: &[&str]| {
+        let out = f.out.with_extension("png");
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+            .arg("slice")
+            .arg("--data")
+            .arg(&f.data)
+            .args(["--attribute", "s", "--radius", "0.3", "--axis", "y", "--width", "370"])
+            .args(["--no-legend", "--force", "--out"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        image::open(&out).unwrap().to_luma8()
+    };
+    let column = |image: &image::GrayImage, x: u32| -> Vec<f64> {
+        (0..image.height())
+            .map(|y| f64::from(image.get_pixel(x, y).0[0]))
+            .collect()
+    };
+    let seam = |image: &image::GrayImage| {
+        let (a, b) = (column(image, 0), column(image, image.width() - 1));
+        a.iter().zip(&b).map(|(a, b)| (a - b).abs()).sum::<f64>() / a.len() as f64
+    };
+    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    let periodic = slice(&["--periodic", BOX]);
+    // The box's x side over the width: the slice spans the box, not the data's bounds.
+    assert_eq!(periodic.dimensions(), (370, 430));
+    let open = slice(&[]);
+    let (s_periodic, s_open) = (seam(&periodic), seam(&open));
+    assert!(
+        s_periodic < 3.0 && s_open > 4.0 * s_periodic,
+        "mean difference across the x faces: periodic {s_periodic:.2}, open {s_open:.2}"
+    );
+    let (edge, middle) = (mean(column(&periodic, 0)), mean(column(&periodic, 185)));
+    assert!(edge > 0.8 * middle, "edge {edge:.1}, middle {middle:.1}");
+    let open_edge = mean(column(&open, 0));
+    assert!(open_edge < 0.8 * edge, "open edge {open_edge:.1} vs {edge:.1}");
+}
