@@ -49,6 +49,10 @@ pub struct DataSection {
     pub particle_type: Option<ParticleType>,
     /// An HDF5 snapshot's comoving quantities in physical units.
     pub physical: Option<bool>,
+    /// The periodic box the field wraps at: `true` (the snapshot header's), `false` (open),
+    /// or `[LX, LY, LZ]` (the box [0, L)); unset, the header decides.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periodic: Option<periodic::PeriodicSetting>,
 }
 
 /// The range of the attribute the colour map spans.

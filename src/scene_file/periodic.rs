@@ -3,6 +3,7 @@
 //! states when it says its run is periodic.
 
 use anyhow::bail;
+use serde::{Deserialize, Serialize};
 
 use crate::field::PeriodicBox;
 use crate::scene::TimeSeries;
@@ -35,6 +36,40 @@ impl std::str::FromStr for PeriodicSpec {
         };
         PeriodicBox::from_origin(size).map_err(|e| e.to_string())?;
         Ok(PeriodicSpec::Box(size))
+    }
+}
+
+/// A scene file's `periodic`: `true` (the header's box), `false` (open), or `[LX, LY, LZ]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum PeriodicSetting {
+    Flag(bool),
+    Box([f64; 3]),
+}
+
+impl PeriodicSetting {
+    /// The setting that reproduces `periodic`: its box, or an open box.
+    pub fn of(periodic: Option<PeriodicBox>) -> PeriodicSetting {
+        match periodic {
+            Some(b) => PeriodicSetting::Box(b.size.to_array()),
+            None => PeriodicSetting::Flag(false),
+        }
+    }
+}
+
+/// The flags over a scene file's setting: what `--periodic` asks for, and whether the box is
+/// open (`--no-periodic`).
+pub fn merge(
+    flag: Option<PeriodicSpec>,
+    no_periodic: bool,
+    scene: Option<PeriodicSetting>,
+) -> (Option<PeriodicSpec>, bool) {
+    match (flag, no_periodic, scene) {
+        (Some(spec), _, _) => (Some(spec), false),
+        (None, true, _) | (None, false, Some(PeriodicSetting::Flag(false))) => (None, true),
+        (None, false, Some(PeriodicSetting::Flag(true))) => (Some(PeriodicSpec::FromHeader), false),
+        (None, false, Some(PeriodicSetting::Box(size))) => (Some(PeriodicSpec::Box(size)), false),
+        (None, false, None) => (None, false),
     }
 }
 

@@ -302,12 +302,14 @@ impl Resolved {
             &self.field,
             self.cluster,
             self.colormap.as_deref(),
+            self.periodic,
         )
     }
 }
 
 /// The data and field sections of a scene file that reproduces a field of the data at
 /// `data_path`: the path absolute, the radius in data units, the maps as their control points.
+#[allow(clippy::too_many_arguments)] // one per section entry; a struct would only rename them
 pub fn scene_sections(
     data_path: &std::path::Path,
     format: Option<Format>,
@@ -316,6 +318,7 @@ pub fn scene_sections(
     f: &FieldSettings,
     cluster: ClusterSize,
     colormap: Option<&str>,
+    periodic: Option<crate::field::PeriodicBox>,
 ) -> (DataSection, FieldSection) {
     let absolute = |p: &std::path::Path| std::path::absolute(p).unwrap_or(p.to_path_buf());
     (
@@ -328,6 +331,7 @@ pub fn scene_sections(
             radius_attribute: f.radius_attribute.clone(),
             particle_type: (read.particle_type != ParticleType::GAS).then_some(read.particle_type),
             physical: read.physical.then_some(true),
+            periodic: Some(super::periodic::PeriodicSetting::of(periodic)),
         },
         FieldSection {
             radius: Some(RadiusSpec::Absolute(f.radius)),
@@ -474,7 +478,9 @@ fn resolve_choosing(
     }
     let opened_in = opening.elapsed();
     let decoded_at_open = series.steps_decoded();
-    let periodic = super::periodic::choose(&series, data.periodic, data.no_periodic)?;
+    let (periodic_spec, no_periodic) =
+        super::periodic::merge(data.periodic, data.no_periodic, scene.data.periodic);
+    let periodic = super::periodic::choose(&series, periodic_spec, no_periodic)?;
     let step = asked_step;
     if step >= series.len() {
         bail!(

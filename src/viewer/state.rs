@@ -90,6 +90,7 @@ impl ViewState {
             &self.field,
             self.cluster,
             Some(&self.colormap),
+            self.periodic,
         );
         SceneFile::reproducing(
             data,
