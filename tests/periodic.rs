@@ -54,7 +54,9 @@ fn scene(n: usize, seed: u64) -> Scene {
         })
         .collect();
     let h = (0..n).map(|_| rng.random_range(0.5..1.5)).collect();
-    let s = (0..n).map(|_| 10f64.powf(rng.random_range(-2.0..3.0))).collect();
+    let s = (0..n)
+        .map(|_| 10f64.powf(rng.random_range(-2.0..3.0)))
+        .collect();
     Scene { positions, h, s }
 }
 
@@ -203,7 +205,11 @@ const BOX: &str = "3.7,2.9,4.3";
 #[test]
 fn field_near_faces_is_the_sum_over_every_periodic_image() {
     let f = fixture();
-    let periodic: Vec<[f64; 2]> = f.points.iter().map(|&q| oracle(&f.scene, q, true)).collect();
+    let periodic: Vec<[f64; 2]> = f
+        .points
+        .iter()
+        .map(|&q| oracle(&f.scene, q, true))
+        .collect();
     let open: Vec<[f64; 2]> = f
         .points
         .iter()
@@ -218,18 +224,28 @@ fn field_near_faces_is_the_sum_over_every_periodic_image() {
     assert!(changed > 100, "only {changed} queries feel an image");
 
     let (got, log) = common::aarbf_field(
-        &args(&f.data, &f.queries, &["--periodic", BOX, "--precision", "f64"]),
+        &args(
+            &f.data,
+            &f.queries,
+            &["--periodic", BOX, "--precision", "f64"],
+        ),
         "cpu",
         &f.out,
     );
     assert!(log.contains("periodic box"), "{log}");
     let (phi, theta) = worst(&got, &periodic);
-    assert!(phi <= 1e-12 && theta <= 1e-12, "Phi {phi:.2e}, Theta {theta:.2e}");
+    assert!(
+        phi <= 1e-12 && theta <= 1e-12,
+        "Phi {phi:.2e}, Theta {theta:.2e}"
+    );
 
     // Without --periodic, the open box's field, which the oracle of the open box also gives.
     let (got, _) = common::aarbf_field(&args(&f.data, &f.queries, &[]), "cpu", &f.out);
     let (phi, theta) = worst(&got, &open);
-    assert!(phi <= 1e-12 && theta <= 1e-12, "open: Phi {phi:.2e}, Theta {theta:.2e}");
+    assert!(
+        phi <= 1e-12 && theta <= 1e-12,
+        "open: Phi {phi:.2e}, Theta {theta:.2e}"
+    );
 }
 
 #[test]
@@ -256,19 +272,33 @@ fn no_seam_at_the_faces() {
             .map(|p| (p[0][0] - p[1][0]).abs() / p[0][0].max(p[1][0]))
             .fold(0.0f64, f64::max)
     };
-    let (got, _) = common::aarbf_field(&args(&f.data, &queries, &["--periodic", BOX]), "cpu", &f.out);
+    let (got, _) = common::aarbf_field(
+        &args(&f.data, &queries, &["--periodic", BOX]),
+        "cpu",
+        &f.out,
+    );
     assert!(got.iter().filter(|g| g[0] > 0.0).count() > 150);
     let seam = jump(&got);
     // The field's gradient times 2 eps: far below 1e-4 of the field.
-    assert!(seam < 1e-4, "periodic field jumps by {seam:.2e} across a face");
+    assert!(
+        seam < 1e-4,
+        "periodic field jumps by {seam:.2e} across a face"
+    );
     let (open, _) = common::aarbf_field(&args(&f.data, &queries, &[]), "cpu", &f.out);
-    assert!(jump(&open) > 0.5, "the open box has a seam: this test must see it");
+    assert!(
+        jump(&open) > 0.5,
+        "the open box has a seam: this test must see it"
+    );
 }
 
 #[test]
 fn every_backend_gives_the_periodic_field() {
     let f = fixture();
-    let periodic: Vec<[f64; 2]> = f.points.iter().map(|&q| oracle(&f.scene, q, true)).collect();
+    let periodic: Vec<[f64; 2]> = f
+        .points
+        .iter()
+        .map(|&q| oracle(&f.scene, q, true))
+        .collect();
     for backend in ["cpu", "wgpu", "ash"] {
         let (got, log) = common::aarbf_field(
             &args(&f.data, &f.queries, &["--periodic", BOX]),
@@ -408,7 +438,11 @@ fn snapshot_args(data: &Path, queries: &Path, extra: &[&str]) -> Vec<OsString> {
 fn a_swift_snapshot_is_periodic_by_default_and_no_periodic_opens_it() {
     let f = fixture();
     let dir = tempfile::tempdir().unwrap();
-    let periodic: Vec<[f64; 2]> = f.points.iter().map(|&q| oracle(&f.scene, q, true)).collect();
+    let periodic: Vec<[f64; 2]> = f
+        .points
+        .iter()
+        .map(|&q| oracle(&f.scene, q, true))
+        .collect();
     let open: Vec<[f64; 2]> = f
         .points
         .iter()
@@ -422,14 +456,20 @@ fn a_swift_snapshot_is_periodic_by_default_and_no_periodic_opens_it() {
         "{log}"
     );
     let (phi, theta) = worst(&got, &periodic);
-    assert!(phi <= 1e-12 && theta <= 1e-12, "Phi {phi:.2e}, Theta {theta:.2e}");
+    assert!(
+        phi <= 1e-12 && theta <= 1e-12,
+        "Phi {phi:.2e}, Theta {theta:.2e}"
+    );
     let (got, _) = common::aarbf_field(
         &snapshot_args(&snap, &f.queries, &["--no-periodic"]),
         "cpu",
         &f.out,
     );
     let (phi, theta) = worst(&got, &open);
-    assert!(phi <= 1e-12 && theta <= 1e-12, "--no-periodic: Phi {phi:.2e}, Theta {theta:.2e}");
+    assert!(
+        phi <= 1e-12 && theta <= 1e-12,
+        "--no-periodic: Phi {phi:.2e}, Theta {theta:.2e}"
+    );
 
     // `aarbf info` says so.
     let info = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
@@ -492,7 +532,16 @@ fn a_slice_of_a_periodic_box_has_no_seam() {
             .arg("slice")
             .arg("--data")
             .arg(&f.data)
-            .args(["--attribute", "s", "--radius", "0.3", "--axis", "y", "--width", "370"])
+            .args([
+                "--attribute",
+                "s",
+                "--radius",
+                "0.3",
+                "--axis",
+                "y",
+                "--width",
+                "370",
+            ])
             .args(["--no-legend", "--force", "--out"])
             .arg(&out)
             .args(extra)
@@ -527,5 +576,8 @@ fn a_slice_of_a_periodic_box_has_no_seam() {
     let (edge, middle) = (mean(column(&periodic, 0)), mean(column(&periodic, 185)));
     assert!(edge > 0.8 * middle, "edge {edge:.1}, middle {middle:.1}");
     let open_edge = mean(column(&open, 0));
-    assert!(open_edge < 0.8 * edge, "open edge {open_edge:.1} vs {edge:.1}");
+    assert!(
+        open_edge < 0.8 * edge,
+        "open edge {open_edge:.1} vs {edge:.1}"
+    );
 }

@@ -93,7 +93,10 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
             "periodic: {} images of particles near the box's faces{}",
             images.step.len() - images.originals,
             if images.wrapped > 0 {
-                format!(", {} particles outside the box wrapped into it", images.wrapped)
+                format!(
+                    ", {} particles outside the box wrapped into it",
+                    images.wrapped
+                )
             } else {
                 String::new()
             }

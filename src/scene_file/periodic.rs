@@ -113,7 +113,9 @@ pub fn choose(
         return Ok(None);
     }
     let b = PeriodicBox::from_origin(stated.size).map_err(|e| {
-        anyhow::anyhow!("{e} (the snapshot's /Header BoxSize); --no-periodic reads it as an open box")
+        anyhow::anyhow!(
+            "{e} (the snapshot's /Header BoxSize); --no-periodic reads it as an open box"
+        )
     })?;
     // Under --physical the box scales with the scale factor, which differs between steps.
     if series.len() > 1
