@@ -725,3 +725,60 @@ fn a_render_without_flags_says_which_particle_type_it_reads() {
         "{stderr}"
     );
 }
+
+/// The issue's own command asks a SWIFT run for `Temperature`, which SWIFT calls
+/// `Temperatures`: the other number of a name the data has is taken, and the log says so; a
+/// name with no such match is the error listing the data's names.
+#[test]
+fn an_attribute_named_in_the_other_number_is_the_datas() {
+    let dir = tempfile::tempdir().unwrap();
+    write_swift(&dir.path().join("snap_0000.hdf5"), 611, 40);
+    let slice = |attribute: &str, radius_attribute: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+            .args(["slice", "--data"])
+            .arg(dir.path())
+            .args([
+                "--attribute",
+                attribute,
+                "--radius-attribute",
+                radius_attribute,
+            ])
+            .args([
+                "--radius",
+                "0.1",
+                "--width",
+                "32",
+                "--no-periodic",
+                "--force",
+                "--out",
+            ])
+            .arg(dir.path().join(format!("{attribute}.png")))
+            .output()
+            .unwrap()
+    };
+    let out = slice("Temperature", "SmoothingLength");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    for said in [
+        "attribute 'Temperature': the data has no attribute of that name, but has 'Temperatures': using 'Temperatures'",
+        "attribute 'SmoothingLength': the data has no attribute of that name, but has 'SmoothingLengths'",
+        "colour: 'Temperatures' over [",
+    ] {
+        assert!(stderr.contains(said), "'{said}' not in:\n{stderr}");
+    }
+    // The same image as the data's own names give.
+    let own = slice("Temperatures", "SmoothingLengths");
+    assert!(own.status.success());
+    assert_eq!(
+        std::fs::read(dir.path().join("Temperature.png")).unwrap(),
+        std::fs::read(dir.path().join("Temperatures.png")).unwrap()
+    );
+    let out = slice("Pressure", "SmoothingLengths");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && stderr.contains("attribute 'Pressure' not found")
+            && stderr.contains("'Temperatures'"),
+        "{stderr}"
+    );
+}

@@ -411,6 +411,11 @@ pub fn finish_step(
                 return Err(at.err(Problem::MissingAttribute {
                     name: w.clone(),
                     available: available_list(&attributes, &skipped),
+                    names: attributes
+                        .iter()
+                        .map(|a| a.name.clone())
+                        .chain(skipped.iter().cloned())
+                        .collect(),
                 }));
             }
         }

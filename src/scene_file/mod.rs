@@ -17,6 +17,7 @@
 //! cluster = 4
 //! ```
 
+pub mod names;
 pub mod periodic;
 pub mod resolve;
 

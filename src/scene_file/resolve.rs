@@ -429,34 +429,61 @@ fn resolve_choosing(
             None => tracing::info!("colour: by density (the data has no attributes)"),
         }
     }
-    let radius_attribute = options
+    let mut radius_attribute = options
         .radius_attribute
         .clone()
         .or(scene.data.radius_attribute.clone())
         .or(data.smoothing.map(|s| s.attribute()));
-    let selection = AttributeSelection::Only(
-        attribute
-            .iter()
-            .chain(radius_attribute.iter())
-            .cloned()
-            .collect(),
-    );
     let opening = std::time::Instant::now();
     let mut asked_step = data.step.or(scene.data.step).unwrap_or(0);
-    let series = TimeSeries::open(
-        &path,
-        &OpenOptions {
-            format: data.format.or(scene.data.format),
-            read,
-            smoothing: data.smoothing,
-            attributes: selection,
-            cache_bytes: data.cache_mib << 20,
-            // A batch frame uses the final series values, never provisional ones.
-            background_scan: false,
-            rescan: data.rescan,
-        },
-    )
-    .map_err(|e| {
+    let open = |attribute: &Option<String>, radius_attribute: &Option<String>| {
+        TimeSeries::open(
+            &path,
+            &OpenOptions {
+                format: data.format.or(scene.data.format),
+                read,
+                smoothing: data.smoothing,
+                attributes: AttributeSelection::Only(
+                    attribute
+                        .iter()
+                        .chain(radius_attribute.iter())
+                        .cloned()
+                        .collect(),
+                ),
+                cache_bytes: data.cache_mib << 20,
+                // A batch frame uses the final series values, never provisional ones.
+                background_scan: false,
+                rescan: data.rescan,
+            },
+        )
+    };
+    let mut opened = open(&attribute, &radius_attribute);
+    // A name the data spells in the other number or case (SWIFT's `Temperatures` for
+    // `Temperature`) is the data's, said in the log; at most the two names asked for.
+    for _ in 0..2 {
+        let Err(crate::io::DataError {
+            problem: crate::io::Problem::MissingAttribute { name, names, .. },
+            ..
+        }) = &opened
+        else {
+            break;
+        };
+        let Some(found) = super::names::other_spelling(name, names) else {
+            break;
+        };
+        let name = name.clone();
+        tracing::info!(
+            "attribute '{name}': the data has no attribute of that name, but has '{found}': \
+             using '{found}'"
+        );
+        for a in [&mut attribute, &mut radius_attribute] {
+            if a.as_deref() == Some(name.as_str()) {
+                *a = Some(found.clone());
+            }
+        }
+        opened = open(&attribute, &radius_attribute);
+    }
+    let series = opened.map_err(|e| {
         // The series' first step is checked when it opens, whichever step was asked for: say
         // so, or the message seems to be about the wrong step.
         let missing = matches!(e.problem, crate::io::Problem::MissingAttribute { .. });
