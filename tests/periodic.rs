@@ -503,6 +503,17 @@ fn a_swift_snapshot_is_periodic_by_default_and_no_periodic_opens_it() {
     assert!(log.contains("GADGET-family"), "{log}");
     assert!(worst(&got, &periodic).0 <= 1e-12);
 
+    // A header whose box the particles lie well outside is not the data's box: the field is
+    // not wrapped, and the warning says so and how to force it.
+    let small = dir.path().join("small_0000.hdf5");
+    write_swift(&f.scene, &small, Some("1"), [2.0, 2.9, 4.3]);
+    let (got, log) = common::aarbf_field(&snapshot_args(&small, &f.queries, &[]), "cpu", &f.out);
+    assert!(
+        log.contains("well outside it: the field is not wrapped") && log.contains("--periodic"),
+        "{log}"
+    );
+    assert!(worst(&got, &open).0 <= 1e-12);
+
     // A header box of side 0 with --periodic: the error names it.
     let flat = dir.path().join("flat_0000.hdf5");
     write_swift(&f.scene, &flat, Some("1"), [3.7, 0.0, 4.3]);
