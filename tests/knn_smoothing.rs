@@ -110,6 +110,8 @@ fn data_args(data: &Path, smoothing: Smoothing) -> DataArgs {
         physical: false,
         smoothing: Some(smoothing),
         rescan: false,
+        periodic: None,
+        no_periodic: false,
     }
 }
 

@@ -18,6 +18,8 @@
 //! ```
 
 mod kernel;
+pub mod names;
+pub mod periodic;
 pub mod resolve;
 
 use std::path::{Path, PathBuf};
@@ -51,6 +53,10 @@ pub struct DataSection {
     pub physical: Option<bool>,
     /// Smoothing lengths from neighbours (`"knn:32"`), as `--smoothing` gives them.
     pub smoothing: Option<crate::scene::smoothing::Smoothing>,
+    /// The periodic box the field wraps at: `true` (the snapshot header's), `false` (open),
+    /// or `[LX, LY, LZ]` (the box [0, L)); unset, the header decides.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periodic: Option<periodic::PeriodicSetting>,
 }
 
 /// The range of the attribute the colour map spans.
