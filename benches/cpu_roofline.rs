@@ -204,8 +204,8 @@ fn main() {
 /// The best rate of runs of `f` (which returns work and seconds) over `seconds`, at least
 /// three runs. The machine is shared: three runs, of under a millisecond each for a peak loop,
 /// once let a peak be read while another process held a core (the 2-thread AVX-512 peak read
-/// 2.48 G terms/s, half its 4.8, and the share of it printed 25.0%); the best of many is the
-/// machine's.
+/// half the machine's, and the share of it printed twice the true one:
+/// docs/notes/2026-12-06-cpu-point-queries.md); the best of many is the machine's.
 fn best_rate(seconds: f64, mut f: impl FnMut() -> (u64, f64)) -> f64 {
     let started = Instant::now();
     let mut best: f64 = 0.0;

@@ -160,7 +160,7 @@ fn main() {
     let points: Vec<DVec3> = (0..queries)
         .map(|_| DVec3::new(r.random(), r.random(), r.random()))
         .collect();
-    // As `aarbf field` does: queries in Hilbert order (both backends ~2-3x faster).
+    // As `aarbf field` does: queries in Hilbert order (faster on both backends).
     let sorted: Vec<DVec3> = hilbert_order(&points, UNIT)
         .iter()
         .map(|&i| points[i as usize])

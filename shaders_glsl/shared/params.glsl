@@ -23,6 +23,8 @@ struct Field {
                      // z = the density map's value if constant, w unused
     uvec4 counts;    // x = particles, y = clusters, zw: the wgpu backend's part lengths
                      // (wgpu/split.glsl; unused by the Vulkan kernels)
+    uvec4 factors;   // x = where an SPH kernel's volumes start in the radius-attribute
+                     // buffer (floats; after the radius attribute's section); yzw unused
 };
 
 // The shared constants, with the specialisation constants (wgpu: pipeline overrides; Vulkan:

@@ -13,8 +13,12 @@
 // f32's relative precision however small the radius is against the coordinates.
 //
 // The includer defines, before this file, `Field field_params` (params.glsl), `vec4
-// particle_lo(uint k)` (read only when POSITION_DS is 1) and, when HAS_RADIUS_ATTRIBUTE is 1,
-// `float radius_attribute(uint particle)`.
+// particle_lo(uint k)` (read only when POSITION_DS is 1), when HAS_RADIUS_ATTRIBUTE is 1
+// `float radius_attribute(uint particle)`, and for an SPH kernel (KERNEL > 0) `float
+// particle_volume(uint particle)`, the particle's m/rho.
+//
+// The kernel (values::Kernel, the one definition in f64): the paper's Gaussian, or an SPH
+// kernel normalised in 3D, `V sigma / h^3 f(q)`, q = d / h and h = r / support.
 
 float particle_radius(vec4 p, uint index) {
     float m = (RADIUS_MAP_VARIES == 1u) ? map_lookup(TABLE_RADIUS, p.w) : field_params.radius.y;
@@ -25,8 +29,14 @@ float particle_radius(vec4 p, uint index) {
     return r;
 }
 
-float particle_weight(vec4 p) {
-    return (DENSITY_MAP_VARIES == 1u) ? map_lookup(TABLE_DENSITY, p.w) : field_params.radius.z;
+// The weight of particle k (p) of radius r: the density map's, times an SPH kernel's volume
+// and normalisation V sigma support^3 / r^3.
+float particle_weight(vec4 p, uint k, float r) {
+    float w = (DENSITY_MAP_VARIES == 1u) ? map_lookup(TABLE_DENSITY, p.w) : field_params.radius.z;
+    if (KERNEL != KERNEL_GAUSSIAN_RBF) {
+        w *= particle_volume(k) * kernel_radius_norm() / (r * r * r);
+    }
+    return w;
 }
 
 vec3 particle_theta(vec4 p) {
@@ -54,9 +64,38 @@ float rbf_exponent(float d2, float r) {
     return 4.5 * d2 / (r * r);
 }
 
-// Adds the contribution of particle p, at squared distance d2 (inside radius r), to acc.
-void rbf_add(inout vec4 acc, float d2, float r, vec4 p) {
-    float phi = particle_weight(p) * exp(-rbf_exponent(d2, r));
+// The kernel's profile at squared distance d2 within radius r (values::Kernel::profile): the
+// Gaussian exp(-4.5 d²/r²), or an SPH kernel's f(q), its splines' (x)+ as max(x, 0).
+float rbf_profile(float d2, float r) {
+    if (KERNEL == KERNEL_GAUSSIAN_RBF) {
+        return exp(-rbf_exponent(d2, r));
+    }
+    float q = kernel_support() * sqrt(d2 / (r * r));
+    if (KERNEL == KERNEL_SPH_CUBIC) {
+        float a = max(2.0 - q, 0.0);
+        float b = max(1.0 - q, 0.0);
+        return 0.25 * (a * a * a) - b * b * b;
+    }
+    if (KERNEL == KERNEL_SPH_QUINTIC) {
+        float a = max(3.0 - q, 0.0);
+        float b = max(2.0 - q, 0.0);
+        float c = max(1.0 - q, 0.0);
+        float a2 = a * a;
+        float b2 = b * b;
+        float c2 = c * c;
+        return a2 * a2 * a - 6.0 * (b2 * b2 * b) + 15.0 * (c2 * c2 * c);
+    }
+    float a = max(1.0 - 0.5 * q, 0.0);
+    float a2 = a * a;
+    if (KERNEL == KERNEL_SPH_WENDLAND_C2) {
+        return a2 * a2 * (1.0 + 2.0 * q);
+    }
+    return a2 * a2 * a2 * (1.0 + 3.0 * q + (35.0 / 12.0) * q * q);
+}
+
+// Adds the contribution of particle k (p), at squared distance d2 (inside radius r), to acc.
+void rbf_add(inout vec4 acc, float d2, float r, vec4 p, uint k) {
+    float phi = particle_weight(p, k, r) * rbf_profile(d2, r);
     acc.x += phi;
     acc.yzw += particle_theta(p) * phi;
 }
@@ -91,6 +130,6 @@ void rbf_accumulate(inout vec4 acc, vec3 x, vec3 x_lo, vec4 p, uint k, float r) 
     vec3 d = rbf_offset(x, x_lo, p, k);
     float d2 = dot(d, d);
     if (rbf_inside(d2, r)) {
-        rbf_add(acc, d2, r, p);
+        rbf_add(acc, d2, r, p, k);
     }
 }

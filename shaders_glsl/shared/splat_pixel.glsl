@@ -53,7 +53,7 @@ vec4 splat_pixel(uvec2 pixel) {
             float t = dot(oc, dir);
             vec3 perp = oc - dir * t;
             float b2 = dot(perp, perp);
-            float phi = particle_weight(p) * exp(-4.5 * b2 / (r * r));
+            float phi = particle_weight(p, k, r) * rbf_profile(b2, r);
             vec4 s = shade(vec4(phi, particle_theta(p) * phi));
             if (s.w <= 0.0) {
                 continue;

@@ -46,7 +46,7 @@ layout(push_constant) uniform Push {
     uint first_frame;  // 1: the frame replaces the accumulation
     uint query_lo;     // 1: a query launch whose points carry lo parts (POSITION_DS)
     uvec2 particle_address;     // ParticleArray of the step
-    uvec2 radius_address;       // FloatArray of radius attributes (0 when there are none)
+    uvec2 radius_address;       // FloatArray of radius attributes, then SPH volumes (0 when neither)
     uvec2 boxes_address;        // the BLAS input boxes, 6 floats each (boxes.comp writes them)
     uvec2 accum_address;        // Vec4Array: the frame's f32 RGBA sums per pixel
     uvec2 particle_lo_address;  // ParticleArray of the lo parts (POSITION_DS; else 0)
@@ -72,6 +72,10 @@ vec4 particle_lo(uint k) {
 
 float radius_attribute(uint k) {
     return FloatArray(push.radius_address).v[k];
+}
+
+float particle_volume(uint k) {
+    return FloatArray(push.radius_address).v[field_params.factors.x + k];
 }
 
 #include "shared/maps.glsl"

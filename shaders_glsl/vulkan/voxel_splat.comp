@@ -61,7 +61,7 @@ void main() {
                 float d2 = dot(d, d);
                 if (rbf_inside(d2, r)) {
                     vec4 sums = vec4(0.0);
-                    rbf_add(sums, d2, r, p);
+                    rbf_add(sums, d2, r, p, k);
                     uint word = 4u * ((z * voxels.dims.y + y) * voxels.dims.w + x);
                     add_f32(word, sums.x);
                     if (voxels.channels.x > 1u) {

@@ -24,6 +24,10 @@ float radius_attribute(uint i) {
     return radius_attributes[i];
 }
 
+float particle_volume(uint i) {
+    return radius_attributes[field_params.factors.x + i];
+}
+
 #include "shared/rbf.glsl"
 #include "shared/lbvh.glsl"
 

@@ -24,6 +24,10 @@ float radius_attribute(uint i) {
     return radius_attributes[i];
 }
 
+float particle_volume(uint i) {
+    return radius_attributes[field_params.factors.x + i];
+}
+
 #include "shared/rbf.glsl"
 
 void main() {
@@ -38,6 +42,7 @@ void main() {
     if (POSITION_DS == 1u) {
         offset += particle_lo(k).xyz - voxels.origin_lo.xyz;
     }
-    splats[2u * i] = vec4(offset, particle_radius(p, k));
-    splats[2u * i + 1u] = vec4(particle_weight(p), particle_theta(p));
+    float r = particle_radius(p, k);
+    splats[2u * i] = vec4(offset, r);
+    splats[2u * i + 1u] = vec4(particle_weight(p, k, r), particle_theta(p));
 }

@@ -38,13 +38,12 @@ impl ClusterSize {
     /// The cluster size for data where `overlap` particles reach a particle centre on average
     /// (itself included; [`crate::render::auto::mean_overlap`]): 16 where particles overlap
     /// ([`DENSE_OVERLAP`] or more), 4 where they barely do. Measured with `aarbf bench cluster`
-    /// on every backend (docs/benchmarks.md, "The cluster size from the data"): where several
+    /// on every backend (docs/notes/2026-12-02-cluster-size-from-data.md): where several
     /// particles reach a point, larger clusters only gain (a query visits fewer, fuller boxes;
-    /// K = 16 was the fastest or within 12% of it on uniform data at overlap 28, on clusters at
-    /// overlap over 2000 and on the dam break at 7); where a point meets about one particle,
-    /// the best K depends on how small the particles are against their spacing (K = 8 at a
-    /// radius of 0.7 spacings, K = 1 at 0.27), which the overlap does not see, and K = 4 was
-    /// within 11% of the fastest on every backend at both, K = 16 up to 25% slower.
+    /// K = 16 was the fastest or close to it on uniform data, on clustered data and on the dam
+    /// break); where a point meets about one particle, the best K depends on how small the
+    /// particles are against their spacing, which the overlap does not see, and K = 4 was
+    /// close to the fastest on every backend in both cases, where K = 16 was not.
     pub fn for_overlap(overlap: f64) -> ClusterSize {
         if overlap >= DENSE_OVERLAP {
             ClusterSize(16)

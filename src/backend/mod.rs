@@ -77,7 +77,7 @@ pub fn create(kind: BackendKind) -> Result<Box<dyn Backend>, BackendError> {
 
 /// The best backend here: ash on a GPU with ray tracing, else wgpu on a GPU, else the CPU
 /// backend. A software device (lavapipe) is never "best": on the same cores the CPU backend is
-/// 2.5-6x faster (docs/benchmarks.md); ask for `--backend ash|wgpu` to use one anyway.
+/// faster (docs/benchmarks.md); ask for `--backend ash|wgpu` to use one anyway.
 fn auto() -> Box<dyn Backend> {
     match ash_rt::AshBackend::new() {
         Ok(b) if !b.capabilities().software => return Box::new(b),
@@ -188,7 +188,7 @@ pub struct StepInput<'a> {
 pub const QUERY_BATCH: usize = 1 << 18;
 
 /// Phi and the Theta numerator at `points`, in their order, queried in Hilbert order
-/// (neighbouring queries share tree nodes: ~2-3x faster on every backend) in batches of
+/// (neighbouring queries share tree nodes: faster on every backend) in batches of
 /// [`QUERY_BATCH`]; `progress` is told how many points each batch held.
 pub fn query_in_hilbert_order<B: Backend + ?Sized>(
     backend: &mut B,

@@ -36,6 +36,8 @@
 
 use std::fmt;
 
+use crate::values::Kernel;
+
 /// f32's unit roundoff: the largest relative error of one rounding to nearest.
 pub const U: f64 = f32::EPSILON as f64 / 2.0;
 
@@ -156,6 +158,8 @@ pub struct SceneNumbers {
     /// GPU.
     pub density_slope: f64,
     pub radius_slope: f64,
+    /// The kernel the terms are computed with.
+    pub kernel: Kernel,
 }
 
 impl SceneNumbers {
@@ -170,13 +174,14 @@ impl SceneNumbers {
         radius_varies: false,
         density_slope: 0.0,
         radius_slope: 0.0,
+        kernel: Kernel::GaussianRbf,
     };
 
     /// Whether every term and sum lies in f32's normal range: the smallest term (at the edge of
     /// a radius) well above the smallest normal f32, so rounding stays relative, and the largest
     /// sum below f32's largest value.
     pub fn f32_range_ok(&self) -> bool {
-        let smallest = self.w_min * (-A_MAX).exp();
+        let smallest = self.w_min * smallest_profile(self.kernel);
         let largest = self.w_max * self.max_terms.max(1) as f64;
         smallest.is_nan()
             || smallest <= 0.0
@@ -263,7 +268,15 @@ impl ErrorBound {
                 (argument, 2.0 * GLSL_EXP_ULP * U, weight)
             }
         };
-        let kernel = A_MAX * argument + exp;
+        let kernel = if scene.kernel.is_sph() {
+            sph_kernel_error(
+                scene.kernel,
+                argument,
+                matches!(arithmetic, Arithmetic::Glsl),
+            )
+        } else {
+            A_MAX * argument + exp
+        };
         // The weight and the product w e.
         let terms = weight + U;
         let summation = match summation {
@@ -304,6 +317,67 @@ impl ErrorBound {
         }
         let numerator = phi + 2.0 * U;
         ((phi + numerator) / (1.0 - phi) + U).min(1.0)
+    }
+}
+
+/// Below this fraction of its peak, an SPH kernel's term is not bounded relative to itself
+/// (see [`sph_kernel_error`]).
+pub const SPH_TERM_FLOOR: f64 = 1e-3;
+
+/// The smallest profile value whose rounding the bound keeps relative: the Gaussian's at its
+/// radius, an SPH kernel's at [`SPH_TERM_FLOOR`] of its peak.
+fn smallest_profile(kernel: Kernel) -> f64 {
+    if kernel.is_sph() {
+        SPH_TERM_FLOOR * kernel.of_q(0.0)
+    } else {
+        (-A_MAX).exp()
+    }
+}
+
+/// The relative error of an SPH kernel's term whose value is at least [`SPH_TERM_FLOOR`] of
+/// its peak, when `d²/r²` carries the relative error `argument`: `q = support √(d²/r²)` takes
+/// half of it, the square root (GLSL: 2.5 ulp through `inversesqrt`, the CPU: correctly
+/// rounded) and the product with the support one rounding each; the term moves by its
+/// condition number `|q f'(q) / f(q)|` times that, at most [`sph_condition`] over the terms
+/// above the floor; the polynomial's own evaluation adds [`sph_evaluation`]. A term below the
+/// floor (the last few percent of the support, where `f` falls to 0 as a power of the distance
+/// to the edge) can err by more relative to itself: its absolute error is at most `κ ε_q` of
+/// the floor, which the bound leaves out, as it leaves out the truncation edge.
+pub fn sph_kernel_error(kernel: Kernel, argument: f64, glsl: bool) -> f64 {
+    let sqrt = if glsl { 2.0 * 2.5 * U } else { U };
+    let q_error = 0.5 * argument + sqrt + U;
+    sph_condition(kernel) * q_error + sph_evaluation(kernel) * U
+}
+
+/// The largest condition number `|q f'(q) / f(q)|` of an SPH kernel over the q where
+/// `f(q) >= SPH_TERM_FLOOR f(0)` (by a fine scan: f is smooth and the number grows towards the
+/// edge, so the scan's last point above the floor is its largest).
+pub fn sph_condition(kernel: Kernel) -> f64 {
+    let floor = SPH_TERM_FLOOR * kernel.of_q(0.0);
+    let s = kernel.support();
+    let n = 100_000;
+    (1..n)
+        .map(|i| s * i as f64 / n as f64)
+        .filter(|&q| kernel.of_q(q) >= floor)
+        .map(|q| {
+            let h = 1e-7 * s;
+            let slope = (kernel.of_q(q + h) - kernel.of_q(q - h)) / (2.0 * h);
+            (q * slope / kernel.of_q(q)).abs()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The relative rounding error, in units of u, of evaluating an SPH kernel's polynomial as
+/// `values::kernel` and `rbf.glsl` write it: the roundings of its powers and sums, times how
+/// much the sum of its pieces cancels (the sum of their magnitudes over the result, at most 3
+/// for the cubic spline and 7 for the quintic at q = 0).
+fn sph_evaluation(kernel: Kernel) -> f64 {
+    match kernel {
+        Kernel::GaussianRbf => 0.0,
+        Kernel::SphCubic => 3.0 * 6.0,
+        Kernel::SphQuintic => 7.0 * 10.0,
+        Kernel::SphWendlandC2 => 8.0,
+        Kernel::SphWendlandC4 => 12.0,
     }
 }
 
@@ -453,6 +527,13 @@ pub fn choose_cpu(
         bound: ErrorBound::NONE,
         tolerance,
     };
+    // The f32 kernel computes the Gaussian only: an SPH kernel takes the reference.
+    if scene.kernel.is_sph() {
+        return reference(match precision {
+            Precision::Auto { tolerance } => Some(tolerance),
+            _ => None,
+        });
+    }
     match precision {
         Precision::F32 | Precision::F32Compensated => f32_kernel(None),
         Precision::DoubleSingle | Precision::F64 => reference(None),
@@ -482,6 +563,7 @@ mod tests {
             radius_varies: false,
             density_slope: 0.0,
             radius_slope: 0.0,
+            kernel: Kernel::GaussianRbf,
         }
     }
 

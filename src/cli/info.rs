@@ -116,7 +116,12 @@ pub fn devices() -> String {
 fn defaults(series: &TimeSeries) -> anyhow::Result<String> {
     use std::fmt::Write;
     let first = series.first_step_in_full()?;
-    let (_, radius) = crate::scene_file::resolve::default_radius(series, None, first.as_deref())?;
+    let (_, radius) = crate::scene_file::resolve::default_radius(
+        series,
+        None,
+        first.as_deref(),
+        crate::field::Kernel::GaussianRbf,
+    )?;
     let camera = crate::scene::Camera::default_for(series.bounds());
     let mut out = String::new();
     let _ = writeln!(out, "defaults (render, slice, view):");

@@ -468,6 +468,18 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if (target.is_some() || args.reference) && method != Method::Rbf {
         bail!("--target-error, --time-budget and --reference render with --method rbf");
     }
+    if method != Method::Rbf && resolved.field.kernel.is_sph() {
+        bail!(
+            "--method {} is a baseline of the paper's Table 3, which splats its Gaussian RBF; \
+             --kernel {} renders with --method rbf",
+            if method == Method::Splat {
+                "splat"
+            } else {
+                "voxel"
+            },
+            resolved.field.kernel
+        );
+    }
     if let Some(k) = settings.splat_k {
         ensure!(
             settings.integrator == Integrator::Ea,

@@ -14,7 +14,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::f32_kernel::simd_in_use;
-use super::{Particles, Theta};
+use super::{Kernel, Particles, Theta};
 
 /// Candidates tested together.
 pub const LANES: usize = 4;
@@ -31,6 +31,7 @@ pub struct Packed64 {
     w: Vec<f64>,
     theta: [Vec<f64>; 3],
     channels: usize,
+    kernel: Kernel,
 }
 
 impl Packed64 {
@@ -57,6 +58,7 @@ impl Packed64 {
             w: f64s(&|i| p.weights[i]),
             theta,
             channels,
+            kernel: p.kernel,
         }
     }
 
@@ -107,6 +109,19 @@ const HELD: usize = 32;
 /// profile). A run's last chunk reads past its end and masks those lanes.
 #[inline(always)]
 fn sums_lanes<const C: usize>(p: &Packed64, runs: &[(u32, u32)], q: DVec3) -> (f64, [f64; 3]) {
+    if p.kernel.is_sph() {
+        sums_kernel::<C, true>(p, runs, q)
+    } else {
+        sums_kernel::<C, false>(p, runs, q)
+    }
+}
+
+#[inline(always)]
+fn sums_kernel<const C: usize, const SPH: bool>(
+    p: &Packed64,
+    runs: &[(u32, u32)],
+    q: DVec3,
+) -> (f64, [f64; 3]) {
     let mut phi = 0.0;
     let mut num = [0.0; 3];
     let mut held_index = [0u32; HELD];
@@ -115,7 +130,13 @@ fn sums_lanes<const C: usize>(p: &Packed64, runs: &[(u32, u32)], q: DVec3) -> (f
     let mut flush = |held_index: &[u32], held_d2: &[f64]| {
         for (&j, &d2) in held_index.iter().zip(held_d2) {
             let j = j as usize;
-            let term = p.w[j] * (-4.5 * d2 / p.r2[j]).exp();
+            // The Gaussian written out (the reference's form, and the common case);
+            // another kernel through its one definition.
+            let term = if SPH {
+                p.w[j] * p.kernel.profile(d2, p.r2[j])
+            } else {
+                p.w[j] * (-4.5 * d2 / p.r2[j]).exp()
+            };
             phi += term;
             for (acc, t) in num.iter_mut().zip(&p.theta).take(C) {
                 *acc += t[j] * term;

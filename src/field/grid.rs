@@ -136,8 +136,8 @@ impl Particles {
         let particles = self;
         // A few blocks a thread, so that uneven data still shares out: each block repeats
         // the exponentials along x and y of the particles reaching it from a neighbour's
-        // planes, so many small blocks cost more than they balance (at 1M particles on a 100³
-        // grid, 16 a thread took 1.3x the time of 4).
+        // planes, so many small blocks cost more than they balance (measured: 16 a thread
+        // against 4, docs/notes/2026-12-01-field-grid.md).
         let blocks = (4 * rayon::current_num_threads()).min(rows).max(1);
         let rows_per_block = rows.div_ceil(blocks);
         let blocks = rows.div_ceil(rows_per_block);
@@ -261,6 +261,22 @@ impl Scatter<'_> {
         members: &[u32],
         rows: std::ops::Range<usize>,
     ) -> [Vec<f64>; S] {
+        if self.particles.kernel.is_sph() {
+            self.block_kernel::<S, true>(members, rows)
+        } else {
+            self.block_kernel::<S, false>(members, rows)
+        }
+    }
+
+    /// [`Self::block_lanes`] for the Gaussian (separable: `SPH` false) or an SPH kernel (its
+    /// profile per point, from the same d² the reference computes).
+    #[inline(always)]
+    fn block_kernel<const S: usize, const SPH: bool>(
+        &self,
+        members: &[u32],
+        rows: std::ops::Range<usize>,
+    ) -> [Vec<f64>; S] {
+        let kernel = self.particles.kernel;
         let [nx, ny, _] = self.grid.dims;
         let stride = nx + LANES;
         let particles = self.particles;
@@ -294,7 +310,12 @@ impl Scatter<'_> {
                         .map(|&x| (x - centre) * (x - centre)),
                 );
                 e[d].clear();
-                e[d].extend(t[d].iter().map(|&t| (-4.5 * t / r2).exp()));
+                if SPH {
+                    // Not separable: the profile is taken per point below.
+                    e[d].resize(t[d].len(), 1.0);
+                } else {
+                    e[d].extend(t[d].iter().map(|&t| (-4.5 * t / r2).exp()));
+                }
             }
             t[0].extend([f64::INFINITY; LANES]);
             e[0].extend([0.0; LANES]);
@@ -331,7 +352,13 @@ impl Scatter<'_> {
                             };
                             // Without a branch: a point beyond the radius adds 0 (the
                             // padding lies beyond every radius).
-                            phi[l] = if d2 <= r2 { weight * ex[l] } else { 0.0 };
+                            phi[l] = if d2 > r2 {
+                                0.0
+                            } else if SPH {
+                                weight * kernel.profile(d2, r2)
+                            } else {
+                                weight * ex[l]
+                            };
                         }
                         for (acc, g) in acc.iter_mut().zip(gain) {
                             let acc: &mut [f64; LANES] = (&mut acc
@@ -365,6 +392,10 @@ mod tests {
     /// Particles as a simulation writes them (full f64 coordinates off the origin, radii of
     /// several sizes through a radius attribute), an awkward count.
     fn field(classification: Classification) -> ReferenceField {
+        field_with(classification, crate::field::Kernel::GaussianRbf)
+    }
+
+    fn field_with(classification: Classification, kernel: crate::field::Kernel) -> ReferenceField {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
         let n = 1237;
         let positions: Vec<DVec3> = (0..n)
@@ -375,21 +406,30 @@ mod tests {
             .collect();
         let s = (0..n).map(|_| rng.random::<f64>() * 40.0 - 3.0).collect();
         let h = (0..n).map(|_| 0.5 + rng.random::<f64>()).collect();
+        let m = (0..n).map(|_| 0.5 + rng.random::<f64>()).collect();
+        let rho = (0..n)
+            .map(|_| 900.0 + 200.0 * rng.random::<f64>())
+            .collect();
+        let attribute = |name: &str, values| Attribute {
+            name: name.into(),
+            values,
+        };
         let step = Step {
             name: "grid".into(),
             positions,
             attributes: vec![
-                Attribute {
-                    name: "s".into(),
-                    values: s,
-                },
-                Attribute {
-                    name: "h".into(),
-                    values: h,
-                },
+                attribute("s", s),
+                attribute("h", h),
+                attribute("m", m),
+                attribute("rho", rho),
             ],
         };
         let mut settings = FieldSettings::new(Some("s"), 0.11);
+        if kernel.is_sph() {
+            settings.kernel = kernel;
+            settings.mass = Some(crate::field::PerParticle::Attribute("m".into()));
+            settings.density = Some(crate::field::PerParticle::Attribute("rho".into()));
+        }
         settings.radius_attribute = Some("h".into());
         settings.classification = classification;
         settings.density_map =
@@ -450,6 +490,18 @@ mod tests {
                 dims: [30, 18, 1],
             };
             assert_matches_queries(&f, &slice);
+        }
+    }
+
+    /// An SPH kernel (not separable: its profile is taken per point) scatters onto the grid
+    /// the values a query per point gives.
+    #[test]
+    fn an_sph_kernel_scatters_what_the_queries_give() {
+        for kernel in crate::field::Kernel::ALL.into_iter().filter(|k| k.is_sph()) {
+            let f = field_with(Classification::Post, kernel);
+            let lo = DVec3::splat(1e3) - 0.05;
+            let hi = DVec3::splat(1e3) + DVec3::new(2.0, 1.0, 0.7) + 0.05;
+            assert_matches_queries(&f, &RegularGrid::cell_centred(lo, hi, [37, 23, 11]));
         }
     }
 

@@ -3,7 +3,7 @@
 
 use rayon::prelude::*;
 
-use super::{FieldError, FieldSettings};
+use super::{FieldError, FieldSettings, PerParticle};
 use crate::values::{Attribute, Step};
 
 /// The arrays a field reads from a step, checked against its settings: what every backend
@@ -15,6 +15,49 @@ pub struct FieldInputs<'a> {
     pub radius: Option<&'a Attribute>,
     /// The range t is normalised over.
     pub range: (f64, f64),
+    /// An SPH kernel's per-particle volumes `m/ρ`; `None` for the Gaussian RBF.
+    pub volume: Option<Volume<'a>>,
+}
+
+/// Where an SPH kernel's particle volumes `m_i / ρ_i` come from, checked: every mass finite
+/// and >= 0, every density finite and > 0.
+#[derive(Clone, Copy)]
+pub struct Volume<'a> {
+    pub mass: Values<'a>,
+    pub density: Values<'a>,
+}
+
+/// A checked per-particle quantity: one for all, or an attribute.
+#[derive(Clone, Copy)]
+pub enum Values<'a> {
+    Constant(f64),
+    Attribute(&'a Attribute),
+}
+
+impl Values<'_> {
+    #[inline]
+    fn at(&self, i: usize) -> f64 {
+        match self {
+            Values::Constant(v) => *v,
+            Values::Attribute(a) => a.values[i],
+        }
+    }
+}
+
+impl Volume<'_> {
+    /// Particle i's volume `m_i / ρ_i`.
+    #[inline]
+    pub fn of(&self, i: usize) -> f64 {
+        self.mass.at(i) / self.density.at(i)
+    }
+}
+
+impl FieldInputs<'_> {
+    /// Particle i's volume (1 without an SPH kernel, where nothing reads it).
+    #[inline]
+    pub fn volume(&self, i: usize) -> f64 {
+        self.volume.as_ref().map_or(1.0, |v| v.of(i))
+    }
 }
 
 impl<'a> FieldInputs<'a> {
@@ -72,13 +115,67 @@ impl<'a> FieldInputs<'a> {
             (None, None) => (0.0, 0.0),
         };
 
+        let volume = if settings.kernel.is_sph() {
+            Some(Self::check_volume(step, settings, &lookup)?)
+        } else {
+            None
+        };
         let inputs = FieldInputs {
             attribute,
             radius: per_particle_radius,
             range,
+            volume,
         };
         inputs.warn_if_meaningless(step, settings);
         Ok(inputs)
+    }
+
+    /// An SPH kernel's masses and densities: present, finite, masses >= 0 and densities > 0.
+    fn check_volume(
+        step: &'a Step,
+        settings: &FieldSettings,
+        lookup: &dyn Fn(&str) -> Result<&'a Attribute, FieldError>,
+    ) -> Result<Volume<'a>, FieldError> {
+        let kernel = settings.kernel;
+        let checked = |given: Option<&PerParticle>,
+                       what: &'static str,
+                       ok: fn(f64) -> bool,
+                       need: &'static str|
+         -> Result<Values<'a>, FieldError> {
+            let bad = |name: &str, value: f64, index: usize| FieldError::BadVolume {
+                step: step.name.clone(),
+                what,
+                name: name.to_owned(),
+                value,
+                index,
+                need,
+            };
+            match given.ok_or(FieldError::SphNeedsVolume { kernel, what })? {
+                PerParticle::Constant(v) if ok(*v) => Ok(Values::Constant(*v)),
+                PerParticle::Constant(v) => Err(bad("the value given", *v, 0)),
+                PerParticle::Attribute(name) => {
+                    let a = lookup(name)?;
+                    match a.values.par_iter().position_first(|&v| !ok(v)) {
+                        Some(index) => Err(bad(&a.name, a.values[index], index)),
+                        None => Ok(Values::Attribute(a)),
+                    }
+                }
+            }
+        };
+        Ok(Volume {
+            mass: checked(
+                settings.mass.as_ref(),
+                "mass",
+                |v| v.is_finite() && v >= 0.0,
+                "masses >= 0",
+            )?,
+            density: checked(
+                settings.density.as_ref(),
+                "density",
+                |v| v.is_finite() && v > 0.0,
+                "densities > 0",
+            )?,
+        })
     }
 
     /// Warns (once per preparation, on every backend) when the settings leave this step no

@@ -35,6 +35,7 @@ pub use reach::particle_reaches;
 pub use reference::{ReferenceField, Sample, finish_sums};
 
 use crate::scene::maps::{ColorMap, DensityMap, RadiusMap};
+pub use crate::values::Kernel;
 
 /// How attribute values become colour (method.md §2).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -62,6 +63,45 @@ pub struct FieldSettings {
     pub density_map: DensityMap,
     pub color_map: ColorMap,
     pub classification: Classification,
+    /// The kernel (the paper's Gaussian RBF by default). An SPH kernel weights each term by
+    /// the particle's volume `m/ρ`, from [`Self::mass`] and [`Self::density`].
+    pub kernel: Kernel,
+    /// The particles' mass for an SPH kernel: an attribute, or one value for all.
+    pub mass: Option<PerParticle>,
+    /// The particles' density ρ for an SPH kernel: an attribute, or one value for all (1 makes
+    /// Phi the SPH density estimate Σ m W itself).
+    pub density: Option<PerParticle>,
+}
+
+/// Where an SPH kernel takes a per-particle quantity (mass, density) from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum PerParticle {
+    /// One value for every particle (a mass table's).
+    Constant(f64),
+    /// An attribute of the step.
+    Attribute(String),
+}
+
+impl std::str::FromStr for PerParticle {
+    type Err = std::convert::Infallible;
+
+    /// A number is a constant mass; anything else names an attribute.
+    fn from_str(text: &str) -> Result<PerParticle, Self::Err> {
+        Ok(match text.parse::<f64>() {
+            Ok(m) => PerParticle::Constant(m),
+            Err(_) => PerParticle::Attribute(text.to_owned()),
+        })
+    }
+}
+
+impl std::fmt::Display for PerParticle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PerParticle::Constant(m) => write!(f, "{m}"),
+            PerParticle::Attribute(name) => write!(f, "'{name}'"),
+        }
+    }
 }
 
 impl FieldSettings {
@@ -76,6 +116,9 @@ impl FieldSettings {
             density_map: DensityMap::default(),
             color_map: ColorMap::default(),
             classification: Classification::Post,
+            kernel: Kernel::GaussianRbf,
+            mass: None,
+            density: None,
         }
     }
 }
@@ -103,6 +146,21 @@ pub enum FieldError {
         name: String,
         value: f64,
         index: usize,
+    },
+    #[error(
+        "the {kernel} kernel weights each particle by its volume m/rho: it needs a {what} (--mass and --density, each an attribute or one value)"
+    )]
+    SphNeedsVolume { kernel: Kernel, what: &'static str },
+    #[error(
+        "step '{step}': {what} '{name}' holds {value} for particle {index}; an SPH kernel needs {need}"
+    )]
+    BadVolume {
+        step: String,
+        what: &'static str,
+        name: String,
+        value: f64,
+        index: usize,
+        need: &'static str,
     },
     #[error(transparent)]
     Periodic(#[from] periodic::PeriodicError),

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::{Classification, FieldError, FieldInputs, FieldSettings, normalise};
 use crate::accel::hilbert_order;
 use crate::values::tables::{lookup, lookup_colour};
-use crate::values::{Bounds, Step};
+use crate::values::{Bounds, Kernel, Step};
 
 /// Per-particle values theta_i.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,6 +38,9 @@ pub struct Particles {
     pub range: (f64, f64),
     /// `order[k]` is the step's index of sorted particle k.
     pub order: Vec<u32>,
+    /// The kernel the weights were computed for (each term is `weights[i]` times its
+    /// profile).
+    pub kernel: Kernel,
 }
 
 /// A field's maps baked into the tables every backend looks them up in (`values::tables`):
@@ -105,6 +108,7 @@ impl Particles {
             theta: Theta::None,
             range: (0.0, 0.0),
             order,
+            kernel: Kernel::GaussianRbf,
         }
     }
 
@@ -117,11 +121,14 @@ impl Particles {
         settings: &FieldSettings,
         series_range: Option<(f64, f64)>,
     ) -> Result<(), FieldError> {
+        let inputs = FieldInputs::check(step, settings, series_range)?;
         let FieldInputs {
             attribute,
             radius: per_particle_radius,
             range,
-        } = FieldInputs::check(step, settings, series_range)?;
+            ..
+        } = inputs;
+        let kernel = settings.kernel;
         let tables = FieldTables::of(settings);
         let order = &self.order;
         // One pass over the sorted particles reads each one's attribute and radius once (the
@@ -135,7 +142,9 @@ impl Particles {
                 lookup(&tables.radius, t),
                 per_particle_radius.map(|h| h.values[i]),
             );
-            (t, (r, lookup(&tables.density, t)))
+            // An SPH kernel's normalisation and the particle's volume (1 for the Gaussian).
+            let w = lookup(&tables.density, t) * kernel.weight_factor(r, inputs.volume(i));
+            (t, (r, w))
         };
         let n = order.len();
         // Sized once and overwritten in place (a step of the same size allocates nothing).
@@ -178,6 +187,7 @@ impl Particles {
             }
         };
         self.range = range;
+        self.kernel = kernel;
         Ok(())
     }
 

@@ -23,6 +23,7 @@ pub fn particle_reaches(
         attribute,
         radius,
         range,
+        ..
     } = FieldInputs::check(step, settings, series_range)?;
     let table = FieldTables::of(settings).radius;
     Ok((0..step.len())

@@ -31,7 +31,7 @@ impl Particles {
         if d2 > r * r {
             return;
         }
-        let phi = self.weights[i] * (-4.5 * d2 / (r * r)).exp();
+        let phi = self.weights[i] * self.kernel.profile(d2, r * r);
         acc.phi += phi;
         match &self.theta {
             Theta::None => {}

@@ -182,7 +182,7 @@ const MAX_CALIBRATION_FRAMES: u32 = 64;
 /// samples there is loose: the default step's calibration images would cost a large share of
 /// the whole render, and the coarser steps' difference decides alone. (At 4, the dam break's
 /// 16-spp target, 24 spp at twice the step, paid 4 frames at the default step for images that
-/// chose the same step: 1.26-1.36x of the front on the CPU, 1.03-1.15x at 8.)
+/// chose the same step: docs/accuracy.md, "The mid target through the loose path".)
 const LOOSE: f64 = 8.0;
 /// The least rate of fall of the noise over a sequence's first mask cycle at which its
 /// renders stop only at whole cycles (independent samples fall at 0.5; the dam break's

@@ -9,7 +9,7 @@ use clap::Args;
 
 use super::{DataSection, FieldSection, MapSpec, RadiusSpec, RangeSpec, SceneFile};
 use crate::accel::ClusterSize;
-use crate::field::{Classification, FieldSettings};
+use crate::field::{Classification, FieldSettings, Kernel, PerParticle};
 use crate::io::{AttributeSelection, Format, ParticleType, ReadOptions};
 use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
 use crate::scene::{OpenOptions, TimeSeries};
@@ -153,6 +153,20 @@ pub struct FieldOptions {
     /// overlap (4 or more reach a particle centre on average), 4 where they barely do.
     #[arg(long)]
     pub cluster: Option<ClusterSize>,
+    /// The kernel: the paper's Gaussian RBF (unnormalised, the default), or an SPH kernel
+    /// normalised in 3D and weighted by each particle's volume m/rho, so the field is the SPH
+    /// interpolant sarracen and yt compute (support 2h; 3h for the quintic).
+    #[arg(long, value_enum)]
+    pub kernel: Option<Kernel>,
+    /// An SPH kernel's masses: an attribute, or one value for every particle. Default: the
+    /// data's Masses, mass or m.
+    #[arg(long, value_name = "ATTRIBUTE|VALUE")]
+    pub mass: Option<PerParticle>,
+    /// An SPH kernel's densities: an attribute, or one value for every particle (1 makes
+    /// Phi the SPH density estimate, the sum of m W). Default: the data's Densities, Density
+    /// or rho.
+    #[arg(long, value_name = "ATTRIBUTE|VALUE")]
+    pub density: Option<PerParticle>,
 }
 
 /// The default global radius over the particles' spacing: twice the median nearest-neighbour
@@ -182,8 +196,19 @@ pub fn default_radius(
     series: &TimeSeries,
     radius_attribute: Option<&str>,
     first_in_full: Option<&Step>,
+    kernel: Kernel,
 ) -> anyhow::Result<(f64, String)> {
     if let Some(h) = radius_attribute {
+        if kernel.is_sph() {
+            let s = kernel.support();
+            return Ok((
+                s,
+                format!(
+                    "{s} x '{h}' for each particle (the {kernel} kernel's support, {s}h; \
+                     --radius scales it, and h with it)"
+                ),
+            ));
+        }
         return Ok((
             RADIUS_PER_SMOOTHING_LENGTH,
             format!(
@@ -331,6 +356,10 @@ pub fn scene_sections(
             radius_attribute: f.radius_attribute.clone(),
             particle_type: (read.particle_type != ParticleType::GAS).then_some(read.particle_type),
             physical: read.physical.then_some(true),
+            smoothing: f
+                .radius_attribute
+                .as_deref()
+                .and_then(crate::scene::smoothing::Smoothing::of_attribute),
             periodic: Some(super::periodic::PeriodicSetting::of(periodic)),
         },
         FieldSection {
@@ -348,6 +377,9 @@ pub fn scene_sections(
             }),
             classification: Some(f.classification),
             cluster: Some(cluster),
+            kernel: f.kernel.is_sph().then_some(f.kernel),
+            mass: f.mass.clone(),
+            density: f.density.clone(),
         },
     )
 }
@@ -429,11 +461,46 @@ fn resolve_choosing(
             None => tracing::info!("colour: by density (the data has no attributes)"),
         }
     }
-    let mut radius_attribute = options
+    let smoothing = data.smoothing.or(scene.data.smoothing);
+    let radius_attribute = options
         .radius_attribute
         .clone()
         .or(scene.data.radius_attribute.clone())
-        .or(data.smoothing.map(|s| s.attribute()));
+        .or(smoothing.map(|s| s.attribute()));
+    let kernel = options.kernel.or(scene.field.kernel).unwrap_or_default();
+    let (mut radius_attribute, mass, density) = if kernel.is_sph() {
+        let mass = options.mass.clone().or(scene.field.mass.clone());
+        let density = options.density.clone().or(scene.field.density.clone());
+        if first_in_full.is_none()
+            && (radius_attribute.is_none() || mass.is_none() || density.is_none())
+        {
+            let refs =
+                crate::io::list_steps_reading(&path, data.format.or(scene.data.format), read)?;
+            if let Some(first) = refs.first() {
+                first_in_full = Some(Arc::new(crate::io::read_step(
+                    first,
+                    &AttributeSelection::All,
+                )?));
+            }
+        }
+        let sph = super::kernel::resolve(
+            kernel,
+            radius_attribute,
+            mass,
+            density,
+            &names_of(first_in_full.as_deref()),
+            &SMOOTHING_LENGTH_NAMES,
+            options.radius.or(scene.field.radius).is_some(),
+        )?;
+        (sph.radius_attribute, Some(sph.mass), Some(sph.density))
+    } else {
+        (radius_attribute, None, None)
+    };
+    let attribute_of = |q: &Option<PerParticle>| match q {
+        Some(PerParticle::Attribute(name)) => Some(name.clone()),
+        _ => None,
+    };
+    let (mass_attribute, density_attribute) = (attribute_of(&mass), attribute_of(&density));
     let opening = std::time::Instant::now();
     let mut asked_step = data.step.or(scene.data.step).unwrap_or(0);
     let open = |attribute: &Option<String>, radius_attribute: &Option<String>| {
@@ -442,11 +509,13 @@ fn resolve_choosing(
             &OpenOptions {
                 format: data.format.or(scene.data.format),
                 read,
-                smoothing: data.smoothing,
+                smoothing,
                 attributes: AttributeSelection::Only(
                     attribute
                         .iter()
                         .chain(radius_attribute.iter())
+                        .chain(mass_attribute.iter())
+                        .chain(density_attribute.iter())
                         .cloned()
                         .collect(),
                 ),
@@ -569,6 +638,7 @@ fn resolve_choosing(
                 &series,
                 radius_attribute.as_deref(),
                 first_in_full.as_deref(),
+                kernel,
             )?;
             tracing::info!("radius: {how}");
             radius
@@ -605,6 +675,9 @@ fn resolve_choosing(
             .classification
             .or(scene.field.classification)
             .unwrap_or_default(),
+        kernel,
+        mass,
+        density,
     };
     let cluster = match options.cluster.or(scene.field.cluster) {
         Some(k) => k,

@@ -1,4 +1,4 @@
-//! f32 against f64 at the extremes (issue 15): the field error of every backend's reduced
+//! f32 against f64 at the extremes: the field error of every backend's reduced
 //! precision (the CPU's f32 kernel and its automatic choice, the GPU backends' f32 and
 //! double-single positions) against the f64 reference, over radii from 1e-6 to 1e2 of the
 //! domain, coordinate offsets up to 1e6 and Phi down to f32's denormal range.
@@ -64,7 +64,7 @@ pub const DESCRIPTION: Description = Description {
     ],
 };
 
-/// The relative Phi error the issue asks of f32 arithmetic on f32-exact inputs.
+/// The relative Phi error f32 arithmetic is held to on f32-exact inputs.
 pub const GOAL: f64 = 1e-5;
 
 /// Particles of every case when `--count` is not given: a few thousand keeps a query at a

@@ -11,7 +11,7 @@
 //! - [`accuracy`]: every knob's time and error against a converged reference, the Pareto
 //!   front, the defaults and `--target-error` against it.
 //! - [`extremes`]: the f32 and double-single field error against the f64 reference at extreme
-//!   radii, offsets and densities (not the paper's; issue 15).
+//!   radii, offsets and densities (not the paper's).
 //!
 //! Every study drives backends through [`RenderSession`] as the CLI and viewer do, warms each
 //! configuration up with one untimed launch (lavapipe compiles a pipeline on first use), times

@@ -82,7 +82,7 @@ pub const HILBERT_STEP: [u8; 192] = [
 
 /// The specialisation constants (Vulkan constant ids; wgpu's pipeline-overridable constants
 /// "0", "1", ...), in id order: their names and what their values mean.
-pub const SPEC_CONSTANTS: [(&str, &str); 10] = [
+pub const SPEC_CONSTANTS: [(&str, &str); 11] = [
     ("INTEGRATOR", "0 EA, 1 delta, 2 marching, 3 SS reference"),
     ("COLOUR_MODE", "0 post, 1 pre, 2 density"),
     ("NOISE_KIND", "0 STBN, 1 white"),
@@ -108,6 +108,10 @@ pub const SPEC_CONSTANTS: [(&str, &str); 10] = [
         "COMPENSATED_SUM",
         "1: a point's clusters' sums added compensated (Kahan; backend::precision)",
     ),
+    (
+        "KERNEL",
+        "the kernel: 0 the paper's Gaussian RBF, 1.. the SPH kernels of KERNEL_SUPPORT",
+    ),
 ];
 /// Indices into [`SPEC_CONSTANTS`].
 pub mod spec {
@@ -121,7 +125,30 @@ pub mod spec {
     pub const POSITION_DS: usize = 7;
     pub const RT_HIT_PER_PARTICLE: usize = 8;
     pub const COMPENSATED_SUM: usize = 9;
+    pub const KERNEL: usize = 10;
 }
+
+/// Values of the `KERNEL` specialisation constant (`values::Kernel`, method.md §2 and
+/// docs/formats.md): the paper's Gaussian RBF, then the SPH kernels in the convention of
+/// Price (2012), Phantom and sarracen, where h is the smoothing length and the support is a
+/// multiple of it.
+pub const KERNEL_GAUSSIAN_RBF: u32 = 0;
+pub const KERNEL_SPH_CUBIC: u32 = 1;
+pub const KERNEL_SPH_QUINTIC: u32 = 2;
+pub const KERNEL_SPH_WENDLAND_C2: u32 = 3;
+pub const KERNEL_SPH_WENDLAND_C4: u32 = 4;
+/// Each kernel's support in units of h (indexed by `KERNEL`; the Gaussian's radius is its own
+/// unit).
+pub const KERNEL_SUPPORT: [f64; 5] = [1.0, 2.0, 3.0, 2.0, 2.0];
+/// Each SPH kernel's 3D normalisation σ: `W(d, h) = σ / h³ · f(d / h)` integrates to 1 with
+/// `f` as `values::kernel` writes it (the Gaussian RBF is not normalised: 1).
+pub const KERNEL_SIGMA: [f64; 5] = [
+    1.0,
+    1.0 / std::f64::consts::PI,
+    1.0 / (120.0 * std::f64::consts::PI),
+    21.0 / (16.0 * std::f64::consts::PI),
+    495.0 / (256.0 * std::f64::consts::PI),
+];
 
 /// Values of the `INTEGRATOR`, `COLOUR_MODE` and `NOISE_KIND` specialisation constants.
 pub const INTEGRATOR_EA: u32 = 0;
@@ -165,6 +192,11 @@ fn unsigned() -> Vec<(&'static str, u64)> {
         ("COLOUR_DENSITY", COLOUR_DENSITY.into()),
         ("NOISE_STBN", NOISE_STBN.into()),
         ("NOISE_WHITE", NOISE_WHITE.into()),
+        ("KERNEL_GAUSSIAN_RBF", KERNEL_GAUSSIAN_RBF.into()),
+        ("KERNEL_SPH_CUBIC", KERNEL_SPH_CUBIC.into()),
+        ("KERNEL_SPH_QUINTIC", KERNEL_SPH_QUINTIC.into()),
+        ("KERNEL_SPH_WENDLAND_C2", KERNEL_SPH_WENDLAND_C2.into()),
+        ("KERNEL_SPH_WENDLAND_C4", KERNEL_SPH_WENDLAND_C4.into()),
     ]
 }
 
@@ -194,6 +226,23 @@ pub fn glsl() -> String {
     }
     let [x, y] = NOISE_OFFSETS[0];
     out.push_str(&format!("    return uvec2({x}u, {y}u);\n}}\n"));
+    // The kernel's support in h and its σ · support³ (the normalisation over the radius,
+    // `rbf.glsl`'s particle_weight), for the KERNEL in use.
+    for (name, values) in [
+        ("kernel_support", KERNEL_SUPPORT),
+        (
+            "kernel_radius_norm",
+            std::array::from_fn(|k| KERNEL_SIGMA[k] * KERNEL_SUPPORT[k].powi(3)),
+        ),
+    ] {
+        out.push_str(&format!("float {name}() {{\n"));
+        for (k, v) in values.iter().enumerate().skip(1) {
+            out.push_str(&format!(
+                "    if (KERNEL == {k}u) {{\n        return {v:e};\n    }}\n"
+            ));
+        }
+        out.push_str(&format!("    return {:e};\n}}\n", values[0]));
+    }
     out
 }
 

@@ -33,6 +33,23 @@ pub(super) struct Buffers {
     pub(super) lbvh_boxes: Buffer,
 }
 
+impl Buffers {
+    /// Grows the radius-attribute buffer to `words` floats: the radius attribute and an SPH
+    /// kernel's volumes after it (`gpu_data::factor_layout`). The shaders reach it by address,
+    /// read at each launch, so no descriptor changes.
+    pub(super) fn ensure_factors(
+        &mut self,
+        ctx: &Arc<Context>,
+        words: usize,
+    ) -> Result<(), BackendError> {
+        let need = words as u64 * 4;
+        if self.radius.size < need {
+            self.radius = addressed(ctx, "radius attribute", need)?;
+        }
+        Ok(())
+    }
+}
+
 /// A buffer the shaders reach by device address (so its size is bound by the allocation
 /// limit, not by maxStorageBufferRange).
 pub(super) fn addressed(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer, BackendError> {

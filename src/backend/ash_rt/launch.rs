@@ -48,6 +48,7 @@ impl AshBackend {
             position_ds: u32::from(d.double_single()),
             rt_hit_per_particle: u32::from(self.hit_reports == HitReports::PerParticle),
             compensated_sum: u32::from(d.compensated()),
+            kernel: d.kernel.id(),
         })
     }
 

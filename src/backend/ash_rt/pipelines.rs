@@ -434,6 +434,7 @@ pub fn compute_pipeline(
             position_ds: 0,
             rt_hit_per_particle: 0,
             compensated_sum: 0,
+            kernel: 0,
             ..spec
         },
         ComputeKind::LbvhRender | ComputeKind::LbvhSplat => spec,
@@ -509,6 +510,7 @@ const UNSPECIALISED: SpecConstants = SpecConstants {
     position_ds: 0,
     rt_hit_per_particle: 0,
     compensated_sum: 0,
+    kernel: 0,
 };
 
 fn align_up(x: u64, a: u64) -> u64 {

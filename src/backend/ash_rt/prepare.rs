@@ -205,12 +205,20 @@ impl Prepare {
             .ok_or_else(|| device_error("staging a step", "no lo parts"))
     }
 
-    fn radius(&mut self) -> Result<&mut Raw, BackendError> {
-        if self.radius.is_none() {
+    /// The raw radius-attribute buffer (with an SPH kernel's volumes after it:
+    /// `gpu_data::factor_layout`), holding at least `words` floats (made again when a step
+    /// needs more).
+    fn radius(&mut self, words: usize) -> Result<&mut Raw, BackendError> {
+        if self
+            .radius
+            .as_ref()
+            .is_none_or(|r| r.on_device().size < words as u64 * 4)
+        {
+            self.radius = None;
             self.radius = Some(Raw::new(
                 &self.ctx,
                 "raw radius attribute",
-                self.capacity.max(1) as u64 * 4,
+                words.max(self.capacity).max(1) as u64 * 4,
                 self.staging,
             )?);
         }
@@ -233,13 +241,14 @@ impl Prepare {
                 format!("{n} particles exceed the {} staged", self.capacity),
             ));
         }
-        if staging.has_radius_attribute() {
-            self.radius()?;
+        let words = staging.factor_words();
+        if words > 0 {
+            self.radius(words)?;
         }
         let Prepare { points, radius, .. } = self;
         let points: Slots16<'_> = points.slots::<16>(n)?;
         let radius: Option<Slots4<'_>> = match radius {
-            Some(r) if staging.has_radius_attribute() => Some(r.slots::<4>(n)?),
+            Some(r) if words > 0 => Some(r.slots::<4>(words)?),
             _ => None,
         };
         let data = staging.write(vec![(0, points)], radius);
@@ -262,7 +271,8 @@ impl Prepare {
     ) -> Result<(), BackendError> {
         let n = data.count;
         if radius {
-            GpuStepData::write_radius_attribute(step, settings, self.radius()?.slots::<4>(n)?);
+            let words = data.factor_words();
+            data.write_factors(step, settings, self.radius(words)?.slots::<4>(words)?)?;
         }
         if lo {
             data.write_lo(step, vec![(0, self.lo()?.slots::<16>(n)?)]);
@@ -385,8 +395,8 @@ impl Prepare {
         if let Some(raw) = self.points_lo.as_ref().filter(|_| data.double_single) {
             copied |= raw.record_copy(ctx, cb, n * 16);
         }
-        if let Some(raw) = self.radius.as_ref().filter(|_| data.has_radius_attribute) {
-            copied |= raw.record_copy(ctx, cb, n * 4);
+        if let Some(raw) = self.radius.as_ref().filter(|_| data.has_factors()) {
+            copied |= raw.record_copy(ctx, cb, data.factor_words() as u64 * 4);
         }
         if copied {
             barrier(ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
@@ -411,7 +421,7 @@ impl Prepare {
         let radius = self
             .radius
             .as_ref()
-            .filter(|_| data.has_radius_attribute)
+            .filter(|_| data.has_factors())
             .zip(targets.radius);
         if n == 0 {
             return Ok(());
@@ -449,7 +459,41 @@ impl Prepare {
             self.gather(cb, ComputeKind::GatherVec4s, data, raw.on_device(), dst)?;
         }
         if let Some((raw, dst)) = radius {
-            self.gather(cb, ComputeKind::GatherWords, data, raw.on_device(), dst)?;
+            self.gather_factors(cb, data, raw.on_device(), dst)?;
+        }
+        Ok(())
+    }
+
+    /// Records the gathers of the radius attribute's and an SPH kernel's volumes' sections of
+    /// the radius-attribute buffer (`gpu_data::factor_layout`), each through the order.
+    fn gather_factors(
+        &self,
+        cb: vk::CommandBuffer,
+        data: &GpuStepData,
+        from: &Buffer,
+        to: &Buffer,
+    ) -> Result<(), BackendError> {
+        let mut sections = Vec::new();
+        if data.has_radius_attribute {
+            sections.push(0u64);
+        }
+        if data.kernel.is_sph() {
+            sections.push(data.volume_offset() as u64 * 4);
+        }
+        for offset in sections {
+            self.elements(
+                cb,
+                ComputeKind::GatherWords,
+                &data.quantizer,
+                data.count as u32,
+                [
+                    self.values.address,
+                    from.address + offset,
+                    to.address + offset,
+                    0,
+                    0,
+                ],
+            )?;
         }
         Ok(())
     }
@@ -486,7 +530,7 @@ impl Prepare {
         let lo = self.points_lo.as_ref().zip(lo);
         let mut copied = false;
         if let Some((raw, _)) = radius {
-            copied |= raw.record_copy(ctx, cb, n * 4);
+            copied |= raw.record_copy(ctx, cb, data.factor_words() as u64 * 4);
         }
         if let Some((raw, _)) = lo {
             copied |= raw.record_copy(ctx, cb, n * 16);
@@ -498,7 +542,7 @@ impl Prepare {
             return Ok(());
         }
         if let Some((raw, dst)) = radius {
-            self.gather(cb, ComputeKind::GatherWords, data, raw.on_device(), dst)?;
+            self.gather_factors(cb, data, raw.on_device(), dst)?;
         }
         if let Some((raw, dst)) = lo {
             self.gather(cb, ComputeKind::GatherVec4s, data, raw.on_device(), dst)?;

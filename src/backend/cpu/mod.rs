@@ -182,6 +182,7 @@ impl CpuBackend {
             radius_varies: false,
             density_slope: 0.0,
             radius_slope: 0.0,
+            kernel: particles.kernel,
         };
         let representation = choose_cpu(
             up.precision,

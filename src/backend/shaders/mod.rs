@@ -246,6 +246,9 @@ pub struct GpuField {
     /// Particles, clusters; the wgpu backend's part lengths (`shaders_glsl/wgpu/split.glsl`;
     /// it sets them when it writes the uniform, the Vulkan kernels ignore them).
     pub counts: [u32; 4],
+    /// Where an SPH kernel's volumes start in the radius-attribute buffer (floats), then
+    /// unused.
+    pub factors: [u32; 4],
 }
 
 /// The specialisation constants (`shader_constants::SPEC_CONSTANTS` names and numbers them).
@@ -261,6 +264,7 @@ pub struct SpecConstants {
     pub position_ds: u32,
     pub rt_hit_per_particle: u32,
     pub compensated_sum: u32,
+    pub kernel: u32,
 }
 
 impl SpecConstants {
@@ -278,6 +282,7 @@ impl SpecConstants {
         v[spec::POSITION_DS] = self.position_ds;
         v[spec::RT_HIT_PER_PARTICLE] = self.rt_hit_per_particle;
         v[spec::COMPENSATED_SUM] = self.compensated_sum;
+        v[spec::KERNEL] = self.kernel;
         v
     }
 

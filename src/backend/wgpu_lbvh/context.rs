@@ -1,5 +1,5 @@
 //! The wgpu device every wgpu backend in a process shares (pipelines are compiled once; on
-//! lavapipe each compilation is a JIT run of 0.5–10 s), its compiled kernels, and error capture:
+//! lavapipe each compilation is a slow JIT run), its compiled kernels, and error capture:
 //! every device operation runs inside error scopes, so a validation error, an out-of-memory
 //! or a lost device becomes a [`BackendError`], never a panic.
 

@@ -55,11 +55,11 @@ pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
-use crate::backend::shaders::GpuFrame;
 use crate::backend::shaders::cpu::{
     lbvh::{LBVH_STACK_SIZE, structure_bytes},
     lbvh_keys::KeyGrid,
 };
+use crate::backend::shaders::{GpuField, GpuFrame};
 use crate::field::FieldSettings;
 use crate::values::FrameParams;
 use crate::values::Image;
@@ -228,14 +228,13 @@ impl WgpuBackend {
                 .transpose()?,
             radius_attribute: targets
                 .radius_attribute
-                .map(|b| -> Result<Vec<f32>, BackendError> {
-                    Ok(bytemuck::pod_collect_to_vec(&util::read(
-                        &self.ctx,
-                        b,
-                        0,
-                        n as u64 * 4,
-                    )?))
-                })
+                .filter(|_| scene.data.has_radius_attribute)
+                .map(|b| util::read_f32s(&self.ctx, b, 0, n))
+                .transpose()?,
+            volume: targets
+                .radius_attribute
+                .filter(|_| scene.data.kernel.is_sph())
+                .map(|b| util::read_f32s(&self.ctx, b, scene.data.volume_offset(), n))
                 .transpose()?,
             order: prepare.order(&self.ctx, n)?,
         })
@@ -368,9 +367,7 @@ impl WgpuBackend {
         scene.ensure_radius_attribute(&self.ctx)?;
         scene.ensure_points_lo(&self.ctx, self.max_binding)?;
         let targets = scene.targets();
-        let radius = targets
-            .radius_attribute
-            .filter(|_| changed.radius_attribute);
+        let radius = targets.radius_attribute.filter(|_| changed.factors);
         let lo = targets.particles_lo.filter(|_| changed.positions_lo);
         if radius.is_some() || lo.is_some() {
             let prepare = self
@@ -409,8 +406,10 @@ impl Backend for WgpuBackend {
         let n = staging.len();
         let clusters = input.cluster.clusters_for(n);
         let has_radius = staging.has_radius_attribute();
+        let sph = input.field.kernel.is_sph();
+        let factor_words = |n| crate::backend::gpu_data::factor_layout(n, has_radius, sph).1;
         let max_binding = self.max_binding;
-        if let Err(what) = check_fits(n, clusters, has_radius, max_binding) {
+        if let Err(what) = check_fits(n, clusters, factor_words(n), max_binding) {
             return Err(device_error(format!(
                 "step '{}' ({n} particles in {clusters} clusters of {}): {what}; {} binds at \
                  most {max_binding} bytes per storage buffer, and this backend splits the \
@@ -426,7 +425,7 @@ impl Backend for WgpuBackend {
         let capacity = if check_fits(
             reserved,
             input.cluster.clusters_for(reserved),
-            has_radius,
+            factor_words(reserved),
             max_binding,
         )
         .is_ok()
@@ -469,7 +468,7 @@ impl Backend for WgpuBackend {
                             capacity,
                             (
                                 storage(&ctx, "map tables", TABLE_FLOATS as u64 * 4),
-                                uniform(&ctx, "field", 32),
+                                uniform(&ctx, "field", std::mem::size_of::<GpuField>() as u64),
                                 MapsWritten::default(),
                             ),
                             None,
@@ -498,7 +497,7 @@ impl Backend for WgpuBackend {
         let Some(prepare) = self.prepare.as_mut() else {
             return Err(BackendError::NothingUploaded("wgpu"));
         };
-        let views = prepare.map(&ctx, n, has_radius)?;
+        let views = prepare.map(&ctx, n, staging.factor_words())?;
         let allocated = started.elapsed();
         let data = prepare.stage(&ctx, staging, views, input.step)?;
         let staged = started.elapsed();

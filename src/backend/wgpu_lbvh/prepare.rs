@@ -216,9 +216,20 @@ impl Prepare {
             .ok_or_else(|| device_error("raw particle lo parts"))
     }
 
-    fn radius(&mut self, ctx: &GpuContext) -> Result<&mut Raw<wgpu::Buffer>, BackendError> {
-        if self.radius_attribute.is_none() {
-            let bytes = self.capacity.max(1) as u64 * WORD_BYTES;
+    /// The raw radius-attribute buffer (with an SPH kernel's volumes after it: see
+    /// `gpu_data::factor_layout`), holding at least `words` floats (made again when a step
+    /// needs more).
+    fn radius(
+        &mut self,
+        ctx: &GpuContext,
+        words: usize,
+    ) -> Result<&mut Raw<wgpu::Buffer>, BackendError> {
+        let bytes = words.max(self.capacity).max(1) as u64 * WORD_BYTES;
+        if self
+            .radius_attribute
+            .as_ref()
+            .is_none_or(|r| r.device.size() < words as u64 * WORD_BYTES)
+        {
             self.radius_attribute = Some(ctx.scoped("raw radius attribute", || {
                 let device = storage_with_usage(ctx, "raw radius attribute", bytes, raw_usage(ctx));
                 let staging = if ctx.unified_memory {
@@ -235,21 +246,22 @@ impl Prepare {
     }
 
     /// Maps the staging memory a step of `n` particles writes (after the device's last copy
-    /// from it, which is over by then): the points', and the radius attribute's when
-    /// `with_radius`. Not CPU work on the step: a wait for the device, kept out of the pass.
+    /// from it, which is over by then): the points', and the radius attribute's (with an SPH
+    /// kernel's volumes) when it has `factor_words` floats. Not CPU work on the step: a wait
+    /// for the device, kept out of the pass.
     pub(super) fn map(
         &mut self,
         ctx: &GpuContext,
         n: usize,
-        with_radius: bool,
+        factor_words: usize,
     ) -> Result<StagingViews, BackendError> {
         assert!(n <= self.capacity);
-        let radius = match with_radius {
-            true => self
-                .radius(ctx)?
+        let radius = match factor_words {
+            0 => Vec::new(),
+            words => self
+                .radius(ctx, words)?
                 .staging
-                .views(ctx, n as u64 * WORD_BYTES)?,
-            false => Vec::new(),
+                .views(ctx, words as u64 * WORD_BYTES)?,
         };
         Ok(StagingViews {
             points: self.points.staging.views(ctx, n as u64 * PARTICLE_BYTES)?,
@@ -298,10 +310,11 @@ impl Prepare {
     ) -> Result<(), BackendError> {
         let n = data.count as u64;
         let lo = self.points_lo.as_mut().filter(|_| data.double_single);
+        let factor_bytes = data.factor_words() as u64 * WORD_BYTES;
         let radius = self
             .radius_attribute
             .as_mut()
-            .filter(|_| data.has_radius_attribute);
+            .filter(|_| data.has_factors());
         let mut copies: Vec<(&mut Staging, &[wgpu::Buffer], u64)> = vec![(
             &mut self.points.staging,
             self.points.device.buffers(),
@@ -314,7 +327,7 @@ impl Prepare {
             copies.push((
                 &mut r.staging,
                 std::slice::from_ref(&r.device),
-                n * WORD_BYTES,
+                factor_bytes,
             ));
         }
         if copies.iter().all(|(staging, ..)| staging.aliases()) {
@@ -381,6 +394,50 @@ impl Prepare {
         dst: &wgpu::Buffer,
         n: usize,
     ) -> Result<(), BackendError> {
+        self.encode_gather_section(ctx, encoder, src, dst, 0, n)
+    }
+
+    /// The radius attribute and an SPH kernel's volumes into the sorted order: each section of
+    /// the radius-attribute buffer (`gpu_data::factor_layout`) gathered on its own.
+    fn encode_gather_factors(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        data: &GpuStepData,
+        src: &wgpu::Buffer,
+        dst: &wgpu::Buffer,
+    ) -> Result<(), BackendError> {
+        let n = data.count;
+        if data.has_radius_attribute {
+            self.encode_gather_section(ctx, encoder, src, dst, 0, n)?;
+        }
+        if data.kernel.is_sph() {
+            self.encode_gather_section(ctx, encoder, src, dst, data.volume_offset(), n)?;
+        }
+        Ok(())
+    }
+
+    /// Encodes `dst[first + k] = src[first + order[k]]` for `k < n` over 4-byte words (`first`
+    /// a multiple of 64: a binding's offset is a multiple of 256 bytes).
+    fn encode_gather_section(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        src: &wgpu::Buffer,
+        dst: &wgpu::Buffer,
+        first: usize,
+        n: usize,
+    ) -> Result<(), BackendError> {
+        if n == 0 {
+            return Ok(());
+        }
+        let section = |buffer| {
+            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer,
+                offset: first as u64 * WORD_BYTES,
+                size: wgpu::BufferSize::new(n as u64 * WORD_BYTES),
+            })
+        };
         encode_pass(
             ctx,
             encoder,
@@ -391,8 +448,8 @@ impl Prepare {
             &[
                 (0, self.params.as_entire_binding()),
                 (1, self.values.as_entire_binding()),
-                (2, src.as_entire_binding()),
-                (3, dst.as_entire_binding()),
+                (2, section(src)),
+                (3, section(dst)),
             ],
             grid(n as u64, 64),
         )
@@ -467,10 +524,10 @@ impl Prepare {
             {
                 self.encode_gather_vec4s(ctx, &mut encoder, &lo.device, dst, n)?;
             }
-            if data.has_radius_attribute
+            if data.has_factors()
                 && let (Some(r), Some(dst)) = (&self.radius_attribute, targets.radius_attribute)
             {
-                self.encode_gather_words(ctx, &mut encoder, &r.device, dst, n)?;
+                self.encode_gather_factors(ctx, &mut encoder, data, &r.device, dst)?;
             }
             Ok(())
         })??;
@@ -491,14 +548,11 @@ impl Prepare {
     ) -> Result<(), BackendError> {
         let n = data.count;
         if let Some(dst) = radius {
-            let raw = self.radius(ctx)?;
-            let mut views = raw.staging.views(ctx, n as u64 * WORD_BYTES)?;
+            let words = data.factor_words();
+            let raw = self.radius(ctx, words)?;
+            let mut views = raw.staging.views(ctx, words as u64 * WORD_BYTES)?;
             if let Some(v) = views.first_mut() {
-                GpuStepData::write_radius_attribute(
-                    step,
-                    settings,
-                    v.slice(..).into_chunks::<4>().0,
-                );
+                data.write_factors(step, settings, v.slice(..).into_chunks::<4>().0)?;
             }
             drop(views);
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -506,13 +560,13 @@ impl Prepare {
                 raw.staging.encode_copy(
                     &mut encoder,
                     std::slice::from_ref(&raw.device),
-                    n as u64 * WORD_BYTES,
+                    words as u64 * WORD_BYTES,
                 );
             })?;
             self.write_params(ctx, &data.quantizer, n);
             if let Some(raw) = &self.radius_attribute {
                 ctx.scoped("radius attribute gather", || {
-                    self.encode_gather_words(ctx, &mut encoder, &raw.device, dst, n)
+                    self.encode_gather_factors(ctx, &mut encoder, data, &raw.device, dst)
                 })??;
             }
             submit_and_wait(ctx, "radius attribute", encoder)?;

@@ -38,7 +38,7 @@ pub(super) struct Scene {
 
 /// The bytes last written to a scene's map tables and field constants: a frame or a step
 /// whose maps did not change writes nothing (a `write_buffer` is a staging allocation and a
-/// copy; a step change on lavapipe spent 0.2-0.5 ms on these two).
+/// copy, which a step change paid for both: docs/notes/2026-12-03-playback.md).
 #[derive(Default)]
 pub(super) struct MapsWritten(std::sync::Mutex<(Vec<f32>, Vec<u8>)>);
 
@@ -73,6 +73,7 @@ impl Scene {
             position_ds: u32::from(self.data.double_single()),
             rt_hit_per_particle: 0,
             compensated_sum: u32::from(self.data.compensated()),
+            kernel: self.data.kernel.id(),
         }
         .values()
     }
@@ -144,11 +145,18 @@ impl Scene {
     /// Makes the radius-attribute buffer when the scene has one and it is missing or small, and
     /// drops it when the scene has none.
     pub(super) fn ensure_radius_attribute(&mut self, ctx: &GpuContext) -> Result<(), BackendError> {
-        if !self.data.has_radius_attribute {
+        if !self.data.has_factors() {
             self.radius_attribute = None;
             return Ok(());
         }
-        let needed = (self.particle_capacity.max(self.data.count) * 4) as u64;
+        // Room for the radius attribute and an SPH kernel's volumes at the capacity.
+        let words = crate::backend::gpu_data::factor_layout(
+            self.particle_capacity.max(self.data.count),
+            self.data.has_radius_attribute,
+            self.data.kernel.is_sph(),
+        )
+        .1;
+        let needed = (words * 4) as u64;
         if self
             .radius_attribute
             .as_ref()
@@ -173,7 +181,7 @@ impl Scene {
             radius_attribute: self
                 .radius_attribute
                 .as_ref()
-                .filter(|_| self.data.has_radius_attribute),
+                .filter(|_| self.data.has_factors()),
         }
     }
 }
@@ -184,7 +192,7 @@ impl Scene {
 pub(super) fn check_fits(
     n: usize,
     clusters: usize,
-    has_radius_attribute: bool,
+    factor_words: usize,
     max_binding: u64,
 ) -> Result<(), String> {
     let (n, c) = (n as u64, clusters as u64);
@@ -206,8 +214,8 @@ pub(super) fn check_fits(
         ("the per-particle sort keys", n),
         ("the per-cluster sort keys", c),
     ];
-    if has_radius_attribute {
-        single.push(("the radius attribute", n));
+    if factor_words > 0 {
+        single.push(("the radius attribute and SPH volumes", factor_words as u64));
     }
     for (what, count) in single {
         if count * WORD_BYTES > max_binding {

@@ -1,0 +1,173 @@
+//! What an SPH kernel needs of the data, found as a user of SPH codes expects: the smoothing
+//! length, the masses and the densities under the names the codes write (SWIFT's
+//! `SmoothingLengths`, `Masses`, `Densities`; GADGET's `SmoothingLength`, `Density`; PySPH's
+//! `h`, `m`, `rho`), each said in the log with the flag that overrides it.
+
+use anyhow::bail;
+
+use crate::field::{Kernel, PerParticle};
+
+/// Names masses go by in SPH codes' output (compared ignoring case), in order of preference.
+const MASS_NAMES: [&str; 4] = ["masses", "mass", "m", "pmass"];
+/// Names densities go by.
+const DENSITY_NAMES: [&str; 5] = ["densities", "density", "rho", "rhos", "dens"];
+
+/// An SPH kernel's inputs after defaults.
+#[derive(Debug)]
+pub struct SphInputs {
+    pub radius_attribute: Option<String>,
+    pub mass: PerParticle,
+    pub density: PerParticle,
+}
+
+fn find(names: &[String], candidates: &[&str]) -> Option<String> {
+    candidates
+        .iter()
+        .find_map(|c| names.iter().find(|n| n.eq_ignore_ascii_case(c)).cloned())
+}
+
+/// The smoothing length, mass and density of an SPH kernel: those given, else the data's own
+/// (`names`: the attributes of the first step). `smoothing_names` are the names a smoothing
+/// length goes by; `radius_given` whether `--radius` was given (a kernel of one h for every
+/// particle needs no attribute, but then h must be said).
+pub fn resolve(
+    kernel: Kernel,
+    radius_attribute: Option<String>,
+    mass: Option<PerParticle>,
+    density: Option<PerParticle>,
+    names: &[String],
+    smoothing_names: &[&str],
+    radius_given: bool,
+) -> anyhow::Result<SphInputs> {
+    let listed = || {
+        if names.is_empty() {
+            "none".to_owned()
+        } else {
+            names.join(", ")
+        }
+    };
+    let radius_attribute = match radius_attribute {
+        Some(h) => Some(h),
+        None => match find(names, smoothing_names) {
+            Some(h) => {
+                tracing::info!(
+                    "{kernel}: smoothing length '{h}' (--radius-attribute sets another)"
+                );
+                Some(h)
+            }
+            None if radius_given => None,
+            None => bail!(
+                "the {kernel} kernel needs a smoothing length per particle, and the data has \
+                 none by a known name (its attributes: {}): pass --radius-attribute NAME, \
+                 --smoothing knn:32 to derive one from the 32 nearest neighbours, or --radius \
+                 for one support radius for all",
+                listed()
+            ),
+        },
+    };
+    let mass = match mass {
+        Some(m) => m,
+        None => match find(names, &MASS_NAMES) {
+            Some(m) => {
+                tracing::info!("{kernel}: masses '{m}' (--mass NAME or VALUE sets them)");
+                PerParticle::Attribute(m)
+            }
+            None => bail!(
+                "the {kernel} kernel weights each particle by its volume m/rho, and the data \
+                 has no masses by a known name (its attributes: {}): pass --mass NAME, or \
+                 --mass VALUE for equal masses",
+                listed()
+            ),
+        },
+    };
+    let density = match density {
+        Some(d) => d,
+        None => match find(names, &DENSITY_NAMES) {
+            Some(d) => {
+                tracing::info!("{kernel}: densities '{d}' (--density NAME or VALUE sets them)");
+                PerParticle::Attribute(d)
+            }
+            None => bail!(
+                "the {kernel} kernel weights each particle by its volume m/rho, and the data \
+                 has no densities by a known name (its attributes: {}): pass --density NAME, or \
+                 --density 1 for the SPH density estimate itself",
+                listed()
+            ),
+        },
+    };
+    Ok(SphInputs {
+        radius_attribute,
+        mass,
+        density,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn the_codes_names_are_found() {
+        let h = ["h", "smoothinglengths", "smoothinglength"];
+        let swift = names(&["Coordinates", "Densities", "Masses", "SmoothingLengths"]);
+        let s = resolve(Kernel::SphCubic, None, None, None, &swift, &h, false).unwrap();
+        assert_eq!(s.radius_attribute.as_deref(), Some("SmoothingLengths"));
+        assert_eq!(s.mass, PerParticle::Attribute("Masses".into()));
+        assert_eq!(s.density, PerParticle::Attribute("Densities".into()));
+        let pysph = names(&["x", "m", "rho", "h", "p"]);
+        let s = resolve(Kernel::SphQuintic, None, None, None, &pysph, &h, false).unwrap();
+        assert_eq!(
+            (s.radius_attribute.as_deref(), &s.density),
+            (Some("h"), &PerParticle::Attribute("rho".into()))
+        );
+        assert_eq!(s.mass, PerParticle::Attribute("m".into()));
+    }
+
+    #[test]
+    fn what_is_missing_is_named_with_the_flag_that_gives_it() {
+        let h = ["h"];
+        let e = resolve(
+            Kernel::SphCubic,
+            None,
+            None,
+            None,
+            &names(&["rho", "m"]),
+            &h,
+            false,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("--smoothing knn:32") && e.contains("rho, m"),
+            "{e}"
+        );
+        let e = resolve(
+            Kernel::SphCubic,
+            Some("h".into()),
+            None,
+            None,
+            &names(&["h"]),
+            &h,
+            false,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--mass"), "{e}");
+        let e = resolve(
+            Kernel::SphCubic,
+            Some("h".into()),
+            Some(PerParticle::Constant(1.0)),
+            None,
+            &names(&["h"]),
+            &h,
+            false,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--density"), "{e}");
+    }
+}
