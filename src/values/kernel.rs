@@ -108,39 +108,42 @@ impl Kernel {
     }
 
     /// An SPH kernel's unnormalised `f(q)`, `q = d / h` (0 beyond the support; the Gaussian's
-    /// is `exp(-4.5 (q)²)` in units of its radius).
+    /// is `exp(-4.5 q²)` in units of its radius), in f64 or, as the shaders compute it, in f32
+    /// (`backend::shaders::cpu::rbf::sph_profile`, the twin of `rbf.glsl`'s `rbf_profile`).
     #[inline(always)]
-    pub fn of_q(self, q: f64) -> f64 {
-        let plus = |x: f64| x.max(0.0);
+    pub fn of_q<F: num_traits::Float>(self, q: F) -> F {
+        let c = |v: f64| F::from(v).expect("a kernel constant");
+        let zero = F::zero();
+        let plus = |x: F| x.max(zero);
         match self {
             Kernel::GaussianRbf => {
-                if q <= 1.0 {
-                    (-4.5 * q * q).exp()
+                if q <= F::one() {
+                    (c(-4.5) * q * q).exp()
                 } else {
-                    0.0
+                    zero
                 }
             }
             Kernel::SphCubic => {
-                let (a, b) = (plus(2.0 - q), plus(1.0 - q));
-                0.25 * (a * a * a) - b * b * b
+                let (a, b) = (plus(c(2.0) - q), plus(F::one() - q));
+                c(0.25) * (a * a * a) - b * b * b
             }
             Kernel::SphQuintic => {
-                let fifth = |x: f64| {
+                let fifth = |x: F| {
                     let x = plus(x);
                     let x2 = x * x;
                     x2 * x2 * x
                 };
-                fifth(3.0 - q) - 6.0 * fifth(2.0 - q) + 15.0 * fifth(1.0 - q)
+                fifth(c(3.0) - q) - c(6.0) * fifth(c(2.0) - q) + c(15.0) * fifth(F::one() - q)
             }
             Kernel::SphWendlandC2 => {
-                let a = plus(1.0 - 0.5 * q);
+                let a = plus(F::one() - c(0.5) * q);
                 let a2 = a * a;
-                a2 * a2 * (1.0 + 2.0 * q)
+                a2 * a2 * (F::one() + c(2.0) * q)
             }
             Kernel::SphWendlandC4 => {
-                let a = plus(1.0 - 0.5 * q);
+                let a = plus(F::one() - c(0.5) * q);
                 let a2 = a * a;
-                a2 * a2 * a2 * (1.0 + 3.0 * q + (35.0 / 12.0) * q * q)
+                a2 * a2 * a2 * (F::one() + c(3.0) * q + c(35.0 / 12.0) * q * q)
             }
         }
     }
