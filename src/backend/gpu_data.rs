@@ -215,6 +215,11 @@ impl StepStaging<'_> {
         self.values.inputs.radius.is_some()
     }
 
+    /// Whether the step needs the radius-attribute buffer (as [`GpuStepData::has_factors`]).
+    pub fn has_factors(&self) -> bool {
+        self.has_radius_attribute() || self.input.field.kernel.is_sph()
+    }
+
     /// Floats of the radius-attribute buffer the pass writes: the radius attribute, then an
     /// SPH kernel's volumes ([`factor_layout`]); 0 when neither.
     pub fn factor_words(&self) -> usize {
@@ -316,8 +321,7 @@ impl GpuStepData {
         let n = staging.len();
         let mut points = vec![[0.0f32; 4]; n];
         let words = staging.factor_words();
-        let has_factors = staging.has_radius_attribute() || input.field.kernel.is_sph();
-        let mut factors = has_factors.then(|| vec![0.0f32; words]);
+        let mut factors = staging.has_factors().then(|| vec![0.0f32; words]);
         let data = staging.write(
             vec![(0, slots16(&mut points))],
             factors.as_deref_mut().map(slots4),
@@ -404,6 +408,19 @@ impl GpuStepData {
     /// kernel's volumes.
     pub fn has_factors(&self) -> bool {
         self.has_radius_attribute || self.kernel.is_sph()
+    }
+
+    /// Where each section of the radius-attribute buffer starts (floats), each `count` long:
+    /// what a backend gathers into the sorted order, one section at a time.
+    pub fn factor_sections(&self) -> Vec<usize> {
+        let mut sections = Vec::new();
+        if self.has_radius_attribute {
+            sections.push(0);
+        }
+        if self.kernel.is_sph() {
+            sections.push(self.volume_offset());
+        }
+        sections
     }
 
     /// Applies field settings that keep the particles (the same attribute and range): checks

@@ -436,15 +436,19 @@ fn resolve_choosing(
     let read = data.read_options(&scene.data);
     let mut attribute = options.attribute.clone().or(scene.data.attribute.clone());
     // The first step with every attribute it holds, read where a default needs it.
-    let mut first_in_full: Option<Arc<Step>> = None;
-    if attribute.is_none() && first_attribute_by_default {
+    let read_first_in_full = || -> anyhow::Result<Option<Arc<Step>>> {
         let refs = crate::io::list_steps_reading(&path, data.format.or(scene.data.format), read)?;
-        if let Some(first) = refs.first() {
-            first_in_full = Some(Arc::new(crate::io::read_step(
+        Ok(match refs.first() {
+            Some(first) => Some(Arc::new(crate::io::read_step(
                 first,
                 &AttributeSelection::All,
-            )?));
-        }
+            )?)),
+            None => None,
+        })
+    };
+    let mut first_in_full: Option<Arc<Step>> = None;
+    if attribute.is_none() && first_attribute_by_default {
+        first_in_full = read_first_in_full()?;
         let names = names_of(first_in_full.as_deref());
         attribute = names.first().cloned();
         match &attribute {
@@ -474,14 +478,7 @@ fn resolve_choosing(
         if first_in_full.is_none()
             && (radius_attribute.is_none() || mass.is_none() || density.is_none())
         {
-            let refs =
-                crate::io::list_steps_reading(&path, data.format.or(scene.data.format), read)?;
-            if let Some(first) = refs.first() {
-                first_in_full = Some(Arc::new(crate::io::read_step(
-                    first,
-                    &AttributeSelection::All,
-                )?));
-            }
+            first_in_full = read_first_in_full()?;
         }
         let sph = super::kernel::resolve(
             kernel,

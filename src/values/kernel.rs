@@ -22,25 +22,29 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::shader_constants::{KERNEL_SIGMA, KERNEL_SUPPORT};
+use super::shader_constants::{
+    KERNEL_GAUSSIAN_RBF, KERNEL_SIGMA, KERNEL_SPH_CUBIC, KERNEL_SPH_QUINTIC,
+    KERNEL_SPH_WENDLAND_C2, KERNEL_SPH_WENDLAND_C4, KERNEL_SUPPORT,
+};
 
 /// Which kernel the field is summed with.
 #[derive(
     Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
 )]
 #[serde(rename_all = "kebab-case")]
+#[repr(u32)]
 pub enum Kernel {
     /// The paper's Gaussian `w exp(-0.5 (3d/r)²)`, truncated at r, not normalised.
     #[default]
-    GaussianRbf,
+    GaussianRbf = KERNEL_GAUSSIAN_RBF,
     /// The M4 cubic spline, support 2h (Monaghan 1992; Phantom, sarracen).
-    SphCubic,
+    SphCubic = KERNEL_SPH_CUBIC,
     /// The M6 quintic spline, support 3h.
-    SphQuintic,
+    SphQuintic = KERNEL_SPH_QUINTIC,
     /// Wendland C2, support 2h (Dehnen & Aly 2012, with H = 2h).
-    SphWendlandC2,
+    SphWendlandC2 = KERNEL_SPH_WENDLAND_C2,
     /// Wendland C4, support 2h.
-    SphWendlandC4,
+    SphWendlandC4 = KERNEL_SPH_WENDLAND_C4,
 }
 
 impl Kernel {
@@ -52,7 +56,8 @@ impl Kernel {
         Kernel::SphWendlandC4,
     ];
 
-    /// The value of the `KERNEL` specialisation constant.
+    /// The value of the `KERNEL` specialisation constant (the shaders' `KERNEL_*`, which the
+    /// variants take as theirs), and the index of the kernel's support and σ.
     pub fn id(self) -> u32 {
         self as u32
     }
