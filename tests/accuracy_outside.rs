@@ -188,7 +188,7 @@ fn an_opaque_pysph_step_estimates_its_step_bias() {
     // their ratio by under 2% (in quadrature), at a ninth of a 1e-4 reference's samples.
     let truth = reference(&scene, &s, 4e-4);
     let mut session = session(&scene);
-    for e in [0.01, 0.005] {
+    for e in [0.01, 0.005, 0.0025] {
         let done = render_to_target(&mut session, &s, &target(e)).unwrap();
         let true_error = done.image.rmse(&truth);
         let ratio = done.estimate / true_error;
@@ -201,6 +201,10 @@ fn an_opaque_pysph_step_estimates_its_step_bias() {
             done.spp
         );
         assert!(done.met && true_error <= e, "E {e}: true {true_error:.3e}");
+        // At 0.0025 the full calibration chooses the default step, and its 2-frame images
+        // left the difference from twice the step (8.7e-4) within its noise (8.5e-4): taken
+        // at order 2, the estimate was 0.38 of the truth (1.47e-3). It grows them until the
+        // difference is resolved (docs/notes/2026-12-07-target-error.md).
         assert!(
             (0.7..=2.0).contains(&ratio),
             "E {e}: estimate {:.3e}, true {true_error:.3e}",
@@ -238,4 +242,39 @@ fn noise_held_by_a_few_pixels_is_measured_on_the_whole_image() {
         done.noise_rmse, done.step_size, done.spp
     );
     assert!((0.8..=1.25).contains(&ratio), "noise estimate x{ratio:.2}");
+}
+
+#[test]
+fn a_bias_hidden_in_a_coarse_steps_noise_is_measured() {
+    // The sharp scene at 20 times the default density, E = 0.005: four times the step is
+    // far too coarse for the sheet and the halo's sub-step particles (its noise 8.8 times
+    // twice the step's at as many frames), and the loose path took the difference between
+    // twice and four times the step, hidden in that noise, as no bias: the estimate was 0.53
+    // of the true error (3.1e-4 against 5.8e-4; the bias at twice the step is 5.3e-4).
+    let scene = sharp();
+    let s = opaque(&scene, 64, 20.0);
+    // 1e-4: under a third of the true error, 13 s here.
+    let truth = reference(&scene, &s, 1e-4);
+    let mut session = session(&scene);
+    let e = 0.005;
+    let done = render_to_target(&mut session, &s, &target(e)).unwrap();
+    let true_error = done.image.rmse(&truth);
+    let ratio = done.estimate / true_error;
+    println!(
+        "sharp x20, E {e}: estimate {:.3e} (noise {:.3e}, bias {:.3e}), true {true_error:.3e} (x{ratio:.2}), step {:.3e}, {} spp, work {:.1}",
+        done.estimate,
+        done.noise_rmse,
+        done.bias.at(done.step_size),
+        done.step_size,
+        done.spp,
+        done.work
+    );
+    assert!(done.met && true_error <= e, "true {true_error:.3e}");
+    // Within 2x is the promise; 0.7 as for the PySPH step, where the estimate now lies
+    // (0.53 before).
+    assert!(
+        (0.7..=2.0).contains(&ratio),
+        "estimate {:.3e}, true {true_error:.3e}",
+        done.estimate
+    );
 }

@@ -34,6 +34,8 @@ fn data_args(data: &Path, step: Option<usize>, time: Option<f64>) -> DataArgs {
         physical: false,
         smoothing: None,
         rescan: false,
+        periodic: None,
+        no_periodic: false,
     }
 }
 

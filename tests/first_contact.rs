@@ -78,6 +78,8 @@ fn data_args(folder: &Path, step: Option<usize>) -> DataArgs {
         physical: false,
         smoothing: None,
         rescan: false,
+        periodic: None,
+        no_periodic: false,
     }
 }
 

@@ -119,6 +119,10 @@ fn write_swift_with(path: &Path, n: usize, n_dm: usize, extra: impl FnOnce(&hdf5
     let units = f.create_group("Units").unwrap();
     attr(&units, "Unit length in cgs (U_L)", &[3.08567758e24f64]);
     attr(&units, "Unit mass in cgs (U_M)", &[1.98841e43f64]);
+    // SWIFT's used run-time parameters, as text. The fixture's smoothing lengths (up to 6)
+    // exceed half its box, which a periodic field refuses: the run is an open box.
+    let parameters = f.create_group("Parameters").unwrap();
+    string_attr(&parameters, "InitialConditions:periodic", "0");
     let cosmo = f.create_group("Cosmology").unwrap();
     attr(&cosmo, "Cosmological run", &[1i32]);
     attr(&cosmo, "Scale-factor", &[0.5f64]);
@@ -670,6 +674,9 @@ fn info_describes_and_render_draws_a_swift_and_a_multi_file_gadget_series() {
             "1",
             "--steps",
             "0..2",
+            // The GADGET fixture's smoothing lengths (up to 8) exceed half its box (10): a
+            // periodic field of it is refused. (SWIFT's says its run is not periodic.)
+            "--no-periodic",
             "--out",
             out.to_str().unwrap(),
         ]);
@@ -715,6 +722,63 @@ fn a_render_without_flags_says_which_particle_type_it_reads() {
         stderr.contains(
             "particles: gas (/PartType0); the snapshot holds 611 gas (type 0), 40 dm (type 1)"
         ),
+        "{stderr}"
+    );
+}
+
+/// The issue's own command asks a SWIFT run for `Temperature`, which SWIFT calls
+/// `Temperatures`: the other number of a name the data has is taken, and the log says so; a
+/// name with no such match is the error listing the data's names.
+#[test]
+fn an_attribute_named_in_the_other_number_is_the_datas() {
+    let dir = tempfile::tempdir().unwrap();
+    write_swift(&dir.path().join("snap_0000.hdf5"), 611, 40);
+    let slice = |attribute: &str, radius_attribute: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+            .args(["slice", "--data"])
+            .arg(dir.path())
+            .args([
+                "--attribute",
+                attribute,
+                "--radius-attribute",
+                radius_attribute,
+            ])
+            .args([
+                "--radius",
+                "0.1",
+                "--width",
+                "32",
+                "--no-periodic",
+                "--force",
+                "--out",
+            ])
+            .arg(dir.path().join(format!("{attribute}.png")))
+            .output()
+            .unwrap()
+    };
+    let out = slice("Temperature", "SmoothingLength");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    for said in [
+        "attribute 'Temperature': the data has no attribute of that name, but has 'Temperatures': using 'Temperatures'",
+        "attribute 'SmoothingLength': the data has no attribute of that name, but has 'SmoothingLengths'",
+        "colour: 'Temperatures' over [",
+    ] {
+        assert!(stderr.contains(said), "'{said}' not in:\n{stderr}");
+    }
+    // The same image as the data's own names give.
+    let own = slice("Temperatures", "SmoothingLengths");
+    assert!(own.status.success());
+    assert_eq!(
+        std::fs::read(dir.path().join("Temperature.png")).unwrap(),
+        std::fs::read(dir.path().join("Temperatures.png")).unwrap()
+    );
+    let out = slice("Pressure", "SmoothingLengths");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && stderr.contains("attribute 'Pressure' not found")
+            && stderr.contains("'Temperatures'"),
         "{stderr}"
     );
 }

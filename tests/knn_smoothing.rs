@@ -110,6 +110,8 @@ fn data_args(data: &Path, smoothing: Smoothing) -> DataArgs {
         physical: false,
         smoothing: Some(smoothing),
         rescan: false,
+        periodic: None,
+        no_periodic: false,
     }
 }
 
@@ -164,4 +166,26 @@ fn knn_lengths_are_the_series_radius_attribute_and_cached_beside_the_data() {
             .values,
         *h
     );
+
+    // A scene file written from it says how the lengths were made: opened with no flag but
+    // the scene, it has the same radius attribute with the same lengths.
+    let (data, field_section) = resolved.scene_sections();
+    assert_eq!(data.smoothing, Some(smoothing));
+    let scene = aarbf::scene_file::SceneFile {
+        data,
+        field: field_section,
+        ..Default::default()
+    };
+    let path = dir.path().join("knn.toml");
+    scene.save(&path, false).unwrap();
+    let from_scene = DataArgs {
+        scene: Some(path),
+        data: None,
+        smoothing: None,
+        ..data_args(&first, smoothing)
+    };
+    let reopened = resolve(&from_scene, &FieldOptions::default()).unwrap();
+    assert_eq!(reopened.field.radius_attribute.as_deref(), Some("h_knn12"));
+    let step = reopened.series.step(1).unwrap();
+    assert_eq!(step.attribute("h_knn12").unwrap().values, *h);
 }

@@ -69,6 +69,8 @@ fn open(dir: &Path, backend: BackendKind) -> ViewerApp {
         physical: false,
         smoothing: None,
         rescan: false,
+        periodic: None,
+        no_periodic: false,
     };
     let field = FieldOptions {
         attribute: Some("temperature".into()),

@@ -16,7 +16,7 @@ of any strides are read once into the double precision the library holds.
 from __future__ import annotations
 
 import os
-from typing import Any, Mapping, Optional, Sequence, Union
+from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -153,6 +153,9 @@ class Scene(_aarbf.Scene):
         "sph-wendland-c4".
     mass, density : an SPH kernel's masses and densities: an attribute's name or one value.
     cluster : particles per cluster box (1, 2, 4, 8, 16).
+    periodic : True (the box an HDF5 snapshot's header states), False (an open box), a box
+        length L or (LX, LY, LZ) (the box [0, L)); default: periodic where the snapshot's
+        header says so. Particles near one face are felt across it, so the field has no seam.
 
     Automatic values are resolved as ``aarbf render`` resolves them, and said through the
     ``logging`` logger "aarbf" at INFO.
@@ -177,6 +180,7 @@ class Scene(_aarbf.Scene):
         mass: Optional[Union[float, str]] = None,
         density: Optional[Union[float, str]] = None,
         cluster: Optional[int] = None,
+        periodic: Optional[Union[bool, float, Tuple[float, float, float]]] = None,
     ) -> "Scene":
         if isinstance(data, (str, os.PathLike)):
             data = open(data)
@@ -211,6 +215,7 @@ class Scene(_aarbf.Scene):
             mass=mass,
             density=density,
             cluster=cluster,
+            periodic=periodic,
         )
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:  # arguments taken by __new__

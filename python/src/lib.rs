@@ -25,6 +25,7 @@ use aarbf::scene::{OpenOptions, TimeSeries, UpAxis};
 use aarbf::scene_file::resolve::{
     DataArgs, FieldOptions, Resolved, resolve_in_memory, resolve_scene,
 };
+use aarbf::scene_file::periodic::PeriodicSetting;
 use aarbf::scene_file::{CameraSection, MapSpec, RadiusSpec, RangeSpec, SceneFile};
 use aarbf::values::{Attribute, Image, Integrator, Light, NoiseKind, Step};
 
@@ -371,6 +372,8 @@ impl DataSource {
             particle_type: Some(self.read.particle_type),
             physical: self.read.physical,
             smoothing: self.smoothing,
+            periodic: None,
+            no_periodic: false,
             cache_mib: self.cache_mib,
             rescan: false,
         }
@@ -680,7 +683,7 @@ fn per_particle(value: &Bound<'_, PyAny>, what: &str) -> PyResult<PerParticle> {
 impl Scene {
     /// See `aarbf.Scene` (python/aarbf/__init__.py) for the arguments.
     #[new]
-    #[pyo3(signature = (data, scene_file=None, step=None, time=None, attribute=None, attribute_range=None, radius=None, radius_attribute=None, radius_map=None, density_map=None, colormap=None, classification=None, kernel=None, mass=None, density=None, cluster=None))]
+    #[pyo3(signature = (data, scene_file=None, step=None, time=None, attribute=None, attribute_range=None, radius=None, radius_attribute=None, radius_map=None, density_map=None, colormap=None, classification=None, kernel=None, mass=None, density=None, cluster=None, periodic=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -700,6 +703,7 @@ impl Scene {
         mass: Option<&Bound<'_, PyAny>>,
         density: Option<&Bound<'_, PyAny>>,
         cluster: Option<usize>,
+        periodic: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Scene> {
         let mut scene = match &scene_file {
             Some(path) => SceneFile::load(path).map_err(|e| to_py(e.into()))?,
@@ -719,6 +723,19 @@ impl Scene {
         }
         if radius_attribute.is_some() {
             d.radius_attribute = radius_attribute;
+        }
+        if let Some(p) = periodic {
+            d.periodic = Some(if let Ok(on) = p.extract::<bool>() {
+                PeriodicSetting::Flag(on)
+            } else if let Ok(l) = p.extract::<f64>() {
+                PeriodicSetting::Box([l; 3])
+            } else if let Ok((x, y, z)) = p.extract::<(f64, f64, f64)>() {
+                PeriodicSetting::Box([x, y, z])
+            } else {
+                return Err(fail(
+                    "periodic must be True, False, a box length L or (LX, LY, LZ)",
+                ));
+            });
         }
         let f = &mut scene.field;
         if let Some(r) = radius {
@@ -787,7 +804,7 @@ impl Scene {
                         particle_type: scene.data.particle_type.unwrap_or_default(),
                         physical: scene.data.physical.unwrap_or(false),
                     },
-                    smoothing: None,
+                    smoothing: scene.data.smoothing,
                     cache_mib: 2048,
                 }),
                 None,
@@ -808,6 +825,8 @@ impl Scene {
                 particle_type: None,
                 physical: false,
                 smoothing: None,
+                periodic: None,
+                no_periodic: false,
                 cache_mib: 2048,
                 rescan: false,
             },

@@ -196,3 +196,36 @@ def test_a_long_render_releases_the_gil_and_stops_on_ctrl_c(scene):
     assert len([t for t in ticks if t > started + 0.2]) > 10
     # The scene renders again afterwards.
     assert scene.render(width=8, height=8, spp=1, backend="cpu", up="y").shape == (8, 8, 4)
+
+
+def test_a_periodic_box_gives_the_cli_field_and_no_seam(cli, tmp_path):
+    # 997 particles in the box [0, 2) x [0, 1) x [0, 1), written as NumPy writes them.
+    rng = np.random.default_rng(11)
+    box = np.array([2.0, 1.0, 1.0])
+    pos = rng.random((997, 3)) * box
+    temp = np.sin(3.0 * pos[:, 0]) + pos[:, 2]
+    np.save(tmp_path / "p.npy", np.column_stack([pos, temp]))
+    q = rng.random((500, 3)) * box
+    q[:100, 0] = 1e-9  # on the face x = 0 ...
+    q[100:200] = q[:100]
+    q[100:200, 0] = 2.0 - 1e-9  # ... and just inside the face x = 2: the same place
+    np.save(tmp_path / "q.npy", q)
+    cli("field", "--data", tmp_path / "p.npy", "--attribute", "col3", "--radius", 0.2,
+        "--periodic", "2,1,1", "--backend", "cpu",
+        "--queries", tmp_path / "q.npy", "--out", tmp_path / "f.npy")
+    scene = aarbf.Scene(
+        aarbf.Particles(pos, attributes={"col3": temp}),
+        attribute="col3", radius=0.2, periodic=(2.0, 1.0, 1.0),
+    )
+    got = scene.field(q)
+    assert np.array_equal(got, np.load(tmp_path / "f.npy"))
+    # The two sets lie 2e-9 apart: equal to the field's change over that distance.
+    assert np.allclose(got[:100], got[100:200], rtol=1e-5, atol=1e-6)
+    # Without the box the faces differ: the test above would see a seam.
+    open_box = aarbf.Scene(
+        aarbf.Particles(pos, attributes={"col3": temp}),
+        attribute="col3", radius=0.2, periodic=False,
+    ).field(q)
+    assert not np.allclose(open_box[:100, 0], open_box[100:200, 0], rtol=1e-3)
+    with pytest.raises(ValueError, match="periodic"):
+        aarbf.Scene(aarbf.Particles(pos), periodic="sideways")

@@ -32,7 +32,6 @@
 
 use glam::DVec3;
 use rayon::prelude::*;
-use wgpu::WriteOnly;
 
 use super::precision::{PositionKind, Representation, SceneNumbers, Summation, choose_gpu};
 use super::shaders::GpuField;
@@ -45,25 +44,10 @@ use crate::field::{
 use crate::values::tables::{lookup, steepest_relative_slope, value_extremes};
 use crate::values::{Kernel, Step};
 
-/// Write-only slots of an array of 16-byte elements (a particle's vec4) or 4-byte ones (its
-/// radius attribute): memory the device copies from (mapped staging buffers are write-only),
-/// or a host array.
-pub type Slots16<'a> = WriteOnly<'a, [[u8; 16]]>;
-pub type Slots4<'a> = WriteOnly<'a, [[u8; 4]]>;
+mod slots;
 
-/// Slots over a host array of vec4s.
-pub fn slots16(v: &mut [[f32; 4]]) -> Slots16<'_> {
-    WriteOnly::from_mut(bytemuck::cast_slice_mut(v))
-}
-
-/// Slots over a host array of f32s.
-pub fn slots4(v: &mut [f32]) -> Slots4<'_> {
-    WriteOnly::from_mut(bytemuck::cast_slice_mut(v))
-}
-
-/// Particles one task of a staging pass converts (large enough that rayon's overhead is
-/// nothing, small enough that two cores share the work evenly).
-const CHUNK: usize = 1 << 14;
+use slots::{CHUNK, for_each_particle};
+pub use slots::{Slots4, Slots16, slots4, slots16};
 
 /// One step, ready to upload: everything a backend needs beside the particle arrays, which
 /// live on the device.
@@ -209,138 +193,6 @@ impl ParticleValues<'_> {
     }
 }
 
-/// Writes `f(i, extremes)` for every particle `i` of `parts` (slots for particles `first ..`,
-/// the parts in order, covering a prefix of the step), its second value into the matching slot
-/// of a second array when one is given (covering the same particles from 0), in parallel over
-/// tasks of [`CHUNK`] particles; returns the extremes the calls gathered. (A mapped slice
-/// cannot move to another thread, a fixed-size array of slots can: the tasks are whole chunks,
-/// and the few particles past a part's last chunk run on the calling thread.)
-fn for_each_particle<'a, A, B, F>(
-    parts: Vec<(usize, WriteOnly<'a, [A]>)>,
-    mut second: Option<WriteOnly<'a, [B]>>,
-    f: F,
-) -> Extremes
-where
-    A: Copy + Default + Send,
-    B: Copy + Default + Send,
-    F: Fn(usize, &mut Extremes) -> (A, Option<B>) + Sync,
-{
-    type Chunk<'a, T> = WriteOnly<'a, [T; CHUNK]>;
-    let mut chunks: Vec<(usize, Chunk<'a, A>, Option<Chunk<'a, B>>)> = Vec::new();
-    let mut tails = Vec::new();
-    for (first, slots) in parts {
-        let len = slots.len();
-        let paired = match second.take() {
-            Some(s) => {
-                let available = s.len();
-                let (head, rest) = s.split_at(len.min(available));
-                second = Some(rest);
-                Some(head.into_chunks::<CHUNK>())
-            }
-            None => None,
-        };
-        let (full, tail) = slots.into_chunks::<CHUNK>();
-        let whole = full.len();
-        let (paired_full, paired_tail) = match paired {
-            Some((f, t)) => (Some(f.into_iter()), Some(t)),
-            None => (None, None),
-        };
-        let mut paired_full = paired_full;
-        for (j, chunk) in full.into_iter().enumerate() {
-            let b = paired_full.as_mut().and_then(Iterator::next);
-            chunks.push((first + j * CHUNK, chunk, b));
-        }
-        tails.push((first + whole * CHUNK, tail, paired_tail));
-    }
-    let chunked = chunks
-        .into_par_iter()
-        .map(|(first, a, b)| {
-            let mut e = Extremes::NONE;
-            fill(first, a.into(), b.map(Into::into), &f, &mut e);
-            e
-        })
-        .reduce(|| Extremes::NONE, Extremes::merge);
-    let mut e = Extremes::NONE;
-    for (first, a, b) in tails {
-        fill(first, a, b, &f, &mut e);
-    }
-    Extremes::merge(chunked, e)
-}
-
-/// Writes `f(i)` for particles `first ..` into `a` (and the second values into `b`), a batch
-/// at a time: the values are made in a small array and copied into the slots in one go, which
-/// costs less than a write through a slot per particle.
-fn fill<A, B, F>(
-    first: usize,
-    mut a: WriteOnly<'_, [A]>,
-    mut b: Option<WriteOnly<'_, [B]>>,
-    f: &F,
-    e: &mut Extremes,
-) where
-    A: Copy + Default,
-    B: Copy + Default,
-    F: Fn(usize, &mut Extremes) -> (A, Option<B>),
-{
-    const BATCH: usize = 256;
-    let mut values_a = [A::default(); BATCH];
-    let mut values_b = [B::default(); BATCH];
-    let mut at = first;
-    while !a.is_empty() {
-        let k = BATCH.min(a.len());
-        for j in 0..k {
-            let (x, y) = f(at + j, e);
-            values_a[j] = x;
-            if let Some(y) = y {
-                values_b[j] = y;
-            }
-        }
-        let (head, rest) = a.split_at(k);
-        stream_into(head, &values_a[..k]);
-        a = rest;
-        if let Some(slots) = b.take() {
-            let m = k.min(slots.len());
-            let (mut head, rest) = slots.split_at(m);
-            head.copy_from_slice(&values_b[..m]);
-            b = Some(rest);
-        }
-        at += k;
-    }
-}
-
-/// Copies `src` into `dst` (of equal length). Slots of 16 bytes at 16-byte addresses (the
-/// staging pass's particles) are written with non-temporal stores: the step goes to memory the
-/// device reads, not to the CPU's caches, and a plain store first reads each line it fills
-/// (16 MiB of writes per 1M particles cost 32 MiB of traffic), where an in-memory copy of the
-/// step (`memcpy`) uses the same stores (docs/notes/2026-12-03-playback.md, "Non-temporal
-/// stores in the staging pass").
-fn stream_into<A: Copy>(mut dst: WriteOnly<'_, [A]>, src: &[A]) {
-    assert_eq!(dst.len(), src.len(), "a slot per value");
-    #[cfg(target_arch = "x86_64")]
-    if size_of::<A>() == 16 {
-        let to = dst
-            .as_raw_element_ptr()
-            .as_ptr()
-            .cast::<core::arch::x86_64::__m128i>();
-        if to.is_aligned() {
-            for (i, v) in src.iter().enumerate() {
-                // SAFETY: `dst` holds `src.len()` writable 16-byte slots from `to`, which is
-                // 16-byte aligned (checked); SSE2 is part of x86-64. The value is read
-                // unaligned from `src`.
-                unsafe {
-                    let v = core::ptr::read_unaligned((v as *const A).cast());
-                    core::arch::x86_64::_mm_stream_si128(to.add(i), v);
-                }
-            }
-            // Non-temporal stores are weakly ordered: fence them before the slots are handed
-            // on (to another thread, or unmapped for the device).
-            // SAFETY: SSE2 is part of x86-64.
-            unsafe { core::arch::x86_64::_mm_sfence() };
-            return;
-        }
-    }
-    dst.copy_from_slice(src);
-}
-
 /// A step that passed the one check ([`FieldInputs::check`]), ready for the staging pass.
 pub struct StepStaging<'a> {
     input: &'a StepInput<'a>,
@@ -361,6 +213,11 @@ impl StepStaging<'_> {
     /// Whether the pass writes a radius attribute ([`Self::write`] needs its slots).
     pub fn has_radius_attribute(&self) -> bool {
         self.values.inputs.radius.is_some()
+    }
+
+    /// Whether the step needs the radius-attribute buffer (as [`GpuStepData::has_factors`]).
+    pub fn has_factors(&self) -> bool {
+        self.has_radius_attribute() || self.input.field.kernel.is_sph()
     }
 
     /// Floats of the radius-attribute buffer the pass writes: the radius attribute, then an
@@ -464,7 +321,7 @@ impl GpuStepData {
         let n = staging.len();
         let mut points = vec![[0.0f32; 4]; n];
         let words = staging.factor_words();
-        let mut factors = (words > 0).then(|| vec![0.0f32; words]);
+        let mut factors = staging.has_factors().then(|| vec![0.0f32; words]);
         let data = staging.write(
             vec![(0, slots16(&mut points))],
             factors.as_deref_mut().map(slots4),
@@ -550,7 +407,20 @@ impl GpuStepData {
     /// Whether the step needs the radius-attribute buffer: a radius attribute, or an SPH
     /// kernel's volumes.
     pub fn has_factors(&self) -> bool {
-        self.factor_words() > 0
+        self.has_radius_attribute || self.kernel.is_sph()
+    }
+
+    /// Where each section of the radius-attribute buffer starts (floats), each `count` long:
+    /// what a backend gathers into the sorted order, one section at a time.
+    pub fn factor_sections(&self) -> Vec<usize> {
+        let mut sections = Vec::new();
+        if self.has_radius_attribute {
+            sections.push(0);
+        }
+        if self.kernel.is_sph() {
+            sections.push(self.volume_offset());
+        }
+        sections
     }
 
     /// Applies field settings that keep the particles (the same attribute and range): checks
@@ -781,197 +651,4 @@ pub struct Changed {
 }
 
 #[cfg(test)]
-mod tests {
-    use std::sync::Arc;
-
-    use glam::DVec3;
-    use rand::{Rng, SeedableRng};
-
-    use super::*;
-    use crate::values::{Attribute, Bounds};
-
-    /// `n` particles uniform in a cube of side `side` centred at `offset`, written as f64 the
-    /// way a simulation would (no f32-exact coordinates).
-    fn cube(n: usize, side: f64, offset: f64) -> Arc<Step> {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
-        let positions: Vec<DVec3> = (0..n)
-            .map(|_| {
-                DVec3::new(rng.random(), rng.random(), rng.random()) * side + DVec3::splat(offset)
-            })
-            .collect();
-        let values = (0..n).map(|_| rng.random::<f64>()).collect();
-        Arc::new(Step {
-            name: "cube".into(),
-            positions,
-            attributes: vec![Attribute {
-                name: "s".into(),
-                values,
-            }],
-        })
-    }
-
-    fn prepared(
-        step: &Arc<Step>,
-        radius: f64,
-        precision: Precision,
-    ) -> (GpuStepData, SortedParticles) {
-        let field = FieldSettings::new(Some("s"), radius);
-        GpuStepData::prepare(&StepInput {
-            step,
-            field: &field,
-            cluster: ClusterSize::new(1).unwrap(),
-            series_bounds: Bounds::of_points(&step.positions),
-            series_range: Some((0.0, 1.0)),
-            precision,
-        })
-        .unwrap()
-    }
-
-    /// Slots over `v` cut at the particle indices `cuts` (ascending), each part with its first
-    /// particle.
-    fn split<'a>(v: &'a mut [[f32; 4]], cuts: &[usize]) -> Vec<(usize, Slots16<'a>)> {
-        let mut out = Vec::new();
-        let mut rest = v;
-        let mut first = 0;
-        for &cut in cuts {
-            let (head, tail) = rest.split_at_mut(cut - first);
-            out.push((first, slots16(head)));
-            rest = tail;
-            first = cut;
-        }
-        out.push((first, slots16(rest)));
-        out
-    }
-
-    /// Streaming stores write exactly the values, at a 16-byte aligned destination (the
-    /// non-temporal path) and at a misaligned one (the plain copy), over poisoned slots, and
-    /// leave the slots beyond untouched.
-    #[test]
-    fn streamed_slots_hold_the_values_aligned_or_not() {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
-        let n = 77;
-        let values: Vec<[u8; 16]> = (0..n).map(|_| rng.random()).collect();
-        // 16-byte aligned storage, written from slot 0 (aligned) and from byte 4 (misaligned).
-        for offset in [0usize, 4] {
-            let mut storage = vec![0u128; n + 2];
-            let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut storage);
-            bytes.fill(0xA5);
-            let slots: &mut [[u8; 16]] = bytemuck::cast_slice_mut(&mut bytes[offset..][..16 * n]);
-            stream_into(WriteOnly::from_mut(slots), &values);
-            let bytes: &[u8] = bytemuck::cast_slice(&storage);
-            assert_eq!(
-                &bytes[offset..][..16 * n],
-                values.concat().as_slice(),
-                "offset {offset}"
-            );
-            assert!(bytes[..offset].iter().all(|&b| b == 0xA5));
-            assert!(bytes[offset + 16 * n..].iter().all(|&b| b == 0xA5));
-        }
-    }
-
-    /// The staging pass writes the same bytes however its output is cut into parts (a split
-    /// buffer's parts are not multiples of the pass's chunks), with the radius attribute and
-    /// the lo parts beside them, and sees the same extremes.
-    #[test]
-    fn staging_in_parts_equals_staging_in_one() {
-        let n = 3 * CHUNK + 1234;
-        let mut step = (*cube(n, 2.5, 1e5)).clone();
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-        step.attributes.push(Attribute {
-            name: "h".into(),
-            values: (0..n).map(|_| rng.random_range(0.5..1.5)).collect(),
-        });
-        let step = Arc::new(step);
-        let mut field = FieldSettings::new(Some("s"), 0.01);
-        field.radius_attribute = Some("h".into());
-        let input = StepInput {
-            step: &step,
-            field: &field,
-            cluster: ClusterSize::new(2).unwrap(),
-            series_bounds: Bounds::of_points(&step.positions),
-            series_range: Some((0.0, 1.0)),
-            precision: Precision::DoubleSingle,
-        };
-        let stage = |cuts: &[usize]| {
-            let mut points = vec![[f32::NAN; 4]; n];
-            let mut lo = vec![[f32::NAN; 4]; n];
-            let mut radius = vec![f32::NAN; n];
-            let data = GpuStepData::check(&input)
-                .unwrap()
-                .write(split(&mut points, cuts), Some(slots4(&mut radius)));
-            assert!(data.double_single);
-            data.write_lo(&step, split(&mut lo, cuts));
-            (data, points, lo, radius)
-        };
-        let bits =
-            |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
-        let (one, points, lo, radius) = stage(&[]);
-        assert!(
-            points
-                .iter()
-                .chain(&lo)
-                .all(|p| p.iter().all(|c| c.is_finite()))
-        );
-        assert!(radius.iter().all(|h| h.is_finite()));
-        let (parts, p2, lo2, radius2) = stage(&[CHUNK + 5, 3 * CHUNK - 1, 3 * CHUNK + 1000]);
-        assert_eq!(one, parts);
-        assert_eq!(bits(&points), bits(&p2));
-        assert_eq!(bits(&lo), bits(&lo2));
-        assert_eq!(radius, radius2);
-    }
-
-    /// A scene pays for double-single positions only when its radii and extent need them: an
-    /// image of a unit-cube scene at a radius of 2% of the domain stays in f32 (16 B a
-    /// particle), the same scene asked for field values at 1e-5 needs the pairs, and so does
-    /// an image whose radii are 1e-6 of the domain, or whose domain lies at 1e6 with radii
-    /// of 1e-4 (offsets alone cost nothing: local coordinates remove them).
-    #[test]
-    fn auto_precision_pays_for_pairs_only_where_the_scene_needs_them() {
-        let unit = cube(2000, 1.0, 0.0);
-        let (image, _) = prepared(&unit, 0.02, Precision::RENDER);
-        assert!(
-            !image.double_single(),
-            "bound {}",
-            image.representation.bound.positions
-        );
-        assert_eq!(image.particle_bytes(), 2000 * 16);
-        let (field, _) = prepared(&unit, 0.02, Precision::FIELD);
-        assert!(
-            field.double_single(),
-            "bound {}",
-            field.representation.bound.positions
-        );
-        assert_eq!(field.particle_bytes(), 2000 * 32);
-        assert!(prepared(&unit, 1e-6, Precision::RENDER).0.double_single());
-
-        let far = cube(2000, 1.0, 1e6);
-        let (far_image, _) = prepared(&far, 0.02, Precision::RENDER);
-        assert!(!far_image.double_single(), "an offset alone needs no pairs");
-        assert!(
-            (far_image.representation.bound.positions - image.representation.bound.positions).abs()
-                < 1e-3 * image.representation.bound.positions,
-            "the bound depends on the local extent, not the offset: {} vs {}",
-            far_image.representation.bound.positions,
-            image.representation.bound.positions
-        );
-        assert!(prepared(&far, 1e-4, Precision::RENDER).0.double_single());
-
-        // The pairs hold what f32 loses: hi + lo equals the f64 local position to ~48 bits.
-        let (pairs, sorted) = prepared(&far, 1e-4, Precision::RENDER);
-        let lo = sorted.points_lo.as_ref().unwrap();
-        for (k, &i) in sorted.order.iter().enumerate().step_by(97) {
-            let local = far.positions[i as usize] - pairs.origin;
-            for a in 0..3 {
-                let sum = f64::from(sorted.points[k][a]) + f64::from(lo[k][a]);
-                assert!((sum - local[a]).abs() <= 1e-13, "{sum} vs {}", local[a]);
-            }
-        }
-        // Forced precisions are obeyed either way.
-        assert!(!prepared(&unit, 1e-6, Precision::F32).0.double_single());
-        assert!(
-            prepared(&unit, 0.5, Precision::DoubleSingle)
-                .0
-                .double_single()
-        );
-    }
-}
+mod tests;

@@ -351,8 +351,14 @@ pub fn sph_kernel_error(kernel: Kernel, argument: f64, glsl: bool) -> f64 {
 
 /// The largest condition number `|q f'(q) / f(q)|` of an SPH kernel over the q where
 /// `f(q) >= SPH_TERM_FLOOR f(0)` (by a fine scan: f is smooth and the number grows towards the
-/// edge, so the scan's last point above the floor is its largest).
+/// edge, so the scan's last point above the floor is its largest). Scanned once per kernel:
+/// every upload's bound asks for it.
 pub fn sph_condition(kernel: Kernel) -> f64 {
+    static SCANNED: std::sync::OnceLock<[f64; Kernel::ALL.len()]> = std::sync::OnceLock::new();
+    SCANNED.get_or_init(|| Kernel::ALL.map(scan_condition))[kernel as usize]
+}
+
+fn scan_condition(kernel: Kernel) -> f64 {
     let floor = SPH_TERM_FLOOR * kernel.of_q(0.0);
     let s = kernel.support();
     let n = 100_000;

@@ -58,9 +58,13 @@ pub fn run(args: FieldArgs) -> anyhow::Result<()> {
         );
     }
     let queries = match (&args.queries, args.grid) {
-        (Some(path), _) => Queries::Points(read_queries(path)?),
+        // The periodic field at a point outside the box is the field at its wrapped point.
+        (Some(path), _) => Queries::Points(match resolved.periodic {
+            Some(b) => read_queries(path)?.into_iter().map(|q| b.wrap(q)).collect(),
+            None => read_queries(path)?,
+        }),
         (None, Some(dims)) => {
-            let b = resolved.series.bounds();
+            let b = resolved.domain();
             tracing::info!(
                 "grid of {}x{}x{} cell-centred points over {:?}..{:?}",
                 dims[0],
@@ -133,13 +137,36 @@ pub fn evaluate(
     progress: impl Fn(usize),
 ) -> anyhow::Result<Evaluated> {
     let step = resolved.series.step(resolved.step)?;
+    // In a periodic box the step goes to the backend with its images near the faces.
+    let images = match resolved.periodic {
+        Some(b) => Some(b.images(&step, &resolved.field, resolved.series_range())?),
+        None => None,
+    };
+    let (step_data, step_bounds) = match (&images, resolved.periodic) {
+        (Some(images), Some(b)) => (&images.step, b.bounds().grown(images.largest_reach)),
+        _ => (&step, resolved.series.bounds()),
+    };
+    if let Some(images) = &images {
+        tracing::info!(
+            "periodic: {} images of particles near the box's faces{}",
+            images.step.len() - images.originals,
+            if images.wrapped > 0 {
+                format!(
+                    ", {} particles outside the box wrapped into it",
+                    images.wrapped
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
     let mut backend = backend::create(kind)?;
     let built = Instant::now();
     backend.upload(&StepInput {
-        step: &step,
+        step: step_data,
         field: &resolved.field,
         cluster: resolved.cluster,
-        series_bounds: resolved.series.bounds(),
+        series_bounds: step_bounds,
         series_range: resolved.series_range(),
         precision: parse_precision(precision, Precision::FIELD).map_err(anyhow::Error::msg)?,
     })?;

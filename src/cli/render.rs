@@ -453,7 +453,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         }
         Method::Rbf => {}
     }
-    let bounds = resolved.series.bounds();
+    let bounds = resolved.domain();
     let mut settings = resolved
         .scene
         .render_settings(bounds)
@@ -535,6 +535,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     );
     let on_cpu = backend.capabilities().name == "cpu";
     let mut session = RenderSession::new(backend, &resolved.series);
+    session.set_periodic(resolved.periodic);
     // The CPU splatter collects hits through the f64 BVH (the cpu backend's only tree); asking
     // for it up front spares building the f32 cells first.
     session.set_precision(if method == Method::Splat && on_cpu {

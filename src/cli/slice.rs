@@ -83,14 +83,22 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
     crate::io::output::check_writable(&args.out, args.force)?;
     let resolved = resolve_for_images(&args.data, &args.field)?;
     let step = resolved.series.step(resolved.step)?;
+    // In a periodic box the particles near a face are felt across it, through their images,
+    // and the slice spans the box.
+    let images = match resolved.periodic {
+        Some(b) => Some(b.images(&step, &resolved.field, resolved.series_range())?),
+        None => None,
+    };
+    let bounds = resolved.domain();
     // The particles alone: scattering them onto the pixels needs no tree.
     let particles = Particles::prepare(
-        &step,
+        images.as_ref().map_or(&*step, |i| &*i.step),
         &resolved.field,
-        resolved.series.bounds(),
+        images
+            .as_ref()
+            .map_or(bounds, |i| bounds.grown(i.largest_reach)),
         resolved.series_range(),
     )?;
-    let bounds = resolved.series.bounds();
     let (lo, hi) = (bounds.min, bounds.max);
     let (normal, u, v) = match args.axis {
         Axis::X => (0, 2, 1),

@@ -19,6 +19,8 @@ mod f64_kernel;
 mod grid;
 mod inputs;
 mod particles;
+pub mod periodic;
+mod reach;
 mod reference;
 pub mod splat;
 
@@ -28,6 +30,8 @@ pub use f32_field::{F32Batch, F32Field, F32Packet, F32Ray};
 pub use grid::RegularGrid;
 pub use inputs::{FieldInputs, normalise};
 pub use particles::{FieldTables, Particles, Theta, particle_radius};
+pub use periodic::PeriodicBox;
+pub use reach::particle_reaches;
 pub use reference::{ReferenceField, Sample, finish_sums};
 
 use crate::scene::maps::{ColorMap, DensityMap, RadiusMap};
@@ -158,4 +162,6 @@ pub enum FieldError {
         index: usize,
         need: &'static str,
     },
+    #[error(transparent)]
+    Periodic(#[from] periodic::PeriodicError),
 }

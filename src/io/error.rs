@@ -42,7 +42,12 @@ pub enum Problem {
         size: u64,
     },
     #[error("attribute '{name}' not found; the data has: {available}")]
-    MissingAttribute { name: String, available: String },
+    MissingAttribute {
+        name: String,
+        available: String,
+        /// The names the data has, for finding the one meant.
+        names: Vec<String>,
+    },
     #[error("step holds no particles{0}")]
     EmptyStep(String),
     #[error("wrong dimensionality: {0}")]

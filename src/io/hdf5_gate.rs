@@ -39,3 +39,19 @@ pub fn time(path: &Path) -> Option<f64> {
 pub fn time(_path: &Path) -> Option<f64> {
     None
 }
+
+#[cfg(feature = "hdf5")]
+pub fn simulation_box(
+    path: &Path,
+    read: &ReadOptions,
+) -> Result<Option<super::SimulationBox>, DataError> {
+    super::hdf5_snapshot::simulation_box(path, read)
+}
+
+#[cfg(not(feature = "hdf5"))]
+pub fn simulation_box(
+    _path: &Path,
+    _read: &ReadOptions,
+) -> Result<Option<super::SimulationBox>, DataError> {
+    Ok(None)
+}

@@ -195,6 +195,10 @@ const STRATIFIED_RATE: f64 = 0.75;
 /// step, 120-128, 0.96-0.98. (At 48 the dam break's 32x32 targets in `tests/accuracy.rs`,
 /// whose lattice estimate was 0.84-1.09 of the truth, moved to a pair too.)
 const MIN_LATTICE_PIXELS: f64 = 16.0;
+/// The most the noise at four times the step may be, in times that at twice the step at as
+/// many frames, for their difference to decide a loose target alone (the jittered march's
+/// noise grows about linearly with the step while the step resolves the kernels).
+const COARSE_NOISE: f64 = 4.0;
 /// The share of the squared target error the bias may take (the rest is left to the noise).
 const BIAS_SHARE: f64 = 0.75;
 /// The second sequence's seed is the first's with these bits flipped.
@@ -717,18 +721,34 @@ pub fn render_to_target(
             [middle.noise(), coarse.noise()],
         );
         let b = bias.at(2.0 * dt0);
-        if b * b <= BIAS_SHARE * e * e {
+        // The difference tells the bias at twice the step only where four times the step
+        // still resolves what twice the step does: its noise (the march's jitter over the
+        // features) at most `COARSE_NOISE` times twice the step's at as many frames. On the
+        // sharp-gradient scene it was 8.8 times (the sheet and the halo's particles thinner
+        // than the step), and the bias at twice the step (5.3e-4) hid in it; 1.0-2.1 on the
+        // dam break and the PySPH step.
+        let coarse_noise = coarse.noise()
+            / middle
+                .convergence()
+                .noise_at(f64::from(coarse.spp()))
+                .max(1e-300);
+        // (Unless the bias at its most is negligible beside the target anyway: the dam
+        // break demo's first step, 1000 times under it, paid 2.4x for the full calibration.)
+        let negligible = bias.slow_bound[1].hypot(middle.noise()) <= StepBias::NEGLIGIBLE * e;
+        if b * b <= BIAS_SHARE * e * e && (coarse_noise <= COARSE_NOISE || negligible) {
             let needed = middle.convergence().frames_for((e * e - b * b).sqrt());
             if needed <= LOOSE * f64::from(middle.spp()) {
                 tracing::debug!(
                     "targeted: loose: twice the step, bias {b:.3e}, {needed:.1} spp predicted"
                 );
                 let calibration = run.started.elapsed();
-                let [_, middle, coarse] = levels;
-                let bias_images = (coarse.image(&run.settings), middle.image(&run.settings));
-                return finish(
+                let bias_images = (
+                    levels[2].image(&run.settings),
+                    levels[1].image(&run.settings),
+                );
+                let done = finish(
                     &mut run,
-                    middle,
+                    &mut levels[1],
                     needed,
                     Chosen {
                         bias,
@@ -736,6 +756,17 @@ pub fn render_to_target(
                         bias_images,
                         calibration,
                     },
+                )?;
+                // Four times the step can be too coarse for its image to tell anything (on
+                // the sharp-gradient scene its noise was 36 times twice the step's): where
+                // the difference leaves the bias unsettled beside the image's noise, the
+                // full calibration goes on from these images.
+                if !done.met || bias.settled(2.0 * dt0, done.noise_rmse, e) {
+                    return Ok(done);
+                }
+                tracing::debug!(
+                    "targeted: loose: the bias at twice the step is not settled beside the noise {:.3e} ({bias:?}): the full calibration",
+                    done.noise_rmse
                 );
             }
         }
@@ -785,9 +816,130 @@ pub fn render_to_target(
         frames = (frames * 4).min(MAX_CALIBRATION_FRAMES);
     };
     let calibration = run.started.elapsed();
+    let mut bias = bias;
+    // The level at a step finer than dt0, where one was chosen: (j, level).
+    let mut finer: Option<(i32, Level)> = None;
+    loop {
+        let (j, spp) = choose_step(&run, &levels, &bias, e_rmse, step_fixed, &finer);
+        let dt = dt0 * 2f64.powi(j);
+        let b = bias.at(dt);
+        let bias_images = (
+            levels[1].image(&run.settings),
+            levels[0].image(&run.settings),
+        );
+        let level = match usize::try_from(j) {
+            Ok(i) => &mut levels[i],
+            Err(_) => {
+                if finer.as_ref().is_none_or(|(k, _)| *k != j) {
+                    finer = Some((j, Level::new(dt, seed, lattice)));
+                }
+                &mut finer.as_mut().expect("just set").1
+            }
+        };
+        // Past its first mask cycle one sequence of whole cycles is no less noisy than two
+        // of half as many, so a sequence predicted to need more than one cycle gains nothing
+        // from the lattice and would pay it for its first cycle: a pair measures its noise
+        // instead.
+        if let Some(d) = lattice
+            && level.frames_for(spp) > d
+        {
+            level.measure_by_pair();
+        }
+        let done = finish(
+            &mut run,
+            level,
+            spp,
+            Chosen {
+                bias,
+                b,
+                bias_images,
+                calibration,
+            },
+        )?;
+        // The estimate holds where the bias it carries is settled beside the image's noise
+        // (`StepBias::settled`); otherwise the calibration images the bias rests on grow
+        // until it is, and the render goes on from the new estimate.
+        let settled = !(done.met && target.error.is_some() && target.metric == ErrorMetric::Rmse)
+            || step_fixed
+            || bias.settled(dt, done.noise_rmse, e_rmse.unwrap_or(f64::INFINITY))
+            || run.out_of_time();
+        if settled || !grow_calibration(&mut run, &mut levels, j)? {
+            return Ok(Targeted {
+                calibration: done.calibration,
+                ..done
+            });
+        }
+        let images = levels.each_ref().map(|l| l.image(&run.settings));
+        bias = StepBias::calibrate(
+            dt0,
+            [&images[0], &images[1], &images[2]],
+            levels.each_ref().map(Level::noise),
+        );
+        tracing::debug!(
+            "targeted: the bias at step x{} was not settled beside the noise {:.3e}: calibration grown to {:?} frames, bias now {:.3e} ({bias:?})",
+            2f64.powi(j),
+            done.noise_rmse,
+            levels.each_ref().map(|l| l.a.frames),
+            bias.at(dt),
+        );
+    }
+}
 
-    // Choose the step: the least predicted time to the target, or the least predicted error
-    // within the budget.
+/// Grows the calibration images that the bias at step `dt0 · 2^j` rests on (the images at
+/// `dt0` and `2 dt0`, or `dt0` and `4 dt0` for `j = 2`), after the render at that step met
+/// the target while its bias was not settled ([`StepBias::settled`]): the noisier of the two
+/// (the chosen step's image counts with its final frames) to four times its frames, at most
+/// to the other's noise, or both to twice where they are about as noisy. Returns whether
+/// anything was rendered (false at the sample limit).
+fn grow_calibration(
+    run: &mut Run<'_>,
+    levels: &mut [Level; 3],
+    j: i32,
+) -> Result<bool, RenderError> {
+    let other = if j == 2 { 2 } else { 1 };
+    let cycle = mask_cycle(&run.settings);
+    let (n0, n1) = (levels[0].noise(), levels[other].noise());
+    let mut grown = false;
+    let even = n0 >= 0.7 * n1 && n1 >= 0.7 * n0;
+    let plan = [(0, n0 >= 0.7 * n1, n1), (other, n1 >= 0.7 * n0, n0)];
+    for (i, grow, towards) in plan {
+        if !grow {
+            continue;
+        }
+        let level = &mut levels[i];
+        let reached = level.a.frames;
+        let factor = if even { 3 } else { 4 };
+        let mut wanted = f64::from(reached * factor);
+        if !even {
+            wanted =
+                wanted.min(level.convergence().frames_for(towards) / f64::from(level.spp_at(1)));
+        }
+        let frames = stop_at(
+            wanted.max(f64::from(reached + 1)).ceil() as u32,
+            reached,
+            cycle,
+        )
+        .min(run.target.max_spp / level.spp_at(1))
+        .max(reached);
+        if frames > reached {
+            run.extend(level, frames)?;
+            grown = true;
+        }
+    }
+    Ok(grown)
+}
+
+/// The step (`dt0 · 2^j`) and samples per pixel of the least predicted time to the target, or
+/// the least predicted error within the budget, from the calibration.
+fn choose_step(
+    run: &Run<'_>,
+    levels: &[Level; 3],
+    bias: &StepBias,
+    e_rmse: Option<f64>,
+    step_fixed: bool,
+    finer: &Option<(i32, Level)>,
+) -> (i32, f64) {
+    let (target, dt0) = (run.target, run.dt0);
     let steps: Vec<i32> = if step_fixed {
         vec![0]
     } else {
@@ -800,7 +952,10 @@ pub fn render_to_target(
         if !run.allowed(dt) {
             continue;
         }
-        let level = usize::try_from(j).ok().and_then(|j| levels.get(j));
+        let level = usize::try_from(j)
+            .ok()
+            .and_then(|j| levels.get(j))
+            .or_else(|| finer.as_ref().filter(|(k, _)| *k == j).map(|(_, l)| l));
         let convergence = level.map_or(fine.convergence(), Level::convergence);
         let frame_time = level.map_or(fine.frame_time() * 2f64.powi(-j), Level::frame_time);
         let b = bias.at(dt);
@@ -839,7 +994,7 @@ pub fn render_to_target(
         }
     }
     // A target no step reaches within its bias share: the finest allowed step.
-    let (j, spp) = match best {
+    match best {
         Some((_, j, spp)) => (j, spp),
         None => {
             let j = steps
@@ -852,36 +1007,7 @@ pub fn render_to_target(
             );
             (j, f64::from(target.max_spp))
         }
-    };
-    let dt = dt0 * 2f64.powi(j);
-    let b = bias.at(dt);
-    let [fine, middle, coarse] = levels;
-    let bias_images = (middle.image(&run.settings), fine.image(&run.settings));
-    let mut level = match j {
-        0 => fine,
-        1 => middle,
-        2 => coarse,
-        _ => Level::new(dt, seed, lattice),
-    };
-    // Past its first mask cycle one sequence of whole cycles is no less noisy than two of
-    // half as many, so a sequence predicted to need more than one cycle gains nothing from the
-    // lattice and would pay it for its first cycle: a pair measures its noise instead.
-    if let Some(d) = lattice
-        && level.frames_for(spp) > d
-    {
-        level.measure_by_pair();
     }
-    finish(
-        &mut run,
-        level,
-        spp,
-        Chosen {
-            bias,
-            b,
-            bias_images,
-            calibration,
-        },
-    )
 }
 
 /// What the calibration chose, for the render to the target.
@@ -899,7 +1025,7 @@ struct Chosen {
 /// short of the target.
 fn finish(
     run: &mut Run<'_>,
-    mut level: Level,
+    level: &mut Level,
     mut spp: f64,
     chosen: Chosen,
 ) -> Result<Targeted, RenderError> {
@@ -931,7 +1057,7 @@ fn finish(
             frames = frames.min(before + d * cycles.min(f64::from(u32::MAX / d)) as u32);
             no_cycle_fits = frames == before;
         }
-        run.extend(&mut level, frames)?;
+        run.extend(level, frames)?;
         let image = level.image(&run.settings);
         let noise = level.noise();
         let estimate = match target.metric {

@@ -11,7 +11,7 @@ use super::cycles::CycleWeights;
 use super::settings::RenderSettings;
 use crate::accel::ClusterSize;
 use crate::backend::{Backend, BackendError, Precision, StepInput};
-use crate::field::{Classification, FieldSettings};
+use crate::field::{Classification, FieldSettings, PeriodicBox};
 use crate::io::DataError;
 use crate::scene::{Camera, CameraError, TimeSeries};
 use crate::values::tables::table_max;
@@ -71,7 +71,11 @@ pub struct RenderSession {
     backend: Box<dyn Backend>,
     /// How GPU backends hold positions (`Precision::RENDER` unless set).
     precision: Precision,
+    /// The domain: the series' bounds, or the periodic box.
     bounds: Bounds,
+    series_bounds: Bounds,
+    /// The box whose faces wrap, if any: each step is uploaded with its periodic images.
+    periodic: Option<PeriodicBox>,
     max_count: usize,
     loaded: Option<Loaded>,
     /// The automatic values of the series under the loaded field ([`AutoValues`]).
@@ -92,6 +96,8 @@ impl RenderSession {
             backend,
             precision: Precision::RENDER,
             bounds: series.bounds(),
+            series_bounds: series.bounds(),
+            periodic: None,
             max_count: series.max_count(),
             loaded: None,
             auto: None,
@@ -106,6 +112,18 @@ impl RenderSession {
     /// uploads the step again).
     pub fn set_precision(&mut self, precision: Precision) {
         self.precision = precision;
+    }
+
+    /// Wraps the field at the faces of `periodic` from the next [`show`](Self::show) on (which
+    /// uploads the step again): each step goes to the backend with the periodic images of its
+    /// particles near the faces ([`PeriodicBox::images`]), and the domain (the default camera,
+    /// the march box) is the box itself. `None` restores the open domain.
+    pub fn set_periodic(&mut self, periodic: Option<PeriodicBox>) {
+        if self.periodic != periodic {
+            self.periodic = periodic;
+            self.bounds = periodic.map_or(self.series_bounds, |b| b.bounds());
+            self.loaded = None;
+        }
     }
 
     pub fn backend(&self) -> &dyn Backend {
@@ -151,7 +169,9 @@ impl RenderSession {
                 if have.step == step
                     && have.cluster == cluster
                     && have.precision == self.precision
-                    && same_particles(&have.field, field) =>
+                    && same_particles(&have.field, field)
+                    // Under periodicity the radii decide which particles have images.
+                    && (self.periodic.is_none() || same_radii(&have.field, field)) =>
             {
                 if same_radii(&have.field, field) {
                     self.backend.update_maps(field)?;
@@ -168,11 +188,19 @@ impl RenderSession {
                     .as_deref()
                     .and_then(|a| series.attribute(a))
                     .map(|a| (a.min, a.max));
+                let images = match &self.periodic {
+                    Some(b) => Some(periodic_images(b, &data, field, range)?),
+                    None => None,
+                };
+                let (step_data, step_bounds) = match &images {
+                    Some((images, bounds)) => (&images.step, *bounds),
+                    None => (&data, self.bounds),
+                };
                 self.backend.upload(&StepInput {
-                    step: &data,
+                    step: step_data,
                     field,
                     cluster,
-                    series_bounds: self.bounds,
+                    series_bounds: step_bounds,
                     series_range: range,
                     precision: self.precision,
                 })?;
@@ -247,7 +275,12 @@ impl RenderSession {
             phi_ref,
             step_size: dt,
             density_scale: settings.optical.scale().unwrap_or(0.4 / r),
-            margin: 2.0 * auto.max_radius,
+            // A periodic box is the whole domain: nothing outside it is drawn.
+            margin: if self.periodic.is_some() {
+                0.0
+            } else {
+                2.0 * auto.max_radius
+            },
         })
     }
 
@@ -428,6 +461,33 @@ impl RenderSession {
         }
         self.image()
     }
+}
+
+/// `step` with its periodic images in `periodic`, and the bounds the images lie in (the box
+/// grown by the largest reach), which fix the backend's Hilbert grid and local origin.
+fn periodic_images(
+    periodic: &PeriodicBox,
+    step: &crate::values::Step,
+    field: &FieldSettings,
+    range: Option<(f64, f64)>,
+) -> Result<(crate::field::periodic::Images, Bounds), RenderError> {
+    let images = periodic
+        .images(step, field, range)
+        .map_err(BackendError::from)?;
+    if images.wrapped > 0 {
+        tracing::info!(
+            "step '{}': {} particles outside the periodic box wrapped into it",
+            step.name,
+            images.wrapped
+        );
+    }
+    tracing::debug!(
+        "step '{}': {} periodic images of particles near the box's faces",
+        step.name,
+        images.step.len() - images.originals
+    );
+    let bounds = periodic.bounds().grown(images.largest_reach);
+    Ok((images, bounds))
 }
 
 /// Whether two field settings give the same per-particle data (positions, attribute).

@@ -558,6 +558,18 @@ impl TimeSeries {
         }
     }
 
+    /// The simulation box step `index`'s file states (an HDF5 snapshot's `BoxSize` and
+    /// periodicity; `None` for other formats and for a series held in memory).
+    pub fn simulation_box(&self, index: usize) -> Result<Option<io::SimulationBox>, DataError> {
+        match &self.shared.source {
+            Source::Files { steps, .. } => match steps.get(index) {
+                Some(step) => io::simulation_box(step),
+                None => Ok(None),
+            },
+            Source::Memory(_) => Ok(None),
+        }
+    }
+
     /// Whether step `index` is held in memory now (a step read from memory always is).
     pub fn is_cached(&self, index: usize) -> bool {
         match &self.shared.source {

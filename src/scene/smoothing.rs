@@ -22,8 +22,10 @@ pub const CACHE_DIR: &str = ".aarbf-smoothing";
 /// at one point): the data has no length scale, so one unit.
 pub const NO_SCALE: f64 = 1.0;
 
-/// `--smoothing knn:K`: h from the K-th nearest neighbour.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// `--smoothing knn:K`: h from the K-th nearest neighbour. Scene files spell it as the flag
+/// does (`smoothing = "knn:32"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub struct Smoothing {
     pub neighbours: usize,
 }
@@ -35,6 +37,26 @@ impl Smoothing {
     /// named with K so that the series index never mixes lengths of different K.
     pub fn attribute(self) -> String {
         format!("h_knn{}", self.neighbours)
+    }
+
+    /// The smoothing whose lengths an attribute of this name holds ([`Self::attribute`]'s
+    /// inverse), so a scene file that uses them says how to make them again.
+    pub fn of_attribute(name: &str) -> Option<Smoothing> {
+        let neighbours = name.strip_prefix("h_knn")?.parse().ok()?;
+        (neighbours > 0).then_some(Smoothing { neighbours })
+    }
+}
+
+impl TryFrom<String> for Smoothing {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<Smoothing> for String {
+    fn from(s: Smoothing) -> String {
+        format!("knn:{}", s.neighbours)
     }
 }
 

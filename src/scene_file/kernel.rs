@@ -65,36 +65,43 @@ pub fn resolve(
             ),
         },
     };
-    let mass = match mass {
-        Some(m) => m,
-        None => match find(names, &MASS_NAMES) {
-            Some(m) => {
-                tracing::info!("{kernel}: masses '{m}' (--mass NAME or VALUE sets them)");
-                PerParticle::Attribute(m)
+    // A mass or a density: as given, else the data's by one of `candidates`.
+    let per_particle = |given: Option<PerParticle>,
+                        candidates: &[&str],
+                        what: &str,
+                        flag: &str,
+                        otherwise: &str|
+     -> anyhow::Result<PerParticle> {
+        if let Some(q) = given {
+            return Ok(q);
+        }
+        match find(names, candidates) {
+            Some(name) => {
+                tracing::info!("{kernel}: {what} '{name}' ({flag} NAME or VALUE sets them)");
+                Ok(PerParticle::Attribute(name))
             }
             None => bail!(
                 "the {kernel} kernel weights each particle by its volume m/rho, and the data \
-                 has no masses by a known name (its attributes: {}): pass --mass NAME, or \
-                 --mass VALUE for equal masses",
+                 has no {what} by a known name (its attributes: {}): pass {flag} NAME, or \
+                 {otherwise}",
                 listed()
             ),
-        },
+        }
     };
-    let density = match density {
-        Some(d) => d,
-        None => match find(names, &DENSITY_NAMES) {
-            Some(d) => {
-                tracing::info!("{kernel}: densities '{d}' (--density NAME or VALUE sets them)");
-                PerParticle::Attribute(d)
-            }
-            None => bail!(
-                "the {kernel} kernel weights each particle by its volume m/rho, and the data \
-                 has no densities by a known name (its attributes: {}): pass --density NAME, or \
-                 --density 1 for the SPH density estimate itself",
-                listed()
-            ),
-        },
-    };
+    let mass = per_particle(
+        mass,
+        &MASS_NAMES,
+        "masses",
+        "--mass",
+        "--mass VALUE for equal masses",
+    )?;
+    let density = per_particle(
+        density,
+        &DENSITY_NAMES,
+        "densities",
+        "--density",
+        "--density 1 for the SPH density estimate itself",
+    )?;
     Ok(SphInputs {
         radius_attribute,
         mass,

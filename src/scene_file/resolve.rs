@@ -48,6 +48,15 @@ pub struct DataArgs {
     /// `.aarbf-smoothing/` beside the data.
     #[arg(long, value_name = "knn:K")]
     pub smoothing: Option<crate::scene::smoothing::Smoothing>,
+    /// Wrap the field at the faces of a periodic box: particles near one face are felt across
+    /// it, so slices and renders of the box have no seam. `--periodic` alone takes the box an
+    /// HDF5 snapshot's header states; `--periodic L` or `LX,LY,LZ` gives the box [0, L) for
+    /// any format. Default: on where a snapshot's header says its box is periodic.
+    #[arg(long, value_name = "L|LX,LY,LZ", num_args = 0..=1, default_missing_value = "header")]
+    pub periodic: Option<super::periodic::PeriodicSpec>,
+    /// Treat the data's box as open, even where the snapshot says it is periodic.
+    #[arg(long, conflicts_with = "periodic")]
+    pub no_periodic: bool,
     /// The most memory, in MiB, that steps read from disk are kept in (the least recently
     /// used go first; a series larger than this plays with memory bounded by it).
     #[arg(long, default_value_t = 2048)]
@@ -296,9 +305,18 @@ pub struct Resolved {
     /// How the attribute's range was chosen: a per-step range is chosen again for each step
     /// shown ([`Resolved::range_for_step`]).
     pub range: RangeSpec,
+    /// The periodic box the field wraps at ([`super::periodic::choose`]), if any.
+    pub periodic: Option<crate::field::PeriodicBox>,
 }
 
 impl Resolved {
+    /// The domain an image or grid of the field covers: the periodic box where there is one,
+    /// else the series' bounds.
+    pub fn domain(&self) -> crate::values::Bounds {
+        self.periodic
+            .map_or_else(|| self.series.bounds(), |b| b.bounds())
+    }
+
     /// The data and field sections of a scene file that reproduces these settings.
     pub fn scene_sections(&self) -> (DataSection, FieldSection) {
         scene_sections(
@@ -309,12 +327,14 @@ impl Resolved {
             &self.field,
             self.cluster,
             self.colormap.as_deref(),
+            self.periodic,
         )
     }
 }
 
 /// The data and field sections of a scene file that reproduces a field of the data at
 /// `data_path`: the path absolute, the radius in data units, the maps as their control points.
+#[allow(clippy::too_many_arguments)] // one per section entry; a struct would only rename them
 pub fn scene_sections(
     data_path: &std::path::Path,
     format: Option<Format>,
@@ -323,6 +343,7 @@ pub fn scene_sections(
     f: &FieldSettings,
     cluster: ClusterSize,
     colormap: Option<&str>,
+    periodic: Option<crate::field::PeriodicBox>,
 ) -> (DataSection, FieldSection) {
     let absolute = |p: &std::path::Path| std::path::absolute(p).unwrap_or(p.to_path_buf());
     (
@@ -335,6 +356,11 @@ pub fn scene_sections(
             radius_attribute: f.radius_attribute.clone(),
             particle_type: (read.particle_type != ParticleType::GAS).then_some(read.particle_type),
             physical: read.physical.then_some(true),
+            smoothing: f
+                .radius_attribute
+                .as_deref()
+                .and_then(crate::scene::smoothing::Smoothing::of_attribute),
+            periodic: Some(super::periodic::PeriodicSetting::of(periodic)),
         },
         FieldSection {
             radius: Some(RadiusSpec::Absolute(f.radius)),
@@ -490,13 +516,14 @@ fn resolve_from(
             None => tracing::info!("colour: by density (the data has no attributes)"),
         }
     }
+    let smoothing = data.smoothing.or(scene.data.smoothing);
     let radius_attribute = options
         .radius_attribute
         .clone()
         .or(scene.data.radius_attribute.clone())
-        .or(data.smoothing.map(|s| s.attribute()));
+        .or(smoothing.map(|s| s.attribute()));
     let kernel = options.kernel.or(scene.field.kernel).unwrap_or_default();
-    let (radius_attribute, mass, density) = if kernel.is_sph() {
+    let (mut radius_attribute, mass, density) = if kernel.is_sph() {
         let mass = options.mass.clone().or(scene.field.mass.clone());
         let density = options.density.clone().or(scene.field.density.clone());
         if first_in_full.is_none()
@@ -522,60 +549,107 @@ fn resolve_from(
         _ => None,
     };
     let (mass_attribute, density_attribute) = (attribute_of(&mass), attribute_of(&density));
-    let selection = AttributeSelection::Only(
-        attribute
-            .iter()
-            .chain(radius_attribute.iter())
-            .chain(mass_attribute.iter())
-            .chain(density_attribute.iter())
-            .cloned()
-            .collect(),
-    );
     let opening = std::time::Instant::now();
     let mut asked_step = data.step.or(scene.data.step).unwrap_or(0);
     let series = match memory {
         Some(series) => {
-            // Held whole in memory: every attribute is there; check the ones asked for.
-            if let (AttributeSelection::Only(names), Some(first)) =
-                (&selection, series.first_step_in_full()?)
-            {
-                for name in names {
+            // Held whole in memory: every attribute is there; check the ones asked for, a
+            // name in the other number or case being the data's, as for a file.
+            if let Some(first) = series.first_step_in_full()? {
+                let names = names_of(Some(&first));
+                for a in [&mut attribute, &mut radius_attribute] {
+                    let Some(name) = a.clone() else { continue };
+                    if first.attribute(&name).is_some() {
+                        continue;
+                    }
+                    let found = super::names::other_spelling(&name, &names).with_context(|| {
+                        format!(
+                            "{}: no attribute '{name}'; the particles have: {}",
+                            path.display(),
+                            names.join(", ")
+                        )
+                    })?;
+                    tracing::info!(
+                        "attribute '{name}': the data has no attribute of that name, but has \
+                         '{found}': using '{found}'"
+                    );
+                    *a = Some(found);
+                }
+                for name in mass_attribute.iter().chain(density_attribute.iter()) {
                     anyhow::ensure!(
                         first.attribute(name).is_some(),
                         "{}: no attribute '{name}'; the particles have: {}",
                         path.display(),
-                        names_of(Some(&first)).join(", ")
+                        names.join(", ")
                     );
                 }
             }
             series
         }
-        None => TimeSeries::open(
-            &path,
-            &OpenOptions {
-                format: data.format.or(scene.data.format),
-                read,
-                smoothing: data.smoothing,
-                attributes: selection,
-                cache_bytes: data.cache_mib << 20,
-                // A batch frame uses the final series values, never provisional ones.
-                background_scan: false,
-                rescan: data.rescan,
-            },
-        )
-        .map_err(|e| {
-            // The series' first step is checked when it opens, whichever step was asked for: say
-            // so, or the message seems to be about the wrong step.
-            let missing = matches!(e.problem, crate::io::Problem::MissingAttribute { .. });
-            if missing && asked_step != 0 {
-                anyhow::Error::new(e).context(format!(
-                    "the attributes asked for must be in every step of the series, and its first \
-                 step lacks one (step {asked_step} was asked for)"
-                ))
-            } else {
-                e.into()
+        None => {
+            let open = |attribute: &Option<String>, radius_attribute: &Option<String>| {
+                TimeSeries::open(
+                    &path,
+                    &OpenOptions {
+                        format: data.format.or(scene.data.format),
+                        read,
+                        smoothing,
+                        attributes: AttributeSelection::Only(
+                            attribute
+                                .iter()
+                                .chain(radius_attribute.iter())
+                                .chain(mass_attribute.iter())
+                                .chain(density_attribute.iter())
+                                .cloned()
+                                .collect(),
+                        ),
+                        cache_bytes: data.cache_mib << 20,
+                        // A batch frame uses the final series values, never provisional ones.
+                        background_scan: false,
+                        rescan: data.rescan,
+                    },
+                )
+            };
+            let mut opened = open(&attribute, &radius_attribute);
+            // A name the data spells in the other number or case (SWIFT's `Temperatures` for
+            // `Temperature`) is the data's, said in the log; at most the two names asked for.
+            for _ in 0..2 {
+                let Err(crate::io::DataError {
+                    problem: crate::io::Problem::MissingAttribute { name, names, .. },
+                    ..
+                }) = &opened
+                else {
+                    break;
+                };
+                let Some(found) = super::names::other_spelling(name, names) else {
+                    break;
+                };
+                let name = name.clone();
+                tracing::info!(
+                    "attribute '{name}': the data has no attribute of that name, but has '{found}': \
+                 using '{found}'"
+                );
+                for a in [&mut attribute, &mut radius_attribute] {
+                    if a.as_deref() == Some(name.as_str()) {
+                        *a = Some(found.clone());
+                    }
+                }
+                opened = open(&attribute, &radius_attribute);
             }
-        })?,
+            opened.map_err(|e| {
+                // The series' first step is checked when it opens, whichever step was asked for: say
+                // so, or the message seems to be about the wrong step.
+                let missing = matches!(e.problem, crate::io::Problem::MissingAttribute { .. });
+                if missing && asked_step != 0 {
+                    anyhow::Error::new(e).context(format!(
+                    "the attributes asked for must be in every step of the series, and its first \
+                     step lacks one (step {asked_step} was asked for)"
+                ))
+                } else {
+                    e.into()
+                }
+            })?
+        }
     };
     if let Some(time) = data.time {
         let (step, at) = series
@@ -586,6 +660,9 @@ fn resolve_from(
     }
     let opened_in = opening.elapsed();
     let decoded_at_open = series.steps_decoded();
+    let (periodic_spec, no_periodic) =
+        super::periodic::merge(data.periodic, data.no_periodic, scene.data.periodic);
+    let periodic = super::periodic::choose(&series, periodic_spec, no_periodic)?;
     let step = asked_step;
     if step >= series.len() {
         bail!(
@@ -728,5 +805,6 @@ fn resolve_from(
         opened_in,
         decoded_at_open,
         range,
+        periodic,
     })
 }

@@ -22,25 +22,29 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::shader_constants::{KERNEL_SIGMA, KERNEL_SUPPORT};
+use super::shader_constants::{
+    KERNEL_GAUSSIAN_RBF, KERNEL_SIGMA, KERNEL_SPH_CUBIC, KERNEL_SPH_QUINTIC,
+    KERNEL_SPH_WENDLAND_C2, KERNEL_SPH_WENDLAND_C4, KERNEL_SUPPORT,
+};
 
 /// Which kernel the field is summed with.
 #[derive(
     Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
 )]
 #[serde(rename_all = "kebab-case")]
+#[repr(u32)]
 pub enum Kernel {
     /// The paper's Gaussian `w exp(-0.5 (3d/r)²)`, truncated at r, not normalised.
     #[default]
-    GaussianRbf,
+    GaussianRbf = KERNEL_GAUSSIAN_RBF,
     /// The M4 cubic spline, support 2h (Monaghan 1992; Phantom, sarracen).
-    SphCubic,
+    SphCubic = KERNEL_SPH_CUBIC,
     /// The M6 quintic spline, support 3h.
-    SphQuintic,
+    SphQuintic = KERNEL_SPH_QUINTIC,
     /// Wendland C2, support 2h (Dehnen & Aly 2012, with H = 2h).
-    SphWendlandC2,
+    SphWendlandC2 = KERNEL_SPH_WENDLAND_C2,
     /// Wendland C4, support 2h.
-    SphWendlandC4,
+    SphWendlandC4 = KERNEL_SPH_WENDLAND_C4,
 }
 
 impl Kernel {
@@ -52,7 +56,8 @@ impl Kernel {
         Kernel::SphWendlandC4,
     ];
 
-    /// The value of the `KERNEL` specialisation constant.
+    /// The value of the `KERNEL` specialisation constant (the shaders' `KERNEL_*`, which the
+    /// variants take as theirs), and the index of the kernel's support and σ.
     pub fn id(self) -> u32 {
         self as u32
     }
@@ -108,39 +113,42 @@ impl Kernel {
     }
 
     /// An SPH kernel's unnormalised `f(q)`, `q = d / h` (0 beyond the support; the Gaussian's
-    /// is `exp(-4.5 (q)²)` in units of its radius).
+    /// is `exp(-4.5 q²)` in units of its radius), in f64 or, as the shaders compute it, in f32
+    /// (`backend::shaders::cpu::rbf::sph_profile`, the twin of `rbf.glsl`'s `rbf_profile`).
     #[inline(always)]
-    pub fn of_q(self, q: f64) -> f64 {
-        let plus = |x: f64| x.max(0.0);
+    pub fn of_q<F: num_traits::Float>(self, q: F) -> F {
+        let c = |v: f64| F::from(v).expect("a kernel constant");
+        let zero = F::zero();
+        let plus = |x: F| x.max(zero);
         match self {
             Kernel::GaussianRbf => {
-                if q <= 1.0 {
-                    (-4.5 * q * q).exp()
+                if q <= F::one() {
+                    (c(-4.5) * q * q).exp()
                 } else {
-                    0.0
+                    zero
                 }
             }
             Kernel::SphCubic => {
-                let (a, b) = (plus(2.0 - q), plus(1.0 - q));
-                0.25 * (a * a * a) - b * b * b
+                let (a, b) = (plus(c(2.0) - q), plus(F::one() - q));
+                c(0.25) * (a * a * a) - b * b * b
             }
             Kernel::SphQuintic => {
-                let fifth = |x: f64| {
+                let fifth = |x: F| {
                     let x = plus(x);
                     let x2 = x * x;
                     x2 * x2 * x
                 };
-                fifth(3.0 - q) - 6.0 * fifth(2.0 - q) + 15.0 * fifth(1.0 - q)
+                fifth(c(3.0) - q) - c(6.0) * fifth(c(2.0) - q) + c(15.0) * fifth(F::one() - q)
             }
             Kernel::SphWendlandC2 => {
-                let a = plus(1.0 - 0.5 * q);
+                let a = plus(F::one() - c(0.5) * q);
                 let a2 = a * a;
-                a2 * a2 * (1.0 + 2.0 * q)
+                a2 * a2 * (F::one() + c(2.0) * q)
             }
             Kernel::SphWendlandC4 => {
-                let a = plus(1.0 - 0.5 * q);
+                let a = plus(F::one() - c(0.5) * q);
                 let a2 = a * a;
-                a2 * a2 * a2 * (1.0 + 3.0 * q + (35.0 / 12.0) * q * q)
+                a2 * a2 * a2 * (F::one() + c(3.0) * q + c(35.0 / 12.0) * q * q)
             }
         }
     }

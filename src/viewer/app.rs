@@ -886,6 +886,8 @@ impl ViewerApp {
             physical: false,
             smoothing: None,
             rescan: false,
+            periodic: None,
+            no_periodic: false,
         };
         self.reload(&data, &FieldOptions::default())?;
         self.say(format!("loaded {}", path.display()));
@@ -920,6 +922,8 @@ impl ViewerApp {
                     physical: false,
                     smoothing: None,
                     rescan: false,
+                    periodic: None,
+                    no_periodic: false,
                 };
                 self.reload(&data, &FieldOptions::default())
             });

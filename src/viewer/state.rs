@@ -37,13 +37,15 @@ pub struct ViewState {
     /// `f64`).
     pub precision: String,
     pub backend: BackendKind,
+    /// The periodic box the field wraps at, if any (fixed while a series is open).
+    pub periodic: Option<crate::field::PeriodicBox>,
 }
 
 impl ViewState {
     /// The state of a freshly resolved scene (flags over the scene file): its camera, or the
     /// default view of the data's bounds.
     pub fn of(loaded: &Loaded, backend: BackendKind) -> Result<ViewState, String> {
-        let bounds = loaded.series.bounds();
+        let bounds = loaded.domain();
         let mut settings = loaded.scene.render_settings(bounds)?;
         settings.camera = Some(
             settings
@@ -67,6 +69,7 @@ impl ViewState {
                 .clone()
                 .unwrap_or_else(|| "auto".into()),
             backend,
+            periodic: loaded.periodic,
         })
     }
 
@@ -87,6 +90,7 @@ impl ViewState {
             &self.field,
             self.cluster,
             Some(&self.colormap),
+            self.periodic,
         );
         SceneFile::reproducing(
             data,

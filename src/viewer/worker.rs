@@ -359,6 +359,7 @@ impl Worker<'_> {
         let precision = backend::parse_precision(&state.precision, Precision::RENDER)
             .map_err(RenderError::Settings)?;
         session.set_precision(precision);
+        session.set_periodic(state.periodic);
         let building = self
             .applied
             .as_ref()

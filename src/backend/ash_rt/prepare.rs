@@ -473,14 +473,8 @@ impl Prepare {
         from: &Buffer,
         to: &Buffer,
     ) -> Result<(), BackendError> {
-        let mut sections = Vec::new();
-        if data.has_radius_attribute {
-            sections.push(0u64);
-        }
-        if data.kernel.is_sph() {
-            sections.push(data.volume_offset() as u64 * 4);
-        }
-        for offset in sections {
+        for first in data.factor_sections() {
+            let offset = first as u64 * 4;
             self.elements(
                 cb,
                 ComputeKind::GatherWords,

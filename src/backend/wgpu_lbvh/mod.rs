@@ -229,12 +229,12 @@ impl WgpuBackend {
             radius_attribute: targets
                 .radius_attribute
                 .filter(|_| scene.data.has_radius_attribute)
-                .map(|b| read_f32s(&self.ctx, b, 0, n))
+                .map(|b| util::read_f32s(&self.ctx, b, 0, n))
                 .transpose()?,
             volume: targets
                 .radius_attribute
                 .filter(|_| scene.data.kernel.is_sph())
-                .map(|b| read_f32s(&self.ctx, b, scene.data.volume_offset(), n))
+                .map(|b| util::read_f32s(&self.ctx, b, scene.data.volume_offset(), n))
                 .transpose()?,
             order: prepare.order(&self.ctx, n)?,
         })
@@ -388,24 +388,6 @@ impl WgpuBackend {
             _ => Err(BackendError::NothingUploaded("wgpu")),
         }
     }
-}
-
-/// `n` floats of `buffer` from float `first` (tests).
-fn read_f32s(
-    ctx: &GpuContext,
-    buffer: &wgpu::Buffer,
-    first: usize,
-    n: usize,
-) -> Result<Vec<f32>, BackendError> {
-    if n == 0 {
-        return Ok(Vec::new());
-    }
-    Ok(bytemuck::pod_collect_to_vec(&util::read(
-        ctx,
-        buffer,
-        first as u64 * 4,
-        n as u64 * 4,
-    )?))
 }
 
 impl Backend for WgpuBackend {

@@ -407,12 +407,8 @@ impl Prepare {
         src: &wgpu::Buffer,
         dst: &wgpu::Buffer,
     ) -> Result<(), BackendError> {
-        let n = data.count;
-        if data.has_radius_attribute {
-            self.encode_gather_section(ctx, encoder, src, dst, 0, n)?;
-        }
-        if data.kernel.is_sph() {
-            self.encode_gather_section(ctx, encoder, src, dst, data.volume_offset(), n)?;
+        for first in data.factor_sections() {
+            self.encode_gather_section(ctx, encoder, src, dst, first, data.count)?;
         }
         Ok(())
     }

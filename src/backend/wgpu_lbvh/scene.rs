@@ -156,7 +156,7 @@ impl Scene {
             self.data.kernel.is_sph(),
         )
         .1;
-        let needed = (words * 4) as u64;
+        let needed = (words.max(1) * 4) as u64;
         if self
             .radius_attribute
             .as_ref()

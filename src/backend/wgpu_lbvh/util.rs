@@ -645,3 +645,21 @@ impl Staging {
         }
     }
 }
+
+/// `n` floats of `buffer` from float `first` (tests).
+pub(super) fn read_f32s(
+    ctx: &GpuContext,
+    buffer: &wgpu::Buffer,
+    first: usize,
+    n: usize,
+) -> Result<Vec<f32>, BackendError> {
+    if n == 0 {
+        return Ok(Vec::new());
+    }
+    Ok(bytemuck::pod_collect_to_vec(&read(
+        ctx,
+        buffer,
+        first as u64 * 4,
+        n as u64 * 4,
+    )?))
+}

@@ -18,6 +18,9 @@ pub struct Header {
     pub num_total: Vec<u64>,
     pub num_files: u64,
     pub box_size: Option<[f64; 3]>,
+    /// Whether the run's box is periodic, and what in the file says so
+    /// ([`periodicity`]).
+    pub periodic: (bool, &'static str),
     pub time: Option<f64>,
     pub redshift: Option<f64>,
     /// The scale factor of a cosmological run (`None` otherwise: comoving is physical).
@@ -76,7 +79,13 @@ impl Header {
         } else {
             gadget_scale_factor(parameters.as_ref(), time, redshift)
         };
+        let box_size = attr_f64s(&group, "BoxSize").and_then(|b| match b.as_slice() {
+            [side] => Some([*side; 3]),
+            [x, y, z] => Some([*x, *y, *z]),
+            _ => None,
+        });
         Ok(Header {
+            periodic: periodicity(file, parameters.as_ref(), box_size),
             swift,
             num_total: if num_total.is_empty() {
                 num_this_file.clone()
@@ -87,11 +96,7 @@ impl Header {
             num_files: attr_u64s(&group, "NumFilesPerSnapshot")
                 .and_then(|v| v.first().copied())
                 .unwrap_or(1),
-            box_size: attr_f64s(&group, "BoxSize").and_then(|b| match b.as_slice() {
-                [side] => Some([*side; 3]),
-                [x, y, z] => Some([*x, *y, *z]),
-                _ => None,
-            }),
+            box_size,
             time,
             redshift,
             scale_factor,
@@ -110,6 +115,48 @@ impl Header {
     /// The mass every particle of type `t` has, if the mass table gives one.
     pub fn table_mass(&self, t: usize) -> Option<f64> {
         self.mass_table.get(t).copied().filter(|m| *m > 0.0)
+    }
+}
+
+/// Whether the run's box is periodic, and what says so:
+/// - SWIFT: its run-time parameter `InitialConditions:periodic`, which it writes into
+///   `/Parameters` (as text, "0" or "1");
+/// - GADGET-4 and AREPO: the compile-time options they write as attributes of `/Config`:
+///   `PERIODIC` (GADGET-4's switch) makes the box periodic, AREPO's `REFLECTIVE_X`, `_Y` or
+///   `_Z` makes it not;
+/// - otherwise (GADGET-2/3 and GIZMO write no flag): a positive `BoxSize` is a periodic box,
+///   the GADGET family's default for the cosmological volumes such files hold.
+pub fn periodicity(
+    file: &File,
+    parameters: Option<&Group>,
+    box_size: Option<[f64; 3]>,
+) -> (bool, &'static str) {
+    let flag = parameters.and_then(|p| {
+        attr_f64(p, "InitialConditions:periodic").or_else(|| {
+            attr_string(p, "InitialConditions:periodic").and_then(|t| t.trim().parse().ok())
+        })
+    });
+    if let Some(flag) = flag {
+        return (
+            flag != 0.0,
+            "/Parameters InitialConditions:periodic (SWIFT)",
+        );
+    }
+    if let Ok(config) = file.group("Config") {
+        let names = config.attr_names().unwrap_or_default();
+        if names.iter().any(|n| n == "PERIODIC") {
+            return (true, "/Config PERIODIC");
+        }
+        if names.iter().any(|n| n.starts_with("REFLECTIVE_")) {
+            return (false, "/Config REFLECTIVE_* (reflective faces)");
+        }
+    }
+    match box_size {
+        Some(b) if b.iter().all(|s| *s > 0.0) => (
+            true,
+            "BoxSize in /Header, no flag saying otherwise (GADGET-family boxes are periodic)",
+        ),
+        _ => (false, "no positive BoxSize in /Header"),
     }
 }
 

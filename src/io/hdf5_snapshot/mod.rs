@@ -210,29 +210,33 @@ pub fn read_step(
     }
     let physical = Scaling::new(&header, options.physical);
     let read = |column: &Column| -> Result<Vec<f64>, DataError> {
-        // The first file's values are the array the others extend (a single-file snapshot's
-        // is used as read: no copy).
-        let mut values: Option<Vec<f64>> = None;
+        // One array for the whole snapshot, each file's rows read into their part of it.
+        let total = parts.iter().map(|p| p.2 as usize).sum::<usize>() * column.components;
+        let mut values = datasets::fresh::<f64>(total);
+        let mut offset = 0;
         for (path, file, count) in &parts {
             if *count > 0 {
-                let part = read_part(At::new(path, at.step), file, &catalog, column, *count)?;
-                match values.as_mut() {
-                    Some(v) => v.extend_from_slice(&part),
-                    None => values = Some(part),
-                }
+                let len = *count as usize * column.components;
+                let out = &mut values[offset..offset + len];
+                read_part(At::new(path, at.step), file, &catalog, column, *count, out)?;
+                offset += len;
             }
         }
-        let mut values = values.unwrap_or_default();
         let factor = physical.factor(&group, column)?;
         if factor != 1.0 {
             values.par_iter_mut().for_each(|v| *v *= factor);
         }
         Ok(values)
     };
-    let positions: Vec<DVec3> = read(coordinates)?
-        .par_chunks_exact(3)
-        .map(|p| DVec3::new(p[0], p[1], p[2]))
-        .collect();
+    // N x 3 doubles are N points as they lie in memory: the array becomes the positions
+    // without a copy.
+    let positions: Vec<DVec3> = bytemuck::allocation::try_cast_vec(read(coordinates)?)
+        .unwrap_or_else(|(_, values)| {
+            values
+                .par_chunks_exact(3)
+                .map(|p| DVec3::new(p[0], p[1], p[2]))
+                .collect()
+        });
     let attributes = read_attributes(at, &catalog, selection, positions.len(), &read)?;
     let skipped = catalog
         .attribute_names()
@@ -260,11 +264,19 @@ fn read_attributes(
         let names = super::array_attribute_names(&column.name, column.components);
         if names.iter().any(|n| selection.keeps(n)) {
             let values = read(column)?;
-            attributes.extend(super::split_components(
-                &column.name,
-                &values,
-                column.components,
-            ));
+            if column.components == 1 {
+                // A scalar's array is the attribute as read: no copy.
+                attributes.push(Attribute {
+                    name: column.name.clone(),
+                    values,
+                });
+            } else {
+                attributes.extend(super::split_components(
+                    &column.name,
+                    &values,
+                    column.components,
+                ));
+            }
         }
     }
     if let Some(mass) = catalog.table_mass.filter(|_| selection.keeps(MASSES)) {
@@ -306,14 +318,15 @@ pub fn derived_smoothing_length(mass: f64, density: f64) -> f64 {
     0.5 * (DERIVED_NEIGHBOURS * 3.0 * mass / (4.0 * std::f64::consts::PI * density)).cbrt()
 }
 
-/// One file's rows of `column`, checked against the file's own header count.
+/// One file's rows of `column` into `out`, checked against the file's own header count.
 fn read_part(
     at: At<'_>,
     file: &File,
     catalog: &Catalog,
     column: &Column,
     count: u64,
-) -> Result<Vec<f64>, DataError> {
+    out: &mut [f64],
+) -> Result<(), DataError> {
     let path = format!("{}/{}", catalog.group, column.name);
     let dataset = file
         .dataset(&path)
@@ -335,7 +348,7 @@ fn read_part(
             here.rows
         )));
     }
-    here.read(at, &catalog.group, &dataset)
+    here.read_into(at, &catalog.group, &dataset, out)
 }
 
 /// Comoving to physical: each dataset times a^exponent (SWIFT states the exponent on every
@@ -416,6 +429,26 @@ fn type_counts(header: &Header) -> String {
     }
 }
 
+/// The simulation box the snapshot's header states (`BoxSize`, scaled by the scale factor
+/// under `--physical`) and whether it is periodic; `None` without a `BoxSize`.
+pub fn simulation_box(
+    path: &Path,
+    read: &ReadOptions,
+) -> Result<Option<super::SimulationBox>, DataError> {
+    let at = At::new(path, None);
+    let header = Header::read(at, &open(at)?)?;
+    let Some(size) = header.box_size else {
+        return Ok(None);
+    };
+    let scale = header.scale_factor.filter(|_| read.physical).unwrap_or(1.0);
+    let (periodic, because) = header.periodic;
+    Ok(Some(super::SimulationBox {
+        size: size.map(|s| s * scale),
+        periodic,
+        because: because.to_owned(),
+    }))
+}
+
 /// The snapshot's `/Header` `Time`, if it can be read.
 pub fn time(path: &Path) -> Option<f64> {
     let at = At::new(path, None);
@@ -459,6 +492,12 @@ pub fn describe(path: &Path) -> Result<String, DataError> {
             "{} x {} x {}",
             b[0], b[1], b[2]
         ))
+    );
+    let _ = writeln!(
+        out,
+        "  periodic:     {} ({}; --periodic or --no-periodic overrides)",
+        if header.periodic.0 { "yes" } else { "no" },
+        header.periodic.1
     );
     for (name, value) in &header.units {
         let _ = writeln!(out, "  unit:         {name} = {value:e}");

@@ -55,32 +55,13 @@ impl PointSum {
 }
 
 /// `rbf.glsl`'s `rbf_profile` for an SPH kernel, in f32: its profile at squared distance `d2`
-/// within radius `r`, written as the shader writes it.
+/// within radius `r`, `q` computed as the shader computes it and `f(q)` by the one definition
+/// ([`Kernel::of_q`]) in f32.
 pub fn sph_profile(kernel: Kernel, d2: f32, r: f32) -> f32 {
-    let q = kernel.support() as f32 * (d2 / (r * r)).sqrt();
-    let plus = |x: f32| x.max(0.0);
-    match kernel {
-        Kernel::GaussianRbf => (-4.5 * d2 / (r * r)).exp(),
-        Kernel::SphCubic => {
-            let (a, b) = (plus(2.0 - q), plus(1.0 - q));
-            0.25 * (a * a * a) - b * b * b
-        }
-        Kernel::SphQuintic => {
-            let (a, b, c) = (plus(3.0 - q), plus(2.0 - q), plus(1.0 - q));
-            let (a2, b2, c2) = (a * a, b * b, c * c);
-            a2 * a2 * a - 6.0 * (b2 * b2 * b) + 15.0 * (c2 * c2 * c)
-        }
-        Kernel::SphWendlandC2 => {
-            let a = plus(1.0 - 0.5 * q);
-            let a2 = a * a;
-            a2 * a2 * (1.0 + 2.0 * q)
-        }
-        Kernel::SphWendlandC4 => {
-            let a = plus(1.0 - 0.5 * q);
-            let a2 = a * a;
-            a2 * a2 * a2 * (1.0 + 3.0 * q + (35.0 / 12.0) * q * q)
-        }
+    if kernel == Kernel::GaussianRbf {
+        return (-4.5 * d2 / (r * r)).exp();
     }
+    kernel.of_q(kernel.support() as f32 * (d2 / (r * r)).sqrt())
 }
 
 #[cfg(test)]
