@@ -22,10 +22,10 @@ use aarbf::io::{At, AttributeSelection, Columns, Format, ParticleType, ReadOptio
 use aarbf::render::RenderSession;
 use aarbf::render::accuracy::{ErrorMetric, render_to_target};
 use aarbf::scene::{OpenOptions, TimeSeries, UpAxis};
+use aarbf::scene_file::periodic::PeriodicSetting;
 use aarbf::scene_file::resolve::{
     DataArgs, FieldOptions, Resolved, resolve_in_memory, resolve_scene,
 };
-use aarbf::scene_file::periodic::PeriodicSetting;
 use aarbf::scene_file::{CameraSection, MapSpec, RadiusSpec, RangeSpec, SceneFile};
 use aarbf::values::{Attribute, Image, Integrator, Light, NoiseKind, Step};
 
