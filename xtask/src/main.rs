@@ -354,10 +354,77 @@ fn python() -> Result<PathBuf> {
     build_python()
 }
 
+/// The crates one `cargo tree` selection (`args`) builds, each with its resolved features (a
+/// crate built for the host and for the target with different features appears twice).
+fn resolved_units(args: &[&str]) -> Result<std::collections::BTreeSet<(String, String)>> {
+    let out = cargo()
+        .arg("tree")
+        .args(args)
+        .args(["-f", "{p}|{f}", "--prefix", "none"])
+        .output()
+        .context("cannot run cargo tree")?;
+    if !out.status.success() {
+        bail!(
+            "cargo tree {args:?} failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|line| {
+            let (package, features) = line.split_once('|')?;
+            let package = package.split(" (").next().unwrap_or(package);
+            let features = features.split(" (").next().unwrap_or(features);
+            Some((package.to_owned(), features.to_owned()))
+        })
+        .collect())
+}
+
+/// Fails where the wheel would build a dependency with other features than the tests built it:
+/// Cargo unifies features only over what one command builds, and one differing feature low in
+/// the graph would make the wheel compile most of it again (docs/python.md, "Building").
+fn check_one_graph() -> Result<()> {
+    let tests = resolved_units(&[
+        "--workspace",
+        "--exclude",
+        "aarbf-python",
+        "-e",
+        "normal,build,dev",
+    ])?;
+    let wheel = resolved_units(&["-p", "aarbf-python", "-e", "normal,build"])?;
+    let in_tests: std::collections::BTreeSet<&str> =
+        tests.iter().map(|(package, _)| package.as_str()).collect();
+    let differ: Vec<String> = wheel
+        .iter()
+        .filter(|unit| in_tests.contains(unit.0.as_str()) && !tests.contains(*unit))
+        .map(|(package, features)| {
+            let built: Vec<&str> = tests
+                .iter()
+                .filter(|(p, _)| p == package)
+                .map(|(_, f)| f.as_str())
+                .collect();
+            format!(
+                "{package}: the wheel needs [{features}], the tests built [{}]",
+                built.join("], [")
+            )
+        })
+        .collect();
+    if !differ.is_empty() {
+        bail!(
+            "the wheel would build these dependencies with other features than the tests, and \
+             so compile the graph again; name the missing features on the other side \
+             (docs/python.md, \"Building\"):\n{}",
+            differ.join("\n")
+        );
+    }
+    Ok(())
+}
+
 /// Builds the Python package's wheel (abi3: one for every CPython >= 3.9) into
 /// `target/wheels/` and installs it into `target/venv`, made if missing; returns the
 /// environment's interpreter.
 fn build_python() -> Result<PathBuf> {
+    check_one_graph()?;
     let target = target_dir();
     let venv = target.join("venv");
     let python = venv.join("bin").join("python");
