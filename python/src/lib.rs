@@ -20,7 +20,7 @@ use aarbf::cli::field::{Queries, evaluate};
 use aarbf::field::{Classification, Kernel, PerParticle, RegularGrid};
 use aarbf::io::{At, AttributeSelection, Columns, Format, ParticleType, ReadOptions};
 use aarbf::render::RenderSession;
-use aarbf::render::accuracy::{ErrorMetric, render_to_target};
+use aarbf::render::target::{ErrorMetric, render_to_target};
 use aarbf::scene::{OpenOptions, TimeSeries, UpAxis};
 use aarbf::scene_file::periodic::PeriodicSetting;
 use aarbf::scene_file::resolve::{

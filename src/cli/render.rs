@@ -9,9 +9,9 @@ use clap::Args;
 use crate::backend::voxel::VoxelGeometry;
 use crate::backend::{self, BackendKind};
 use crate::render::RenderSession;
-use crate::render::accuracy::{ErrorMetric, render_to_target};
+use crate::render::converged::{ReferenceOptions, converged_reference, reference_settings};
 use crate::render::legend::Legend;
-use crate::render::reference::{ReferenceOptions, converged_reference, reference_settings};
+use crate::render::target::{ErrorMetric, render_to_target};
 use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
 use crate::scene_file::resolve::{

@@ -15,7 +15,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::session::RenderError;
+use super::error::RenderError;
 use crate::field::{FieldSettings, FieldTables, normalise, particle_radius};
 use crate::scene::TimeSeries;
 use crate::values::tables::{lookup, table_max};

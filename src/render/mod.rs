@@ -4,15 +4,17 @@
 //! integrators themselves are shader code (`shaders_glsl/shared/integrators.glsl`) with their
 //! CPU twin in [`crate::backend::cpu::integrators`].
 
-pub mod accuracy;
 pub mod auto;
+pub mod converged;
 mod cycles;
+mod error;
 pub mod legend;
-pub mod reference;
 pub mod session;
 pub mod settings;
 mod step_bias;
+pub mod target;
 
 pub use auto::AutoValues;
-pub use session::{RenderError, RenderSession, Resolved, StepChange};
+pub use error::RenderError;
+pub use session::{RenderSession, Resolved, StepChange};
 pub use settings::{Method, RenderSettings, SPLAT_K, VOXEL_GRID};

@@ -8,26 +8,14 @@ use glam::DVec3;
 
 use super::auto::AutoValues;
 use super::cycles::CycleWeights;
+use super::error::RenderError;
 use super::settings::RenderSettings;
 use crate::accel::ClusterSize;
 use crate::backend::{Backend, BackendError, Precision, StepInput};
 use crate::field::{Classification, FieldSettings, PeriodicBox};
-use crate::io::DataError;
-use crate::scene::{Camera, CameraError, TimeSeries};
+use crate::scene::{Camera, TimeSeries};
 use crate::values::tables::table_max;
 use crate::values::{Bounds, ColourMode, FrameParams, Image};
-
-#[derive(Debug, thiserror::Error)]
-pub enum RenderError {
-    #[error(transparent)]
-    Backend(#[from] BackendError),
-    #[error(transparent)]
-    Data(#[from] DataError),
-    #[error(transparent)]
-    Camera(#[from] CameraError),
-    #[error("render settings: {0}")]
-    Settings(String),
-}
 
 /// What the backend holds now.
 #[derive(Clone, PartialEq)]
@@ -426,7 +414,7 @@ impl RenderSession {
 
     /// [`render_frames`](Self::render_frames) on the image's half-resolution lattice
     /// ([`FrameParams::on_half_lattice`]): the rays of the full image's even pixels, at a
-    /// quarter of the work. Its pixels estimate the full image's noise (`render::accuracy`).
+    /// quarter of the work. Its pixels estimate the full image's noise (`render::target`).
     pub fn render_frames_on_half_lattice(
         &mut self,
         settings: &RenderSettings,

@@ -1,4 +1,4 @@
-//! The march's step bias in a targeted render (`render::accuracy`): how far the converged
+//! The march's step bias in a targeted render (`render::target`): how far the converged
 //! image at a march step lies from the converged reference, calibrated from images at a few
 //! steps, with no reference.
 

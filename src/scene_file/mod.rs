@@ -382,7 +382,7 @@ pub struct RenderSection {
     /// Render for this many seconds, choosing the step with the least estimated error.
     pub time_budget: Option<f64>,
     /// The measure of `target_error`: `rmse` (linear RGB, the default) or `flip`.
-    pub error_metric: Option<crate::render::accuracy::ErrorMetric>,
+    pub error_metric: Option<crate::render::target::ErrorMetric>,
     /// Render with Knoll et al.'s splatter, this many hits per slab, instead of the RBFs
     /// (`aarbf render --method splat --splat-k K`).
     pub splat_k: Option<usize>,
@@ -591,7 +591,7 @@ impl SceneFile {
     }
 
     /// What a targeted render aims for, if the scene asks for one.
-    pub fn target(&self) -> Result<Option<crate::render::accuracy::Target>, String> {
+    pub fn target(&self) -> Result<Option<crate::render::target::Target>, String> {
         let r = &self.render;
         if r.target_error.is_none() && r.time_budget.is_none() {
             return Ok(None);
@@ -603,11 +603,11 @@ impl SceneFile {
                     .map_err(|_| format!("time budget {s} s must be a positive number of seconds"))
             })
             .transpose()?;
-        let target = crate::render::accuracy::Target {
+        let target = crate::render::target::Target {
             error: r.target_error,
             time_budget,
             metric: r.error_metric.unwrap_or_default(),
-            max_spp: crate::render::accuracy::Target::DEFAULT_MAX_SPP,
+            max_spp: crate::render::target::Target::DEFAULT_MAX_SPP,
         };
         target.check().map_err(|e| e.to_string())?;
         Ok(Some(target))

@@ -1,5 +1,5 @@
 //! Speed against accuracy: every knob's cost in time and in error against the converged
-//! reference ([`crate::render::reference`]), the Pareto front of the two, how far the default
+//! reference ([`crate::render::converged`]), the Pareto front of the two, how far the default
 //! settings sit from it, and what `--target-error` costs against it.
 //!
 //! For each data set and backend, one camera (the default view) and the error images' size
@@ -26,8 +26,8 @@ use super::{Ctx, Description, Options, Row, StudyError, device_of, value};
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
 use crate::render::RenderSettings;
-use crate::render::accuracy::{ErrorMetric, Target, render_to_target};
-use crate::render::reference::{ReferenceOptions, converged_reference};
+use crate::render::converged::{ReferenceOptions, converged_reference};
+use crate::render::target::{ErrorMetric, Target, render_to_target};
 use crate::values::{Integrator, NoiseKind};
 
 pub const DESCRIPTION: Description = Description {

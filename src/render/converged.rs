@@ -15,7 +15,8 @@ use std::time::Instant;
 use base64::Engine as _;
 use serde::{Deserialize, Serialize};
 
-use super::session::{RenderError, RenderSession};
+use super::RenderError;
+use super::session::RenderSession;
 use super::settings::RenderSettings;
 use crate::accel::ClusterSize;
 use crate::backend::Precision;

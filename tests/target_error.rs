@@ -11,8 +11,8 @@ use std::process::Command;
 use aarbf::accel::ClusterSize;
 use aarbf::backend::{self, BackendKind};
 use aarbf::field::FieldSettings;
-use aarbf::render::accuracy::{ErrorMetric, Target, Targeted, noise_of_pair, render_to_target};
-use aarbf::render::reference::{ReferenceOptions, converged_reference};
+use aarbf::render::converged::{ReferenceOptions, converged_reference};
+use aarbf::render::target::{ErrorMetric, Target, Targeted, noise_of_pair, render_to_target};
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::synth::Generator;
 use aarbf::study::{DataSpec, Dataset};
@@ -47,7 +47,7 @@ fn k1() -> ClusterSize {
     ClusterSize::new(1).unwrap()
 }
 
-fn reference(ds: &Dataset, s: &RenderSettings) -> aarbf::render::reference::Reference {
+fn reference(ds: &Dataset, s: &RenderSettings) -> aarbf::render::converged::Reference {
     converged_reference(
         &ds.series,
         ds.step,
