@@ -7,7 +7,8 @@
 //!
 //! A module may use the modules before it in the flow, never one after it; only the top tier
 //! (the command line, and the scene file that composes everything) may use its siblings. A new
-//! top-level module fails the test until it is given its place here.
+//! top-level module fails the test until it is given its place here. Inside a folder, the
+//! modules use each other without loops, so each can be read before the ones that use it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -150,4 +151,185 @@ fn the_reader_sees_paths_and_ignores_comments_and_strings() {
     let code = "use crate::values::Bounds;\n// crate::render::x in a comment\nlet s = \"crate::cli\"; crate::io::read(x); notcrate::scene::y;\n";
     let found: Vec<String> = crate_paths(code).into_iter().collect();
     assert_eq!(found, ["io", "values"]);
+}
+
+/// A file's module path: `src/render/session.rs` is `render::session`, `src/io/vtk/mod.rs` is
+/// `io::vtk` (empty for the crate roots).
+fn module_path(src: &Path, file: &Path) -> Vec<String> {
+    let rel = file.strip_prefix(src).unwrap().with_extension("");
+    let mut path: Vec<String> = rel
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
+    if path
+        .last()
+        .is_some_and(|l| l == "mod" || l == "lib" || l == "main")
+    {
+        path.pop();
+    }
+    path
+}
+
+/// The code of `text` without comments and string literals.
+fn code_only(text: &str) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        let code = line.split("//").next().unwrap_or("");
+        let (mut in_string, mut escaped) = (false, false);
+        for c in code.chars() {
+            match (in_string, escaped, c) {
+                (true, false, '\\') => escaped = true,
+                (true, false, '"') => in_string = false,
+                (true, _, _) => escaped = false,
+                (false, _, '"') => in_string = true,
+                (false, _, c) => out.push(c),
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// The paths `code` names from `crate::` or `super::` (each brace group's entries apart),
+/// as absolute paths for a file whose module is `own` (a `mod.rs`'s own is its folder).
+fn used_paths(code: &str, own: &[String]) -> Vec<Vec<String>> {
+    let ident = |s: &str| -> String {
+        s.chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect()
+    };
+    let mut out = Vec::new();
+    let bytes = code.as_bytes();
+    let mut i = 0;
+    while i < code.len() {
+        let starts = |word: &str| code[i..].starts_with(word);
+        let preceded = i > 0
+            && (bytes[i - 1].is_ascii_alphanumeric()
+                || bytes[i - 1] == b'_'
+                || bytes[i - 1] == b':');
+        if preceded || !(starts("crate::") || starts("super::")) {
+            i += 1;
+            continue;
+        }
+        let mut base: Vec<String> = Vec::new();
+        let mut rest = &code[i..];
+        if rest.starts_with("crate::") {
+            rest = &rest["crate::".len()..];
+        } else {
+            base = own.to_vec();
+            while rest.starts_with("super::") {
+                base.pop();
+                rest = &rest["super::".len()..];
+            }
+        }
+        // One path, or a brace group of entries (their first segments).
+        let mut path = base.clone();
+        loop {
+            if let Some(group) = rest.strip_prefix('{') {
+                let end = group.find('}').unwrap_or(group.len());
+                for entry in group[..end].split(',') {
+                    let name = ident(entry.trim());
+                    if !name.is_empty() && name != "self" {
+                        let mut p = path.clone();
+                        p.push(name);
+                        out.push(p);
+                    }
+                }
+                break;
+            }
+            let name = ident(rest);
+            if name.is_empty() {
+                break;
+            }
+            rest = &rest[name.len()..];
+            path.push(name);
+            match rest.strip_prefix("::") {
+                Some(r) => rest = r,
+                None => break,
+            }
+        }
+        out.push(path);
+        i += 1;
+    }
+    out
+}
+
+#[test]
+fn the_modules_of_a_folder_use_each_other_without_loops() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    files.sort();
+    let modules: BTreeSet<Vec<String>> = files.iter().map(|f| module_path(&src, f)).collect();
+    // Edges between siblings: a file's use of a module beside its own (or beside one of its
+    // ancestors) counts for the sibling it lies in.
+    let mut edges: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> = BTreeMap::new();
+    for file in &files {
+        let own = module_path(&src, file);
+        let code = code_only(&std::fs::read_to_string(file).unwrap());
+        for used in used_paths(&code, &own) {
+            // The longest prefix of the path that is a module.
+            let Some(target) = (1..=used.len())
+                .rev()
+                .map(|n| used[..n].to_vec())
+                .find(|p| modules.contains(p))
+            else {
+                continue;
+            };
+            let common = own.iter().zip(&target).take_while(|(a, b)| a == b).count();
+            if common >= own.len() || common >= target.len() {
+                continue; // itself, an ancestor or a descendant
+            }
+            edges
+                .entry(own[..=common].to_vec())
+                .or_default()
+                .insert(target[..=common].to_vec());
+        }
+    }
+    // A loop: a path back to where it started (depth-first from each module).
+    let mut loops = BTreeSet::new();
+    for start in edges.keys() {
+        let mut stack = vec![(start.clone(), vec![start.clone()])];
+        let mut seen = BTreeSet::new();
+        while let Some((at, trail)) = stack.pop() {
+            for next in edges.get(&at).into_iter().flatten() {
+                if next == start {
+                    let mut names: Vec<String> = trail.iter().map(|m| m.join("::")).collect();
+                    let first = names.iter().min().unwrap().clone();
+                    let k = names.iter().position(|n| *n == first).unwrap();
+                    names.rotate_left(k);
+                    loops.insert(names.join(" -> "));
+                } else if seen.insert(next.clone()) {
+                    let mut t = trail.clone();
+                    t.push(next.clone());
+                    stack.push((next.clone(), t));
+                }
+            }
+        }
+    }
+    assert!(
+        loops.is_empty(),
+        "modules that use each other in a loop (each loops back to its first):\n{}",
+        loops.into_iter().collect::<Vec<_>>().join("\n")
+    );
+}
+
+#[test]
+fn the_loop_reader_resolves_super_crate_and_brace_groups() {
+    let own: Vec<String> = ["render", "session"].map(String::from).to_vec();
+    let code = code_only(
+        "use super::{auto::AutoValues, cycles};\nuse crate::io::vtk::read; // super::x\nlet s = \"super::y\"; super::super::cli::run();\n",
+    );
+    let found: Vec<String> = used_paths(&code, &own)
+        .iter()
+        .map(|p| p.join("::"))
+        .collect();
+    assert!(found.contains(&"render::auto".to_owned()), "{found:?}");
+    assert!(found.contains(&"render::cycles".to_owned()), "{found:?}");
+    assert!(found.contains(&"io::vtk::read".to_owned()), "{found:?}");
+    assert!(found.contains(&"cli::run".to_owned()), "{found:?}");
+    assert!(
+        !found.iter().any(|p| p.ends_with("x") || p.ends_with("y")),
+        "{found:?}"
+    );
 }

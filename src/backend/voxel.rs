@@ -5,7 +5,7 @@
 //! particles. Every backend does both through [`super::Backend::voxelize`] and
 //! [`super::Backend::render_voxels`]; this file holds what they share: where the cells lie
 //! ([`VoxelGeometry`]), the grid of sums as the host holds it, and the sampling rule
-//! ([`VoxelGrid`]'s [`FieldSampler`], the CPU twin of `field_query` in
+//! ([`VoxelGrid::trilinear`], the CPU twin of `field_query` in
 //! `shaders_glsl/shared/voxel_sample.glsl`).
 //!
 //! What the grid loses is what a voxel renderer loses: detail finer than a cell (the
@@ -18,7 +18,6 @@
 use glam::DVec3;
 
 use super::BackendError;
-use super::cpu::integrators::FieldSampler;
 use crate::field::RegularGrid;
 
 /// The largest grid side accepted (a 1024³ grid holds 16 GiB of f32 sums).
@@ -172,27 +171,12 @@ impl VoxelGrid {
     }
 }
 
-impl FieldSampler for VoxelGrid {
-    type Ray = ();
-    type Packet = ();
-
-    /// The whole interval: the grid does not skip empty space (as the baseline it models).
-    fn begin(
-        &self,
-        _: &mut (),
-        _: DVec3,
-        _: DVec3,
-        t0: f64,
-        t1: f64,
-        occupied: &mut Vec<(f64, f64)>,
-    ) {
-        occupied.push((t0, t1));
-    }
-
-    /// Trilinear interpolation of the sums between cell centres (clamped to the outer cells'
-    /// centres at the grid's faces). Twin: `voxel_field` in
+impl VoxelGrid {
+    /// Phi and the Theta numerators at `x`: trilinear interpolation of the sums between cell
+    /// centres (clamped to the outer cells' centres at the grid's faces); the CPU backend
+    /// samples the grid through it (`FieldSampler`). Twin: `voxel_field` in
     /// `shaders_glsl/shared/voxel_sample.glsl`, statement for statement.
-    fn sample(&self, _: &mut (), x: DVec3) -> (f64, [f64; 3]) {
+    pub fn trilinear(&self, x: DVec3) -> (f64, [f64; 3]) {
         let dims = self.geometry.dims;
         let g = (x - self.origin) / self.cell;
         let mut base = [0usize; 3];
@@ -274,12 +258,12 @@ mod tests {
             DVec3::new(0.5, 0.5, 0.5),
             DVec3::new(4.5, 3.5, 2.5),
         ] {
-            let (phi, num) = grid.sample(&mut (), p);
+            let (phi, num) = grid.trilinear(p);
             assert!((phi - (p.x + 2.0 * p.y + 3.0 * p.z)).abs() < 1e-4, "{p}");
             assert!((num[0] - 1.0).abs() < 1e-6);
         }
         // Outside, the faces' values.
-        let (phi, _) = grid.sample(&mut (), DVec3::new(-3.0, 0.5, 0.5));
+        let (phi, _) = grid.trilinear(DVec3::new(-3.0, 0.5, 0.5));
         assert!((phi - (0.5 + 1.0 + 1.5)).abs() < 1e-4);
     }
 }

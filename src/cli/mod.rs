@@ -1,8 +1,6 @@
 //! The `aarbf` command line: argument definitions and the commands behind them.
 
 mod bench;
-mod bench_interactive;
-mod bench_study;
 pub mod field;
 mod generate;
 mod info;
@@ -79,10 +77,9 @@ impl Cli {
                 })
                 .mut_subcommands(negatives)
         }
-        let mut command =
-            negatives(Cli::command()).mut_subcommand("bench", bench_study::tailor_help);
+        let mut command = negatives(Cli::command()).mut_subcommand("bench", bench::tailor_help);
         let mut matches = command.get_matches_mut();
-        bench_study::warn_of_other_studies_options(&matches);
+        bench::warn_of_other_studies_options(&matches);
         Cli::from_arg_matches_mut(&mut matches).unwrap_or_else(|e| e.exit())
     }
 }

@@ -25,7 +25,6 @@ mod scalar;
 pub mod stems;
 pub mod text;
 pub mod vtk;
-mod vtk_appended;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

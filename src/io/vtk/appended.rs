@@ -3,7 +3,7 @@
 //! type, components and offset, and only the point coordinates and the selected point-data
 //! arrays are read from the file (decoded, and inflated for zlib, VTK's default compressor);
 //! every other array is never read or decoded. Files with inline (ascii or base64) arrays or
-//! another compressor go through vtkio ([`super::vtk`]). (vtkio 0.7.0-rc2 panics on the base64
+//! another compressor go through vtkio ([`super`]). (vtkio 0.7.0-rc2 panics on the base64
 //! appended data VTK 9.7's writer makes of a million particles: `benches/peers/vtk_read.py`.)
 
 use std::fs::File;
@@ -12,8 +12,10 @@ use std::io::{Read, Seek, SeekFrom};
 use glam::DVec3;
 use quick_xml::events::{BytesStart, Event};
 
-use super::scalar::Scalar;
-use super::{At, AttributeSelection, Columns, DataError, array_attribute_names, split_components};
+use crate::io::scalar::Scalar;
+use crate::io::{
+    At, AttributeSelection, Columns, DataError, array_attribute_names, split_components,
+};
 
 /// The most bytes of XML read while looking for `<AppendedData ... _` (a header describes
 /// arrays; 64 MiB of it would be thousands of pieces).
@@ -76,7 +78,7 @@ pub(super) fn read(
     selection: &AttributeSelection,
 ) -> Result<Option<Columns>, DataError> {
     let mut file = File::open(at.file).map_err(|e| at.io(e))?;
-    let file_len = super::file_len(at, &file)?;
+    let file_len = crate::io::file_len(at, &file)?;
     let Some(header) = read_header(at, &mut file)? else {
         return Ok(None);
     };
@@ -87,7 +89,7 @@ pub(super) fn read(
         header: &header,
     };
     let mut positions = Vec::new();
-    let mut attributes: Vec<super::Attribute> = Vec::new();
+    let mut attributes: Vec<crate::io::Attribute> = Vec::new();
     let mut skipped = Vec::new();
     // A piece without points (VTK writes them for idle MPI ranks) adds nothing.
     let pieces = header.pieces.iter().filter(|p| p.points > 0);
@@ -116,7 +118,7 @@ pub(super) fn read(
             let values = reader.values(array, n)?;
             piece_attributes.extend(split_components(&array.name, &values, array.components));
         }
-        super::vtk::append_piece(at, &mut attributes, piece_attributes, index)?;
+        super::append_piece(at, &mut attributes, piece_attributes, index)?;
         positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
     }
     Ok(Some(Columns {
@@ -385,7 +387,7 @@ impl ArrayReader<'_> {
         // Checked before anything is allocated: a hostile header could declare terabytes.
         let limit = if self.header.zlib {
             self.file_len
-                .saturating_mul(super::vtk::MAX_INFLATION as u64)
+                .saturating_mul(super::MAX_INFLATION as u64)
                 .saturating_add(1 << 20)
         } else {
             self.file_len

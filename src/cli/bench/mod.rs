@@ -7,6 +7,11 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::{Args, Subcommand};
 
+mod interactive;
+mod study;
+
+pub(super) use study::{tailor_help, warn_of_other_studies_options};
+
 use super::render::step_range;
 use crate::backend::{self, BackendKind};
 use crate::render::{RenderSession, RenderSettings};
@@ -32,30 +37,30 @@ pub enum BenchCommand {
     /// Drive the viewer's render worker as a drag does (a new camera every 1/60 s), then
     /// release: preview rate, size and frame time while moving, the time to a full image and
     /// to the spp after, and the longest the window thread waited (interactive.md).
-    Interactive(super::bench_interactive::InteractiveArgs),
+    Interactive(interactive::InteractiveArgs),
     /// The paper's Fig. 9 (blue): frame time vs the global radius at K = 1 and K = 16, over the
     /// benchmark orbit (writes OUT/radius/radius.{csv,md,png}).
-    Radius(super::bench_study::StudyArgs),
+    Radius(study::StudyArgs),
     /// Fig. 9 (red) and Tables 1-2: frame, build and refit time and structure bytes vs K.
-    Cluster(super::bench_study::StudyArgs),
+    Cluster(study::StudyArgs),
     /// Fig. 10a: the RT pipeline vs the LBVH traversal on one device, and the wgpu LBVH.
-    Traversal(super::bench_study::StudyArgs),
+    Traversal(study::StudyArgs),
     /// Fig. 10b: blue vs white noise, frame time and error against a converged reference.
-    Noise(super::bench_study::StudyArgs),
+    Noise(study::StudyArgs),
     /// Build, refit, query and frame time vs N on a log-log plot with fitted exponents.
-    Scaling(super::bench_study::StudyArgs),
+    Scaling(study::StudyArgs),
     /// Table 3: our method vs the voxel-grid baseline and Knoll et al.'s splatter, with the
     /// structure rebuilt every frame, and each one's image error against a converged reference.
-    Baselines(super::bench_study::StudyArgs),
+    Baselines(study::StudyArgs),
     /// Speed vs accuracy: every knob's time and error against a converged f64 reference, the
     /// Pareto front, the defaults and --target-error against it.
-    Accuracy(super::bench_study::StudyArgs),
+    Accuracy(study::StudyArgs),
     /// The field error of the backends' f32 and double-single paths against the f64 reference
     /// at radii from 1e-6 to 1e2 of the domain, offsets up to 1e6 and Phi down to f32's
     /// denormals, on f64 and on f32-exact inputs (not the paper's).
-    Extremes(super::bench_study::StudyArgs),
+    Extremes(study::StudyArgs),
     /// Every study above in turn, with the same options.
-    All(super::bench_study::StudyArgs),
+    All(study::StudyArgs),
 }
 
 #[derive(Debug, Args)]
@@ -100,16 +105,16 @@ pub(super) fn parse_size(text: &str) -> Result<(u32, u32), String> {
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.what {
         BenchCommand::Playback(a) => playback(a),
-        BenchCommand::Interactive(a) => super::bench_interactive::run(a),
-        BenchCommand::Radius(a) => super::bench_study::run(Some(Study::Radius), &a),
-        BenchCommand::Cluster(a) => super::bench_study::run(Some(Study::Cluster), &a),
-        BenchCommand::Traversal(a) => super::bench_study::run(Some(Study::Traversal), &a),
-        BenchCommand::Noise(a) => super::bench_study::run(Some(Study::Noise), &a),
-        BenchCommand::Scaling(a) => super::bench_study::run(Some(Study::Scaling), &a),
-        BenchCommand::Baselines(a) => super::bench_study::run(Some(Study::Baselines), &a),
-        BenchCommand::Accuracy(a) => super::bench_study::run(Some(Study::Accuracy), &a),
-        BenchCommand::Extremes(a) => super::bench_study::run(Some(Study::Extremes), &a),
-        BenchCommand::All(a) => super::bench_study::run(None, &a),
+        BenchCommand::Interactive(a) => interactive::run(a),
+        BenchCommand::Radius(a) => study::run(Some(Study::Radius), &a),
+        BenchCommand::Cluster(a) => study::run(Some(Study::Cluster), &a),
+        BenchCommand::Traversal(a) => study::run(Some(Study::Traversal), &a),
+        BenchCommand::Noise(a) => study::run(Some(Study::Noise), &a),
+        BenchCommand::Scaling(a) => study::run(Some(Study::Scaling), &a),
+        BenchCommand::Baselines(a) => study::run(Some(Study::Baselines), &a),
+        BenchCommand::Accuracy(a) => study::run(Some(Study::Accuracy), &a),
+        BenchCommand::Extremes(a) => study::run(Some(Study::Extremes), &a),
+        BenchCommand::All(a) => study::run(None, &a),
     }
 }
 

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 
-use super::bench::median;
+use super::median;
 use crate::backend::BackendKind;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
 use crate::viewer::navigation::orbit;
@@ -26,7 +26,7 @@ pub struct InteractiveArgs {
     #[arg(long, value_enum, default_value = "cpu")]
     pub backend: BackendKind,
     /// The view's full size, WxH (what the window's central panel would be).
-    #[arg(long, default_value = "1024x768", value_parser = super::bench::parse_size)]
+    #[arg(long, default_value = "1024x768", value_parser = super::parse_size)]
     pub size: (u32, u32),
     /// Seconds of dragging.
     #[arg(long, default_value_t = 5.0)]

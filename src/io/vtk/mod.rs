@@ -11,6 +11,8 @@ use vtkio::model::{
     Piece, PieceData, PolyDataPiece, Version, VertexNumbers, Vtk,
 };
 
+mod appended;
+
 use super::{
     At, AttributeSelection, Columns, DataError, Problem, array_attribute_names, split_components,
 };
@@ -28,7 +30,7 @@ pub fn read_step(
     precheck_counts(at, legacy)?;
     // Raw appended data (VTK's and ParaView's default) is read by offset, only the arrays
     // asked for; everything else is parsed whole by vtkio below.
-    if !legacy && let Some(columns) = super::vtk_appended::read(at, selection)? {
+    if !legacy && let Some(columns) = appended::read(at, selection)? {
         return Ok(columns);
     }
     let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::bench::parse_size;
+use super::parse_size;
 use crate::backend::BackendKind;
 use crate::study::{self, DataSpec, Options, Study};
 use crate::values::Integrator;
@@ -155,7 +155,7 @@ fn study_specific(id: &str) -> bool {
 }
 
 /// `aarbf bench` with each study's help listing its own options (`all` lists every one).
-pub(super) fn tailor_help(bench: clap::Command) -> clap::Command {
+pub(in crate::cli) fn tailor_help(bench: clap::Command) -> clap::Command {
     STUDY_OPTIONS.iter().fold(bench, |bench, (study, own)| {
         bench.mut_subcommand(study, |command| {
             command.mut_args(|arg| {
@@ -173,7 +173,7 @@ pub(super) fn tailor_help(bench: clap::Command) -> clap::Command {
 /// Says which options given are another study's, which this one does not read (`aarbf bench
 /// noise --voxel-grids 64`): a script may pass one list of options to every study, so they are
 /// ignored with a warning rather than refused.
-pub(super) fn warn_of_other_studies_options(matches: &clap::ArgMatches) {
+pub(in crate::cli) fn warn_of_other_studies_options(matches: &clap::ArgMatches) {
     let Some(("bench", bench)) = matches.subcommand() else {
         return;
     };
