@@ -13,7 +13,7 @@
 //! backends add with atomics on the device), voxelisation and march timed apart.
 
 use super::plot::{self, Figure, Panel, Scale};
-use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of};
+use super::{Ctx, Description, Measurement, Options, Row, StudyError, cameras, device_of};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
 use crate::field::FieldSettings;
@@ -133,39 +133,20 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         .rmse(&reference),
                 );
             }
-            let row = |metric, unit, settings, values| Row {
-                device: device.clone(),
-                variant: String::new(),
-                data: ds.name.clone(),
-                step: ds.step,
-                n: ds.n,
-                settings,
-                metric,
-                unit,
-                values,
+            let measured = |variant: &str, settings| {
+                Measurement::new(device.clone(), &ds, settings).variant(variant)
             };
             let s = || settings_of("rbf", "-".into(), o.image, 1);
-            ctx.recorder.record(Row {
-                variant: "rbf".into(),
-                ..row("frame", "ms", s(), total)
-            })?;
-            ctx.recorder.record(Row {
-                variant: "rbf".into(),
-                ..row("structure", "ms", s(), build)
-            })?;
-            ctx.recorder.record(Row {
-                variant: "rbf".into(),
-                ..row("march", "ms", s(), march)
-            })?;
-            ctx.recorder.record(Row {
-                variant: "rbf".into(),
-                ..row(
-                    "rmse",
-                    "linear rgba",
-                    settings_of("rbf", "-".into(), o.noise_image, error_spp),
-                    errors,
-                )
-            })?;
+            ctx.record(&measured("rbf", s()), "frame", "ms", total)?;
+            ctx.record(&measured("rbf", s()), "structure", "ms", build)?;
+            ctx.record(&measured("rbf", s()), "march", "ms", march)?;
+            let noise_settings = settings_of("rbf", "-".into(), o.noise_image, error_spp);
+            ctx.record(
+                &measured("rbf", noise_settings),
+                "rmse",
+                "linear rgba",
+                errors,
+            )?;
             bar.inc(1);
             // The voxel grids, splatted and marched by the backend itself (the GPU backends on
             // the device, timed by its timestamps where it has them).
@@ -215,10 +196,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         errors,
                     ),
                 ] {
-                    ctx.recorder.record(Row {
-                        variant: variant.clone(),
-                        ..row(metric, unit, settings, values)
-                    })?;
+                    ctx.record(&measured(&variant, settings), metric, unit, values)?;
                 }
                 bar.inc(1);
             }
@@ -278,10 +256,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                     if values.is_empty() {
                         continue;
                     }
-                    ctx.recorder.record(Row {
-                        variant: variant.clone(),
-                        ..row(metric, unit, settings, values)
-                    })?;
+                    ctx.record(&measured(&variant, settings), metric, unit, values)?;
                 }
                 bar.inc(1);
             }

@@ -3,7 +3,10 @@
 //! particles' bytes, on every backend.
 
 use super::plot::{self, Figure, Panel, Scale};
-use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of, frame_times, value};
+use super::{
+    Ctx, Description, Measurement, Options, Row, StudyError, build_and_refit_times, cameras,
+    frame_times, value, with_frame_settings,
+};
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
 use crate::values::NoiseKind;
@@ -34,63 +37,45 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
         ctx.data.len() * ctx.backends.len() * o.clusters.len(),
         "cluster",
     );
-    for spec in ctx.data {
-        let ds = ctx.load(spec)?;
+    ctx.each_session(|ctx, ds, session, device| {
         let orbit = cameras(ds.bounds, o.cameras);
         let field = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
         let mut wider = field.clone();
         wider.radius *= 1.1;
-        for &kind in ctx.backends {
-            let mut session = super::session(kind, &ds)?;
-            let device = device_of(&session);
-            for &k in &o.clusters {
-                let cluster = ClusterSize::new(k).map_err(StudyError::Invalid)?;
-                // Builds (after the untimed warm-up) and refits after a 10% radius change, back and
-                // forth (the first untimed).
-                let (builds, refits) = super::build_and_refit_times(
-                    &mut session,
-                    &ds,
-                    &field,
-                    &wider,
-                    cluster,
-                    o.repetitions,
-                )?;
-                let memory = session.backend().memory();
-                let settings = ctx.frame_settings(NoiseKind::Stbn);
-                let dt = session.resolve(&settings)?.step_size;
-                let frames = frame_times(&mut session, &settings, &orbit, o.repetitions)?;
-                let row = |metric, unit, values| Row {
-                    device: device.clone(),
-                    variant: String::new(),
-                    data: ds.name.clone(),
-                    step: ds.step,
-                    n: ds.n,
-                    settings: super::with_frame_settings(
-                        vec![("radius", value(ds.radius)), ("k", k.to_string())],
-                        o,
-                        dt,
-                    ),
-                    metric,
-                    unit,
-                    values,
-                };
-                ctx.recorder.record(row("frame", "ms", frames))?;
-                ctx.recorder.record(row("build", "ms", builds))?;
-                ctx.recorder.record(row("refit", "ms", refits))?;
-                ctx.recorder.record(row(
-                    "structure_bytes",
-                    "bytes",
-                    vec![memory.structure_bytes as f64],
-                ))?;
-                ctx.recorder.record(row(
-                    "particle_bytes",
-                    "bytes",
-                    vec![memory.particle_bytes as f64],
-                ))?;
-                bar.inc(1);
-            }
+        for &k in &o.clusters {
+            let cluster = ClusterSize::new(k).map_err(StudyError::Invalid)?;
+            // Builds (after the untimed warm-up) and refits after a 10% radius change, back and
+            // forth (the first untimed).
+            let (builds, refits) =
+                build_and_refit_times(session, ds, &field, &wider, cluster, o.repetitions)?;
+            let memory = session.backend().memory();
+            let settings = ctx.frame_settings(NoiseKind::Stbn);
+            let dt = session.resolve(&settings)?.step_size;
+            let frames = frame_times(session, &settings, &orbit, o.repetitions)?;
+            let m = Measurement::new(
+                device.clone(),
+                ds,
+                with_frame_settings(
+                    vec![("radius", value(ds.radius)), ("k", k.to_string())],
+                    o,
+                    dt,
+                ),
+            );
+            ctx.record(&m, "frame", "ms", frames)?;
+            ctx.record(&m, "build", "ms", builds)?;
+            ctx.record(&m, "refit", "ms", refits)?;
+            let bytes = |b: usize| vec![b as f64];
+            ctx.record(
+                &m,
+                "structure_bytes",
+                "bytes",
+                bytes(memory.structure_bytes),
+            )?;
+            ctx.record(&m, "particle_bytes", "bytes", bytes(memory.particle_bytes))?;
+            bar.inc(1);
         }
-    }
+        Ok(())
+    })?;
     bar.finish_and_clear();
     Ok(())
 }

@@ -24,6 +24,7 @@ pub mod baselines;
 pub mod cluster;
 pub mod data;
 pub mod extremes;
+mod harness;
 pub mod noise;
 pub mod plot;
 pub mod radius;
@@ -33,18 +34,18 @@ pub mod scaling;
 pub mod traversal;
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
-use indicatif::ProgressBar;
-
-use crate::backend::{self, BackendError, BackendKind};
+use crate::backend::{BackendError, BackendKind};
 use crate::io::DataError;
 use crate::io::output::OutputError;
-use crate::render::{RenderError, RenderSession, RenderSettings};
-use crate::scene::Camera;
-use crate::values::{Bounds, Integrator, NoiseKind};
+use crate::render::RenderError;
+use crate::values::{Bounds, Integrator};
 
 pub use data::{DataSpec, Dataset};
+pub use harness::{
+    Ctx, Measurement, backends, build_and_refit_times, cameras, device_of, frame_times, ms,
+    session, timer, with_frame_settings,
+};
 pub use record::{Device, Machine, Recorder, Row};
 
 /// Why a study could not run or finish.
@@ -414,183 +415,6 @@ pub fn run(study: Study, options: &Options) -> Result<Written, StudyError> {
 /// Runs every study in turn with the same options; stops at the first that fails.
 pub fn run_all(options: &Options) -> Result<Vec<Written>, StudyError> {
     Study::ALL.iter().map(|&s| run(s, options)).collect()
-}
-
-/// What a study's measuring code works with.
-pub struct Ctx<'a> {
-    pub options: &'a Options,
-    pub recorder: &'a mut Recorder,
-    pub data: &'a [DataSpec],
-    pub backends: &'a [BackendKind],
-}
-
-impl Ctx<'_> {
-    /// Loads data set `spec` as the options ask.
-    pub fn load(&self, spec: &DataSpec) -> Result<Dataset, StudyError> {
-        let o = self.options;
-        Dataset::load(spec, o.count, o.step, o.attribute.as_deref(), o.radius)
-    }
-
-    /// A progress bar over `len` measurements.
-    pub fn bar(&self, len: usize, study: &str) -> ProgressBar {
-        crate::progress::bar(len as u64, study)
-    }
-
-    /// The settings of a timed frame.
-    pub fn frame_settings(&self, noise: NoiseKind) -> RenderSettings {
-        RenderSettings {
-            width: self.options.image.0,
-            height: self.options.image.1,
-            integrator: self.options.integrator,
-            noise,
-            ..RenderSettings::default()
-        }
-    }
-}
-
-/// The backends to measure: those asked for (each must work), or every one this machine has.
-pub fn backends(asked: &[BackendKind]) -> Result<Vec<BackendKind>, StudyError> {
-    if !asked.is_empty() {
-        let mut out: Vec<BackendKind> = Vec::new();
-        for &b in asked {
-            if b == BackendKind::Auto {
-                return Err(StudyError::Invalid(
-                    "a study compares named backends: pass --backend cpu, wgpu or ash".into(),
-                ));
-            }
-            if !out.contains(&b) {
-                out.push(b);
-            }
-        }
-        return Ok(out);
-    }
-    static PRESENT: OnceLock<Vec<BackendKind>> = OnceLock::new();
-    Ok(PRESENT
-        .get_or_init(|| {
-            [BackendKind::Cpu, BackendKind::Wgpu, BackendKind::Ash]
-                .into_iter()
-                .filter(|&k| match backend::create(k) {
-                    Ok(_) => true,
-                    Err(e) => {
-                        tracing::warn!("{k}: not measured ({e})");
-                        false
-                    }
-                })
-                .collect()
-        })
-        .clone())
-}
-
-/// How a backend's times are taken.
-pub fn timer(caps: &crate::backend::Capabilities) -> &'static str {
-    use crate::backend::FrameTimer;
-    match (caps.name, caps.frame_timer) {
-        ("ash", FrameTimer::DeviceTimestamps) => "device timestamps",
-        ("wgpu", FrameTimer::DeviceTimestamps) => {
-            "device timestamps for frames, builds, refits and queries; wall clock for uploads"
-        }
-        (_, FrameTimer::SubmitToCompletion) => "wall clock, submit to completion",
-        _ => "wall clock",
-    }
-}
-
-/// The device a session's backend runs on.
-pub fn device_of(session: &RenderSession) -> Device {
-    let caps = session.backend().capabilities();
-    Device::of(caps.name, &caps.device, timer(caps))
-}
-
-/// The paper's benchmark orbit: `count` cameras on a Fibonacci hemisphere around `bounds`
-/// (50 in the paper).
-pub fn cameras(bounds: Bounds, count: usize) -> Vec<Camera> {
-    (0..count)
-        .map(|i| Camera::benchmark_orbit(bounds, i, count, 45.0))
-        .collect()
-}
-
-/// The mean frame time over `cameras` (ms), once per repetition, after one untimed frame.
-/// One frame per camera, restarted for each (1 spp), as the paper times its orbit.
-pub fn frame_times(
-    session: &mut RenderSession,
-    settings: &RenderSettings,
-    cameras: &[Camera],
-    repetitions: usize,
-) -> Result<Vec<f64>, StudyError> {
-    let at = |c: &Camera| RenderSettings {
-        camera: Some(*c),
-        ..settings.clone()
-    };
-    // The warm-up: lavapipe compiles the pipeline of this configuration now.
-    session.accumulate(&at(&cameras[0]), 1)?;
-    let mut out = Vec::with_capacity(repetitions);
-    for _ in 0..repetitions {
-        let mut sum = 0.0;
-        for c in cameras {
-            // A new camera restarts the accumulation: each frame is a first frame.
-            session.accumulate(&at(c), 1)?;
-            sum += session.backend().timings().frame.as_secs_f64();
-        }
-        out.push(1e3 * sum / cameras.len() as f64);
-    }
-    Ok(out)
-}
-
-/// A new session on `kind` over `data`'s series.
-/// Build and refit times (ms) of `repetitions` each on `session`, for `data`'s step under
-/// `field` with `cluster`: the untimed warm-up build first, then rebuilds; then refits after
-/// a radius change to `wider` and back, the first untimed. Leaves the step shown under `field`.
-pub fn build_and_refit_times(
-    session: &mut RenderSession,
-    data: &Dataset,
-    field: &crate::field::FieldSettings,
-    wider: &crate::field::FieldSettings,
-    cluster: crate::accel::ClusterSize,
-    repetitions: usize,
-) -> Result<(Vec<f64>, Vec<f64>), StudyError> {
-    session.show(&data.series, data.step, field, cluster)?;
-    let mut builds = Vec::new();
-    for _ in 0..repetitions {
-        session.backend_mut().build()?;
-        builds.push(ms(session.backend().timings().build));
-    }
-    session.show(&data.series, data.step, wider, cluster)?;
-    let mut refits = Vec::new();
-    for i in 0..repetitions {
-        let f = if i % 2 == 0 { field } else { wider };
-        session.show(&data.series, data.step, f, cluster)?;
-        refits.push(ms(session.backend().timings().refit));
-    }
-    session.show(&data.series, data.step, field, cluster)?;
-    Ok((builds, refits))
-}
-
-/// A timed frame row's settings: `own` (what the study varies), then the frames' (the
-/// options' image size and integrator, blue noise, 1 spp, the orbit's cameras, the march step
-/// the session used).
-pub fn with_frame_settings(
-    mut own: Vec<(&'static str, String)>,
-    o: &Options,
-    step_size: f64,
-) -> Vec<(&'static str, String)> {
-    own.extend([
-        ("width", o.image.0.to_string()),
-        ("height", o.image.1.to_string()),
-        ("integrator", format!("{:?}", o.integrator).to_lowercase()),
-        ("noise", "stbn".into()),
-        ("spp", "1".into()),
-        ("cameras", o.cameras.to_string()),
-        ("step_size", value(step_size)),
-    ]);
-    own
-}
-
-/// Milliseconds of a duration.
-pub fn ms(d: std::time::Duration) -> f64 {
-    d.as_secs_f64() * 1e3
-}
-
-pub fn session(kind: BackendKind, data: &Dataset) -> Result<RenderSession, StudyError> {
-    Ok(RenderSession::new(backend::create(kind)?, &data.series))
 }
 
 /// The least-squares slope of log y over log x: the exponent of a power law y ∝ x^e.

@@ -5,7 +5,10 @@
 //! a sample costs as more particles overlap it.
 
 use super::plot::{self, Figure, Panel, Scale};
-use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of, frame_times, value};
+use super::{
+    Ctx, Description, Measurement, Options, Row, StudyError, cameras, frame_times, value,
+    with_frame_settings,
+};
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
 use crate::render::RenderSettings;
@@ -41,66 +44,50 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
         ctx.data.len() * ctx.backends.len() * KS.len() * o.radius_factors.len(),
         "radius",
     );
-    for spec in ctx.data {
-        let ds = ctx.load(spec)?;
+    ctx.each_session(|ctx, ds, session, device| {
         let orbit = cameras(ds.bounds, o.cameras);
-        for &kind in ctx.backends {
-            let mut session = super::session(kind, &ds)?;
-            let device = device_of(&session);
-            // One march step for the whole sweep, the data set's own (at its radius): the
-            // samples per ray stay the same, so the sweep shows what more overlap per sample
-            // costs.
-            let at_own = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
-            session.show(
-                &ds.series,
-                ds.step,
-                &at_own,
-                ClusterSize::new(1).map_err(StudyError::Invalid)?,
-            )?;
-            let settings = RenderSettings {
-                step_size: Some(
-                    session
-                        .resolve(&ctx.frame_settings(NoiseKind::Stbn))?
-                        .step_size,
-                ),
-                ..ctx.frame_settings(NoiseKind::Stbn)
-            };
-            for k in KS {
-                let cluster = ClusterSize::new(k).map_err(StudyError::Invalid)?;
-                for &factor in &o.radius_factors {
-                    let radius = ds.radius * factor;
-                    let field = FieldSettings::new(ds.attribute.as_deref(), radius);
-                    session.show(&ds.series, ds.step, &field, cluster)?;
-                    let dt = session.resolve(&settings)?.step_size;
-                    let values = frame_times(&mut session, &settings, &orbit, o.repetitions)?;
-                    ctx.recorder.record(Row {
-                        device: device.clone(),
-                        variant: format!("K={k}"),
-                        data: ds.name.clone(),
-                        step: ds.step,
-                        n: ds.n,
-                        settings: super::with_frame_settings(
-                            vec![
-                                ("radius", value(radius)),
-                                (
-                                    "radius_pct_diagonal",
-                                    format!("{:.4}", 100.0 * radius / ds.bounds.diagonal()),
-                                ),
-                                ("radius_factor", format!("{factor}")),
-                                ("k", k.to_string()),
-                            ],
-                            o,
-                            dt,
-                        ),
-                        metric: "frame",
-                        unit: "ms",
-                        values,
-                    })?;
-                    bar.inc(1);
-                }
+        // One march step for the whole sweep, the data set's own (at its radius): the samples
+        // per ray stay the same, so the sweep shows what more overlap per sample costs.
+        let at_own = FieldSettings::new(ds.attribute.as_deref(), ds.radius);
+        session.show(
+            &ds.series,
+            ds.step,
+            &at_own,
+            ClusterSize::new(1).map_err(StudyError::Invalid)?,
+        )?;
+        let settings = RenderSettings {
+            step_size: Some(
+                session
+                    .resolve(&ctx.frame_settings(NoiseKind::Stbn))?
+                    .step_size,
+            ),
+            ..ctx.frame_settings(NoiseKind::Stbn)
+        };
+        for k in KS {
+            let cluster = ClusterSize::new(k).map_err(StudyError::Invalid)?;
+            for &factor in &o.radius_factors {
+                let radius = ds.radius * factor;
+                let field = FieldSettings::new(ds.attribute.as_deref(), radius);
+                session.show(&ds.series, ds.step, &field, cluster)?;
+                let dt = session.resolve(&settings)?.step_size;
+                let values = frame_times(session, &settings, &orbit, o.repetitions)?;
+                let own = vec![
+                    ("radius", value(radius)),
+                    (
+                        "radius_pct_diagonal",
+                        format!("{:.4}", 100.0 * radius / ds.bounds.diagonal()),
+                    ),
+                    ("radius_factor", format!("{factor}")),
+                    ("k", k.to_string()),
+                ];
+                let m = Measurement::new(device.clone(), ds, with_frame_settings(own, o, dt))
+                    .variant(format!("K={k}"));
+                ctx.record(&m, "frame", "ms", values)?;
+                bar.inc(1);
             }
         }
-    }
+        Ok(())
+    })?;
     bar.finish_and_clear();
     Ok(())
 }

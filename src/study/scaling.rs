@@ -11,7 +11,8 @@
 
 use super::plot::{Figure, Panel, Scale};
 use super::{
-    Ctx, DataSpec, Description, Options, Row, StudyError, cameras, device_of, frame_times, value,
+    Ctx, DataSpec, Description, Measurement, Options, Row, StudyError, cameras, device_of,
+    frame_times, value,
 };
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
@@ -128,13 +129,10 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                 let settings = ctx.frame_settings(NoiseKind::Stbn);
                 let dt = session.resolve(&settings)?.step_size;
                 let frames = frame_times(&mut session, &settings, &orbit, o.repetitions)?;
-                let row = |metric, values| Row {
-                    device: device.clone(),
-                    variant: String::new(),
-                    data: ds.name.clone(),
-                    step: ds.step,
-                    n: ds.n,
-                    settings: super::with_frame_settings(
+                let m = Measurement::new(
+                    device.clone(),
+                    &ds,
+                    super::with_frame_settings(
                         vec![
                             ("radius", value(ds.radius)),
                             ("k", "1".into()),
@@ -143,14 +141,11 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         o,
                         dt,
                     ),
-                    metric,
-                    unit: "ms",
-                    values,
-                };
-                ctx.recorder.record(row("build", builds))?;
-                ctx.recorder.record(row("refit", refits))?;
-                ctx.recorder.record(row("query", queries))?;
-                ctx.recorder.record(row("frame", frames))?;
+                );
+                ctx.record(&m, "build", "ms", builds)?;
+                ctx.record(&m, "refit", "ms", refits)?;
+                ctx.record(&m, "query", "ms", queries)?;
+                ctx.record(&m, "frame", "ms", frames)?;
                 bar.inc(1);
             }
         }

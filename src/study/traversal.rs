@@ -6,7 +6,9 @@
 //! cluster.
 
 use super::plot::{self, Figure, Panel};
-use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of, frame_times, value};
+use super::{
+    Ctx, Description, Measurement, Options, Row, StudyError, cameras, device_of, frame_times, value,
+};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
 use crate::backend::ash_rt::context::Context as AshContext;
@@ -165,25 +167,14 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                 let settings = ctx.frame_settings(NoiseKind::Stbn);
                 let dt = session.resolve(&settings)?.step_size;
                 let values = frame_times(&mut session, &settings, &orbit, o.repetitions)?;
-                ctx.recorder.record(Row {
-                    device,
-                    variant: variant.clone(),
-                    data: ds.name.clone(),
-                    step: ds.step,
-                    n: ds.n,
-                    settings: super::with_frame_settings(
-                        vec![
-                            ("radius", value(ds.radius)),
-                            ("k", "1".into()),
-                            ("traversal", variant),
-                        ],
-                        o,
-                        dt,
-                    ),
-                    metric: "frame",
-                    unit: "ms",
-                    values,
-                })?;
+                let own = vec![
+                    ("radius", value(ds.radius)),
+                    ("k", "1".into()),
+                    ("traversal", variant.clone()),
+                ];
+                let m = Measurement::new(device, &ds, super::with_frame_settings(own, o, dt))
+                    .variant(variant);
+                ctx.record(&m, "frame", "ms", values)?;
                 bar.inc(1);
             }
         }
