@@ -14,5 +14,6 @@ pub mod settings;
 mod step_bias;
 
 pub use auto::AutoValues;
-pub use session::{RenderError, RenderSession, Resolved, StepChange};
+pub(crate) use cycles::stratified_cycle;
+pub use session::{FrameBasis, RenderError, RenderSession, Resolved, StepChange};
 pub use settings::{Method, RenderSettings, SPLAT_K, VOXEL_GRID};
