@@ -307,3 +307,43 @@ fn the_command_line_renders_with_ranks() {
     assert!(!refused.status.success());
     assert!(err.contains("single scattering across bricks"), "{err}");
 }
+
+/// The f32 path (the CPU's fast kernel, where its bound allows): each brick holds its own
+/// f32 cells, so the terms are rounded differently from the single rank's, but the samples,
+/// the noise and the compositing are the same.
+#[test]
+fn emission_absorption_in_f32_matches_to_f32_rounding() {
+    let frames = frames(Integrator::Ea, 1, false);
+    let s = scene();
+    let d = DistScene {
+        precision: Precision::F32,
+        ..dist_scene(s)
+    };
+    let mut backend = CpuBackend::new();
+    backend
+        .upload(&StepInput {
+            step: &s.step,
+            field: d.field,
+            cluster: d.cluster,
+            series_bounds: d.series_bounds,
+            series_range: d.series_range,
+            precision: d.precision,
+        })
+        .unwrap();
+    backend.build().unwrap();
+    backend.render(&frames[0]).unwrap();
+    let want = backend.mean_f64().unwrap();
+    for p in [2, 4] {
+        let got = run_local(p, |comm| {
+            let local = slice_of(&s.step, comm.rank(), comm.size());
+            render_distributed(comm, &mut CpuBackend::new(), &local, &d, &frames)
+        })
+        .unwrap()
+        .swap_remove(0)
+        .unwrap();
+        assert!(got.reports.iter().all(|r| r.f64_positions == 0));
+        let diff = max_abs(&got.mean, &want);
+        eprintln!("P = {p}, f32: max |distributed - single rank| = {diff:.3e}");
+        assert!(diff <= 1e-5, "P = {p}: max abs difference {diff:e}");
+    }
+}

@@ -381,3 +381,56 @@ fn direct_send_blends_every_rank_s_pieces_front_to_back() {
         }
     }
 }
+
+/// More ranks than particles: most bricks are empty, and the image is still the single
+/// rank's (to rounding; termination off).
+#[test]
+fn empty_bricks_render_nothing_and_break_nothing() {
+    use crate::backend::cpu::CpuBackend;
+    use crate::backend::{Backend, Precision, StepInput};
+    let step = std::sync::Arc::new(cloud(12, 8));
+    let field = field();
+    let march = step.bounds().grown(0.2);
+    let mut f = frame(DVec3::new(2.6, 1.5, 1.8), march.center(), march, 40, 30);
+    f.colour = ColourMode::Post;
+    f.density_scale = 5.0;
+    f.optical_table = std::sync::Arc::new((0..64).map(|i| i as f32 / 63.0).collect());
+    let frames = [f];
+    let scene = DistScene {
+        field: &field,
+        cluster: crate::accel::ClusterSize::new(1).unwrap(),
+        series_bounds: step.bounds(),
+        series_range: Some((0.0, 3.0)),
+        precision: Precision::F64,
+    };
+    let mut single = CpuBackend::new();
+    single
+        .upload(&StepInput {
+            step: &step,
+            field: &field,
+            cluster: scene.cluster,
+            series_bounds: scene.series_bounds,
+            series_range: scene.series_range,
+            precision: scene.precision,
+        })
+        .unwrap();
+    single.build().unwrap();
+    single.render(&frames[0]).unwrap();
+    let want = single.mean_f64().unwrap();
+    assert!(want.iter().any(|p| p[3] > 0.05), "the particles show");
+    let got = run_local(16, |comm| {
+        let local = slice_of(&step, comm.rank(), comm.size());
+        render_distributed(comm, &mut CpuBackend::new(), &local, &scene, &frames)
+    })
+    .unwrap()
+    .swap_remove(0)
+    .unwrap();
+    assert!(got.reports.iter().filter(|r| r.owned == 0).count() >= 4);
+    let diff = got
+        .mean
+        .iter()
+        .zip(&want)
+        .flat_map(|(a, b)| (0..4).map(move |c| (a[c] - b[c]).abs()))
+        .fold(0.0, f64::max);
+    assert!(diff <= 1e-12, "{diff:e}");
+}
