@@ -321,6 +321,7 @@ fn check_flags(args: &RenderArgs) -> anyhow::Result<bool> {
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    super::render_dist::refuse_mpi_launch()?;
     let draw_legend = check_flags(&args)?;
     let mut resolved = if args.color_by_density {
         resolve(&args.data, &args.field)?

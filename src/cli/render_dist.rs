@@ -19,6 +19,23 @@ use crate::render::{AutoValues, FrameBasis, Method, RenderSettings, stratified_c
 use crate::scene_file::resolve::Resolved;
 use crate::values::FrameParams;
 
+/// Launched as one of several MPI processes, each would render the whole image and write the
+/// same file: refused, saying what runs today, until an MPI build exists.
+pub(super) fn refuse_mpi_launch() -> anyhow::Result<()> {
+    for var in ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"] {
+        if let Ok(size) = std::env::var(var)
+            && size.trim().parse::<usize>().is_ok_and(|n| n > 1)
+        {
+            bail!(
+                "aarbf was started as one of {size} MPI processes ({var}), but this build has no \
+                 MPI support yet: each process would render the whole image. Run one process \
+                 with --ranks {size} instead (ranks as threads; docs/distributed.md)"
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Refuses what the distributed renderer does not do yet, naming it.
 fn check_supported(
     args: &RenderArgs,

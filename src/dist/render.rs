@@ -43,7 +43,8 @@ pub struct RankReport {
     /// Whether its brick was built in f64 (1) or f32 (0).
     pub f64_positions: u64,
     /// Seconds: sampling, decomposition and exchange; upload and build; rendering its brick
-    /// (all frames); compositing (all frames).
+    /// (all frames); compositing (all frames). A collective's time includes waiting in it
+    /// for the slowest rank.
     pub exchange_seconds: f64,
     pub build_seconds: f64,
     pub render_seconds: f64,
