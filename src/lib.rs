@@ -13,12 +13,15 @@
 //! - [`backend`]: the `Backend` trait, its CPU, wgpu and ash implementations, and the shaders
 //!   with their CPU twins;
 //! - [`render`]: the rendering session (what each change costs, the automatic settings);
+//! - [`dist`]: distributed rendering (k-d bricks, ghost particles, direct-send compositing)
+//!   over a communicator: threads in one process now, MPI later;
 //! - [`cli`], [`viewer`], [`study`] (the paper's benchmark studies) and [`scene_file`] (which
 //!   composes all of the above) at the top.
 
 pub mod accel;
 pub mod backend;
 pub mod cli;
+pub mod dist;
 pub mod field;
 pub mod io;
 pub mod noise;

@@ -1315,7 +1315,7 @@ fn save_image(
     let image = image_of(array)?;
     let background = [background.0, background.1, background.2];
     detached(py, move || {
-        let format = aarbf::cli::render::OutputFormat::of(&path, bit_depth)?;
+        let format = aarbf::cli::output_format::OutputFormat::of(&path, bit_depth)?;
         aarbf::io::output::check_writable(&path, force)?;
         format.write(&path, &image, background, None)
     })

@@ -22,7 +22,7 @@ use glam::DVec3;
 
 use crate::accel::ClusterSize;
 use crate::field::{FieldError, FieldSettings};
-use crate::values::{Bounds, FrameParams, Image, Step};
+use crate::values::{Bounds, FrameParams, HalfOpenBox, Image, PixelRect, Step};
 
 pub use precision::{Precision, Representation, parse_precision};
 
@@ -227,6 +227,9 @@ pub enum BackendError {
     /// The caller raised the abandon flag ([`Backend::set_abandon_flag`]) during the frame.
     #[error("the frame was abandoned for a newer one")]
     Abandoned,
+    /// [`Backend::render_owned`] where it is not implemented yet.
+    #[error("{backend}: {what} is not distributed yet")]
+    NotDistributed { backend: &'static str, what: String },
 }
 
 /// A rendering and query backend.
@@ -295,6 +298,27 @@ pub trait Backend: Send {
         frame: &FrameParams,
         k: usize,
     ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError>;
+
+    /// The part of one frame whose samples lie in `owned`, for the pixels of `rect`, row-major,
+    /// each `[r, g, b, T]`: the premultiplied colour gathered from those samples and the
+    /// transmittance through them, composited from transmittance 1 with no background (a
+    /// rank's share of a distributed frame). The samples are the whole frame's lattice
+    /// `t_enter + (k + jitter) dt`, from the entry into the frame's march box, with the whole
+    /// frame's noise, so boxes that tile space split each pixel's samples between them, one
+    /// box to each; composited in the order a ray meets the boxes they give the whole frame up
+    /// to rounding. Nothing is accumulated. Emission–absorption only (single scattering makes
+    /// one decision per ray, which no box can make alone); by default not implemented.
+    fn render_owned(
+        &mut self,
+        _frame: &FrameParams,
+        _owned: &HalfOpenBox,
+        _rect: PixelRect,
+    ) -> Result<Vec<[f64; 4]>, BackendError> {
+        Err(BackendError::NotDistributed {
+            backend: self.capabilities().name,
+            what: "rendering a part of a frame (distributed renders run on the cpu backend)".into(),
+        })
+    }
 
     /// The voxel-grid baseline of the paper's Table 3 ([`voxel`]), its first half: splats the
     /// uploaded particles (no [`Backend::build`] needed) into a grid over the frame's march

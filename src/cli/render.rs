@@ -1,10 +1,13 @@
 //! `aarbf render`: images of one step or a range of steps.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail, ensure};
 use clap::Args;
+
+use super::output_format::OutputFormat;
+use super::render_plan::{Frame, plan_frames};
 
 use crate::backend::voxel::VoxelGeometry;
 use crate::backend::{self, BackendKind};
@@ -14,9 +17,7 @@ use crate::render::legend::Legend;
 use crate::render::target::{ErrorMetric, render_to_target};
 use crate::render::{Method, SPLAT_K};
 use crate::scene::Camera;
-use crate::scene_file::resolve::{
-    DataArgs, FieldOptions, Resolved, ViewFlags, resolve, resolve_for_images,
-};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve, resolve_for_images};
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
 
@@ -161,6 +162,12 @@ pub struct RenderArgs {
     /// Draw no colour legend.
     #[arg(long, conflicts_with = "legend")]
     pub no_legend: bool,
+    /// Render with N ranks: threads of this process, each holding one k-d brick of the step
+    /// (its particles and their ghosts) and rendering its samples, composited by direct send;
+    /// the code path an MPI launch will take. Emission-absorption on the cpu backend
+    /// (docs/distributed.md).
+    #[arg(long, value_name = "N")]
+    pub ranks: Option<usize>,
 }
 
 fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
@@ -286,81 +293,6 @@ fn apply_flags(args: &RenderArgs, scene: &mut SceneFile) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// One image of a render: which step, from where, into which file.
-struct Frame {
-    step: usize,
-    camera: Camera,
-    path: PathBuf,
-}
-
-/// `camera` turned by `degrees` about its up axis through its focal point.
-fn turned(camera: Camera, degrees: f64) -> Camera {
-    let turn = glam::DQuat::from_axis_angle(camera.up.normalize(), degrees.to_radians());
-    Camera {
-        eye: camera.at + turn * (camera.eye - camera.at),
-        ..camera
-    }
-}
-
-/// The kind of image file a render writes, from its extension and --bit-depth (the Python
-/// package's `Image.save` writes through it too).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum OutputFormat {
-    Png8,
-    Png16,
-    Exr,
-}
-
-impl OutputFormat {
-    pub fn of(path: &Path, bit_depth: u8) -> anyhow::Result<OutputFormat> {
-        let ext = path
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
-        Ok(match (ext.as_str(), bit_depth) {
-            ("png", 8) => OutputFormat::Png8,
-            ("png", 16) => OutputFormat::Png16,
-            ("png", d) => bail!("--bit-depth {d}: a PNG has 8 or 16 bits per channel"),
-            ("exr", 8) => OutputFormat::Exr,
-            ("exr", d) => bail!("--bit-depth {d}: an .exr output is always 32-bit float"),
-            (e, _) => bail!(
-                "--out {}: unknown image type '.{e}' (write .png or .exr)",
-                path.display()
-            ),
-        })
-    }
-
-    fn extension(self) -> &'static str {
-        match self {
-            OutputFormat::Png8 | OutputFormat::Png16 => "png",
-            OutputFormat::Exr => "exr",
-        }
-    }
-
-    /// Writes `image` (composited over `background`) with `legend` drawn on an 8-bit PNG.
-    pub fn write(
-        self,
-        path: &Path,
-        image: &crate::values::Image,
-        background: [f64; 3],
-        legend: Option<&Legend>,
-    ) -> anyhow::Result<()> {
-        use crate::io::output;
-        match self {
-            OutputFormat::Png8 => {
-                let mut rgb = image.to_srgb8();
-                if let Some(legend) = legend {
-                    legend.draw(&mut rgb)?;
-                }
-                output::write_image(path, rgb.into(), image::ImageFormat::Png, true)?;
-            }
-            OutputFormat::Png16 => output::write_png16_alpha(path, image, background, true)?,
-            OutputFormat::Exr => output::write_exr(path, image, background, true)?,
-        }
-        Ok(())
-    }
-}
-
 /// Checks the flags before the data is opened or a device is probed, and decides whether a
 /// legend is drawn (on 8-bit PNG images that hold it, unless --no-legend).
 fn check_flags(args: &RenderArgs) -> anyhow::Result<bool> {
@@ -388,53 +320,8 @@ fn check_flags(args: &RenderArgs) -> anyhow::Result<bool> {
     Ok(!args.no_legend && format == OutputFormat::Png8 && fits)
 }
 
-/// The images a render writes: one step, a range of steps, or an orbit, each with its camera
-/// and file; and whether they are a sequence (frames numbered in their names).
-fn plan_frames(
-    args: &RenderArgs,
-    resolved: &Resolved,
-    start_camera: Camera,
-    format: OutputFormat,
-) -> anyhow::Result<(Vec<Frame>, bool)> {
-    let steps: Vec<usize> = match &args.steps {
-        Some(text) => step_range(text, resolved.series.len())?.collect(),
-        None => vec![resolved.step],
-    };
-    let sequence = args.steps.is_some() || args.orbit_sequence.is_some();
-    let frame_path = |index: usize| -> PathBuf {
-        if !sequence {
-            return args.out.clone();
-        }
-        let stem = args
-            .out
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "frame".into());
-        let dir = args.out.parent().unwrap_or(Path::new(""));
-        dir.join(format!("{stem}_{index:04}.{}", format.extension()))
-    };
-    let frames = match args.orbit_sequence {
-        Some(0) => bail!("--orbit-sequence needs at least 1 frame"),
-        Some(n) => (0..n)
-            .map(|k| Frame {
-                step: steps[k % steps.len()],
-                camera: turned(start_camera, 360.0 * k as f64 / n as f64),
-                path: frame_path(k),
-            })
-            .collect(),
-        None => steps
-            .iter()
-            .map(|&step| Frame {
-                step,
-                camera: start_camera,
-                path: frame_path(step),
-            })
-            .collect(),
-    };
-    Ok((frames, sequence))
-}
-
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    super::render_dist::refuse_mpi_launch()?;
     let draw_legend = check_flags(&args)?;
     let mut resolved = if args.color_by_density {
         resolve(&args.data, &args.field)?
@@ -527,6 +414,18 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| "auto".into());
     let precision = backend::parse_precision(&precision_text, backend::Precision::RENDER)
         .map_err(anyhow::Error::msg)?;
+    if let Some(ranks) = args.ranks {
+        return super::render_dist::run(
+            &args,
+            resolved,
+            settings,
+            &frames,
+            format,
+            draw_legend,
+            precision,
+            ranks,
+        );
+    }
     let backend = backend::create(args.backend)?;
     tracing::info!(
         "backend: {} ({})",

@@ -216,33 +216,9 @@ impl RenderSession {
     /// What `settings` leaves automatic, resolved for the loaded field (the step size, the
     /// density scale and Phi_ref, from the series' automatic values unless set).
     pub fn resolve(&self, settings: &RenderSettings) -> Result<Resolved, RenderError> {
-        let Some((_, auto)) = &self.auto else {
-            return Err(BackendError::NothingUploaded("session").into());
-        };
-        let r = auto.typical_radius.max(1e-30);
-        let spacing = (self.bounds.extent().max(DVec3::splat(r)).element_product()
-            / self.max_count.max(1) as f64)
-            .cbrt();
-        // Work per pixel stays bounded: at most MAX_SAMPLES_PER_RAY samples across the march
-        // box. The default resolves the kernel (R / 3) and the particle spacing, but never
-        // finer than the box's diagonal / DEFAULT_SAMPLES_PER_RAY.
-        let box_diagonal = (self.bounds.extent() + 4.0 * auto.max_radius).length();
-        let dt = settings.step_size.unwrap_or_else(|| {
-            (r / 3.0)
-                .min(0.5 * spacing)
-                .max(box_diagonal / DEFAULT_SAMPLES_PER_RAY)
-        });
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(RenderError::Settings(format!(
-                "step size {dt} must be positive"
-            )));
-        }
-        if box_diagonal / dt > MAX_SAMPLES_PER_RAY {
-            return Err(RenderError::Settings(format!(
-                "step size {dt} would take {:.0} samples across the data ({box_diagonal}); at most {MAX_SAMPLES_PER_RAY} are allowed",
-                box_diagonal / dt
-            )));
-        }
+        let basis = self.basis()?;
+        let resolved = basis.resolve(settings)?;
+        let (r, dt) = (basis.auto.typical_radius.max(1e-30), resolved.step_size);
         if settings.step_size.is_none()
             && dt > r
             && !self
@@ -253,23 +229,7 @@ impl RenderSession {
                 "the particles' radius ({r:.3e}) is below the march step ({dt:.3e}, {DEFAULT_SAMPLES_PER_RAY} samples across the data): the image will miss particles; pass --step-size to march finer"
             );
         }
-        let phi_ref = settings.phi_ref.unwrap_or(auto.phi_ref);
-        if !(phi_ref.is_finite() && phi_ref > 0.0) {
-            return Err(RenderError::Settings(format!(
-                "Phi_ref {phi_ref} must be positive"
-            )));
-        }
-        Ok(Resolved {
-            phi_ref,
-            step_size: dt,
-            density_scale: settings.optical.scale().unwrap_or(0.4 / r),
-            // A periodic box is the whole domain: nothing outside it is drawn.
-            margin: if self.periodic.is_some() {
-                0.0
-            } else {
-                2.0 * auto.max_radius
-            },
-        })
+        Ok(resolved)
     }
 
     /// The frame constants for `settings`, frame number `frame`.
@@ -278,58 +238,21 @@ impl RenderSession {
         settings: &RenderSettings,
         frame: u32,
     ) -> Result<FrameParams, RenderError> {
-        let Some(loaded) = &self.loaded else {
+        self.resolve(settings)?;
+        self.basis()?.frame_params(settings, frame)
+    }
+
+    /// What the frames of the loaded field follow from.
+    fn basis(&self) -> Result<FrameBasis<'_>, RenderError> {
+        let (Some(loaded), Some((_, auto))) = (&self.loaded, &self.auto) else {
             return Err(BackendError::NothingUploaded("session").into());
         };
-        let resolved = self.resolve(settings)?;
-        settings.check().map_err(RenderError::Settings)?;
-        let camera = settings
-            .camera
-            .unwrap_or_else(|| Camera::default_for(self.bounds));
-        let grow = DVec3::splat(resolved.margin);
-        let density_scale = resolved.density_scale;
-        let optical_table = settings.optical.map().bake();
-        let colour = if settings.colour_by_density || loaded.field.attribute.is_none() {
-            ColourMode::Density
-        } else if loaded.field.classification == Classification::Pre {
-            ColourMode::Pre
-        } else {
-            ColourMode::Post
-        };
-        // A series without particles has inverted (infinite) bounds; its march box is a point,
-        // which every ray misses, so the frame is background at no cost on any backend.
-        let (box_min, box_max) = if self.bounds.is_empty() {
-            (DVec3::ZERO, DVec3::ZERO)
-        } else {
-            (self.bounds.min - grow, self.bounds.max + grow)
-        };
-        Ok(FrameParams {
-            width: settings.width,
-            height: settings.height,
-            frame,
-            seed: settings.seed,
-            camera: camera.frame(settings.width, settings.height)?,
-            box_min,
-            box_max,
-            dt: resolved.step_size,
-            opacity_threshold: settings.opacity_threshold,
-            phi_ref: resolved.phi_ref,
-            density_scale,
-            majorant: density_scale * table_max(&optical_table),
-            light_dir: {
-                let (side, front) = settings.up_axis.horizontal();
-                settings
-                    .light
-                    .direction_about(settings.up_axis.vector(), side, front)
-            },
-            light_intensity: settings.light.intensity,
-            ambient: settings.light.ambient,
-            background: settings.background,
-            integrator: settings.integrator,
-            noise: settings.noise,
-            colour,
-            optical_table: Arc::new(optical_table),
-            colour_table: Arc::new(loaded.field.color_map.bake()),
+        Ok(FrameBasis {
+            bounds: self.bounds,
+            max_count: self.max_count,
+            periodic: self.periodic.is_some(),
+            field: &loaded.field,
+            auto: *auto,
         })
     }
 
@@ -448,6 +371,128 @@ impl RenderSession {
             self.backend.render(&params)?;
         }
         self.image()
+    }
+}
+
+/// What a frame's constants follow from besides the render settings: the domain, the series'
+/// largest step, the field and the series' automatic values under it. A session makes one for
+/// what its backend holds; a distributed render, whose ranks each hold a part of the step,
+/// makes one from the series alone, so that every rank's frames are the single-rank frames.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameBasis<'a> {
+    /// The domain: the series' bounds, or the periodic box.
+    pub bounds: Bounds,
+    pub max_count: usize,
+    /// Whether the domain's faces wrap (the march box then has no margin).
+    pub periodic: bool,
+    pub field: &'a FieldSettings,
+    pub auto: AutoValues,
+}
+
+impl FrameBasis<'_> {
+    /// What `settings` leaves automatic, resolved (the step size, the density scale and
+    /// Phi_ref, from the series' automatic values unless set).
+    pub fn resolve(&self, settings: &RenderSettings) -> Result<Resolved, RenderError> {
+        let auto = &self.auto;
+        let r = auto.typical_radius.max(1e-30);
+        let spacing = (self.bounds.extent().max(DVec3::splat(r)).element_product()
+            / self.max_count.max(1) as f64)
+            .cbrt();
+        // Work per pixel stays bounded: at most MAX_SAMPLES_PER_RAY samples across the march
+        // box. The default resolves the kernel (R / 3) and the particle spacing, but never
+        // finer than the box's diagonal / DEFAULT_SAMPLES_PER_RAY.
+        let box_diagonal = (self.bounds.extent() + 4.0 * auto.max_radius).length();
+        let dt = settings.step_size.unwrap_or_else(|| {
+            (r / 3.0)
+                .min(0.5 * spacing)
+                .max(box_diagonal / DEFAULT_SAMPLES_PER_RAY)
+        });
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(RenderError::Settings(format!(
+                "step size {dt} must be positive"
+            )));
+        }
+        if box_diagonal / dt > MAX_SAMPLES_PER_RAY {
+            return Err(RenderError::Settings(format!(
+                "step size {dt} would take {:.0} samples across the data ({box_diagonal}); at most {MAX_SAMPLES_PER_RAY} are allowed",
+                box_diagonal / dt
+            )));
+        }
+        let phi_ref = settings.phi_ref.unwrap_or(auto.phi_ref);
+        if !(phi_ref.is_finite() && phi_ref > 0.0) {
+            return Err(RenderError::Settings(format!(
+                "Phi_ref {phi_ref} must be positive"
+            )));
+        }
+        Ok(Resolved {
+            phi_ref,
+            step_size: dt,
+            density_scale: settings.optical.scale().unwrap_or(0.4 / r),
+            // A periodic box is the whole domain: nothing outside it is drawn.
+            margin: if self.periodic {
+                0.0
+            } else {
+                2.0 * auto.max_radius
+            },
+        })
+    }
+
+    /// The frame constants for `settings`, frame number `frame`.
+    pub fn frame_params(
+        &self,
+        settings: &RenderSettings,
+        frame: u32,
+    ) -> Result<FrameParams, RenderError> {
+        let resolved = self.resolve(settings)?;
+        settings.check().map_err(RenderError::Settings)?;
+        let camera = settings
+            .camera
+            .unwrap_or_else(|| Camera::default_for(self.bounds));
+        let grow = DVec3::splat(resolved.margin);
+        let density_scale = resolved.density_scale;
+        let optical_table = settings.optical.map().bake();
+        let colour = if settings.colour_by_density || self.field.attribute.is_none() {
+            ColourMode::Density
+        } else if self.field.classification == Classification::Pre {
+            ColourMode::Pre
+        } else {
+            ColourMode::Post
+        };
+        // A series without particles has inverted (infinite) bounds; its march box is a point,
+        // which every ray misses, so the frame is background at no cost on any backend.
+        let (box_min, box_max) = if self.bounds.is_empty() {
+            (DVec3::ZERO, DVec3::ZERO)
+        } else {
+            (self.bounds.min - grow, self.bounds.max + grow)
+        };
+        Ok(FrameParams {
+            width: settings.width,
+            height: settings.height,
+            frame,
+            seed: settings.seed,
+            camera: camera.frame(settings.width, settings.height)?,
+            box_min,
+            box_max,
+            dt: resolved.step_size,
+            opacity_threshold: settings.opacity_threshold,
+            phi_ref: resolved.phi_ref,
+            density_scale,
+            majorant: density_scale * table_max(&optical_table),
+            light_dir: {
+                let (side, front) = settings.up_axis.horizontal();
+                settings
+                    .light
+                    .direction_about(settings.up_axis.vector(), side, front)
+            },
+            light_intensity: settings.light.intensity,
+            ambient: settings.light.ambient,
+            background: settings.background,
+            integrator: settings.integrator,
+            noise: settings.noise,
+            colour,
+            optical_table: Arc::new(optical_table),
+            colour_table: Arc::new(self.field.color_map.bake()),
+        })
     }
 }
 

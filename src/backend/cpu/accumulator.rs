@@ -37,6 +37,12 @@ impl Accumulator {
         self.frames += 1;
     }
 
+    /// The mean per pixel, in f64.
+    pub fn mean(&self) -> Vec<[f64; 4]> {
+        let n = f64::from(self.frames.max(1));
+        self.sum.iter().map(|s| s.map(|v| v / n)).collect()
+    }
+
     pub fn image(&self) -> Image {
         let n = f64::from(self.frames.max(1));
         Image {

@@ -21,10 +21,10 @@
 use glam::DVec3;
 
 use crate::noise::{BlueNoiseMask, white::white};
-use crate::values::FrameParams;
 use crate::values::frame::{ColourMode, Integrator, NoiseKind};
 use crate::values::shader_constants::{NOISE_OFFSETS, PHI_EPSILON};
 use crate::values::tables::{lookup, lookup_colour};
+use crate::values::{Bounds, FrameParams, HalfOpenBox};
 
 /// The field as an integrator sees it: sampled along rays, each at increasing distances (every
 /// integrator marches or tracks forward), so a sampler may keep what one sample found for the
@@ -286,13 +286,64 @@ pub fn render_pixels_with<F: FieldSampler>(
 ) {
     match p.integrator {
         Integrator::Ea | Integrator::SsReference | Integrator::Marching => {
-            march_packet(p, field, pixels, scratch, out)
+            march_packet(p, field, None, pixels, scratch, out)
         }
         Integrator::Delta => {
             for (o, &(x, y)) in out.iter_mut().zip(pixels) {
                 *o = render_pixel_with(p, field, x, y, scratch);
             }
         }
+    }
+}
+
+/// The part of each of `pixels`' emission–absorption that `owned` holds: the frame's samples
+/// (the same lattice `t_enter + (k + jitter) dt` from the march box's entry as the whole
+/// frame's) whose points lie in the half-open box, composited front to back from
+/// transmittance 1, as premultiplied colour and the transmittance left, `[r, g, b, T]`, with
+/// no background. Boxes that tile space split every pixel's samples between them, each sample
+/// to one box, so compositing their values in the order a ray meets the boxes
+/// (`C = C_front + T_front C`, `T = T_front T`) gives the whole frame's pixel up to rounding,
+/// and exactly its value for a box holding all of space. Early termination applies per box.
+/// Emission–absorption only: the other integrators make one decision per ray, which no box
+/// can make alone (the caller refuses them).
+pub fn render_owned_pixels_with<F: FieldSampler>(
+    p: &FrameParams,
+    field: &F,
+    owned: &HalfOpenBox,
+    pixels: &[(u32, u32)],
+    scratch: &mut PixelScratch<F>,
+    out: &mut [[f64; 4]],
+) {
+    assert_eq!(
+        p.integrator,
+        Integrator::Ea,
+        "a box's part of a frame is emission-absorption only"
+    );
+    march_packet(p, field, Some(owned), pixels, scratch, out)
+}
+
+/// Keeps of a ray's `intervals` the part where it can meet `owned` within the march box. The
+/// box is grown by a step first, so that no rounding of where the ray crosses its faces drops
+/// a sample: which samples are owned is decided by their points, not by these bounds.
+fn clip_to_owned(
+    p: &FrameParams,
+    owned: &HalfOpenBox,
+    origin: DVec3,
+    dir: DVec3,
+    intervals: &mut Vec<(f64, f64)>,
+) {
+    let march_box = Bounds {
+        min: p.box_min,
+        max: p.box_max,
+    };
+    let reach = owned.clipped_to(march_box).grown(p.dt);
+    match ray_box(origin, dir, reach.min, reach.max) {
+        None => intervals.clear(),
+        Some((a, b)) => intervals.retain_mut(|(s, e)| {
+            *s = s.max(a);
+            *e = e.min(b);
+            *s < *e
+        }),
     }
 }
 
@@ -329,8 +380,14 @@ struct MarchedRay {
 }
 
 impl MarchedRay {
-    /// The pixel's value: what the ray gathered over the background.
-    fn finish(&self, bg: [f64; 3]) -> [f64; 4] {
+    /// The pixel's value: what the ray gathered over the background; or, for a ray marched
+    /// through an owned box only, what it gathered there, `[r, g, b, T]` (premultiplied colour
+    /// and transmittance, no background).
+    fn finish(&self, bg: [f64; 3], owned: Option<&HalfOpenBox>) -> [f64; 4] {
+        if owned.is_some() {
+            let c = self.colour;
+            return [c[0], c[1], c[2], self.transmittance];
+        }
         let c = self.colour;
         let tr = self.transmittance;
         [
@@ -351,6 +408,7 @@ impl MarchedRay {
 fn march_packet<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
+    owned: Option<&HalfOpenBox>,
     pixels: &[(u32, u32)],
     scratch: &mut PixelScratch<F>,
     out: &mut [[f64; 4]],
@@ -368,7 +426,10 @@ fn march_packet<F: FieldSampler>(
     let mut rays: [Option<MarchedRay>; PACKET] = [None; PACKET];
     for (i, &(x, y)) in pixels.iter().enumerate() {
         let (origin, dir) = p.primary_ray(x, y);
-        out[i] = [bg[0], bg[1], bg[2], 0.0];
+        out[i] = match owned {
+            None => [bg[0], bg[1], bg[2], 0.0],
+            Some(_) => [0.0, 0.0, 0.0, 1.0],
+        };
         let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
             continue;
         };
@@ -383,6 +444,9 @@ fn march_packet<F: FieldSampler>(
             t_exit,
             &mut intervals[i],
         );
+        if let Some(owned) = owned {
+            clip_to_owned(p, owned, origin, dir, &mut intervals[i]);
+        }
         // Dimension 0 is the primary decision: emission–absorption's jitter, or stochastic
         // marching's free-flight number (its jitter is dimension 1, as the reference's).
         let (jitter, target_tau) = match p.integrator {
@@ -423,17 +487,25 @@ fn march_packet<F: FieldSampler>(
             let Some(ray) = &mut rays[i] else { continue };
             match ray.samples.next(&intervals[i]) {
                 Some(t) => {
-                    points[i] = Some(ray.origin + ray.dir * t);
+                    let at = ray.origin + ray.dir * t;
+                    // Another box's sample is another rank's (the ray marches on).
+                    if owned.is_none_or(|b| b.contains(at)) {
+                        points[i] = Some(at);
+                    }
                     any = true;
                 }
                 None => {
-                    out[i] = ray.finish(bg);
+                    out[i] = ray.finish(bg, owned);
                     rays[i] = None;
                 }
             }
         }
         if !any {
             return;
+        }
+        if points.iter().all(Option::is_none) {
+            // Every ray of the packet is crossing another box's samples.
+            continue;
         }
         field.sample_packet(packet, primary, &points, &mut values);
         for i in 0..PACKET {
@@ -464,7 +536,7 @@ fn march_packet<F: FieldSampler>(
             }
             ray.transmittance *= 1.0 - alpha;
             if 1.0 - ray.transmittance >= p.opacity_threshold {
-                out[i] = ray.finish(bg);
+                out[i] = ray.finish(bg, owned);
                 rays[i] = None;
             }
         }
@@ -485,7 +557,7 @@ pub fn render_pixel_with<F: FieldSampler>(
         Integrator::Ea | Integrator::SsReference | Integrator::Marching
     ) {
         let mut out = [[0.0; 4]];
-        march_packet(p, field, &[(x, y)], scratch, &mut out);
+        march_packet(p, field, None, &[(x, y)], scratch, &mut out);
         return out[0];
     }
     let (origin, dir) = p.primary_ray(x, y);

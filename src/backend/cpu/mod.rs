@@ -12,6 +12,7 @@
 
 mod accumulator;
 pub mod integrators;
+mod owned;
 pub mod splat;
 
 use std::sync::Arc;
@@ -31,7 +32,7 @@ use crate::field::splat::{SplatCounts, SplatScratch};
 use crate::field::{
     F32Batch, F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField,
 };
-use crate::values::{FrameParams, Image, Step};
+use crate::values::{FrameParams, HalfOpenBox, Image, PixelRect, Step};
 
 const TILE: u32 = 16;
 
@@ -370,6 +371,12 @@ fn pixels_of<S: Default + Send>(
 }
 
 impl CpuBackend {
+    /// The mean of the frames accumulated so far in f64, before [`Backend::image`] rounds it to
+    /// f32 (what distributed renders are compared with to f64 rounding).
+    pub fn mean_f64(&self) -> Option<Vec<[f64; 4]>> {
+        self.accumulator.as_ref().map(Accumulator::mean)
+    }
+
     fn abandoned(&self) -> bool {
         self.abandon
             .as_ref()
@@ -510,6 +517,22 @@ impl Backend for CpuBackend {
         self.accumulate_tiles(frame, tiles)?;
         self.timings.frame = started.elapsed();
         Ok(())
+    }
+
+    fn render_owned(
+        &mut self,
+        frame: &FrameParams,
+        owned: &HalfOpenBox,
+        rect: PixelRect,
+    ) -> Result<Vec<[f64; 4]>, BackendError> {
+        owned::check_integrator(frame)?;
+        let started = Instant::now();
+        let pixels = match self.sampler()? {
+            Sampler::F64(field) => owned::render_rect(frame, field, owned, rect),
+            Sampler::F32(field) => owned::render_rect(frame, field, owned, rect),
+        };
+        self.timings.frame = started.elapsed();
+        Ok(pixels)
     }
 
     /// The splatter collects its hits through the f64 reference's cluster BVH: a scene

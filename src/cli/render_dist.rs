@@ -1,0 +1,195 @@
+//! `aarbf render --ranks N`: the distributed renderer ([`crate::dist`]) with N ranks as threads
+//! of this process. Each rank takes its share of the step's records (`[rN/P, (r+1)N/P)`, as a
+//! parallel read will give it), and from there on sees the others only through the
+//! communicator: decomposition, particle exchange, its brick's render, direct-send
+//! compositing; rank 0 writes the image. It is the code path an MPI launch will take.
+
+use std::time::Instant;
+
+use anyhow::{Context, bail, ensure};
+
+use super::output_format::OutputFormat;
+use super::render::RenderArgs;
+use super::render_plan::Frame;
+use crate::backend::cpu::CpuBackend;
+use crate::backend::{BackendKind, Precision};
+use crate::dist::{Comm, DistScene, RankReport, render_distributed, run_local, slice_of};
+use crate::render::legend::Legend;
+use crate::render::{AutoValues, FrameBasis, Method, RenderSettings, stratified_cycle};
+use crate::scene_file::resolve::Resolved;
+use crate::values::FrameParams;
+
+/// Launched as one of several MPI processes, each would render the whole image and write the
+/// same file: refused, saying what runs today, until an MPI build exists.
+pub(super) fn refuse_mpi_launch() -> anyhow::Result<()> {
+    for var in ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"] {
+        if let Ok(size) = std::env::var(var)
+            && size.trim().parse::<usize>().is_ok_and(|n| n > 1)
+        {
+            bail!(
+                "aarbf was started as one of {size} MPI processes ({var}), but this build has no \
+                 MPI support yet: each process would render the whole image. Run one process \
+                 with --ranks {size} instead (ranks as threads; docs/distributed.md)"
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Refuses what the distributed renderer does not do yet, naming it.
+fn check_supported(
+    args: &RenderArgs,
+    resolved: &Resolved,
+    settings: &RenderSettings,
+    ranks: usize,
+) -> anyhow::Result<()> {
+    ensure!(ranks >= 1, "--ranks must be at least 1");
+    ensure!(
+        matches!(args.backend, BackendKind::Auto | BackendKind::Cpu),
+        "--ranks renders on the cpu backend so far (the {} backend does not render a brick yet)",
+        args.backend
+    );
+    ensure!(
+        args.method == Method::Rbf && settings.splat_k.is_none() && settings.voxel_grid.is_none(),
+        "--ranks renders with --method rbf (the baselines are not distributed)"
+    );
+    ensure!(
+        !args.reference && args.target_error.is_none() && args.time_budget.is_none(),
+        "--ranks renders a set number of samples: --reference, --target-error and \
+         --time-budget are not distributed yet"
+    );
+    ensure!(
+        resolved
+            .scene
+            .target()
+            .map_err(anyhow::Error::msg)?
+            .is_none(),
+        "--ranks renders a set number of samples: the scene's target_error and time_budget \
+         are not distributed yet"
+    );
+    ensure!(
+        resolved.periodic.is_none(),
+        "--ranks: a periodic domain is not distributed yet (ghosts across the wrapped faces)"
+    );
+    ensure!(
+        args.save_scene.is_none(),
+        "--ranks: --save-scene is not distributed yet; save the scene from a single-rank render"
+    );
+    let spp = resolved.scene.spp();
+    if let Some(cycle) = stratified_cycle(settings) {
+        ensure!(
+            spp <= cycle,
+            "--ranks: {spp} spp of blue noise spans more than one mask cycle ({cycle} frames), \
+             whose frames a single-rank render weights by their measured noise; that weighting \
+             is not distributed yet: use --spp {cycle} or less, or --noise white"
+        );
+    }
+    Ok(())
+}
+
+/// Renders each planned image with `ranks` ranks and writes it from rank 0.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run(
+    args: &RenderArgs,
+    mut resolved: Resolved,
+    mut settings: RenderSettings,
+    frames: &[Frame],
+    format: OutputFormat,
+    draw_legend: bool,
+    precision: Precision,
+    ranks: usize,
+) -> anyhow::Result<()> {
+    check_supported(args, &resolved, &settings, ranks)?;
+    let spp = resolved.scene.spp();
+    tracing::info!(
+        "distributed: {ranks} ranks as threads of this process, cpu backend, emission-absorption"
+    );
+    for frame in frames {
+        let started = Instant::now();
+        settings.camera = Some(frame.camera);
+        resolved.range_for_step(frame.step)?;
+        let auto = AutoValues::of(&resolved.series, &resolved.field)?;
+        let basis = FrameBasis {
+            bounds: resolved.domain(),
+            max_count: resolved.series.max_count(),
+            periodic: false,
+            field: &resolved.field,
+            auto,
+        };
+        let used = basis.resolve(&settings)?;
+        let params: Vec<FrameParams> = (0..spp)
+            .map(|f| basis.frame_params(&settings, f))
+            .collect::<Result<_, _>>()?;
+        let step = resolved.series.step(frame.step)?;
+        let scene = DistScene {
+            field: &resolved.field,
+            cluster: resolved.cluster,
+            series_bounds: resolved.series.bounds(),
+            series_range: resolved.series_range(),
+            precision,
+        };
+        let mut images = run_local(ranks, |comm| {
+            let local = slice_of(&step, comm.rank(), comm.size());
+            let mut backend = CpuBackend::new();
+            render_distributed(comm, &mut backend, &local, &scene, &params)
+        })
+        .with_context(|| format!("distributed render of step {}", frame.step))?;
+        drop(step);
+        let Some(image) = images.swap_remove(0) else {
+            bail!("rank 0 returned no image");
+        };
+        log_reports(&image.reports);
+        let legend = draw_legend.then(|| {
+            Legend::of_field(
+                &resolved.field,
+                resolved.series_range(),
+                resolved.range.label(),
+                settings.colour_by_density,
+                used.phi_ref,
+            )
+        });
+        format.write(
+            &frame.path,
+            &image.image(),
+            settings.background,
+            legend.as_ref(),
+        )?;
+        tracing::info!(
+            "step {}: {} ({}x{}, {spp} spp, {ranks} ranks) in {:.2} s",
+            frame.step,
+            frame.path.display(),
+            settings.width,
+            settings.height,
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+/// Each rank's counts and times, and the ghosts and imbalance over all.
+fn log_reports(reports: &[RankReport]) {
+    for (rank, r) in reports.iter().enumerate() {
+        tracing::info!(
+            "rank {rank}: read {}, owns {}, {} ghosts; sent {:.1} MiB of particles, {:.1} MiB of tiles; exchange {:.3} s, build {:.3} s, render {:.3} s, composite {:.3} s",
+            r.read,
+            r.owned,
+            r.ghosts,
+            r.particle_bytes as f64 / 1048576.0,
+            r.tile_bytes as f64 / 1048576.0,
+            r.exchange_seconds,
+            r.build_seconds,
+            r.render_seconds,
+            r.composite_seconds
+        );
+    }
+    let owned: u64 = reports.iter().map(|r| r.owned).sum();
+    let ghosts: u64 = reports.iter().map(|r| r.ghosts).sum();
+    let max_owned = reports.iter().map(|r| r.owned).max().unwrap_or(0);
+    let mean_owned = owned as f64 / reports.len().max(1) as f64;
+    tracing::info!(
+        "{} particles owned once each, {ghosts} ghosts ({:.1}%); largest brick {:.3} x the mean",
+        owned,
+        100.0 * ghosts as f64 / owned.max(1) as f64,
+        max_owned as f64 / mean_owned.max(1e-300)
+    );
+}

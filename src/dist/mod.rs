@@ -1,0 +1,73 @@
+//! Distributed rendering: one step split among P ranks, each rendering the samples of its own
+//! part of space, composited into the single-rank image (issue 49, `docs/distributed.md`).
+//!
+//! The flow of a frame, every stage one collective of a [`Comm`]:
+//! 1. [`exchange::decompose`]: a k-d tree of P half-open leaves ([`kd`]) from an all-gathered
+//!    sample of each rank's particles, the same on every rank;
+//! 2. [`exchange::exchange`]: one all-to-all-v sends each particle to the rank owning its leaf,
+//!    and as a ghost to every rank whose leaf it reaches (the field's own radius rule);
+//! 3. each rank renders its brick: the frame's own sample lattice and noise, only the samples
+//!    whose points its leaf holds ([`crate::backend::Backend::render_owned`]);
+//! 4. [`composite::direct_send`]: one all-to-all-v of the tiles each brick's screen rectangle
+//!    touches to their owners, blended in the leaves' front-to-back order;
+//! 5. one gather-v of the accumulated tiles to rank 0.
+//!
+//! [`LocalComm`] runs the ranks as threads of one process (`aarbf render --ranks N`, and the
+//! tests); an MPI communicator will implement the same trait. Emission–absorption only, on the
+//! CPU backend, so far.
+
+pub mod comm;
+pub mod composite;
+pub mod exchange;
+pub mod kd;
+pub mod local;
+mod render;
+
+pub use comm::{Comm, CommError, CommExt, Parts};
+pub use local::{LocalComm, run_local};
+pub use render::{DistImage, DistScene, RankReport, render_distributed, slice_of};
+
+use crate::backend::BackendError;
+use crate::field::FieldError;
+
+/// Why a distributed render failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DistError {
+    #[error(transparent)]
+    Comm(#[from] CommError),
+    #[error(transparent)]
+    Backend(#[from] BackendError),
+    #[error(transparent)]
+    Field(#[from] FieldError),
+    /// What a distributed render cannot do yet.
+    #[error("{0}")]
+    NotDistributed(String),
+    /// A message that does not hold what its collective should: a bug, or ranks that disagree.
+    #[error("malformed message: {0}")]
+    Malformed(String),
+    #[error("a distributed render needs at least one rank")]
+    NoRanks,
+    #[error("panicked: {message}")]
+    Panicked { message: String },
+    /// A rank's own failure, naming it.
+    #[error("rank {rank}: {source}")]
+    Rank {
+        rank: usize,
+        #[source]
+        source: Box<DistError>,
+    },
+}
+
+impl DistError {
+    /// Whether this only reports that another rank failed.
+    pub fn is_peer_failure(&self) -> bool {
+        match self {
+            DistError::Comm(CommError::PeerFailed { .. }) => true,
+            DistError::Rank { source, .. } => source.is_peer_failure(),
+            _ => false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
