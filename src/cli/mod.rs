@@ -6,8 +6,6 @@ mod generate;
 mod info;
 pub mod output_format;
 mod render;
-mod render_dist;
-mod render_plan;
 mod slice;
 mod stbn;
 mod view;

@@ -4,8 +4,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 
-use super::output_format::OutputFormat;
-use super::render::{RenderArgs, step_range};
+use super::{RenderArgs, step_range};
+use crate::cli::output_format::OutputFormat;
 use crate::scene::Camera;
 use crate::scene_file::resolve::Resolved;
 

@@ -6,8 +6,11 @@ use std::time::Instant;
 use anyhow::{Context, bail, ensure};
 use clap::Args;
 
+mod dist;
+mod plan;
+
 use super::output_format::OutputFormat;
-use super::render_plan::{Frame, plan_frames};
+use plan::{Frame, plan_frames};
 
 use crate::backend::voxel::VoxelGeometry;
 use crate::backend::{self, BackendKind};
@@ -321,7 +324,7 @@ fn check_flags(args: &RenderArgs) -> anyhow::Result<bool> {
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    super::render_dist::refuse_mpi_launch()?;
+    dist::refuse_mpi_launch()?;
     let draw_legend = check_flags(&args)?;
     let mut resolved = if args.color_by_density {
         resolve(&args.data, &args.field)?
@@ -415,7 +418,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let precision = backend::parse_precision(&precision_text, backend::Precision::RENDER)
         .map_err(anyhow::Error::msg)?;
     if let Some(ranks) = args.ranks {
-        return super::render_dist::run(
+        return dist::run(
             &args,
             resolved,
             settings,

@@ -8,11 +8,11 @@ use std::time::Instant;
 
 use anyhow::{Context, bail, ensure};
 
-use super::output_format::OutputFormat;
-use super::render::RenderArgs;
-use super::render_plan::Frame;
+use super::RenderArgs;
+use super::plan::Frame;
 use crate::backend::cpu::CpuBackend;
 use crate::backend::{BackendKind, Precision};
+use crate::cli::output_format::OutputFormat;
 use crate::dist::{Comm, DistScene, RankReport, render_distributed, run_local, slice_of};
 use crate::render::legend::Legend;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings, stratified_cycle};
