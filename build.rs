@@ -40,6 +40,18 @@ fn files(dir: &str, extensions: &[&str]) -> Vec<PathBuf> {
     out
 }
 
+/// The entry points of a Vulkan GLSL file: one `main` (None) unless it has `#ifdef ENTRY_<name>`
+/// blocks, each a `main` of its own, compiled with `ENTRY_<name>` defined (GLSL has one entry
+/// point a module, so a stage with several passes, as its WGSL twin has, is written thus).
+fn glsl_entry_points(source: &str) -> Vec<Option<String>> {
+    let named: Vec<Option<String>> = source
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("#ifdef ENTRY_"))
+        .map(|e| Some(e.trim().to_owned()))
+        .collect();
+    if named.is_empty() { vec![None] } else { named }
+}
+
 fn fail(message: String) -> ! {
     eprintln!("{message}");
     println!(
@@ -170,23 +182,33 @@ fn main() {
         let resolved = out_dir.join(format!("{name}.glsl"));
         std::fs::write(&resolved, &source).unwrap();
         let stage = path.extension().unwrap().to_string_lossy().into_owned();
-        let output = Command::new(&glslc)
-            .args([
-                "--target-env=vulkan1.2",
-                "-O",
-                &format!("-fshader-stage={stage}"),
-            ])
-            .arg(&resolved)
-            .arg("-o")
-            .arg(out_dir.join(format!("{name}.spv")))
-            .output()
-            .unwrap_or_else(|e| fail(format!("cannot run {glslc}: {e}")));
-        if !output.status.success() {
-            fail(format!(
-                "{}: glslc failed:\n{}",
-                path.display(),
-                String::from_utf8_lossy(&output.stderr)
-            ));
+        for entry in glsl_entry_points(&source) {
+            let (define, spirv) = match &entry {
+                None => (None, format!("{name}.spv")),
+                Some(e) => (Some(format!("-DENTRY_{e}")), format!("{name}.{e}.spv")),
+            };
+            let output = Command::new(&glslc)
+                .args([
+                    "--target-env=vulkan1.2",
+                    "-O",
+                    &format!("-fshader-stage={stage}"),
+                ])
+                .args(define)
+                .arg(&resolved)
+                .arg("-o")
+                .arg(out_dir.join(spirv))
+                .output()
+                .unwrap_or_else(|e| fail(format!("cannot run {glslc}: {e}")));
+            if !output.status.success() {
+                fail(format!(
+                    "{}{}: glslc failed:\n{}",
+                    path.display(),
+                    entry
+                        .map(|e| format!(" (entry point {e})"))
+                        .unwrap_or_default(),
+                    String::from_utf8_lossy(&output.stderr)
+                ));
+            }
         }
     }
 }

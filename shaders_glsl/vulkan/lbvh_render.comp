@@ -1,6 +1,6 @@
 #version 460
 // One frame of the shared integrators with the LBVH traversal as the field query (the
-// software side of Fig. 10a on the same device; raygen.rgen is the hardware side). Added into
+// software side of Fig. 10a on the same device; render.rgen is the hardware side). Added into
 // the same accumulation buffer.
 #include "vulkan/bindings.glsl"
 

@@ -14,7 +14,7 @@ use super::resources::barrier;
 use super::{AshBackend, BOX_GROUP, BOX_ROW, TS_BLAS, TS_BOXES, TS_START, TS_TLAS};
 use crate::backend::BackendError;
 use crate::backend::shaders::cpu::{
-    Lbvh, cluster_box::lbvh_bounds, lbvh_keys::KeyGrid, rbf::RadiusRule,
+    Lbvh, lbvh_boxes::lbvh_boxes, lbvh_keys::KeyGrid, rbf::RadiusRule,
 };
 
 impl AshBackend {
@@ -126,7 +126,7 @@ impl AshBackend {
             radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
             radius_attribute: radius.as_deref(),
         };
-        let boxes = lbvh_bounds(&points, d.cluster.get(), &rule);
+        let boxes = lbvh_boxes(&points, d.cluster.get(), &rule);
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
         if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
             return Err(device_error(

@@ -7,7 +7,7 @@
 //! - A step is prepared on the device ([`prepare`]): the CPU converts it once into staging
 //!   memory, compute passes sort it along the Hilbert curve and gather it.
 //! - The structure is an AABB BLAS with one box per cluster of K Hilbert-sorted particles,
-//!   written by a compute shader (`boxes.comp`) from positions, radius map and global radius;
+//!   written by a compute shader (`blas_boxes.comp`) from positions, radius map and global radius;
 //!   a new step is a full build, a radius change a refit ([`structure`]).
 //! - Rendering runs the shared integrators (`shaders_glsl/shared/integrators.glsl`) in the
 //!   ray-generation shader and sums frames into an f32 buffer.

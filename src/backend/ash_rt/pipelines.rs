@@ -3,7 +3,7 @@
 //! pipelines.
 //!
 //! Shaders (`shaders_glsl/vulkan/`, compiled by build.rs with glslc):
-//! - `raygen.rgen`: the shared integrator (`shared/integrators.glsl`) per pixel, adding the
+//! - `render.rgen`: the shared integrator (`shared/integrators.glsl`) per pixel, adding the
 //!   frame into the accumulation buffer; `query.rgen`: the field at points from a buffer.
 //!   Both define `field_query(x)` (`vulkan/field_query.glsl`): one ray from x along (1, 1, 1)
 //!   with tmin = tmax = 0.
@@ -11,7 +11,7 @@
 //!   `CLUSTER_SIZE` particles) and reports (d², r, t) for each that contains the point;
 //!   `particle.rahit`: adds the particle's RBF term into the payload and ignores the hit, so
 //!   traversal goes on; `empty.rmiss`.
-//! - `boxes.comp`: the AABB of each cluster from positions, radius map and global radius.
+//! - `blas_boxes.comp`: the AABB of each cluster from positions, radius map and global radius.
 //! - `lbvh_query.comp`, `lbvh_render.comp`: the same queries and integrators with the shared
 //!   LBVH stack traversal (`shared/lbvh.glsl`) in place of the RT pipeline, for the
 //!   same-device hardware-versus-software comparison (the paper's Fig. 10a).
@@ -42,7 +42,7 @@ macro_rules! spirv {
     };
 }
 
-const RAYGEN: &[u8] = spirv!("raygen.rgen");
+const RAYGEN: &[u8] = spirv!("render.rgen");
 const QUERY: &[u8] = spirv!("query.rgen");
 const MISS: &[u8] = spirv!("empty.rmiss");
 const INTERSECTION: &[u8] = spirv!("particle.rint");
@@ -51,15 +51,15 @@ const SPLAT_RAYGEN: &[u8] = spirv!("splat.rgen");
 const SPLAT_INTERSECTION: &[u8] = spirv!("splat.rint");
 const SPLAT_ANY_HIT: &[u8] = spirv!("splat.rahit");
 const LBVH_SPLAT: &[u8] = spirv!("lbvh_splat.comp");
-const BOXES: &[u8] = spirv!("boxes.comp");
+const BOXES: &[u8] = spirv!("blas_boxes.comp");
 const LBVH_QUERY: &[u8] = spirv!("lbvh_query.comp");
 const LBVH_RENDER: &[u8] = spirv!("lbvh_render.comp");
 const HILBERT_KEYS: &[u8] = spirv!("hilbert_keys.comp");
-const SORT_COUNT: &[u8] = spirv!("sort_count.comp");
-const SORT_SCAN: &[u8] = spirv!("sort_scan.comp");
-const SORT_SCATTER: &[u8] = spirv!("sort_scatter.comp");
-const GATHER_WORDS: &[u8] = spirv!("gather_words.comp");
-const GATHER_VEC4S: &[u8] = spirv!("gather_vec4s.comp");
+const SORT_COUNT: &[u8] = spirv!("radix_sort.comp.count");
+const SORT_SCAN: &[u8] = spirv!("radix_sort.comp.scan");
+const SORT_SCATTER: &[u8] = spirv!("radix_sort.comp.scatter");
+const GATHER_WORDS: &[u8] = spirv!("gather.comp.gather_words");
+const GATHER_VEC4S: &[u8] = spirv!("gather.comp.gather_vec4s");
 const VOXEL_SPLAT: &[u8] = spirv!("voxel_splat.comp");
 const VOXEL_RENDER: &[u8] = spirv!("voxel_render.comp");
 
@@ -209,7 +209,7 @@ impl Layouts {
 /// The compute kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ComputeKind {
-    /// One AABB per cluster (`boxes.comp`).
+    /// One AABB per cluster (`blas_boxes.comp`).
     Boxes,
     /// Field queries by LBVH traversal (`lbvh_query.comp`).
     LbvhQuery,
@@ -294,7 +294,7 @@ const SPEC_ENTRIES: [vk::SpecializationMapEntry; SPEC_CONSTANTS.len()] = {
 /// What a ray-tracing pipeline runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum RtProgram {
-    /// The RBF field: frames and point queries (`raygen.rgen`, `query.rgen`, `particle.*`).
+    /// The RBF field: frames and point queries (`render.rgen`, `query.rgen`, `particle.*`).
     Field,
     /// Knoll et al.'s splatter (`splat.*`).
     Splat,

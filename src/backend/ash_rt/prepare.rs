@@ -3,7 +3,7 @@
 //! runs the wgpu backend's stages (`wgpu_lbvh::prepare` explains them: 63-bit Hilbert keys, two
 //! stable 32-bit radix sorts with the high words gathered between them, the gather into Hilbert
 //! order) as compute passes of this backend's own (`shaders_glsl/vulkan/hilbert_keys.comp`,
-//! `sort_{count,scan,scatter}.comp`, `gather_{words,vec4s}.comp`: the sort needs workgroup
+//! `radix_sort.comp`, `gather.comp`: the sort needs workgroup
 //! atomics, which the GLSL both backends share may not use), with the same CPU twins, into the
 //! buffers the structure build reads. The order stays on the device, so a radius-attribute or
 //! precision change gathers the new array without sorting again. Every buffer is made for the

@@ -33,7 +33,7 @@ pub fn buffers_made() -> u64 {
 /// A compute kernel of the backend: a shader file and an entry point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Kernel {
-    /// `shaders_glsl/wgpu/lbvh_bounds.comp`: cluster boxes.
+    /// `shaders_glsl/wgpu/lbvh_boxes.comp`: cluster boxes.
     Bounds,
     /// `shaders_glsl/wgpu/lbvh_query.comp`: field queries.
     Query,
@@ -138,7 +138,7 @@ impl ShaderFile {
     fn source(self) -> Source {
         match self {
             ShaderFile::Bounds => {
-                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_bounds.comp"))
+                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_boxes.comp"))
             }
             ShaderFile::Query => {
                 Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_query.comp"))
