@@ -1,7 +1,8 @@
 //! The CPU twins of the GPU stages, one file per stage (as vello's `cpu/`), each doing what its
 //! stage does in the same f32 arithmetic so the tests can compare them. A twin has its stage's
-//! name (`lbvh_boxes.rs` ↔ `shaders_glsl/wgpu/lbvh_boxes.comp`); a twin of a shared include has
-//! the include's (`rbf.rs` ↔ `shaders_glsl/shared/rbf.glsl`).
+//! name (`lbvh_boxes.rs` ↔ `shaders_glsl/wgpu/lbvh_boxes.comp` ↔ `on_wgpu::LBVH_BOXES`); a
+//! twin of a shared include has the include's (`rbf.rs` ↔ `shaders_glsl/shared/rbf.glsl`).
+//! `shaders::table`'s tests fail when a shader has no twin or a twin no shader.
 //!
 //! Preparing a step on the device (`wgpu_lbvh::prepare`): Hilbert keys of the particles' f32
 //! local coordinates (`hilbert_keys.wgsl`, 63 bits as two words), a stable radix sort by the
