@@ -177,9 +177,81 @@ include!(concat!(env!("OUT_DIR"), "/shader_table.rs"));
 
 #[cfg(test)]
 mod tests {
+    use std::collections::BTreeSet;
     use std::path::Path;
 
     use super::*;
+
+    fn root() -> &'static Path {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+    }
+
+    /// The stems of the twin files in `src/backend/shaders/cpu/`.
+    fn twin_files() -> BTreeSet<String> {
+        std::fs::read_dir(root().join("src/backend/shaders/cpu"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+            .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+            .filter(|stem| stem != "mod")
+            .collect()
+    }
+
+    /// A stage is one name in three places: its shader file, its table entry and its twin
+    /// `cpu/<name>.rs`. This fails for a shader without a twin (unless its `// twin:` line
+    /// names one elsewhere or says why there is none) and for a twin without a shader (a
+    /// twin of a shared include, `shaders_glsl/shared/<name>.glsl`, counts as one with).
+    #[test]
+    fn every_shader_has_a_twin_and_every_twin_a_shader() {
+        let twins = twin_files();
+        let declared =
+            std::fs::read_to_string(root().join("src/backend/shaders/cpu/mod.rs")).unwrap();
+        let mut problems = Vec::new();
+        for shader in SHADERS {
+            let file = twins.contains(shader.name);
+            match shader.twin {
+                Twin::Cpu if !file => problems.push(format!(
+                    "{}: no twin: write src/backend/shaders/cpu/{}.rs, or say in the shader \
+                     `// twin: <path>: <why>` or `// twin: none: <why>`",
+                    shader.file, shader.name
+                )),
+                Twin::Elsewhere { path, .. } if !root().join(path).is_file() => {
+                    problems.push(format!(
+                        "{}: its twin line names {path}, which is not a file",
+                        shader.file
+                    ))
+                }
+                Twin::Elsewhere { .. } | Twin::None { .. } if file => problems.push(format!(
+                    "{}: has src/backend/shaders/cpu/{}.rs, yet its twin line says otherwise",
+                    shader.file, shader.name
+                )),
+                Twin::None { why } | Twin::Elsewhere { why, .. } if why.is_empty() => {
+                    problems.push(format!("{}: its twin line gives no reason", shader.file))
+                }
+                _ => {}
+            }
+        }
+        for twin in &twins {
+            let stage = SHADERS
+                .iter()
+                .any(|s| s.name == twin && s.twin == Twin::Cpu);
+            let include = root()
+                .join(format!("shaders_glsl/shared/{twin}.glsl"))
+                .is_file();
+            if !stage && !include {
+                problems.push(format!(
+                    "src/backend/shaders/cpu/{twin}.rs: the twin of no shader (no stage, nor \
+                     shaders_glsl/shared/{twin}.glsl, is named {twin})"
+                ));
+            }
+            if !declared.contains(&format!("pub mod {twin};")) {
+                problems.push(format!(
+                    "src/backend/shaders/cpu/{twin}.rs: not declared (`pub mod {twin};` in cpu/mod.rs)"
+                ));
+            }
+        }
+        assert!(problems.is_empty(), "{}", problems.join("\n"));
+    }
 
     /// The table holds what each backend needs: wgpu compiles the source, ash loads SPIR-V;
     /// compute stages have a workgroup; a stage written for both backends says why.
