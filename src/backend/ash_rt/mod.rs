@@ -35,6 +35,8 @@ mod build;
 pub mod context;
 mod inspect;
 mod launch;
+#[cfg(test)]
+mod naga_spirv;
 pub mod pipelines;
 mod prepare;
 pub mod resources;
