@@ -415,8 +415,10 @@ pub fn compute_pipeline(
             kernel: 0,
             ..spec
         },
-        on_ash::LBVH_RENDER | on_ash::LBVH_SPLAT => spec,
-        // Their code reads no specialisation constant: one pipeline each.
+        // Every constant (the frame kernels, and a new kernel until it is narrowed here).
+        _ if kind.point().specialised => spec,
+        // Their code reads no specialisation constant (the table reflects it): one pipeline
+        // each.
         _ => UNSPECIALISED,
     };
     let mut cache = ctx
