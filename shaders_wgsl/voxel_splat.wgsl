@@ -7,6 +7,7 @@
 // in between, and then the exchange fails and is retried with the new value). The host
 // clears the slab before the first range and copies it into the grid's texture after the
 // last, in later passes, which wgpu orders after this one.
+// twin: src/field/grid.rs: the scatter of Particles::eval_grid_sums (tests/voxel_wgpu.rs compares the grids)
 
 #include "shared/invocation.wgsl"
 

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use aarbf::accel::{ClusterBoxes, ClusterSize};
 use aarbf::backend::ash_rt::{self, AshBackend};
 use aarbf::backend::gpu_data::GpuStepData;
-use aarbf::backend::shaders::cpu::cluster_box;
+use aarbf::backend::shaders::cpu::blas_boxes;
 use aarbf::backend::shaders::cpu::rbf::RadiusRule;
 use aarbf::backend::{Backend, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
@@ -140,7 +140,7 @@ fn device_has_ray_tracing_and_validation_when_installed() {
     assert_no_validation_messages();
 }
 
-/// The box kernel's boxes equal its CPU twin's (`cpu::cluster_box::blas_boxes`, the same f32
+/// The box kernel's boxes equal its CPU twin's (`cpu::blas_boxes::blas_boxes`, the same f32
 /// rule) to an ulp, contain the CPU's (f64, outward-rounded) cluster boxes and exceed them by
 /// no more than the padding; clusters whose particles all have radius 0 get a degenerate box at
 /// their first particle; clusters past the step are NaN.
@@ -171,7 +171,7 @@ fn boxes_match_the_cpu_cluster_boxes() {
             radius_table: data.radius_map_varies.then_some(&data.tables.radius[..]),
             radius_attribute: particles.radius_attribute.as_deref(),
         };
-        let twin = cluster_box::blas_boxes(&particles.points, k as usize, &rule, gpu.len());
+        let twin = blas_boxes::blas_boxes(&particles.points, k as usize, &rule, gpu.len());
         for (c, (g, t)) in gpu.iter().zip(&twin).enumerate() {
             for (a, e) in g.iter().zip(t) {
                 // One ulp: the compiler may fuse the padding's multiply into the subtraction.

@@ -28,7 +28,7 @@ use aarbf::backend::shaders::cpu::lbvh::{
     self, GpuBox, LBVH_EMPTY_KEY, LBVH_NONE, LBVH_SENTINEL, Lbvh, box_is_empty,
 };
 use aarbf::backend::shaders::cpu::rbf::RadiusRule;
-use aarbf::backend::shaders::cpu::{cluster_box, lbvh_keys, radix_sort};
+use aarbf::backend::shaders::cpu::{lbvh_boxes, lbvh_keys, radix_sort};
 use aarbf::backend::wgpu_lbvh::{self, BuildStage, GpuContext, WgpuBackend, prepare, sort};
 use aarbf::backend::{Backend, Precision, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
@@ -130,7 +130,7 @@ fn twin_boxes(backend: &WgpuBackend) -> Vec<GpuBox> {
         radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
         radius_attribute: particles.radius_attribute.as_deref(),
     };
-    cluster_box::lbvh_bounds(&particles.points, d.cluster.get(), &rule)
+    lbvh_boxes::lbvh_boxes(&particles.points, d.cluster.get(), &rule)
 }
 
 fn assert_boxes_close(gpu: &[GpuBox], cpu: &[GpuBox], radius: f32, what: &str) {

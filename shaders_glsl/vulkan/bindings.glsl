@@ -47,7 +47,7 @@ layout(push_constant) uniform Push {
     uint query_lo;     // 1: a query launch whose points carry lo parts (POSITION_DS)
     uvec2 particle_address;     // ParticleArray of the step
     uvec2 radius_address;       // FloatArray of radius attributes, then SPH volumes (0 when neither)
-    uvec2 boxes_address;        // the BLAS input boxes, 6 floats each (boxes.comp writes them)
+    uvec2 boxes_address;        // the BLAS input boxes, 6 floats each (blas_boxes.comp writes them)
     uvec2 accum_address;        // Vec4Array: the frame's f32 RGBA sums per pixel
     uvec2 particle_lo_address;  // ParticleArray of the lo parts (POSITION_DS; else 0)
     uvec2 voxel_address;        // the voxel baseline's grid: 4 f32 sums per cell (else 0)

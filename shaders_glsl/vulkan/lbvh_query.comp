@@ -3,6 +3,7 @@
 // shared LBVH stack traversal (shared/lbvh.glsl, the wgpu backend's) instead of the RT
 // pipeline, over the same particles, maps and RBF code. The tree is built on the CPU
 // (backend::shaders::cpu, the wgpu build's twin) and uploaded.
+// twin: src/field/reference.rs: ReferenceField::eval_sums, the f64 field every backend is held to (tests/ash_rt.rs)
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 64) in;

@@ -1,7 +1,8 @@
 #version 460
 // One frame of the shared integrators with the LBVH traversal as the field query (the
-// software side of Fig. 10a on the same device; raygen.rgen is the hardware side). Added into
+// software side of Fig. 10a on the same device; render.rgen is the hardware side). Added into
 // the same accumulation buffer.
+// twin: src/backend/cpu/integrators.rs: the CPU backend renders the same frame (tests/ash_rt.rs compares the images)
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 8, local_size_y = 8) in;

@@ -3,6 +3,7 @@
 // of the same device's comparison, as lbvh_render.comp is for the RBF renderer; splat.rgen is
 // the RT side). Added into the same accumulation buffer. CPU twin:
 // backend::cpu::splat::splat_pixel.
+// twin: src/backend/cpu/splat.rs: the CPU backend splats the same frame (tests/splat_ash.rs compares the images)
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 8, local_size_y = 8) in;

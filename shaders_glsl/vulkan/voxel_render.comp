@@ -2,6 +2,7 @@
 // One frame of the shared integrators over the voxel-grid baseline's grid (voxel_splat.comp's
 // sums, reached by device address), added into the accumulation the other frame kernels
 // fill. Twin: CpuBackend::render_voxels (render_pixel_with over a VoxelGrid).
+// twin: src/backend/voxel.rs: the CPU backend marches the same grid with the same integrators (tests/voxel_ash.rs compares the images)
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 8, local_size_y = 8) in;

@@ -7,6 +7,7 @@
 // compare-exchange loop on the word's bits (an add is lost only if another thread changed the
 // word in between, and then the exchange fails and is retried with the new value). The host
 // clears the grid first. Twin: the scatter of Particles::eval_grid_sums.
+// twin: src/field/grid.rs: the scatter of Particles::eval_grid_sums (tests/voxel_ash.rs compares the grids)
 #include "vulkan/bindings.glsl"
 
 layout(local_size_x = 64) in;

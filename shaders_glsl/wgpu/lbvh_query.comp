@@ -2,6 +2,7 @@
 // Field queries: (Phi, Theta numerator) at each query point (local coordinates), by the
 // shared LBVH traversal. Twin: ReferenceField::eval_sums (f64). With double-single positions
 // each query is two vec4s, hi then lo.
+// twin: src/field/reference.rs: ReferenceField::eval_sums, the f64 field every backend is held to (tests/wgpu_lbvh.rs)
 
 layout(local_size_x = 64) in;
 

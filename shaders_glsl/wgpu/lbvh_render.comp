@@ -1,6 +1,7 @@
 #version 450
 // One frame of the shared integrators over the LBVH field, added to the accumulation (sums of
 // linear RGBA; the host divides by the frame count). Twin: backend::cpu::integrators::render_pixel.
+// twin: src/backend/cpu/integrators.rs: the CPU backend renders the same frame (tests/wgpu_render.rs compares the images)
 
 layout(local_size_x = 8, local_size_y = 8) in;
 

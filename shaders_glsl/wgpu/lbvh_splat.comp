@@ -4,6 +4,7 @@
 // the frame count). Each pixel's slabs collect their hits by a software traversal of the tree
 // (shared/lbvh_splat.glsl) and are composited by shared/splat_pixel.glsl.
 // Twin: backend::cpu::splat::splat_pixel. Emission–absorption only: no integrator, no noise.
+// twin: src/backend/cpu/splat.rs: the CPU backend splats the same frame (tests/splat_wgpu.rs compares the images)
 
 layout(local_size_x = 8, local_size_y = 8) in;
 

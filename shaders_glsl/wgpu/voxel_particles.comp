@@ -5,6 +5,7 @@
 // particle two vec4s: its offset from the grid's first cell centre (exact for nearby points,
 // as rbf_offset's difference; with double-single positions the lo parts are added) and its
 // radius; then its weight w(t) and theta. Twin: the scatter of Particles::eval_grid_sums.
+// twin: src/field/grid.rs: the scatter of Particles::eval_grid_sums, with voxel_splat (tests/voxel_wgpu.rs compares the grids)
 
 layout(local_size_x = 64) in;
 

@@ -3,6 +3,7 @@
 // the sums at cell centres, filled by voxel_particles.comp and voxel_splat.wgsl), added to
 // the accumulation lbvh_render.comp fills. Twin: CpuBackend::render_voxels
 // (backend::cpu::integrators::render_pixel_with over a VoxelGrid).
+// twin: src/backend/voxel.rs: the CPU backend marches the same grid with the same integrators (tests/voxel_wgpu.rs compares the images)
 
 layout(local_size_x = 8, local_size_y = 8) in;
 

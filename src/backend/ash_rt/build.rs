@@ -9,19 +9,20 @@ use ash::vk;
 use super::StructureTimings;
 use super::buffers::storage;
 use super::context::{NAME, device_error};
-use super::pipelines::{self, ComputeKind, Push};
+use super::pipelines::{self, Push};
 use super::resources::barrier;
-use super::{AshBackend, BOX_GROUP, BOX_ROW, TS_BLAS, TS_BOXES, TS_START, TS_TLAS};
+use super::{AshBackend, BOX_ROW_GROUPS, TS_BLAS, TS_BOXES, TS_START, TS_TLAS};
 use crate::backend::BackendError;
 use crate::backend::shaders::cpu::{
-    Lbvh, cluster_box::lbvh_bounds, lbvh_keys::KeyGrid, rbf::RadiusRule,
+    Lbvh, lbvh_boxes::lbvh_boxes, lbvh_keys::KeyGrid, rbf::RadiusRule,
 };
+use crate::backend::shaders::on_ash;
 
 impl AshBackend {
     /// Writes the boxes, then builds (or refits) the BLAS and builds the TLAS, timed.
     pub(super) fn build_structure(&mut self, update: bool) -> Result<(), BackendError> {
         let spec = self.spec(0, 0, 0)?;
-        let boxes_pipeline = pipelines::compute_pipeline(&self.ctx, ComputeKind::Boxes, spec)?;
+        let boxes_pipeline = pipelines::compute_pipeline(&self.ctx, on_ash::BLAS_BOXES, spec)?;
         let boxes_address = self.buffers.boxes.address;
         let structure = self
             .structure
@@ -38,23 +39,25 @@ impl AshBackend {
         let started = Instant::now();
         let cb = self.commands.begin()?;
         self.commands.timestamp(TS_START);
+        let group = on_ash::BLAS_BOXES.point().threads();
+        let row = BOX_ROW_GROUPS * group;
         self.bind(
             cb,
             vk::PipelineBindPoint::COMPUTE,
             boxes_pipeline,
             Push {
                 count,
-                width: BOX_ROW,
+                width: row,
                 ..Push::default()
             },
         );
-        let groups = count.div_ceil(BOX_GROUP);
+        let groups = count.div_ceil(group);
         // SAFETY: recording with the pipeline and set bound.
         unsafe {
             self.ctx.device.cmd_dispatch(
                 cb,
-                groups.min(BOX_ROW / BOX_GROUP),
-                count.div_ceil(BOX_ROW).max(1),
+                groups.min(BOX_ROW_GROUPS),
+                count.div_ceil(row).max(1),
                 1,
             )
         };
@@ -126,7 +129,7 @@ impl AshBackend {
             radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
             radius_attribute: radius.as_deref(),
         };
-        let boxes = lbvh_bounds(&points, d.cluster.get(), &rule);
+        let boxes = lbvh_boxes(&points, d.cluster.get(), &rule);
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
         if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
             return Err(device_error(

@@ -24,8 +24,9 @@ use ash::{ext, khr, vk};
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use gpu_allocator::{AllocationSizes, AllocatorDebugSettings};
 
-use super::pipelines::{ComputeKind, Layouts};
+use super::pipelines::Layouts;
 use crate::backend::BackendError;
+use crate::backend::shaders::Entry;
 use crate::backend::shaders::SpecConstants;
 
 pub(crate) const NAME: &str = "ash";
@@ -180,7 +181,7 @@ pub struct Context {
     pub layouts: Layouts,
     pub(crate) rt_pipelines:
         Mutex<HashMap<(SpecConstants, super::pipelines::RtProgram), vk::Pipeline>>,
-    pub(crate) compute_pipelines: Mutex<HashMap<(ComputeKind, SpecConstants), vk::Pipeline>>,
+    pub(crate) compute_pipelines: Mutex<HashMap<(Entry, SpecConstants), vk::Pipeline>>,
 }
 
 static SHARED: OnceLock<Result<Arc<Context>, ContextError>> = OnceLock::new();

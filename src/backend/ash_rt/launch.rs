@@ -6,11 +6,12 @@ use std::time::Duration;
 use ash::vk;
 
 use super::context::NAME;
-use super::pipelines::{self, BindingTable, ComputeKind, Push, RtProgram};
+use super::pipelines::{self, BindingTable, Push, RtProgram};
 use super::resources::barrier;
 use super::{AshBackend, HitReports, QUERY_WIDTH, TS_END, TS_START, Traversal};
 use crate::backend::BackendError;
 use crate::backend::shaders::SpecConstants;
+use crate::backend::shaders::{Entry, on_ash};
 use crate::field::Classification;
 use crate::values::ColourMode;
 
@@ -136,9 +137,9 @@ impl AshBackend {
         }
         let work = match self.traversal {
             _ if launch == Launch::Voxels => {
-                let pipeline =
-                    pipelines::compute_pipeline(&self.ctx, ComputeKind::VoxelRender, spec)?;
-                Work::Compute(pipeline, [w.div_ceil(8), h.div_ceil(8)])
+                let kind = on_ash::VOXEL_RENDER;
+                let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
+                Work::Compute(pipeline, groups(kind, w, h))
             }
             Traversal::RtPipeline => {
                 let program = match launch {
@@ -155,14 +156,14 @@ impl AshBackend {
             }
             Traversal::Lbvh => {
                 self.ensure_lbvh()?;
-                let (kind, group) = match launch {
-                    Launch::Query => (ComputeKind::LbvhQuery, [64, 1]),
-                    Launch::Render => (ComputeKind::LbvhRender, [8, 8]),
-                    Launch::Splat => (ComputeKind::LbvhSplat, [8, 8]),
-                    Launch::Voxels => (ComputeKind::VoxelRender, [8, 8]),
+                let kind = match launch {
+                    Launch::Query => on_ash::LBVH_QUERY,
+                    Launch::Render => on_ash::LBVH_RENDER,
+                    Launch::Splat => on_ash::LBVH_SPLAT,
+                    Launch::Voxels => on_ash::VOXEL_RENDER,
                 };
                 let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
-                Work::Compute(pipeline, [w.div_ceil(group[0]), h.div_ceil(group[1])])
+                Work::Compute(pipeline, groups(kind, w, h))
             }
         };
         let (stage, point) = match work {
@@ -233,4 +234,10 @@ impl AshBackend {
         self.commands.submit_and_wait()?;
         Ok(self.commands.elapsed(TS_START, TS_END).unwrap_or_default())
     }
+}
+
+/// Workgroups of `kernel` covering a `w` x `h` launch.
+fn groups(kernel: Entry, w: u32, h: u32) -> [u32; 2] {
+    let [x, y, _] = kernel.point().workgroup_size;
+    [w.div_ceil(x), h.div_ceil(y)]
 }

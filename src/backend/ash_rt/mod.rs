@@ -7,7 +7,7 @@
 //! - A step is prepared on the device ([`prepare`]): the CPU converts it once into staging
 //!   memory, compute passes sort it along the Hilbert curve and gather it.
 //! - The structure is an AABB BLAS with one box per cluster of K Hilbert-sorted particles,
-//!   written by a compute shader (`boxes.comp`) from positions, radius map and global radius;
+//!   written by a compute shader (`blas_boxes.comp`) from positions, radius map and global radius;
 //!   a new step is a full build, a radius change a refit ([`structure`]).
 //! - Rendering runs the shared integrators (`shaders_glsl/shared/integrators.glsl`) in the
 //!   ray-generation shader and sums frames into an f32 buffer.
@@ -35,6 +35,8 @@ mod build;
 pub mod context;
 mod inspect;
 mod launch;
+#[cfg(test)]
+mod naga_spirv;
 pub mod pipelines;
 mod prepare;
 pub mod resources;
@@ -52,7 +54,7 @@ use gpu_allocator::MemoryLocation;
 use self::buffers::{Buffers, addressed, boxes_buffer, ensure_points_lo, storage};
 use self::context::{Context, NAME, device_error};
 use self::launch::Launch;
-use self::pipelines::{BindingTable, Push, binding};
+use self::pipelines::{BindingTable, Push};
 use self::prepare::{Prepare, Targets};
 use self::resources::{Buffer, Commands};
 use self::structure::{BOX_BYTES, Structure};
@@ -71,10 +73,10 @@ pub use self::context::{REQUIRED_EXTENSIONS, validation_messages};
 
 /// Queries per launch (the query buffers hold this many points).
 const QUERY_BATCH: usize = 1 << 18;
-/// Row width of query launches and of the box kernel's 2D dispatch.
+/// Row width of query launches.
 pub(super) const QUERY_WIDTH: u32 = 1024;
-pub(super) const BOX_GROUP: u32 = 64;
-pub(super) const BOX_ROW: u32 = BOX_GROUP * 1024;
+/// Workgroups per row of the box kernel's 2D dispatch.
+pub(super) const BOX_ROW_GROUPS: u32 = 1024;
 
 /// Timestamp slots: a build or refit uses all four, a query or render launch the first two.
 pub(super) const TS_START: u32 = 0;
@@ -207,17 +209,14 @@ impl AshBackend {
         };
         buffers.stbn.write(0, bytemuck::cast_slice(&words))?;
 
-        let sizes = [
-            vk::DescriptorPoolSize::default()
-                .ty(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
-                .descriptor_count(1),
-            vk::DescriptorPoolSize::default()
-                .ty(vk::DescriptorType::UNIFORM_BUFFER)
-                .descriptor_count(1),
-            vk::DescriptorPoolSize::default()
-                .ty(vk::DescriptorType::STORAGE_BUFFER)
-                .descriptor_count(binding::STORAGE.len() as u32),
-        ];
+        // One descriptor of each binding of the set.
+        let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
+        for (_, ty, _) in pipelines::set_bindings() {
+            match sizes.iter_mut().find(|s| s.ty == ty) {
+                Some(s) => s.descriptor_count += 1,
+                None => sizes.push(vk::DescriptorPoolSize::default().ty(ty).descriptor_count(1)),
+            }
+        }
         // SAFETY: valid create infos; the pool is destroyed in Drop.
         let pool = unsafe {
             ctx.device.create_descriptor_pool(

@@ -2,8 +2,10 @@
 //! once per process and cached in the [`Context`]), its shader binding table, and the compute
 //! pipelines.
 //!
-//! Shaders (`shaders_glsl/vulkan/`, compiled by build.rs with glslc):
-//! - `raygen.rgen`: the shared integrator (`shared/integrators.glsl`) per pixel, adding the
+//! Shaders (`shaders_glsl/vulkan/`, compiled by build.rs with glslc; the shader table's
+//! [`on_ash`] names each, and the descriptor-set layout is the union of their reflected
+//! bindings, [`set_bindings`]):
+//! - `render.rgen`: the shared integrator (`shared/integrators.glsl`) per pixel, adding the
 //!   frame into the accumulation buffer; `query.rgen`: the field at points from a buffer.
 //!   Both define `field_query(x)` (`vulkan/field_query.glsl`): one ray from x along (1, 1, 1)
 //!   with tmin = tmax = 0.
@@ -11,7 +13,9 @@
 //!   `CLUSTER_SIZE` particles) and reports (d², r, t) for each that contains the point;
 //!   `particle.rahit`: adds the particle's RBF term into the payload and ignores the hit, so
 //!   traversal goes on; `empty.rmiss`.
-//! - `boxes.comp`: the AABB of each cluster from positions, radius map and global radius.
+//! - `blas_boxes.comp`: the AABB of each cluster from positions, radius map and global radius.
+//! - `hilbert_keys.comp`, `radix_sort.comp` (entry points count, scan, scatter), `gather.comp`
+//!   (gather_words, gather_vec4s): preparing a step (`prepare.rs`).
 //! - `lbvh_query.comp`, `lbvh_render.comp`: the same queries and integrators with the shared
 //!   LBVH stack traversal (`shared/lbvh.glsl`) in place of the RT pipeline, for the
 //!   same-device hardware-versus-software comparison (the paper's Fig. 10a).
@@ -33,39 +37,15 @@ use gpu_allocator::MemoryLocation;
 use super::context::{Context, device_error, vk_error};
 use super::resources::Buffer;
 use crate::backend::BackendError;
-use crate::backend::shaders::SpecConstants;
+use crate::backend::shaders::table::{BindingKind, GpuBackend, StageKind};
+use crate::backend::shaders::{Entry, SHADERS, SpecConstants, on_ash};
 use crate::values::shader_constants::SPEC_CONSTANTS;
 
-macro_rules! spirv {
-    ($name:literal) => {
-        include_bytes!(concat!(env!("OUT_DIR"), "/", $name, ".spv"))
-    };
-}
-
-const RAYGEN: &[u8] = spirv!("raygen.rgen");
-const QUERY: &[u8] = spirv!("query.rgen");
-const MISS: &[u8] = spirv!("empty.rmiss");
-const INTERSECTION: &[u8] = spirv!("particle.rint");
-const ANY_HIT: &[u8] = spirv!("particle.rahit");
-const SPLAT_RAYGEN: &[u8] = spirv!("splat.rgen");
-const SPLAT_INTERSECTION: &[u8] = spirv!("splat.rint");
-const SPLAT_ANY_HIT: &[u8] = spirv!("splat.rahit");
-const LBVH_SPLAT: &[u8] = spirv!("lbvh_splat.comp");
-const BOXES: &[u8] = spirv!("boxes.comp");
-const LBVH_QUERY: &[u8] = spirv!("lbvh_query.comp");
-const LBVH_RENDER: &[u8] = spirv!("lbvh_render.comp");
-const HILBERT_KEYS: &[u8] = spirv!("hilbert_keys.comp");
-const SORT_COUNT: &[u8] = spirv!("sort_count.comp");
-const SORT_SCAN: &[u8] = spirv!("sort_scan.comp");
-const SORT_SCATTER: &[u8] = spirv!("sort_scatter.comp");
-const GATHER_WORDS: &[u8] = spirv!("gather_words.comp");
-const GATHER_VEC4S: &[u8] = spirv!("gather_vec4s.comp");
-const VOXEL_SPLAT: &[u8] = spirv!("voxel_splat.comp");
-const VOXEL_RENDER: &[u8] = spirv!("voxel_render.comp");
-
-/// Descriptor bindings (set 0); `shaders_glsl/vulkan/bindings.glsl` declares the same.
-/// Bindings 2, 3 and 9 (particles, radius attributes, boxes) are gone: those arrays grow with
-/// the step and are reached by device address (`Push`), so no binding limit applies.
+/// The names of the descriptor bindings (set 0) the backend writes, as
+/// `shaders_glsl/vulkan/bindings.glsl` declares them; the layout itself is [`set_bindings`],
+/// reflected from the shaders. Bindings 2, 3 and 9 (particles, radius attributes, boxes) are
+/// gone: those arrays grow with the step and are reached by device address (`Push`), so no
+/// binding limit applies.
 pub mod binding {
     pub const TLAS: u32 = 0;
     pub const PARAMS: u32 = 1;
@@ -75,15 +55,52 @@ pub mod binding {
     pub const QUERY_RESULTS: u32 = 8;
     pub const LBVH_NODES: u32 = 10;
     pub const LBVH_BOXES: u32 = 11;
-    /// Storage buffers: every binding but the TLAS and the uniform block.
-    pub const STORAGE: [u32; 6] = [
-        TABLES,
-        STBN,
-        QUERY_POINTS,
-        QUERY_RESULTS,
-        LBVH_NODES,
-        LBVH_BOXES,
-    ];
+}
+
+/// The descriptor type of a binding of the shader table.
+fn descriptor_type(kind: BindingKind) -> vk::DescriptorType {
+    match kind {
+        BindingKind::Uniform => vk::DescriptorType::UNIFORM_BUFFER,
+        BindingKind::Storage { .. } => vk::DescriptorType::STORAGE_BUFFER,
+        BindingKind::Texture => vk::DescriptorType::SAMPLED_IMAGE,
+        BindingKind::Sampler => vk::DescriptorType::SAMPLER,
+        BindingKind::AccelerationStructure => vk::DescriptorType::ACCELERATION_STRUCTURE_KHR,
+    }
+}
+
+/// The shader stage flag of a stage kind.
+fn stage_flags(stage: StageKind) -> vk::ShaderStageFlags {
+    match stage {
+        StageKind::Compute => vk::ShaderStageFlags::COMPUTE,
+        StageKind::RayGeneration => vk::ShaderStageFlags::RAYGEN_KHR,
+        StageKind::Intersection => vk::ShaderStageFlags::INTERSECTION_KHR,
+        StageKind::AnyHit => vk::ShaderStageFlags::ANY_HIT_KHR,
+        StageKind::ClosestHit => vk::ShaderStageFlags::CLOSEST_HIT_KHR,
+        StageKind::Miss => vk::ShaderStageFlags::MISS_KHR,
+    }
+}
+
+/// The one descriptor set every ash pipeline binds (set 0): each binding any ash stage uses,
+/// as the shader table reflects it from the SPIR-V, with its descriptor type and the stages
+/// that use it, by binding.
+pub fn set_bindings() -> Vec<(u32, vk::DescriptorType, vk::ShaderStageFlags)> {
+    let mut out: Vec<(u32, vk::DescriptorType, vk::ShaderStageFlags)> = Vec::new();
+    for shader in SHADERS.iter().filter(|s| s.backend == GpuBackend::Ash) {
+        for entry in shader.entry_points {
+            for b in entry.bindings {
+                let (ty, stage) = (descriptor_type(b.kind), stage_flags(entry.stage));
+                match out.iter_mut().find(|(n, ..)| *n == b.binding) {
+                    Some((_, t, s)) => {
+                        assert_eq!(*t, ty, "binding {} differs in {}", b.binding, shader.file);
+                        *s |= stage;
+                    }
+                    None => out.push((b.binding, ty, stage)),
+                }
+            }
+        }
+    }
+    out.sort_by_key(|b| b.0);
+    out
 }
 
 /// The push constants of every kernel (`Push` in bindings.glsl).
@@ -135,27 +152,16 @@ pub struct Layouts {
 
 impl Layouts {
     pub fn new(device: &ash::Device) -> Result<Layouts, vk::Result> {
-        let mut bindings = vec![
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(binding::TLAS)
-                .descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::RAYGEN_KHR),
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(binding::PARAMS)
-                .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::ALL),
-        ];
-        for b in binding::STORAGE {
-            bindings.push(
+        let bindings: Vec<vk::DescriptorSetLayoutBinding> = set_bindings()
+            .into_iter()
+            .map(|(binding, ty, stages)| {
                 vk::DescriptorSetLayoutBinding::default()
-                    .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .binding(binding)
+                    .descriptor_type(ty)
                     .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::ALL),
-            );
-        }
+                    .stage_flags(stages)
+            })
+            .collect();
         // SAFETY: valid create infos; destroyed in `destroy`.
         unsafe {
             let set = device.create_descriptor_set_layout(
@@ -206,44 +212,10 @@ impl Layouts {
     }
 }
 
-/// The compute kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum ComputeKind {
-    /// One AABB per cluster (`boxes.comp`).
-    Boxes,
-    /// Field queries by LBVH traversal (`lbvh_query.comp`).
-    LbvhQuery,
-    /// One frame by LBVH traversal (`lbvh_render.comp`).
-    LbvhRender,
-    /// One splatted frame by LBVH traversal (`lbvh_splat.comp`).
-    LbvhSplat,
-    /// The voxel baseline: the particles added to the grid (`voxel_splat.comp`), and one
-    /// frame over the grid (`voxel_render.comp`).
-    VoxelSplat,
-    VoxelRender,
-    /// Preparing a step (`PreparePush`): Hilbert keys, the radix sort's three passes, and the
-    /// gathers of words and of vec4s.
-    HilbertKeys,
-    SortCount,
-    SortScan,
-    SortScatter,
-    GatherWords,
-    GatherVec4s,
-}
-
-impl ComputeKind {
-    /// Whether the kernel prepares a step (the push-only layout, no specialisation).
-    fn prepares(self) -> bool {
-        !matches!(
-            self,
-            ComputeKind::Boxes
-                | ComputeKind::LbvhQuery
-                | ComputeKind::LbvhRender
-                | ComputeKind::LbvhSplat
-                | ComputeKind::VoxelSplat
-                | ComputeKind::VoxelRender
-        )
-    }
+/// Whether a compute kernel prepares a step: it binds no descriptor (every array by address,
+/// `PreparePush`) and reads no specialisation constant, so it uses the push-only layout.
+fn prepares(kernel: Entry) -> bool {
+    kernel.point().bindings.is_empty()
 }
 
 /// Shader modules destroyed when dropped.
@@ -253,7 +225,9 @@ struct Modules<'a> {
 }
 
 impl Modules<'_> {
-    fn load(&mut self, spirv: &[u8]) -> Result<vk::ShaderModule, BackendError> {
+    fn load(&mut self, entry: Entry) -> Result<vk::ShaderModule, BackendError> {
+        debug_assert_eq!(entry.shader().backend, GpuBackend::Ash, "{entry}");
+        let spirv = entry.point().spirv;
         let words = ash::util::read_spv(&mut Cursor::new(spirv))
             .map_err(|e| device_error("reading SPIR-V", e))?;
         // SAFETY: valid SPIR-V produced by glslc at build time.
@@ -294,13 +268,28 @@ const SPEC_ENTRIES: [vk::SpecializationMapEntry; SPEC_CONSTANTS.len()] = {
 /// What a ray-tracing pipeline runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum RtProgram {
-    /// The RBF field: frames and point queries (`raygen.rgen`, `query.rgen`, `particle.*`).
+    /// The RBF field: frames and point queries (`render.rgen`, `query.rgen`, `particle.*`).
     Field,
     /// Knoll et al.'s splatter (`splat.*`).
     Splat,
 }
 
 impl RtProgram {
+    /// Its stages: the raygens, then the miss, intersection and any-hit stages.
+    fn stages(self) -> (&'static [Entry], [Entry; 3]) {
+        let miss = on_ash::EMPTY_RMISS;
+        match self {
+            RtProgram::Field => (
+                &[on_ash::RENDER_RGEN, on_ash::QUERY_RGEN],
+                [miss, on_ash::PARTICLE_RINT, on_ash::PARTICLE_RAHIT],
+            ),
+            RtProgram::Splat => (
+                &[on_ash::SPLAT_RGEN],
+                [miss, on_ash::SPLAT_RINT, on_ash::SPLAT_RAHIT],
+            ),
+        }
+    }
+
     /// Ray-generation groups (first in the pipeline's groups; a miss and a hit group follow).
     pub fn raygens(self) -> u32 {
         match self {
@@ -332,30 +321,18 @@ pub fn rt_pipeline(
     let spec_info = vk::SpecializationInfo::default()
         .map_entries(&SPEC_ENTRIES)
         .data(data);
-    let stage = |flags, module| {
-        vk::PipelineShaderStageCreateInfo::default()
-            .stage(flags)
-            .module(module)
-            .name(c"main")
-            .specialization_info(&spec_info)
-    };
-    let (raygens, intersection, any_hit): (&[&[u8]], _, _) = match program {
-        RtProgram::Field => (&[RAYGEN, QUERY], INTERSECTION, ANY_HIT),
-        RtProgram::Splat => (&[SPLAT_RAYGEN], SPLAT_INTERSECTION, SPLAT_ANY_HIT),
-    };
+    let (raygens, [miss, intersection, any_hit]) = program.stages();
     let mut stages = Vec::new();
-    for &code in raygens {
-        stages.push(stage(vk::ShaderStageFlags::RAYGEN_KHR, modules.load(code)?));
+    for &entry in raygens.iter().chain(&[miss, intersection, any_hit]) {
+        // Every SPIR-V module glslc writes has one entry point, `main`.
+        stages.push(
+            vk::PipelineShaderStageCreateInfo::default()
+                .stage(stage_flags(entry.point().stage))
+                .module(modules.load(entry)?)
+                .name(c"main")
+                .specialization_info(&spec_info),
+        );
     }
-    stages.push(stage(vk::ShaderStageFlags::MISS_KHR, modules.load(MISS)?));
-    stages.push(stage(
-        vk::ShaderStageFlags::INTERSECTION_KHR,
-        modules.load(intersection)?,
-    ));
-    stages.push(stage(
-        vk::ShaderStageFlags::ANY_HIT_KHR,
-        modules.load(any_hit)?,
-    ));
     let general = |i: u32| {
         vk::RayTracingShaderGroupCreateInfoKHR::default()
             .ty(vk::RayTracingShaderGroupTypeKHR::GENERAL)
@@ -398,26 +375,27 @@ pub fn rt_pipeline(
     Ok(pipeline)
 }
 
-/// The compute pipeline `kind` for `spec` (only the constants the kernel reads matter).
+/// The compute pipeline of `kind` (one of [`on_ash`]) for `spec` (only the constants the
+/// kernel reads matter).
 pub fn compute_pipeline(
     ctx: &Context,
-    kind: ComputeKind,
+    kind: Entry,
     spec: SpecConstants,
 ) -> Result<vk::Pipeline, BackendError> {
     let key_spec = match kind {
-        ComputeKind::Boxes => SpecConstants {
+        on_ash::BLAS_BOXES => SpecConstants {
             integrator: 0,
             colour_mode: 0,
             noise_kind: 0,
             density_map_varies: 0,
             ..spec
         },
-        ComputeKind::LbvhQuery => SpecConstants {
+        on_ash::LBVH_QUERY => SpecConstants {
             integrator: 0,
             noise_kind: 0,
             ..spec
         },
-        ComputeKind::VoxelSplat => SpecConstants {
+        on_ash::VOXEL_SPLAT => SpecConstants {
             integrator: 0,
             noise_kind: 0,
             cluster_size: 0,
@@ -426,7 +404,7 @@ pub fn compute_pipeline(
             ..spec
         },
         // The march reads no particle.
-        ComputeKind::VoxelRender => SpecConstants {
+        on_ash::VOXEL_RENDER => SpecConstants {
             cluster_size: 0,
             radius_map_varies: 0,
             density_map_varies: 0,
@@ -437,8 +415,10 @@ pub fn compute_pipeline(
             kernel: 0,
             ..spec
         },
-        ComputeKind::LbvhRender | ComputeKind::LbvhSplat => spec,
-        // Their code reads no specialisation constant: one pipeline each.
+        // Every constant (the frame kernels, and a new kernel until it is narrowed here).
+        _ if kind.point().specialised => spec,
+        // Their code reads no specialisation constant (the table reflects it): one pipeline
+        // each.
         _ => UNSPECIALISED,
     };
     let mut cache = ctx
@@ -452,32 +432,18 @@ pub fn compute_pipeline(
         device: &ctx.device,
         modules: Vec::new(),
     };
-    let code = match kind {
-        ComputeKind::Boxes => BOXES,
-        ComputeKind::LbvhQuery => LBVH_QUERY,
-        ComputeKind::LbvhRender => LBVH_RENDER,
-        ComputeKind::LbvhSplat => LBVH_SPLAT,
-        ComputeKind::VoxelSplat => VOXEL_SPLAT,
-        ComputeKind::VoxelRender => VOXEL_RENDER,
-        ComputeKind::HilbertKeys => HILBERT_KEYS,
-        ComputeKind::SortCount => SORT_COUNT,
-        ComputeKind::SortScan => SORT_SCAN,
-        ComputeKind::SortScatter => SORT_SCATTER,
-        ComputeKind::GatherWords => GATHER_WORDS,
-        ComputeKind::GatherVec4s => GATHER_VEC4S,
-    };
     let values = key_spec.values();
     let spec_info = vk::SpecializationInfo::default()
         .map_entries(&SPEC_ENTRIES)
         .data(bytemuck::cast_slice(&values));
     let stage = vk::PipelineShaderStageCreateInfo::default()
         .stage(vk::ShaderStageFlags::COMPUTE)
-        .module(modules.load(code)?)
+        .module(modules.load(kind)?)
         .name(c"main")
         .specialization_info(&spec_info);
     let info = [vk::ComputePipelineCreateInfo::default()
         .stage(stage)
-        .layout(if kind.prepares() {
+        .layout(if prepares(kind) {
             ctx.layouts.prepare
         } else {
             ctx.layouts.pipeline
@@ -493,8 +459,8 @@ pub fn compute_pipeline(
 }
 
 /// The pipeline of a kernel that prepares a step (no specialisation constant).
-pub fn prepare_pipeline(ctx: &Context, kind: ComputeKind) -> Result<vk::Pipeline, BackendError> {
-    debug_assert!(kind.prepares());
+pub fn prepare_pipeline(ctx: &Context, kind: Entry) -> Result<vk::Pipeline, BackendError> {
+    debug_assert!(prepares(kind));
     compute_pipeline(ctx, kind, UNSPECIALISED)
 }
 
@@ -588,5 +554,58 @@ impl BindingTable {
             hit: region(u64::from(raygens) + 1),
             _buffer: buffer,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The descriptor set is what the stages use, as reflected: the bindings the backend
+    /// writes by name, each of the type it writes, and nothing more.
+    #[test]
+    fn the_set_layout_is_the_reflected_bindings_the_backend_writes() {
+        let set = set_bindings();
+        let of = |b: u32| set.iter().find(|x| x.0 == b).map(|x| (x.1, x.2));
+        assert_eq!(
+            of(binding::TLAS),
+            Some((
+                vk::DescriptorType::ACCELERATION_STRUCTURE_KHR,
+                vk::ShaderStageFlags::RAYGEN_KHR
+            ))
+        );
+        let (ty, stages) = of(binding::PARAMS).unwrap();
+        assert_eq!(ty, vk::DescriptorType::UNIFORM_BUFFER);
+        assert!(
+            stages.contains(vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::INTERSECTION_KHR)
+        );
+        let storage = [
+            binding::TABLES,
+            binding::STBN,
+            binding::QUERY_POINTS,
+            binding::QUERY_RESULTS,
+            binding::LBVH_NODES,
+            binding::LBVH_BOXES,
+        ];
+        for b in storage {
+            assert_eq!(
+                of(b).unwrap().0,
+                vk::DescriptorType::STORAGE_BUFFER,
+                "binding {b}"
+            );
+        }
+        assert_eq!(set.len(), 2 + storage.len());
+        // The prepare kernels bind nothing (the push-only layout); the others do.
+        for kernel in [
+            on_ash::HILBERT_KEYS,
+            on_ash::RADIX_SORT_COUNT,
+            on_ash::RADIX_SORT_SCAN,
+            on_ash::RADIX_SORT_SCATTER,
+            on_ash::GATHER_WORDS,
+            on_ash::GATHER_VEC4S,
+        ] {
+            assert!(prepares(kernel), "{kernel}");
+        }
+        assert!(!prepares(on_ash::BLAS_BOXES) && !prepares(on_ash::LBVH_RENDER));
     }
 }

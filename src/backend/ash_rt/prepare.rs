@@ -3,7 +3,7 @@
 //! runs the wgpu backend's stages (`wgpu_lbvh::prepare` explains them: 63-bit Hilbert keys, two
 //! stable 32-bit radix sorts with the high words gathered between them, the gather into Hilbert
 //! order) as compute passes of this backend's own (`shaders_glsl/vulkan/hilbert_keys.comp`,
-//! `sort_{count,scan,scatter}.comp`, `gather_{words,vec4s}.comp`: the sort needs workgroup
+//! `radix_sort.comp`, `gather.comp`: the sort needs workgroup
 //! atomics, which the GLSL both backends share may not use), with the same CPU twins, into the
 //! buffers the structure build reads. The order stays on the device, so a radius-attribute or
 //! precision change gathers the new array without sorting again. Every buffer is made for the
@@ -17,19 +17,18 @@ use wgpu::WriteOnly;
 
 use super::buffers::addressed;
 use super::context::{Context, device_error};
-use super::pipelines::{ComputeKind, PreparePush, prepare_pipeline};
+use super::pipelines::{PreparePush, prepare_pipeline};
 use super::resources::{Buffer, COMPUTE_READ, Commands, TRANSFER_WRITE, barrier};
 use crate::accel::HilbertQuantizer;
 use crate::backend::BackendError;
 use crate::backend::gpu_data::{GpuStepData, Slots4, Slots16, StepStaging};
+use crate::backend::shaders::{Entry, on_ash};
 use crate::field::FieldSettings;
 use crate::values::Step;
 use crate::values::shader_constants::{SORT_RADIX, SORT_TILE};
 
-/// Threads per workgroup of the per-element kernels.
-const GROUP: u32 = 64;
-/// Elements per row of their 2D launches (at most 65535 workgroups per dimension).
-const ROW: u32 = 65_535 * GROUP;
+/// Workgroups per row of the per-element kernels' 2D launches (at most 65535 per dimension).
+const ROW_GROUPS: u32 = 65_535;
 /// Passes of 4-bit digits over 32-bit keys.
 const SORT_PASSES: u32 = 8;
 
@@ -284,7 +283,7 @@ impl Prepare {
     fn dispatch(
         &self,
         cb: vk::CommandBuffer,
-        kind: ComputeKind,
+        kind: Entry,
         push: &PreparePush,
         groups: (u32, u32),
     ) -> Result<(), BackendError> {
@@ -323,27 +322,30 @@ impl Prepare {
     fn elements(
         &self,
         cb: vk::CommandBuffer,
-        kind: ComputeKind,
+        kind: Entry,
         quantizer: &HilbertQuantizer,
         n: u32,
         arrays: [u64; 5],
     ) -> Result<(), BackendError> {
         let [lx, ly, lz] = quantizer.lo();
         let [sx, sy, sz] = quantizer.scale();
+        // Elements per row of the 2D launch.
+        let group = kind.point().threads();
+        let row = ROW_GROUPS * group;
         let push = PreparePush {
             grid_lo: [lx, ly, lz, 0.0],
             grid_scale: [sx, sy, sz, 0.0],
             count: n,
-            width: ROW,
+            width: row,
             arrays,
             ..PreparePush::default()
         };
-        let groups = n.div_ceil(GROUP).max(1);
+        let groups = n.div_ceil(group).max(1);
         self.dispatch(
             cb,
             kind,
             &push,
-            (groups.min(ROW / GROUP), n.div_ceil(ROW).max(1)),
+            (groups.min(ROW_GROUPS), n.div_ceil(row).max(1)),
         )
     }
 
@@ -378,9 +380,9 @@ impl Prepare {
                 ],
                 ..PreparePush::default()
             };
-            self.dispatch(cb, ComputeKind::SortCount, &push, (tiles, 1))?;
-            self.dispatch(cb, ComputeKind::SortScan, &push, (1, 1))?;
-            self.dispatch(cb, ComputeKind::SortScatter, &push, (tiles, 1))?;
+            self.dispatch(cb, on_ash::RADIX_SORT_COUNT, &push, (tiles, 1))?;
+            self.dispatch(cb, on_ash::RADIX_SORT_SCAN, &push, (1, 1))?;
+            self.dispatch(cb, on_ash::RADIX_SORT_SCATTER, &push, (tiles, 1))?;
         }
         Ok(())
     }
@@ -428,7 +430,7 @@ impl Prepare {
         }
         self.elements(
             cb,
-            ComputeKind::HilbertKeys,
+            on_ash::HILBERT_KEYS,
             &data.quantizer,
             n,
             [
@@ -440,23 +442,17 @@ impl Prepare {
             ],
         )?;
         self.record_sort(cb, n)?;
-        self.gather(
-            cb,
-            ComputeKind::GatherWords,
-            data,
-            &self.keys_hi,
-            &self.keys,
-        )?;
+        self.gather(cb, on_ash::GATHER_WORDS, data, &self.keys_hi, &self.keys)?;
         self.record_sort(cb, n)?;
         self.gather(
             cb,
-            ComputeKind::GatherVec4s,
+            on_ash::GATHER_VEC4S,
             data,
             self.points.on_device(),
             targets.points,
         )?;
         if let Some((raw, dst)) = lo {
-            self.gather(cb, ComputeKind::GatherVec4s, data, raw.on_device(), dst)?;
+            self.gather(cb, on_ash::GATHER_VEC4S, data, raw.on_device(), dst)?;
         }
         if let Some((raw, dst)) = radius {
             self.gather_factors(cb, data, raw.on_device(), dst)?;
@@ -477,7 +473,7 @@ impl Prepare {
             let offset = first as u64 * 4;
             self.elements(
                 cb,
-                ComputeKind::GatherWords,
+                on_ash::GATHER_WORDS,
                 &data.quantizer,
                 data.count as u32,
                 [
@@ -496,7 +492,7 @@ impl Prepare {
     fn gather(
         &self,
         cb: vk::CommandBuffer,
-        kind: ComputeKind,
+        kind: Entry,
         data: &GpuStepData,
         from: &Buffer,
         to: &Buffer,
@@ -539,7 +535,7 @@ impl Prepare {
             self.gather_factors(cb, data, raw.on_device(), dst)?;
         }
         if let Some((raw, dst)) = lo {
-            self.gather(cb, ComputeKind::GatherVec4s, data, raw.on_device(), dst)?;
+            self.gather(cb, on_ash::GATHER_VEC4S, data, raw.on_device(), dst)?;
         }
         Ok(())
     }
@@ -571,7 +567,7 @@ impl Prepare {
         );
         self.elements(
             cb,
-            ComputeKind::HilbertKeys,
+            on_ash::HILBERT_KEYS,
             quantizer,
             n as u32,
             [

@@ -12,10 +12,11 @@ use ash::vk;
 
 use super::buffers::addressed;
 use super::context::{NAME, device_error};
-use super::pipelines::{self, ComputeKind, Push};
+use super::pipelines::{self, Push};
 use super::resources::{Buffer, barrier};
 use super::{AshBackend, QUERY_WIDTH, TS_END, TS_START};
 use crate::backend::BackendError;
+use crate::backend::shaders::on_ash;
 use crate::backend::shaders::{GpuField, GpuFrame, GpuVoxels, SpecConstants};
 use crate::backend::voxel::{VoxelGeometry, VoxelGrid};
 use crate::values::FrameParams;
@@ -91,7 +92,7 @@ impl AshBackend {
             .params
             .write(VOXELS_OFFSET, bytemuck::bytes_of(&constants))?;
         let spec = self.spec(0, SpecConstants::colour_id(frame.colour), 0)?;
-        let pipeline = pipelines::compute_pipeline(&self.ctx, ComputeKind::VoxelSplat, spec)?;
+        let pipeline = pipelines::compute_pipeline(&self.ctx, on_ash::VOXEL_SPLAT, spec)?;
         let grid = self.voxels.as_ref().expect("made above").buffer.raw;
         let count = count as u32;
         let cb = self.commands.begin()?;

@@ -9,7 +9,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::backend::BackendError;
-use crate::backend::shaders::{glsl_with_includes, wgsl_with_includes};
+use crate::backend::shaders::table::{GpuBackend, Language};
+use crate::backend::shaders::{Entry, Shader, glsl_with_includes, wgsl_with_includes};
 use crate::values::shader_constants::SPEC_CONSTANTS;
 
 pub(crate) fn device_error(message: impl Into<String>) -> BackendError {
@@ -28,148 +29,6 @@ thread_local! {
 /// thread, so tests running beside each other on the shared device do not count each other's).
 pub fn buffers_made() -> u64 {
     BUFFERS_MADE.with(Cell::get)
-}
-
-/// A compute kernel of the backend: a shader file and an entry point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Kernel {
-    /// `shaders_glsl/wgpu/lbvh_bounds.comp`: cluster boxes.
-    Bounds,
-    /// `shaders_glsl/wgpu/lbvh_query.comp`: field queries.
-    Query,
-    /// `shaders_glsl/wgpu/lbvh_render.comp`: one frame of an integrator.
-    Render,
-    /// `shaders_glsl/wgpu/lbvh_splat.comp`: one frame of Knoll et al.'s splatter.
-    Splat,
-    /// `shaders_glsl/wgpu/voxel_particles.comp`: the voxel baseline's particles as the kernel
-    /// sees them.
-    VoxelParticles,
-    /// `shaders_wgsl/voxel_splat.wgsl`: their kernels added to a slab of the grid.
-    VoxelSplat,
-    /// `shaders_glsl/wgpu/voxel_render.comp`: one frame of an integrator over the grid.
-    VoxelRender,
-    /// `shaders_wgsl/lbvh_keys.wgsl`.
-    Keys,
-    /// `shaders_wgsl/radix_sort.wgsl`, its three entry points.
-    SortCount,
-    SortScan,
-    SortScatter,
-    /// `shaders_wgsl/lbvh_hierarchy.wgsl`.
-    Hierarchy,
-    /// `shaders_wgsl/lbvh_fit.wgsl`: the bottom-up climb and the refit's reset.
-    FitClimb,
-    FitReset,
-    /// `shaders_wgsl/hilbert_keys.wgsl`: a step's Hilbert keys.
-    HilbertKeys,
-    /// `shaders_wgsl/gather.wgsl`, its two entry points.
-    GatherWords,
-    GatherVec4s,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-enum ShaderFile {
-    Bounds,
-    Query,
-    Render,
-    Splat,
-    VoxelParticles,
-    VoxelSplat,
-    VoxelRender,
-    Keys,
-    Sort,
-    Hierarchy,
-    Fit,
-    HilbertKeys,
-    Gather,
-}
-
-impl Kernel {
-    fn file(self) -> ShaderFile {
-        match self {
-            Kernel::Bounds => ShaderFile::Bounds,
-            Kernel::Query => ShaderFile::Query,
-            Kernel::Render => ShaderFile::Render,
-            Kernel::Splat => ShaderFile::Splat,
-            Kernel::VoxelParticles => ShaderFile::VoxelParticles,
-            Kernel::VoxelSplat => ShaderFile::VoxelSplat,
-            Kernel::VoxelRender => ShaderFile::VoxelRender,
-            Kernel::Keys => ShaderFile::Keys,
-            Kernel::SortCount | Kernel::SortScan | Kernel::SortScatter => ShaderFile::Sort,
-            Kernel::Hierarchy => ShaderFile::Hierarchy,
-            Kernel::FitClimb | Kernel::FitReset => ShaderFile::Fit,
-            Kernel::HilbertKeys => ShaderFile::HilbertKeys,
-            Kernel::GatherWords | Kernel::GatherVec4s => ShaderFile::Gather,
-        }
-    }
-
-    fn entry_point(self) -> &'static str {
-        match self {
-            Kernel::SortCount => "count",
-            Kernel::SortScan => "scan",
-            Kernel::SortScatter => "scatter",
-            Kernel::FitClimb => "climb",
-            Kernel::FitReset => "reset",
-            Kernel::GatherWords => "gather_words",
-            Kernel::GatherVec4s => "gather_vec4s",
-            _ => "main",
-        }
-    }
-
-    /// Whether the kernel is GLSL with the specialisation constants of `params.glsl`.
-    fn specialised(self) -> bool {
-        matches!(
-            self,
-            Kernel::Bounds
-                | Kernel::Query
-                | Kernel::Render
-                | Kernel::Splat
-                | Kernel::VoxelParticles
-                | Kernel::VoxelRender
-        )
-    }
-}
-
-enum Source {
-    Glsl(&'static str),
-    Wgsl(&'static str),
-}
-
-impl ShaderFile {
-    fn source(self) -> Source {
-        match self {
-            ShaderFile::Bounds => {
-                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_bounds.comp"))
-            }
-            ShaderFile::Query => {
-                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_query.comp"))
-            }
-            ShaderFile::Render => {
-                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_render.comp"))
-            }
-            ShaderFile::Splat => {
-                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/lbvh_splat.comp"))
-            }
-            ShaderFile::VoxelParticles => Source::Glsl(include_str!(
-                "../../../shaders_glsl/wgpu/voxel_particles.comp"
-            )),
-            ShaderFile::VoxelSplat => {
-                Source::Wgsl(include_str!("../../../shaders_wgsl/voxel_splat.wgsl"))
-            }
-            ShaderFile::VoxelRender => {
-                Source::Glsl(include_str!("../../../shaders_glsl/wgpu/voxel_render.comp"))
-            }
-            ShaderFile::Keys => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_keys.wgsl")),
-            ShaderFile::Sort => Source::Wgsl(include_str!("../../../shaders_wgsl/radix_sort.wgsl")),
-            ShaderFile::Hierarchy => {
-                Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_hierarchy.wgsl"))
-            }
-            ShaderFile::Fit => Source::Wgsl(include_str!("../../../shaders_wgsl/lbvh_fit.wgsl")),
-            ShaderFile::HilbertKeys => {
-                Source::Wgsl(include_str!("../../../shaders_wgsl/hilbert_keys.wgsl"))
-            }
-            ShaderFile::Gather => Source::Wgsl(include_str!("../../../shaders_wgsl/gather.wgsl")),
-        }
-    }
 }
 
 /// The specialisation-constant values of a GLSL kernel variant (params.glsl's seven, in
@@ -263,8 +122,9 @@ pub struct GpuContext {
     /// without a staging copy.
     pub unified_memory: bool,
     lost: Arc<Mutex<Option<String>>>,
-    modules: Mutex<HashMap<(ShaderFile, Layout), Arc<wgpu::ShaderModule>>>,
-    pipelines: Mutex<HashMap<(Kernel, Variant, Layout), Arc<wgpu::ComputePipeline>>>,
+    /// By shader file (`Shader::file`) and layout.
+    modules: Mutex<HashMap<(&'static str, Layout), Arc<wgpu::ShaderModule>>>,
+    pipelines: Mutex<HashMap<(Entry, Variant, Layout), Arc<wgpu::ComputePipeline>>>,
 }
 
 /// A pair of timestamp queries and the buffers their values come back through, for timing one
@@ -497,25 +357,28 @@ impl GpuContext {
 
     fn module(
         &self,
-        file: ShaderFile,
+        shader: &'static Shader,
         layout: Layout,
     ) -> Result<Arc<wgpu::ShaderModule>, BackendError> {
         let mut modules = self.modules.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(m) = modules.get(&(file, layout)) {
+        if let Some(m) = modules.get(&(shader.file, layout)) {
             return Ok(m.clone());
         }
-        let label = format!("{file:?} {layout:?}");
+        let label = format!("{} {layout:?}", shader.file);
         let parts = layout.split_parts();
         let parts_text = parts.to_string();
         let defines = [("SPLIT_PARTS", parts_text.as_str())];
-        let source = match file.source() {
-            Source::Glsl(text) => wgpu::ShaderSource::Glsl {
-                shader: Cow::Owned(glsl_with_includes(text)),
+        let source = match shader.language {
+            Language::GlslCompute => wgpu::ShaderSource::Glsl {
+                shader: Cow::Owned(glsl_with_includes(shader.source)),
                 stage: wgpu::naga::ShaderStage::Compute,
                 defines: &defines,
             },
-            Source::Wgsl(text) => {
-                wgpu::ShaderSource::Wgsl(Cow::Owned(wgsl_with_includes(text, parts)))
+            Language::Wgsl => {
+                wgpu::ShaderSource::Wgsl(Cow::Owned(wgsl_with_includes(shader.source, parts)))
+            }
+            Language::GlslRayTracing => {
+                return Err(device_error(format!("{}: not a wgpu shader", shader.file)));
             }
         };
         let module = self.scoped(&format!("shader {label}"), || {
@@ -526,20 +389,25 @@ impl GpuContext {
                 })
         })?;
         let module = Arc::new(module);
-        modules.insert((file, layout), module.clone());
+        modules.insert((shader.file, layout), module.clone());
         Ok(module)
     }
 
-    /// The pipeline of `kernel` (with specialisation constants `variant` for the GLSL kernels)
-    /// binding its splittable arrays as `layout` says, compiled on first use and cached for
-    /// the process.
+    /// The pipeline of `kernel` (one of [`crate::backend::shaders::on_wgpu`], with
+    /// specialisation constants `variant` where it has them) binding its splittable arrays as
+    /// `layout` says, compiled on first use and cached for the process.
     pub fn pipeline(
         &self,
-        kernel: Kernel,
+        kernel: Entry,
         variant: Variant,
         layout: Layout,
     ) -> Result<Arc<wgpu::ComputePipeline>, BackendError> {
-        let variant = if kernel.specialised() { variant } else { None };
+        debug_assert_eq!(kernel.shader().backend, GpuBackend::Wgpu, "{kernel}");
+        let variant = if kernel.point().specialised {
+            variant
+        } else {
+            None
+        };
         let key = (kernel, variant, layout);
         if let Some(p) = self
             .pipelines
@@ -549,7 +417,7 @@ impl GpuContext {
         {
             return Ok(p.clone());
         }
-        let module = self.module(kernel.file(), layout)?;
+        let module = self.module(kernel.shader(), layout)?;
         // naga names an override by its constant_id when it has one: the keys are "0", "1", ...
         let keys: Vec<String> = (0..SPEC_CONSTANTS.len()).map(|i| i.to_string()).collect();
         let constants: Vec<(&str, f64)> = variant
@@ -560,7 +428,7 @@ impl GpuContext {
                     .collect()
             })
             .unwrap_or_default();
-        let label = format!("{kernel:?} {variant:?} {layout:?}");
+        let label = format!("{kernel} {variant:?} {layout:?}");
         let started = std::time::Instant::now();
         let pipeline = self.scoped(&format!("pipeline {label}"), || {
             self.device
@@ -568,7 +436,7 @@ impl GpuContext {
                     label: Some(&label),
                     layout: None,
                     module: &module,
-                    entry_point: Some(kernel.entry_point()),
+                    entry_point: Some(kernel.point().name),
                     compilation_options: wgpu::PipelineCompilationOptions {
                         constants: &constants,
                         zero_initialize_workgroup_memory: false,

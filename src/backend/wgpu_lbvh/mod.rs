@@ -14,7 +14,7 @@
 //!   Every kernel exists in two layouts (`context::Layout`): the one-part layout, which a step
 //!   that fits runs, binds at most 8 storage buffers per stage (WebGPU's default, checked in
 //!   `build.rs`), so the backend runs on small GPUs; only a split step needs more.
-//! - **Build**, every stage a compute pass: cluster boxes (`shaders_glsl/wgpu/lbvh_bounds.comp`),
+//! - **Build**, every stage a compute pass: cluster boxes (`shaders_glsl/wgpu/lbvh_boxes.comp`),
 //!   Morton keys (`shaders_wgsl/lbvh_keys.wgsl`), a portable LSD radix sort
 //!   (`radix_sort.wgsl`), Karras' hierarchy (`lbvh_hierarchy.wgsl`) and bottom-up bounds
 //!   (`lbvh_fit.wgsl`). The build reads back the leaf count and the tree's depth.
@@ -50,7 +50,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-pub use context::{AdapterSummary, GpuContext, Kernel, adapters, buffers_made, instance_flags};
+pub use context::{AdapterSummary, GpuContext, adapters, buffers_made, instance_flags};
 pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::{GpuStepData, SortedParticles};

@@ -18,7 +18,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::context::{GpuContext, Kernel, Layout, device_error};
+use super::context::{GpuContext, Layout, device_error};
 use super::sort::RadixSort;
 use super::util::{
     SplitBuffer, Staging, encode_pass, grid, poison, read_u32, storage, storage_with_usage,
@@ -28,6 +28,7 @@ use super::{PARTICLE_BYTES, WORD_BYTES};
 use crate::accel::HilbertQuantizer;
 use crate::backend::BackendError;
 use crate::backend::gpu_data::{GpuStepData, Slots16, StepStaging};
+use crate::backend::shaders::on_wgpu;
 use crate::field::FieldSettings;
 use crate::values::Step;
 
@@ -377,11 +378,11 @@ impl Prepare {
             ctx,
             encoder,
             "hilbert keys",
-            Kernel::HilbertKeys,
+            on_wgpu::HILBERT_KEYS,
             None,
             layout,
             &entries,
-            grid(n as u64, 64),
+            grid(n as u64, on_wgpu::HILBERT_KEYS.point().threads()),
         )
     }
 
@@ -438,7 +439,7 @@ impl Prepare {
             ctx,
             encoder,
             "gather words",
-            Kernel::GatherWords,
+            on_wgpu::GATHER_WORDS,
             None,
             Layout::Whole,
             &[
@@ -447,7 +448,7 @@ impl Prepare {
                 (2, section(src)),
                 (3, section(dst)),
             ],
-            grid(n as u64, 64),
+            grid(n as u64, on_wgpu::GATHER_WORDS.point().threads()),
         )
     }
 
@@ -471,11 +472,11 @@ impl Prepare {
             ctx,
             encoder,
             "gather vec4s",
-            Kernel::GatherVec4s,
+            on_wgpu::GATHER_VEC4S,
             None,
             layout,
             &entries,
-            grid(n as u64, 64),
+            grid(n as u64, on_wgpu::GATHER_VEC4S.point().threads()),
         )
     }
 

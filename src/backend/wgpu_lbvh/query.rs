@@ -5,10 +5,11 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use super::context::{Kernel, Layout};
+use super::context::Layout;
 use super::util::{self, bind, dispatch, grid, storage, uniform, write};
 use super::{QUERY_CHUNK, WgpuBackend};
 use crate::backend::BackendError;
+use crate::backend::shaders::on_wgpu;
 use crate::values::{Integrator, NoiseKind};
 
 impl WgpuBackend {
@@ -60,7 +61,7 @@ impl WgpuBackend {
             self.query_buffers.as_ref().expect("made above");
         let layout = Layout::of(&[&scene.particles, &tree.nodes, &tree.boxes]);
         let pipeline = ctx.pipeline(
-            Kernel::Query,
+            on_wgpu::LBVH_QUERY,
             Some(scene.variant(Integrator::Ea, scene.colour_mode(), NoiseKind::Stbn)),
             layout,
         )?;
@@ -84,7 +85,7 @@ impl WgpuBackend {
                 scene.data.push_query(x, &mut local);
             }
             write(&ctx, points_buffer, bytemuck::cast_slice(&local));
-            let groups = (part.len() as u32).div_ceil(64);
+            let groups = (part.len() as u32).div_ceil(on_wgpu::LBVH_QUERY.point().threads());
             let (blocks, per_block, dispatched) = util::interleave(groups);
             write(
                 &ctx,

@@ -5,11 +5,12 @@
 
 use std::time::Instant;
 
-use super::context::{Kernel, Layout, device_error};
+use super::context::{Layout, device_error};
 use super::util::{self, PARTS, SplitBuffer, bind, dispatch, grid, parts_needed, storage, write};
 use super::{Accumulation, WgpuBackend};
 use crate::backend::BackendError;
 use crate::backend::shaders::GpuFrame;
+use crate::backend::shaders::on_wgpu;
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
 use crate::values::shader_constants::{STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, spec};
@@ -58,19 +59,20 @@ impl WgpuBackend {
         let layout = Layout::of(&[&scene.particles, &tree.nodes, &tree.boxes, sums]);
         let mut variant = scene.variant(frame.integrator, frame.colour, frame.noise);
         let (pipeline_kernel, label) = match kernel {
-            FrameKernel::Integrator => (Kernel::Render, "lbvh render"),
+            FrameKernel::Integrator => (on_wgpu::LBVH_RENDER, "lbvh render"),
             FrameKernel::Splat { .. } => {
                 // The splatter reads neither the integrator nor the noise: one variant serves
                 // every frame setting of a scene.
                 variant[spec::INTEGRATOR] = 0;
                 variant[spec::NOISE_KIND] = 0;
-                (Kernel::Splat, "lbvh splat")
+                (on_wgpu::LBVH_SPLAT, "lbvh splat")
             }
         };
         let pipeline = ctx.pipeline(pipeline_kernel, Some(variant), layout)?;
         let (w, h) = (frame.width, frame.height);
-        let tiles_x = w.div_ceil(8);
-        let tiles = tiles_x * h.div_ceil(8);
+        let [group_x, group_y, _] = pipeline_kernel.point().workgroup_size;
+        let tiles_x = w.div_ceil(group_x);
+        let tiles = tiles_x * h.div_ceil(group_y);
         let (blocks, per_block, dispatched) = util::interleave(tiles);
         let acc = self.accumulation.as_mut().expect("made above");
         let acc_part = acc.sums.part_len(16);

@@ -4,9 +4,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::context::{GpuContext, Kernel, Layout};
+use super::context::{GpuContext, Layout};
 use super::util::{bind, dispatch, grid, poison, read_u32, storage, write};
 use crate::backend::BackendError;
+use crate::backend::shaders::on_wgpu;
 use crate::values::shader_constants::{SORT_RADIX, SORT_TILE};
 
 /// Passes of 4-bit digits over 32-bit keys.
@@ -78,9 +79,9 @@ impl RadixSort {
                 self.tiles_capacity * SORT_TILE
             )));
         }
-        let count_pipeline = ctx.pipeline(Kernel::SortCount, None, Layout::Whole)?;
-        let scan_pipeline = ctx.pipeline(Kernel::SortScan, None, Layout::Whole)?;
-        let scatter_pipeline = ctx.pipeline(Kernel::SortScatter, None, Layout::Whole)?;
+        let count_pipeline = ctx.pipeline(on_wgpu::RADIX_SORT_COUNT, None, Layout::Whole)?;
+        let scan_pipeline = ctx.pipeline(on_wgpu::RADIX_SORT_SCAN, None, Layout::Whole)?;
+        let scatter_pipeline = ctx.pipeline(on_wgpu::RADIX_SORT_SCATTER, None, Layout::Whole)?;
         let groups = grid(u64::from(tiles), 1);
         for pass in 0..PASSES {
             let params = SortParams {

@@ -3,7 +3,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::context::{GpuContext, Kernel, Layout, Variant, device_error};
+use super::context::{GpuContext, Layout, Variant, device_error};
 use super::sort::RadixSort;
 use super::util::PARTS;
 use super::util::{SplitBuffer, encode_pass, grid, poison, read_u32, storage, write};
@@ -11,6 +11,7 @@ use crate::backend::BackendError;
 use crate::backend::shaders::cpu::Lbvh;
 use crate::backend::shaders::cpu::lbvh::{GpuBox, NODE_WORDS};
 use crate::backend::shaders::cpu::lbvh_keys::KeyGrid;
+use crate::backend::shaders::on_wgpu;
 
 /// How far a build goes (tests stop early to compare a stage with its twin).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -190,11 +191,11 @@ impl GpuTree {
             ctx,
             encoder,
             "lbvh bounds",
-            Kernel::Bounds,
+            on_wgpu::LBVH_BOXES,
             scene.variant,
             layout,
             &entries,
-            grid(u64::from(clusters), 64),
+            grid(u64::from(clusters), on_wgpu::LBVH_BOXES.point().threads()),
         )
     }
 
@@ -218,11 +219,14 @@ impl GpuTree {
             ctx,
             encoder,
             "lbvh climb",
-            Kernel::FitClimb,
+            on_wgpu::LBVH_FIT_CLIMB,
             None,
             layout,
             &entries,
-            grid(u64::from(clusters), 64),
+            grid(
+                u64::from(clusters),
+                on_wgpu::LBVH_FIT_CLIMB.point().threads(),
+            ),
         )
     }
 
@@ -257,11 +261,11 @@ impl GpuTree {
                     ctx,
                     &mut encoder,
                     "lbvh keys",
-                    Kernel::Keys,
+                    on_wgpu::LBVH_KEYS,
                     None,
                     layout,
                     &entries,
-                    grid(u64::from(clusters), 64),
+                    grid(u64::from(clusters), on_wgpu::LBVH_KEYS.point().threads()),
                 )?;
             }
             if until >= BuildStage::Sort {
@@ -291,11 +295,14 @@ impl GpuTree {
                     ctx,
                     &mut encoder,
                     "lbvh hierarchy",
-                    Kernel::Hierarchy,
+                    on_wgpu::LBVH_HIERARCHY,
                     None,
                     layout,
                     &entries,
-                    grid(u64::from(clusters.max(1)), 64),
+                    grid(
+                        u64::from(clusters.max(1)),
+                        on_wgpu::LBVH_HIERARCHY.point().threads(),
+                    ),
                 )?;
             }
             if until >= BuildStage::Fit {
@@ -327,11 +334,14 @@ impl GpuTree {
                 ctx,
                 &mut encoder,
                 "lbvh reset",
-                Kernel::FitReset,
+                on_wgpu::LBVH_FIT_RESET,
                 None,
                 layout,
                 &entries,
-                grid(u64::from(clusters), 64),
+                grid(
+                    u64::from(clusters),
+                    on_wgpu::LBVH_FIT_RESET.point().threads(),
+                ),
             )?;
             self.encode_climb(ctx, &mut encoder, clusters)
         })??;

@@ -113,7 +113,7 @@ pub fn encode_pass(
     ctx: &GpuContext,
     encoder: &mut wgpu::CommandEncoder,
     label: &str,
-    kernel: super::context::Kernel,
+    kernel: crate::backend::shaders::Entry,
     variant: super::context::Variant,
     layout: Layout,
     entries: &[(u32, wgpu::BindingResource<'_>)],

@@ -13,9 +13,10 @@
 use std::time::Instant;
 
 use super::WgpuBackend;
-use super::context::{Kernel, Layout, device_error};
+use super::context::{Layout, device_error};
 use super::util::{self, bind, dispatch, grid, storage, write};
 use crate::backend::BackendError;
+use crate::backend::shaders::on_wgpu;
 use crate::backend::shaders::{GpuFrame, GpuVoxels};
 use crate::backend::voxel::{VoxelGeometry, VoxelGrid};
 use crate::values::FrameParams;
@@ -213,8 +214,8 @@ impl WgpuBackend {
         variant[spec::INTEGRATOR] = 0;
         variant[spec::NOISE_KIND] = 0;
         let particles_layout = Layout::of(&[&scene.particles]);
-        let prepare = ctx.pipeline(Kernel::VoxelParticles, Some(variant), particles_layout)?;
-        let splat = ctx.pipeline(Kernel::VoxelSplat, None, Layout::Whole)?;
+        let prepare = ctx.pipeline(on_wgpu::VOXEL_PARTICLES, Some(variant), particles_layout)?;
+        let splat = ctx.pipeline(on_wgpu::VOXEL_SPLAT, None, Layout::Whole)?;
         let slab = self.splat_buffers.slab.as_ref().expect("made above");
         let splats = self.splat_buffers.splats.as_ref().expect("made above");
         let voxels = self.voxels.as_ref().expect("made above");
@@ -263,7 +264,7 @@ impl WgpuBackend {
                             "voxel particles",
                             &prepare,
                             &bg,
-                            grid(in_chunk, 64),
+                            grid(in_chunk, on_wgpu::VOXEL_PARTICLES.point().threads()),
                         );
                     }
                     let bg = bind(
@@ -275,7 +276,8 @@ impl WgpuBackend {
                             (9, slab.as_entire_binding()),
                         ],
                     );
-                    dispatch(&mut encoder, "voxel splat", &splat, &bg, grid(in_chunk, 64));
+                    let groups = grid(in_chunk, on_wgpu::VOXEL_SPLAT.point().threads());
+                    dispatch(&mut encoder, "voxel splat", &splat, &bg, groups);
                 }
                 encoder.copy_buffer_to_texture(
                     wgpu::TexelCopyBufferInfo {
@@ -349,10 +351,11 @@ impl WgpuBackend {
         ] {
             variant[unread] = 0;
         }
-        let pipeline = ctx.pipeline(Kernel::VoxelRender, Some(variant), layout)?;
+        let pipeline = ctx.pipeline(on_wgpu::VOXEL_RENDER, Some(variant), layout)?;
         let (w, h) = (frame.width, frame.height);
-        let tiles_x = w.div_ceil(8);
-        let tiles = tiles_x * h.div_ceil(8);
+        let [group_x, group_y, _] = on_wgpu::VOXEL_RENDER.point().workgroup_size;
+        let tiles_x = w.div_ceil(group_x);
+        let tiles = tiles_x * h.div_ceil(group_y);
         let (blocks, per_block, dispatched) = util::interleave(tiles);
         write(
             &ctx,

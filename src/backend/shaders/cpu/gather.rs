@@ -1,4 +1,4 @@
-//! The CPU twin of `shaders_wgsl/gather.wgsl` and `shaders_glsl/vulkan/gather_{words,vec4s}.comp`
+//! The CPU twin of `shaders_wgsl/gather.wgsl` and `shaders_glsl/vulkan/gather.comp`
 //! (preparing a step, the last stage): an array put into sorted order, element k of the result
 //! being element `order[k]` of the input. The GPU backends gather the sort's second key word,
 //! then the particles, their lo parts and radius attribute; the CPU preparation

@@ -1,5 +1,8 @@
-//! The CPU twins of the GPU stages, one file per shader (as vello's `cpu/`), each doing what its
-//! stage does in the same f32 arithmetic so the tests can compare them.
+//! The CPU twins of the GPU stages, one file per stage (as vello's `cpu/`), each doing what its
+//! stage does in the same f32 arithmetic so the tests can compare them. A twin has its stage's
+//! name (`lbvh_boxes.rs` ↔ `shaders_glsl/wgpu/lbvh_boxes.comp` ↔ `on_wgpu::LBVH_BOXES`); a
+//! twin of a shared include has the include's (`rbf.rs` ↔ `shaders_glsl/shared/rbf.glsl`).
+//! `shaders::table`'s tests fail when a shader has no twin or a twin no shader.
 //!
 //! Preparing a step on the device (`wgpu_lbvh::prepare`): Hilbert keys of the particles' f32
 //! local coordinates (`hilbert_keys.wgsl`, 63 bits as two words), a stable radix sort by the
@@ -10,14 +13,14 @@
 //!
 //! The LBVH: a linear BVH (Karras, "Maximizing parallelism in the construction of BVHs, octrees, and k-d
 //! trees", HPG 2012) over cluster boxes: the CPU twin of the wgpu backend's GPU build
-//! (`shaders_glsl/wgpu/lbvh_bounds.comp`, `shaders_wgsl/lbvh_*.wgsl`, `shaders_wgsl/radix_sort.wgsl`)
+//! (`shaders_glsl/wgpu/lbvh_boxes.comp`, `shaders_wgsl/lbvh_*.wgsl`, `shaders_wgsl/radix_sort.wgsl`)
 //! and of its traversal (`shaders_glsl/shared/lbvh.glsl`). Every stage here does what the GPU
 //! stage does, in the same f32 arithmetic, so the tests compare them: integer stages (keys,
 //! sort, hierarchy, parents, depth) bit for bit, float stages (boxes) within a stated tolerance,
 //! and the bottom-up bounds exactly (min/max of the same f32 values).
 //!
 //! # Stages
-//! 1. **Cluster boxes** (`lbvh_bounds.comp`): cluster `c` holds particles `cK .. cK+K` (Hilbert
+//! 1. **Cluster boxes** (`lbvh_boxes.comp`): cluster `c` holds particles `cK .. cK+K` (Hilbert
 //!    order, local coordinates); its box bounds `[p - r, p + r]` over members with `r > 0`
 //!    (`r` = `particle_radius` of `shared/rbf.glsl`). No member left: the box is empty
 //!    (`min = +inf, max = -inf`) and the cluster stays out of the tree.
@@ -40,10 +43,12 @@
 //! internal node `i` is node `i + 1`. Beside it: `node_parents[j]` (the root's is [`LBVH_NONE`])
 //! and `leaf_parents[c]` ([`LBVH_NONE`] for a cluster left out, [`LBVH_ROOT_LEAF`] for the only leaf).
 
+pub mod blas_boxes;
 pub mod cluster_box;
 pub mod gather;
 pub mod hilbert_keys;
 pub mod lbvh;
+pub mod lbvh_boxes;
 pub mod lbvh_fit;
 pub mod lbvh_hierarchy;
 pub mod lbvh_keys;

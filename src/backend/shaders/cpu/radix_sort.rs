@@ -1,5 +1,5 @@
 //! The CPU twin of `shaders_wgsl/radix_sort.wgsl` (LBVH stage 3, and the sorts that prepare a
-//! step) and of the ash backend's `shaders_glsl/vulkan/sort_{count,scan,scatter}.comp`: a
+//! step) and of the ash backend's `shaders_glsl/vulkan/radix_sort.comp`: a
 //! stable sort by key.
 
 /// Stage 3: (key, value) pairs sorted stably by key, values the input indices.

@@ -3,7 +3,7 @@
 // cluster-box rule (shared/cluster_box.glsl); an empty cluster gets the empty box
 // (+inf, -inf) and is left out of the tree. (This stage is GLSL rather than WGSL for that
 // reason: one source for the rule and the radius; it needs no atomics.)
-// Twin: backend/shaders/cpu/lbvh_bounds.rs.
+// Twin: backend/shaders/cpu/lbvh_boxes.rs.
 
 layout(local_size_x = 64) in;
 
