@@ -24,7 +24,6 @@ use ash::{ext, khr, vk};
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use gpu_allocator::{AllocationSizes, AllocatorDebugSettings};
 
-use super::pipelines::Layouts;
 use crate::backend::BackendError;
 use crate::backend::shaders::Entry;
 use crate::backend::shaders::SpecConstants;
@@ -164,6 +163,24 @@ impl From<ContextError> for BackendError {
     }
 }
 
+/// The descriptor-set layout and pipeline layout every pipeline uses, and the layout of the
+/// kernels that prepare a step (push constants only: they reach every array by
+/// address). Made by `Layouts::new` in `pipelines.rs`.
+pub struct Layouts {
+    pub set: vk::DescriptorSetLayout,
+    pub pipeline: vk::PipelineLayout,
+    pub prepare: vk::PipelineLayout,
+}
+
+/// What a ray-tracing pipeline runs (its stages: `RtProgram::stages` in `pipelines.rs`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RtProgram {
+    /// The RBF field: frames and point queries (`render.rgen`, `query.rgen`, `particle.*`).
+    Field,
+    /// Knoll et al.'s splatter (`splat.*`).
+    Splat,
+}
+
 /// The instance, device, queue, allocator and compiled pipelines.
 pub struct Context {
     _entry: ash::Entry,
@@ -179,8 +196,7 @@ pub struct Context {
     pub info: DeviceInfo,
     pub validation: bool,
     pub layouts: Layouts,
-    pub(crate) rt_pipelines:
-        Mutex<HashMap<(SpecConstants, super::pipelines::RtProgram), vk::Pipeline>>,
+    pub(crate) rt_pipelines: Mutex<HashMap<(SpecConstants, RtProgram), vk::Pipeline>>,
     pub(crate) compute_pipelines: Mutex<HashMap<(Entry, SpecConstants), vk::Pipeline>>,
 }
 

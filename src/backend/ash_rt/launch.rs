@@ -6,7 +6,8 @@ use std::time::Duration;
 use ash::vk;
 
 use super::context::NAME;
-use super::pipelines::{self, BindingTable, Push, RtProgram};
+use super::context::RtProgram;
+use super::pipelines::{self, BindingTable, Push};
 use super::resources::barrier;
 use super::{AshBackend, HitReports, QUERY_WIDTH, TS_END, TS_START, Traversal};
 use crate::backend::BackendError;

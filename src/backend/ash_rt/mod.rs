@@ -158,7 +158,7 @@ pub struct AshBackend {
     tables: Vec<f32>,
     accum_size: Option<(u32, u32)>,
     frames: u32,
-    binding_tables: HashMap<(SpecConstants, pipelines::RtProgram), BindingTable>,
+    binding_tables: HashMap<(SpecConstants, context::RtProgram), BindingTable>,
     timings: Timings,
     structure_timings: StructureTimings,
     traversal: Traversal,

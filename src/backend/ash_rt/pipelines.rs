@@ -34,7 +34,7 @@ use std::sync::Arc;
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
-use super::context::{Context, device_error, vk_error};
+use super::context::{Context, Layouts, RtProgram, device_error, vk_error};
 use super::resources::Buffer;
 use crate::backend::BackendError;
 use crate::backend::shaders::table::{BindingKind, GpuBackend, StageKind};
@@ -140,14 +140,6 @@ pub struct PreparePush {
     pub tiles: u32,
     pub width: u32,
     pub arrays: [u64; 5],
-}
-
-/// The descriptor-set layout and pipeline layout every pipeline uses, and the layout of the
-/// kernels that prepare a step (push constants only: they reach every array by address).
-pub struct Layouts {
-    pub set: vk::DescriptorSetLayout,
-    pub pipeline: vk::PipelineLayout,
-    pub prepare: vk::PipelineLayout,
 }
 
 impl Layouts {
@@ -264,15 +256,6 @@ const SPEC_ENTRIES: [vk::SpecializationMapEntry; SPEC_CONSTANTS.len()] = {
     }
     e
 };
-
-/// What a ray-tracing pipeline runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum RtProgram {
-    /// The RBF field: frames and point queries (`render.rgen`, `query.rgen`, `particle.*`).
-    Field,
-    /// Knoll et al.'s splatter (`splat.*`).
-    Splat,
-}
 
 impl RtProgram {
     /// Its stages: the raygens, then the miss, intersection and any-hit stages.

@@ -35,8 +35,13 @@ pub fn buffers_made() -> u64 {
 /// constant_id order), or none.
 pub type Variant = Option<[u32; SPEC_CONSTANTS.len()]>;
 
+/// Parts an array may be split into ([`super::util::SplitBuffer`]); the kernels' [`Layout::Split`] variant
+/// (`SPLIT_PARTS` = 4 in `shaders_glsl/wgpu/split.glsl`, `shaders_wgsl/shared/split_boxes.wgsl`,
+/// `shaders_wgsl/lbvh_{hierarchy,fit}.wgsl`) binds this many buffers per array.
+pub const PARTS: u64 = 4;
+
 /// How a kernel binds the arrays that can outgrow one storage binding
-/// (`shaders_glsl/wgpu/split.glsl`): each as one buffer, or in [`super::util::PARTS`] parts.
+/// (`shaders_glsl/wgpu/split.glsl`): each as one buffer, or in [`PARTS`] parts (`Layout::of` picks).
 /// The two are separate shader modules (`SPLIT_PARTS` = 1 or 4), so the whole variant binds
 /// one buffer per array and carries no part selection.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -46,19 +51,10 @@ pub enum Layout {
 }
 
 impl Layout {
-    /// Split when any array the kernel binds is in more than one part.
-    pub fn of(arrays: &[&super::util::SplitBuffer]) -> Layout {
-        if arrays.iter().any(|a| a.parts_used() > 1) {
-            Layout::Split
-        } else {
-            Layout::Whole
-        }
-    }
-
     fn split_parts(self) -> u32 {
         match self {
             Layout::Whole => 1,
-            Layout::Split => super::util::PARTS as u32,
+            Layout::Split => PARTS as u32,
         }
     }
 }
@@ -450,9 +446,7 @@ impl GpuContext {
                 "{e} (this step or image outgrows one storage binding, so each of its large \
                  arrays is bound in {} parts; {} allows {} storage buffers per shader stage: a \
                  larger cluster size or a smaller image keeps every array in one binding)",
-                super::util::PARTS,
-                self.info.name,
-                self.limits.max_storage_buffers_per_shader_stage
+                PARTS, self.info.name, self.limits.max_storage_buffers_per_shader_stage
             )),
             Layout::Whole => e,
         })?;

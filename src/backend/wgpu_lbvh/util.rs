@@ -288,10 +288,18 @@ impl<'a> DeviceSpan<'a> {
     }
 }
 
-/// Parts an array may be split into ([`SplitBuffer`]); the kernels' [`Layout::Split`] variant
-/// (`SPLIT_PARTS` = 4 in `shaders_glsl/wgpu/split.glsl`, `shaders_wgsl/shared/split_boxes.wgsl`,
-/// `shaders_wgsl/lbvh_{hierarchy,fit}.wgsl`) binds this many buffers per array.
-pub const PARTS: u64 = 4;
+pub use super::context::PARTS;
+
+impl Layout {
+    /// Split when any array the kernel binds is in more than one part.
+    pub fn of(arrays: &[&SplitBuffer]) -> Layout {
+        if arrays.iter().any(|a| a.parts_used() > 1) {
+            Layout::Split
+        } else {
+            Layout::Whole
+        }
+    }
+}
 
 /// The largest part a split array uses: the binding limit, capped at 2 GiB so that every word
 /// index of a 4-part array fits a u32 in the shaders.

@@ -2,8 +2,9 @@
 
 use glam::DVec3;
 
-use super::lbvh::{GpuBox, LBVH_EMPTY_KEY, MORTON_CELLS, box_is_empty};
+use super::cluster_box::{GpuBox, box_is_empty};
 use crate::values::Bounds;
+use crate::values::shader_constants::{LBVH_EMPTY_KEY, MORTON_CELLS};
 
 /// The Morton grid over the series' bounds, in local coordinates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,7 +68,7 @@ pub fn morton_keys(boxes: &[GpuBox], grid: &KeyGrid) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::shaders::cpu::lbvh::EMPTY_BOX;
+    use crate::backend::shaders::cpu::cluster_box::EMPTY_BOX;
 
     #[test]
     fn morton_keys_interleave_x_highest() {
