@@ -143,6 +143,7 @@ pub fn read_step(
         positions,
         attributes,
         skipped,
+        finite: false,
     })
 }
 

@@ -123,6 +123,7 @@ pub(super) fn read(
         positions,
         attributes,
         skipped,
+        finite: false,
     }))
 }
 

@@ -1,6 +1,8 @@
 //! One particle dataset of an HDF5 snapshot: its shape and type checked, then read whole in its
 //! stored type (HDF5 decompresses chunk by chunk into the one array) and converted to f64 in
-//! parallel; doubles are used as read.
+//! parallel; doubles are used as read. Each read says whether every value is finite, found in
+//! the pass that converts them (or one over the doubles read), so `finish_step` need not sweep
+//! the step again.
 
 use ::hdf5::Dataset;
 use ::hdf5::types::{FloatSize, IntSize, TypeDescriptor};
@@ -75,17 +77,17 @@ impl Column {
 
     /// Reads every value (row-major, `components` per particle) as f64 into `out` (exactly
     /// rows x components long), after checking the file stores as many bytes as the shape
-    /// claims. Doubles are read by HDF5 straight into `out`; other types into one buffer of
-    /// their own, converted into `out` in parallel. (Read block by block through hyperslabs it
-    /// was 8x h5py's time on 4M uncompressed particles: each block's selection, copy and
-    /// conversion.)
+    /// claims, and says whether every value is finite. Doubles are read by HDF5 straight into
+    /// `out`; other types into one buffer of their own, converted into `out` in parallel.
+    /// (Read block by block through hyperslabs it was 8x h5py's time on 4M uncompressed
+    /// particles: each block's selection, copy and conversion.)
     pub fn read_into(
         &self,
         at: At<'_>,
         group: &str,
         dataset: &Dataset,
         out: &mut [f64],
-    ) -> Result<(), DataError> {
+    ) -> Result<bool, DataError> {
         let values = self.rows as u64 * self.components as u64;
         let logical = values * self.bytes_per_value;
         let stored = dataset.storage_size();
@@ -110,7 +112,9 @@ impl Column {
         }
         let n = out.len();
         let read = match self.kind {
-            Kind::F64 => dataset.read_into_raw::<f64>(out).map(drop),
+            Kind::F64 => dataset
+                .read_into_raw::<f64>(out)
+                .map(|_| crate::io::all_finite(out)),
             Kind::F32 => read_widened::<f32>(dataset, n, out, f64::from),
             Kind::I64 => read_widened::<i64>(dataset, n, out, |x| x as f64),
             Kind::U64 => read_widened::<u64>(dataset, n, out, |x| x as f64),
@@ -125,20 +129,30 @@ impl Column {
 }
 
 /// Reads `dataset` (n values) in the type `T`, into a buffer of its own, and converts it into
-/// `out` in parallel.
+/// `out` in parallel; whether every value is finite, found in the same pass.
 fn read_widened<T: ::hdf5::H5Type + Copy + Default + Send + Sync>(
     dataset: &Dataset,
     n: usize,
     out: &mut [f64],
     convert: impl Fn(T) -> f64 + Send + Sync,
-) -> ::hdf5::Result<()> {
+) -> ::hdf5::Result<bool> {
     use rayon::prelude::*;
     let mut stored = fresh::<T>(n);
     dataset.read_into_raw::<T>(&mut stored)?;
-    out.par_iter_mut()
-        .zip(stored.par_iter())
-        .for_each(|(o, &v)| *o = convert(v));
-    Ok(())
+    Ok(out
+        .par_chunks_mut(crate::io::FINITE_BLOCK)
+        .zip(stored.par_chunks(crate::io::FINITE_BLOCK))
+        .map(|(out, stored)| widen_checked(stored, out, &convert))
+        .reduce(|| true, |a, b| a & b))
+}
+
+/// `out[i] = convert(stored[i])`, and whether every value written is finite (checked without
+/// branching, so the loop vectorises).
+fn widen_checked<T: Copy>(stored: &[T], out: &mut [f64], convert: impl Fn(T) -> f64) -> bool {
+    out.iter_mut().zip(stored).fold(true, |all, (o, &v)| {
+        *o = convert(v);
+        all & o.is_finite()
+    })
 }
 
 /// A buffer of `len` zeros for a large read, which the read then fills: allocated zeroed, so
