@@ -209,8 +209,7 @@ pub fn read_step(
         )));
     }
     let physical = Scaling::new(&header, options.physical);
-    // A dataset's values, and whether every one is finite.
-    let read = |column: &Column| -> Result<(Vec<f64>, bool), DataError> {
+    let read = |column: &Column| -> Result<Values, DataError> {
         // One array for the whole snapshot, each file's rows read into their part of it.
         let total = parts.iter().map(|p| p.2 as usize).sum::<usize>() * column.components;
         let mut values = datasets::fresh::<f64>(total);
@@ -264,6 +263,9 @@ pub fn read_step(
     })
 }
 
+/// A dataset's values, and whether every one is finite.
+type Values = (Vec<f64>, bool);
+
 /// The attributes `selection` keeps: datasets split into components, the mass table's
 /// masses and the derived smoothing length; and whether every value of them is finite.
 fn read_attributes(
@@ -271,7 +273,7 @@ fn read_attributes(
     catalog: &Catalog,
     selection: &AttributeSelection,
     n: usize,
-    read: &dyn Fn(&Column) -> Result<(Vec<f64>, bool), DataError>,
+    read: &dyn Fn(&Column) -> Result<Values, DataError>,
 ) -> Result<(Vec<Attribute>, bool), DataError> {
     let mut attributes = Vec::new();
     let mut finite = true;
