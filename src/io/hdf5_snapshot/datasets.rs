@@ -1,8 +1,8 @@
 //! One particle dataset of an HDF5 snapshot: its shape and type checked, then read and
 //! converted to f64, and whether every value is finite found as it is (so `finish_step` need
 //! not sweep the step again). A contiguous, uncompressed dataset of native doubles or floats
-//! is one run of the values' bytes in the file: read directly, in blocks, by every core, each
-//! block widened and checked while in cache. Any other is read whole by HDF5 in its stored
+//! is one run of the values' bytes in the file: read directly, a block at a time, each block
+//! widened and checked while in cache. Any other is read whole by HDF5 in its stored
 //! type (decompressed chunk by chunk into the one array) and converted in parallel; doubles
 //! are used as read.
 
@@ -165,9 +165,11 @@ impl Column {
 }
 
 /// Reads `out.len()` values of `kind` (f64 or f32, native) at `offset` in `file` into `out`,
-/// block by block in parallel (each core `pread`s its blocks, floats into a small buffer of
-/// its own and widened from there), each block checked for finiteness as it is written;
-/// whether every value is finite.
+/// a block of 64K values at a time on the calling thread: doubles `pread` into `out`, floats
+/// into one small buffer and widened from there, each block checked for finiteness while it is
+/// in cache; whether every value is finite. (In parallel on rayon's two threads it was slower
+/// here, on a machine busy with other work: 1.15-1.7x h5py against 1.1-1.35x, and more CPU
+/// time per read.)
 #[cfg(unix)]
 fn read_direct(
     file: &std::path::Path,
@@ -175,33 +177,28 @@ fn read_direct(
     kind: Kind,
     out: &mut [f64],
 ) -> std::io::Result<bool> {
-    use rayon::prelude::*;
     use std::os::unix::fs::FileExt;
     const BLOCK: usize = crate::io::FINITE_BLOCK;
     let file = std::fs::File::open(file)?;
-    let blocks = out.par_chunks_mut(BLOCK).enumerate();
-    let finite = |block: &[f64]| block.iter().fold(true, |all, v| all & v.is_finite());
-    if kind == Kind::F64 {
-        blocks
-            .map(|(b, out)| {
-                let at = offset + (b * BLOCK * 8) as u64;
-                file.read_exact_at(bytemuck::cast_slice_mut(out), at)?;
-                Ok(finite(out))
-            })
-            .try_reduce(|| true, |a, b| Ok(a & b))
-    } else {
-        blocks
-            .map_init(
-                || vec![0f32; BLOCK],
-                |buffer, (b, out)| {
-                    let at = offset + (b * BLOCK * 4) as u64;
-                    let stored = &mut buffer[..out.len()];
-                    file.read_exact_at(bytemuck::cast_slice_mut(stored), at)?;
-                    Ok(widen_checked(stored, out, f64::from))
-                },
-            )
-            .try_reduce(|| true, |a, b| Ok(a & b))
+    let mut floats = vec![0f32; if kind == Kind::F32 { BLOCK } else { 0 }];
+    let mut finite = true;
+    for (b, out) in out.chunks_mut(BLOCK).enumerate() {
+        if kind == Kind::F64 {
+            file.read_exact_at(
+                bytemuck::cast_slice_mut(out),
+                offset + (b * BLOCK * 8) as u64,
+            )?;
+            finite &= out.iter().fold(true, |all, v| all & v.is_finite());
+        } else {
+            let stored = &mut floats[..out.len()];
+            file.read_exact_at(
+                bytemuck::cast_slice_mut(stored),
+                offset + (b * BLOCK * 4) as u64,
+            )?;
+            finite &= widen_checked(stored, out, f64::from);
+        }
     }
+    Ok(finite)
 }
 
 /// Reads `dataset` (n values) in the type `T`, into a buffer of its own, and converts it into
