@@ -656,6 +656,10 @@ fn bad_snapshots_name_the_file_and_the_dataset() {
     let totals = d.join("totals");
     std::fs::create_dir(&totals).unwrap();
     write_gadget_snapshot(&totals, 9, &[10, 20], 1.0);
+    // Rewritten as a new file: HDF5 opens files without close-on-exec, so an `aarbf` another
+    // test starts meanwhile can inherit the first one's descriptor and hold its lock, and
+    // H5Fcreate over it then fails ("unable to lock file").
+    std::fs::remove_file(totals.join("snap_009.1.hdf5")).unwrap();
     write_gadget_part(&totals, 9, 1, &[10, 21], 10, 1.0);
     let e = err_text(&totals);
     assert!(
