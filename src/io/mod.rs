@@ -500,7 +500,8 @@ pub fn finish_step(
     })
 }
 
-/// Values per block of a parallel pass that checks finiteness.
+/// Values per block of a pass that checks finiteness (512 KiB of doubles: a block stays in
+/// cache while it is checked).
 pub(crate) const FINITE_BLOCK: usize = 1 << 16;
 
 /// Whether every value is finite: in parallel blocks, each checked without branching (so it

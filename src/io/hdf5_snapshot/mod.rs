@@ -3,10 +3,10 @@
 //! file or split over `snap_012.0.hdf5`, `snap_012.1.hdf5`, ... (`NumFilesPerSnapshot`).
 //!
 //! Every dataset of the chosen type but `Coordinates` is an attribute; a vector dataset gives
-//! `_x`, `_y`, `_z` and `_magnitude`. Only the datasets a selection keeps are read, each a
-//! block of whole chunks at a time. Without a `Masses` dataset the mass table gives `Masses`;
-//! without a smoothing length (AREPO's cells) `SmoothingLength` is derived from the cell
-//! volume m / rho.
+//! `_x`, `_y`, `_z` and `_magnitude`. Only the datasets a selection keeps are read: each
+//! whole by HDF5 (decompressed chunk by chunk), or a contiguous one directly from the file.
+//! Without a `Masses` dataset the mass table gives `Masses`; without a smoothing length
+//! (AREPO's cells) `SmoothingLength` is derived from the cell volume m / rho.
 
 mod datasets;
 mod header;
