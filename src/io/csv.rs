@@ -100,6 +100,7 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
         positions,
         attributes,
         skipped: skipped.into_iter().map(|c| headers[c].clone()).collect(),
+        finite: false,
     })
 }
 

@@ -377,6 +377,9 @@ pub struct Columns {
     /// The names of the attributes the file holds that were not decoded (for errors that
     /// say what there is to choose from).
     pub skipped: Vec<String>,
+    /// The reader found every position and attribute value finite as it decoded them (false:
+    /// it did not check, or found one that is not; [`finish_step`] then checks).
+    pub finite: bool,
 }
 
 /// Checks and cleans a reader's output: equal lengths, the selected attributes present (and
@@ -392,6 +395,7 @@ pub fn finish_step(
         positions,
         mut attributes,
         skipped,
+        finite,
     } = columns;
     let n = positions.len();
     for a in &attributes {
@@ -425,10 +429,12 @@ pub fn finish_step(
         return Err(at.err(Problem::EmptyStep(String::new())));
     }
 
-    // Simulation output is almost always finite: one parallel pass says so, and only data
-    // with a non-finite value pays for the per-particle bookkeeping below.
-    if all_finite(bytemuck::cast_slice(&positions))
-        && attributes.iter().all(|a| all_finite(&a.values))
+    // Simulation output is almost always finite: one parallel pass says so (or the reader
+    // did, as it decoded), and only data with a non-finite value pays for the per-particle
+    // bookkeeping below.
+    if finite
+        || (all_finite(bytemuck::cast_slice(&positions))
+            && attributes.iter().all(|a| all_finite(&a.values)))
     {
         return Ok(Step {
             name: name.to_owned(),
@@ -493,12 +499,16 @@ pub fn finish_step(
     })
 }
 
+/// Values per block of a pass that checks finiteness (512 KiB of doubles: a block stays in
+/// cache while it is checked).
+pub(crate) const FINITE_BLOCK: usize = 1 << 16;
+
 /// Whether every value is finite: in parallel blocks, each checked without branching (so it
 /// runs at memory speed, vectorised), the answer only combined between blocks.
-fn all_finite(values: &[f64]) -> bool {
+pub(crate) fn all_finite(values: &[f64]) -> bool {
     use rayon::prelude::*;
     values
-        .par_chunks(1 << 16)
+        .par_chunks(FINITE_BLOCK)
         .all(|block| block.iter().fold(true, |all, v| all & v.is_finite()))
 }
 

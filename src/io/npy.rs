@@ -320,6 +320,7 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
         positions,
         attributes,
         skipped: skipped.into_iter().map(|c| format!("col{c}")).collect(),
+        finite: false,
     })
 }
 

@@ -327,6 +327,7 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             positions,
             attributes,
             skipped,
+            finite: false,
         });
     }
     Err(at.err(Problem::Dimensionality(

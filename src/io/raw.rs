@@ -57,6 +57,7 @@ pub(crate) fn xyzw_columns(
         positions,
         attributes,
         skipped,
+        finite: false,
     }
 }
 

@@ -3,10 +3,10 @@
 //! file or split over `snap_012.0.hdf5`, `snap_012.1.hdf5`, ... (`NumFilesPerSnapshot`).
 //!
 //! Every dataset of the chosen type but `Coordinates` is an attribute; a vector dataset gives
-//! `_x`, `_y`, `_z` and `_magnitude`. Only the datasets a selection keeps are read, each a
-//! block of whole chunks at a time. Without a `Masses` dataset the mass table gives `Masses`;
-//! without a smoothing length (AREPO's cells) `SmoothingLength` is derived from the cell
-//! volume m / rho.
+//! `_x`, `_y`, `_z` and `_magnitude`. Only the datasets a selection keeps are read: each
+//! whole by HDF5 (decompressed chunk by chunk), or a contiguous one directly from the file.
+//! Without a `Masses` dataset the mass table gives `Masses`; without a smoothing length
+//! (AREPO's cells) `SmoothingLength` is derived from the cell volume m / rho.
 
 mod datasets;
 mod header;
@@ -209,35 +209,47 @@ pub fn read_step(
         )));
     }
     let physical = Scaling::new(&header, options.physical);
-    let read = |column: &Column| -> Result<Vec<f64>, DataError> {
+    let read = |column: &Column| -> Result<Values, DataError> {
         // One array for the whole snapshot, each file's rows read into their part of it.
         let total = parts.iter().map(|p| p.2 as usize).sum::<usize>() * column.components;
         let mut values = datasets::fresh::<f64>(total);
+        let mut finite = true;
         let mut offset = 0;
         for (path, file, count) in &parts {
             if *count > 0 {
                 let len = *count as usize * column.components;
                 let out = &mut values[offset..offset + len];
-                read_part(At::new(path, at.step), file, &catalog, column, *count, out)?;
+                finite &= read_part(At::new(path, at.step), file, &catalog, column, *count, out)?;
                 offset += len;
             }
         }
         let factor = physical.factor(&group, column)?;
         if factor != 1.0 {
-            values.par_iter_mut().for_each(|v| *v *= factor);
+            // Finite values times a finite factor can overflow: checked again as scaled.
+            finite = values
+                .par_chunks_mut(super::FINITE_BLOCK)
+                .map(|block| {
+                    block.iter_mut().fold(true, |all, v| {
+                        *v *= factor;
+                        all & v.is_finite()
+                    })
+                })
+                .reduce(|| true, |a, b| a & b);
         }
-        Ok(values)
+        Ok((values, finite))
     };
     // N x 3 doubles are N points as they lie in memory: the array becomes the positions
     // without a copy.
-    let positions: Vec<DVec3> = bytemuck::allocation::try_cast_vec(read(coordinates)?)
-        .unwrap_or_else(|(_, values)| {
+    let (coordinates, positions_finite) = read(coordinates)?;
+    let positions: Vec<DVec3> =
+        bytemuck::allocation::try_cast_vec(coordinates).unwrap_or_else(|(_, values)| {
             values
                 .par_chunks_exact(3)
                 .map(|p| DVec3::new(p[0], p[1], p[2]))
                 .collect()
         });
-    let attributes = read_attributes(at, &catalog, selection, positions.len(), &read)?;
+    let (attributes, attributes_finite) =
+        read_attributes(at, &catalog, selection, positions.len(), &read)?;
     let skipped = catalog
         .attribute_names()
         .into_iter()
@@ -247,39 +259,45 @@ pub fn read_step(
         positions,
         attributes,
         skipped,
+        finite: positions_finite && attributes_finite,
     })
 }
 
+/// A dataset's values, and whether every one is finite.
+type Values = (Vec<f64>, bool);
+
 /// The attributes `selection` keeps: datasets split into components, the mass table's
-/// masses and the derived smoothing length.
+/// masses and the derived smoothing length; and whether every value of them is finite.
 fn read_attributes(
     at: At<'_>,
     catalog: &Catalog,
     selection: &AttributeSelection,
     n: usize,
-    read: &dyn Fn(&Column) -> Result<Vec<f64>, DataError>,
-) -> Result<Vec<Attribute>, DataError> {
+    read: &dyn Fn(&Column) -> Result<Values, DataError>,
+) -> Result<(Vec<Attribute>, bool), DataError> {
     let mut attributes = Vec::new();
+    let mut finite = true;
     for column in catalog.columns.iter().filter(|c| c.name != COORDINATES) {
         let names = super::array_attribute_names(&column.name, column.components);
         if names.iter().any(|n| selection.keeps(n)) {
-            let values = read(column)?;
+            let (values, values_finite) = read(column)?;
             if column.components == 1 {
                 // A scalar's array is the attribute as read: no copy.
+                finite &= values_finite;
                 attributes.push(Attribute {
                     name: column.name.clone(),
                     values,
                 });
             } else {
-                attributes.extend(super::split_components(
-                    &column.name,
-                    &values,
-                    column.components,
-                ));
+                // (A magnitude of finite components can overflow: those are checked.)
+                let split = super::split_components(&column.name, &values, column.components);
+                finite &= split.iter().all(|a| super::all_finite(&a.values));
+                attributes.extend(split);
             }
         }
     }
     if let Some(mass) = catalog.table_mass.filter(|_| selection.keeps(MASSES)) {
+        finite &= mass.is_finite();
         attributes.push(Attribute {
             name: MASSES.to_owned(),
             values: vec![mass; n],
@@ -289,9 +307,9 @@ fn read_attributes(
         let density = catalog
             .column(&DENSITY_DATASETS)
             .expect("checked in the catalog");
-        let rho = read(density)?;
+        let (rho, _) = read(density)?;
         let masses = match catalog.column(&[MASSES]) {
-            Some(m) => read(m)?,
+            Some(m) => read(m)?.0,
             None => vec![catalog.table_mass.expect("checked in the catalog"); n],
         };
         tracing::info!(
@@ -300,16 +318,18 @@ fn read_attributes(
             at.location(),
             catalog.group
         );
+        let values: Vec<f64> = masses
+            .iter()
+            .zip(&rho)
+            .map(|(m, rho)| derived_smoothing_length(*m, *rho))
+            .collect();
+        finite &= super::all_finite(&values);
         attributes.push(Attribute {
             name: DERIVED_SMOOTHING_LENGTH.to_owned(),
-            values: masses
-                .iter()
-                .zip(&rho)
-                .map(|(m, rho)| derived_smoothing_length(*m, *rho))
-                .collect(),
+            values,
         });
     }
-    Ok(attributes)
+    Ok((attributes, finite))
 }
 
 /// h such that a sphere of radius 2 h holds [`DERIVED_NEIGHBOURS`] cells of volume m / rho:
@@ -318,7 +338,8 @@ pub fn derived_smoothing_length(mass: f64, density: f64) -> f64 {
     0.5 * (DERIVED_NEIGHBOURS * 3.0 * mass / (4.0 * std::f64::consts::PI * density)).cbrt()
 }
 
-/// One file's rows of `column` into `out`, checked against the file's own header count.
+/// One file's rows of `column` into `out`, checked against the file's own header count;
+/// whether every value is finite.
 fn read_part(
     at: At<'_>,
     file: &File,
@@ -326,7 +347,7 @@ fn read_part(
     column: &Column,
     count: u64,
     out: &mut [f64],
-) -> Result<(), DataError> {
+) -> Result<bool, DataError> {
     let path = format!("{}/{}", catalog.group, column.name);
     let dataset = file
         .dataset(&path)

@@ -125,6 +125,7 @@ pub(super) fn read(
         positions,
         attributes,
         skipped,
+        finite: false,
     }))
 }
 

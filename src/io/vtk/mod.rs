@@ -145,6 +145,7 @@ pub fn read_step(
         positions,
         attributes,
         skipped,
+        finite: false,
     })
 }
 
