@@ -279,6 +279,9 @@ impl Particles {
                     positions,
                     attributes: columns,
                     skipped: Vec::new(),
+                    // Arrays from Python are checked by finish_step (NaN rows dropped with
+                    // a warning).
+                    finite: false,
                 },
                 &AttributeSelection::All,
             )?)
