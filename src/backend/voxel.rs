@@ -169,9 +169,7 @@ impl VoxelGrid {
         let d = self.geometry.dims;
         self.sums[i[0] + d[0] * (i[1] + d[1] * i[2])]
     }
-}
 
-impl VoxelGrid {
     /// Phi and the Theta numerators at `x`: trilinear interpolation of the sums between cell
     /// centres (clamped to the outer cells' centres at the grid's faces); the CPU backend
     /// samples the grid through it (`FieldSampler`). Twin: `voxel_field` in
