@@ -334,3 +334,44 @@ fn the_loop_reader_resolves_super_crate_and_brace_groups() {
         "{found:?}"
     );
 }
+
+/// The integration tests are one binary (`tests/suite.rs`) and Cargo no longer finds them by
+/// file: a test file missing from the suite's `mod` list would never run, and pass unseen.
+#[test]
+fn every_test_file_is_in_the_suite() {
+    let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
+    let suite = std::fs::read_to_string(tests.join("suite.rs")).unwrap();
+    let declared: BTreeSet<&str> = suite
+        .lines()
+        .filter_map(|line| line.strip_prefix("mod ")?.strip_suffix(';'))
+        .collect();
+    let own_binaries = ["suite", "ash_validation"];
+    let cargo = std::fs::read_to_string(tests.join("../Cargo.toml")).unwrap();
+    for name in own_binaries {
+        assert!(
+            cargo.contains(&format!("path = \"tests/{name}.rs\"")),
+            "Cargo.toml has no [[test]] for tests/{name}.rs"
+        );
+    }
+    let mut missing = Vec::new();
+    for entry in std::fs::read_dir(&tests).unwrap() {
+        let path = entry.unwrap().path();
+        let name = if path.is_dir() {
+            if !path.join("mod.rs").exists() {
+                continue; // data
+            }
+            path.file_name().unwrap().to_string_lossy().into_owned()
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            path.file_stem().unwrap().to_string_lossy().into_owned()
+        } else {
+            continue;
+        };
+        if !declared.contains(name.as_str()) && !own_binaries.contains(&name.as_str()) {
+            missing.push(name);
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "not in tests/suite.rs (add `mod NAME;` there), so never run: {missing:?}"
+    );
+}

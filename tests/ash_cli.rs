@@ -7,7 +7,7 @@ use std::process::{Command, Output};
 use aarbf::io::{At, npy};
 use aarbf::scene::{OpenOptions, TimeSeries};
 
-mod common;
+use crate::common;
 
 fn aarbf(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_aarbf"))

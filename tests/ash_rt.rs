@@ -22,7 +22,7 @@ use aarbf::values::{Attribute, Bounds, Step};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 
 /// A backend on the shared ray-tracing device (the test fails without one).
 fn backend() -> AshBackend {

@@ -13,7 +13,7 @@ use aarbf::values::{Integrator, NoiseKind};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 
 /// The backends under test, the precision asked of each, and their relative tolerance against
 /// the f64 reference (those the backends' own tests state: the CPU's f64 agrees to rounding;

@@ -10,7 +10,7 @@ use aarbf::scene::maps::{DensityMap, RadiusMap};
 use aarbf::values::{Attribute, Step};
 use glam::DVec3;
 
-mod common;
+use crate::common;
 
 fn step() -> Step {
     let n = 97;

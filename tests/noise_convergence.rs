@@ -19,7 +19,7 @@ use aarbf::scene::maps::{ColorMap, OpticalDensityMap, PiecewiseLinear};
 use aarbf::values::{Attribute, FrameParams, Image, Integrator, Light, NoiseKind, Step};
 use glam::DVec3;
 
-mod common;
+use crate::common;
 
 const RADIUS: f64 = 0.3;
 const CENTRE: DVec3 = DVec3::new(0.5, 0.45, 0.55);

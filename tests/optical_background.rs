@@ -12,7 +12,7 @@ use aarbf::scene::maps::{OpticalDensityMap, PiecewiseLinear};
 use aarbf::scene::synth::Generator;
 use aarbf::values::{Image, Integrator, NoiseKind};
 
-mod common;
+use crate::common;
 
 fn render(kind: BackendKind, series: &TimeSeries, settings: &RenderSettings, spp: u32) -> Image {
     let field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 
 /// The box [0, L) of the generated scenes: no two sides equal.
 const L: [f64; 3] = [3.7, 2.9, 4.3];

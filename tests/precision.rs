@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 
 struct Case {
     name: &'static str,

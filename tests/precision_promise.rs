@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 
 struct Scene {
     name: String,

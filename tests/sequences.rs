@@ -15,7 +15,7 @@ use aarbf::scene::TimeSeries;
 use aarbf::scene::synth::Generator;
 use aarbf::values::{Image, Integrator};
 
-mod common;
+use crate::common;
 
 fn frames(kind: BackendKind, series: &TimeSeries, steps: &[usize]) -> Vec<Image> {
     let mut field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());

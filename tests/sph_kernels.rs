@@ -3,7 +3,7 @@
 //! particle against hand-derived values, a uniform lattice reproducing its density, the
 //! backends agreeing, and bad input refused with a message that names it.
 
-mod common;
+use crate::common;
 
 use std::f64::consts::PI;
 use std::ffi::OsString;

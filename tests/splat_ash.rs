@@ -17,7 +17,7 @@ use aarbf::values::shader_constants::SPLAT_K_MAX;
 use aarbf::values::{Attribute, Image, Integrator, NoiseKind, Step};
 use glam::DVec3;
 
-mod common;
+use crate::common;
 
 fn ash(traversal: Traversal) -> Box<dyn Backend> {
     let mut b = common::require(

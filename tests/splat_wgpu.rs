@@ -20,7 +20,7 @@ use aarbf::values::shader_constants::SPLAT_K_MAX;
 use aarbf::values::{Attribute, FrameParams, Image, Integrator, NoiseKind, Step};
 use glam::DVec3;
 
-mod common;
+use crate::common;
 use common::assert_no_driver_messages;
 
 fn gpu() -> Arc<GpuContext> {

@@ -478,7 +478,7 @@ fn the_real_window_opens_renders_and_takes_a_screenshot() {
     assert!(coloured > 2000, "{coloured} coloured pixels in the view");
 }
 
-mod common;
+use crate::common;
 
 /// The splatter baseline from the quality panel: it renders Knoll et al.'s splatter (a
 /// different image from the RBFs'), and the scene saved from the viewer renders the same image

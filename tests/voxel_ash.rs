@@ -16,7 +16,7 @@ use aarbf::values::{Attribute, FrameParams, Image, Integrator, NoiseKind, Step};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 use common::assert_no_driver_messages;
 
 fn ash() -> AshBackend {
@@ -321,8 +321,8 @@ fn bad_grids_and_a_march_before_a_grid_are_refused() {
 fn aarbf_render_draws_the_voxel_baseline_on_ash_as_on_the_cpu() {
     ash();
     let dir = tempfile::tempdir().unwrap();
-    let images = common_cli::render_voxels_on(dir.path(), &["cpu", "ash"]);
-    let worst = common_cli::largest_byte_difference(&images[0], &images[1]);
+    let images = crate::voxel_cli::render_voxels_on(dir.path(), &["cpu", "ash"]);
+    let worst = crate::voxel_cli::largest_byte_difference(&images[0], &images[1]);
     let distinct: std::collections::HashSet<&[u8]> = images[0].as_raw().chunks(4).collect();
     assert!(
         distinct.len() > 20,
@@ -333,7 +333,3 @@ fn aarbf_render_draws_the_voxel_baseline_on_ash_as_on_the_cpu() {
     // Measured on lavapipe: 0 (the images differ by far less than one 8-bit step).
     assert!(worst <= 1, "largest difference {worst} of 255");
 }
-
-/// `aarbf render --method voxel` as a user runs it, on each backend of a list.
-#[path = "voxel_cli/mod.rs"]
-mod common_cli;

@@ -18,7 +18,7 @@ use aarbf::values::{Attribute, FrameParams, Image, Integrator, NoiseKind, Step};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 use common::assert_no_driver_messages;
 
 fn gpu() -> Arc<GpuContext> {
@@ -352,8 +352,8 @@ fn grids_beyond_the_limits_are_refused_with_the_limit_named() {
 fn aarbf_render_draws_the_voxel_baseline_on_wgpu_as_on_the_cpu() {
     gpu();
     let dir = tempfile::tempdir().unwrap();
-    let images = common_cli::render_voxels_on(dir.path(), &["cpu", "wgpu"]);
-    let worst = common_cli::largest_byte_difference(&images[0], &images[1]);
+    let images = crate::voxel_cli::render_voxels_on(dir.path(), &["cpu", "wgpu"]);
+    let worst = crate::voxel_cli::largest_byte_difference(&images[0], &images[1]);
     let distinct: std::collections::HashSet<&[u8]> = images[0].as_raw().chunks(4).collect();
     assert!(
         distinct.len() > 20,
@@ -364,7 +364,3 @@ fn aarbf_render_draws_the_voxel_baseline_on_wgpu_as_on_the_cpu() {
     // Measured on lavapipe: 0 (the images differ by far less than one 8-bit step).
     assert!(worst <= 1, "largest difference {worst} of 255");
 }
-
-/// `aarbf render --method voxel` as a user runs it, on each backend of a list.
-#[path = "voxel_cli/mod.rs"]
-mod common_cli;

@@ -38,7 +38,7 @@ use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-mod common;
+use crate::common;
 use common::assert_no_driver_messages;
 
 /// The shared device (the test fails without one).

@@ -21,7 +21,7 @@ use aarbf::scene::synth::Generator;
 use aarbf::values::Image;
 use aarbf::values::{Integrator, NoiseKind};
 
-mod common;
+use crate::common;
 use common::assert_no_driver_messages;
 
 fn gpu() -> std::sync::Arc<GpuContext> {
