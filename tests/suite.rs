@@ -23,6 +23,7 @@ mod first_contact;
 mod fuzz_regressions;
 mod hdf5_snapshots;
 mod knn_smoothing;
+mod mpirun;
 mod noise_convergence;
 mod optical_background;
 mod periodic;

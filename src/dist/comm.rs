@@ -9,6 +9,24 @@
 
 use bytemuck::Pod;
 
+/// The environment variables by which MPI launchers tell a process it is one of several
+/// (Open MPI, and MPICH / Intel MPI / Slurm's PMI).
+const LAUNCHER_SIZE_VARS: [&str; 3] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_SIZE"];
+
+/// How many processes the MPI launcher says the job has, if this process was started by one.
+pub fn launched_size() -> Option<usize> {
+    LAUNCHER_SIZE_VARS
+        .iter()
+        .find_map(|var| std::env::var(var).ok()?.trim().parse().ok())
+}
+
+/// How many ranks of the job share this node (Open MPI and MPICH say), if the launcher says.
+pub fn node_local_size() -> Option<usize> {
+    ["OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS"]
+        .iter()
+        .find_map(|var| std::env::var(var).ok()?.trim().parse().ok())
+}
+
 /// Why a collective did not complete.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CommError {
@@ -32,6 +50,11 @@ pub enum CommError {
         bytes: usize,
         size: usize,
     },
+    /// More bytes than one MPI collective can address (its counts and displacements are C ints).
+    #[error(
+        "{bytes} bytes in one collective is more than MPI can address ({limit}): run more ranks"
+    )]
+    TooLarge { bytes: usize, limit: usize },
     /// A send that names more or fewer destinations than there are ranks.
     #[error("{parts} parts sent among {size} ranks")]
     WrongPartCount { parts: usize, size: usize },
@@ -56,6 +79,17 @@ impl Parts {
             out.push(part);
         }
         out
+    }
+
+    /// Parts laid end to end in `bytes`, rank r's `counts[r]` long (what MPI's `v` collectives
+    /// receive). `None` when the counts do not add up to the buffer's length.
+    pub fn from_buffer(bytes: Vec<u8>, counts: &[usize]) -> Option<Parts> {
+        let mut offsets = Vec::with_capacity(counts.len() + 1);
+        offsets.push(0);
+        for &count in counts {
+            offsets.push(offsets.last()? + count);
+        }
+        (*offsets.last()? == bytes.len()).then_some(Parts { bytes, offsets })
     }
 
     /// Appends the next rank's part.
@@ -195,5 +229,8 @@ mod tests {
             vec![u16::from_ne_bytes([4, 5])]
         );
         assert!(typed::<f64>(1, parts.part(1)).unwrap().is_empty());
+        let rebuilt = Parts::from_buffer(parts.bytes().to_vec(), &parts.counts()).unwrap();
+        assert_eq!(rebuilt, parts);
+        assert!(Parts::from_buffer(vec![1, 2], &[1]).is_none());
     }
 }

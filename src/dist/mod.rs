@@ -13,18 +13,22 @@
 //! 5. one gather-v of the accumulated tiles to rank 0.
 //!
 //! [`LocalComm`] runs the ranks as threads of one process (`aarbf render --ranks N`, and the
-//! tests); an MPI communicator will implement the same trait. Emission–absorption only, on the
-//! CPU backend, so far.
+//! tests); `MpiComm` (the `mpi` feature) runs them as the processes of an MPI job
+//! (`mpirun -np N aarbf render`). Emission–absorption only, on the CPU backend, so far.
 
 pub mod comm;
 pub mod composite;
 pub mod exchange;
 pub mod kd;
 pub mod local;
+#[cfg(feature = "mpi")]
+pub mod mpi_comm;
 mod render;
 
-pub use comm::{Comm, CommError, CommExt, Parts};
+pub use comm::{Comm, CommError, CommExt, Parts, launched_size, node_local_size};
 pub use local::{LocalComm, run_local};
+#[cfg(feature = "mpi")]
+pub use mpi_comm::MpiComm;
 pub use render::{DistImage, DistScene, RankReport, render_distributed, slice_of};
 
 use crate::backend::BackendError;

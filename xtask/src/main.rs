@@ -4,7 +4,9 @@
 //!   visible, install the Vulkan loader and Mesa lavapipe >= 25 from bookworm-backports; always
 //!   make sure the GLSL compiler and Vulkan tools the build and tests use are present.
 //!   Idempotent: it prints each step and skips what is already there.
-//! - `test`: setup, then the whole test suite (optimised, with debug assertions).
+//! - `setup --mpi`: setup, and Open MPI and libclang for a build with the `mpi` feature.
+//! - `test`: setup --mpi, then the whole test suite (optimised, with debug assertions), the
+//!   Python package's, and last the MPI tests (aarbf built with `mpi`, run under mpirun).
 //! - `demo`: setup, then render the built-in demo scene to `demo.png`.
 //! - `python`: setup, then build the Python package's wheel (maturin, abi3) into
 //!   `target/wheels/` and install it into the virtual environment `target/venv` (made with
@@ -43,6 +45,9 @@ const TOOL_PACKAGES: [&str; 9] = [
     "python3-venv",
     "python3-dev",
 ];
+/// What the `mpi` feature builds and runs with: Open MPI (its `mpirun` and headers) and
+/// libclang, with which rsmpi's build generates its bindings.
+const MPI_PACKAGES: [&str; 3] = ["openmpi-bin", "libopenmpi-dev", "libclang-dev"];
 /// What the Python package's virtual environment gets from PyPI besides the wheel: the build,
 /// and what its tests run with (the yt and sarracen bridges are tested with the real packages,
 /// the notebook executed with nbclient).
@@ -66,7 +71,7 @@ const PYTHON_MODULES: &str =
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
-        Some("setup") => setup().map(|_| ()),
+        Some("setup") => setup_with(args[1..].iter().any(|a| a == "--mpi")).map(|_| ()),
         Some("test") => test(&args[1..]),
         Some("demo") => demo(),
         Some("python") => python().map(|_| ()),
@@ -76,8 +81,8 @@ fn main() -> ExitCode {
         _ => {
             eprintln!(
                 "usage: cargo xtask <setup | test [cargo test args] | demo | python | bench NAME [args] | fuzz [--seconds N] [TARGET...] | device-check --prepare|--dry-run>\n\n  \
-                 setup  install the Vulkan driver (lavapipe) and tools if missing\n  \
-                 test   setup, then run every test\n  \
+                 setup  install the Vulkan driver (lavapipe) and tools if missing; --mpi adds\n         Open MPI and libclang (the `mpi` feature's build)\n  \
+                 test   setup --mpi, then run every test (the MPI tests under mpirun last)\n  \
                  demo   setup, then render the demo scene to demo.png\n  \
                  python setup, then build the Python wheel into target/wheels/ and install it\n         into target/venv\n  \
                  bench  run benches/NAME.rs (results belong in docs/benchmarks.md); `bench studies`\n         runs every study of the paper (aarbf bench all) into target/studies/\n  \
@@ -219,11 +224,18 @@ fn apt_install(packages: &[&str], suite: Option<&str>) -> Result<()> {
 
 /// Makes the machine ready; returns the ray-tracing devices found.
 fn setup() -> Result<Vec<String>> {
+    setup_with(false)
+}
+
+/// Set-up; with `mpi`, also what a build with the `mpi` feature and its tests need.
+fn setup_with(mpi: bool) -> Result<Vec<String>> {
     let devices = ray_tracing_devices();
     let mesa = package_version("mesa-vulkan-drivers");
     let lavapipe_ok = mesa.as_deref().is_some_and(|v| major(v) >= MIN_MESA_MAJOR);
+    let wanted: &[&str] = if mpi { &MPI_PACKAGES } else { &[] };
     let missing_tools: Vec<&str> = TOOL_PACKAGES
         .iter()
+        .chain(wanted)
         .copied()
         .filter(|p| package_version(p).is_none())
         .collect();
@@ -310,7 +322,7 @@ fn cargo() -> Command {
 }
 
 fn test(extra: &[String]) -> Result<()> {
-    setup()?;
+    setup_with(true)?;
     let mut cmd = cargo();
     // Set-up has just made a Vulkan device visible; a GPU test that finds none fails.
     run(cmd
@@ -330,7 +342,20 @@ fn test(extra: &[String]) -> Result<()> {
     run(vulkan_env(&mut Command::new(python))
         .current_dir(workspace_root())
         .args(["-m", "pytest", "-q", "python/tests"])
-        .env("AARBF_BIN", target_dir().join(PROFILE).join("aarbf")))
+        .env("AARBF_BIN", target_dir().join(PROFILE).join("aarbf")))?;
+    // The MPI tests, last: they build aarbf again with the `mpi` feature (the dependency graph
+    // is the one above), then run it under `mpirun -np 1..4` (tests/mpirun.rs).
+    run(cargo().args([
+        "test",
+        "--profile",
+        PROFILE,
+        "--features",
+        "mpi",
+        "--test",
+        "suite",
+        "--",
+        "mpirun::",
+    ]))
 }
 
 /// The Cargo target directory (`CARGO_TARGET_DIR`, else `target/`).

@@ -1,8 +1,9 @@
-//! `aarbf render --ranks N`: the distributed renderer ([`crate::dist`]) with N ranks as threads
-//! of this process. Each rank takes its share of the step's records (`[rN/P, (r+1)N/P)`, as a
-//! parallel read will give it), and from there on sees the others only through the
-//! communicator: decomposition, particle exchange, its brick's render, direct-send
-//! compositing; rank 0 writes the image. It is the code path an MPI launch will take.
+//! `aarbf render --ranks N`, and `mpirun -np N aarbf render` in a build with the `mpi` feature:
+//! the distributed renderer ([`crate::dist`]) with N ranks, as threads of this process or as the
+//! processes of an MPI job. Each rank takes its share of the step's records (`[rN/P,
+//! (r+1)N/P)`), and from there on sees the others only through the communicator:
+//! decomposition, particle exchange, its brick's render, direct-send compositing; rank 0 writes
+//! the image. A failing rank ends every rank, naming itself.
 
 use std::time::Instant;
 
@@ -19,21 +20,73 @@ use crate::render::{AutoValues, FrameBasis, Method, RenderSettings, stratified_c
 use crate::scene_file::resolve::Resolved;
 use crate::values::FrameParams;
 
-/// Launched as one of several MPI processes, each would render the whole image and write the
-/// same file: refused, saying what runs today, until an MPI build exists.
-pub(super) fn refuse_mpi_launch() -> anyhow::Result<()> {
-    for var in ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"] {
-        if let Ok(size) = std::env::var(var)
-            && size.trim().parse::<usize>().is_ok_and(|n| n > 1)
-        {
-            bail!(
-                "aarbf was started as one of {size} MPI processes ({var}), but this build has no \
-                 MPI support yet: each process would render the whole image. Run one process \
-                 with --ranks {size} instead (ranks as threads; docs/distributed.md)"
-            );
+/// How the ranks of a distributed render run.
+pub(super) enum Ranks {
+    /// `--ranks N`: threads of this process.
+    Threads(usize),
+    /// The processes of an MPI job (`mpirun -np N aarbf render`), this one among them.
+    #[cfg(feature = "mpi")]
+    Mpi(crate::dist::MpiComm),
+}
+
+impl Ranks {
+    fn size(&self) -> usize {
+        match self {
+            Ranks::Threads(n) => *n,
+            #[cfg(feature = "mpi")]
+            Ranks::Mpi(comm) => comm.size(),
         }
     }
-    Ok(())
+}
+
+/// Whether, and how, this render is distributed: `--ranks N`, or the processes of the MPI job
+/// this one was started in. A build without MPI started by an MPI launcher refuses, since each
+/// process would render the whole image and write the same file.
+pub(super) fn ranks(args: &RenderArgs) -> anyhow::Result<Option<Ranks>> {
+    let Some(launched) = crate::dist::launched_size() else {
+        return Ok(args.ranks.map(Ranks::Threads));
+    };
+    ensure!(
+        args.ranks.is_none(),
+        "--ranks runs the ranks as threads of one process, and this one was started by an MPI \
+         launcher ({launched} processes): use one or the other"
+    );
+    mpi_job(launched)
+}
+
+#[cfg(feature = "mpi")]
+fn mpi_job(launched: usize) -> anyhow::Result<Option<Ranks>> {
+    let Some(comm) = crate::dist::MpiComm::init() else {
+        bail!("MPI did not initialise at thread level Funneled ({launched} processes)");
+    };
+    // The cores of a node are shared among its ranks (rayon would start one thread a core
+    // in each), unless the user said otherwise.
+    if std::env::var_os("RAYON_NUM_THREADS").is_none() {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let local = crate::dist::node_local_size().unwrap_or(1).max(1);
+        let threads = (cores / local).max(1);
+        if rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build_global()
+            .is_ok()
+        {
+            tracing::debug!("{threads} threads a rank ({cores} cores, {local} ranks a node)");
+        }
+    }
+    Ok(Some(Ranks::Mpi(comm)))
+}
+
+#[cfg(not(feature = "mpi"))]
+fn mpi_job(launched: usize) -> anyhow::Result<Option<Ranks>> {
+    if launched <= 1 {
+        return Ok(None);
+    }
+    bail!(
+        "aarbf was started as one of {launched} MPI processes, but this build has no MPI \
+         support: each process would render the whole image. Rebuild with `cargo xtask setup \
+         --mpi && cargo build --release --features mpi`, or run one process with --ranks \
+         {launched} (ranks as threads; docs/distributed.md)"
+    )
 }
 
 /// Refuses what the distributed renderer does not do yet, naming it.
@@ -97,13 +150,22 @@ pub(super) fn run(
     format: OutputFormat,
     draw_legend: bool,
     precision: Precision,
-    ranks: usize,
+    ranks: Ranks,
 ) -> anyhow::Result<()> {
-    check_supported(args, &resolved, &settings, ranks)?;
+    let size = ranks.size();
+    check_supported(args, &resolved, &settings, size)?;
     let spp = resolved.scene.spp();
-    tracing::info!(
-        "distributed: {ranks} ranks as threads of this process, cpu backend, emission-absorption"
-    );
+    match &ranks {
+        Ranks::Threads(_) => tracing::info!(
+            "distributed: {size} ranks as threads of this process, cpu backend, \
+             emission-absorption"
+        ),
+        #[cfg(feature = "mpi")]
+        Ranks::Mpi(comm) => tracing::info!(
+            "distributed: rank {} of {size} MPI processes, cpu backend, emission-absorption",
+            comm.rank()
+        ),
+    }
     for frame in frames {
         let started = Instant::now();
         settings.camera = Some(frame.camera);
@@ -128,16 +190,32 @@ pub(super) fn run(
             series_range: resolved.series_range(),
             precision,
         };
-        let mut images = run_local(ranks, |comm| {
+        let rank_body = |comm: &dyn Comm| {
             let local = slice_of(&step, comm.rank(), comm.size());
             let mut backend = CpuBackend::new();
             render_distributed(comm, &mut backend, &local, &scene, &params)
-        })
-        .with_context(|| format!("distributed render of step {}", frame.step))?;
-        drop(step);
-        let Some(image) = images.swap_remove(0) else {
-            bail!("rank 0 returned no image");
         };
+        let image = match &ranks {
+            Ranks::Threads(n) => {
+                let mut images = run_local(*n, |comm| rank_body(comm))
+                    .with_context(|| format!("distributed render of step {}", frame.step))?;
+                let Some(image) = images.swap_remove(0) else {
+                    bail!("rank 0 returned no image");
+                };
+                image
+            }
+            #[cfg(feature = "mpi")]
+            Ranks::Mpi(comm) => match rank_body(comm) {
+                Ok(Some(image)) => image,
+                // Rank 0 writes the image.
+                Ok(None) => continue,
+                Err(e) => {
+                    comm.abort(&format!("distributed render of step {}: {e}", frame.step));
+                    unreachable!("MPI_Abort returned");
+                }
+            },
+        };
+        drop(step);
         log_reports(&image.reports);
         let legend = draw_legend.then(|| {
             Legend::of_field(
@@ -155,7 +233,7 @@ pub(super) fn run(
             legend.as_ref(),
         )?;
         tracing::info!(
-            "step {}: {} ({}x{}, {spp} spp, {ranks} ranks) in {:.2} s",
+            "step {}: {} ({}x{}, {spp} spp, {size} ranks) in {:.2} s",
             frame.step,
             frame.path.display(),
             settings.width,

@@ -324,7 +324,7 @@ fn check_flags(args: &RenderArgs) -> anyhow::Result<bool> {
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    dist::refuse_mpi_launch()?;
+    let ranks = dist::ranks(&args)?;
     let draw_legend = check_flags(&args)?;
     let mut resolved = if args.color_by_density {
         resolve(&args.data, &args.field)?
@@ -417,7 +417,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| "auto".into());
     let precision = backend::parse_precision(&precision_text, backend::Precision::RENDER)
         .map_err(anyhow::Error::msg)?;
-    if let Some(ranks) = args.ranks {
+    if let Some(ranks) = ranks {
         return dist::run(
             &args,
             resolved,

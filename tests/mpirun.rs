@@ -1,0 +1,272 @@
+//! `mpirun -np N aarbf render` with a build that has the `mpi` feature (`cargo xtask test` runs
+//! these last, building it): the ranks as MPI processes render the very image the same number
+//! of ranks as threads (`--ranks N`) renders, bit for bit, and so the single-rank image within
+//! the distributed tolerances (tests/distributed.rs); only rank 0 writes; a rank that dies ends
+//! the job with a failure within 30 s.
+#![cfg(feature = "mpi")]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn aarbf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("AARBF_LOG", "info")
+        .output()
+        .expect("the binary runs")
+}
+
+/// `mpirun -np ranks aarbf args`, as root where the tests run as root, more ranks than cores,
+/// shared memory between the ranks.
+fn mpirun(ranks: usize, args: &[String]) -> Command {
+    let mut cmd = Command::new("mpirun");
+    cmd.args(["--oversubscribe", "--mca", "btl", "self,vader", "-np"])
+        .arg(ranks.to_string())
+        .arg(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        // Containers often forbid the cross-process memory attach Open MPI tries first.
+        .env("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
+        .env("AARBF_LOG", "info");
+    cmd
+}
+
+/// A dam break of 4000 particles, written by `aarbf generate`; its header's path.
+fn dam_break(dir: &Path) -> String {
+    let out = aarbf(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        dir.join("db").to_str().unwrap(),
+        "--count",
+        "4000",
+        "--steps",
+        "3",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap().trim().to_owned()
+}
+
+/// The arguments of a render of the dam break's last step into `out` (linear f32 EXR).
+fn render_args(header: &str, out: &Path, size: (u32, u32), spp: u32) -> Vec<String> {
+    [
+        "render",
+        "--data",
+        header,
+        "--step",
+        "2",
+        "--attribute",
+        "attribute",
+        "--radius",
+        "2%",
+        "--width",
+        &size.0.to_string(),
+        "--height",
+        &size.1.to_string(),
+        "--spp",
+        &spp.to_string(),
+        "--backend",
+        "cpu",
+        "--precision",
+        "f64",
+        "--up",
+        "y",
+        "--out",
+        out.to_str().unwrap(),
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+fn pixels(path: &Path) -> Vec<f32> {
+    image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgba32f()
+        .into_raw()
+}
+
+#[test]
+fn mpi_processes_render_the_image_of_as_many_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = dam_break(d);
+    let single_path = d.join("single.exr");
+    let single = aarbf(
+        &render_args(&header, &single_path, (64, 48), 2)
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert!(
+        single.status.success(),
+        "{}",
+        String::from_utf8_lossy(&single.stderr)
+    );
+    let single = pixels(&single_path);
+    assert!(single.iter().any(|&v| v > 0.05), "the fluid shows");
+    for ranks in 1..=4 {
+        let threads_path = d.join(format!("threads-{ranks}.exr"));
+        let mut args = render_args(&header, &threads_path, (64, 48), 2);
+        args.extend(["--ranks".into(), ranks.to_string()]);
+        let threads = aarbf(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(
+            threads.status.success(),
+            "{}",
+            String::from_utf8_lossy(&threads.stderr)
+        );
+
+        let mpi_dir = d.join(format!("mpi-{ranks}"));
+        std::fs::create_dir(&mpi_dir).unwrap();
+        let mpi_path = mpi_dir.join("image.exr");
+        let out = mpirun(ranks, &render_args(&header, &mpi_path, (64, 48), 2))
+            .output()
+            .expect("mpirun runs (cargo xtask setup --mpi installs Open MPI)");
+        let log = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "mpirun -np {ranks}:\n{log}");
+        for rank in 0..ranks {
+            assert!(
+                log.contains(&format!("rank {rank} of {ranks} MPI processes")),
+                "rank {rank} of {ranks} did not say it ran:\n{log}"
+            );
+        }
+        assert!(
+            log.contains(&format!("rank {}: read", ranks - 1)) && log.contains("owned once each"),
+            "rank 0 logs every rank's report:\n{log}"
+        );
+        // Rank 0 alone writes, and no temporary file is left behind.
+        let written: Vec<PathBuf> = std::fs::read_dir(&mpi_dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        assert_eq!(written, vec![mpi_path.clone()], "-np {ranks}");
+
+        let mpi = pixels(&mpi_path);
+        let threads = pixels(&threads_path);
+        assert_eq!(mpi.len(), threads.len());
+        let differing = mpi
+            .iter()
+            .zip(&threads)
+            .filter(|(a, b)| a.to_bits() != b.to_bits())
+            .count();
+        assert_eq!(
+            differing, 0,
+            "-np {ranks}: {differing} values differ from --ranks {ranks}"
+        );
+        let diff = mpi
+            .iter()
+            .zip(&single)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        // The default early termination is on: each brick stops at its threshold.
+        assert!(
+            diff <= 0.01,
+            "-np {ranks} differs from the single-rank image by {diff}"
+        );
+    }
+}
+
+/// The processes `root` started, and theirs.
+fn descendants(root: u32) -> Vec<u32> {
+    let mut parents: Vec<(u32, u32)> = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(entry.path().join("stat")) else {
+            continue;
+        };
+        // pid (comm) state ppid ...: the command may hold spaces and parentheses.
+        let Some(after) = stat.rfind(')').map(|i| &stat[i + 1..]) else {
+            continue;
+        };
+        if let Some(ppid) = after.split_whitespace().nth(1).and_then(|p| p.parse().ok()) {
+            parents.push((pid, ppid));
+        }
+    }
+    let mut found = vec![root];
+    let mut i = 0;
+    while i < found.len() {
+        let parent = found[i];
+        found.extend(parents.iter().filter(|p| p.1 == parent).map(|p| p.0));
+        i += 1;
+    }
+    found.remove(0);
+    found
+}
+
+/// The MPI rank a process of the job is, from its environment.
+fn rank_of(pid: u32) -> Option<usize> {
+    let environ = std::fs::read(format!("/proc/{pid}/environ")).ok()?;
+    environ
+        .split(|&b| b == 0)
+        .find_map(|var| var.strip_prefix(b"OMPI_COMM_WORLD_RANK="))
+        .and_then(|v| std::str::from_utf8(v).ok()?.parse().ok())
+}
+
+#[test]
+fn a_rank_that_dies_ends_the_job_with_a_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = dam_break(d);
+    let out_path = d.join("never.exr");
+    // Long enough (several seconds a rank) that rank 1 is killed mid-render.
+    let mut job = mpirun(3, &render_args(&header, &out_path, (512, 512), 64))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("mpirun starts");
+    let started = Instant::now();
+    let victim = loop {
+        let ranks: Vec<(u32, usize)> = descendants(job.id())
+            .into_iter()
+            .filter_map(|pid| Some((pid, rank_of(pid)?)))
+            .collect();
+        if let Some(&(pid, _)) = ranks.iter().find(|r| r.1 == 1) {
+            break pid;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "rank 1 never started"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    // Past MPI's start-up, into the render.
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(
+        job.try_wait().unwrap().is_none(),
+        "the job ended before the fault: make its render longer"
+    );
+    let killed = Command::new("kill")
+        .args(["-KILL", &victim.to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let killed_at = Instant::now();
+    let status = loop {
+        if let Some(status) = job.try_wait().unwrap() {
+            break status;
+        }
+        if killed_at.elapsed() > Duration::from_secs(30) {
+            let _ = job.kill();
+            panic!("the job still ran 30 s after rank 1 died");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut log = String::new();
+    std::io::Read::read_to_string(job.stderr.as_mut().unwrap(), &mut log).unwrap();
+    assert!(
+        !status.success(),
+        "the job succeeded without rank 1:\n{log}"
+    );
+    assert!(!out_path.exists(), "an image was written without rank 1");
+    eprintln!(
+        "the job ended {:.1} s after rank 1 died ({status})",
+        killed_at.elapsed().as_secs_f64()
+    );
+}
