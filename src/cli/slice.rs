@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use clap::Args;
 use glam::DVec3;
 
-use crate::field::{Classification, Particles, RegularGrid, normalise};
+use crate::field::{Classification, FieldSettings, Particles, RegularGrid, Sample, normalise};
 use crate::render::auto::AutoValues;
 use crate::render::legend::Legend;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve_for_images};
@@ -56,6 +56,74 @@ pub struct SliceArgs {
 }
 
 pub fn run(args: SliceArgs) -> anyhow::Result<()> {
+    check_args(&args)?;
+    crate::io::output::check_writable(&args.out, args.force)?;
+    let resolved = resolve_for_images(&args.data, &args.field)?;
+    let step = resolved.series.step(resolved.step)?;
+    // In a periodic box the particles near a face are felt across it, through their images,
+    // and the slice spans the box.
+    let images = match resolved.periodic {
+        Some(b) => Some(b.images(&step, &resolved.field, resolved.series_range())?),
+        None => None,
+    };
+    let bounds = resolved.domain();
+    // The particles alone: scattering them onto the pixels needs no tree.
+    let particles = Particles::prepare(
+        images.as_ref().map_or(&*step, |i| &*i.step),
+        &resolved.field,
+        images
+            .as_ref()
+            .map_or(bounds, |i| bounds.grown(i.largest_reach)),
+        resolved.series_range(),
+    )?;
+    let (grid, normal) = plane(&args, bounds);
+    let [width, height, _] = grid.dims;
+    let samples = particles.eval_grid(&grid);
+
+    // Brightness: 1 - exp(-2 Phi / Phi_ref), Phi_ref the series' (as a render of the same
+    // field uses), never one of this plane's: slices along other axes and the renders agree.
+    let phi_ref = match args.phi_ref {
+        Some(p) => p,
+        None => AutoValues::of(&resolved.series, &resolved.field)?.phi_ref,
+    };
+    let range = particles.range;
+    let mut image = colour(&samples, &resolved.field, range, phi_ref, width, height);
+    let (min_w, min_h) = crate::render::legend::MIN_SIZE;
+    if args.legend || (!args.no_legend && width as u32 >= min_w && height as u32 >= min_h) {
+        Legend::of_field(
+            &resolved.field,
+            Some(range),
+            resolved.range.label(),
+            false,
+            phi_ref,
+        )
+        .draw(&mut image)?;
+    }
+    crate::io::output::write_atomically(&args.out, args.force, |tmp| {
+        image
+            .save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })?;
+    tracing::info!(
+        "slice of step {} ({} particles) at {:?} = {:.4}: {}x{} pixels, Phi_ref {:.4} ({})",
+        resolved.step,
+        step.len(),
+        args.axis,
+        grid.origin[normal],
+        width,
+        height,
+        phi_ref,
+        if args.phi_ref.is_some() {
+            "set"
+        } else {
+            "automatic, the series'"
+        }
+    );
+    Ok(())
+}
+
+/// Checks the flags before the data is opened.
+fn check_args(args: &SliceArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
         (0.0..=1.0).contains(&args.position),
         "--position must lie in [0, 1], got {}",
@@ -80,25 +148,12 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
             args.width
         );
     }
-    crate::io::output::check_writable(&args.out, args.force)?;
-    let resolved = resolve_for_images(&args.data, &args.field)?;
-    let step = resolved.series.step(resolved.step)?;
-    // In a periodic box the particles near a face are felt across it, through their images,
-    // and the slice spans the box.
-    let images = match resolved.periodic {
-        Some(b) => Some(b.images(&step, &resolved.field, resolved.series_range())?),
-        None => None,
-    };
-    let bounds = resolved.domain();
-    // The particles alone: scattering them onto the pixels needs no tree.
-    let particles = Particles::prepare(
-        images.as_ref().map_or(&*step, |i| &*i.step),
-        &resolved.field,
-        images
-            .as_ref()
-            .map_or(bounds, |i| bounds.grown(i.largest_reach)),
-        resolved.series_range(),
-    )?;
+    Ok(())
+}
+
+/// The pixel centres of the slice over `bounds`, rows going down while the plane's v axis goes
+/// up (the height following the data's aspect ratio), and the axis normal to it.
+fn plane(args: &SliceArgs, bounds: crate::values::Bounds) -> (RegularGrid, usize) {
     let (lo, hi) = (bounds.min, bounds.max);
     let (normal, u, v) = match args.axis {
         Axis::X => (0, 2, 1),
@@ -109,8 +164,8 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
     let width = args.width as usize;
     let height =
         ((width as f64 * extent[v] / extent[u].max(1e-30)).round() as usize).clamp(1, 16384);
-    // Pixel centres, rows going down while the v axis goes up; the field is scattered onto
-    // them (each particle onto the pixels it reaches), not queried pixel by pixel.
+    // The field is scattered onto the pixel centres (each particle onto the pixels it
+    // reaches), not queried pixel by pixel.
     let mut origin = DVec3::ZERO;
     origin[normal] = lo[normal] + args.position * extent[normal];
     origin[u] = lo[u] + 0.5 / width as f64 * extent[u];
@@ -121,66 +176,32 @@ pub fn run(args: SliceArgs) -> anyhow::Result<()> {
         spacing: [extent[u] / width as f64, -extent[v] / height as f64, 0.0],
         dims: [width, height, 1],
     };
-    let samples = particles.eval_grid(&grid);
+    (grid, normal)
+}
 
-    // Brightness: 1 - exp(-2 Phi / Phi_ref), Phi_ref the series' (as a render of the same
-    // field uses), never one of this plane's: slices along other axes and the renders agree.
-    let phi_ref = match args.phi_ref {
-        Some(p) => p,
-        None => AutoValues::of(&resolved.series, &resolved.field)?.phi_ref,
-    };
-    let pre = resolved.field.classification == Classification::Pre;
-    let range = particles.range;
+/// The slice's pixels: colour from Theta (or, by density, from Phi), brightness from Phi.
+fn colour(
+    samples: &[Sample],
+    field: &FieldSettings,
+    range: (f64, f64),
+    phi_ref: f64,
+    width: usize,
+    height: usize,
+) -> image::RgbImage {
+    let pre = field.classification == Classification::Pre;
     let mut image = image::RgbImage::new(width as u32, height as u32);
-    for (pixel, s) in image.pixels_mut().zip(&samples) {
+    for (pixel, s) in image.pixels_mut().zip(samples) {
         let alpha = 1.0 - (-2.0 * s.phi / phi_ref).exp();
-        let colour = if resolved.field.attribute.is_none() {
-            resolved
-                .field
-                .color_map
-                .linear_rgb((s.phi / phi_ref).min(1.0))
+        let colour = if field.attribute.is_none() {
+            field.color_map.linear_rgb((s.phi / phi_ref).min(1.0))
         } else if pre {
             s.theta
         } else {
-            resolved
-                .field
-                .color_map
-                .linear_rgb(normalise(s.theta[0], range))
+            field.color_map.linear_rgb(normalise(s.theta[0], range))
         };
         *pixel = image::Rgb(
             colour.map(|c| (linear_to_srgb((c * alpha).clamp(0.0, 1.0)) * 255.0).round() as u8),
         );
     }
-    let (min_w, min_h) = crate::render::legend::MIN_SIZE;
-    if args.legend || (!args.no_legend && width as u32 >= min_w && height as u32 >= min_h) {
-        Legend::of_field(
-            &resolved.field,
-            Some(range),
-            resolved.range.label(),
-            false,
-            phi_ref,
-        )
-        .draw(&mut image)?;
-    }
-    crate::io::output::write_atomically(&args.out, args.force, |tmp| {
-        image
-            .save_with_format(tmp, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
-    })?;
-    tracing::info!(
-        "slice of step {} ({} particles) at {:?} = {:.4}: {}x{} pixels, Phi_ref {:.4} ({})",
-        resolved.step,
-        step.len(),
-        args.axis,
-        lo[normal] + args.position * extent[normal],
-        width,
-        height,
-        phi_ref,
-        if args.phi_ref.is_some() {
-            "set"
-        } else {
-            "automatic, the series'"
-        }
-    );
-    Ok(())
+    image
 }

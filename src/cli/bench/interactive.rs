@@ -46,6 +46,29 @@ const UI_FRAME: Duration = Duration::from_micros(16_667);
 /// No phase of the benchmark waits longer than this for the worker.
 const PATIENCE: Duration = Duration::from_secs(1800);
 
+/// What the benchmark measured, phase by phase.
+struct Measures {
+    /// Opening: the first image, and the converged one, after the first `show`.
+    first_image: Duration,
+    open_converged: Duration,
+    backend: String,
+    drag: Drag,
+    /// After the release: the first full-resolution image, its readback, and the spp.
+    first_full: Duration,
+    full_readback: Duration,
+    converged: Duration,
+}
+
+/// What the window saw during the drag.
+struct Drag {
+    /// Each new preview: when it arrived, the image, and its frame time.
+    previews: Vec<(Instant, Arc<ShownImage>, Duration)>,
+    readbacks: Vec<f64>,
+    /// The longest call of the window thread to the worker.
+    window_wait: Duration,
+    time: Duration,
+}
+
 pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     let md = args.out.join("interactive.md");
     crate::io::output::check_writable(&md, args.force)?;
@@ -59,13 +82,29 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     let count = loaded.series.step_info(loaded.step).map_or(0, |i| i.count);
     let name = loaded.data_path.display().to_string();
     let worker = RenderWorker::spawn(Arc::new(loaded.series), Box::new(|| {}));
+    let measures = measure(&worker, &mut state, args.drag_seconds)?;
+    let out = report(&args, &name, count, state.step, &measures)?;
+    std::fs::create_dir_all(&args.out)?;
+    crate::io::output::write_atomically(&md, true, |p| std::fs::write(p, &out))?;
+    println!("{out}");
+    tracing::info!("wrote {}", md.display());
+    Ok(())
+}
+
+/// Opens the view, drags it for `drag_seconds`, and releases it, timing what the worker
+/// publishes.
+fn measure(
+    worker: &RenderWorker,
+    state: &mut ViewState,
+    drag_seconds: f64,
+) -> anyhow::Result<Measures> {
     let mut generation = 1;
     let idle = Interaction::default();
 
     // Opening: the first build (and, on a GPU backend, pipeline compilation) and a converged
     // image, as the window shows on start.
     let opened = Instant::now();
-    worker.show(&state, generation, idle);
+    worker.show(state, generation, idle);
     let first = worker.wait_for(PATIENCE, |s| {
         s.generation == generation && s.image.is_some()
     });
@@ -81,22 +120,63 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
         .clone()
         .map_or_else(|| "?".into(), |(n, d)| format!("{n} ({d})"));
 
-    // The drag.
+    let drag = drag(
+        worker,
+        state,
+        &mut generation,
+        settled.image.clone(),
+        drag_seconds,
+    );
+
+    // The release: full resolution, accumulated to the spp.
+    let released = Instant::now();
+    generation += 1;
+    worker.show(state, generation, idle);
+    let full = worker.wait_for(PATIENCE, |s| {
+        s.generation == generation && s.full_resolution && s.image.is_some()
+    });
+    let first_full = released.elapsed();
+    let full_readback = full.readback;
+    let done = worker.wait_for(PATIENCE, |s| s.generation == generation && s.converged);
+    let converged = released.elapsed();
+    anyhow::ensure!(
+        full.full_resolution && done.converged,
+        "no full image: {done:?}"
+    );
+    Ok(Measures {
+        first_image,
+        open_converged,
+        backend,
+        drag,
+        first_full,
+        full_readback,
+        converged,
+    })
+}
+
+/// The drag: a new camera every `UI_FRAME` for `seconds`, the view marked as moving; `last`
+/// is the image shown before it, so only new previews count.
+fn drag(
+    worker: &RenderWorker,
+    state: &mut ViewState,
+    generation: &mut u64,
+    mut last: Option<Arc<ShownImage>>,
+    seconds: f64,
+) -> Drag {
     let moving = Interaction {
         interacting: true,
-        ..idle
+        ..Interaction::default()
     };
     let mut previews: Vec<(Instant, Arc<ShownImage>, Duration)> = Vec::new();
     let mut readbacks: Vec<f64> = Vec::new();
     let mut window_wait = Duration::ZERO;
     let started = Instant::now();
-    let mut last: Option<Arc<ShownImage>> = settled.image.clone();
-    while started.elapsed().as_secs_f64() < args.drag_seconds {
+    while started.elapsed().as_secs_f64() < seconds {
         let tick = Instant::now();
         state.settings.camera = Some(orbit(state.camera(), 4.0, 0.0));
-        generation += 1;
+        *generation += 1;
         let call = Instant::now();
-        worker.show(&state, generation, moving);
+        worker.show(state, *generation, moving);
         let shown = worker.shown();
         window_wait = window_wait.max(call.elapsed());
         if let Some(image) = &shown.image
@@ -109,24 +189,23 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
         }
         std::thread::sleep(UI_FRAME.saturating_sub(tick.elapsed()));
     }
-    let drag_time = started.elapsed();
+    Drag {
+        previews,
+        readbacks,
+        window_wait,
+        time: started.elapsed(),
+    }
+}
 
-    // The release: full resolution, accumulated to the spp.
-    let released = Instant::now();
-    generation += 1;
-    worker.show(&state, generation, idle);
-    let full = worker.wait_for(PATIENCE, |s| {
-        s.generation == generation && s.full_resolution && s.image.is_some()
-    });
-    let first_full = released.elapsed();
-    let full_readback = full.readback;
-    let done = worker.wait_for(PATIENCE, |s| s.generation == generation && s.converged);
-    let converged = released.elapsed();
-    anyhow::ensure!(
-        full.full_resolution && done.converged,
-        "no full image: {done:?}"
-    );
-
+/// interactive.md: the measures as a table, the steady previews' medians among them.
+fn report(
+    args: &InteractiveArgs,
+    name: &str,
+    count: usize,
+    step: usize,
+    m: &Measures,
+) -> anyhow::Result<String> {
+    let (drag, previews) = (&m.drag, &m.drag.previews);
     let full_pixels = f64::from(args.size.0) * f64::from(args.size.1);
     // The first previews find the scale; the steady state is the second half.
     let steady = &previews[previews.len() / 2..];
@@ -141,6 +220,7 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     let frame_times: Vec<f64> = steady.iter().map(|(_, _, t)| t.as_secs_f64()).collect();
     let median_size = median(sizes);
     let side = (median_size / full_pixels).sqrt();
+    let backend = &m.backend;
     let mut out = String::new();
     writeln!(out, "# Interactive viewing: {name}\n")?;
     writeln!(
@@ -148,10 +228,10 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
         "Step {} ({count} particles), view {}x{}, backend {backend}; a drag of {:.1} s (a new \
          camera every {:.1} ms), then {} spp at full resolution. Interactive frames aim at \
          {} ms.\n",
-        state.step,
+        step,
         args.size.0,
         args.size.1,
-        drag_time.as_secs_f64(),
+        drag.time.as_secs_f64(),
         UI_FRAME.as_secs_f64() * 1e3,
         args.spp,
         INTERACTIVE_FRAME.as_millis()
@@ -161,19 +241,19 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     writeln!(
         out,
         "| open: first image / converged | {:.2} s / {:.2} s |",
-        first_image.as_secs_f64(),
-        open_converged.as_secs_f64()
+        m.first_image.as_secs_f64(),
+        m.open_converged.as_secs_f64()
     )?;
     writeln!(
         out,
         "| window thread, longest call to the worker | {:.3} ms |",
-        window_wait.as_secs_f64() * 1e3
+        drag.window_wait.as_secs_f64() * 1e3
     )?;
     writeln!(
         out,
         "| previews during the drag | {} ({:.1} per second) |",
         previews.len(),
-        previews.len() as f64 / drag_time.as_secs_f64()
+        previews.len() as f64 / drag.time.as_secs_f64()
     )?;
     writeln!(
         out,
@@ -194,19 +274,15 @@ pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     writeln!(
         out,
         "| image to the window (readback and conversion): preview / full | {:.2} ms / {:.2} ms |",
-        median(readbacks) * 1e3,
-        full_readback.as_secs_f64() * 1e3
+        median(drag.readbacks.clone()) * 1e3,
+        m.full_readback.as_secs_f64() * 1e3
     )?;
     writeln!(
         out,
         "| after release: first full image / {} spp | {:.2} s / {:.2} s |",
         args.spp,
-        first_full.as_secs_f64(),
-        converged.as_secs_f64()
+        m.first_full.as_secs_f64(),
+        m.converged.as_secs_f64()
     )?;
-    std::fs::create_dir_all(&args.out)?;
-    crate::io::output::write_atomically(&md, true, |p| std::fs::write(p, &out))?;
-    println!("{out}");
-    tracing::info!("wrote {}", md.display());
-    Ok(())
+    Ok(out)
 }

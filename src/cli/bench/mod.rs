@@ -17,7 +17,7 @@ use crate::backend::{self, BackendKind};
 use crate::render::{RenderSession, RenderSettings};
 use crate::scene::prefetch::Prefetcher;
 use crate::scene::{OpenOptions, TimeSeries};
-use crate::scene_file::resolve::{DataArgs, FieldOptions, resolve};
+use crate::scene_file::resolve::{DataArgs, FieldOptions, Resolved, resolve};
 use crate::study::Study;
 use crate::values::Step;
 
@@ -146,32 +146,7 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
     for p in [&csv, &md] {
         crate::io::output::check_writable(p, args.force)?;
     }
-    // With --rescan, first how a first open goes (the index ignored): a background open,
-    // which returns after the first step, and the scan it leaves running.
-    let first_open = match &args.data.data {
-        Some(path) if args.data.rescan => {
-            let started = Instant::now();
-            let series = TimeSeries::open(
-                path,
-                &OpenOptions {
-                    format: args.data.format,
-                    cache_bytes: args.data.cache_mib << 20,
-                    background_scan: true,
-                    rescan: true,
-                    ..OpenOptions::default()
-                },
-            )?;
-            let returned = started.elapsed();
-            let decoded = series.steps_decoded();
-            series.wait_for_scan()?;
-            Some(FirstOpen {
-                returned,
-                decoded,
-                scanned: started.elapsed(),
-            })
-        }
-        _ => None,
-    };
+    let first_open = first_open(&args.data)?;
     let opened = Instant::now();
     let data = DataArgs {
         rescan: args.data.rescan && first_open.is_none(),
@@ -204,41 +179,7 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
     series.clear_cache();
     let bar = crate::progress::bar(steps.len() as u64, "playing");
     let played = Instant::now();
-    let times = std::thread::scope(|scope| -> anyhow::Result<Vec<StepTimes>> {
-        let prefetcher = Prefetcher::spawn(scope, series);
-        let mut times = Vec::with_capacity(steps.len());
-        for (k, &step) in steps.iter().enumerate() {
-            let started = Instant::now();
-            let prefetched = series.is_cached(step);
-            prefetcher.plan(step, steps[k + 1..].iter().copied());
-            let data = series.step(step)?;
-            let wait = started.elapsed();
-            session.show(series, step, &resolved.field, resolved.cluster)?;
-            let t = session.backend().timings();
-            let frame = Instant::now();
-            session.accumulate(&settings, args.spp)?;
-            let frame = frame.elapsed();
-            times.push(StepTimes {
-                step,
-                particles: data.len(),
-                bytes: data.bytes(),
-                stages: [
-                    series.read_time(step).unwrap_or_default(),
-                    wait,
-                    t.prepare,
-                    t.upload,
-                    t.device_prepare,
-                    t.build,
-                    frame,
-                ]
-                .map(|d| d.as_secs_f64()),
-                total: started.elapsed().as_secs_f64(),
-                prefetched,
-            });
-            bar.inc(1);
-        }
-        Ok(times)
-    })?;
+    let times = play(&mut session, &resolved, &steps, &settings, args.spp, &bar)?;
     let play_time = played.elapsed();
     bar.finish_and_clear();
     // The image is read back once, as a batch render writes it, and kept for the record.
@@ -248,36 +189,7 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
 
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let mut rows = String::from("step,particles,bytes,stage,seconds\n");
-    for t in &times {
-        for (stage, s) in STAGES.iter().zip(t.stages) {
-            writeln!(
-                rows,
-                "{},{},{},{stage},{s:.6}",
-                t.step, t.particles, t.bytes
-            )?;
-        }
-        writeln!(
-            rows,
-            "{},{},{},step,{:.6}",
-            t.step, t.particles, t.bytes, t.total
-        )?;
-    }
-    for (step, f) in steps.iter().zip(&floors) {
-        let info = series.step_info(*step).expect("a step of the series");
-        let (n, bytes) = (info.count, info.bytes);
-        writeln!(
-            rows,
-            "{step},{n},{bytes},floor: copy in memory,{:.6}",
-            f.copy
-        )?;
-        if let Some(r) = f.page_cache {
-            writeln!(
-                rows,
-                "{step},{n},{bytes},floor: read from page cache,{r:.6}"
-            )?;
-        }
-    }
+    let rows = csv_rows(series, &times, &steps, &floors)?;
     crate::io::output::write_atomically(&csv, true, |p| std::fs::write(p, &rows))?;
 
     let summary = summarise(&Summary {
@@ -303,6 +215,123 @@ fn playback(args: PlaybackArgs) -> anyhow::Result<()> {
     println!("{summary}");
     tracing::info!("wrote {} and {}", csv.display(), md.display());
     Ok(())
+}
+
+/// With --rescan, first how a first open goes (the index ignored): a background open, which
+/// returns after the first step, and the scan it leaves running.
+fn first_open(data: &DataArgs) -> anyhow::Result<Option<FirstOpen>> {
+    Ok(match &data.data {
+        Some(path) if data.rescan => {
+            let started = Instant::now();
+            let series = TimeSeries::open(
+                path,
+                &OpenOptions {
+                    format: data.format,
+                    cache_bytes: data.cache_mib << 20,
+                    background_scan: true,
+                    rescan: true,
+                    ..OpenOptions::default()
+                },
+            )?;
+            let returned = started.elapsed();
+            let decoded = series.steps_decoded();
+            series.wait_for_scan()?;
+            Some(FirstOpen {
+                returned,
+                decoded,
+                scanned: started.elapsed(),
+            })
+        }
+        _ => None,
+    })
+}
+
+/// Plays `steps` as a viewer does, the next steps read ahead on a worker thread, timing each
+/// stage of each step.
+fn play(
+    session: &mut RenderSession,
+    resolved: &Resolved,
+    steps: &[usize],
+    settings: &RenderSettings,
+    spp: u32,
+    bar: &indicatif::ProgressBar,
+) -> anyhow::Result<Vec<StepTimes>> {
+    let series = &resolved.series;
+    std::thread::scope(|scope| -> anyhow::Result<Vec<StepTimes>> {
+        let prefetcher = Prefetcher::spawn(scope, series);
+        let mut times = Vec::with_capacity(steps.len());
+        for (k, &step) in steps.iter().enumerate() {
+            let started = Instant::now();
+            let prefetched = series.is_cached(step);
+            prefetcher.plan(step, steps[k + 1..].iter().copied());
+            let data = series.step(step)?;
+            let wait = started.elapsed();
+            session.show(series, step, &resolved.field, resolved.cluster)?;
+            let t = session.backend().timings();
+            let frame = Instant::now();
+            session.accumulate(settings, spp)?;
+            let frame = frame.elapsed();
+            times.push(StepTimes {
+                step,
+                particles: data.len(),
+                bytes: data.bytes(),
+                stages: [
+                    series.read_time(step).unwrap_or_default(),
+                    wait,
+                    t.prepare,
+                    t.upload,
+                    t.device_prepare,
+                    t.build,
+                    frame,
+                ]
+                .map(|d| d.as_secs_f64()),
+                total: started.elapsed().as_secs_f64(),
+                prefetched,
+            });
+            bar.inc(1);
+        }
+        Ok(times)
+    })
+}
+
+/// playback.csv: a row per step and stage, the whole step, and the floors.
+fn csv_rows(
+    series: &TimeSeries,
+    times: &[StepTimes],
+    steps: &[usize],
+    floors: &[Floor],
+) -> anyhow::Result<String> {
+    let mut rows = String::from("step,particles,bytes,stage,seconds\n");
+    for t in times {
+        for (stage, s) in STAGES.iter().zip(t.stages) {
+            writeln!(
+                rows,
+                "{},{},{},{stage},{s:.6}",
+                t.step, t.particles, t.bytes
+            )?;
+        }
+        writeln!(
+            rows,
+            "{},{},{},step,{:.6}",
+            t.step, t.particles, t.bytes, t.total
+        )?;
+    }
+    for (step, f) in steps.iter().zip(floors) {
+        let info = series.step_info(*step).expect("a step of the series");
+        let (n, bytes) = (info.count, info.bytes);
+        writeln!(
+            rows,
+            "{step},{n},{bytes},floor: copy in memory,{:.6}",
+            f.copy
+        )?;
+        if let Some(r) = f.page_cache {
+            writeln!(
+                rows,
+                "{step},{n},{bytes},floor: read from page cache,{r:.6}"
+            )?;
+        }
+    }
+    Ok(rows)
 }
 
 struct Floor {
@@ -407,13 +436,34 @@ pub(super) fn median(mut v: Vec<f64>) -> f64 {
 
 fn summarise(s: &Summary<'_>) -> String {
     let mut out = String::new();
-    let n = s.times.len();
     // The first step also creates pipelines and buffers and computes the series' automatic
     // values: the rates are over the steps after it (all of them if only one was played).
-    let steady = if n > 1 { &s.times[1..] } else { s.times };
-    let steady_total: f64 = steady.iter().map(|t| t.total).sum();
-    let mib = |b: usize| b as f64 / 1048576.0;
+    let steady = if s.times.len() > 1 {
+        &s.times[1..]
+    } else {
+        s.times
+    };
     let max_step = s.series.steps().iter().map(|i| i.bytes).max().unwrap_or(0);
+    say_opening_and_rate(&mut out, s, steady, max_step);
+    stage_table(&mut out, steady);
+    say_floors(&mut out, s, steady);
+    say_peak_memory(&mut out, s, max_step);
+    let _ = writeln!(
+        out,
+        "\nLast frame's mean opacity: {:.4} (a check that frames were drawn).",
+        s.image_mean
+    );
+    out
+}
+
+fn mib(bytes: usize) -> f64 {
+    bytes as f64 / 1048576.0
+}
+
+/// The summary's heading, the time to open the series, and the steps per second.
+fn say_opening_and_rate(out: &mut String, s: &Summary<'_>, steady: &[StepTimes], max_step: usize) {
+    let n = s.times.len();
+    let steady_total: f64 = steady.iter().map(|t| t.total).sum();
     let _ = writeln!(out, "# Playback: {}\n", s.data.display());
     let _ = writeln!(
         out,
@@ -459,6 +509,11 @@ fn summarise(s: &Summary<'_>) -> String {
         s.play_time.as_secs_f64(),
         s.times.iter().filter(|t| t.prefetched).count()
     );
+}
+
+/// Each stage's median, mean and share of a step, over the steady steps.
+fn stage_table(out: &mut String, steady: &[StepTimes]) {
+    let steady_total: f64 = steady.iter().map(|t| t.total).sum();
     let _ = writeln!(
         out,
         "\n| stage | median (ms) | mean (ms) | share of a step |"
@@ -487,6 +542,10 @@ fn summarise(s: &Summary<'_>) -> String {
         1e3 * median(steady.iter().map(|t| t.total).collect()),
         1e3 * steady_total / steady.len() as f64
     );
+}
+
+/// The floors a step change is measured against: copying a step in memory, reading its file.
+fn say_floors(out: &mut String, s: &Summary<'_>, steady: &[StepTimes]) {
     let copy = median(s.floors.iter().map(|f| f.copy).collect());
     let _ = writeln!(out, "\nFloors, per step (median, best of 3 each):\n");
     let _ = writeln!(
@@ -506,6 +565,10 @@ fn summarise(s: &Summary<'_>) -> String {
             median(steady.iter().map(|t| t.stages[0]).collect()) / median(page)
         );
     }
+}
+
+/// The peak resident memory beside what bounds it.
+fn say_peak_memory(out: &mut String, s: &Summary<'_>, max_step: usize) {
     let bound = s.series.cache_limit();
     match s.peak {
         Some(peak) => {
@@ -524,10 +587,4 @@ fn summarise(s: &Summary<'_>) -> String {
             let _ = writeln!(out, "\nPeak resident memory: not reported by this system.");
         }
     }
-    let _ = writeln!(
-        out,
-        "\nLast frame's mean opacity: {:.4} (a check that frames were drawn).",
-        s.image_mean
-    );
-    out
 }

@@ -7,20 +7,21 @@ use anyhow::{Context, bail, ensure};
 use clap::Args;
 
 mod dist;
+mod image;
 mod plan;
 
 use super::output_format::OutputFormat;
 use plan::{Frame, plan_frames};
 
-use crate::backend::voxel::VoxelGeometry;
 use crate::backend::{self, BackendKind};
-use crate::render::RenderSession;
-use crate::render::converged::{ReferenceOptions, converged_reference, reference_settings};
+use crate::render::converged::reference_settings;
 use crate::render::legend::Legend;
-use crate::render::target::{ErrorMetric, render_to_target};
-use crate::render::{Method, SPLAT_K};
+use crate::render::target::{ErrorMetric, Target};
+use crate::render::{Method, RenderSession, RenderSettings, SPLAT_K};
 use crate::scene::Camera;
-use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve, resolve_for_images};
+use crate::scene_file::resolve::{
+    DataArgs, FieldOptions, Resolved, ViewFlags, resolve, resolve_for_images,
+};
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
 
@@ -323,15 +324,80 @@ fn check_flags(args: &RenderArgs) -> anyhow::Result<bool> {
     Ok(!args.no_legend && format == OutputFormat::Png8 && fits)
 }
 
+/// A render's settings, settled from the flags over the scene file and the data.
+struct Setup {
+    resolved: Resolved,
+    settings: RenderSettings,
+    method: Method,
+    spp: u32,
+    /// The error or time a targeted render stops at.
+    target: Option<Target>,
+}
+
+impl Setup {
+    /// The precision as the scene spells it, for the log and a saved scene.
+    fn precision_text(&self) -> String {
+        self.resolved
+            .scene
+            .render
+            .precision
+            .clone()
+            .unwrap_or_else(|| "auto".into())
+    }
+}
+
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let ranks = dist::ranks(&args)?;
     let draw_legend = check_flags(&args)?;
+    let setup = settle(&args)?;
+    let format = OutputFormat::of(&args.out, args.bit_depth)?;
+    let start_camera = setup
+        .settings
+        .camera
+        .unwrap_or_else(|| Camera::default_for(setup.resolved.domain()));
+    let (frames, sequence) = plan_frames(&args, &setup.resolved, start_camera, format)?;
+    let frames = frames_to_render(&args, frames, sequence)?;
+    if frames.is_empty() {
+        return Ok(());
+    }
+    if let Some(path) = &args.save_scene {
+        crate::io::output::check_writable(path, args.force)?;
+    }
+    let precision = backend::parse_precision(&setup.precision_text(), backend::Precision::RENDER)
+        .map_err(anyhow::Error::msg)?;
+    if let Some(ranks) = ranks {
+        return dist::run(
+            &args,
+            setup.resolved,
+            setup.settings,
+            &frames,
+            format,
+            draw_legend,
+            precision,
+            ranks,
+        );
+    }
+    let session = open_session(&args, &setup, precision)?;
+    render_frames(
+        &args,
+        setup,
+        session,
+        &frames,
+        sequence,
+        format,
+        draw_legend,
+    )
+}
+
+/// Resolves the data and the field, writes the flags over the scene file, and settles the
+/// method, refusing the combinations it does not render.
+fn settle(args: &RenderArgs) -> anyhow::Result<Setup> {
     let mut resolved = if args.color_by_density {
         resolve(&args.data, &args.field)?
     } else {
         resolve_for_images(&args.data, &args.field)?
     };
-    apply_flags(&args, &mut resolved.scene)?;
+    apply_flags(args, &mut resolved.scene)?;
     match args.method {
         Method::Splat => {
             resolved.scene.render.splat_k = Some(args.splat_k);
@@ -343,10 +409,9 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         }
         Method::Rbf => {}
     }
-    let bounds = resolved.domain();
-    let mut settings = resolved
+    let settings = resolved
         .scene
-        .render_settings(bounds)
+        .render_settings(resolved.domain())
         .map_err(anyhow::Error::msg)?;
     // A scene file's `splat_k` or `voxel_grid` asks for its baseline as --method does.
     let method = match (settings.splat_k, settings.voxel_grid) {
@@ -380,14 +445,23 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         );
         ensure!(k > 0, "--splat-k must be at least 1");
     }
+    Ok(Setup {
+        resolved,
+        settings,
+        method,
+        spp,
+        target,
+    })
+}
 
-    let format = OutputFormat::of(&args.out, args.bit_depth)?;
-    let start_camera = settings
-        .camera
-        .unwrap_or_else(|| Camera::default_for(bounds));
-    let (frames, sequence) = plan_frames(&args, &resolved, start_camera, format)?;
-    // Check every output before rendering any, so a sequence never stops half way; a
-    // sequence's frames already written are kept (outputs are written whole, atomically).
+/// The frames still to render. Every output is checked before any is rendered, so a sequence
+/// never stops half way; a sequence's frames already written are kept (outputs are written
+/// whole, atomically) unless --force.
+fn frames_to_render(
+    args: &RenderArgs,
+    frames: Vec<Frame>,
+    sequence: bool,
+) -> anyhow::Result<Vec<Frame>> {
     let (done, frames): (Vec<Frame>, Vec<Frame>) = if sequence && !args.force {
         frames.into_iter().partition(|f| f.path.exists())
     } else {
@@ -403,32 +477,15 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             done.len() + frames.len()
         );
     }
-    if frames.is_empty() {
-        return Ok(());
-    }
-    if let Some(path) = &args.save_scene {
-        crate::io::output::check_writable(path, args.force)?;
-    }
-    let precision_text = resolved
-        .scene
-        .render
-        .precision
-        .clone()
-        .unwrap_or_else(|| "auto".into());
-    let precision = backend::parse_precision(&precision_text, backend::Precision::RENDER)
-        .map_err(anyhow::Error::msg)?;
-    if let Some(ranks) = ranks {
-        return dist::run(
-            &args,
-            resolved,
-            settings,
-            &frames,
-            format,
-            draw_legend,
-            precision,
-            ranks,
-        );
-    }
+    Ok(frames)
+}
+
+/// A session on the backend the flags choose, said in the log.
+fn open_session(
+    args: &RenderArgs,
+    setup: &Setup,
+    precision: backend::Precision,
+) -> anyhow::Result<RenderSession> {
     let backend = backend::create(args.backend)?;
     tracing::info!(
         "backend: {} ({})",
@@ -436,21 +493,35 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         backend.capabilities().device
     );
     let on_cpu = backend.capabilities().name == "cpu";
-    let mut session = RenderSession::new(backend, &resolved.series);
-    session.set_periodic(resolved.periodic);
+    let mut session = RenderSession::new(backend, &setup.resolved.series);
+    session.set_periodic(setup.resolved.periodic);
     // The CPU splatter collects hits through the f64 BVH (the cpu backend's only tree); asking
     // for it up front spares building the f32 cells first.
-    session.set_precision(if method == Method::Splat && on_cpu {
+    session.set_precision(if setup.method == Method::Splat && on_cpu {
         backend::Precision::F64
     } else {
         precision
     });
+    Ok(session)
+}
+
+/// Renders and writes each frame, the settings the first used said (and saved) once.
+fn render_frames(
+    args: &RenderArgs,
+    mut setup: Setup,
+    mut session: RenderSession,
+    frames: &[Frame],
+    sequence: bool,
+    format: OutputFormat,
+    draw_legend: bool,
+) -> anyhow::Result<()> {
+    let chooses_step = setup.target.is_some() || args.reference;
     // A targeted or reference render does not know its samples in advance: the bar counts
     // images, and the render shows its own progress.
-    let per_image = if target.is_some() || args.reference {
+    let per_image = if chooses_step {
         1
     } else {
-        u64::from(spp)
+        u64::from(setup.spp)
     };
     let bar = crate::progress::bar(
         (frames.len() as u64) * per_image,
@@ -465,165 +536,19 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     for (k, frame) in frames.iter().enumerate() {
         let started = Instant::now();
         let step = frame.step;
-        settings.camera = Some(frame.camera);
-        resolved.range_for_step(step)?;
+        setup.settings.camera = Some(frame.camera);
+        setup.resolved.range_for_step(step)?;
+        let resolved = &setup.resolved;
         session.show(&resolved.series, step, &resolved.field, resolved.cluster)?;
         if k == 0 {
             // Series-wide values: the same for every step, so printed (and saved) once.
-            let used = session.resolve(&settings)?;
-            // A targeted or reference render chooses its own step (printed with each image).
-            let step_size = if (target.is_some() || args.reference) && settings.step_size.is_none()
-            {
-                "chosen per image (below)".to_owned()
-            } else {
-                format!(
-                    "{} ({})",
-                    used.step_size,
-                    set_or_auto(settings.step_size.is_some())
-                )
-            };
-            tracing::info!(
-                "settings used: phi_ref {} ({}), step size {step_size}, density scale {} ({}), radius {}, march box margin {}",
-                used.phi_ref,
-                set_or_auto(settings.phi_ref.is_some()),
-                used.density_scale,
-                set_or_auto(settings.optical.scale().is_some()),
-                resolved.field.radius,
-                used.margin
-            );
+            let used = session.resolve(&setup.settings)?;
+            say_settings_used(&used, &setup, chooses_step);
             scene_used_phi_ref = Some(used.phi_ref);
             scene_used = Some(used);
         }
-        let path = &frame.path;
-        // What the image used where it chose: the step and samples of a targeted render.
-        let (mut used_step, mut used_spp) = (None, spp);
-        let image = match method {
-            Method::Rbf if args.reference => {
-                let options = ReferenceOptions {
-                    tolerance: args.reference_tolerance,
-                    ..ReferenceOptions::default()
-                };
-                let reference = converged_reference(
-                    &resolved.series,
-                    step,
-                    &resolved.field,
-                    resolved.cluster,
-                    &settings,
-                    &options,
-                )?;
-                tracing::info!(
-                    "reference of step {step}: step size {:.4e}, {} spp; doubling the samples changes it by {:.2e}, halving the step by {} (tolerance {:.1e}, {}){}",
-                    reference.step_size,
-                    reference.spp,
-                    reference.spp_change,
-                    reference
-                        .step_change
-                        .map_or("(not tried: the sample bound)".into(), |c| format!(
-                            "{c:.2e}"
-                        )),
-                    reference.tolerance,
-                    if reference.converged {
-                        "converged"
-                    } else {
-                        "NOT converged"
-                    },
-                    if reference.from_cache {
-                        ", from the cache"
-                    } else {
-                        ""
-                    },
-                );
-                (used_step, used_spp) = (Some(reference.step_size), reference.spp);
-                bar.inc(1);
-                reference.image().clone()
-            }
-            Method::Rbf if target.is_some() => {
-                let target = target.as_ref().expect("checked");
-                let done = render_to_target(&mut session, &settings, target)?;
-                tracing::info!(
-                    "step {step}: estimated error {:.3e} ({}{}) at step size {:.4e} and {} spp, in {:.2} s ({:.2} s calibrating; step bias {:.2e} {}, order {:.2}); noise {:.2e}",
-                    done.estimate,
-                    target.metric.name(),
-                    match (done.met, target.error) {
-                        (true, Some(e)) => format!(", target {e:.3e} met"),
-                        (false, Some(e)) => format!(", target {e:.3e} NOT met"),
-                        (_, None) => String::new(),
-                    },
-                    done.step_size,
-                    done.spp,
-                    done.elapsed.as_secs_f64(),
-                    done.calibration.as_secs_f64(),
-                    done.bias.at(done.step_size),
-                    if done.bias.resolved {
-                        "measured"
-                    } else {
-                        "bounded by the noise"
-                    },
-                    done.bias.order,
-                    done.noise_rmse,
-                );
-                (used_step, used_spp) = (Some(done.step_size), done.spp);
-                bar.inc(1);
-                done.image
-            }
-            Method::Rbf => {
-                for _ in 0..spp {
-                    session.accumulate(&settings, 1)?;
-                    bar.inc(1);
-                }
-                session.image()?
-            }
-            Method::Voxel => {
-                // The backend's own voxel path: the session splats the particles into the
-                // backend's grid with the first frame, then marches the grid.
-                let n = settings.voxel_grid.expect("set for the voxel baseline");
-                for _ in 0..spp {
-                    session.accumulate(&settings, 1)?;
-                    bar.inc(1);
-                }
-                let box_of = session.frame_params(&settings, 0)?;
-                let geometry = VoxelGeometry::new(
-                    session.backend().capabilities().name,
-                    box_of.box_min,
-                    box_of.box_max,
-                    n,
-                )?;
-                tracing::info!(
-                    "voxelised step {step} on {} into {:?} cells ({:.1} MiB of sums, {:.1} MiB held) in {:.3} s",
-                    session.backend().capabilities().name,
-                    geometry.dims,
-                    geometry.bytes() as f64 / 1048576.0,
-                    session.backend().memory().voxel_bytes as f64 / 1048576.0,
-                    session.backend().timings().voxelize.as_secs_f64()
-                );
-                session.image()?
-            }
-            Method::Splat => {
-                session.backend_mut().reset();
-                let k = settings.splat_k.expect("set for the splatter");
-                let mut counts = Some(crate::field::splat::SplatCounts::default());
-                for f in 0..spp {
-                    let frame = session.frame_params(&settings, f)?;
-                    let frame_counts = session.backend_mut().render_splat(&frame, k)?;
-                    counts = counts.zip(frame_counts).map(|(a, b)| a + b);
-                    bar.inc(1);
-                }
-                match counts {
-                    Some(counts) => tracing::info!(
-                        "splatted step {step}: {} hits composited, {} ({:.2}%) lost to full {}-entry slab buffers",
-                        counts.kept,
-                        counts.lost,
-                        100.0 * counts.lost_fraction(),
-                        k
-                    ),
-                    None => tracing::info!(
-                        "splatted step {step} with {}-entry slab buffers (this backend does not count lost hits)",
-                        k
-                    ),
-                }
-                session.backend_mut().image()?
-            }
-        };
+        let rendered = image::render(&mut session, &setup, args, step, &bar)?;
+        let (resolved, settings) = (&setup.resolved, &setup.settings);
         // Checked before rendering; a sequence's own earlier frames are not "existing" outputs.
         let legend = match (draw_legend, &scene_used_phi_ref) {
             (true, Some(phi_ref)) => Some(Legend::of_field(
@@ -635,41 +560,21 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             )),
             _ => None,
         };
-        format.write(path, &image, settings.background, legend.as_ref())?;
+        let path = &frame.path;
+        format.write(path, &rendered.image, settings.background, legend.as_ref())?;
         if let (Some(path), Some(used)) = (&args.save_scene, scene_used.take()) {
-            let (data, field) = resolved.scene_sections();
-            let used = crate::render::Resolved {
-                step_size: used_step.unwrap_or(used.step_size),
-                ..used
-            };
-            let saved = if args.reference {
-                reference_settings(&settings)
-            } else {
-                settings.clone()
-            };
-            SceneFile::reproducing(
-                data,
-                field,
-                &saved,
-                Some(&used),
-                frame.camera,
-                used_spp,
-                if args.reference {
-                    "f64"
-                } else {
-                    &precision_text
-                },
-            )
-            .save(path, true)?;
-            tracing::info!("wrote {}", path.display());
+            save_scene(path, args, &setup, used, &rendered, frame.camera)?;
         }
         let t = session.backend().timings();
         tracing::info!(
-            "step {step}: {} ({}x{}, {used_spp} spp{}{}, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",
+            "step {step}: {} ({}x{}, {} spp{}{}, {:?}): build {:.3} s, last frame {:.3} s, total {:.1} s",
             path.display(),
             settings.width,
             settings.height,
-            used_step.map_or(String::new(), |dt| format!(", step size {dt:.4e}")),
+            rendered.spp,
+            rendered
+                .step_size
+                .map_or(String::new(), |dt| format!(", step size {dt:.4e}")),
             match resolved.field.attribute_range {
                 Some((lo, hi)) if resolved.range.per_step() => format!(", range [{lo}, {hi}]"),
                 _ => String::new(),
@@ -681,5 +586,63 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         );
     }
     bar.finish_and_clear();
+    Ok(())
+}
+
+/// Says the series-wide values the render used, each set or automatic; a targeted or
+/// reference render (`chooses_step`) chooses its own step, said with each image.
+fn say_settings_used(used: &crate::render::Resolved, setup: &Setup, chooses_step: bool) {
+    let settings = &setup.settings;
+    let step_size = if chooses_step && settings.step_size.is_none() {
+        "chosen per image (below)".to_owned()
+    } else {
+        format!(
+            "{} ({})",
+            used.step_size,
+            set_or_auto(settings.step_size.is_some())
+        )
+    };
+    tracing::info!(
+        "settings used: phi_ref {} ({}), step size {step_size}, density scale {} ({}), radius {}, march box margin {}",
+        used.phi_ref,
+        set_or_auto(settings.phi_ref.is_some()),
+        used.density_scale,
+        set_or_auto(settings.optical.scale().is_some()),
+        setup.resolved.field.radius,
+        used.margin
+    );
+}
+
+/// Writes the scene file that renders `rendered` again (with the step and samples it chose).
+fn save_scene(
+    path: &std::path::Path,
+    args: &RenderArgs,
+    setup: &Setup,
+    used: crate::render::Resolved,
+    rendered: &image::Rendered,
+    camera: Camera,
+) -> anyhow::Result<()> {
+    let (data, field) = setup.resolved.scene_sections();
+    let used = crate::render::Resolved {
+        step_size: rendered.step_size.unwrap_or(used.step_size),
+        ..used
+    };
+    let precision = setup.precision_text();
+    let saved = if args.reference {
+        reference_settings(&setup.settings)
+    } else {
+        setup.settings.clone()
+    };
+    SceneFile::reproducing(
+        data,
+        field,
+        &saved,
+        Some(&used),
+        camera,
+        rendered.spp,
+        if args.reference { "f64" } else { &precision },
+    )
+    .save(path, true)?;
+    tracing::info!("wrote {}", path.display());
     Ok(())
 }

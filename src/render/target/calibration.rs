@@ -283,40 +283,11 @@ pub(super) fn finish(
     // Whether the sequences stop only at the ends of mask cycles (see `stop_at`).
     let mut cycle = mask_cycle(&run.settings);
     loop {
-        let before = level.a.frames;
-        let mut frames = stop_at(level.frames_for(spp), before, cycle)
-            .clamp(1, target.max_spp / level.spp_at(1))
-            .max(before);
-        // Past the first cycle a budget starts only the cycles that fit in the time left: an
-        // incomplete one would make the image worse, not better.
-        let mut no_cycle_fits = false;
-        if let (Some(budget), Some(d)) = (target.time_budget, cycle)
-            && before >= d
-        {
-            let left = budget.saturating_sub(run.started.elapsed()).as_secs_f64();
-            let cycles = (left / (f64::from(d) * level.step_time()).max(1e-9)).floor();
-            frames = frames.min(before + d * cycles.min(f64::from(u32::MAX / d)) as u32);
-            no_cycle_fits = frames == before;
-        }
+        let (frames, no_cycle_fits) = next_stop(run, level, spp, cycle);
         run.extend(level, frames)?;
         let image = level.image(&run.settings);
         let noise = level.noise();
-        let estimate = match target.metric {
-            ErrorMetric::Rmse => noise.hypot(b),
-            ErrorMetric::Flip => {
-                // One realisation of the noise ((A - B) / 2) and of the bias (the calibration
-                // difference from dt0 to 2 dt0, scaled to the bias at this step) added.
-                let (a, bb) = level
-                    .pair_images(&run.settings)
-                    .expect("FLIP targets measure their noise by a pair");
-                let scale = b / bias_images.0.rmse(&bias_images.1).max(1e-30);
-                let disturbed =
-                    image
-                        .offset_by(&a, &bb, 0.5)
-                        .offset_by(&bias_images.0, &bias_images.1, scale);
-                image.flip(&disturbed)
-            }
-        };
+        let estimate = estimate(run, level, &image, b, &bias_images);
         spinner.set_message(format!(
             "{} spp at step {dt:.3e}: estimated error {estimate:.3e}{}",
             level.spp(),
@@ -360,30 +331,92 @@ pub(super) fn finish(
                 work: run.work,
             });
         }
-        // Short: predict again from the noise measured now (a budget alone renders on until
-        // the time is spent). At whole mask cycles the noise falls as N^-1/2 from here.
-        let now = f64::from(level.spp());
-        let convergence = match cycle {
-            Some(d) if reached >= d && reached.is_multiple_of(d) => Convergence {
-                frames: level.spp(),
-                noise,
-                rate: 0.5,
-            },
-            _ => level.convergence(),
-        };
-        let predicted = match (target.error, target.metric) {
-            (Some(e), ErrorMetric::Rmse) => {
-                convergence.frames_for((e * e - b * b).max(0.1 * e * e).sqrt())
-            }
-            (Some(e), ErrorMetric::Flip) => now * (estimate / e).powf(1.0 / convergence.rate),
-            (None, _) => 2.0 * now,
-        };
-        spp = if predicted.is_finite() {
-            // At most doubling: the prediction's rate is of the frames so far.
-            predicted.clamp(now + 2.0, 2.0 * now)
-        } else {
-            2.0 * now
-        };
+        spp = predict_spp(&target, level, noise, estimate, b, cycle);
+    }
+}
+
+/// The frames a sequence of `level` renders to next, predicted to need `spp` samples, and
+/// whether a time budget has room for no further mask cycle.
+fn next_stop(run: &Run<'_>, level: &Level, spp: f64, cycle: Option<u32>) -> (u32, bool) {
+    let target = run.target;
+    let before = level.a.frames;
+    let mut frames = stop_at(level.frames_for(spp), before, cycle)
+        .clamp(1, target.max_spp / level.spp_at(1))
+        .max(before);
+    // Past the first cycle a budget starts only the cycles that fit in the time left: an
+    // incomplete one would make the image worse, not better.
+    let mut no_cycle_fits = false;
+    if let (Some(budget), Some(d)) = (target.time_budget, cycle)
+        && before >= d
+    {
+        let left = budget.saturating_sub(run.started.elapsed()).as_secs_f64();
+        let cycles = (left / (f64::from(d) * level.step_time()).max(1e-9)).floor();
+        frames = frames.min(before + d * cycles.min(f64::from(u32::MAX / d)) as u32);
+        no_cycle_fits = frames == before;
+    }
+    (frames, no_cycle_fits)
+}
+
+/// The estimated error of `image`, `level`'s image, in the target's metric, with the bias `b`
+/// at its step.
+fn estimate(
+    run: &Run<'_>,
+    level: &Level,
+    image: &Image,
+    b: f64,
+    bias_images: &(Image, Image),
+) -> f64 {
+    match run.target.metric {
+        ErrorMetric::Rmse => level.noise().hypot(b),
+        ErrorMetric::Flip => {
+            // One realisation of the noise ((A - B) / 2) and of the bias (the calibration
+            // difference from dt0 to 2 dt0, scaled to the bias at this step) added.
+            let (a, bb) = level
+                .pair_images(&run.settings)
+                .expect("FLIP targets measure their noise by a pair");
+            let scale = b / bias_images.0.rmse(&bias_images.1).max(1e-30);
+            let disturbed =
+                image
+                    .offset_by(&a, &bb, 0.5)
+                    .offset_by(&bias_images.0, &bias_images.1, scale);
+            image.flip(&disturbed)
+        }
+    }
+}
+
+/// The samples a render short of the target goes on to: predicted again from the noise
+/// measured now (a budget alone renders on until the time is spent). At whole mask cycles the
+/// noise falls as N^-1/2 from here.
+fn predict_spp(
+    target: &Target,
+    level: &Level,
+    noise: f64,
+    estimate: f64,
+    b: f64,
+    cycle: Option<u32>,
+) -> f64 {
+    let now = f64::from(level.spp());
+    let reached = level.a.frames;
+    let convergence = match cycle {
+        Some(d) if reached >= d && reached.is_multiple_of(d) => Convergence {
+            frames: level.spp(),
+            noise,
+            rate: 0.5,
+        },
+        _ => level.convergence(),
+    };
+    let predicted = match (target.error, target.metric) {
+        (Some(e), ErrorMetric::Rmse) => {
+            convergence.frames_for((e * e - b * b).max(0.1 * e * e).sqrt())
+        }
+        (Some(e), ErrorMetric::Flip) => now * (estimate / e).powf(1.0 / convergence.rate),
+        (None, _) => 2.0 * now,
+    };
+    if predicted.is_finite() {
+        // At most doubling: the prediction's rate is of the frames so far.
+        predicted.clamp(now + 2.0, 2.0 * now)
+    } else {
+        2.0 * now
     }
 }
 

@@ -296,7 +296,6 @@ pub fn render_to_target(
         ErrorMetric::Flip => None,
     };
     let mut levels = [dt0, 2.0 * dt0, 4.0 * dt0].map(|dt| Level::new(dt, seed, lattice));
-    let mut frames = CALIBRATION_FRAMES;
 
     // A loose target first: the coarser steps alone, and twice the default step chosen on
     // their difference when it meets the target within `LOOSE` times their samples (the front's
@@ -309,71 +308,100 @@ pub fn render_to_target(
         && target.time_budget.is_none()
         && run.allowed(2.0 * dt0)
         && run.allowed(4.0 * dt0)
+        && let Some(done) = render_loose(&mut run, &mut levels, e, CALIBRATION_FRAMES)?
     {
-        // Four times the step at half the frames: only its difference from twice the step is
-        // used here (the full calibration extends it if this is not enough).
-        run.extend(&mut levels[1], frames / 2)?;
-        run.extend(&mut levels[1], frames)?;
-        run.extend(&mut levels[2], frames / 2)?;
-        let (middle, coarse) = (&levels[1], &levels[2]);
-        let bias = StepBias::calibrate_coarse(
-            dt0,
-            [&middle.image(&run.settings), &coarse.image(&run.settings)],
-            [middle.noise(), coarse.noise()],
-        );
-        let b = bias.at(2.0 * dt0);
-        // The difference tells the bias at twice the step only where four times the step
-        // still resolves what twice the step does: its noise (the march's jitter over the
-        // features) at most `COARSE_NOISE` times twice the step's at as many frames. On the
-        // sharp-gradient scene it was 8.8 times (the sheet and the halo's particles thinner
-        // than the step), and the bias at twice the step (5.3e-4) hid in it; 1.0-2.1 on the
-        // dam break and the PySPH step.
-        let coarse_noise = coarse.noise()
-            / middle
-                .convergence()
-                .noise_at(f64::from(coarse.spp()))
-                .max(1e-300);
-        // (Unless the bias at its most is negligible beside the target anyway: the dam
-        // break demo's first step, 1000 times under it, paid 2.4x for the full calibration.)
-        let negligible = bias.slow_bound[1].hypot(middle.noise()) <= StepBias::NEGLIGIBLE * e;
-        if b * b <= BIAS_SHARE * e * e && (coarse_noise <= COARSE_NOISE || negligible) {
-            let needed = middle.convergence().frames_for((e * e - b * b).sqrt());
-            if needed <= LOOSE * f64::from(middle.spp()) {
-                tracing::debug!(
-                    "targeted: loose: twice the step, bias {b:.3e}, {needed:.1} spp predicted"
-                );
-                let calibration = run.started.elapsed();
-                let bias_images = (
-                    levels[2].image(&run.settings),
-                    levels[1].image(&run.settings),
-                );
-                let done = finish(
-                    &mut run,
-                    &mut levels[1],
-                    needed,
-                    Chosen {
-                        bias,
-                        b,
-                        bias_images,
-                        calibration,
-                    },
-                )?;
-                // Four times the step can be too coarse for its image to tell anything (on
-                // the sharp-gradient scene its noise was 36 times twice the step's): where
-                // the difference leaves the bias unsettled beside the image's noise, the
-                // full calibration goes on from these images.
-                if !done.met || bias.settled(2.0 * dt0, done.noise_rmse, e) {
-                    return Ok(done);
-                }
-                tracing::debug!(
-                    "targeted: loose: the bias at twice the step is not settled beside the noise {:.3e} ({bias:?}): the full calibration",
-                    done.noise_rmse
-                );
+        return Ok(done);
+    }
+    let (bias, e_rmse) = calibrate(&mut run, &mut levels, step_fixed, CALIBRATION_FRAMES)?;
+    render_at_chosen_step(run, levels, bias, e_rmse, step_fixed, lattice)
+}
+
+/// A loose target `e` from twice and four times the step alone (`frames` a sequence to
+/// start): the render at twice the step where their difference settles its bias, else `None`
+/// and the full calibration goes on from these images.
+fn render_loose(
+    run: &mut Run<'_>,
+    levels: &mut [Level; 3],
+    e: f64,
+    frames: u32,
+) -> Result<Option<Targeted>, RenderError> {
+    let dt0 = run.dt0;
+    // Four times the step at half the frames: only its difference from twice the step is
+    // used here (the full calibration extends it if this is not enough).
+    run.extend(&mut levels[1], frames / 2)?;
+    run.extend(&mut levels[1], frames)?;
+    run.extend(&mut levels[2], frames / 2)?;
+    let (middle, coarse) = (&levels[1], &levels[2]);
+    let bias = StepBias::calibrate_coarse(
+        dt0,
+        [&middle.image(&run.settings), &coarse.image(&run.settings)],
+        [middle.noise(), coarse.noise()],
+    );
+    let b = bias.at(2.0 * dt0);
+    // The difference tells the bias at twice the step only where four times the step
+    // still resolves what twice the step does: its noise (the march's jitter over the
+    // features) at most `COARSE_NOISE` times twice the step's at as many frames. On the
+    // sharp-gradient scene it was 8.8 times (the sheet and the halo's particles thinner
+    // than the step), and the bias at twice the step (5.3e-4) hid in it; 1.0-2.1 on the
+    // dam break and the PySPH step.
+    let coarse_noise = coarse.noise()
+        / middle
+            .convergence()
+            .noise_at(f64::from(coarse.spp()))
+            .max(1e-300);
+    // (Unless the bias at its most is negligible beside the target anyway: the dam
+    // break demo's first step, 1000 times under it, paid 2.4x for the full calibration.)
+    let negligible = bias.slow_bound[1].hypot(middle.noise()) <= StepBias::NEGLIGIBLE * e;
+    if b * b <= BIAS_SHARE * e * e && (coarse_noise <= COARSE_NOISE || negligible) {
+        let needed = middle.convergence().frames_for((e * e - b * b).sqrt());
+        if needed <= LOOSE * f64::from(middle.spp()) {
+            tracing::debug!(
+                "targeted: loose: twice the step, bias {b:.3e}, {needed:.1} spp predicted"
+            );
+            let calibration = run.started.elapsed();
+            let bias_images = (
+                levels[2].image(&run.settings),
+                levels[1].image(&run.settings),
+            );
+            let done = finish(
+                run,
+                &mut levels[1],
+                needed,
+                Chosen {
+                    bias,
+                    b,
+                    bias_images,
+                    calibration,
+                },
+            )?;
+            // Four times the step can be too coarse for its image to tell anything (on
+            // the sharp-gradient scene its noise was 36 times twice the step's): where
+            // the difference leaves the bias unsettled beside the image's noise, the
+            // full calibration goes on from these images.
+            if !done.met || bias.settled(2.0 * dt0, done.noise_rmse, e) {
+                return Ok(Some(done));
             }
+            tracing::debug!(
+                "targeted: loose: the bias at twice the step is not settled beside the noise {:.3e} ({bias:?}): the full calibration",
+                done.noise_rmse
+            );
         }
     }
-    let (bias, e_rmse) = loop {
-        for level in &mut levels {
+    Ok(None)
+}
+
+/// The full calibration: every level's images from `frames` frames a sequence, grown while
+/// the noise hides whether four times the step would meet the target. Returns the bias it
+/// measured and the target error in RMSE (none with a time budget alone).
+fn calibrate(
+    run: &mut Run<'_>,
+    levels: &mut [Level; 3],
+    step_fixed: bool,
+    mut frames: u32,
+) -> Result<(StepBias, Option<f64>), RenderError> {
+    let (target, dt0) = (run.target, run.dt0);
+    loop {
+        for level in levels.iter_mut() {
             if level.history.is_empty() {
                 run.extend(level, frames / 2)?;
             }
@@ -412,12 +440,24 @@ pub fn render_to_target(
             || f64::from(levels[0].spp_at(4 * frames)) > 0.125 * needed
             || run.out_of_time()
         {
-            break (bias, e_rmse);
+            return Ok((bias, e_rmse));
         }
         frames = (frames * 4).min(MAX_CALIBRATION_FRAMES);
-    };
+    }
+}
+
+/// Renders at the step the calibration chooses, growing the calibration and choosing again
+/// while the bias the estimate carries is not settled beside the image's noise.
+fn render_at_chosen_step(
+    mut run: Run<'_>,
+    mut levels: [Level; 3],
+    mut bias: StepBias,
+    e_rmse: Option<f64>,
+    step_fixed: bool,
+    lattice: Option<u32>,
+) -> Result<Targeted, RenderError> {
+    let (target, dt0, seed) = (run.target, run.dt0, run.settings.seed);
     let calibration = run.started.elapsed();
-    let mut bias = bias;
     // The level at a step finer than dt0, where one was chosen: (j, level).
     let mut finer: Option<(i32, Level)> = None;
     loop {

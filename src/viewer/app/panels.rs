@@ -279,49 +279,7 @@ impl ViewerApp {
 
     fn quality_controls(&mut self, ui: &mut egui::Ui) {
         let s = &mut self.state.settings;
-        // The Table 3 baselines, to look at their artefacts beside the RBF image.
-        let mut method = match (s.splat_k, s.voxel_grid) {
-            (Some(_), _) => Method::Splat,
-            (None, Some(_)) => Method::Voxel,
-            (None, None) => Method::Rbf,
-        };
-        egui::ComboBox::new("method", "renderer")
-            .selected_text(method_name(method))
-            .show_ui(ui, |ui| {
-                for m in [Method::Rbf, Method::Voxel, Method::Splat] {
-                    ui.selectable_value(&mut method, m, method_name(m));
-                }
-            })
-            .response
-            .on_hover_text(
-                "RBF: the particles queried at every sample (the paper's method). Voxel grid: \
-                 the particles splatted into a grid, re-voxelised on every change, then \
-                 marched. Splat: each ray cut into slabs one step long, at most k particles a \
-                 slab, sorted and composited front to back (emission-absorption).",
-            );
-        (s.splat_k, s.voxel_grid) = match method {
-            Method::Rbf => (None, None),
-            Method::Voxel => {
-                let mut n = s.voxel_grid.unwrap_or(crate::render::VOXEL_GRID);
-                ui.add(
-                    egui::Slider::new(&mut n, 8..=crate::backend::voxel::MAX_GRID)
-                        .logarithmic(true)
-                        .text("cells along the longest side"),
-                );
-                (None, Some(n))
-            }
-            Method::Splat => {
-                let mut k = s.splat_k.unwrap_or(crate::render::SPLAT_K);
-                ui.add(
-                    egui::Slider::new(
-                        &mut k,
-                        1..=crate::values::shader_constants::SPLAT_K_MAX as usize,
-                    )
-                    .text("hits per slab"),
-                );
-                (Some(k), None)
-            }
-        };
+        let method = method_controls(ui, s);
         let splatting = method == Method::Splat;
         ui.add_enabled_ui(!splatting, |ui| {
             egui::ComboBox::new("integrator", "integrator")
@@ -351,27 +309,7 @@ impl ViewerApp {
             ui.radio_value(&mut s.noise, NoiseKind::Stbn, "blue (STBN)");
             ui.radio_value(&mut s.noise, NoiseKind::White, "white");
         });
-        let used_step = self.shown.used.map(|u| u.step_size);
-        ui.horizontal(|ui| {
-            let mut automatic = s.step_size.is_none();
-            let label = ui.checkbox(&mut automatic, "automatic step").id;
-            if automatic {
-                s.step_size = None;
-                if let Some(dt) = used_step {
-                    ui.label(format!("{dt:.3e}"));
-                }
-            } else {
-                let mut dt = s.step_size.or(used_step).unwrap_or(1e-2);
-                let speed = dt * 0.01;
-                ui.add(
-                    egui::DragValue::new(&mut dt)
-                        .speed(speed)
-                        .range(1e-12..=1e12),
-                )
-                .labelled_by(label);
-                s.step_size = Some(dt);
-            }
-        });
+        step_size_controls(ui, s, self.shown.used.map(|u| u.step_size));
         ui.add(
             egui::Slider::new(&mut self.state.spp, 1..=4096)
                 .logarithmic(true)
@@ -472,4 +410,80 @@ impl ViewerApp {
             ui.label(format!("wrote {}", last.display()));
         }
     }
+}
+
+/// The renderer: the paper's RBF, or a Table 3 baseline, to look at their artefacts beside
+/// the RBF image, with the baseline's own setting.
+fn method_controls(ui: &mut egui::Ui, s: &mut crate::render::RenderSettings) -> Method {
+    let mut method = match (s.splat_k, s.voxel_grid) {
+        (Some(_), _) => Method::Splat,
+        (None, Some(_)) => Method::Voxel,
+        (None, None) => Method::Rbf,
+    };
+    egui::ComboBox::new("method", "renderer")
+        .selected_text(method_name(method))
+        .show_ui(ui, |ui| {
+            for m in [Method::Rbf, Method::Voxel, Method::Splat] {
+                ui.selectable_value(&mut method, m, method_name(m));
+            }
+        })
+        .response
+        .on_hover_text(
+            "RBF: the particles queried at every sample (the paper's method). Voxel grid: \
+             the particles splatted into a grid, re-voxelised on every change, then \
+             marched. Splat: each ray cut into slabs one step long, at most k particles a \
+             slab, sorted and composited front to back (emission-absorption).",
+        );
+    (s.splat_k, s.voxel_grid) = match method {
+        Method::Rbf => (None, None),
+        Method::Voxel => {
+            let mut n = s.voxel_grid.unwrap_or(crate::render::VOXEL_GRID);
+            ui.add(
+                egui::Slider::new(&mut n, 8..=crate::backend::voxel::MAX_GRID)
+                    .logarithmic(true)
+                    .text("cells along the longest side"),
+            );
+            (None, Some(n))
+        }
+        Method::Splat => {
+            let mut k = s.splat_k.unwrap_or(crate::render::SPLAT_K);
+            ui.add(
+                egui::Slider::new(
+                    &mut k,
+                    1..=crate::values::shader_constants::SPLAT_K_MAX as usize,
+                )
+                .text("hits per slab"),
+            );
+            (Some(k), None)
+        }
+    };
+    method
+}
+
+/// The march's step: automatic (showing the one the image used) or set by hand.
+fn step_size_controls(
+    ui: &mut egui::Ui,
+    s: &mut crate::render::RenderSettings,
+    used_step: Option<f64>,
+) {
+    ui.horizontal(|ui| {
+        let mut automatic = s.step_size.is_none();
+        let label = ui.checkbox(&mut automatic, "automatic step").id;
+        if automatic {
+            s.step_size = None;
+            if let Some(dt) = used_step {
+                ui.label(format!("{dt:.3e}"));
+            }
+        } else {
+            let mut dt = s.step_size.or(used_step).unwrap_or(1e-2);
+            let speed = dt * 0.01;
+            ui.add(
+                egui::DragValue::new(&mut dt)
+                    .speed(speed)
+                    .range(1e-12..=1e12),
+            )
+            .labelled_by(label);
+            s.step_size = Some(dt);
+        }
+    });
 }

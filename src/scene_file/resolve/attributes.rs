@@ -1,0 +1,113 @@
+//! The attributes the field asks the data for: its colour, the per-particle radius, and an
+//! SPH kernel's masses and densities, from the flags over the scene file, and from the data's
+//! names where a default needs them.
+
+use std::sync::Arc;
+
+use super::args::{DataArgs, FieldOptions};
+use super::radius::SMOOTHING_LENGTH_NAMES;
+use super::source::{Source, names_of};
+use crate::field::{Kernel, PerParticle};
+use crate::scene::smoothing::Smoothing;
+use crate::scene_file::SceneFile;
+use crate::values::Step;
+
+/// What the field asks of the data, before the series opens.
+pub(super) struct Wanted {
+    /// The attribute the field carries (its colour), if any.
+    pub attribute: Option<String>,
+    pub radius_attribute: Option<String>,
+    pub kernel: Kernel,
+    /// An SPH kernel's masses and densities (`None` for the Gaussian RBF).
+    pub mass: Option<PerParticle>,
+    pub density: Option<PerParticle>,
+    pub smoothing: Option<Smoothing>,
+}
+
+impl Wanted {
+    /// The attributes the masses and the densities are read from (none where either is one
+    /// value for every particle).
+    pub fn mass_and_density_attributes(&self) -> (Option<String>, Option<String>) {
+        let attribute_of = |q: &Option<PerParticle>| match q {
+            Some(PerParticle::Attribute(name)) => Some(name.clone()),
+            _ => None,
+        };
+        (attribute_of(&self.mass), attribute_of(&self.density))
+    }
+}
+
+/// The attributes the field asks for, with the data's first step whole where a default needed
+/// it read (the first attribute for an image's colour, an SPH kernel's smoothing length, mass
+/// or density found by name).
+pub(super) fn choose(
+    source: &Source,
+    scene: &SceneFile,
+    data: &DataArgs,
+    options: &FieldOptions,
+    first_attribute_by_default: bool,
+) -> anyhow::Result<(Wanted, Option<Arc<Step>>)> {
+    let mut attribute = options.attribute.clone().or(scene.data.attribute.clone());
+    // The first step with every attribute it holds, read where a default needs it.
+    let mut first_in_full: Option<Arc<Step>> = None;
+    if attribute.is_none() && first_attribute_by_default {
+        first_in_full = source.first_in_full()?;
+        attribute = first_attribute(first_in_full.as_deref());
+    }
+    let smoothing = data.smoothing.or(scene.data.smoothing);
+    let radius_attribute = options
+        .radius_attribute
+        .clone()
+        .or(scene.data.radius_attribute.clone())
+        .or(smoothing.map(|s| s.attribute()));
+    let kernel = options.kernel.or(scene.field.kernel).unwrap_or_default();
+    let (radius_attribute, mass, density) = if kernel.is_sph() {
+        let mass = options.mass.clone().or(scene.field.mass.clone());
+        let density = options.density.clone().or(scene.field.density.clone());
+        if first_in_full.is_none()
+            && (radius_attribute.is_none() || mass.is_none() || density.is_none())
+        {
+            first_in_full = source.first_in_full()?;
+        }
+        let sph = crate::scene_file::kernel::resolve(
+            kernel,
+            radius_attribute,
+            mass,
+            density,
+            &names_of(first_in_full.as_deref()),
+            &SMOOTHING_LENGTH_NAMES,
+            options.radius.or(scene.field.radius).is_some(),
+        )?;
+        (sph.radius_attribute, Some(sph.mass), Some(sph.density))
+    } else {
+        (radius_attribute, None, None)
+    };
+    let wanted = Wanted {
+        attribute,
+        radius_attribute,
+        kernel,
+        mass,
+        density,
+        smoothing,
+    };
+    Ok((wanted, first_in_full))
+}
+
+/// The data's first attribute, the colour of an image given none, said with the others.
+fn first_attribute(first_in_full: Option<&Step>) -> Option<String> {
+    let names = names_of(first_in_full);
+    let attribute = names.first().cloned();
+    match &attribute {
+        Some(first) => tracing::info!(
+            "colour: '{first}', the data's first attribute (no --attribute given); the \
+             others: {} (--attribute NAME picks one, --color-by-density colours by \
+             density)",
+            if names.len() > 1 {
+                names[1..].join(", ")
+            } else {
+                "none".to_owned()
+            }
+        ),
+        None => tracing::info!("colour: by density (the data has no attributes)"),
+    }
+    attribute
+}
