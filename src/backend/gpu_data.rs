@@ -47,7 +47,7 @@ use crate::values::{Kernel, Step};
 mod slots;
 
 use slots::{CHUNK, for_each_particle};
-pub use slots::{Slots4, Slots16, slots4, slots16};
+pub use slots::{Slots, Slots4, Slots16, slots4, slots16};
 
 /// One step, ready to upload: everything a backend needs beside the particle arrays, which
 /// live on the device.

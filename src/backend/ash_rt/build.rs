@@ -1,6 +1,6 @@
 //! Building the ash backend's structures: the box kernel, then the BLAS build or refit and
 //! the TLAS (timed per stage), and the LBVH for the software traversal (built on the CPU by
-//! the wgpu build's twin and uploaded).
+//! [`crate::accel::lbvh`], whose stages the wgpu backend runs on the device, and uploaded).
 
 use std::time::Instant;
 
@@ -12,11 +12,9 @@ use super::context::{NAME, device_error};
 use super::pipelines::{self, Push};
 use super::resources::barrier;
 use super::{AshBackend, BOX_ROW_GROUPS, TS_BLAS, TS_BOXES, TS_START, TS_TLAS};
+use crate::accel::lbvh::{KeyGrid, LBVH_STACK_SIZE, Lbvh, cluster_boxes};
 use crate::backend::BackendError;
-use crate::backend::shaders::cpu::{
-    Lbvh, lbvh_boxes::lbvh_boxes, lbvh_keys::KeyGrid, rbf::RadiusRule,
-};
-use crate::backend::shaders::on_ash;
+use crate::backend::shaders::{RadiusRule, on_ash};
 
 impl AshBackend {
     /// Writes the boxes, then builds (or refits) the BLAS and builds the TLAS, timed.
@@ -103,9 +101,9 @@ impl AshBackend {
         Ok(())
     }
 
-    /// Builds the LBVH over the uploaded particles and current radii (on the CPU, with the
-    /// wgpu backend's twin build, from the particles the device prepared) and uploads it,
-    /// unless it is current.
+    /// Builds the LBVH over the uploaded particles and current radii (on the CPU, from the
+    /// particles the device prepared, by the shaders' radius rule) and uploads it, unless it is
+    /// current.
     pub(super) fn ensure_lbvh(&mut self) -> Result<(), BackendError> {
         if self.lbvh.is_some() {
             return Ok(());
@@ -129,9 +127,9 @@ impl AshBackend {
             radius_table: d.radius_map_varies.then_some(&d.tables.radius[..]),
             radius_attribute: radius.as_deref(),
         };
-        let boxes = lbvh_boxes(&points, d.cluster.get(), &rule);
+        let boxes = cluster_boxes(&points, d.cluster.get(), |p, i| rule.radius(p, i));
         let tree = Lbvh::build(&boxes, &KeyGrid::new(up.series_bounds, d.origin));
-        if tree.depth > crate::backend::shaders::cpu::lbvh::LBVH_STACK_SIZE {
+        if tree.depth > LBVH_STACK_SIZE {
             return Err(device_error(
                 "building the LBVH",
                 format!("depth {} exceeds the traversal stack", tree.depth),

@@ -19,7 +19,7 @@
 //!   (`shared/lbvh.glsl`, the wgpu backend's) in a compute pipeline on the same device, with the
 //!   same particles, maps, RBF code and integrators: the paper's Fig. 10a comparison of
 //!   hardware and software traversal on one device, one API, one integrator. Its tree is built
-//!   on the CPU ([`crate::backend::shaders::cpu`], the twin of the wgpu backend's GPU build).
+//!   on the CPU ([`crate::accel::lbvh`], the build the wgpu backend runs on the device).
 //!
 //! One Vulkan device serves the whole process ([`context::shared`]).
 //!
@@ -60,7 +60,7 @@ use self::resources::{Buffer, Commands};
 use self::structure::{BOX_BYTES, Structure};
 use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
-use crate::backend::shaders::cpu::Lbvh;
+use crate::accel::lbvh::Lbvh;
 use crate::backend::shaders::{GpuFrame, GpuVoxels, SpecConstants};
 use crate::field::FieldSettings;
 use crate::noise::BlueNoiseMask;
@@ -647,8 +647,8 @@ impl Backend for AshBackend {
             structure_bytes: self.structure.as_ref().map_or(0, |s| {
                 (s.total_bytes() + u64::from(s.boxes) * BOX_BYTES) as usize
             }) + self.lbvh.as_ref().map_or(0, |t| {
-                t.nodes.len() * crate::backend::shaders::cpu::lbvh::NODE_BYTES
-                    + t.leaf_parents.len() * crate::backend::shaders::cpu::lbvh::BOX_BYTES
+                t.nodes.len() * crate::accel::lbvh::NODE_BYTES
+                    + t.leaf_parents.len() * crate::accel::lbvh::BOX_BYTES
             }),
             image_bytes: self
                 .accum_size

@@ -169,12 +169,77 @@ struct SortBuffers {
     histogram: Buffer,
 }
 
-#[test]
-#[ignore = "a measurement (docs/notes/2026-12-07-shader-table.md), not a guard"]
-fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
-    let ctx = context::shared().expect("a Vulkan device");
-    println!("device: {}", ctx.describe());
-    // Every prepare pass of the wgpu backend compiles and makes a pipeline here.
+impl SortBuffers {
+    fn new(ctx: &Arc<Context>, n: u32, tiles: u32) -> SortBuffers {
+        let bytes = u64::from(n) * 4;
+        SortBuffers {
+            keys: [
+                addressed(ctx, "keys", bytes),
+                addressed(ctx, "keys tmp", bytes),
+            ],
+            values: [
+                addressed(ctx, "values", bytes),
+                addressed(ctx, "values tmp", bytes),
+            ],
+            histogram: addressed(ctx, "histogram", u64::from(16 * tiles) * 4),
+        }
+    }
+
+    /// The device addresses of keys, values (ping, pong) and histogram.
+    fn addresses(&self) -> ([u64; 2], [u64; 2], u64) {
+        (
+            [self.keys[0].address, self.keys[1].address],
+            [self.values[0].address, self.values[1].address],
+            self.histogram.address,
+        )
+    }
+}
+
+/// The sort's size: keys, and tiles of [`SORT_TILE`] keys.
+#[derive(Clone, Copy)]
+struct SortSize {
+    n: u32,
+    tiles: u32,
+}
+
+/// The uniform entries of the WGSL sort's 8 passes (count, shift, tiles, pad), `stride` bytes
+/// apart.
+fn sort_params(ctx: &Arc<Context>, size: SortSize, stride: u64) -> Buffer {
+    let mut params = Buffer::new(
+        ctx,
+        "sort params",
+        stride * 8,
+        vk::BufferUsageFlags::UNIFORM_BUFFER,
+        MemoryLocation::CpuToGpu,
+    )
+    .unwrap();
+    for pass in 0..8u32 {
+        params
+            .write(
+                u64::from(pass) * stride,
+                bytemuck::cast_slice(&[size.n, 4 * pass, size.tiles, 0]),
+            )
+            .unwrap();
+    }
+    params
+}
+
+/// `n` pseudo-random keys (xorshift).
+fn random_keys(n: u32) -> Vec<u32> {
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    (0..n)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 16) as u32
+        })
+        .collect()
+}
+
+/// Every prepare pass of the wgpu backend compiles (naga) and makes a pipeline here; the
+/// ash backend's own sort passes (glslc) for comparison.
+fn compile_the_prepare_passes(ctx: &Context) {
     for entry in [
         on_wgpu::RADIX_SORT_COUNT,
         on_wgpu::RADIX_SORT_SCAN,
@@ -184,8 +249,8 @@ fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
         on_wgpu::GATHER_VEC4S,
     ] {
         let words = naga_spirv(entry, Checks::AsWgpu);
-        let (set, layout) = layouts(&ctx, &[entry]);
-        let (p, seconds) = pipeline(&ctx, &words, entry.point().name, layout);
+        let (set, layout) = layouts(ctx, &[entry]);
+        let (p, seconds) = pipeline(ctx, &words, entry.point().name, layout);
         println!(
             "{entry}: {} SPIR-V words, pipeline in {seconds:.2} s",
             words.len()
@@ -203,131 +268,60 @@ fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
         on_ash::RADIX_SORT_SCATTER,
     ] {
         let started = Instant::now();
-        prepare_pipeline(&ctx, glsl).unwrap();
+        prepare_pipeline(ctx, glsl).unwrap();
         println!(
             "{glsl}: glslc's SPIR-V, pipeline in {:.2} s",
             started.elapsed().as_secs_f64()
         );
     }
+}
 
-    // The sort itself: 8 passes over n keys, both ways, on the same buffers.
-    let n: u32 = std::env::var("AARBF_NAGA_SORT_KEYS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1 << 20);
-    let tiles = n.div_ceil(SORT_TILE);
-    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-    let keys: Vec<u32> = (0..n)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 16) as u32
-        })
-        .collect();
-    let (expected_keys, expected_order) = sort_pairs(&keys);
-    let bytes = u64::from(n) * 4;
-    let mut b = SortBuffers {
-        keys: [
-            addressed(&ctx, "keys", bytes),
-            addressed(&ctx, "keys tmp", bytes),
-        ],
-        values: [
-            addressed(&ctx, "values", bytes),
-            addressed(&ctx, "values tmp", bytes),
-        ],
-        histogram: addressed(&ctx, "histogram", u64::from(16 * tiles) * 4),
-    };
-    // Per pass: count, shift, tiles, pad, at a 256-byte stride.
-    let stride = 256u64;
-    let mut params = Buffer::new(
-        &ctx,
-        "sort params",
-        stride * 8,
-        vk::BufferUsageFlags::UNIFORM_BUFFER,
-        MemoryLocation::CpuToGpu,
-    )
-    .unwrap();
-    for pass in 0..8u32 {
-        params
-            .write(
-                u64::from(pass) * stride,
-                bytemuck::cast_slice(&[n, 4 * pass, tiles, 0]),
-            )
-            .unwrap();
-    }
-    let commands = Commands::new(&ctx, 2).unwrap();
-    let identity: Vec<u32> = (0..n).collect();
-    let run = |b: &mut SortBuffers, record: &dyn Fn(vk::CommandBuffer)| {
-        b.keys[0].write(0, bytemuck::cast_slice(&keys)).unwrap();
-        b.values[0]
-            .write(0, bytemuck::cast_slice(&identity))
-            .unwrap();
-        let cb = commands.begin().unwrap();
-        commands.timestamp(0);
-        record(cb);
-        commands.timestamp(1);
-        commands.submit_and_wait().unwrap();
-        let seconds = commands.elapsed(0, 1).map_or(f64::NAN, |d| d.as_secs_f64());
-        let got_keys: Vec<u32> = bytemuck::pod_collect_to_vec(&b.keys[0].read(bytes).unwrap());
-        let got_order: Vec<u32> = bytemuck::pod_collect_to_vec(&b.values[0].read(bytes).unwrap());
-        assert!(
-            got_keys == expected_keys && got_order == expected_order,
-            "not the twin's sort"
-        );
-        seconds
-    };
-
-    // glslc's SPIR-V: push constants and device addresses, the backend's own passes.
-    let glsl = [
-        on_ash::RADIX_SORT_COUNT,
-        on_ash::RADIX_SORT_SCAN,
-        on_ash::RADIX_SORT_SCATTER,
-    ]
-    .map(|e| prepare_pipeline(&ctx, e).unwrap());
-    let addresses = |b: &SortBuffers| {
-        (
-            [b.keys[0].address, b.keys[1].address],
-            [b.values[0].address, b.values[1].address],
-            b.histogram.address,
-        )
-    };
-    let record_glsl = |cb: vk::CommandBuffer, (k, v, h): ([u64; 2], [u64; 2], u64)| {
-        for pass in 0..8usize {
-            let (i, o) = (pass % 2, 1 - pass % 2);
-            let push = PreparePush {
-                count: n,
-                shift: 4 * pass as u32,
-                tiles,
-                arrays: [k[i], v[i], k[o], v[o], h],
-                ..PreparePush::default()
-            };
-            for (p, groups) in glsl.iter().zip([tiles, 1, tiles]) {
-                // SAFETY: recording; the pipelines use the prepare layout.
-                unsafe {
-                    ctx.device
-                        .cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, *p);
-                    ctx.device.cmd_push_constants(
-                        cb,
-                        ctx.layouts.prepare,
-                        vk::ShaderStageFlags::COMPUTE,
-                        0,
-                        bytemuck::bytes_of(&push),
-                    );
-                    ctx.device.cmd_dispatch(cb, groups, 1, 1);
-                }
-                compute_barrier(&ctx, cb);
+/// Records the 8 passes of glslc's sort (`glsl`: count, scan, scatter), push constants and
+/// device addresses as the backend's own passes have them.
+fn record_glsl_sort(
+    ctx: &Context,
+    cb: vk::CommandBuffer,
+    glsl: &[vk::Pipeline; 3],
+    size: SortSize,
+    (k, v, h): ([u64; 2], [u64; 2], u64),
+) {
+    for pass in 0..8usize {
+        let (i, o) = (pass % 2, 1 - pass % 2);
+        let push = PreparePush {
+            count: size.n,
+            shift: 4 * pass as u32,
+            tiles: size.tiles,
+            arrays: [k[i], v[i], k[o], v[o], h],
+            ..PreparePush::default()
+        };
+        for (p, groups) in glsl.iter().zip([size.tiles, 1, size.tiles]) {
+            // SAFETY: recording; the pipelines use the prepare layout.
+            unsafe {
+                ctx.device
+                    .cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, *p);
+                ctx.device.cmd_push_constants(
+                    cb,
+                    ctx.layouts.prepare,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    bytemuck::bytes_of(&push),
+                );
+                ctx.device.cmd_dispatch(cb, groups, 1, 1);
             }
+            compute_barrier(ctx, cb);
         }
-    };
+    }
+}
 
-    // naga's SPIR-V: the WGSL's bind group as a descriptor set, one set per pass.
-    let wgsl = [
-        on_wgpu::RADIX_SORT_COUNT,
-        on_wgpu::RADIX_SORT_SCAN,
-        on_wgpu::RADIX_SORT_SCATTER,
-    ];
-    let (set_layout, layout) = layouts(&ctx, &wgsl);
+/// A descriptor pool and one set per pass of the WGSL sort (its bind group as a descriptor
+/// set over `b`, the pass's entry of `params` at `stride`).
+fn sort_sets(
+    ctx: &Context,
+    set_layout: vk::DescriptorSetLayout,
+    params: &Buffer,
+    stride: u64,
+    b: &SortBuffers,
+) -> (vk::DescriptorPool, Vec<vk::DescriptorSet>) {
     let sizes = [
         vk::DescriptorPoolSize::default()
             .ty(vk::DescriptorType::UNIFORM_BUFFER)
@@ -336,7 +330,7 @@ fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
             .ty(vk::DescriptorType::STORAGE_BUFFER)
             .descriptor_count(40),
     ];
-    // SAFETY: valid create and allocate infos; destroyed at the end.
+    // SAFETY: valid create and allocate infos; destroyed by the caller.
     let (pool, sets) = unsafe {
         let pool = ctx
             .device
@@ -392,39 +386,116 @@ fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
         // SAFETY: the set is not in use.
         unsafe { ctx.device.update_descriptor_sets(&writes, &[]) };
     }
+    (pool, sets)
+}
+
+/// Records the 8 passes of naga's sort (`made`: count, scan, scatter), one descriptor set a
+/// pass.
+fn record_naga_sort(
+    ctx: &Context,
+    cb: vk::CommandBuffer,
+    made: &[(vk::Pipeline, f64)],
+    layout: vk::PipelineLayout,
+    sets: &[vk::DescriptorSet],
+    size: SortSize,
+) {
+    for &set in sets {
+        for (&(p, _), groups) in made.iter().zip([size.tiles, 1, size.tiles]) {
+            // SAFETY: recording; the set matches the pipeline's layout.
+            unsafe {
+                ctx.device
+                    .cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, p);
+                ctx.device.cmd_bind_descriptor_sets(
+                    cb,
+                    vk::PipelineBindPoint::COMPUTE,
+                    layout,
+                    0,
+                    &[set],
+                    &[],
+                );
+                ctx.device.cmd_dispatch(cb, groups, 1, 1);
+            }
+            compute_barrier(ctx, cb);
+        }
+    }
+}
+
+#[test]
+#[ignore = "a measurement (docs/notes/2026-12-07-shader-table.md), not a guard"]
+fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
+    let ctx = context::shared().expect("a Vulkan device");
+    println!("device: {}", ctx.describe());
+    compile_the_prepare_passes(&ctx);
+
+    // The sort itself: 8 passes over n keys, both ways, on the same buffers.
+    let n: u32 = std::env::var("AARBF_NAGA_SORT_KEYS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1 << 20);
+    let size = SortSize {
+        n,
+        tiles: n.div_ceil(SORT_TILE),
+    };
+    let keys = random_keys(n);
+    let (expected_keys, expected_order) = sort_pairs(&keys);
+    let bytes = u64::from(n) * 4;
+    let mut b = SortBuffers::new(&ctx, n, size.tiles);
+    // Per pass: count, shift, tiles, pad, at a 256-byte stride.
+    let stride = 256u64;
+    let params = sort_params(&ctx, size, stride);
+    let commands = Commands::new(&ctx, 2).unwrap();
+    let identity: Vec<u32> = (0..n).collect();
+    let run = |b: &mut SortBuffers, record: &dyn Fn(vk::CommandBuffer)| {
+        b.keys[0].write(0, bytemuck::cast_slice(&keys)).unwrap();
+        b.values[0]
+            .write(0, bytemuck::cast_slice(&identity))
+            .unwrap();
+        let cb = commands.begin().unwrap();
+        commands.timestamp(0);
+        record(cb);
+        commands.timestamp(1);
+        commands.submit_and_wait().unwrap();
+        let seconds = commands.elapsed(0, 1).map_or(f64::NAN, |d| d.as_secs_f64());
+        let got_keys: Vec<u32> = bytemuck::pod_collect_to_vec(&b.keys[0].read(bytes).unwrap());
+        let got_order: Vec<u32> = bytemuck::pod_collect_to_vec(&b.values[0].read(bytes).unwrap());
+        assert!(
+            got_keys == expected_keys && got_order == expected_order,
+            "not the twin's sort"
+        );
+        seconds
+    };
+
+    // glslc's SPIR-V: push constants and device addresses, the backend's own passes.
+    let glsl = [
+        on_ash::RADIX_SORT_COUNT,
+        on_ash::RADIX_SORT_SCAN,
+        on_ash::RADIX_SORT_SCATTER,
+    ]
+    .map(|e| prepare_pipeline(&ctx, e).unwrap());
+
+    // naga's SPIR-V: the WGSL's bind group as a descriptor set, one set per pass.
+    let wgsl = [
+        on_wgpu::RADIX_SORT_COUNT,
+        on_wgpu::RADIX_SORT_SCAN,
+        on_wgpu::RADIX_SORT_SCATTER,
+    ];
+    let (set_layout, layout) = layouts(&ctx, &wgsl);
+    let (pool, sets) = sort_sets(&ctx, set_layout, &params, stride, &b);
     let mut report = Vec::new();
     for checks in [Checks::AsWgpu, Checks::Unchecked] {
         let made: Vec<(vk::Pipeline, f64)> = wgsl
             .iter()
             .map(|&e| pipeline(&ctx, &naga_spirv(e, checks), e.point().name, layout))
             .collect();
-        let record_wgsl = |cb: vk::CommandBuffer| {
-            for &set in &sets {
-                for (&(p, _), groups) in made.iter().zip([tiles, 1, tiles]) {
-                    // SAFETY: recording; the set matches the pipeline's layout.
-                    unsafe {
-                        ctx.device
-                            .cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, p);
-                        ctx.device.cmd_bind_descriptor_sets(
-                            cb,
-                            vk::PipelineBindPoint::COMPUTE,
-                            layout,
-                            0,
-                            &[set],
-                            &[],
-                        );
-                        ctx.device.cmd_dispatch(cb, groups, 1, 1);
-                    }
-                    compute_barrier(&ctx, cb);
-                }
-            }
-        };
+        let record_wgsl = |cb| record_naga_sort(&ctx, cb, &made, layout, &sets, size);
         // Alternating, five of each; the medians.
         let (mut naga_times, mut glslc_times) = (Vec::new(), Vec::new());
         for _ in 0..5 {
             naga_times.push(run(&mut b, &record_wgsl));
-            let a = addresses(&b);
-            glslc_times.push(run(&mut b, &|cb| record_glsl(cb, a)));
+            let a = b.addresses();
+            glslc_times.push(run(&mut b, &|cb| {
+                record_glsl_sort(&ctx, cb, &glsl, size, a)
+            }));
         }
         let median = |t: &mut Vec<f64>| {
             t.sort_by(f64::total_cmp);

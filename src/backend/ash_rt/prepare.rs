@@ -13,7 +13,6 @@ use std::sync::Arc;
 
 use ash::vk;
 use gpu_allocator::MemoryLocation;
-use wgpu::WriteOnly;
 
 use super::buffers::addressed;
 use super::context::{Context, device_error};
@@ -21,7 +20,7 @@ use super::pipelines::{PreparePush, prepare_pipeline};
 use super::resources::{Buffer, COMPUTE_READ, Commands, TRANSFER_WRITE, barrier};
 use crate::accel::HilbertQuantizer;
 use crate::backend::BackendError;
-use crate::backend::gpu_data::{GpuStepData, Slots4, Slots16, StepStaging};
+use crate::backend::gpu_data::{GpuStepData, Slots, Slots4, Slots16, StepStaging};
 use crate::backend::shaders::{Entry, on_ash};
 use crate::field::FieldSettings;
 use crate::values::Step;
@@ -81,16 +80,11 @@ impl Raw {
     }
 
     /// Write-only slots over the first `n` elements of `N` bytes of the staging memory.
-    fn slots<const N: usize>(
-        &mut self,
-        n: usize,
-    ) -> Result<WriteOnly<'_, [[u8; N]]>, BackendError> {
+    fn slots<const N: usize>(&mut self, n: usize) -> Result<Slots<'_, [u8; N]>, BackendError> {
         let bytes = self.staging.host_slice().ok_or_else(|| {
             device_error("staging a step", "the staging memory is not host-visible")
         })?;
-        Ok(WriteOnly::from_mut(&mut bytes[..n * N])
-            .into_chunks::<N>()
-            .0)
+        Ok(Slots::from_mut(bytes[..n * N].as_chunks_mut::<N>().0))
     }
 
     /// Records copying the first `bytes` bytes to the device array, if there is one to copy

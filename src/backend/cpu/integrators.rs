@@ -380,6 +380,45 @@ struct MarchedRay {
 }
 
 impl MarchedRay {
+    /// The ray of pixel (x, y) as [`march_packet`] starts it, its sample intervals found (and
+    /// clipped to `owned`) in `intervals`; `None` when it misses the box.
+    #[inline]
+    fn start<F: FieldSampler>(
+        p: &FrameParams,
+        field: &F,
+        owned: Option<&HalfOpenBox>,
+        (x, y): (u32, u32),
+        primary: &mut F::Ray,
+        intervals: &mut Vec<(f64, f64)>,
+    ) -> Option<MarchedRay> {
+        let (origin, dir) = p.primary_ray(x, y);
+        let (t_enter, t_exit) = ray_box(origin, dir, p.box_min, p.box_max)?;
+        intervals.clear();
+        let clear_where_empty =
+            march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
+        if let Some(owned) = owned {
+            clip_to_owned(p, owned, origin, dir, intervals);
+        }
+        // Dimension 0 is the primary decision: emission–absorption's jitter, or stochastic
+        // marching's free-flight number (its jitter is dimension 1, as the reference's).
+        let scatter = p.integrator == Integrator::SsReference;
+        let (jitter, target_tau) = match p.integrator {
+            Integrator::Marching => (p.random(x, y, 1), -(1.0 - p.random(x, y, 0)).ln()),
+            _ => (p.random(x, y, if scatter { 1 } else { 0 }), f64::INFINITY),
+        };
+        Some(MarchedRay {
+            origin,
+            dir,
+            clear_where_empty,
+            samples: MarchSamples::new(t_enter, t_exit, p.dt, jitter),
+            shadow_jitter: p.random(x, y, 2),
+            colour: [0.0; 3],
+            transmittance: 1.0,
+            tau: 0.0,
+            target_tau,
+        })
+    }
+
     /// The pixel's value: what the ray gathered over the background; or, for a ray marched
     /// through an owned box only, what it gathered there, `[r, g, b, T]` (premultiplied colour
     /// and transmittance, no background).
@@ -424,46 +463,12 @@ fn march_packet<F: FieldSampler>(
         shadow_intervals,
     } = scratch;
     let mut rays: [Option<MarchedRay>; PACKET] = [None; PACKET];
-    for (i, &(x, y)) in pixels.iter().enumerate() {
-        let (origin, dir) = p.primary_ray(x, y);
+    for (i, &pixel) in pixels.iter().enumerate() {
         out[i] = match owned {
             None => [bg[0], bg[1], bg[2], 0.0],
             Some(_) => [0.0, 0.0, 0.0, 1.0],
         };
-        let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
-            continue;
-        };
-        intervals[i].clear();
-        let clear_where_empty = march_intervals(
-            p,
-            field,
-            &mut primary[i],
-            origin,
-            dir,
-            t_enter,
-            t_exit,
-            &mut intervals[i],
-        );
-        if let Some(owned) = owned {
-            clip_to_owned(p, owned, origin, dir, &mut intervals[i]);
-        }
-        // Dimension 0 is the primary decision: emission–absorption's jitter, or stochastic
-        // marching's free-flight number (its jitter is dimension 1, as the reference's).
-        let (jitter, target_tau) = match p.integrator {
-            Integrator::Marching => (p.random(x, y, 1), -(1.0 - p.random(x, y, 0)).ln()),
-            _ => (p.random(x, y, if scatter { 1 } else { 0 }), f64::INFINITY),
-        };
-        rays[i] = Some(MarchedRay {
-            origin,
-            dir,
-            clear_where_empty,
-            samples: MarchSamples::new(t_enter, t_exit, p.dt, jitter),
-            shadow_jitter: p.random(x, y, 2),
-            colour: [0.0; 3],
-            transmittance: 1.0,
-            tau: 0.0,
-            target_tau,
-        });
+        rays[i] = MarchedRay::start(p, field, owned, pixel, &mut primary[i], &mut intervals[i]);
     }
     // What a ray's sample at `at` scatters towards the camera, `albedo` under the light there.
     let mut lit = |ray: &MarchedRay, at: DVec3, albedo: [f64; 3]| {

@@ -1,25 +1,123 @@
 //! Write-only slots over the memory a step is staged into, and the staging pass that fills
 //! them in parallel.
 
+use std::marker::PhantomData;
+use std::ptr::NonNull;
+
 use rayon::prelude::*;
-use wgpu::WriteOnly;
 
 use super::Extremes;
 
+/// Write-only slots: exclusive access to `len` elements that are written and never read. The
+/// staging pass writes the memory the device copies from, which a GPU API maps for writing
+/// only (it may be write-combined: a read is slow, or not promised at all); each GPU backend
+/// makes slots of its mapped memory, and [`Slots::from_mut`] of a host array.
+pub struct Slots<'a, T> {
+    ptr: NonNull<T>,
+    len: usize,
+    _memory: PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: slots are like `&mut [T]`: their access is exclusive, so sending them sends no more
+// than the right to write `T`s.
+unsafe impl<T: Send> Send for Slots<'_, T> {}
+
+impl<'a, T> Slots<'a, T> {
+    /// Slots over `len` elements from `ptr`.
+    ///
+    /// # Safety
+    /// `ptr` is aligned for `T` and valid for writes of `len` elements, and nothing else
+    /// accesses them during `'a`.
+    #[inline]
+    pub unsafe fn from_raw(ptr: NonNull<T>, len: usize) -> Slots<'a, T> {
+        Slots {
+            ptr,
+            len,
+            _memory: PhantomData,
+        }
+    }
+
+    /// Slots over a host array.
+    #[inline]
+    pub fn from_mut(slice: &'a mut [T]) -> Slots<'a, T> {
+        let len = slice.len();
+        // SAFETY: a mutable borrow for 'a meets every condition.
+        unsafe { Slots::from_raw(NonNull::from(slice).cast(), len) }
+    }
+
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The first `mid` slots and the rest.
+    #[inline]
+    #[track_caller]
+    pub fn split_at(self, mid: usize) -> (Slots<'a, T>, Slots<'a, T>) {
+        assert!(mid <= self.len, "mid > len");
+        // SAFETY: the two runs are disjoint parts of this one, which they replace.
+        unsafe {
+            (
+                Slots::from_raw(self.ptr, mid),
+                Slots::from_raw(self.ptr.add(mid), self.len - mid),
+            )
+        }
+    }
+
+    /// Consecutive runs of `n` slots, and the fewer than `n` left after them.
+    #[inline]
+    pub fn chunks(self, n: usize) -> (impl Iterator<Item = Slots<'a, T>>, Slots<'a, T>) {
+        assert!(n != 0, "chunk size must be non-zero");
+        let whole = self.len / n;
+        let (full, tail) = self.split_at(whole * n);
+        let ptr = full.ptr;
+        // SAFETY: the runs are disjoint parts of `full`, which they replace.
+        let runs = (0..whole).map(move |j| unsafe { Slots::from_raw(ptr.add(j * n), n) });
+        (runs, tail)
+    }
+
+    /// Writes `src` (of the slots' length) into the slots.
+    #[inline]
+    #[track_caller]
+    pub fn copy_from_slice(&mut self, src: &[T])
+    where
+        T: Copy,
+    {
+        assert_eq!(self.len, src.len(), "a slot per value");
+        // SAFETY: the slots are valid for writes of `len` elements and cannot overlap `src`,
+        // which is borrowed while they are borrowed mutably.
+        unsafe {
+            self.ptr
+                .as_ptr()
+                .copy_from_nonoverlapping(src.as_ptr(), src.len())
+        }
+    }
+
+    /// The first slot's address, for writes the methods here do not make (never reads).
+    #[inline]
+    pub fn as_mut_ptr(&mut self) -> *mut T {
+        self.ptr.as_ptr()
+    }
+}
+
 /// Write-only slots of an array of 16-byte elements (a particle's vec4) or 4-byte ones (its
-/// radius attribute): memory the device copies from (mapped staging buffers are write-only),
-/// or a host array.
-pub type Slots16<'a> = WriteOnly<'a, [[u8; 16]]>;
-pub type Slots4<'a> = WriteOnly<'a, [[u8; 4]]>;
+/// radius attribute).
+pub type Slots16<'a> = Slots<'a, [u8; 16]>;
+pub type Slots4<'a> = Slots<'a, [u8; 4]>;
 
 /// Slots over a host array of vec4s.
 pub fn slots16(v: &mut [[f32; 4]]) -> Slots16<'_> {
-    WriteOnly::from_mut(bytemuck::cast_slice_mut(v))
+    Slots::from_mut(bytemuck::cast_slice_mut(v))
 }
 
 /// Slots over a host array of f32s.
 pub fn slots4(v: &mut [f32]) -> Slots4<'_> {
-    WriteOnly::from_mut(bytemuck::cast_slice_mut(v))
+    Slots::from_mut(bytemuck::cast_slice_mut(v))
 }
 
 /// Particles one task of a staging pass converts (large enough that rayon's overhead is
@@ -29,12 +127,11 @@ pub(super) const CHUNK: usize = 1 << 14;
 /// Writes `f(i, extremes)` for every particle `i` of `parts` (slots for particles `first ..`,
 /// the parts in order, covering a prefix of the step), its second value into the matching slot
 /// of a second array when one is given (covering the same particles from 0), in parallel over
-/// tasks of [`CHUNK`] particles; returns the extremes the calls gathered. (A mapped slice
-/// cannot move to another thread, a fixed-size array of slots can: the tasks are whole chunks,
-/// and the few particles past a part's last chunk run on the calling thread.)
+/// tasks of [`CHUNK`] particles; returns the extremes the calls gathered. (The tasks are whole
+/// chunks; the few particles past a part's last chunk run on the calling thread.)
 pub(super) fn for_each_particle<'a, A, B, F>(
-    parts: Vec<(usize, WriteOnly<'a, [A]>)>,
-    mut second: Option<WriteOnly<'a, [B]>>,
+    parts: Vec<(usize, Slots<'a, A>)>,
+    mut second: Option<Slots<'a, B>>,
     f: F,
 ) -> Extremes
 where
@@ -42,8 +139,8 @@ where
     B: Copy + Default + Send,
     F: Fn(usize, &mut Extremes) -> (A, Option<B>) + Sync,
 {
-    type Chunk<'a, T> = WriteOnly<'a, [T; CHUNK]>;
-    let mut chunks: Vec<(usize, Chunk<'a, A>, Option<Chunk<'a, B>>)> = Vec::new();
+    // Chunks are runs of CHUNK slots.
+    let mut chunks: Vec<(usize, Slots<'a, A>, Option<Slots<'a, B>>)> = Vec::new();
     let mut tails = Vec::new();
     for (first, slots) in parts {
         let len = slots.len();
@@ -52,18 +149,17 @@ where
                 let available = s.len();
                 let (head, rest) = s.split_at(len.min(available));
                 second = Some(rest);
-                Some(head.into_chunks::<CHUNK>())
+                Some(head.chunks(CHUNK))
             }
             None => None,
         };
-        let (full, tail) = slots.into_chunks::<CHUNK>();
-        let whole = full.len();
-        let (paired_full, paired_tail) = match paired {
-            Some((f, t)) => (Some(f.into_iter()), Some(t)),
+        let whole = len / CHUNK;
+        let (full, tail) = slots.chunks(CHUNK);
+        let (mut paired_full, paired_tail) = match paired {
+            Some((f, t)) => (Some(f), Some(t)),
             None => (None, None),
         };
-        let mut paired_full = paired_full;
-        for (j, chunk) in full.into_iter().enumerate() {
+        for (j, chunk) in full.enumerate() {
             let b = paired_full.as_mut().and_then(Iterator::next);
             chunks.push((first + j * CHUNK, chunk, b));
         }
@@ -73,7 +169,7 @@ where
         .into_par_iter()
         .map(|(first, a, b)| {
             let mut e = Extremes::NONE;
-            fill(first, a.into(), b.map(Into::into), &f, &mut e);
+            fill(first, a, b, &f, &mut e);
             e
         })
         .reduce(|| Extremes::NONE, Extremes::merge);
@@ -89,8 +185,8 @@ where
 /// costs less than a write through a slot per particle.
 pub(super) fn fill<A, B, F>(
     first: usize,
-    mut a: WriteOnly<'_, [A]>,
-    mut b: Option<WriteOnly<'_, [B]>>,
+    mut a: Slots<'_, A>,
+    mut b: Option<Slots<'_, B>>,
     f: &F,
     e: &mut Extremes,
 ) where
@@ -130,14 +226,11 @@ pub(super) fn fill<A, B, F>(
 /// (16 MiB of writes per 1M particles cost 32 MiB of traffic), where an in-memory copy of the
 /// step (`memcpy`) uses the same stores (docs/notes/2026-12-03-playback.md, "Non-temporal
 /// stores in the staging pass").
-pub(super) fn stream_into<A: Copy>(mut dst: WriteOnly<'_, [A]>, src: &[A]) {
+pub(super) fn stream_into<A: Copy>(mut dst: Slots<'_, A>, src: &[A]) {
     assert_eq!(dst.len(), src.len(), "a slot per value");
     #[cfg(target_arch = "x86_64")]
     if size_of::<A>() == 16 {
-        let to = dst
-            .as_raw_element_ptr()
-            .as_ptr()
-            .cast::<core::arch::x86_64::__m128i>();
+        let to = dst.as_mut_ptr().cast::<core::arch::x86_64::__m128i>();
         if to.is_aligned() {
             for (i, v) in src.iter().enumerate() {
                 // SAFETY: `dst` holds `src.len()` writable 16-byte slots from `to`, which is

@@ -3,8 +3,6 @@ use std::sync::Arc;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-use wgpu::WriteOnly;
-
 use super::slots::stream_into;
 use super::*;
 use crate::values::{Attribute, Bounds};
@@ -70,7 +68,7 @@ fn streamed_slots_hold_the_values_aligned_or_not() {
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut storage);
         bytes.fill(0xA5);
         let slots: &mut [[u8; 16]] = bytemuck::cast_slice_mut(&mut bytes[offset..][..16 * n]);
-        stream_into(WriteOnly::from_mut(slots), &values);
+        stream_into(Slots::from_mut(slots), &values);
         let bytes: &[u8] = bytemuck::cast_slice(&storage);
         assert_eq!(
             &bytes[offset..][..16 * n],

@@ -86,6 +86,21 @@ pub fn split_array(spec: &str, language: ShaderLanguage) -> Result<String, Strin
     let binding: u32 = binding
         .parse()
         .map_err(|_| format!("#split_array {name}: binding '{binding}' is not a number"))?;
+    let mut out = split_declarations(name, binding, ty, access, language);
+    for op in ops.iter() {
+        out.push_str(&split_accessor(name, ty, length, op, language)?);
+    }
+    Ok(out)
+}
+
+/// The storage buffers of a `#split_array`: part 0, and where `SPLIT_PARTS > 1` the others.
+fn split_declarations(
+    name: &str,
+    binding: u32,
+    ty: &str,
+    access: &str,
+    language: ShaderLanguage,
+) -> String {
     let part = |k: u32| format!("{name}{k}");
     let declare = |k: u32| match language {
         ShaderLanguage::Glsl => {
@@ -98,7 +113,7 @@ pub fn split_array(spec: &str, language: ShaderLanguage) -> Result<String, Strin
                         .unwrap_or_default()
                 })
                 .collect();
-            let qualifier = match *access {
+            let qualifier = match access {
                 "readwrite" => String::new(),
                 a => format!("{a} "),
             };
@@ -120,78 +135,89 @@ pub fn split_array(spec: &str, language: ShaderLanguage) -> Result<String, Strin
         out.push_str(&declare(k));
     }
     out.push_str("#endif\n");
-    for op in ops.iter() {
-        let (op, function) = op
-            .split_once(':')
-            .ok_or_else(|| format!("#split_array {name}: '{op}' is not OP:FUNCTION"))?;
-        let value_ty = match (language, *ty) {
-            (ShaderLanguage::Wgsl, "atomic<u32>") => "u32",
-            _ => ty,
-        };
-        // The signature, and the statement that does the op on element `i` of array `a`.
-        let (signature, statement): (String, fn(&str) -> String) = match (language, op) {
-            (ShaderLanguage::Glsl, "get") => (format!("{ty} {function}(uint i)"), |a| {
-                format!("return {a}[i];")
-            }),
-            (ShaderLanguage::Glsl, "set") => (
-                format!("void {function}(uint i, {ty} value)"),
-                |a| format!("{a}[i] = value;"),
-            ),
-            (ShaderLanguage::Glsl, "add") => (
-                format!("void {function}(uint i, {ty} value)"),
-                |a| format!("{a}[i] += value;"),
-            ),
-            (ShaderLanguage::Wgsl, "get") => (format!("fn {function}(index: u32) -> {ty}"), |a| {
-                format!("return {a}[i];")
-            }),
-            (ShaderLanguage::Wgsl, "set") => (
-                format!("fn {function}(index: u32, value: {value_ty})"),
-                |a| format!("{a}[i] = value;"),
-            ),
-            (ShaderLanguage::Wgsl, "store") => (
-                format!("fn {function}(index: u32, value: {value_ty})"),
-                |a| format!("atomicStore(&{a}[i], value);"),
-            ),
-            (ShaderLanguage::Wgsl, "exchange") => (
-                format!("fn {function}(index: u32, value: {value_ty}) -> u32"),
-                |a| format!("return atomicExchange(&{a}[i], value);"),
-            ),
-            (l, other) => {
-                return Err(format!(
-                    "#split_array {name}: no op '{other}' in {l:?} (get, set, add; WGSL also store, exchange)"
-                ));
-            }
-        };
-        let returns = statement("a").starts_with("return");
-        let open_index = match language {
-            ShaderLanguage::Glsl => "",
-            ShaderLanguage::Wgsl => "    var i = index;\n",
-        };
-        let (if_open, if_close) = match language {
-            ShaderLanguage::Glsl => ("if (i < len) {", "}"),
-            ShaderLanguage::Wgsl => ("if i < len {", "}"),
-        };
-        let len_decl = match language {
-            ShaderLanguage::Glsl => format!("    uint len = {length};\n"),
-            ShaderLanguage::Wgsl => format!("    let len = {length};\n"),
-        };
-        out.push_str(&format!("{signature} {{\n#if SPLIT_PARTS > 1\n{len_decl}{open_index}"));
-        for k in 0..SPLIT_PARTS_MAX - 1 {
-            out.push_str(&format!("    {if_open}\n        {}\n", statement(&part(k))));
-            if !returns {
-                out.push_str("        return;\n");
-            }
-            out.push_str(&format!("    {if_close}\n    i -= len;\n"));
+    out
+}
+
+/// One accessor of a `#split_array` (`op` is `OP:FUNCTION`): the part holding element `i`
+/// found from the part length `length`, and the op done on it.
+fn split_accessor(
+    name: &str,
+    ty: &str,
+    length: &str,
+    op: &str,
+    language: ShaderLanguage,
+) -> Result<String, String> {
+    let part = |k: u32| format!("{name}{k}");
+    let (op, function) = op
+        .split_once(':')
+        .ok_or_else(|| format!("#split_array {name}: '{op}' is not OP:FUNCTION"))?;
+    let value_ty = match (language, ty) {
+        (ShaderLanguage::Wgsl, "atomic<u32>") => "u32",
+        _ => ty,
+    };
+    // The signature, and the statement that does the op on element `i` of array `a`.
+    let (signature, statement): (String, fn(&str) -> String) = match (language, op) {
+        (ShaderLanguage::Glsl, "get") => (format!("{ty} {function}(uint i)"), |a| {
+            format!("return {a}[i];")
+        }),
+        (ShaderLanguage::Glsl, "set") => (
+            format!("void {function}(uint i, {ty} value)"),
+            |a| format!("{a}[i] = value;"),
+        ),
+        (ShaderLanguage::Glsl, "add") => (
+            format!("void {function}(uint i, {ty} value)"),
+            |a| format!("{a}[i] += value;"),
+        ),
+        (ShaderLanguage::Wgsl, "get") => (format!("fn {function}(index: u32) -> {ty}"), |a| {
+            format!("return {a}[i];")
+        }),
+        (ShaderLanguage::Wgsl, "set") => (
+            format!("fn {function}(index: u32, value: {value_ty})"),
+            |a| format!("{a}[i] = value;"),
+        ),
+        (ShaderLanguage::Wgsl, "store") => (
+            format!("fn {function}(index: u32, value: {value_ty})"),
+            |a| format!("atomicStore(&{a}[i], value);"),
+        ),
+        (ShaderLanguage::Wgsl, "exchange") => (
+            format!("fn {function}(index: u32, value: {value_ty}) -> u32"),
+            |a| format!("return atomicExchange(&{a}[i], value);"),
+        ),
+        (l, other) => {
+            return Err(format!(
+                "#split_array {name}: no op '{other}' in {l:?} (get, set, add; WGSL also store, exchange)"
+            ));
         }
-        out.push_str(&format!(
-            "    {}\n#else\n",
-            statement(&part(SPLIT_PARTS_MAX - 1))
-        ));
-        if language == ShaderLanguage::Wgsl {
-            out.push_str("    let i = index;\n");
+    };
+    let returns = statement("a").starts_with("return");
+    let open_index = match language {
+        ShaderLanguage::Glsl => "",
+        ShaderLanguage::Wgsl => "    var i = index;\n",
+    };
+    let (if_open, if_close) = match language {
+        ShaderLanguage::Glsl => ("if (i < len) {", "}"),
+        ShaderLanguage::Wgsl => ("if i < len {", "}"),
+    };
+    let len_decl = match language {
+        ShaderLanguage::Glsl => format!("    uint len = {length};\n"),
+        ShaderLanguage::Wgsl => format!("    let len = {length};\n"),
+    };
+    let mut out = format!("{signature} {{\n#if SPLIT_PARTS > 1\n{len_decl}{open_index}");
+    for k in 0..SPLIT_PARTS_MAX - 1 {
+        out.push_str(&format!("    {if_open}\n        {}\n", statement(&part(k))));
+        if !returns {
+            out.push_str("        return;\n");
         }
-        out.push_str(&format!("    {}\n#endif\n}}\n", statement(&part(0))));
+        out.push_str(&format!("    {if_close}\n    i -= len;\n"));
     }
+    out.push_str(&format!(
+        "    {}\n#else\n",
+        statement(&part(SPLIT_PARTS_MAX - 1))
+    ));
+    if language == ShaderLanguage::Wgsl {
+        out.push_str("    let i = index;\n");
+    }
+    out.push_str(&format!("    {}\n#endif\n}}\n", statement(&part(0))));
     Ok(out)
 }
 

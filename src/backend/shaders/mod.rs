@@ -5,12 +5,14 @@
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 
+use crate::field::particle_radius;
 use crate::values::FrameParams;
 use crate::values::shader_constants::{
     self, COLOUR_DENSITY, COLOUR_POST, COLOUR_PRE, INTEGRATOR_DELTA, INTEGRATOR_EA,
     INTEGRATOR_MARCHING, INTEGRATOR_SS_REFERENCE, NOISE_STBN, NOISE_WHITE, SPEC_CONSTANTS,
     TABLE_COLOUR, TABLE_DENSITY, TABLE_FLOATS, TABLE_OPTICAL, TABLE_RADIUS, TABLE_SIZE, spec,
 };
+use crate::values::tables::lookup;
 use crate::values::{ColourMode, Integrator, NoiseKind};
 
 pub mod cpu;
@@ -167,6 +169,34 @@ pub struct GpuField {
     /// Where an SPH kernel's volumes start in the radius-attribute buffer (floats), then
     /// unused.
     pub factors: [u32; 4],
+}
+
+/// How the shaders size particles: `rbf.glsl`'s `particle_radius` ([`particle_radius`] in f32)
+/// over a [`GpuField`], the radius map's table and the radius attribute. The ash backend
+/// bounds the boxes of the LBVH it builds on the CPU by it.
+#[derive(Clone, Copy, Debug)]
+pub struct RadiusRule<'a> {
+    pub field: GpuField,
+    /// The radius-map table when the map varies (`RADIUS_MAP_VARIES`), else the constant
+    /// `field.radius[1]` applies.
+    pub radius_table: Option<&'a [f32]>,
+    /// Per-particle radius factors (`HAS_RADIUS_ATTRIBUTE`).
+    pub radius_attribute: Option<&'a [f32]>,
+}
+
+impl RadiusRule<'_> {
+    /// The radius of particle `index`, `p` its local position and t.
+    pub fn radius(&self, p: [f32; 4], index: usize) -> f32 {
+        let m = match self.radius_table {
+            Some(t) => lookup(t, p[3]),
+            None => self.field.radius[1],
+        };
+        particle_radius(
+            self.field.radius[0],
+            m,
+            self.radius_attribute.map(|h| h[index]),
+        )
+    }
 }
 
 /// The specialisation constants (`shader_constants::SPEC_CONSTANTS` names and numbers them).

@@ -32,7 +32,8 @@
 //! build and refit passes), `sort` (the radix sort), `query` and `render` (the two traversal
 //! kernels), and here the backend itself.
 //!
-//! The CPU twin of every build stage is in [`crate::backend::shaders::cpu`], a file per shader; `tests/wgpu_lbvh.rs` compares
+//! The CPU twin of every build stage is in [`crate::backend::shaders::cpu`], a file per shader
+//! (the LBVH's are the library's build, [`crate::accel::lbvh`]); `tests/wgpu_lbvh.rs` compares
 //! them, and the backend with the CPU reference.
 
 mod context;
@@ -55,19 +56,16 @@ pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
-use crate::backend::shaders::cpu::{
-    lbvh::{LBVH_STACK_SIZE, structure_bytes},
-    lbvh_keys::KeyGrid,
-};
-use crate::backend::shaders::{GpuField, GpuFrame};
+use crate::accel::lbvh::{KeyGrid, LBVH_STACK_SIZE, structure_bytes};
+use crate::backend::shaders::GpuFrame;
 use crate::field::FieldSettings;
 use crate::values::FrameParams;
 use crate::values::Image;
-use crate::values::shader_constants::{TABLE_FLOATS, TABLE_SIZE, spec};
+use crate::values::shader_constants::{TABLE_SIZE, spec};
 use crate::values::{ColourMode, Integrator, NoiseKind};
 use context::device_error;
 use prepare::Prepare;
-use scene::{MapsWritten, Scene, check_fits};
+use scene::{Scene, SceneBuffers, capacity_for_step};
 use tree::{GpuTree, SceneBindings};
 use util::{PARTS, SplitBuffer, storage, uniform};
 
@@ -405,84 +403,32 @@ impl Backend for WgpuBackend {
         let checked = started.elapsed();
         let n = staging.len();
         let clusters = input.cluster.clusters_for(n);
-        let has_radius = staging.has_radius_attribute();
-        let sph = input.field.kernel.is_sph();
-        let factor_words = |n| crate::backend::gpu_data::factor_layout(n, has_radius, sph).1;
         let max_binding = self.max_binding;
-        if let Err(what) = check_fits(n, clusters, factor_words(n), max_binding) {
-            return Err(device_error(format!(
-                "step '{}' ({n} particles in {clusters} clusters of {}): {what}; {} binds at \
-                 most {max_binding} bytes per storage buffer, and this backend splits the \
-                 particles, nodes and boxes over at most {PARTS} (a larger cluster size needs \
-                 fewer clusters)",
-                input.step.name, input.cluster, self.ctx.info.name,
-            )));
-        }
-        let ctx = self.ctx.clone();
-        // Keep buffers for the largest step seen (or reserved, when that fits): a series
-        // allocates once.
-        let reserved = self.reserved.max(n);
-        let capacity = if check_fits(
-            reserved,
-            input.cluster.clusters_for(reserved),
-            factor_words(reserved),
+        let capacity = capacity_for_step(
+            input,
+            &staging,
+            self.reserved,
             max_binding,
-        )
-        .is_ok()
-        {
-            reserved
-        } else {
-            n
-        };
-        let old = self.scene.take();
-        let (
+            &self.ctx.info.name,
+        )?;
+        let ctx = self.ctx.clone();
+        let mut old = self.scene.take();
+        let SceneBuffers {
             particles,
             particles_lo,
             particle_capacity,
-            (maps, field_uniform, maps_written),
+            maps,
+            field_uniform,
+            maps_written,
             radius_attribute,
-        ) = match old {
-            Some(s) if s.particle_capacity >= n => (
-                s.particles,
-                s.particles_lo,
-                s.particle_capacity,
-                (s.maps, s.field_uniform, s.maps_written),
-                s.radius_attribute,
-            ),
-            _ => {
-                let need = capacity as u64 * PARTICLE_BYTES;
-                ctx.scoped(
-                    &format!(
-                        "step '{}': particle buffers ({need} bytes for {capacity} particles)",
-                        input.step.name
-                    ),
-                    || {
-                        (
-                            SplitBuffer::new(
-                                &ctx,
-                                "particles",
-                                capacity as u64,
-                                PARTICLE_BYTES,
-                                max_binding,
-                            ),
-                            capacity,
-                            (
-                                storage(&ctx, "map tables", TABLE_FLOATS as u64 * 4),
-                                uniform(&ctx, "field", std::mem::size_of::<GpuField>() as u64),
-                                MapsWritten::default(),
-                            ),
-                            None,
-                        )
-                    },
-                )
-                .and_then(|(p, c, m, r)| {
-                    let p = p.ok_or_else(|| {
-                        device_error(format!("{capacity} particles do not fit {PARTS} parts"))
-                    })?;
-                    Ok((p, None, c, m, r))
-                })?
-            }
-        };
+        } = SceneBuffers::reuse_or_make(
+            &ctx,
+            &mut old,
+            &input.step.name,
+            n,
+            capacity,
+            max_binding,
+        )?;
         if self
             .prepare
             .as_ref()

@@ -27,7 +27,7 @@ use super::util::{
 use super::{PARTICLE_BYTES, WORD_BYTES};
 use crate::accel::HilbertQuantizer;
 use crate::backend::BackendError;
-use crate::backend::gpu_data::{GpuStepData, Slots16, StepStaging};
+use crate::backend::gpu_data::{GpuStepData, Slots, Slots16, StepStaging};
 use crate::backend::shaders::on_wgpu;
 use crate::field::FieldSettings;
 use crate::values::Step;
@@ -287,9 +287,7 @@ impl Prepare {
         let part = self.points.staging.part_bytes();
         let data = staging.write(
             slots(&mut views, part),
-            radius_views
-                .first_mut()
-                .map(|v| v.slice(..).into_chunks::<4>().0),
+            radius_views.first_mut().map(view_slots::<4>),
         );
         drop((views, radius_views));
         if data.double_single {
@@ -549,7 +547,7 @@ impl Prepare {
             let raw = self.radius(ctx, words)?;
             let mut views = raw.staging.views(ctx, words as u64 * WORD_BYTES)?;
             if let Some(v) = views.first_mut() {
-                data.write_factors(step, settings, v.slice(..).into_chunks::<4>().0)?;
+                data.write_factors(step, settings, view_slots::<4>(v))?;
             }
             drop(views);
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -601,8 +599,18 @@ fn slots(views: &mut [wgpu::BufferViewMut], part_bytes: u64) -> Vec<(usize, Slot
     views
         .iter_mut()
         .enumerate()
-        .map(|(i, v)| (i * per_part, v.slice(..).into_chunks::<16>().0))
+        .map(|(i, v)| (i * per_part, view_slots::<16>(v)))
         .collect()
+}
+
+/// Slots of `N` bytes over a mapped staging view (wgpu hands its memory out write-only).
+fn view_slots<const N: usize>(view: &mut wgpu::BufferViewMut) -> Slots<'_, [u8; N]> {
+    let mut memory = view.slice(..).into_chunks::<N>().0;
+    let len = memory.len();
+    // SAFETY: the view's memory is valid for writes of `len` elements of `N` bytes (alignment
+    // 1) and the `WriteOnly`'s alone while the view is borrowed; it is consumed here, and its
+    // access passes to the slots.
+    unsafe { Slots::from_raw(memory.as_raw_element_ptr(), len) }
 }
 
 /// Stage 1 alone on `points` (local coordinates in xyz), its outputs poisoned first: each

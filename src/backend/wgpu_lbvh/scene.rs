@@ -5,15 +5,15 @@
 use super::context::{GpuContext, Layout, device_error};
 use super::prepare::Targets;
 use super::tree::GpuTree;
-use super::util::{PARTS, SplitBuffer, parts_needed, storage, write};
+use super::util::{PARTS, SplitBuffer, parts_needed, storage, uniform, write};
 use super::{CLUSTER_BYTES, PARTICLE_BYTES, WORD_BYTES};
 use crate::accel::ClusterSize;
-use crate::backend::BackendError;
-use crate::backend::gpu_data::GpuStepData;
-use crate::backend::shaders::cpu::lbvh_keys::KeyGrid;
-use crate::backend::shaders::{SpecConstants, pack_map_tables};
+use crate::accel::lbvh::KeyGrid;
+use crate::backend::gpu_data::{GpuStepData, StepStaging, factor_layout};
+use crate::backend::shaders::{GpuField, SpecConstants, pack_map_tables};
+use crate::backend::{BackendError, StepInput};
 use crate::field::{Classification, FieldSettings};
-use crate::values::shader_constants::SPEC_CONSTANTS;
+use crate::values::shader_constants::{SPEC_CONSTANTS, TABLE_FLOATS};
 use crate::values::{ColourMode, Integrator, NoiseKind, Step};
 
 /// The uploaded step and its buffers.
@@ -226,6 +226,107 @@ pub(super) fn check_fits(
         }
     }
     Ok(())
+}
+
+/// The particles a step's buffers are made for: the reserved count or the largest step seen
+/// (`reserved`) when that fits the bindings, so a series allocates once, else the step's own;
+/// an error when the step itself does not fit.
+pub(super) fn capacity_for_step(
+    input: &StepInput<'_>,
+    staging: &StepStaging<'_>,
+    reserved: usize,
+    max_binding: u64,
+    device: &str,
+) -> Result<usize, BackendError> {
+    let n = staging.len();
+    let clusters = input.cluster.clusters_for(n);
+    let has_radius = staging.has_radius_attribute();
+    let sph = input.field.kernel.is_sph();
+    let factor_words = |n| factor_layout(n, has_radius, sph).1;
+    if let Err(what) = check_fits(n, clusters, factor_words(n), max_binding) {
+        return Err(device_error(format!(
+            "step '{}' ({n} particles in {clusters} clusters of {}): {what}; {device} binds at \
+             most {max_binding} bytes per storage buffer, and this backend splits the \
+             particles, nodes and boxes over at most {PARTS} (a larger cluster size needs \
+             fewer clusters)",
+            input.step.name, input.cluster,
+        )));
+    }
+    let reserved = reserved.max(n);
+    let fits = check_fits(
+        reserved,
+        input.cluster.clusters_for(reserved),
+        factor_words(reserved),
+        max_binding,
+    )
+    .is_ok();
+    Ok(if fits { reserved } else { n })
+}
+
+/// The buffers a scene keeps from step to step: the particles (and lo parts), the maps and
+/// field constants with what they hold, and the radius attribute.
+pub(super) struct SceneBuffers {
+    pub(super) particles: SplitBuffer,
+    pub(super) particles_lo: Option<SplitBuffer>,
+    pub(super) particle_capacity: usize,
+    pub(super) maps: wgpu::Buffer,
+    pub(super) field_uniform: wgpu::Buffer,
+    pub(super) maps_written: MapsWritten,
+    pub(super) radius_attribute: Option<wgpu::Buffer>,
+}
+
+impl SceneBuffers {
+    /// The buffers of the scene in `old`, taken from it, when they hold `n` particles; else new
+    /// ones for `capacity` (`step` names the step in an error).
+    pub(super) fn reuse_or_make(
+        ctx: &GpuContext,
+        old: &mut Option<Scene>,
+        step: &str,
+        n: usize,
+        capacity: usize,
+        max_binding: u64,
+    ) -> Result<SceneBuffers, BackendError> {
+        if let Some(s) = old.take_if(|s| s.particle_capacity >= n) {
+            return Ok(SceneBuffers {
+                particles: s.particles,
+                particles_lo: s.particles_lo,
+                particle_capacity: s.particle_capacity,
+                maps: s.maps,
+                field_uniform: s.field_uniform,
+                maps_written: s.maps_written,
+                radius_attribute: s.radius_attribute,
+            });
+        }
+        let need = capacity as u64 * PARTICLE_BYTES;
+        let (particles, maps, field_uniform) = ctx.scoped(
+            &format!("step '{step}': particle buffers ({need} bytes for {capacity} particles)"),
+            || {
+                (
+                    SplitBuffer::new(
+                        ctx,
+                        "particles",
+                        capacity as u64,
+                        PARTICLE_BYTES,
+                        max_binding,
+                    ),
+                    storage(ctx, "map tables", TABLE_FLOATS as u64 * 4),
+                    uniform(ctx, "field", std::mem::size_of::<GpuField>() as u64),
+                )
+            },
+        )?;
+        let particles = particles.ok_or_else(|| {
+            device_error(format!("{capacity} particles do not fit {PARTS} parts"))
+        })?;
+        Ok(SceneBuffers {
+            particles,
+            particles_lo: None,
+            particle_capacity: capacity,
+            maps,
+            field_uniform,
+            maps_written: MapsWritten::default(),
+            radius_attribute: None,
+        })
+    }
 }
 
 impl Scene {

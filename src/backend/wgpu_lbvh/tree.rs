@@ -7,10 +7,8 @@ use super::context::{GpuContext, Layout, Variant, device_error};
 use super::sort::RadixSort;
 use super::util::PARTS;
 use super::util::{SplitBuffer, encode_pass, grid, poison, read_u32, storage, write};
+use crate::accel::lbvh::{GpuBox, KeyGrid, Lbvh, NODE_WORDS};
 use crate::backend::BackendError;
-use crate::backend::shaders::cpu::Lbvh;
-use crate::backend::shaders::cpu::lbvh::{GpuBox, NODE_WORDS};
-use crate::backend::shaders::cpu::lbvh_keys::KeyGrid;
 use crate::backend::shaders::on_wgpu;
 
 /// How far a build goes (tests stop early to compare a stage with its twin).

@@ -70,6 +70,117 @@ fn buffer_at_least(
     Ok(())
 }
 
+/// How a voxelisation covers the grid: slabs of whole layers along z, each as large as one
+/// storage binding holds, and chunks of particles, each as many splats as one binding holds;
+/// one pass per (slab, chunk).
+struct SlabPlan {
+    dims: [usize; 3],
+    /// Cells per row of the slab buffer ([`row_cells`]).
+    row: u64,
+    layer_bytes: u64,
+    layers_per_slab: usize,
+    slabs: usize,
+    /// Particles.
+    count: usize,
+    /// Particles per chunk.
+    chunk: usize,
+    chunks: usize,
+}
+
+impl SlabPlan {
+    /// The plan for a grid of `dims` cells and `count` particles, or why the device cannot
+    /// hold the grid.
+    fn new(
+        ctx: &super::GpuContext,
+        dims: [usize; 3],
+        count: usize,
+        max_binding: u64,
+    ) -> Result<SlabPlan, BackendError> {
+        let max_3d = u64::from(ctx.limits.max_texture_dimension_3d);
+        if dims.iter().any(|&d| d as u64 > max_3d) {
+            return Err(device_error(format!(
+                "a voxel grid of {dims:?} cells does not fit a 3D texture: {} allows at most \
+                 {max_3d} texels along each side (max_texture_dimension_3d)",
+                ctx.info.name
+            )));
+        }
+        let row = row_cells(dims);
+        let layer_bytes = row * dims[1] as u64 * CELL_BYTES;
+        if layer_bytes > max_binding {
+            return Err(device_error(format!(
+                "one layer of a {dims:?} voxel grid needs {layer_bytes} bytes of slab buffer, \
+                 more than the {max_binding} bytes {} binds per storage buffer",
+                ctx.info.name
+            )));
+        }
+        let layers_per_slab = (max_binding / layer_bytes).min(dims[2] as u64) as usize;
+        let chunk = ((max_binding / SPLAT_BYTES) as usize).min(count).max(1);
+        Ok(SlabPlan {
+            dims,
+            row,
+            layer_bytes,
+            layers_per_slab,
+            slabs: dims[2].div_ceil(layers_per_slab),
+            count,
+            chunk,
+            chunks: count.div_ceil(chunk),
+        })
+    }
+
+    /// Slab `s`'s first layer and its number of layers.
+    fn layers(&self, s: usize) -> (usize, usize) {
+        let first_layer = s * self.layers_per_slab;
+        (
+            first_layer,
+            self.layers_per_slab.min(self.dims[2] - first_layer),
+        )
+    }
+
+    /// Chunk `c`'s first particle and its number of particles.
+    fn particles(&self, c: usize) -> (usize, usize) {
+        let first = c * self.chunk;
+        (first, self.chunk.min(self.count - first))
+    }
+}
+
+/// Records the copy of slab buffer `slab` (`layers` layers) into the grid's texture from
+/// layer `first_layer` on.
+fn copy_slab(
+    encoder: &mut wgpu::CommandEncoder,
+    slab: &wgpu::Buffer,
+    texture: &wgpu::Texture,
+    plan: &SlabPlan,
+    first_layer: usize,
+    layers: usize,
+) {
+    let dims = plan.dims;
+    encoder.copy_buffer_to_texture(
+        wgpu::TexelCopyBufferInfo {
+            buffer: slab,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some((plan.row * CELL_BYTES) as u32),
+                rows_per_image: Some(dims[1] as u32),
+            },
+        },
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: 0,
+                y: 0,
+                z: first_layer as u32,
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::Extent3d {
+            width: dims[0] as u32,
+            height: dims[1] as u32,
+            depth_or_array_layers: layers as u32,
+        },
+    );
+}
+
 impl WgpuBackend {
     pub(super) fn run_voxelize(
         &mut self,
@@ -83,133 +194,153 @@ impl WgpuBackend {
             .scene
             .as_ref()
             .ok_or(BackendError::NothingUploaded("wgpu"))?;
-        let dims = geometry.dims;
-        let max_3d = u64::from(ctx.limits.max_texture_dimension_3d);
-        if dims.iter().any(|&d| d as u64 > max_3d) {
-            return Err(device_error(format!(
-                "a voxel grid of {dims:?} cells does not fit a 3D texture: {} allows at most \
-                 {max_3d} texels along each side (max_texture_dimension_3d)",
-                ctx.info.name
-            )));
-        }
-        let row = row_cells(dims);
-        let layer_bytes = row * dims[1] as u64 * CELL_BYTES;
-        let max_binding = self.max_binding;
-        if layer_bytes > max_binding {
-            return Err(device_error(format!(
-                "one layer of a {dims:?} voxel grid needs {layer_bytes} bytes of slab buffer, \
-                 more than the {max_binding} bytes {} binds per storage buffer",
-                ctx.info.name
-            )));
-        }
-        let layers_per_slab = (max_binding / layer_bytes).min(dims[2] as u64) as usize;
-        let slabs = dims[2].div_ceil(layers_per_slab);
-        let count = scene.data.count;
-        let chunk = ((max_binding / SPLAT_BYTES) as usize).min(count).max(1);
-        let chunks = count.div_ceil(chunk);
-
-        // The texture, kept while the grid's dimensions stay.
-        if self.voxels.as_ref().is_none_or(|v| v.geometry.dims != dims) {
-            self.voxels = None;
-            let bytes = geometry.bytes();
-            let (texture, march_uniform) = ctx
-                .scoped(&format!("voxel grid texture ({bytes} bytes)"), || {
-                    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-                        label: Some("voxel grid"),
-                        size: wgpu::Extent3d {
-                            width: dims[0] as u32,
-                            height: dims[1] as u32,
-                            depth_or_array_layers: dims[2] as u32,
-                        },
-                        mip_level_count: 1,
-                        sample_count: 1,
-                        dimension: wgpu::TextureDimension::D3,
-                        format: wgpu::TextureFormat::Rgba32Float,
-                        usage: wgpu::TextureUsages::TEXTURE_BINDING
-                            | wgpu::TextureUsages::COPY_DST
-                            | wgpu::TextureUsages::COPY_SRC,
-                        view_formats: &[],
-                    });
-                    let uniform =
-                        util::uniform(&ctx, "voxel grid", std::mem::size_of::<GpuVoxels>() as u64);
-                    (texture, uniform)
-                })
-                .map_err(|e| {
-                    let e = match e {
-                        BackendError::Device { message, .. } => message,
-                        other => other.to_string(),
-                    };
-                    device_error(format!(
-                        "{e} (a voxel grid of {dims:?} cells is one rgba32float 3D texture of \
-                         {} MiB, more than {} allocates: use a smaller --voxel-grid)",
-                        bytes >> 20,
-                        ctx.info.name
-                    ))
-                })?;
-            let view = texture.create_view(&Default::default());
-            self.voxels = Some(Voxels {
-                geometry,
-                texture,
-                view,
-                march_uniform,
-            });
-        }
+        let plan = SlabPlan::new(&ctx, geometry.dims, scene.data.count, self.max_binding)?;
+        self.ensure_grid_texture(&geometry)?;
         buffer_at_least(
             &ctx,
             &mut self.splat_buffers.slab,
             "voxel slab",
-            layers_per_slab as u64 * layer_bytes,
+            plan.layers_per_slab as u64 * plan.layer_bytes,
             storage,
         )?;
         buffer_at_least(
             &ctx,
             &mut self.splat_buffers.splats,
             "voxel splats",
-            chunk as u64 * SPLAT_BYTES,
+            plan.chunk as u64 * SPLAT_BYTES,
             storage,
         )?;
         let scene = self.scene.as_ref().expect("checked above");
         scene.write_maps(&ctx, self.tree.as_ref(), &self.optical, &frame.colour_table);
-        let colour = frame.colour;
-        let base = GpuVoxels::new(&geometry, scene.data.origin, row as u32, colour);
+        let base = GpuVoxels::new(&geometry, scene.data.origin, plan.row as u32, frame.colour);
         let voxels = self.voxels.as_mut().expect("made above");
         voxels.geometry = geometry;
         write(&ctx, &voxels.march_uniform, bytemuck::bytes_of(&base));
+        let entry = self.write_pass_ranges(&plan, base)?;
+        let encoder = self.record_voxelize(frame, &plan, entry)?;
+        let device_time = util::submit_and_time(&ctx, "voxelize", encoder)?;
+        self.timings.voxelize = device_time.unwrap_or_else(|| started.elapsed());
+        let SlabPlan {
+            dims,
+            layers_per_slab,
+            slabs,
+            count,
+            chunks,
+            ..
+        } = plan;
+        tracing::debug!(
+            "wgpu: voxelised {count} particles into {dims:?} cells in {slabs} slab(s) of \
+             {layers_per_slab} layer(s), {chunks} chunk(s) of particles"
+        );
+        Ok(())
+    }
 
-        // One uniform entry per pass (slab, chunk), at the device's offset alignment: the
-        // passes of one submission each read their own range.
+    /// Makes the grid's texture (and the march's uniform) unless the grid has its dimensions.
+    fn ensure_grid_texture(&mut self, geometry: &VoxelGeometry) -> Result<(), BackendError> {
+        let dims = geometry.dims;
+        if self
+            .voxels
+            .as_ref()
+            .is_some_and(|v| v.geometry.dims == dims)
+        {
+            return Ok(());
+        }
+        let ctx = &self.ctx;
+        self.voxels = None;
+        let bytes = geometry.bytes();
+        let (texture, march_uniform) = ctx
+            .scoped(&format!("voxel grid texture ({bytes} bytes)"), || {
+                let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("voxel grid"),
+                    size: wgpu::Extent3d {
+                        width: dims[0] as u32,
+                        height: dims[1] as u32,
+                        depth_or_array_layers: dims[2] as u32,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D3,
+                    format: wgpu::TextureFormat::Rgba32Float,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_DST
+                        | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                });
+                let uniform =
+                    util::uniform(ctx, "voxel grid", std::mem::size_of::<GpuVoxels>() as u64);
+                (texture, uniform)
+            })
+            .map_err(|e| {
+                let e = match e {
+                    BackendError::Device { message, .. } => message,
+                    other => other.to_string(),
+                };
+                device_error(format!(
+                    "{e} (a voxel grid of {dims:?} cells is one rgba32float 3D texture of \
+                     {} MiB, more than {} allocates: use a smaller --voxel-grid)",
+                    bytes >> 20,
+                    ctx.info.name
+                ))
+            })?;
+        let view = texture.create_view(&Default::default());
+        self.voxels = Some(Voxels {
+            geometry: *geometry,
+            texture,
+            view,
+            march_uniform,
+        });
+        Ok(())
+    }
+
+    /// Writes one uniform entry per pass (slab, chunk), `base` with the pass's range, at the
+    /// device's offset alignment (the passes of one submission each read their own range);
+    /// returns the entries' stride.
+    fn write_pass_ranges(&mut self, plan: &SlabPlan, base: GpuVoxels) -> Result<u64, BackendError> {
+        let ctx = &self.ctx;
         let align = u64::from(ctx.limits.min_uniform_buffer_offset_alignment);
         let entry = (std::mem::size_of::<GpuVoxels>() as u64).next_multiple_of(align);
-        let passes = slabs * chunks;
+        let passes = plan.slabs * plan.chunks;
         let mut entries = vec![0u8; passes * entry as usize];
-        for s in 0..slabs {
-            let first_layer = s * layers_per_slab;
-            let layers = layers_per_slab.min(dims[2] - first_layer);
-            for c in 0..chunks {
-                let first = c * chunk;
+        for s in 0..plan.slabs {
+            let (first_layer, layers) = plan.layers(s);
+            for c in 0..plan.chunks {
+                let (first, in_chunk) = plan.particles(c);
                 let mut v = base;
                 v.range = [
                     first as u32,
-                    chunk.min(count - first) as u32,
+                    in_chunk as u32,
                     first_layer as u32,
                     layers as u32,
                 ];
-                let at = (s * chunks + c) * entry as usize;
+                let at = (s * plan.chunks + c) * entry as usize;
                 entries[at..at + std::mem::size_of::<GpuVoxels>()]
                     .copy_from_slice(bytemuck::bytes_of(&v));
             }
         }
         buffer_at_least(
-            &ctx,
+            ctx,
             &mut self.splat_buffers.ranges,
             "voxel pass ranges",
             entries.len() as u64,
             util::uniform,
         )?;
         let ranges = self.splat_buffers.ranges.as_ref().expect("made above");
-        write(&ctx, ranges, &entries);
+        write(ctx, ranges, &entries);
+        Ok(entry)
+    }
 
-        let mut variant = scene.variant(frame.integrator, colour, frame.noise);
+    /// Records a voxelisation's passes: per slab, the slab cleared, each chunk's particles made
+    /// as the kernel sees them (once, when there is one chunk) and splatted into it, and the
+    /// slab copied into the texture. `entry` is the stride of the passes' uniform entries.
+    fn record_voxelize(
+        &self,
+        frame: &FrameParams,
+        plan: &SlabPlan,
+        entry: u64,
+    ) -> Result<wgpu::CommandEncoder, BackendError> {
+        let ctx = &self.ctx;
+        let scene = self.scene.as_ref().expect("checked by run_voxelize");
+        let mut variant = scene.variant(frame.integrator, frame.colour, frame.noise);
         // Neither pass integrates or draws noise: one variant per scene and colour mode.
         variant[spec::INTEGRATOR] = 0;
         variant[spec::NOISE_KIND] = 0;
@@ -218,16 +349,16 @@ impl WgpuBackend {
         let splat = ctx.pipeline(on_wgpu::VOXEL_SPLAT, None, Layout::Whole)?;
         let slab = self.splat_buffers.slab.as_ref().expect("made above");
         let splats = self.splat_buffers.splats.as_ref().expect("made above");
+        let ranges = self.splat_buffers.ranges.as_ref().expect("made above");
         let voxels = self.voxels.as_ref().expect("made above");
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         ctx.scoped("voxelize", || {
-            for s in 0..slabs {
-                let first_layer = s * layers_per_slab;
-                let layers = layers_per_slab.min(dims[2] - first_layer);
+            for s in 0..plan.slabs {
+                let (first_layer, layers) = plan.layers(s);
                 encoder.clear_buffer(slab, 0, None);
-                for c in 0..chunks {
-                    let pass = (s * chunks + c) as u64;
-                    let in_chunk = chunk.min(count - c * chunk) as u64;
+                for c in 0..plan.chunks {
+                    let pass = (s * plan.chunks + c) as u64;
+                    let in_chunk = plan.particles(c).1 as u64;
                     let range = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                         buffer: ranges,
                         offset: pass * entry,
@@ -235,7 +366,7 @@ impl WgpuBackend {
                     });
                     // With one chunk the particles as the kernel sees them are the same for
                     // every slab: made once.
-                    if chunks > 1 || s == 0 {
+                    if plan.chunks > 1 || s == 0 {
                         let mut bound = vec![
                             (0, range.clone()),
                             (1, scene.field_uniform.as_entire_binding()),
@@ -258,7 +389,7 @@ impl WgpuBackend {
                                 .unwrap_or(&scene.particles)
                                 .entries(26, particles_layout),
                         );
-                        let bg = bind(&ctx, &prepare, &bound);
+                        let bg = bind(ctx, &prepare, &bound);
                         dispatch(
                             &mut encoder,
                             "voxel particles",
@@ -268,7 +399,7 @@ impl WgpuBackend {
                         );
                     }
                     let bg = bind(
-                        &ctx,
+                        ctx,
                         &splat,
                         &[
                             (0, range),
@@ -279,40 +410,17 @@ impl WgpuBackend {
                     let groups = grid(in_chunk, on_wgpu::VOXEL_SPLAT.point().threads());
                     dispatch(&mut encoder, "voxel splat", &splat, &bg, groups);
                 }
-                encoder.copy_buffer_to_texture(
-                    wgpu::TexelCopyBufferInfo {
-                        buffer: slab,
-                        layout: wgpu::TexelCopyBufferLayout {
-                            offset: 0,
-                            bytes_per_row: Some((row * CELL_BYTES) as u32),
-                            rows_per_image: Some(dims[1] as u32),
-                        },
-                    },
-                    wgpu::TexelCopyTextureInfo {
-                        texture: &voxels.texture,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d {
-                            x: 0,
-                            y: 0,
-                            z: first_layer as u32,
-                        },
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    wgpu::Extent3d {
-                        width: dims[0] as u32,
-                        height: dims[1] as u32,
-                        depth_or_array_layers: layers as u32,
-                    },
+                copy_slab(
+                    &mut encoder,
+                    slab,
+                    &voxels.texture,
+                    plan,
+                    first_layer,
+                    layers,
                 );
             }
         })?;
-        let device_time = util::submit_and_time(&ctx, "voxelize", encoder)?;
-        self.timings.voxelize = device_time.unwrap_or_else(|| started.elapsed());
-        tracing::debug!(
-            "wgpu: voxelised {count} particles into {dims:?} cells in {slabs} slab(s) of \
-             {layers_per_slab} layer(s), {chunks} chunk(s) of particles"
-        );
-        Ok(())
+        Ok(encoder)
     }
 
     /// One frame of the frame's integrator over the grid, into the accumulation.

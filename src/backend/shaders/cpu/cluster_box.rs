@@ -1,10 +1,11 @@
 //! The CPU twin of `shaders_glsl/shared/cluster_box.glsl`: cluster `c`'s box by the shared
 //! cluster-box rule, which the stages `lbvh_boxes` ([`super::lbvh_boxes`]) and `blas_boxes`
 //! ([`super::blas_boxes`]) apply to every cluster. The rule itself is
-//! [`crate::accel::clusters::cluster_box`], at f32.
+//! [`crate::accel::clusters::cluster_box`], at f32, over a step's particles by
+//! [`crate::accel::lbvh::cluster_box_of`].
 
 use super::rbf::RadiusRule;
-use crate::accel::clusters::cluster_box as rule;
+use crate::accel::lbvh::cluster_box_of;
 
 /// Cluster `c`'s box (clusters of `k` of `points`), or `None` when it is empty.
 pub fn cluster_box(
@@ -13,44 +14,5 @@ pub fn cluster_box(
     k: usize,
     radius: &RadiusRule<'_>,
 ) -> Option<[[f32; 3]; 2]> {
-    let end = ((c + 1) * k).min(points.len());
-    rule((c * k..end).map(|i| {
-        let p = points[i];
-        ([p[0], p[1], p[2]], radius.radius(p, i))
-    }))
-}
-
-/// A box as the GPU stores it: `[min.xyz, 0]`, `[max.xyz, 0]`.
-pub type GpuBox = [[f32; 4]; 2];
-
-pub const EMPTY_BOX: GpuBox = [
-    [f32::INFINITY, f32::INFINITY, f32::INFINITY, 0.0],
-    [f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, 0.0],
-];
-
-/// Whether a box holds nothing (the GPU's test: not `min.x <= max.x`).
-pub fn box_is_empty(b: &GpuBox) -> bool {
-    // Written to match the GPU's `lo.x <= hi.x` exactly, NaN included.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    let empty = !(b[0][0] <= b[1][0]);
-    empty
-}
-
-/// Whether `x` lies in `b` (boundary included), as the traversal tests it.
-pub fn box_contains(b: &GpuBox, x: [f32; 3]) -> bool {
-    (0..3).all(|i| x[i] >= b[0][i] && x[i] <= b[1][i])
-}
-
-pub(super) fn box_union(a: &GpuBox, b: &GpuBox) -> GpuBox {
-    let mut out = *a;
-    for i in 0..3 {
-        out[0][i] = a[0][i].min(b[0][i]);
-        out[1][i] = a[1][i].max(b[1][i]);
-    }
-    out
-}
-
-/// `b` contains `inner` (an empty `inner` is contained in anything).
-pub(super) fn box_contains_box(b: &GpuBox, inner: &GpuBox) -> bool {
-    box_is_empty(inner) || (0..3).all(|i| b[0][i] <= inner[0][i] && b[1][i] >= inner[1][i])
+    cluster_box_of(points, c, k, |p, i| radius.radius(p, i))
 }
