@@ -89,7 +89,7 @@ pub(super) fn read(
         header: &header,
     };
     let mut positions = Vec::new();
-    let mut attributes: Vec<crate::io::Attribute> = Vec::new();
+    let mut attributes: Vec<crate::values::Attribute> = Vec::new();
     let mut skipped = Vec::new();
     // A piece without points (VTK writes them for idle MPI ranks) adds nothing.
     let pieces = header.pieces.iter().filter(|p| p.points > 0);
