@@ -170,6 +170,33 @@ impl Body<'_> {
             "file is truncated: PLY element '{element}' ends at row {row}"
         ))
     }
+
+    /// Reads one row of `element`: each scalar is handed to `scalar` with its index among the
+    /// scalars; list properties are stepped over.
+    fn row(
+        &mut self,
+        at: At<'_>,
+        element: &Element,
+        row: u64,
+        mut scalar: impl FnMut(usize, f64),
+    ) -> Result<(), DataError> {
+        let mut k = 0;
+        for p in &element.properties {
+            match p {
+                Property::Scalar(_, t) => {
+                    scalar(k, self.next(at, *t, &element.name, row)?);
+                    k += 1;
+                }
+                Property::List(c, i) => {
+                    let len = self.next(at, *c, &element.name, row)?;
+                    for _ in 0..(len.max(0.0) as u64) {
+                        self.next(at, *i, &element.name, row)?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
@@ -199,24 +226,32 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             min_row,
             body_len,
         )?;
-        if element.name != "vertex" {
-            for row in 0..element.count {
-                for p in &element.properties {
-                    match p {
-                        Property::Scalar(_, t) => {
-                            body.next(at, *t, &element.name, row)?;
-                        }
-                        Property::List(c, i) => {
-                            let len = body.next(at, *c, &element.name, row)?;
-                            for _ in 0..(len.max(0.0) as u64) {
-                                body.next(at, *i, &element.name, row)?;
-                            }
-                        }
-                    }
-                }
-            }
-            continue;
+        if element.name == "vertex" {
+            return read_vertices(at, &mut body, element, n, selection);
         }
+        for row in 0..element.count {
+            body.row(at, element, row, |_, _| {})?;
+        }
+    }
+    Err(at.err(Problem::Dimensionality(
+        "the PLY file has no 'vertex' element".into(),
+    )))
+}
+
+/// The vertex element's scalar properties, where x, y and z stand among them, and which of
+/// them are stored (positions and the selected attributes; the others are stepped over).
+struct VertexLayout<'a> {
+    scalars: Vec<(&'a str, Scalar)>,
+    xyz: [usize; 3],
+    stored: Vec<bool>,
+}
+
+impl<'a> VertexLayout<'a> {
+    fn new(
+        at: At<'_>,
+        element: &'a Element,
+        selection: &AttributeSelection,
+    ) -> Result<Self, DataError> {
         let scalars: Vec<(&str, Scalar)> = element
             .properties
             .iter()
@@ -231,108 +266,129 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
                 "the PLY vertex element needs properties x, y and z".into(),
             )));
         };
-        // Positions and the selected properties are stored; the others are stepped over.
-        let stored: Vec<bool> = scalars
+        let stored = scalars
             .iter()
             .enumerate()
             .map(|(k, (name, _))| [ix, iy, iz].contains(&k) || selection.keeps(name))
             .collect();
-        let (positions, columns) =
-            if header.encoding != Encoding::Ascii && scalars.len() == element.properties.len() {
-                // Rows of scalars only have a fixed size: the positions and the stored properties
-                // are decoded by their offsets in one parallel pass; the others are never decoded.
-                let mut layout = Vec::with_capacity(scalars.len());
-                let mut stride = 0;
-                for (_, t) in &scalars {
-                    layout.push(InRecord {
-                        offset: stride,
-                        scalar: *t,
-                    });
-                    stride += t.size();
-                }
-                let rest = &body.bytes[body.pos..];
-                if n * stride > rest.len() {
-                    let complete = (rest.len() / stride) as u64;
-                    return Err(body.truncated(at, "vertex", complete));
-                }
-                let decoded: Vec<usize> = (0..scalars.len())
-                    .filter(|k| stored[*k] && ![ix, iy, iz].contains(k))
-                    .collect();
-                let wanted: Vec<InRecord> = decoded.iter().map(|&k| layout[k]).collect();
-                let (positions, values) = decode_records(
-                    rest,
-                    n,
-                    stride,
-                    header.encoding == Encoding::BigEndian,
-                    [layout[ix], layout[iy], layout[iz]],
-                    &wanted,
-                );
-                let mut columns = vec![Vec::new(); scalars.len()];
-                for (k, v) in decoded.into_iter().zip(values) {
-                    columns[k] = v;
-                }
-                (positions, columns)
-            } else {
-                let mut columns: Vec<Vec<f64>> = stored
-                    .iter()
-                    .map(|&s| Vec::with_capacity(if s { n } else { 0 }))
-                    .collect();
-                let mut row_values = vec![0.0f64; scalars.len()];
-                for row in 0..element.count {
-                    let mut k = 0;
-                    for p in &element.properties {
-                        match p {
-                            Property::Scalar(_, t) => {
-                                row_values[k] = body.next(at, *t, "vertex", row)?;
-                                k += 1;
-                            }
-                            Property::List(c, i) => {
-                                let len = body.next(at, *c, "vertex", row)?;
-                                for _ in 0..(len.max(0.0) as u64) {
-                                    body.next(at, *i, "vertex", row)?;
-                                }
-                            }
-                        }
-                    }
-                    for ((col, v), _) in columns
-                        .iter_mut()
-                        .zip(&row_values)
-                        .zip(&stored)
-                        .filter(|(_, s)| **s)
-                    {
-                        col.push(*v);
-                    }
-                }
-                let positions = (0..n)
-                    .map(|i| DVec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
-                    .collect();
-                (positions, columns)
-            };
-        let mut attributes = Vec::new();
-        let mut skipped = Vec::new();
-        for (k, ((name, _), values)) in scalars.iter().zip(columns).enumerate() {
-            if [ix, iy, iz].contains(&k) {
-                continue;
-            }
-            if stored[k] {
-                attributes.push(Attribute {
-                    name: (*name).to_owned(),
-                    values,
-                });
-            } else {
-                skipped.push((*name).to_owned());
-            }
-        }
-        return Ok(Columns {
-            positions,
-            attributes,
-            skipped,
-            finite: false,
-        });
+        Ok(VertexLayout {
+            scalars,
+            xyz: [ix, iy, iz],
+            stored,
+        })
     }
-    Err(at.err(Problem::Dimensionality(
-        "the PLY file has no 'vertex' element".into(),
-    )))
+
+    fn is_position(&self, k: usize) -> bool {
+        self.xyz.contains(&k)
+    }
+}
+
+/// Reads the vertex element: its positions, the selected properties as attributes, the
+/// others' names as skipped.
+fn read_vertices(
+    at: At<'_>,
+    body: &mut Body<'_>,
+    element: &Element,
+    n: usize,
+    selection: &AttributeSelection,
+) -> Result<Columns, DataError> {
+    let layout = VertexLayout::new(at, element, selection)?;
+    let (positions, columns) =
+        if body.encoding != Encoding::Ascii && layout.scalars.len() == element.properties.len() {
+            decode_fixed_rows(at, body, &layout, n)?
+        } else {
+            decode_row_by_row(at, body, element, &layout, n)?
+        };
+    let mut attributes = Vec::new();
+    let mut skipped = Vec::new();
+    for (k, ((name, _), values)) in layout.scalars.iter().zip(columns).enumerate() {
+        if layout.is_position(k) {
+            continue;
+        }
+        if layout.stored[k] {
+            attributes.push(Attribute {
+                name: (*name).to_owned(),
+                values,
+            });
+        } else {
+            skipped.push((*name).to_owned());
+        }
+    }
+    Ok(Columns {
+        positions,
+        attributes,
+        skipped,
+        finite: false,
+    })
+}
+
+/// Rows of scalars only have a fixed size: the positions and the stored properties are decoded
+/// by their offsets in one parallel pass; the others are never decoded. Columns not decoded
+/// are empty.
+fn decode_fixed_rows(
+    at: At<'_>,
+    body: &Body<'_>,
+    layout: &VertexLayout<'_>,
+    n: usize,
+) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
+    let mut offsets = Vec::with_capacity(layout.scalars.len());
+    let mut stride = 0;
+    for (_, t) in &layout.scalars {
+        offsets.push(InRecord {
+            offset: stride,
+            scalar: *t,
+        });
+        stride += t.size();
+    }
+    let rest = &body.bytes[body.pos..];
+    if n * stride > rest.len() {
+        let complete = (rest.len() / stride) as u64;
+        return Err(body.truncated(at, "vertex", complete));
+    }
+    let decoded: Vec<usize> = (0..layout.scalars.len())
+        .filter(|k| layout.stored[*k] && !layout.is_position(*k))
+        .collect();
+    let wanted: Vec<InRecord> = decoded.iter().map(|&k| offsets[k]).collect();
+    let (positions, values) = decode_records(
+        rest,
+        n,
+        stride,
+        body.encoding == Encoding::BigEndian,
+        layout.xyz.map(|k| offsets[k]),
+        &wanted,
+    );
+    let mut columns = vec![Vec::new(); layout.scalars.len()];
+    for (k, v) in decoded.into_iter().zip(values) {
+        columns[k] = v;
+    }
+    Ok((positions, columns))
+}
+
+/// Ascii rows, or rows with lists: value by value. Columns not stored are empty.
+fn decode_row_by_row(
+    at: At<'_>,
+    body: &mut Body<'_>,
+    element: &Element,
+    layout: &VertexLayout<'_>,
+    n: usize,
+) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
+    let mut columns: Vec<Vec<f64>> = layout
+        .stored
+        .iter()
+        .map(|&s| Vec::with_capacity(if s { n } else { 0 }))
+        .collect();
+    for row in 0..element.count {
+        body.row(at, element, row, |k, v| {
+            if layout.stored[k] {
+                columns[k].push(v);
+            }
+        })?;
+    }
+    let [ix, iy, iz] = layout.xyz;
+    let positions = (0..n)
+        .map(|i| DVec3::new(columns[ix][i], columns[iy][i], columns[iz][i]))
+        .collect();
+    Ok((positions, columns))
 }
 
 /// Writes a step as binary little-endian PLY with double properties (the precision a step

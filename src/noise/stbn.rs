@@ -117,22 +117,7 @@ fn ranks_with(
     balanced: bool,
     mut progress: impl FnMut(usize, usize),
 ) -> Vec<u32> {
-    for (name, dim) in [("width", width), ("height", height), ("depth", depth)] {
-        assert!(
-            (1..=MAX_DIM).contains(&dim),
-            "mask {name} {dim} is outside 1..={MAX_DIM}"
-        );
-    }
-    assert!(
-        sigma.is_finite() && sigma > 0.0,
-        "sigma must be a positive finite number, got {sigma}"
-    );
-    let n64 = u64::from(width) * u64::from(height) * u64::from(depth);
-    assert!(
-        n64 < 1 << 32,
-        "a mask of {n64} pixels is too large (the limit is 2^32 - 1)"
-    );
-    let n = n64 as usize;
+    let n = checked_size(width, height, depth, sigma);
     let (w, h, d) = (width as usize, height as usize, depth as usize);
     let wh = w * h;
     let mut state = State::new(w, h, d, sigma, balanced);
@@ -145,72 +130,16 @@ fn ranks_with(
         // Relaxation moves points only out of the `extra` fuller columns: keep enough of them.
         count = count / wh * wh + (count % wh).max(wh / 10);
     }
-    let seed_hash = lowbias32(lowbias32(seed as u32) ^ (seed >> 32) as u32);
-    let initial: Vec<u32> = if balanced {
-        // `full` whole bands (one point per pixel column each) plus one more point in each of
-        // `extra` columns: every column holds `full` or `full + 1` points.
-        let (full, extra) = (count / wh, count % wh);
-        let column_seed = lowbias32(seed_hash);
-        let mut columns: Vec<u32> = (0..wh as u32).collect();
-        if extra > 0 && extra < wh {
-            columns.select_nth_unstable_by_key(extra, |&c| (lowbias32(column_seed ^ c), c));
-        }
-        let mut points_in = vec![full; wh];
-        for &c in &columns[..extra] {
-            points_in[c as usize] += 1;
-        }
-        (0..wh)
-            .into_par_iter()
-            .flat_map_iter(|c| {
-                let mut frames: Vec<u32> = (0..d).map(|z| (z * wh + c) as u32).collect();
-                frames.sort_unstable_by_key(|&i| (lowbias32(seed_hash ^ i), i));
-                frames.truncate(points_in[c]);
-                frames
-            })
-            .collect()
-    } else {
-        // The `count` pixels of smallest seeded hash.
-        let mut order: Vec<u32> = (0..n as u32).collect();
-        if count < n {
-            order.select_nth_unstable_by_key(count, |&i| (lowbias32(seed_hash ^ i), i));
-        }
-        order.truncate(count);
-        order
-    };
-    for &i in &initial {
+    for &i in &initial_pattern(n, wh, d, count, seed, balanced) {
         state.splat(i as usize, true);
     }
-    drop(initial);
     if balanced {
         // Move points only from the fuller columns to the emptier ones.
         let cap = count.div_ceil(wh) as u32;
         state.cluster_above = cap - 1;
         state.void_max = cap - 1;
     }
-    let mut voids = MinTree::build(n, |i| state.void_key(i));
-    let mut clusters = MinTree::build(n, |i| state.cluster_key(i));
-    // A swap never raises the pattern's total energy (it lowers it unless energies tie), so
-    // this settles; the cap only guards against a cycle among ties.
-    let mut removed = Vec::new();
-    for _ in 0..n {
-        let cluster = MinTree::index(clusters.best());
-        state.splat(cluster, false);
-        voids.update(&state.dirty, |i| state.void_key(i));
-        let void = MinTree::index(voids.best());
-        if void == cluster {
-            // Stable. Putting the point back restores every energy exactly, so the cluster
-            // tree, not yet told about the removal, is still right.
-            state.splat(cluster, true);
-            voids.update(&state.dirty, |i| state.void_key(i));
-            break;
-        }
-        removed.clear();
-        removed.extend_from_slice(&state.dirty);
-        state.splat(void, true);
-        voids.update(&state.dirty, |i| state.void_key(i));
-        clusters.update(&removed, |i| state.cluster_key(i));
-        clusters.update(&state.dirty, |i| state.cluster_key(i));
-    }
+    let (mut voids, mut clusters) = relax(&mut state, n);
     let initial_energy = state.energy.clone();
     let initial_set = state.set.clone();
     let initial_counts = state.column_count.clone();
@@ -242,6 +171,104 @@ fn ranks_with(
     }
     debug_assert!(ranks.iter().all(|&r| r != u32::MAX));
     ranks
+}
+
+/// The pixels of a W x H x D mask, after checking its dimensions and `sigma`.
+///
+/// # Panics
+///
+/// As [`generate`].
+fn checked_size(width: u32, height: u32, depth: u32, sigma: f64) -> usize {
+    for (name, dim) in [("width", width), ("height", height), ("depth", depth)] {
+        assert!(
+            (1..=MAX_DIM).contains(&dim),
+            "mask {name} {dim} is outside 1..={MAX_DIM}"
+        );
+    }
+    assert!(
+        sigma.is_finite() && sigma > 0.0,
+        "sigma must be a positive finite number, got {sigma}"
+    );
+    let n64 = u64::from(width) * u64::from(height) * u64::from(depth);
+    assert!(
+        n64 < 1 << 32,
+        "a mask of {n64} pixels is too large (the limit is 2^32 - 1)"
+    );
+    n64 as usize
+}
+
+/// The `count` pixels of the initial pattern (of `n`, in slices of `wh` pixels, `d` deep),
+/// chosen by a seeded hash.
+fn initial_pattern(
+    n: usize,
+    wh: usize,
+    d: usize,
+    count: usize,
+    seed: u64,
+    balanced: bool,
+) -> Vec<u32> {
+    let seed_hash = lowbias32(lowbias32(seed as u32) ^ (seed >> 32) as u32);
+    if balanced {
+        // `full` whole bands (one point per pixel column each) plus one more point in each of
+        // `extra` columns: every column holds `full` or `full + 1` points.
+        let (full, extra) = (count / wh, count % wh);
+        let column_seed = lowbias32(seed_hash);
+        let mut columns: Vec<u32> = (0..wh as u32).collect();
+        if extra > 0 && extra < wh {
+            columns.select_nth_unstable_by_key(extra, |&c| (lowbias32(column_seed ^ c), c));
+        }
+        let mut points_in = vec![full; wh];
+        for &c in &columns[..extra] {
+            points_in[c as usize] += 1;
+        }
+        (0..wh)
+            .into_par_iter()
+            .flat_map_iter(|c| {
+                let mut frames: Vec<u32> = (0..d).map(|z| (z * wh + c) as u32).collect();
+                frames.sort_unstable_by_key(|&i| (lowbias32(seed_hash ^ i), i));
+                frames.truncate(points_in[c]);
+                frames
+            })
+            .collect()
+    } else {
+        // The `count` pixels of smallest seeded hash.
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        if count < n {
+            order.select_nth_unstable_by_key(count, |&i| (lowbias32(seed_hash ^ i), i));
+        }
+        order.truncate(count);
+        order
+    }
+}
+
+/// Relaxes the initial pattern of `state` (of `n` pixels): the tightest cluster moves to the
+/// largest void until they are the same pixel. Returns the voids and clusters trees, up to date.
+fn relax(state: &mut State, n: usize) -> (MinTree, MinTree) {
+    let mut voids = MinTree::build(n, |i| state.void_key(i));
+    let mut clusters = MinTree::build(n, |i| state.cluster_key(i));
+    // A swap never raises the pattern's total energy (it lowers it unless energies tie), so
+    // this settles; the cap only guards against a cycle among ties.
+    let mut removed = Vec::new();
+    for _ in 0..n {
+        let cluster = MinTree::index(clusters.best());
+        state.splat(cluster, false);
+        voids.update(&state.dirty, |i| state.void_key(i));
+        let void = MinTree::index(voids.best());
+        if void == cluster {
+            // Stable. Putting the point back restores every energy exactly, so the cluster
+            // tree, not yet told about the removal, is still right.
+            state.splat(cluster, true);
+            voids.update(&state.dirty, |i| state.void_key(i));
+            break;
+        }
+        removed.clear();
+        removed.extend_from_slice(&state.dirty);
+        state.splat(void, true);
+        voids.update(&state.dirty, |i| state.void_key(i));
+        clusters.update(&removed, |i| state.cluster_key(i));
+        clusters.update(&state.dirty, |i| state.cluster_key(i));
+    }
+    (voids, clusters)
 }
 
 /// Turns global ranks (a permutation of 0..W·H·D) into mask values: within each slice, the

@@ -38,7 +38,8 @@ pub struct StepStats {
     pub all_attributes: bool,
 }
 
-/// One attribute's range, robust range and mean over one step.
+/// One attribute's range, robust range and mean over one step (or, merged, over a series:
+/// `AttributeInfo`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AttributeStats {
     pub name: String,
@@ -48,6 +49,7 @@ pub struct AttributeStats {
     pub p01: f64,
     pub p99: f64,
     pub mean: f64,
+    /// Values the mean is over.
     pub count: usize,
 }
 

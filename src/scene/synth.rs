@@ -380,13 +380,55 @@ fn refine(steps: &[Step], count: usize, seed: u64) -> Vec<Step> {
 /// it moves plausibly, splashes, and its density varies. Attributes: `velocity` (magnitude,
 /// m/s) and `neighbours` (particles within two spacings, a density estimate).
 fn dambreak(n: usize, steps: usize, seed: u64) -> Vec<Step> {
-    let tank = DAMBREAK_TANK;
-    let column = DAMBREAK_COLUMN;
     let spacing = dambreak_spacing(n);
-    let per_axis = (column / spacing).ceil().as_uvec3().max(glam::UVec3::ONE);
+    let mut x = dambreak_column(n, spacing, seed);
+    let mut v = vec![DVec3::ZERO; n];
+    let substeps = 8;
+    let radius = 0.5 * spacing;
+    let sim = Dambreak {
+        tank: DAMBREAK_TANK,
+        spacing,
+        h: (1.0 / 30.0) / substeps as f64,
+        lo: DVec3::splat(radius),
+        hi: DAMBREAK_TANK - radius,
+    };
+    let mut out = Vec::with_capacity(steps);
+    let bar = crate::progress::bar(steps as u64, "simulating");
+    for step in 0..steps {
+        bar.inc(1);
+        if step > 0 {
+            for _ in 0..substeps {
+                sim.substep(&mut x, &mut v);
+            }
+        }
+        out.push(Step {
+            name: format!("{step:04}"),
+            positions: x.clone(),
+            attributes: vec![
+                Attribute {
+                    name: "velocity".into(),
+                    values: v.iter().map(|v| v.length()).collect(),
+                },
+                Attribute {
+                    name: "neighbours".into(),
+                    values: sim.neighbours(&x),
+                },
+            ],
+        });
+    }
+    bar.finish_and_clear();
+    out
+}
+
+/// The dam break's column: `n` particles `spacing` apart, jittered, filled bottom-up layer by
+/// layer, so the last layer is the partial one.
+fn dambreak_column(n: usize, spacing: f64, seed: u64) -> Vec<DVec3> {
+    let per_axis = (DAMBREAK_COLUMN / spacing)
+        .ceil()
+        .as_uvec3()
+        .max(glam::UVec3::ONE);
     let mut rng = Pcg64::seed_from_u64(seed);
     let mut x: Vec<DVec3> = Vec::with_capacity(n);
-    // Fill the column bottom-up, layer by layer, so the last layer is the partial one.
     'fill: for j in 0..u32::MAX {
         for i in 0..per_axis.x {
             for k in 0..per_axis.z {
@@ -399,81 +441,100 @@ fn dambreak(n: usize, steps: usize, seed: u64) -> Vec<Step> {
             }
         }
     }
-    let mut v = vec![DVec3::ZERO; n];
-    let gravity = DVec3::new(0.0, -9.81, 0.0);
-    let frame = 1.0 / 30.0;
-    let substeps = 8;
-    let h = frame / substeps as f64;
-    let radius = 0.5 * spacing;
-    let lo = DVec3::splat(radius);
-    let hi = tank - radius;
+    x
+}
 
-    let mut out = Vec::with_capacity(steps);
-    let bar = crate::progress::bar(steps as u64, "simulating");
-    for step in 0..steps {
-        bar.inc(1);
-        if step > 0 {
-            for _ in 0..substeps {
-                let mut p: Vec<DVec3> = x
-                    .par_iter()
-                    .zip(&mut v)
-                    .map(|(x, v)| {
-                        *v += gravity * h;
-                        (*x + *v * h).clamp(lo, hi)
-                    })
-                    .collect();
-                for _ in 0..3 {
-                    let grid = NeighbourGrid::new(&p, spacing, tank);
-                    p = (0..n)
-                        .into_par_iter()
-                        .map(|i| {
-                            let mut correction = DVec3::ZERO;
-                            grid.for_each_near(p[i], |j| {
-                                if j == i {
-                                    return;
-                                }
-                                let d = p[i] - p[j];
-                                let len = d.length();
-                                if len < spacing {
-                                    // Co-located particles separate along a fixed, index-derived axis.
-                                    let dir = if len > 1e-12 * spacing {
-                                        d / len
-                                    } else {
-                                        let a = (i.wrapping_mul(2654435761) ^ j) as f64;
-                                        DVec3::new(a.sin(), a.cos(), (a * 0.5).sin()).normalize()
-                                            * if i < j { 1.0 } else { -1.0 }
-                                    };
-                                    correction += dir * 0.5 * (spacing - len);
-                                }
-                            });
-                            (p[i] + correction * 0.5).clamp(lo, hi)
-                        })
-                        .collect();
-                }
-                let new_v: Vec<DVec3> = (0..n).into_par_iter().map(|i| (p[i] - x[i]) / h).collect();
-                // XSPH-style viscosity: blend each velocity towards its neighbours' mean.
-                let grid = NeighbourGrid::new(&p, 2.0 * spacing, tank);
-                v = (0..n)
-                    .into_par_iter()
-                    .map(|i| {
-                        let (mut sum, mut weight) = (DVec3::ZERO, 0.0);
-                        grid.for_each_near(p[i], |j| {
-                            let d = p[i].distance(p[j]);
-                            if d < 2.0 * spacing {
-                                let w = 1.0 - d / (2.0 * spacing);
-                                sum += new_v[j] * w;
-                                weight += w;
-                            }
-                        });
-                        let mean = if weight > 0.0 { sum / weight } else { new_v[i] };
-                        new_v[i] + (mean - new_v[i]) * 0.05
-                    })
-                    .collect();
-                x = p;
-            }
+/// The dam break's dynamics: the tank, the particle spacing, the substep's length and the
+/// box the particles' centres keep to.
+struct Dambreak {
+    tank: DVec3,
+    spacing: f64,
+    h: f64,
+    lo: DVec3,
+    hi: DVec3,
+}
+
+impl Dambreak {
+    /// One substep: gravity, three passes of pushing particles apart, the velocities the
+    /// moves imply, then viscosity.
+    fn substep(&self, x: &mut Vec<DVec3>, v: &mut Vec<DVec3>) {
+        let (h, lo, hi) = (self.h, self.lo, self.hi);
+        let gravity = DVec3::new(0.0, -9.81, 0.0);
+        let mut p: Vec<DVec3> = x
+            .par_iter()
+            .zip(&mut *v)
+            .map(|(x, v)| {
+                *v += gravity * h;
+                (*x + *v * h).clamp(lo, hi)
+            })
+            .collect();
+        for _ in 0..3 {
+            p = self.separate(&p);
         }
-        let grid = NeighbourGrid::new(&x, 2.0 * spacing, tank);
-        let neighbours: Vec<f64> = (0..n)
+        let n = p.len();
+        let new_v: Vec<DVec3> = (0..n).into_par_iter().map(|i| (p[i] - x[i]) / h).collect();
+        *v = self.viscous(&p, &new_v);
+        *x = p;
+    }
+
+    /// Each particle moved half way out of its overlaps with those nearer than the spacing.
+    fn separate(&self, p: &[DVec3]) -> Vec<DVec3> {
+        let spacing = self.spacing;
+        let grid = NeighbourGrid::new(p, spacing, self.tank);
+        (0..p.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut correction = DVec3::ZERO;
+                grid.for_each_near(p[i], |j| {
+                    if j == i {
+                        return;
+                    }
+                    let d = p[i] - p[j];
+                    let len = d.length();
+                    if len < spacing {
+                        // Co-located particles separate along a fixed, index-derived axis.
+                        let dir = if len > 1e-12 * spacing {
+                            d / len
+                        } else {
+                            let a = (i.wrapping_mul(2654435761) ^ j) as f64;
+                            DVec3::new(a.sin(), a.cos(), (a * 0.5).sin()).normalize()
+                                * if i < j { 1.0 } else { -1.0 }
+                        };
+                        correction += dir * 0.5 * (spacing - len);
+                    }
+                });
+                (p[i] + correction * 0.5).clamp(self.lo, self.hi)
+            })
+            .collect()
+    }
+
+    /// XSPH-style viscosity: each velocity blended towards its neighbours' mean.
+    fn viscous(&self, p: &[DVec3], new_v: &[DVec3]) -> Vec<DVec3> {
+        let spacing = self.spacing;
+        let grid = NeighbourGrid::new(p, 2.0 * spacing, self.tank);
+        (0..p.len())
+            .into_par_iter()
+            .map(|i| {
+                let (mut sum, mut weight) = (DVec3::ZERO, 0.0);
+                grid.for_each_near(p[i], |j| {
+                    let d = p[i].distance(p[j]);
+                    if d < 2.0 * spacing {
+                        let w = 1.0 - d / (2.0 * spacing);
+                        sum += new_v[j] * w;
+                        weight += w;
+                    }
+                });
+                let mean = if weight > 0.0 { sum / weight } else { new_v[i] };
+                new_v[i] + (mean - new_v[i]) * 0.05
+            })
+            .collect()
+    }
+
+    /// Each particle's neighbours within two spacings.
+    fn neighbours(&self, x: &[DVec3]) -> Vec<f64> {
+        let spacing = self.spacing;
+        let grid = NeighbourGrid::new(x, 2.0 * spacing, self.tank);
+        (0..x.len())
             .into_par_iter()
             .map(|i| {
                 let mut count = 0u32;
@@ -482,24 +543,8 @@ fn dambreak(n: usize, steps: usize, seed: u64) -> Vec<Step> {
                 });
                 f64::from(count)
             })
-            .collect();
-        out.push(Step {
-            name: format!("{step:04}"),
-            positions: x.clone(),
-            attributes: vec![
-                Attribute {
-                    name: "velocity".into(),
-                    values: v.iter().map(|v| v.length()).collect(),
-                },
-                Attribute {
-                    name: "neighbours".into(),
-                    values: neighbours,
-                },
-            ],
-        });
+            .collect()
     }
-    bar.finish_and_clear();
-    out
 }
 
 #[cfg(test)]

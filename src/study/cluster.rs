@@ -5,7 +5,7 @@
 use super::plot::{self, Figure, Panel, Scale};
 use super::{
     Ctx, Description, Measurement, Options, Row, StudyError, build_and_refit_times, cameras,
-    frame_times, value, with_frame_settings,
+    frame_columns, frame_times, value, with_frame_settings,
 };
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
@@ -18,17 +18,7 @@ pub const DESCRIPTION: Description = Description {
             faster with K, a refit costing at most about a third of a rebuild (Table 1); and the \
             structure's size falls linearly with K, from about 9x the particles' bytes at K = 1 \
             to about half of them at K = 16 (Table 2).",
-    settings: &[
-        "radius",
-        "k",
-        "width",
-        "height",
-        "integrator",
-        "noise",
-        "spp",
-        "cameras",
-        "step_size",
-    ],
+    settings: frame_columns!["radius", "k"],
 };
 
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
@@ -81,9 +71,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
 }
 
 fn k_of(r: &Row) -> f64 {
-    r.setting("k")
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(f64::NAN)
+    r.number("k")
 }
 
 fn find<'a>(rows: &'a [Row], like: &Row, metric: &str, k: &str) -> Option<&'a Row> {

@@ -243,23 +243,42 @@ pub fn build_and_refit_times(
     Ok((builds, refits))
 }
 
+/// The settings columns of a study whose rows are timed frames: the study's own (what it
+/// varies), then the frames' ([`with_frame_settings`]).
+macro_rules! frame_columns {
+    ($($own:literal),* $(,)?) => {
+        &[
+            $($own,)*
+            "width",
+            "height",
+            "integrator",
+            "noise",
+            "spp",
+            "cameras",
+            "step_size",
+        ]
+    };
+}
+pub(crate) use frame_columns;
+
 /// A timed frame row's settings: `own` (what the study varies), then the frames' (the
 /// options' image size and integrator, blue noise, 1 spp, the orbit's cameras, the march step
-/// the session used).
+/// the session used), in [`frame_columns`]' order.
 pub fn with_frame_settings(
     mut own: Vec<(&'static str, String)>,
     o: &Options,
     step_size: f64,
 ) -> Vec<(&'static str, String)> {
-    own.extend([
-        ("width", o.image.0.to_string()),
-        ("height", o.image.1.to_string()),
-        ("integrator", format!("{:?}", o.integrator).to_lowercase()),
-        ("noise", "stbn".into()),
-        ("spp", "1".into()),
-        ("cameras", o.cameras.to_string()),
-        ("step_size", value(step_size)),
-    ]);
+    let frame: &[&'static str] = frame_columns!();
+    own.extend(frame.iter().copied().zip([
+        o.image.0.to_string(),
+        o.image.1.to_string(),
+        format!("{:?}", o.integrator).to_lowercase(),
+        "stbn".into(),
+        "1".into(),
+        o.cameras.to_string(),
+        value(step_size),
+    ]));
     own
 }
 

@@ -42,6 +42,7 @@ use crate::render::RenderError;
 use crate::values::{Bounds, Integrator};
 
 pub use data::{DataSpec, Dataset};
+pub(crate) use harness::frame_columns;
 pub use harness::{
     Ctx, Measurement, backends, build_and_refit_times, cameras, device_of, frame_times, ms,
     session, timer, with_frame_settings,

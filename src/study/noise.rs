@@ -10,7 +10,9 @@
 //! 1-pixel Gaussian blur (the low-pass an observer's eye applies).
 
 use super::plot::{self, Figure, Panel, Scale};
-use super::{Ctx, Description, Options, Row, StudyError, cameras, device_of, frame_times, value};
+use super::{
+    Ctx, Description, Measurement, Options, Row, StudyError, cameras, device_of, frame_times, value,
+};
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
 use crate::field::FieldSettings;
@@ -76,13 +78,8 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
             for noise in noises {
                 let timed = ctx.frame_settings(noise);
                 let dt = session.resolve(&timed)?.step_size;
-                let row = |metric, unit, (w, h): (u32, u32), spp: u32, values| Row {
-                    device: device.clone(),
-                    variant: noise.name().into(),
-                    data: ds.name.clone(),
-                    step: ds.step,
-                    n: ds.n,
-                    settings: vec![
+                let measured = |(w, h): (u32, u32), spp: u32| {
+                    let settings = vec![
                         ("radius", value(ds.radius)),
                         ("k", "1".into()),
                         ("noise", noise.name().into()),
@@ -93,14 +90,11 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                         ("cameras", o.cameras.to_string()),
                         ("reference_spp", o.reference_spp.to_string()),
                         ("step_size", value(dt)),
-                    ],
-                    metric,
-                    unit,
-                    values,
+                    ];
+                    Measurement::new(device.clone(), &ds, settings).variant(noise.name())
                 };
                 let frames = frame_times(&mut session, &timed, &orbit, o.repetitions)?;
-                ctx.recorder
-                    .record(row("frame", "ms", o.image, 1, frames))?;
+                ctx.record(&measured(o.image, 1), "frame", "ms", frames)?;
                 // errors[s] = [raw, blurred] per seed at spps[s].
                 let mut errors = vec![[Vec::new(), Vec::new()]; spps.len()];
                 for seed in 0..o.seeds {
@@ -115,15 +109,9 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                     }
                 }
                 for (&spp, [raw, blurred]) in spps.iter().zip(errors) {
-                    ctx.recorder
-                        .record(row("rmse", "linear rgba", o.noise_image, spp, raw))?;
-                    ctx.recorder.record(row(
-                        "rmse_blurred",
-                        "linear rgba",
-                        o.noise_image,
-                        spp,
-                        blurred,
-                    ))?;
+                    let m = measured(o.noise_image, spp);
+                    ctx.record(&m, "rmse", "linear rgba", raw)?;
+                    ctx.record(&m, "rmse_blurred", "linear rgba", blurred)?;
                 }
                 bar.inc(1);
             }
@@ -134,9 +122,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
 }
 
 fn spp_of(r: &Row) -> f64 {
-    r.setting("spp")
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(f64::NAN)
+    r.number("spp")
 }
 
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::StudyError;
@@ -96,6 +97,29 @@ pub struct Series {
     pub points: Vec<(f64, f64, f64, f64)>,
     /// Drawn dashed (a reference, such as the particles' bytes beside the structure's).
     pub dashed: bool,
+}
+
+impl Series {
+    /// A dashed level at `(median, lowest, highest)` from `lo` to `hi` along x (a reference
+    /// beside the lines, such as a goal).
+    pub fn level(label: String, (lo, hi): (f64, f64), (m, l, h): (f64, f64, f64)) -> Series {
+        Series {
+            label,
+            points: vec![(lo, m, l, h), (hi, m, l, h)],
+            dashed: true,
+        }
+    }
+}
+
+/// The least and the greatest of `xs`, where they are finite (none where there are no
+/// values).
+pub fn span(xs: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
+    let (lo, hi) = xs
+        .into_iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+            (l.min(x), h.max(x))
+        });
+    lo.is_finite().then_some((lo, hi))
 }
 
 /// Bars over the categories: (median, lowest, highest) per category, if measured.
@@ -423,14 +447,7 @@ fn draw_lines(
             2 => SeriesLabelPosition::LowerLeft,
             _ => SeriesLabelPosition::LowerRight,
         };
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .label_font((FONT, 13))
-            .position(corner)
-            .draw()
-            .map_err(plot_error)?;
+        draw_legend(&mut chart, corner)?;
     }
     Ok(())
 }
@@ -449,29 +466,8 @@ fn draw_bars(
         unreachable!("called for a bar panel")
     };
     let n = categories.len().max(1);
-    let values = || series.iter().flat_map(|s| s.values.iter().flatten());
-    let top = values().map(|v| v.2).fold(0.0f64, f64::max);
-    let bottom = values()
-        .map(|v| v.1)
-        .filter(|&v| v > 0.0)
-        .fold(f64::INFINITY, f64::min);
-    // Bars spanning more than 30x are drawn on a log axis (in decades: y is log10 of the
-    // value), so the small ones stay readable beside the largest.
-    let log = top > 30.0 * bottom;
-    let (y, y_range) = if log {
-        let lo = (bottom.log10() - 0.3).floor();
-        // Headroom above the tallest bar for the legend, as below.
-        let hi = top.log10() + 0.5 + 0.15 * (top.log10() - lo);
-        (
-            Box::new(move |v: f64| v.max(10f64.powf(lo)).log10()) as Box<dyn Fn(f64) -> f64>,
-            lo..hi,
-        )
-    } else {
-        // Headroom above the tallest bar for the legend (up to about 5 entries).
-        let top = if top > 0.0 { top * 1.4 } else { 1.0 };
-        (Box::new(|v: f64| v) as Box<dyn Fn(f64) -> f64>, 0.0..top)
-    };
-    let base = y_range.start;
+    let axis = BarAxis::of(series);
+    let (log, base) = (axis.log, axis.range.start);
     // Labels longer than a category's width go on two staggered rows.
     let longest = categories
         .iter()
@@ -485,7 +481,7 @@ fn draw_bars(
         .margin(14)
         .x_label_area_size(if staggered { 60 } else { 52 })
         .y_label_area_size(78)
-        .build_cartesian_2d(-0.5..(n as f64 - 0.5), y_range)
+        .build_cartesian_2d(-0.5..(n as f64 - 0.5), axis.range.clone())
         .map_err(plot_error)?;
     let names = categories.clone();
     let fx = move |v: &f64| {
@@ -528,6 +524,80 @@ fn draw_bars(
                 .map_err(plot_error)?;
         }
     }
+    draw_bar_series(&mut chart, series, &axis)?;
+    if !series.is_empty() {
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+    }
+    Ok(())
+}
+
+/// The chart of a panel: f64 on both axes.
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The series' legend, in the corner `at`.
+fn draw_legend<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    at: SeriesLabelPosition,
+) -> Result<(), StudyError> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .label_font((FONT, 13))
+        .position(at)
+        .draw()
+        .map_err(plot_error)
+}
+
+/// A bar panel's y axis: linear from 0, or in decades (y is the log10 of the value) where the
+/// bars span more than 30x, so the small ones stay readable beside the largest.
+struct BarAxis {
+    log: bool,
+    range: std::ops::Range<f64>,
+}
+
+impl BarAxis {
+    fn of(series: &[BarSeries]) -> BarAxis {
+        let values = || series.iter().flat_map(|s| s.values.iter().flatten());
+        let top = values().map(|v| v.2).fold(0.0f64, f64::max);
+        let bottom = values()
+            .map(|v| v.1)
+            .filter(|&v| v > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        let log = top > 30.0 * bottom;
+        let range = if log {
+            let lo = (bottom.log10() - 0.3).floor();
+            // Headroom above the tallest bar for the legend, as below.
+            let hi = top.log10() + 0.5 + 0.15 * (top.log10() - lo);
+            lo..hi
+        } else {
+            // Headroom above the tallest bar for the legend (up to about 5 entries).
+            let top = if top > 0.0 { top * 1.4 } else { 1.0 };
+            0.0..top
+        };
+        BarAxis { log, range }
+    }
+
+    /// Where value `v` stands on the axis.
+    fn y(&self, v: f64) -> f64 {
+        if self.log {
+            v.max(10f64.powf(self.range.start)).log10()
+        } else {
+            v
+        }
+    }
+}
+
+/// Each series' bars side by side in each category, with whiskers from the lowest to the
+/// highest value.
+fn draw_bar_series(
+    chart: &mut Chart<'_, '_>,
+    series: &[BarSeries],
+    axis: &BarAxis,
+) -> Result<(), StudyError> {
+    let base = axis.range.start;
+    let y = |v: f64| axis.y(v);
     let width = 0.8 / series.len().max(1) as f64;
     for (j, s) in series.iter().enumerate() {
         let fill = colour(j).filled();
@@ -551,16 +621,6 @@ fn draw_bars(
                     PathElement::new(vec![(c, y(v.1)), (c, y(v.2))], line)
                 })
             }))
-            .map_err(plot_error)?;
-    }
-    if !series.is_empty() {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .label_font((FONT, 13))
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
             .map_err(plot_error)?;
     }
     Ok(())

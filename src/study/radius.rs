@@ -6,8 +6,8 @@
 
 use super::plot::{self, Figure, Panel, Scale};
 use super::{
-    Ctx, Description, Measurement, Options, Row, StudyError, cameras, frame_times, value,
-    with_frame_settings,
+    Ctx, Description, Measurement, Options, Row, StudyError, cameras, frame_columns, frame_times,
+    value, with_frame_settings,
 };
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
@@ -20,19 +20,7 @@ pub const DESCRIPTION: Description = Description {
             across a sensible range, with 1 (solid) and 16 (dotted) particles per cluster: frame \
             time rises with the radius, as more particles overlap every sample; clustering made \
             frames faster on three of its five data sets.",
-    settings: &[
-        "radius",
-        "radius_pct_diagonal",
-        "radius_factor",
-        "k",
-        "width",
-        "height",
-        "integrator",
-        "noise",
-        "spp",
-        "cameras",
-        "step_size",
-    ],
+    settings: frame_columns!["radius", "radius_pct_diagonal", "radius_factor", "k"],
 };
 
 /// The cluster sizes of Fig. 9's blue lines.
@@ -93,9 +81,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
 }
 
 fn pct(r: &Row) -> f64 {
-    r.setting("radius_pct_diagonal")
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(f64::NAN)
+    r.number("radius_pct_diagonal")
 }
 
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {

@@ -153,6 +153,13 @@ impl Row {
             .map(|(_, v)| v.as_str())
     }
 
+    /// A setting's value as a number (NaN where it has none).
+    pub fn number(&self, key: &str) -> f64 {
+        self.setting(key)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(f64::NAN)
+    }
+
     /// The backend and variant: one line of a plot.
     pub fn series(&self) -> String {
         if self.variant.is_empty() {

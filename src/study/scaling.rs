@@ -12,7 +12,7 @@
 use super::plot::{Figure, Panel, Scale};
 use super::{
     Ctx, DataSpec, Description, Measurement, Options, Row, StudyError, cameras, device_of,
-    frame_times, value,
+    frame_columns, frame_times, value,
 };
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
@@ -25,18 +25,7 @@ pub const DESCRIPTION: Description = Description {
             constant overlap. A GPU LBVH build (radix sort, hierarchy, bottom-up bounds) and a \
             refit are linear in N; a query's cost grows with the tree's depth (log N) at a fixed \
             number of particles per point.",
-    settings: &[
-        "radius",
-        "k",
-        "queries",
-        "width",
-        "height",
-        "integrator",
-        "noise",
-        "spp",
-        "cameras",
-        "step_size",
-    ],
+    settings: frame_columns!["radius", "k", "queries"],
 };
 
 /// The particle counts: from `min_n` times 4 while at most `max_n`, and `max_n` itself.

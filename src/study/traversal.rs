@@ -7,7 +7,8 @@
 
 use super::plot::{self, Figure, Panel};
 use super::{
-    Ctx, Description, Measurement, Options, Row, StudyError, cameras, device_of, frame_times, value,
+    Ctx, Description, Measurement, Options, Row, StudyError, cameras, device_of, frame_columns,
+    frame_times, value,
 };
 use crate::accel::ClusterSize;
 use crate::backend::BackendKind;
@@ -25,18 +26,7 @@ pub const DESCRIPTION: Description = Description {
             through a software LBVH stack traversal on the same GPU: the RT pipeline is faster \
             on all three vendors, much more on NVIDIA and Intel (MIMD RT cores) than on AMD \
             RDNA 2, and more on Random than on Uniform.",
-    settings: &[
-        "radius",
-        "k",
-        "traversal",
-        "width",
-        "height",
-        "integrator",
-        "noise",
-        "spp",
-        "cameras",
-        "step_size",
-    ],
+    settings: frame_columns!["radius", "k", "traversal"],
 };
 
 /// How a row's session is made.

@@ -169,6 +169,7 @@ pub(super) unsafe fn group_sums_body<
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA, and AVX-512 F and VL where `COMPRESS`.
+// Whole on purpose: hot SIMD, its pointer tables and masks kept in registers through both loops.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(super) unsafe fn narrow_copy<

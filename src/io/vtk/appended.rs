@@ -12,6 +12,7 @@ use std::io::{Read, Seek, SeekFrom};
 use glam::DVec3;
 use quick_xml::events::{BytesStart, Event};
 
+use super::find;
 use crate::io::scalar::Scalar;
 use crate::io::{
     At, AttributeSelection, Columns, DataError, array_attribute_names, split_components,
@@ -89,7 +90,7 @@ pub(super) fn read(
         header: &header,
     };
     let mut positions = Vec::new();
-    let mut attributes: Vec<crate::io::Attribute> = Vec::new();
+    let mut attributes: Vec<crate::values::Attribute> = Vec::new();
     let mut skipped = Vec::new();
     // A piece without points (VTK writes them for idle MPI ranks) adds nothing.
     let pieces = header.pieces.iter().filter(|p| p.points > 0);
@@ -132,17 +133,43 @@ pub(super) fn read(
 /// The XML before the raw appended data, parsed; `None` when the file has no raw appended
 /// data, or an array or encoding this reader leaves to vtkio.
 fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError> {
-    let find = |hay: &[u8], needle: &[u8], from: usize| {
-        hay.get(from..)?
-            .windows(needle.len())
-            .position(|w| w == needle)
-            .map(|p| p + from)
+    let Some((head, tag, underscore)) = read_to_appended_data(at, file)? else {
+        return Ok(None);
     };
-    // Read until the '_' that starts the raw data.
+    let tag_end = find(&head, b">", tag).unwrap_or(underscore);
+    let tag_text = String::from_utf8_lossy(&head[tag..tag_end]);
+    let base64 = if tag_text.contains("\"raw\"") {
+        false
+    } else if tag_text.contains("\"base64\"") {
+        true
+    } else {
+        return Ok(None);
+    };
+    let mut header = Header {
+        big_endian: false,
+        int_bytes: 4,
+        zlib: false,
+        pieces: Vec::new(),
+        data_start: underscore as u64 + 1,
+        base64,
+    };
+    if read_pieces(at, &head[..tag], &mut header)?.is_none() || header.pieces.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some(header))
+}
+
+/// The file's bytes up to the '_' that starts the raw data, with where the `<AppendedData`
+/// tag and that '_' stand in them; `None` where none is found in the first [`MAX_HEADER`]
+/// bytes.
+fn read_to_appended_data(
+    at: At<'_>,
+    file: &mut File,
+) -> Result<Option<(Vec<u8>, usize, usize)>, DataError> {
     let mut head = Vec::new();
     let mut chunk = vec![0u8; 1 << 16];
     let mut tag = None;
-    let (tag, underscore) = loop {
+    loop {
         let got = file.read(&mut chunk).map_err(|e| at.io(e))?;
         // A tag may straddle two reads: look again from a little before the new bytes.
         let from = head.len().saturating_sub(16);
@@ -154,31 +181,27 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
             && let Some(end) = find(&head, b">", t)
             && let Some(u) = find(&head, b"_", end)
         {
-            break (t, u);
+            return Ok(Some((head, t, u)));
         }
         if got == 0 || head.len() > MAX_HEADER {
             return Ok(None);
         }
-    };
-    let tag_end = find(&head, b">", tag).unwrap_or(underscore);
-    let tag_text = String::from_utf8_lossy(&head[tag..tag_end]);
-    let base64 = if tag_text.contains("\"raw\"") {
-        false
-    } else if tag_text.contains("\"base64\"") {
-        true
-    } else {
-        return Ok(None);
-    };
-    let mut xml = quick_xml::Reader::from_reader(&head[..tag]);
+    }
+}
+
+/// The value of an XML element's attribute `key`.
+fn attribute(e: &BytesStart<'_>, key: &[u8]) -> Option<String> {
+    e.attributes()
+        .flatten()
+        .find(|a| a.key.as_ref() == key)
+        .and_then(|a| a.unescape_value().ok().map(|v| v.into_owned()))
+}
+
+/// Parses the XML before `<AppendedData>` into `header`'s file settings and pieces; `None`
+/// where it holds what this reader leaves to vtkio.
+fn read_pieces(at: At<'_>, xml: &[u8], header: &mut Header) -> Result<Option<()>, DataError> {
+    let mut xml = quick_xml::Reader::from_reader(xml);
     xml.config_mut().check_end_names = false;
-    let mut header = Header {
-        big_endian: false,
-        int_bytes: 4,
-        zlib: false,
-        pieces: Vec::new(),
-        data_start: underscore as u64 + 1,
-        base64,
-    };
     // Where we are: in <Points> or <PointData> of the current piece (other arrays, such as
     // cells', are not particles' and are skipped).
     #[derive(PartialEq)]
@@ -188,12 +211,6 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
         PointData,
     }
     let mut inside = In::Other;
-    let attr = |e: &BytesStart<'_>, key: &[u8]| -> Option<String> {
-        e.attributes()
-            .flatten()
-            .find(|a| a.key.as_ref() == key)
-            .and_then(|a| a.unescape_value().ok().map(|v| v.into_owned()))
-    };
     let mut buffer = Vec::new();
     loop {
         let event = match xml.read_event_into(&mut buffer) {
@@ -205,29 +222,12 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
             Event::Eof => break,
             Event::Start(e) | Event::Empty(e) => match e.name().as_ref() {
                 b"VTKFile" => {
-                    // Image data and rectilinear grids have no particle positions: vtkio's
-                    // path says so.
-                    if !matches!(
-                        attr(&e, b"type").as_deref(),
-                        Some("PolyData" | "UnstructuredGrid" | "StructuredGrid")
-                    ) {
+                    let Some(()) = read_file_settings(&e, header) else {
                         return Ok(None);
-                    }
-                    header.big_endian = attr(&e, b"byte_order").as_deref() == Some("BigEndian");
-                    header.int_bytes = match attr(&e, b"header_type").as_deref() {
-                        Some("UInt64") => 8,
-                        Some("UInt32") | None => 4,
-                        Some(_) => return Ok(None),
                     };
-                    match attr(&e, b"compressor").as_deref() {
-                        None | Some("") => {}
-                        Some("vtkZLibDataCompressor") => header.zlib = true,
-                        // LZ4 and LZMA: vtkio's.
-                        Some(_) => return Ok(None),
-                    }
                 }
                 b"Piece" => {
-                    let points = attr(&e, b"NumberOfPoints")
+                    let points = attribute(&e, b"NumberOfPoints")
                         .and_then(|v| v.trim().parse::<u64>().ok())
                         .ok_or_else(|| at.malformed("a <Piece> lacks a valid NumberOfPoints"))?;
                     header.pieces.push(PieceDesc {
@@ -240,31 +240,8 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
                 b"CellData" | b"FieldData" | b"Verts" | b"Lines" | b"Strips" | b"Polys"
                 | b"Cells" => inside = In::Other,
                 b"DataArray" if inside != In::Other => {
-                    if attr(&e, b"format").as_deref() != Some("appended") {
+                    let Some(desc) = read_array(at, &e)? else {
                         return Ok(None);
-                    }
-                    let Some(scalar) = attr(&e, b"type").as_deref().and_then(parse_scalar) else {
-                        return Ok(None);
-                    };
-                    let name = attr(&e, b"Name").unwrap_or_default();
-                    let components = attr(&e, b"NumberOfComponents")
-                        .map(|v| v.trim().parse::<usize>())
-                        .transpose()
-                        .map_err(|_| {
-                            at.malformed(format!("array '{name}': bad NumberOfComponents"))
-                        })?
-                        .unwrap_or(1);
-                    if components == 0 {
-                        return Err(at.malformed(format!("array '{name}' has 0 components")));
-                    }
-                    let offset = attr(&e, b"offset")
-                        .and_then(|v| v.trim().parse::<u64>().ok())
-                        .ok_or_else(|| at.malformed(format!("array '{name}': bad offset")))?;
-                    let desc = ArrayDesc {
-                        name,
-                        scalar,
-                        components,
-                        offset,
                     };
                     let Some(piece) = header.pieces.last_mut() else {
                         return Err(at.malformed("a DataArray lies outside any <Piece>"));
@@ -286,10 +263,61 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
         }
         buffer.clear();
     }
-    if header.pieces.is_empty() {
+    Ok(Some(()))
+}
+
+/// The `<VTKFile>` tag's byte order, size integers and compressor, into `header`; `None` where
+/// they are for vtkio.
+fn read_file_settings(e: &BytesStart<'_>, header: &mut Header) -> Option<()> {
+    // Image data and rectilinear grids have no particle positions: vtkio's path says so.
+    if !matches!(
+        attribute(e, b"type").as_deref(),
+        Some("PolyData" | "UnstructuredGrid" | "StructuredGrid")
+    ) {
+        return None;
+    }
+    header.big_endian = attribute(e, b"byte_order").as_deref() == Some("BigEndian");
+    header.int_bytes = match attribute(e, b"header_type").as_deref() {
+        Some("UInt64") => 8,
+        Some("UInt32") | None => 4,
+        Some(_) => return None,
+    };
+    match attribute(e, b"compressor").as_deref() {
+        None | Some("") => {}
+        Some("vtkZLibDataCompressor") => header.zlib = true,
+        // LZ4 and LZMA: vtkio's.
+        Some(_) => return None,
+    }
+    Some(())
+}
+
+/// A `<DataArray>` of points or point data; `None` where it is not appended, or of a type this
+/// reader leaves to vtkio.
+fn read_array(at: At<'_>, e: &BytesStart<'_>) -> Result<Option<ArrayDesc>, DataError> {
+    if attribute(e, b"format").as_deref() != Some("appended") {
         return Ok(None);
     }
-    Ok(Some(header))
+    let Some(scalar) = attribute(e, b"type").as_deref().and_then(parse_scalar) else {
+        return Ok(None);
+    };
+    let name = attribute(e, b"Name").unwrap_or_default();
+    let components = attribute(e, b"NumberOfComponents")
+        .map(|v| v.trim().parse::<usize>())
+        .transpose()
+        .map_err(|_| at.malformed(format!("array '{name}': bad NumberOfComponents")))?
+        .unwrap_or(1);
+    if components == 0 {
+        return Err(at.malformed(format!("array '{name}' has 0 components")));
+    }
+    let offset = attribute(e, b"offset")
+        .and_then(|v| v.trim().parse::<u64>().ok())
+        .ok_or_else(|| at.malformed(format!("array '{name}': bad offset")))?;
+    Ok(Some(ArrayDesc {
+        name,
+        scalar,
+        components,
+        offset,
+    }))
 }
 
 /// Reads arrays out of the appended data.

@@ -33,6 +33,37 @@ pub fn read_step(
     if !legacy && let Some(columns) = appended::read(at, selection)? {
         return Ok(columns);
     }
+    let pieces = point_pieces(at, parse(at, legacy)?)?;
+    let mut positions = Vec::new();
+    let mut attributes: Vec<Attribute> = Vec::new();
+    let mut skipped: Vec<String> = Vec::new();
+    for (index, (points, data)) in pieces.into_iter().enumerate() {
+        let coords = points
+            .cast_into::<f64>()
+            .ok_or_else(|| at.malformed("point coordinates are not numbers"))?;
+        if coords.len() % 3 != 0 {
+            return Err(at.err(Problem::Dimensionality(format!(
+                "{} point coordinates is not a multiple of 3",
+                coords.len()
+            ))));
+        }
+        let n = coords.len() / 3;
+        let skipped = if index == 0 { Some(&mut skipped) } else { None };
+        let piece_attributes = point_attributes(at, data, n, selection, skipped)?;
+        append_piece(at, &mut attributes, piece_attributes, index)?;
+        positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
+    }
+    Ok(Columns {
+        positions,
+        attributes,
+        skipped,
+        finite: false,
+    })
+}
+
+/// The whole file parsed by vtkio (raw appended data re-encoded as base64 first, truncated and
+/// over-inflating files refused before it allocates).
+fn parse(at: At<'_>, legacy: bool) -> Result<Vtk, DataError> {
     let bytes = std::fs::read(at.file).map_err(|e| at.io(e))?;
     let xml = if legacy {
         None
@@ -61,92 +92,79 @@ pub fn read_step(
     })?;
     let mut vtk = parsed.map_err(|e| at.malformed(format!("cannot parse the VTK file: {e}")))?;
     vtk.file_path = Some(at.file.to_path_buf());
-    let source = vtk.file_path.clone();
-    let mut pieces: Vec<(IOBuffer, Attributes)> = Vec::new();
+    Ok(vtk)
+}
+
+/// Each piece's points and attributes, loaded; refused for data sets without particle
+/// positions.
+fn point_pieces(at: At<'_>, vtk: Vtk) -> Result<Vec<(IOBuffer, Attributes)>, DataError> {
+    let source = vtk.file_path.as_deref();
     match vtk.data {
-        DataSet::PolyData { pieces: p, .. } => {
-            for piece in p {
-                let d = load(at, piece, source.as_deref())?;
-                pieces.push((d.points, d.data));
-            }
+        DataSet::PolyData { pieces, .. } => load(at, pieces, source, |d| (d.points, d.data)),
+        DataSet::UnstructuredGrid { pieces, .. } => {
+            load(at, pieces, source, |d| (d.points, d.data))
         }
-        DataSet::UnstructuredGrid { pieces: p, .. } => {
-            for piece in p {
-                let d = load(at, piece, source.as_deref())?;
-                pieces.push((d.points, d.data));
-            }
-        }
-        DataSet::StructuredGrid { pieces: p, .. } => {
-            for piece in p {
-                let d = load(at, piece, source.as_deref())?;
-                pieces.push((d.points, d.data));
-            }
-        }
+        DataSet::StructuredGrid { pieces, .. } => load(at, pieces, source, |d| (d.points, d.data)),
         DataSet::ImageData { .. } | DataSet::RectilinearGrid { .. } | DataSet::Field { .. } => {
-            return Err(at.err(Problem::Dimensionality(
+            Err(at.err(Problem::Dimensionality(
                 "this VTK data set (image, rectilinear grid or field) has no particle positions; \
                  particles come as poly data, unstructured or structured grids"
                     .into(),
-            )));
+            )))
         }
     }
+}
 
-    let mut positions = Vec::new();
-    let mut attributes: Vec<Attribute> = Vec::new();
-    let mut skipped: Vec<String> = Vec::new();
-    for (index, (points, data)) in pieces.into_iter().enumerate() {
-        let coords = points
-            .cast_into::<f64>()
-            .ok_or_else(|| at.malformed("point coordinates are not numbers"))?;
-        if coords.len() % 3 != 0 {
-            return Err(at.err(Problem::Dimensionality(format!(
-                "{} point coordinates is not a multiple of 3",
-                coords.len()
-            ))));
-        }
-        let n = coords.len() / 3;
-        let mut piece_attributes = Vec::new();
-        for attribute in data.point {
-            let arrays: Vec<(String, u32, IOBuffer)> = match attribute {
-                VtkAttribute::DataArray(DataArray { name, elem, data }) => {
-                    vec![(name, elem.num_comp(), data)]
-                }
-                VtkAttribute::Field { data_array, .. } => data_array
-                    .into_iter()
-                    .map(|a| (a.name, a.elem, a.data))
-                    .collect(),
-            };
-            for (name, components, data) in arrays {
-                let components = components.max(1) as usize;
-                // An array none of whose attributes is selected is not converted.
-                let names = array_attribute_names(&name, components);
-                if !names.iter().any(|n| selection.keeps(n)) {
-                    if index == 0 {
-                        skipped.extend(names);
-                    }
-                    continue;
-                }
-                let values = data.cast_into::<f64>().ok_or_else(|| {
-                    at.malformed(format!("point-data array '{name}' is not numeric"))
-                })?;
-                if values.len() != n * components {
-                    return Err(at.malformed(format!(
-                        "point-data array '{name}' has {} values for {n} points of {components} components",
-                        values.len()
-                    )));
-                }
-                piece_attributes.extend(split_components(&name, &values, components));
+/// A piece's point-data arrays of `n` points as attributes, those with no selected attribute
+/// not converted (their names go to `skipped`, where given).
+fn point_attributes(
+    at: At<'_>,
+    data: Attributes,
+    n: usize,
+    selection: &AttributeSelection,
+    mut skipped: Option<&mut Vec<String>>,
+) -> Result<Vec<Attribute>, DataError> {
+    let mut piece_attributes = Vec::new();
+    for attribute in data.point {
+        let arrays: Vec<(String, u32, IOBuffer)> = match attribute {
+            VtkAttribute::DataArray(DataArray { name, elem, data }) => {
+                vec![(name, elem.num_comp(), data)]
             }
+            VtkAttribute::Field { data_array, .. } => data_array
+                .into_iter()
+                .map(|a| (a.name, a.elem, a.data))
+                .collect(),
+        };
+        for (name, components, data) in arrays {
+            let components = components.max(1) as usize;
+            let names = array_attribute_names(&name, components);
+            if !names.iter().any(|n| selection.keeps(n)) {
+                if let Some(skipped) = skipped.as_deref_mut() {
+                    skipped.extend(names);
+                }
+                continue;
+            }
+            let values = data
+                .cast_into::<f64>()
+                .ok_or_else(|| at.malformed(format!("point-data array '{name}' is not numeric")))?;
+            if values.len() != n * components {
+                return Err(at.malformed(format!(
+                    "point-data array '{name}' has {} values for {n} points of {components} components",
+                    values.len()
+                )));
+            }
+            piece_attributes.extend(split_components(&name, &values, components));
         }
-        append_piece(at, &mut attributes, piece_attributes, index)?;
-        positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
     }
-    Ok(Columns {
-        positions,
-        attributes,
-        skipped,
-        finite: false,
-    })
+    Ok(piece_attributes)
+}
+
+/// Where `needle` first stands in `hay` at or after `from`.
+fn find(hay: &[u8], needle: &[u8], from: usize) -> Option<usize> {
+    hay.get(from..)?
+        .windows(needle.len())
+        .position(|w| w == needle)
+        .map(|p| p + from)
 }
 
 /// Appends piece `index`'s attributes to the first pieces' (the first piece's become them);
@@ -184,12 +202,6 @@ pub(super) const MAX_INFLATION: usize = 4096;
 /// [`appended_raw_to_base64`]).
 fn check_inflation(text: &[u8], file_len: usize) -> Result<(), String> {
     use base64::Engine;
-    let find = |hay: &[u8], needle: &[u8], from: usize| {
-        hay.get(from..)?
-            .windows(needle.len())
-            .position(|w| w == needle)
-            .map(|p| p + from)
-    };
     let Some(root) = find(text, b"<VTKFile", 0) else {
         return Ok(());
     };
@@ -271,12 +283,6 @@ fn check_inflation(text: &[u8], file_len: usize) -> Result<(), String> {
 fn appended_raw_to_base64(bytes: &[u8]) -> Result<Option<Vec<u8>>, String> {
     use base64::Engine;
     let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
-    let find = |hay: &[u8], needle: &[u8], from: usize| {
-        hay.get(from..)?
-            .windows(needle.len())
-            .position(|w| w == needle)
-            .map(|p| p + from)
-    };
     let Some(tag) = find(bytes, b"<AppendedData", 0) else {
         return Ok(None);
     };
@@ -430,10 +436,23 @@ fn where_xml_ends_early(text: &[u8]) -> Option<String> {
     ))
 }
 
-fn load<P: PieceData>(at: At<'_>, piece: Piece<P>, source: Option<&Path>) -> Result<P, DataError> {
-    piece
-        .into_loaded_piece_data(source)
-        .map_err(|e| at.malformed(format!("cannot load a VTK piece: {e}")))
+/// Loads every piece (from files beside `source` where they are stored there), each as its
+/// points and attributes.
+fn load<P: PieceData>(
+    at: At<'_>,
+    pieces: Vec<Piece<P>>,
+    source: Option<&Path>,
+    parts: impl Fn(P) -> (IOBuffer, Attributes),
+) -> Result<Vec<(IOBuffer, Attributes)>, DataError> {
+    pieces
+        .into_iter()
+        .map(|piece| {
+            piece
+                .into_loaded_piece_data(source)
+                .map(&parts)
+                .map_err(|e| at.malformed(format!("cannot load a VTK piece: {e}")))
+        })
+        .collect()
 }
 
 /// Refuses point counts the file cannot hold, before the parser allocates for them.

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
-use super::index::{FileStamp, SeriesIndex, StepStats};
+use super::index::{AttributeStats, FileStamp, SeriesIndex, StepStats};
 use super::smoothing::{self, Smoothing};
 use crate::io::{self, AttributeSelection, DataError, Format, ReadOptions, StepRef};
 use crate::progress;
@@ -123,21 +123,11 @@ impl StepInfo {
     }
 }
 
-/// An attribute's range and mean over the whole series (every particle of every step).
-#[derive(Clone, Debug, PartialEq)]
-pub struct AttributeInfo {
-    pub name: String,
-    pub min: f64,
-    pub max: f64,
-    /// The robust range: from the lowest step's 1st percentile to the highest step's 99th
-    /// (`index::robust_range` of each step), so outliers in any step are left out while every
-    /// step's bulk is inside.
-    pub p01: f64,
-    pub p99: f64,
-    pub mean: f64,
-    /// Values the mean is over.
-    pub count: usize,
-}
+/// An attribute's range and mean over the whole series (every particle of every step): its
+/// steps' statistics merged. The robust range is from the lowest step's 1st percentile to the
+/// highest step's 99th, so outliers in any step are left out while every step's bulk is
+/// inside.
+pub type AttributeInfo = AttributeStats;
 
 enum Source {
     Files {

@@ -86,15 +86,7 @@ pub(super) fn merge_ranges(ranges: &mut Vec<AttributeInfo>, step: &StepStats) {
                 r.mean = (r.mean * r.count as f64 + a.mean * a.count as f64) / total as f64;
                 r.count = total;
             }
-            None => ranges.push(AttributeInfo {
-                name: a.name.clone(),
-                min: a.min,
-                max: a.max,
-                p01: a.p01,
-                p99: a.p99,
-                mean: a.mean,
-                count: a.count,
-            }),
+            None => ranges.push(a.clone()),
         }
     }
 }

@@ -37,7 +37,7 @@ use rayon::prelude::*;
 
 use super::plot::{Figure, Panel, Scale, Series};
 use super::record::Device;
-use super::{Ctx, Description, Options, Row, StudyError, value};
+use super::{Ctx, Description, Measurement, Options, Row, StudyError, value};
 use crate::accel::ClusterSize;
 use crate::backend::precision::PositionKind;
 use crate::backend::{self, Backend, BackendKind, Precision, Representation, StepInput};
@@ -491,7 +491,7 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
             for (kind, b, device) in &mut backends {
                 for (precision, name) in precisions(*kind) {
                     let (e, positions) = measure_scene(b.as_mut(), &scene, precision, &reference)?;
-                    let row = |metric, unit, v: f64| Row {
+                    let m = Measurement {
                         device: device.clone(),
                         variant: name.into(),
                         data: case.name(),
@@ -507,24 +507,16 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
                             ("positions", positions_name(positions).into()),
                             ("queries", scene.queries.len().to_string()),
                         ],
-                        metric,
-                        unit,
-                        values: vec![v],
                     };
-                    ctx.recorder
-                        .record(row("phi_rel_max", "relative", e.phi_max))?;
-                    ctx.recorder
-                        .record(row("phi_rel_median", "relative", e.phi_median))?;
-                    ctx.recorder
-                        .record(row("theta_max", "of range", e.theta_max))?;
-                    ctx.recorder
-                        .record(row("nonfinite", "points", e.nonfinite as f64))?;
+                    ctx.record(&m, "phi_rel_max", "relative", vec![e.phi_max])?;
+                    ctx.record(&m, "phi_rel_median", "relative", vec![e.phi_median])?;
+                    ctx.record(&m, "theta_max", "of range", vec![e.theta_max])?;
+                    ctx.record(&m, "nonfinite", "points", vec![e.nonfinite as f64])?;
                     // (None where terms leave f32's normal range: the bound is infinite.)
                     if let Some(r) = positions
                         .filter(|r| r.positions != PositionKind::F64 && r.bound.phi().is_finite())
                     {
-                        ctx.recorder
-                            .record(row("stated_bound", "relative", r.bound.phi()))?;
+                        ctx.record(&m, "stated_bound", "relative", vec![r.bound.phi()])?;
                     }
                     bar.inc(1);
                 }

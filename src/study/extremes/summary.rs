@@ -4,11 +4,7 @@ use super::*;
 
 /// A case's x on its sweep's axis.
 pub(super) fn x_of(r: &Row) -> f64 {
-    let get = |k| {
-        r.setting(k)
-            .and_then(|v| v.parse::<f64>().ok())
-            .unwrap_or(f64::NAN)
-    };
+    let get = |k| r.number(k);
     match r.setting("family") {
         Some("radius") => get("radius_fraction"),
         // A log axis has no 0: offset 0 is drawn at 1.
@@ -126,121 +122,14 @@ pub fn table(rows: &[Row]) -> String {
 }
 
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
-    let mut notes = Vec::new();
-    let normal = |r: &Row| !reaches_denormals(weight_of(r));
-    for s in series_names(rows) {
-        let mut parts = Vec::new();
-        for inputs in Inputs::BOTH.map(Inputs::name) {
-            let pick = |metric, keep: &dyn Fn(&Row) -> bool| worst(rows, &s, inputs, metric, keep);
-            let (Some(phi), Some(theta)) =
-                (pick("phi_rel_max", &|_| true), pick("theta_max", &|_| true))
-            else {
-                continue;
-            };
-            let (phi_normal, theta_normal) =
-                (pick("phi_rel_max", &normal), pick("theta_max", &normal));
-            let goal = if inputs == Inputs::F32Exact.name() {
-                match phi_normal {
-                    Some(v) if v <= GOAL => format!(" (the {} goal: met)", sci(GOAL)),
-                    Some(_) => format!(" (the {} goal: missed)", sci(GOAL)),
-                    None => String::new(),
-                }
-            } else {
-                String::new()
-            };
-            parts.push(format!(
-                "{inputs} inputs: Phi within {} relative and Theta within {} of the range where \
-                 every term stays in f32's normal range{goal}; {} and {} over all cases",
-                phi_normal.map_or("–".into(), sci),
-                theta_normal.map_or("–".into(), sci),
-                sci(phi),
-                sci(theta),
-            ));
-        }
-        // Does the whole bound a backend states hold, where terms stay normal (it bounds every
-        // source of f32 error, not denormals)?
-        let stated: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| r.series() == s && r.metric == "stated_bound" && normal(r))
-            .filter_map(|b| {
-                rows.iter()
-                    .find(|r| {
-                        r.metric == "phi_rel_max"
-                            && r.series() == s
-                            && r.settings == b.settings
-                            && r.data == b.data
-                    })
-                    .map(|r| (r.max(), b.max()))
-            })
-            .collect();
-        if !stated.is_empty() {
-            let held = stated.iter().filter(|(err, bound)| err <= bound).count();
-            parts.push(format!(
-                "the stated error bound held in {held} of {} cases whose terms stay normal",
-                stated.len()
-            ));
-        }
-        let nonfinite = rows
-            .iter()
-            .filter(|r| r.series() == s && r.metric == "nonfinite")
-            .map(Row::max)
-            .sum::<f64>();
-        if nonfinite > 0.0 {
-            parts.push(format!("{nonfinite} non-finite values"));
-        }
-        notes.push(format!("`{s}`: {}", parts.join("; ")));
-    }
-    let mut panels = Vec::new();
-    for (family, x_label) in [
-        (Family::Radius, "radius (fraction of the domain)"),
-        (Family::Offset, "coordinate offset (domains; 0 drawn at 1)"),
-        (Family::Phi, "density weight w (Phi ≈ 0.03 w .. a few w)"),
-    ] {
-        for inputs in Inputs::BOTH {
-            let selected: Vec<Row> = rows
-                .iter()
-                .filter(|r| r.setting("family") == Some(family.name()))
-                .filter(|r| inputs_of(r) == inputs.name())
-                .cloned()
-                .map(|mut r| {
-                    for v in &mut r.values {
-                        *v = v.max(PLOT_FLOOR);
-                    }
-                    r
-                })
-                .collect();
-            let mut series =
-                crate::study::plot::lines(&selected, "phi_rel_max", Row::series, x_of, 1.0);
-            let xs: Vec<f64> = series
-                .iter()
-                .flat_map(|s| s.points.iter().map(|p| p.0))
-                .collect();
-            let (lo, hi) = xs
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-                    (a.min(x), b.max(x))
-                });
-            if lo.is_finite() {
-                series.push(Series {
-                    label: format!("goal {}", sci(GOAL)),
-                    points: vec![(lo, GOAL, GOAL, GOAL), (hi, GOAL, GOAL, GOAL)],
-                    dashed: true,
-                });
-            }
-            panels.push(Panel::Lines {
-                title: format!("{} sweep, {} inputs", family.name(), inputs.name()),
-                x_label: x_label.into(),
-                y_label: "largest relative Phi error".into(),
-                x_scale: Scale::Log10,
-                y_scale: Scale::Log10,
-                series,
-            });
-        }
-    }
+    let notes = series_names(rows)
+        .iter()
+        .map(|s| series_note(rows, s))
+        .collect();
     let count = options.count.unwrap_or(DEFAULT_COUNT);
     let figure = Figure {
         title: DESCRIPTION.title.into(),
-        panels,
+        panels: sweep_panels(rows),
         caption: vec![
             format!(
                 "Goal: relative Phi error at most {} where the f32 inputs are exact (right \
@@ -262,4 +151,111 @@ pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
         ],
     };
     (notes, figure)
+}
+
+/// Series `s`'s errors for each kind of inputs (where terms stay normal, against the goal,
+/// and over all cases), whether its stated bound held, and its non-finite values.
+fn series_note(rows: &[Row], s: &str) -> String {
+    let normal = |r: &Row| !reaches_denormals(weight_of(r));
+    let mut parts = Vec::new();
+    for inputs in Inputs::BOTH.map(Inputs::name) {
+        let pick = |metric, keep: &dyn Fn(&Row) -> bool| worst(rows, s, inputs, metric, keep);
+        let (Some(phi), Some(theta)) =
+            (pick("phi_rel_max", &|_| true), pick("theta_max", &|_| true))
+        else {
+            continue;
+        };
+        let (phi_normal, theta_normal) = (pick("phi_rel_max", &normal), pick("theta_max", &normal));
+        let goal = if inputs == Inputs::F32Exact.name() {
+            match phi_normal {
+                Some(v) if v <= GOAL => format!(" (the {} goal: met)", sci(GOAL)),
+                Some(_) => format!(" (the {} goal: missed)", sci(GOAL)),
+                None => String::new(),
+            }
+        } else {
+            String::new()
+        };
+        parts.push(format!(
+            "{inputs} inputs: Phi within {} relative and Theta within {} of the range where \
+             every term stays in f32's normal range{goal}; {} and {} over all cases",
+            phi_normal.map_or("–".into(), sci),
+            theta_normal.map_or("–".into(), sci),
+            sci(phi),
+            sci(theta),
+        ));
+    }
+    // Does the whole bound a backend states hold, where terms stay normal (it bounds every
+    // source of f32 error, not denormals)?
+    let stated: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.series() == s && r.metric == "stated_bound" && normal(r))
+        .filter_map(|b| {
+            rows.iter()
+                .find(|r| {
+                    r.metric == "phi_rel_max"
+                        && r.series() == s
+                        && r.settings == b.settings
+                        && r.data == b.data
+                })
+                .map(|r| (r.max(), b.max()))
+        })
+        .collect();
+    if !stated.is_empty() {
+        let held = stated.iter().filter(|(err, bound)| err <= bound).count();
+        parts.push(format!(
+            "the stated error bound held in {held} of {} cases whose terms stay normal",
+            stated.len()
+        ));
+    }
+    let nonfinite = rows
+        .iter()
+        .filter(|r| r.series() == s && r.metric == "nonfinite")
+        .map(Row::max)
+        .sum::<f64>();
+    if nonfinite > 0.0 {
+        parts.push(format!("{nonfinite} non-finite values"));
+    }
+    format!("`{s}`: {}", parts.join("; "))
+}
+
+/// A panel for each sweep and kind of inputs: the largest relative Phi error of each series
+/// over the swept value, and the goal.
+fn sweep_panels(rows: &[Row]) -> Vec<Panel> {
+    let mut panels = Vec::new();
+    for (family, x_label) in [
+        (Family::Radius, "radius (fraction of the domain)"),
+        (Family::Offset, "coordinate offset (domains; 0 drawn at 1)"),
+        (Family::Phi, "density weight w (Phi ≈ 0.03 w .. a few w)"),
+    ] {
+        for inputs in Inputs::BOTH {
+            let selected: Vec<Row> = rows
+                .iter()
+                .filter(|r| r.setting("family") == Some(family.name()))
+                .filter(|r| inputs_of(r) == inputs.name())
+                .cloned()
+                .map(|mut r| {
+                    for v in &mut r.values {
+                        *v = v.max(PLOT_FLOOR);
+                    }
+                    r
+                })
+                .collect();
+            let mut series =
+                crate::study::plot::lines(&selected, "phi_rel_max", Row::series, x_of, 1.0);
+            let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+            if let Some(across) = crate::study::plot::span(xs) {
+                let label = format!("goal {}", sci(GOAL));
+                series.push(Series::level(label, across, (GOAL, GOAL, GOAL)));
+            }
+            panels.push(Panel::Lines {
+                title: format!("{} sweep, {} inputs", family.name(), inputs.name()),
+                x_label: x_label.into(),
+                y_label: "largest relative Phi error".into(),
+                x_scale: Scale::Log10,
+                y_scale: Scale::Log10,
+                series,
+            });
+        }
+    }
+    panels
 }
