@@ -19,7 +19,12 @@ include!("src/backend/shaders/include.rs");
 /// The constants Rust and the shaders share: the library's own definitions, so the kernels
 /// validated here are given the text the library gives them.
 #[path = "src/values/shader_constants.rs"]
-#[allow(dead_code)]
+#[allow(
+    dead_code,
+    unreachable_pub,
+    missing_docs,
+    reason = "the library's module, compiled here for its text: what it exports is the library's"
+)]
 mod shader_constants;
 
 fn shared(name: &str) -> Option<String> {

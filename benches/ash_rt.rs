@@ -11,6 +11,10 @@
 //!
 //! Results go to docs/benchmarks.md. On a machine without a GPU, Mesa lavapipe runs all of
 //! it on the CPU: the numbers say nothing about RT-hardware speed-ups.
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::sync::Arc;
 use std::time::Duration;

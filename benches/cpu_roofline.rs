@@ -13,6 +13,10 @@
 //! Terms: a term is one particle within r of a query (what the field sums). The achieved
 //! count is exact: every (query, particle) pair within r, counted on a uniform grid of cell
 //! size r independently of the backend's tree.
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::time::Instant;
 

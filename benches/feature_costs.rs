@@ -18,6 +18,10 @@
 //!   the whole domain (every particle in every sum), with the error each leaves.
 //!
 //! Rows marked "+" add one feature to the post-classified baseline (not to the row above).
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::time::Duration;
 

@@ -3,6 +3,10 @@
 //! Runs the real binary, as a user would. Results go to docs/benchmarks.md.
 //!
 //! cargo bench --bench field_cpu -- [N] [M]     (defaults: 1000000 1000000)
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::process::Command;
 use std::time::Instant;

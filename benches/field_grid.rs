@@ -5,6 +5,10 @@
 //! Phi and the normalised attribute (post-classification), f64.
 //!
 //! cargo bench --bench field_grid -- [N] [G]     (defaults: 1000000 100, a G^3 grid)
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::time::Instant;
 

@@ -4,6 +4,10 @@
 //! the same points (`benches/peers/scipy_knn.py`, which writes and reads them the same way).
 //!
 //! cargo bench --profile checked --bench knn -- [N] [K] [R]     (defaults: 1000000 32 3)
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::time::Instant;
 

@@ -5,6 +5,10 @@
 //! cache.
 //!
 //! cargo bench --profile checked --bench read_step -- [--runs R] [--attribute NAME] FILE...
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::io::Read;
 use std::path::PathBuf;

@@ -5,6 +5,10 @@
 //!
 //! cargo bench --bench wgpu_lbvh -- [N ...] [--queries M] [--frame-size S]
 //!     (defaults: N = 100000 1000000 4000000, M = 1000000, S = 1024)
+#![expect(
+    clippy::print_stdout,
+    reason = "a benchmark prints its table to stdout"
+)]
 
 use std::time::{Duration, Instant};
 

@@ -14,21 +14,38 @@
 //!   with their CPU twins;
 //! - [`render`]: the rendering session (what each change costs, the automatic settings);
 //! - [`dist`]: distributed rendering (k-d bricks, ghost particles, direct-send compositing)
-//!   over a communicator: threads in one process now, MPI later;
+//!   over a communicator: threads in one process, or the processes of an MPI job;
 //! - [`cli`], [`viewer`], [`study`] (the paper's benchmark studies) and [`scene_file`] (which
 //!   composes all of the above) at the top.
 
+#[expect(missing_docs, reason = "public items of accel still undocumented")]
 pub mod accel;
+#[expect(missing_docs, reason = "public items of backend still undocumented")]
 pub mod backend;
+#[expect(missing_docs, reason = "public items of cli still undocumented")]
+#[expect(
+    clippy::print_stdout,
+    reason = "the command line prints its results to stdout"
+)]
 pub mod cli;
+#[expect(missing_docs, reason = "public items of dist still undocumented")]
 pub mod dist;
+#[expect(missing_docs, reason = "public items of field still undocumented")]
 pub mod field;
+#[expect(missing_docs, reason = "public items of io still undocumented")]
 pub mod io;
+#[expect(missing_docs, reason = "public items of noise still undocumented")]
 pub mod noise;
 pub mod progress;
+#[expect(missing_docs, reason = "public items of render still undocumented")]
 pub mod render;
+#[expect(missing_docs, reason = "public items of scene still undocumented")]
 pub mod scene;
+#[expect(missing_docs, reason = "public items of scene_file still undocumented")]
 pub mod scene_file;
+#[expect(missing_docs, reason = "public items of study still undocumented")]
 pub mod study;
+#[expect(missing_docs, reason = "public items of values still undocumented")]
 pub mod values;
+#[expect(missing_docs, reason = "public items of viewer still undocumented")]
 pub mod viewer;

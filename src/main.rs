@@ -1,3 +1,5 @@
+//! The `aarbf` command: logging to stderr (`AARBF_LOG`), then [`aarbf::cli`].
+
 use tracing_subscriber::EnvFilter;
 
 fn main() -> std::process::ExitCode {

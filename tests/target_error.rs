@@ -239,7 +239,7 @@ fn targeted_renders_estimate_their_error_within_2x() {
                 .filter(|m| m.1 <= e)
                 .map(|m| m.0)
                 .fold(f64::INFINITY, f64::min);
-            println!(
+            eprintln!(
                 "{name}, target {e:.3e}: estimate {:.3e}, true {true_error:.3e} (x{ratio:.2}); step x{}, {} spp, work {:.0} (front {cheapest}); bias {:?}; {:?}",
                 done.estimate,
                 done.step_size / dt0,
@@ -272,7 +272,7 @@ fn targeted_renders_estimate_their_error_within_2x() {
     // What a target costs beside the measured front (work at the default step, the
     // calibration included) is the accuracy study's to measure and docs/accuracy.md's to
     // state; here it is printed.
-    println!("the most work beside the front's cheapest: {worst_cost:.1}x");
+    eprintln!("the most work beside the front's cheapest: {worst_cost:.1}x");
 }
 
 /// Renders the dam break (stochastic marching) to the error its defaults reach at `spp`,
@@ -298,7 +298,7 @@ fn dambreak_to_the_defaults_error_at(spp: u32) -> (Targeted, f64) {
     )
     .unwrap();
     let true_error = done.image.rmse(truth.image());
-    println!(
+    eprintln!(
         "target {e:.3e}: estimate {:.3e}, true {true_error:.3e}; step x{}, {} spp, work {}",
         done.estimate,
         done.step_size / dt0,
@@ -423,7 +423,7 @@ fn more_frames_never_make_a_blue_noise_image_noisier() {
         let plain_noise = |i: usize| 0.5 * images[0][i].1.rmse(&images[1][i].1);
         let whole = noise(0);
         for (i, n) in checked.iter().enumerate().skip(1) {
-            println!(
+            eprintln!(
                 "{name} {integrator:?} {n} frames: noise {:.3e} (plain mean {:.3e}), one cycle {whole:.3e}",
                 noise(i),
                 plain_noise(i)
@@ -484,7 +484,7 @@ fn a_time_budget_is_kept_and_estimated() {
     // change the frame time from chunk to chunk) cannot push it far past: when a chunk filled
     // all the time left, and a fresh step's first chunk ran unmeasured, a CI run took 2.0-2.6 s
     // of a 1.5 s budget.
-    println!("budget {budget:?}: took {:?}", done.elapsed);
+    eprintln!("budget {budget:?}: took {:?}", done.elapsed);
     assert!(
         done.elapsed < budget + std::time::Duration::from_millis(500),
         "a budget of {budget:?} took {:?}",

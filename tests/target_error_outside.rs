@@ -147,7 +147,7 @@ fn reference(scene: &Scene, s: &RenderSettings, tolerance: f64) -> Image {
         },
     )
     .unwrap();
-    println!(
+    eprintln!(
         "{}: reference step {:.3e}, {} spp, spp change {:.2e}, step change {:?}, converged {}",
         scene.name, r.step_size, r.spp, r.spp_change, r.step_change, r.converged
     );
@@ -192,7 +192,7 @@ fn an_opaque_pysph_step_estimates_its_step_bias() {
         let done = render_to_target(&mut session, &s, &target(e)).unwrap();
         let true_error = done.image.rmse(&truth);
         let ratio = done.estimate / true_error;
-        println!(
+        eprintln!(
             "pysph x20, E {e}: estimate {:.3e} (noise {:.3e}, bias {:.3e}), true {true_error:.3e} (x{ratio:.2}), step {:.3e}, {} spp",
             done.estimate,
             done.noise_rmse,
@@ -237,7 +237,7 @@ fn noise_held_by_a_few_pixels_is_measured_on_the_whole_image() {
         .unwrap();
     let true_noise = done.image.rmse(&converged);
     let ratio = done.noise_rmse / true_noise;
-    println!(
+    eprintln!(
         "sharp x20: noise estimate {:.3e}, true noise {true_noise:.3e} (x{ratio:.2}), step {:.3e}, {} spp",
         done.noise_rmse, done.step_size, done.spp
     );
@@ -260,7 +260,7 @@ fn a_bias_hidden_in_a_coarse_steps_noise_is_measured() {
     let done = render_to_target(&mut session, &s, &target(e)).unwrap();
     let true_error = done.image.rmse(&truth);
     let ratio = done.estimate / true_error;
-    println!(
+    eprintln!(
         "sharp x20, E {e}: estimate {:.3e} (noise {:.3e}, bias {:.3e}), true {true_error:.3e} (x{ratio:.2}), step {:.3e}, {} spp, work {:.1}",
         done.estimate,
         done.noise_rmse,

@@ -33,7 +33,7 @@ pub struct GenerateArgs {
     pub force: bool,
 }
 
-pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: GenerateArgs) -> anyhow::Result<()> {
     let count = args.count.unwrap_or(args.name.default_count());
     let steps = args.steps.unwrap_or(args.name.default_steps());
     anyhow::ensure!(count > 0, "--count must be at least 1");

@@ -27,7 +27,7 @@ pub struct InfoArgs {
     pub physical: bool,
 }
 
-pub fn run(args: InfoArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: InfoArgs) -> anyhow::Result<()> {
     if args.devices {
         print!("{}", devices());
     }
@@ -68,7 +68,7 @@ fn snapshot(_first: &crate::io::StepRef) -> anyhow::Result<String> {
 }
 
 /// The adapters wgpu finds, with their features and the limits the backends depend on.
-pub fn devices() -> String {
+pub(super) fn devices() -> String {
     use std::fmt::Write;
     let adapters = crate::backend::wgpu_lbvh::adapters();
     let mut out = String::new();
@@ -142,7 +142,7 @@ fn mib(bytes: usize) -> String {
     format!("{:.2} MiB", bytes as f64 / (1 << 20) as f64)
 }
 
-pub fn describe(path: &std::path::Path, series: &TimeSeries) -> String {
+pub(super) fn describe(path: &std::path::Path, series: &TimeSeries) -> String {
     use std::fmt::Write;
     let mut out = String::new();
     let b = series.bounds();

@@ -55,7 +55,7 @@ pub struct SliceArgs {
     pub no_legend: bool,
 }
 
-pub fn run(args: SliceArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: SliceArgs) -> anyhow::Result<()> {
     check_args(&args)?;
     crate::io::output::check_writable(&args.out, args.force)?;
     let resolved = resolve_for_images(&args.data, &args.field)?;

@@ -27,7 +27,7 @@ pub struct StbnArgs {
     pub force: bool,
 }
 
-pub fn run(args: StbnArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: StbnArgs) -> anyhow::Result<()> {
     for (name, v) in [
         ("width", args.width),
         ("height", args.height),

@@ -48,7 +48,7 @@ fn parse_size(text: &str) -> Result<[f32; 2], String> {
     Ok([parse(w)?, parse(h)?])
 }
 
-pub fn run(args: ViewArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: ViewArgs) -> anyhow::Result<()> {
     let mut loaded = resolve_for_images(&args.data, &args.field)?;
     args.view.apply(&mut loaded.scene.camera)?;
     if let Some(spp) = args.spp {

@@ -17,12 +17,12 @@ use super::f32_kernel::simd_in_use;
 use super::{Kernel, Particles, Theta};
 
 /// Candidates tested together.
-pub const LANES: usize = 4;
+pub(super) const LANES: usize = 4;
 
 /// The particles in the order the caller chose (cell by cell), as f64 structure of arrays
 /// followed by [`LANES`] that reach nothing, so four lanes can be read from any particle on.
 #[derive(Clone, Debug, Default)]
-pub struct Packed64 {
+pub(super) struct Packed64 {
     x: Vec<f64>,
     y: Vec<f64>,
     z: Vec<f64>,
@@ -36,7 +36,7 @@ pub struct Packed64 {
 
 impl Packed64 {
     /// Particles `order[0]`, `order[1]`, … of `p`.
-    pub fn gather(p: &Particles, order: &[u32]) -> Packed64 {
+    pub(super) fn gather(p: &Particles, order: &[u32]) -> Packed64 {
         let f64s = |f: &(dyn Fn(usize) -> f64 + Sync)| -> Vec<f64> {
             let mut v: Vec<f64> = order.par_iter().map(|&i| f(i as usize)).collect();
             v.extend([0.0; LANES]);
@@ -63,14 +63,14 @@ impl Packed64 {
     }
 
     /// Bytes of the arrays.
-    pub fn bytes(&self) -> usize {
+    pub(super) fn bytes(&self) -> usize {
         8 * (5 + self.channels) * self.x.len()
     }
 
     /// Σ phi_i and Σ theta_i phi_i at `q` (local coordinates) over the particles of `runs`
     /// (ranges of this order), in f64.
     #[inline]
-    pub fn sums(&self, runs: &[(u32, u32)], q: DVec3) -> (f64, [f64; 3]) {
+    pub(super) fn sums(&self, runs: &[(u32, u32)], q: DVec3) -> (f64, [f64; 3]) {
         match self.channels {
             0 => sums::<0>(self, runs, q),
             1 => sums::<1>(self, runs, q),

@@ -8,7 +8,7 @@ use super::Problem;
 use super::{At, AttributeSelection, Columns, DataError, ReadOptions};
 
 #[cfg(feature = "hdf5")]
-pub fn read_step(
+pub(super) fn read_step(
     at: At<'_>,
     read: &ReadOptions,
     selection: &AttributeSelection,
@@ -31,7 +31,7 @@ pub fn read_step(
 }
 
 #[cfg(feature = "hdf5")]
-pub fn time(path: &Path) -> Option<f64> {
+pub(super) fn time(path: &Path) -> Option<f64> {
     super::hdf5_snapshot::time(path)
 }
 
@@ -41,7 +41,7 @@ pub fn time(_path: &Path) -> Option<f64> {
 }
 
 #[cfg(feature = "hdf5")]
-pub fn simulation_box(
+pub(super) fn simulation_box(
     path: &Path,
     read: &ReadOptions,
 ) -> Result<Option<super::SimulationBox>, DataError> {

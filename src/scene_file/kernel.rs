@@ -14,7 +14,7 @@ const DENSITY_NAMES: [&str; 5] = ["densities", "density", "rho", "rhos", "dens"]
 
 /// An SPH kernel's inputs after defaults.
 #[derive(Debug)]
-pub struct SphInputs {
+pub(super) struct SphInputs {
     pub radius_attribute: Option<String>,
     pub mass: PerParticle,
     pub density: PerParticle,
@@ -30,7 +30,7 @@ fn find(names: &[String], candidates: &[&str]) -> Option<String> {
 /// (`names`: the attributes of the first step). `smoothing_names` are the names a smoothing
 /// length goes by; `radius_given` whether `--radius` was given (a kernel of one h for every
 /// particle needs no attribute, but then h must be said).
-pub fn resolve(
+pub(super) fn resolve(
     kernel: Kernel,
     radius_attribute: Option<String>,
     mass: Option<PerParticle>,

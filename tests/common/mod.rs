@@ -7,7 +7,7 @@
 
 /// What a GPU test needs: the device (or backend) `result` holds. Without one the test fails,
 /// saying how to get one: a test that did not run must never read as passed.
-pub fn require<T, E: std::fmt::Display>(what: &str, result: Result<T, E>) -> T {
+pub(crate) fn require<T, E: std::fmt::Display>(what: &str, result: Result<T, E>) -> T {
     result.unwrap_or_else(|e| {
         panic!(
             "{what} is unavailable: {e}\nGPU tests fail rather than pass without running: \
@@ -55,7 +55,7 @@ impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for DriverMessages {
 
 /// Starts capturing wgpu's messages (and the `log` records of wgpu-hal, through tracing-log);
 /// call before the first device is created. Idempotent.
-pub fn capture_driver_messages() {
+pub(crate) fn capture_driver_messages() {
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
     let _ = tracing_subscriber::registry()
@@ -65,7 +65,7 @@ pub fn capture_driver_messages() {
 
 /// Fails if the validation layers (on in builds with debug assertions, when installed) or
 /// wgpu reported anything so far.
-pub fn assert_no_driver_messages() {
+pub(crate) fn assert_no_driver_messages() {
     let m = DRIVER_MESSAGES
         .lock()
         .unwrap_or_else(|e| e.into_inner())
@@ -75,7 +75,7 @@ pub fn assert_no_driver_messages() {
 
 /// A float64 array as `numpy.save` writes it: magic, version 1.0, a header dict padded with
 /// spaces to a multiple of 64 bytes and ended by a newline, then the row-major data.
-pub fn write_numpy(path: &std::path::Path, rows: usize, cols: usize, data: &[f64]) {
+pub(crate) fn write_numpy(path: &std::path::Path, rows: usize, cols: usize, data: &[f64]) {
     let mut header =
         format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
     let total = 10 + header.len() + 1;
@@ -91,7 +91,7 @@ pub fn write_numpy(path: &std::path::Path, rows: usize, cols: usize, data: &[f64
 }
 
 /// x - c exactly, as the pair (s, e) with s + e = x - c (Knuth's two-sum).
-pub fn two_diff(x: f64, c: f64) -> (f64, f64) {
+pub(crate) fn two_diff(x: f64, c: f64) -> (f64, f64) {
     let s = x - c;
     let bb = s - x;
     let e = (x - (s - bb)) + (-c - bb);
@@ -99,7 +99,7 @@ pub fn two_diff(x: f64, c: f64) -> (f64, f64) {
 }
 
 /// |x - c|² to f64's relative precision, however large x and c are.
-pub fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
+pub(crate) fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
     [(x.x, c.x), (x.y, c.y), (x.z, c.z)]
         .iter()
         .map(|&(a, b)| {
@@ -112,7 +112,7 @@ pub fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
 /// `aarbf field ARGS --backend BACKEND --force --out OUT` as a user runs it: (Phi, Theta) per
 /// query from the output, and what it printed. A GPU backend that cannot start fails the test
 /// as [`require`] does.
-pub fn aarbf_field(
+pub(crate) fn aarbf_field(
     args: &[std::ffi::OsString],
     backend: &str,
     out: &std::path::Path,

@@ -22,7 +22,7 @@ fn run(args: &[&str]) -> String {
 
 /// The dam break's first step drawn with a 64-cell grid (radius 0.03: a few cells) at 2
 /// spp on each of `backends`.
-pub fn render_voxels_on(dir: &Path, backends: &[&str]) -> Vec<image::RgbaImage> {
+pub(crate) fn render_voxels_on(dir: &Path, backends: &[&str]) -> Vec<image::RgbaImage> {
     let data = run(&[
         "generate",
         "dambreak-demo",
@@ -63,7 +63,7 @@ pub fn render_voxels_on(dir: &Path, backends: &[&str]) -> Vec<image::RgbaImage> 
         .collect()
 }
 
-pub fn largest_byte_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> u8 {
+pub(crate) fn largest_byte_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> u8 {
     assert_eq!(a.dimensions(), b.dimensions());
     a.as_raw()
         .iter()

@@ -251,7 +251,7 @@ fn compile_the_prepare_passes(ctx: &Context) {
         let words = naga_spirv(entry, Checks::AsWgpu);
         let (set, layout) = layouts(ctx, &[entry]);
         let (p, seconds) = pipeline(ctx, &words, entry.point().name, layout);
-        println!(
+        eprintln!(
             "{entry}: {} SPIR-V words, pipeline in {seconds:.2} s",
             words.len()
         );
@@ -269,7 +269,7 @@ fn compile_the_prepare_passes(ctx: &Context) {
     ] {
         let started = Instant::now();
         prepare_pipeline(ctx, glsl).unwrap();
-        println!(
+        eprintln!(
             "{glsl}: glslc's SPIR-V, pipeline in {:.2} s",
             started.elapsed().as_secs_f64()
         );
@@ -424,7 +424,7 @@ fn record_naga_sort(
 #[ignore = "a measurement (docs/notes/2026-12-07-shader-table.md), not a guard"]
 fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
     let ctx = context::shared().expect("a Vulkan device");
-    println!("device: {}", ctx.describe());
+    eprintln!("device: {}", ctx.describe());
     compile_the_prepare_passes(&ctx);
 
     // The sort itself: 8 passes over n keys, both ways, on the same buffers.
@@ -518,7 +518,7 @@ fn naga_wgsl_spirv_runs_the_prepare_passes_on_ash() {
         ctx.device.destroy_pipeline_layout(layout, None);
         ctx.device.destroy_descriptor_set_layout(set_layout, None);
     }
-    println!("{}", report.join("\n"));
+    eprintln!("{}", report.join("\n"));
     let messages = validation_messages();
     assert!(messages.is_empty(), "validation: {messages:?}");
 }

@@ -4,7 +4,7 @@ use crate::values::Image;
 
 /// Sums frames per pixel; the image is their mean. Reset on any change.
 #[derive(Clone, Debug)]
-pub struct Accumulator {
+pub(super) struct Accumulator {
     pub width: u32,
     pub height: u32,
     pub frames: u32,
@@ -12,7 +12,7 @@ pub struct Accumulator {
 }
 
 impl Accumulator {
-    pub fn new(width: u32, height: u32) -> Accumulator {
+    pub(super) fn new(width: u32, height: u32) -> Accumulator {
         Accumulator {
             width,
             height,
@@ -21,13 +21,13 @@ impl Accumulator {
         }
     }
 
-    pub fn reset(&mut self) {
+    pub(super) fn reset(&mut self) {
         self.frames = 0;
         self.sum.fill([0.0; 4]);
     }
 
     /// Adds one frame's pixels (row-major).
-    pub fn add(&mut self, frame: &[[f64; 4]]) {
+    pub(super) fn add(&mut self, frame: &[[f64; 4]]) {
         assert_eq!(frame.len(), self.sum.len());
         for (s, f) in self.sum.iter_mut().zip(frame) {
             for c in 0..4 {
@@ -38,12 +38,12 @@ impl Accumulator {
     }
 
     /// The mean per pixel, in f64.
-    pub fn mean(&self) -> Vec<[f64; 4]> {
+    pub(super) fn mean(&self) -> Vec<[f64; 4]> {
         let n = f64::from(self.frames.max(1));
         self.sum.iter().map(|s| s.map(|v| v / n)).collect()
     }
 
-    pub fn image(&self) -> Image {
+    pub(super) fn image(&self) -> Image {
         let n = f64::from(self.frames.max(1));
         Image {
             width: self.width,
@@ -52,7 +52,7 @@ impl Accumulator {
         }
     }
 
-    pub fn bytes(&self) -> usize {
+    pub(super) fn bytes(&self) -> usize {
         self.sum.len() * std::mem::size_of::<[f64; 4]>()
     }
 }

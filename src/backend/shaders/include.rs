@@ -6,7 +6,9 @@
 /// The shading language a source is in (what `#split_array` writes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ShaderLanguage {
+    /// GLSL 4.60 (compiled by naga for wgpu, by glslc for ash).
     Glsl,
+    /// WGSL (wgpu only: the stages that need its atomics).
     Wgsl,
 }
 

@@ -33,12 +33,12 @@ pub fn buffers_made() -> u64 {
 
 /// The specialisation-constant values of a GLSL kernel variant (params.glsl's seven, in
 /// constant_id order), or none.
-pub type Variant = Option<[u32; SPEC_CONSTANTS.len()]>;
+pub(super) type Variant = Option<[u32; SPEC_CONSTANTS.len()]>;
 
 /// Parts an array may be split into ([`super::util::SplitBuffer`]); the kernels' [`Layout::Split`] variant
 /// (`SPLIT_PARTS` = 4 in `shaders_glsl/wgpu/split.glsl`, `shaders_wgsl/shared/split_boxes.wgsl`,
 /// `shaders_wgsl/lbvh_{hierarchy,fit}.wgsl`) binds this many buffers per array.
-pub const PARTS: u64 = 4;
+pub(super) const PARTS: u64 = 4;
 
 /// How a kernel binds the arrays that can outgrow one storage binding
 /// (`shaders_glsl/wgpu/split.glsl`): each as one buffer, or in [`PARTS`] parts (`Layout::of` picks).

@@ -6,7 +6,7 @@ use crate::backend::BackendError;
 /// Workgroups for `threads` threads of `group`-sized workgroups, as a 2D grid (x at most
 /// 65535, the WebGPU minimum limit); the kernels compute their index as
 /// `(wg.y * groups.x + wg.x) * group + local`.
-pub fn grid(threads: u64, group: u32) -> (u32, u32) {
+pub(super) fn grid(threads: u64, group: u32) -> (u32, u32) {
     let groups = threads.div_ceil(u64::from(group)).max(1);
     let x = groups.min(65_535);
     (x as u32, groups.div_ceil(x) as u32)
@@ -16,20 +16,20 @@ pub fn grid(threads: u64, group: u32) -> (u32, u32) {
 /// does group `(i mod B) S + i / B` (those at or beyond `groups` do nothing). Consecutive
 /// workgroups land in different blocks, so a driver that splits a dispatch into contiguous
 /// ranges per thread (lavapipe) balances work that varies across the image or query order.
-pub fn interleave(groups: u32) -> (u32, u32, u32) {
+pub(super) fn interleave(groups: u32) -> (u32, u32, u32) {
     let blocks = groups.clamp(1, 64);
     let per_block = groups.div_ceil(blocks).max(1);
     (blocks, per_block, blocks * per_block)
 }
 
 /// A storage buffer of at least `bytes` (rounded up to 16, never 0), copyable both ways.
-pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
+pub(super) fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
     storage_with_usage(ctx, label, bytes, wgpu::BufferUsages::empty())
 }
 
 /// [`storage`], the buffer also having `extra` usages (`MAP_WRITE` for
 /// [`Staging::aliasing_buffer`]).
-pub fn storage_with_usage(
+pub(super) fn storage_with_usage(
     ctx: &GpuContext,
     label: &str,
     bytes: u64,
@@ -46,7 +46,7 @@ pub fn storage_with_usage(
     })
 }
 
-pub fn uniform(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
+pub(super) fn uniform(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
     ctx.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16).next_multiple_of(16),
@@ -56,20 +56,20 @@ pub fn uniform(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
 }
 
 /// Writes `data` at offset 0 (nothing for empty data).
-pub fn write(ctx: &GpuContext, buffer: &wgpu::Buffer, data: &[u8]) {
+pub(super) fn write(ctx: &GpuContext, buffer: &wgpu::Buffer, data: &[u8]) {
     if !data.is_empty() {
         ctx.queue.write_buffer(buffer, 0, data);
     }
 }
 
 /// Fills a whole buffer with 0xFF bytes (a NaN / u32::MAX poison, for tests).
-pub fn poison(ctx: &GpuContext, buffer: &wgpu::Buffer) {
+pub(super) fn poison(ctx: &GpuContext, buffer: &wgpu::Buffer) {
     ctx.queue
         .write_buffer(buffer, 0, &vec![0xFF; buffer.size() as usize]);
 }
 
 /// A bind group for `pipeline`'s group 0 with whole buffers (or ranges) at the given bindings.
-pub fn bind(
+pub(super) fn bind(
     ctx: &GpuContext,
     pipeline: &wgpu::ComputePipeline,
     entries: &[(u32, wgpu::BindingResource<'_>)],
@@ -90,7 +90,7 @@ pub fn bind(
 }
 
 /// One compute pass with one dispatch.
-pub fn dispatch(
+pub(super) fn dispatch(
     encoder: &mut wgpu::CommandEncoder,
     label: &str,
     pipeline: &wgpu::ComputePipeline,
@@ -109,7 +109,7 @@ pub fn dispatch(
 /// Encodes one pass of `kernel` (its pipeline for `variant` and `layout`, compiled on first
 /// use) bound to `entries`, dispatching `groups` workgroups.
 #[allow(clippy::too_many_arguments)]
-pub fn encode_pass(
+pub(super) fn encode_pass(
     ctx: &GpuContext,
     encoder: &mut wgpu::CommandEncoder,
     label: &str,
@@ -127,7 +127,7 @@ pub fn encode_pass(
 
 /// Reads `bytes` bytes from `offset` of `buffer` (which needs COPY_SRC), waiting for the
 /// device.
-pub fn read(
+pub(super) fn read(
     ctx: &GpuContext,
     buffer: &wgpu::Buffer,
     offset: u64,
@@ -140,7 +140,7 @@ pub fn read(
 
 /// Submits `encoder` (if any) followed by a copy of `bytes` bytes at `offset` of `buffer`,
 /// waits, and appends them to `out`.
-pub fn read_into(
+pub(super) fn read_into(
     ctx: &GpuContext,
     encoder: Option<wgpu::CommandEncoder>,
     buffer: &wgpu::Buffer,
@@ -191,7 +191,7 @@ pub fn read_into(
 }
 
 /// Reads `count` u32 words.
-pub fn read_u32(
+pub(super) fn read_u32(
     ctx: &GpuContext,
     buffer: &wgpu::Buffer,
     count: usize,
@@ -201,7 +201,7 @@ pub fn read_u32(
 }
 
 /// Submits `encoder` and waits for it.
-pub fn submit_and_wait(
+pub(super) fn submit_and_wait(
     ctx: &GpuContext,
     what: &str,
     encoder: wgpu::CommandEncoder,
@@ -215,7 +215,7 @@ pub fn submit_and_wait(
 /// Submits `encoder` and waits for it, returning the time the device spent on it, from
 /// timestamps written in command buffers submitted just before and after it (`None` where the
 /// device has no timestamps inside encoders: the caller times it on the host).
-pub fn submit_and_time(
+pub(super) fn submit_and_time(
     ctx: &GpuContext,
     what: &str,
     encoder: wgpu::CommandEncoder,
@@ -240,13 +240,13 @@ pub fn submit_and_time(
 /// with their resolution, and [`DeviceSpan::read`], once that work has completed, the time
 /// between them. Holds the context's timestamps until read (the context is shared between
 /// threads), so nothing between begin and read may time anything else.
-pub struct DeviceSpan<'a> {
+pub(super) struct DeviceSpan<'a> {
     ts: &'a super::context::Timestamps,
     _one_at_a_time: std::sync::MutexGuard<'a, ()>,
 }
 
 impl<'a> DeviceSpan<'a> {
-    pub fn begin(ctx: &'a GpuContext, encoder: &mut wgpu::CommandEncoder) -> Option<Self> {
+    pub(super) fn begin(ctx: &'a GpuContext, encoder: &mut wgpu::CommandEncoder) -> Option<Self> {
         let ts = ctx.timestamps.as_ref()?;
         let guard = ts.lock.lock().unwrap_or_else(|e| e.into_inner());
         encoder.write_timestamp(&ts.queries, 0);
@@ -256,7 +256,7 @@ impl<'a> DeviceSpan<'a> {
         })
     }
 
-    pub fn end(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub(super) fn end(&self, encoder: &mut wgpu::CommandEncoder) {
         let ts = self.ts;
         encoder.write_timestamp(&ts.queries, 1);
         encoder.resolve_query_set(&ts.queries, 0..2, &ts.resolved, 0);
@@ -264,7 +264,7 @@ impl<'a> DeviceSpan<'a> {
     }
 
     /// The time between the two timestamps (the work holding `end` must have completed).
-    pub fn read(self, ctx: &GpuContext) -> Result<std::time::Duration, BackendError> {
+    pub(super) fn read(self, ctx: &GpuContext) -> Result<std::time::Duration, BackendError> {
         let ts = self.ts;
         let (sender, receiver) = std::sync::mpsc::channel();
         ts.readback.map_async(wgpu::MapMode::Read, .., move |r| {
@@ -288,7 +288,7 @@ impl<'a> DeviceSpan<'a> {
     }
 }
 
-pub use super::context::PARTS;
+pub(super) use super::context::PARTS;
 
 impl Layout {
     /// Split when any array the kernel binds is in more than one part.
@@ -303,13 +303,13 @@ impl Layout {
 
 /// The largest part a split array uses: the binding limit, capped at 2 GiB so that every word
 /// index of a 4-part array fits a u32 in the shaders.
-pub fn part_limit(max_binding: u64) -> u64 {
+pub(super) fn part_limit(max_binding: u64) -> u64 {
     max_binding.min(1 << 31)
 }
 
 /// The parts an array of `elems` elements of `elem_bytes` bytes needs under a binding limit of
 /// `max_binding` bytes (at least 1; may exceed [`PARTS`], which the caller refuses).
-pub fn parts_needed(elems: u64, elem_bytes: u64, max_binding: u64) -> u64 {
+pub(super) fn parts_needed(elems: u64, elem_bytes: u64, max_binding: u64) -> u64 {
     let per_part = part_limit(max_binding) / elem_bytes;
     if per_part == 0 {
         return u64::MAX;
@@ -497,7 +497,7 @@ impl SplitBuffer {
 /// once for a capacity and mapped again for each write, so stepping through a series
 /// makes no buffer. The CPU converts a step straight into them (one copy of its bytes,
 /// `gpu_data`), write-only: mapped memory may be uncached on the host.
-pub struct Staging {
+pub(super) struct Staging {
     parts: Vec<wgpu::Buffer>,
     part_bytes: u64,
     mapped: bool,
@@ -509,7 +509,7 @@ pub struct Staging {
 impl Staging {
     /// Room for `bytes` bytes in parts of `part_bytes`, mapped. Call inside
     /// [`GpuContext::scoped`].
-    pub fn new(ctx: &GpuContext, label: &str, bytes: u64, part_bytes: u64) -> Staging {
+    pub(super) fn new(ctx: &GpuContext, label: &str, bytes: u64, part_bytes: u64) -> Staging {
         let bytes = bytes.max(16);
         let count = bytes.div_ceil(part_bytes);
         let parts = (0..count)
@@ -535,7 +535,7 @@ impl Staging {
     /// Staging that is `dst` itself, whose parts were made mappable
     /// ([`SplitBuffer::with_usage`] with `MAP_WRITE`): views write into the buffers the
     /// kernels read, and [`Self::encode_copy`] only unmaps them.
-    pub fn aliasing(dst: &SplitBuffer) -> Staging {
+    pub(super) fn aliasing(dst: &SplitBuffer) -> Staging {
         Self::aliasing_parts(
             dst.buffers()[..dst.parts_used().max(1)].to_vec(),
             dst.part_bytes,
@@ -544,7 +544,7 @@ impl Staging {
 
     /// Staging that is the one buffer `dst` itself, made with `MAP_WRITE` ([`Self::aliasing`]
     /// for an array in one buffer).
-    pub fn aliasing_buffer(dst: &wgpu::Buffer) -> Staging {
+    pub(super) fn aliasing_buffer(dst: &wgpu::Buffer) -> Staging {
         Self::aliasing_parts(vec![dst.clone()], dst.size())
     }
 
@@ -558,17 +558,17 @@ impl Staging {
     }
 
     /// Staging for the whole of `dst`, in its parts.
-    pub fn for_split(ctx: &GpuContext, label: &str, dst: &SplitBuffer) -> Staging {
+    pub(super) fn for_split(ctx: &GpuContext, label: &str, dst: &SplitBuffer) -> Staging {
         Staging::new(ctx, label, dst.size(), dst.part_bytes)
     }
 
     /// Bytes per part (all but the last are full).
-    pub fn part_bytes(&self) -> u64 {
+    pub(super) fn part_bytes(&self) -> u64 {
         self.part_bytes
     }
 
     /// Whether this staging is its destination's own memory ([`Self::aliasing`]).
-    pub fn aliases(&self) -> bool {
+    pub(super) fn aliases(&self) -> bool {
         self.aliases
     }
 
@@ -600,7 +600,7 @@ impl Staging {
 
     /// Write-only views of bytes `0 .. bytes`, one per part they reach (each from the part's
     /// start); drop them before [`Self::encode_copy`].
-    pub fn views(
+    pub(super) fn views(
         &mut self,
         ctx: &GpuContext,
         bytes: u64,
@@ -623,7 +623,7 @@ impl Staging {
     }
 
     /// Unmaps the parts (after writing through [`Self::views`]).
-    pub fn unmap(&mut self) {
+    pub(super) fn unmap(&mut self) {
         for b in &self.parts {
             b.unmap();
         }
@@ -632,7 +632,7 @@ impl Staging {
 
     /// Unmaps the parts and encodes copying bytes `0 .. bytes` into `dst` (buffers cut into the
     /// same parts; nothing when the parts are `dst`'s own).
-    pub fn encode_copy(
+    pub(super) fn encode_copy(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         dst: &[wgpu::Buffer],

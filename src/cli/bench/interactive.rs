@@ -69,7 +69,7 @@ struct Drag {
     time: Duration,
 }
 
-pub fn run(args: InteractiveArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: InteractiveArgs) -> anyhow::Result<()> {
     let md = args.out.join("interactive.md");
     crate::io::output::check_writable(&md, args.force)?;
     anyhow::ensure!(args.spp > 0, "--spp must be at least 1");

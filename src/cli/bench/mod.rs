@@ -102,7 +102,7 @@ pub(super) fn parse_size(text: &str) -> Result<(u32, u32), String> {
     Ok((parse(w)?, parse(h)?))
 }
 
-pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.what {
         BenchCommand::Playback(a) => playback(a),
         BenchCommand::Interactive(a) => interactive::run(a),

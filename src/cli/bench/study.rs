@@ -266,7 +266,7 @@ fn command_line() -> String {
 }
 
 /// Runs one study (`Some`) or all of them.
-pub fn run(which: Option<Study>, args: &StudyArgs) -> anyhow::Result<()> {
+pub(super) fn run(which: Option<Study>, args: &StudyArgs) -> anyhow::Result<()> {
     let options = args.options(command_line());
     let written = match which {
         Some(s) => vec![study::run(s, &options)?],

@@ -346,7 +346,7 @@ impl Setup {
     }
 }
 
-pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+pub(super) fn run(args: RenderArgs) -> anyhow::Result<()> {
     let ranks = dist::ranks(&args)?;
     let draw_legend = check_flags(&args)?;
     let setup = settle(&args)?;

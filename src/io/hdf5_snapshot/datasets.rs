@@ -18,7 +18,7 @@ const MAX_COMPRESSION_RATIO: u64 = 1100;
 
 /// How a dataset's values are stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
+pub(super) enum Kind {
     F32,
     F64,
     I64,
@@ -48,7 +48,7 @@ fn int_bytes(size: IntSize) -> u64 {
 
 /// A particle dataset: `rows` particles of `components` values each.
 #[derive(Clone, Debug)]
-pub struct Column {
+pub(super) struct Column {
     /// The dataset's name within its particle-type group (`Coordinates`).
     pub name: String,
     pub rows: usize,
@@ -60,7 +60,7 @@ pub struct Column {
 impl Column {
     /// The shape and type of `dataset`; `None` for datasets that are not per-particle numbers
     /// (strings, compound types, more than two dimensions), which cannot be attributes.
-    pub fn of(name: &str, dataset: &Dataset) -> Option<Column> {
+    pub(super) fn of(name: &str, dataset: &Dataset) -> Option<Column> {
         let (kind, bytes_per_value) = Kind::of(&dataset.dtype().ok()?.to_descriptor().ok()?)?;
         let shape = dataset.shape();
         let (rows, components) = match shape.as_slice() {
@@ -84,7 +84,7 @@ impl Column {
     /// by HDF5 straight into `out`, other types into one buffer of their own, converted into
     /// `out` in parallel. (Read block by block through HDF5's hyperslabs it was 8x h5py's time
     /// on 4M uncompressed particles: each block's selection, copy and conversion.)
-    pub fn read_into(
+    pub(super) fn read_into(
         &self,
         at: At<'_>,
         group: &str,
@@ -261,7 +261,7 @@ fn widen_checked<T: Copy>(stored: &[T], out: &mut [f64], convert: impl Fn(T) -> 
 /// advised to be backed by transparent huge pages, as NumPy does for the arrays h5py reads
 /// into. Faulting a 100 MB array in 4 KiB pages (25,000 faults, each clearing its page) took a
 /// third of an uncompressed read; in 2 MiB pages it is 50 faults.
-pub fn fresh<T: Copy + Default>(len: usize) -> Vec<T> {
+pub(super) fn fresh<T: Copy + Default>(len: usize) -> Vec<T> {
     let mut v = vec![T::default(); len];
     advise_huge_pages(&mut v);
     v

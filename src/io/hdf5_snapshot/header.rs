@@ -126,7 +126,7 @@ impl Header {
 ///   `_Z` makes it not;
 /// - otherwise (GADGET-2/3 and GIZMO write no flag): a positive `BoxSize` is a periodic box,
 ///   the GADGET family's default for the cosmological volumes such files hold.
-pub fn periodicity(
+pub(super) fn periodicity(
     file: &File,
     parameters: Option<&Group>,
     box_size: Option<[f64; 3]>,
@@ -214,7 +214,7 @@ fn attribute(location: &Location, name: &str) -> Option<Attribute> {
 }
 
 /// A numeric attribute's values (scalar or array, any integer or float type) as f64.
-pub fn attr_f64s(location: &Location, name: &str) -> Option<Vec<f64>> {
+pub(super) fn attr_f64s(location: &Location, name: &str) -> Option<Vec<f64>> {
     let a = attribute(location, name)?;
     if !matches!(
         a.dtype().ok()?.to_descriptor().ok()?,
@@ -225,7 +225,7 @@ pub fn attr_f64s(location: &Location, name: &str) -> Option<Vec<f64>> {
     a.read_raw::<f64>().ok()
 }
 
-pub fn attr_f64(location: &Location, name: &str) -> Option<f64> {
+pub(super) fn attr_f64(location: &Location, name: &str) -> Option<f64> {
     attr_f64s(location, name)?.first().copied()
 }
 
@@ -255,7 +255,7 @@ fn attr_u64s(location: &Location, name: &str) -> Option<Vec<u64>> {
 }
 
 /// A string attribute, fixed or variable length (h5py writes either, SWIFT fixed).
-pub fn attr_string(location: &Location, name: &str) -> Option<String> {
+pub(super) fn attr_string(location: &Location, name: &str) -> Option<String> {
     let a = attribute(location, name)?;
     let text = match a.dtype().ok()?.to_descriptor().ok()? {
         TypeDescriptor::VarLenUnicode => a.read_raw::<VarLenUnicode>().ok()?.first()?.to_string(),

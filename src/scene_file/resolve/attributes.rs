@@ -27,7 +27,7 @@ pub(super) struct Wanted {
 impl Wanted {
     /// The attributes the masses and the densities are read from (none where either is one
     /// value for every particle).
-    pub fn mass_and_density_attributes(&self) -> (Option<String>, Option<String>) {
+    pub(super) fn mass_and_density_attributes(&self) -> (Option<String>, Option<String>) {
         let attribute_of = |q: &Option<PerParticle>| match q {
             Some(PerParticle::Attribute(name)) => Some(name.clone()),
             _ => None,

@@ -25,7 +25,7 @@ pub(super) struct Source {
 
 impl Source {
     /// The series in memory, or the path the flags or the scene file give.
-    pub fn new(
+    pub(super) fn new(
         scene: &SceneFile,
         memory: Option<(TimeSeries, PathBuf)>,
         data: &DataArgs,
@@ -48,7 +48,7 @@ impl Source {
     }
 
     /// The first step with every attribute it holds: from memory, or read from its file.
-    pub fn first_in_full(&self) -> anyhow::Result<Option<Arc<Step>>> {
+    pub(super) fn first_in_full(&self) -> anyhow::Result<Option<Arc<Step>>> {
         if let Some(series) = &self.memory {
             return Ok(series.first_step_in_full()?);
         }
