@@ -1199,3 +1199,36 @@ fn stepping_through_a_reserved_series_makes_no_buffers() {
     }
     assert_no_validation_messages();
 }
+
+/// The voxel baseline's grid of a cube at 1024³ (16 GiB, 2^32 words) is more than the device
+/// allocates (lavapipe: 2 GiB) or the kernels index: refused before anything is allocated;
+/// the same cube's 16³ grid is made.
+#[test]
+fn a_voxel_grid_beyond_the_allocation_limit_is_refused() {
+    use crate::voxel_baseline as voxel;
+    use aarbf::backend::Precision;
+    use aarbf::backend::voxel::MAX_GRID;
+    let corners: Vec<DVec3> = (0..8)
+        .map(|i| DVec3::new((i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64))
+        .collect();
+    let cube = aarbf::scene::TimeSeries::from_steps(vec![Step {
+        name: "cube".into(),
+        attributes: vec![Attribute {
+            name: "a".into(),
+            values: (0..8).map(f64::from).collect(),
+        }],
+        positions: corners,
+    }]);
+    let field = FieldSettings::new(Some("a"), 0.06);
+    let (_, frame) = voxel::frame_of(&cube, &field, &Default::default());
+    let mut b = backend();
+    voxel::upload(&mut b, &cube, &field, 4, Precision::RENDER);
+    let e = b.voxelize(&frame, MAX_GRID).unwrap_err().to_string();
+    assert!(
+        e.contains("maxMemoryAllocationSize") || e.contains("2^32 words"),
+        "{e}"
+    );
+    b.voxelize(&frame, 16).unwrap();
+    assert_eq!(b.voxel_grid().unwrap().dims(), [16, 16, 16]);
+    assert_no_validation_messages();
+}

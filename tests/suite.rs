@@ -6,10 +6,8 @@
 //! purpose, and every GPU test here asserts that the process saw none.
 
 mod common;
-mod voxel_cli;
 
 mod architecture;
-mod ash_cli;
 mod ash_rt;
 mod cli;
 mod collections;
@@ -21,6 +19,7 @@ mod field_checks;
 mod field_reference;
 mod first_contact;
 mod fuzz_regressions;
+mod gpu_cli;
 mod hdf5_snapshots;
 mod knn_smoothing;
 mod noise_convergence;
@@ -33,16 +32,11 @@ mod render_cpu;
 mod sequences;
 mod series_streaming;
 mod sph_kernels;
-mod splat_ash;
 mod splat_baseline;
-mod splat_wgpu;
 mod studies;
 mod target_error;
 mod target_error_outside;
 mod viewer;
-mod voxel_ash;
 mod voxel_baseline;
-mod voxel_wgpu;
-mod wgpu_cli;
 mod wgpu_lbvh;
 mod wgpu_render;

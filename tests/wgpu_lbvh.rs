@@ -1027,3 +1027,130 @@ fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
     }
     assert_no_driver_messages();
 }
+
+/// The voxel baseline's grid with bindings of 8 KiB (the particles split over parts, the slab
+/// buffer two layers, the first pass 256 particles at a time) equals the CPU's grid as one made
+/// in one binding does, over a poisoned texture; a layer larger than a binding is refused,
+/// naming the limit.
+#[test]
+fn a_voxel_grid_in_many_slabs_and_chunks_equals_one_in_one() {
+    use crate::voxel_baseline as voxel;
+    let series = voxel::random_series(1237, 5, DVec3::new(0.5, 0.25, -1.0));
+    let field = FieldSettings::new(Some("a"), 0.06);
+    let settings = aarbf::render::RenderSettings {
+        width: 16,
+        height: 16,
+        ..aarbf::render::RenderSettings::default()
+    };
+    let (mut cpu, frame) = voxel::frame_of(&series, &field, &settings);
+    cpu.backend_mut().voxelize(&frame, 13).unwrap();
+    let reference = cpu.backend_mut().voxel_grid().unwrap();
+    let mut small = WgpuBackend::with_max_binding(gpu(), 8192);
+    voxel::upload(&mut small, &series, &field, 4, Precision::RENDER);
+    small.voxelize(&frame, 13).unwrap();
+    small.poison_voxels().unwrap();
+    small.voxelize(&frame, 13).unwrap();
+    let (worst, finite) = voxel::grid_difference(&small.voxel_grid().unwrap(), &reference);
+    eprintln!("8 KiB bindings: largest relative difference per channel {worst:?}");
+    assert!(finite);
+    assert!(worst.iter().all(|&w| w < 1e-5), "{worst:?}");
+    let e = small.voxelize(&frame, 64).unwrap_err().to_string();
+    assert!(e.contains("slab buffer") && e.contains("8192"), "{e}");
+    assert_no_driver_messages();
+}
+
+/// A device whose 3D textures are at most 32 texels a side refuses the voxel baseline's
+/// 64-cell grid, naming the limit, and makes a 32-cell one.
+#[test]
+fn a_voxel_grid_beyond_the_3d_texture_limit_is_refused() {
+    use crate::voxel_baseline as voxel;
+    gpu();
+    let series = voxel::random_series(100, 3, DVec3::ZERO);
+    let field = FieldSettings::new(Some("a"), 0.06);
+    let (_, frame) = voxel::frame_of(&series, &field, &Default::default());
+    let limits = wgpu::Limits {
+        max_texture_dimension_3d: 32,
+        ..wgpu::Limits::default()
+    };
+    let small = Arc::new(common::require(
+        "a wgpu adapter",
+        GpuContext::with_limits(limits),
+    ));
+    let mut b = WgpuBackend::with_context(small);
+    voxel::upload(&mut b, &series, &field, 4, Precision::RENDER);
+    let e = b.voxelize(&frame, 64).unwrap_err().to_string();
+    assert!(
+        e.contains("max_texture_dimension_3d") && e.contains("32"),
+        "{e}"
+    );
+    b.voxelize(&frame, 32).unwrap();
+    assert_no_driver_messages();
+}
+
+/// The splatter writes every pixel: its first frame stores into the accumulation without
+/// clearing it, so with the sums poisoned (NaN) a missed pixel would show. At a size that is
+/// no multiple of the 8x8 tiles, so the edge tiles' pixels count too. A second frame adds to
+/// the first (the image, their mean, is the same deterministic frame).
+#[test]
+fn every_splatter_pixel_is_written_over_a_poisoned_accumulation() {
+    use crate::splat_baseline as splat;
+    let (series, field) = splat::dam_break();
+    let cpu = splat::cpu_session(&series, 7, &field, 4);
+    let mut wgpu = WgpuBackend::with_context(gpu());
+    splat::show(&mut wgpu, &series, 7, &field, 4, Precision::RENDER);
+    let settings = aarbf::render::RenderSettings {
+        width: 37,
+        height: 29,
+        integrator: aarbf::values::Integrator::Ea,
+        noise: aarbf::values::NoiseKind::Stbn,
+        ..aarbf::render::RenderSettings::default()
+    };
+    let frame = cpu.frame_params(&settings, 0).unwrap();
+    let first = splat::gpu_splat(&mut wgpu, &frame, 15);
+    assert!(splat::all_finite(&first));
+    assert!(first.pixels.iter().any(|p| p[3] > 0.3), "the data shows");
+    wgpu.poison_accumulation().unwrap();
+    wgpu.render_splat(&frame, 15).unwrap();
+    let again = wgpu.image().unwrap();
+    assert!(splat::all_finite(&again), "a pixel kept the poison");
+    assert_eq!(again.pixels, first.pixels, "the same frame");
+    wgpu.render_splat(&frame, 15).unwrap();
+    let twice = wgpu.image().unwrap();
+    assert_eq!(wgpu.frames(), 2);
+    let worst = splat::largest_difference(&twice, &first);
+    assert!(worst < 1e-6, "the mean of two equal frames: {worst}");
+    assert_no_driver_messages();
+}
+
+/// With the binding limit lowered so that the particles, the tree and the accumulation each
+/// span several storage bindings, the splatter (its 4-part kernel) draws the same image, bit
+/// for bit, as with one binding per array, over a poisoned accumulation.
+#[test]
+fn a_step_and_image_split_over_bindings_splat_the_same_image() {
+    use crate::splat_baseline as splat;
+    let (series, field) = splat::dam_break();
+    let cpu = splat::cpu_session(&series, 7, &field, 4);
+    let mut whole = WgpuBackend::with_context(gpu());
+    splat::show(&mut whole, &series, 7, &field, 4, Precision::RENDER);
+    // 3000 particles (48,000 B) in 3 parts of 16 KiB, 750 clusters' nodes and boxes (24,000
+    // B each) in 2, a 48x40 image's sums (30,720 B) in 2.
+    let mut split = WgpuBackend::with_max_binding(gpu(), 16 * 1024);
+    splat::show(&mut split, &series, 7, &field, 4, Precision::RENDER);
+    assert_eq!(split.split_parts(), Some((3, 2)));
+    let settings = aarbf::render::RenderSettings {
+        width: 48,
+        height: 40,
+        ..aarbf::render::RenderSettings::default()
+    };
+    let frame = cpu.frame_params(&settings, 0).unwrap();
+    let expected = splat::gpu_splat(&mut whole, &frame, 15);
+    assert!(expected.pixels.iter().any(|p| p[3] > 0.3), "the data shows");
+    splat::gpu_splat(&mut split, &frame, 15);
+    split.poison_accumulation().unwrap();
+    let image = splat::gpu_splat(&mut split, &frame, 15);
+    assert!(
+        image == expected,
+        "split and unsplit splatter images differ"
+    );
+    assert_no_driver_messages();
+}

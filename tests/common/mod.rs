@@ -1,9 +1,15 @@
-//! What the test files share: requiring a device (a GPU test fails without one, never passes
-//! without running); capturing the messages of wgpu and of the Vulkan validation layers it
-//! routes through `log`, so a test can fail on any of them; and, for the precision tests,
-//! NumPy files as NumPy writes them and exact distances for their f64 oracles.
+//! What the test files share: the GPU backends a test runs over (`gpu`); requiring a device
+//! (a GPU test fails without one, never passes without running); capturing the validation
+//! messages of wgpu, of the Vulkan layers it routes through `log` and of the ash backend's
+//! messenger, so a test can fail on any of them; and, for the precision tests, NumPy files as
+//! NumPy writes them and exact distances for their f64 oracles.
 
 #![allow(dead_code)] // each test file uses its own part
+
+mod gpu;
+#[allow(unused_imports)] // a binary of its own (ash_validation) shares this file
+pub(crate) use gpu::on_every_gpu;
+pub use gpu::{Gpu, GpuBackend, wgpu_context};
 
 /// What a GPU test needs: the device (or backend) `result` holds. Without one the test fails,
 /// saying how to get one: a test that did not run must never read as passed.
@@ -57,13 +63,21 @@ pub fn capture_driver_messages() {
 }
 
 /// Fails if the validation layers (on in builds with debug assertions, when installed) or
-/// wgpu reported anything so far.
+/// wgpu reported anything so far in this process: through wgpu, or to the ash backend's
+/// messenger.
 pub fn assert_no_driver_messages() {
     let m = DRIVER_MESSAGES
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .clone();
     assert!(m.is_empty(), "validation / driver messages: {m:#?}");
+    let m = aarbf::backend::ash_rt::validation_messages();
+    assert!(
+        m.is_empty(),
+        "{} Vulkan validation message(s):\n{}",
+        m.len(),
+        m.join("\n")
+    );
 }
 
 /// A float64 array as `numpy.save` writes it: magic, version 1.0, a header dict padded with
@@ -100,6 +114,28 @@ pub fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
             s * s + 2.0 * s * e
         })
         .sum()
+}
+
+/// `aarbf ARGS` as a user runs it (warnings logged), which must succeed and, with the
+/// validation layers on (debug assertions, as in the `checked` profile, when the layers are
+/// installed), report no validation message, through wgpu or the ash backend's messenger:
+/// what it printed.
+pub fn aarbf_ok(args: &[&str]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("AARBF_LOG", "warn")
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("the binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "aarbf {args:?} failed:\n{stderr}");
+    assert!(
+        !stderr.contains("VALIDATION")
+            && !stderr.contains("Validation Error")
+            && !stderr.contains("Vulkan validation"),
+        "aarbf {args:?}: validation messages:\n{stderr}"
+    );
+    String::from_utf8(out.stdout).unwrap()
 }
 
 /// `aarbf field ARGS --backend BACKEND --force --out OUT` as a user runs it: (Phi, Theta) per
