@@ -13,6 +13,7 @@ use aarbf::backend::wgpu_lbvh::{self, GpuContext, WgpuBackend};
 use aarbf::backend::{Backend, BackendKind};
 
 /// One test per GPU backend running the body `fn NAME(gpu: Gpu)` beside it.
+#[allow(unused_macros)] // a binary of its own (ash_validation) shares this file
 macro_rules! on_every_gpu {
     ($($test:ident),+ $(,)?) => {$(
         mod $test {
@@ -69,11 +70,11 @@ impl Gpu {
     pub fn backend(self) -> GpuBackend {
         super::capture_driver_messages();
         match self {
-            Gpu::Ash => GpuBackend::Ash(super::require(
+            Gpu::Ash => GpuBackend::Ash(Box::new(super::require(
                 "a Vulkan device with ray-tracing pipelines",
                 AshBackend::new(),
-            )),
-            Gpu::Wgpu => GpuBackend::Wgpu(WgpuBackend::with_context(wgpu_context())),
+            ))),
+            Gpu::Wgpu => GpuBackend::Wgpu(Box::new(WgpuBackend::with_context(wgpu_context()))),
         }
     }
 
@@ -98,7 +99,8 @@ impl Gpu {
         }
     }
 
-    /// Buffers this backend has made in this process so far.
+    /// Buffers this backend has made on this thread so far (each test runs on a thread of its
+    /// own).
     pub fn buffers_made(self) -> u64 {
         match self {
             Gpu::Ash => ash_rt::resources::buffers_made(),
@@ -109,16 +111,16 @@ impl Gpu {
 
 /// A GPU backend with the hooks the tests reach on either.
 pub enum GpuBackend {
-    Ash(AshBackend),
-    Wgpu(WgpuBackend),
+    Ash(Box<AshBackend>),
+    Wgpu(Box<WgpuBackend>),
 }
 
 impl Deref for GpuBackend {
     type Target = dyn Backend;
     fn deref(&self) -> &(dyn Backend + 'static) {
         match self {
-            GpuBackend::Ash(b) => b,
-            GpuBackend::Wgpu(b) => b,
+            GpuBackend::Ash(b) => &**b,
+            GpuBackend::Wgpu(b) => &**b,
         }
     }
 }
@@ -126,8 +128,8 @@ impl Deref for GpuBackend {
 impl DerefMut for GpuBackend {
     fn deref_mut(&mut self) -> &mut (dyn Backend + 'static) {
         match self {
-            GpuBackend::Ash(b) => b,
-            GpuBackend::Wgpu(b) => b,
+            GpuBackend::Ash(b) => &mut **b,
+            GpuBackend::Wgpu(b) => &mut **b,
         }
     }
 }
@@ -135,8 +137,8 @@ impl DerefMut for GpuBackend {
 impl GpuBackend {
     pub fn boxed(self) -> Box<dyn Backend> {
         match self {
-            GpuBackend::Ash(b) => Box::new(b),
-            GpuBackend::Wgpu(b) => Box::new(b),
+            GpuBackend::Ash(b) => b,
+            GpuBackend::Wgpu(b) => b,
         }
     }
 

@@ -8,8 +8,7 @@
 
 mod gpu;
 #[allow(unused_imports)] // a binary of its own (ash_validation) shares this file
-pub(crate) use gpu::on_every_gpu;
-pub use gpu::{Gpu, GpuBackend, wgpu_context};
+pub(crate) use gpu::{Gpu, GpuBackend, on_every_gpu, wgpu_context};
 
 /// What a GPU test needs: the device (or backend) `result` holds. Without one the test fails,
 /// saying how to get one: a test that did not run must never read as passed.
