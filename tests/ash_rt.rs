@@ -1,5 +1,7 @@
-//! The ash (Vulkan ray-tracing) backend against the CPU f64 reference, on whatever Vulkan
-//! device with ray-tracing pipelines this machine has (lavapipe in CI).
+//! The ash (Vulkan ray-tracing) backend's own mechanisms, on whatever Vulkan device with
+//! ray-tracing pipelines this machine has (lavapipe in CI): its BLAS boxes, hit reports and
+//! refit, its two traversals, its images against the wgpu backend's, arrays and images past a
+//! binding, and its limits. What every GPU backend must do is checked in `gpu_backends`.
 //!
 //! - Without such a device the tests fail (a GPU test never passes without running).
 //! - One Vulkan device serves every test of this process (the backend shares it), so each
@@ -16,13 +18,16 @@ use aarbf::backend::shaders::cpu::blas_boxes;
 use aarbf::backend::shaders::cpu::rbf::RadiusRule;
 use aarbf::backend::{Backend, StepInput};
 use aarbf::field::{Classification, FieldSettings, ReferenceField};
-use aarbf::scene::maps::{DensityMap, RadiusMap};
-use aarbf::values::Image;
+use aarbf::scene::maps::RadiusMap;
 use aarbf::values::{Attribute, Bounds, Step};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 
-use crate::common;
+use crate::common::{self, assert_no_driver_messages};
+use crate::gpu_backends::{
+    assert_images_close, box_step, close_view, compare_sums, dambreak, input, queries,
+    radius_map_with_zeros,
+};
 
 /// A backend on the shared ray-tracing device (the test fails without one).
 fn backend() -> AshBackend {
@@ -30,67 +35,6 @@ fn backend() -> AshBackend {
         "a Vulkan device with ray-tracing pipelines",
         AshBackend::new(),
     )
-}
-
-fn assert_no_validation_messages() {
-    let messages = ash_rt::validation_messages();
-    assert!(
-        messages.is_empty(),
-        "{} validation message(s):\n{}",
-        messages.len(),
-        messages.join("\n")
-    );
-}
-
-/// `n` random particles in a box far from the origin (so local coordinates matter), with an
-/// attribute `s` and a radius attribute `h` (some zeros).
-fn random_step(n: usize, seed: u64) -> Step {
-    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
-    let centre = DVec3::new(1000.0, -50.0, 3.0);
-    let positions = (0..n)
-        .map(|_| centre + DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0)
-        .collect();
-    let s = (0..n).map(|_| rng.random_range(-3.0f64..5.0)).collect();
-    let h = (0..n)
-        .map(|_| {
-            if rng.random::<f64>() < 0.1 {
-                0.0
-            } else {
-                rng.random_range(0.5f64..1.5)
-            }
-        })
-        .collect();
-    Step {
-        name: format!("random{seed}"),
-        positions,
-        attributes: vec![
-            Attribute {
-                name: "s".into(),
-                values: s,
-            },
-            Attribute {
-                name: "h".into(),
-                values: h,
-            },
-        ],
-    }
-}
-
-/// A radius map that is 0 below t = 0.2 (on the 256-sample table grid, so the GPU's table and
-/// the CPU's exact map agree).
-fn radius_map_with_zeros() -> RadiusMap {
-    RadiusMap("0:0,0.2:0,0.6:1,1:0.5".parse().unwrap())
-}
-
-fn input<'a>(step: &'a Arc<Step>, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
-    StepInput {
-        step,
-        field,
-        cluster: ClusterSize::new(k).unwrap(),
-        series_bounds: step.bounds(),
-        series_range: None,
-        precision: aarbf::backend::Precision::FIELD,
-    }
 }
 
 #[test]
@@ -109,14 +53,9 @@ fn device_has_ray_tracing_and_validation_when_installed() {
             "the validation layer is installed and this build has debug assertions"
         );
     }
-    // Nothing uploaded: errors, not panics.
-    let mut b = b;
-    assert!(b.query(&[DVec3::ZERO]).is_err());
-    assert!(b.image().is_err());
-    assert!(b.build().is_err());
-    assert!(b.refit(&FieldSettings::new(None, 1.0)).is_err());
     // More particles than the device can allocate: a clear error naming need and limit.
-    let step = std::sync::Arc::new(random_step(10, 1));
+    let mut b = b;
+    let step = std::sync::Arc::new(box_step(10, 1));
     let field = FieldSettings::new(Some("s"), 0.1);
     b.reserve(1 << 40);
     let e = b.upload(&input(&step, &field, 1)).unwrap_err().to_string();
@@ -124,20 +63,7 @@ fn device_has_ray_tracing_and_validation_when_installed() {
         e.contains("1099511627776 particles") && e.contains("allocates at most"),
         "{e}"
     );
-    // An empty step uploads, builds and queries to zero.
-    let mut b = backend();
-    let empty = Arc::new(Step {
-        name: "empty".into(),
-        positions: vec![],
-        attributes: vec![Attribute {
-            name: "s".into(),
-            values: vec![],
-        }],
-    });
-    b.upload(&input(&empty, &field, 4)).unwrap();
-    b.build().unwrap();
-    assert_eq!(b.query(&[DVec3::ZERO]).unwrap(), vec![(0.0, [0.0; 3])]);
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// The box kernel's boxes equal its CPU twin's (`cpu::blas_boxes::blas_boxes`, the same f32
@@ -147,7 +73,7 @@ fn device_has_ray_tracing_and_validation_when_installed() {
 #[test]
 fn boxes_match_the_cpu_cluster_boxes() {
     let mut b = backend();
-    let step = std::sync::Arc::new(random_step(1237, 1));
+    let step = std::sync::Arc::new(box_step(1237, 1));
     let mut field = FieldSettings::new(Some("s"), 0.05);
     field.radius_map = radius_map_with_zeros();
     field.radius_attribute = Some("h".into());
@@ -223,115 +149,7 @@ fn boxes_match_the_cpu_cluster_boxes() {
             "K = {k}: the scene has clusters of zero-radius particles"
         );
     }
-    assert_no_validation_messages();
-}
-
-/// Compares GPU sums with the f64 reference at `points`: Phi and each Theta-numerator
-/// component within `1e-4 Phi + 1e-6`. Where that budget goes: f32 local coordinates of
-/// particles and queries (d²/r² to ~5e-6 relative, so a term's exp to ~2e-5), f32 sums, and
-/// for pre-classification the colour map's 256-sample table, which the GPU interpolates where
-/// the reference evaluates the map exactly (measured ≤ 6e-5 for viridis; Phi itself agrees to
-/// ~3e-6). A query within 1e-5 r of some particle's radius boundary may legitimately differ by
-/// a whole term (f32 decides in or out there); such queries are excused, and must be rare
-/// (≤ 0.5%). Returns the largest relative error seen.
-fn compare_sums(
-    reference: &ReferenceField,
-    points: &[DVec3],
-    got: &[(f64, [f64; 3])],
-    what: &str,
-) -> f64 {
-    assert_eq!(got.len(), points.len());
-    let p = &reference.particles;
-    let mut worst: f64 = 0.0;
-    let mut excused = 0;
-    let mut non_zero = 0;
-    for (i, (&x, g)) in points.iter().zip(got).enumerate() {
-        let (phi, num) = reference.eval_sums(x);
-        if phi > 0.0 {
-            non_zero += 1;
-        }
-        assert!(
-            g.0.is_finite() && g.1.iter().all(|v| v.is_finite()),
-            "{what}: query {i} at {x}: not finite (unwritten?): {g:?}"
-        );
-        let tol = 1e-4 * phi + 1e-6;
-        let err = (g.0 - phi)
-            .abs()
-            .max((0..3).map(|c| (g.1[c] - num[c]).abs()).fold(0.0, f64::max));
-        if err > tol {
-            let near_boundary = (0..p.len()).any(|j| {
-                let r = p.radii[j];
-                r > 0.0 && ((x - p.origin - p.centers[j]).length() - r).abs() <= 1e-5 * r.max(1e-3)
-            });
-            assert!(
-                near_boundary,
-                "{what}: query {i} at {x}: GPU {g:?}, CPU ({phi}, {num:?}), error {err:e} > {tol:e}"
-            );
-            excused += 1;
-            continue;
-        }
-        worst = worst.max(err / phi.max(1e-30));
-    }
-    assert!(
-        excused * 200 <= points.len(),
-        "{what}: {excused} of {} queries differ near a radius boundary",
-        points.len()
-    );
-    assert!(
-        non_zero * 2 > points.len(),
-        "{what}: most queries see particles ({non_zero} of {})",
-        points.len()
-    );
-    worst
-}
-
-/// Query points: every particle centre and as many random points in the bounds.
-fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
-    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
-    let b = step.bounds();
-    let mut q: Vec<DVec3> = step.positions.clone();
-    for _ in 0..step.len() {
-        let t = DVec3::new(rng.random(), rng.random(), rng.random());
-        q.push(b.min + t * (b.max - b.min));
-    }
-    q
-}
-
-#[test]
-fn queries_match_the_f64_reference_for_every_cluster_size() {
-    let mut b = backend();
-    let step = std::sync::Arc::new(random_step(1500, 2));
-    let points = queries(&step, 3);
-    let mut worst: f64 = 0.0;
-    for k in [1, 2, 4, 8, 16] {
-        for classification in [Classification::Post, Classification::Pre] {
-            let mut field = FieldSettings::new(Some("s"), 0.2);
-            field.classification = classification;
-            field.radius_map = radius_map_with_zeros();
-            if classification == Classification::Post {
-                // Per-particle radii (with zeros) and a varying density map.
-                field.radius_attribute = Some("h".into());
-                field.density_map = DensityMap("0:0.5,1:1".parse().unwrap());
-            }
-            b.upload(&input(&step, &field, k)).unwrap();
-            b.build().unwrap();
-            let got = b.query(&points).unwrap();
-            let reference = ReferenceField::of_step(
-                &step,
-                &field,
-                ClusterSize::new(k).unwrap(),
-                step.bounds(),
-                None,
-            )
-            .unwrap();
-            let what = format!("K = {k}, {classification:?}");
-            let e = compare_sums(&reference, &points, &got, &what);
-            eprintln!("{what}: max relative error {e:.2e}");
-            worst = worst.max(e);
-        }
-    }
-    eprintln!("worst relative error over all: {worst:.2e}");
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// The paper's per-particle hit reports (selectable for the traversal study) give what the
@@ -341,7 +159,7 @@ fn queries_match_the_f64_reference_for_every_cluster_size() {
 fn per_particle_hit_reports_match_per_cluster_sums() {
     use aarbf::backend::ash_rt::HitReports;
     let mut b = backend();
-    let step = std::sync::Arc::new(random_step(1200, 21));
+    let step = std::sync::Arc::new(box_step(1200, 21));
     let points = queries(&step, 22);
     for k in [1, 4, 16] {
         let mut field = FieldSettings::new(Some("s"), 0.2);
@@ -362,7 +180,7 @@ fn per_particle_hit_reports_match_per_cluster_sums() {
             );
         }
     }
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// A refit after a radius change (global radius, radius map with zeros moving, radius attribute
@@ -371,7 +189,7 @@ fn per_particle_hit_reports_match_per_cluster_sums() {
 fn refit_after_a_radius_change_equals_a_fresh_build() {
     let mut refitted = backend();
     let mut fresh = backend();
-    let step = std::sync::Arc::new(random_step(1400, 4));
+    let step = std::sync::Arc::new(box_step(1400, 4));
     let points = queries(&step, 5);
     let k = 4;
     let mut before = FieldSettings::new(Some("s"), 0.15);
@@ -441,164 +259,7 @@ fn refit_after_a_radius_change_equals_a_fresh_build() {
     bad.radius_attribute = Some("nonexistent".into());
     assert!(refitted.refit(&bad).is_err());
     assert!(refitted.query(&points[..10]).is_ok());
-    assert_no_validation_messages();
-}
-
-fn dambreak() -> aarbf::scene::TimeSeries {
-    use aarbf::scene::synth::Generator;
-    aarbf::scene::TimeSeries::from_steps(Generator::DambreakDemo.generate(3000, 8, 1))
-}
-
-/// A view close to the fluid, so most pixels see it.
-fn close_view(series: &aarbf::scene::TimeSeries) -> aarbf::scene::Camera {
-    let b = series.bounds();
-    aarbf::scene::Camera {
-        eye: DVec3::new(0.9, 0.45, 1.1),
-        at: DVec3::new(0.55, 0.12, 0.5 * b.max.z),
-        up: DVec3::Y,
-        fovy: 35.0,
-    }
-}
-
-/// Mean FLIP between two images (sRGB 8-bit, default viewing distance).
-fn flip(reference: &Image, test: &Image) -> (f32, nv_flip::FlipImageFloat) {
-    let rgb =
-        |i: &Image| nv_flip::FlipImageRgb8::with_data(i.width, i.height, &i.to_srgb8().into_raw());
-    let error = nv_flip::flip(
-        rgb(reference),
-        rgb(test),
-        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
-    );
-    let mean = nv_flip::FlipPool::from_image(&error).mean();
-    (mean, error)
-}
-
-/// Writes `<name>-actual.png`, `-expected.png` and `-difference.png` (FLIP error through the
-/// magma map) under the target directory, and returns where.
-fn write_failure(
-    name: &str,
-    expected: &Image,
-    actual: &Image,
-    error: &nv_flip::FlipImageFloat,
-) -> String {
-    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("ash-images");
-    std::fs::create_dir_all(&dir).unwrap();
-    aarbf::io::output::write_png(&dir.join(format!("{name}-actual.png")), actual, true).unwrap();
-    aarbf::io::output::write_png(&dir.join(format!("{name}-expected.png")), expected, true)
-        .unwrap();
-    let diff = error.apply_color_lut(&nv_flip::magma_lut());
-    image::RgbImage::from_raw(diff.width(), diff.height(), diff.to_vec())
-        .unwrap()
-        .save(dir.join(format!("{name}-difference.png")))
-        .unwrap();
-    dir.display().to_string()
-}
-
-/// Compares `actual` with `expected` by RMSE and mean FLIP; on failure writes the images.
-fn assert_images_close(name: &str, expected: &Image, actual: &Image, max_rmse: f64, max_flip: f32) {
-    assert!(
-        actual
-            .pixels
-            .iter()
-            .all(|p| p.iter().all(|v| v.is_finite())),
-        "{name}: non-finite pixels (unwritten?)"
-    );
-    let rmse = actual.rmse(expected);
-    let (mean_flip, error) = flip(expected, actual);
-    eprintln!("{name}: RMSE {rmse:.2e}, mean FLIP {mean_flip:.2e}");
-    if rmse > max_rmse || mean_flip > max_flip {
-        let dir = write_failure(name, expected, actual, &error);
-        panic!(
-            "{name}: RMSE {rmse:.3e} (limit {max_rmse:.1e}), mean FLIP {mean_flip:.3e} (limit {max_flip:.1e}); images in {dir}"
-        );
-    }
-}
-
-/// The ash backend's images against the CPU backend's at equal spp and seed, per integrator.
-#[test]
-fn renders_match_the_cpu_backend() {
-    use aarbf::backend::{self, BackendKind};
-    use aarbf::render::{RenderSession, RenderSettings};
-    use aarbf::values::{Integrator, NoiseKind};
-    let series = dambreak();
-    let mut field = FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal());
-    let k = ClusterSize::new(4).unwrap();
-    let mut cpu = RenderSession::new(backend::create(BackendKind::Cpu).unwrap(), &series);
-    let mut gpu = RenderSession::new(backend::create(BackendKind::Ash).unwrap(), &series);
-    assert_eq!(gpu.backend().capabilities().name, "ash");
-    // (integrator, noise, classification, frames, blur, RMSE limit, FLIP limit). EA and
-    // stochastic marching make the same decisions from the same random numbers on both, so
-    // f32-versus-f64 rounding is all that differs (measured: RMSE < 1e-6, FLIP < 1e-4). Delta
-    // tracking on the CPU skips empty space between particle boxes (the same distribution from
-    // other random numbers per pixel), so it is compared at 64 spp through a 1-pixel Gaussian
-    // blur, where what is left is Monte Carlo noise (measured: RMSE ~3e-3).
-    let cases = [
-        (
-            Integrator::Ea,
-            NoiseKind::Stbn,
-            Classification::Post,
-            2,
-            false,
-            1e-4,
-            1e-3,
-        ),
-        (
-            Integrator::Ea,
-            NoiseKind::White,
-            Classification::Pre,
-            2,
-            false,
-            1e-4,
-            1e-3,
-        ),
-        (
-            Integrator::Marching,
-            NoiseKind::Stbn,
-            Classification::Post,
-            2,
-            false,
-            1e-3,
-            5e-3,
-        ),
-        (
-            Integrator::Delta,
-            NoiseKind::White,
-            Classification::Post,
-            64,
-            true,
-            1e-2,
-            4e-2,
-        ),
-    ];
-    for (integrator, noise, classification, frames, blur, max_rmse, max_flip) in cases {
-        field.classification = classification;
-        let settings = RenderSettings {
-            width: 64,
-            height: 48,
-            integrator,
-            noise,
-            seed: 3,
-            camera: Some(close_view(&series)),
-            ..RenderSettings::default()
-        };
-        cpu.show(&series, 7, &field, k).unwrap();
-        gpu.show(&series, 7, &field, k).unwrap();
-        let expected = cpu.render(&settings, frames).unwrap();
-        let actual = gpu.render(&settings, frames).unwrap();
-        let covered = expected.pixels.iter().filter(|p| p[3] > 0.0).count();
-        assert!(
-            covered > 600,
-            "the fluid covers much of the image: {covered} pixels"
-        );
-        let name = format!("{integrator:?}-{noise:?}-{classification:?}").to_lowercase();
-        let (expected, actual) = if blur {
-            (expected.blurred(1.0), actual.blurred(1.0))
-        } else {
-            (expected, actual)
-        };
-        assert_images_close(&name, &expected, &actual, max_rmse, max_flip);
-    }
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// A step with fewer particles than the buffers hold (NaN boxes past its clusters) renders and
@@ -668,7 +329,7 @@ fn a_smaller_step_renders_like_that_step_alone() {
         shared.query(&points).unwrap(),
         alone.query(&points).unwrap()
     );
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// The software traversal on the same device (the LBVH compute pipeline, Fig. 10a's other
@@ -679,7 +340,7 @@ fn lbvh_traversal_on_the_same_device_matches_the_rt_pipeline() {
     use aarbf::render::{RenderSession, RenderSettings};
     use aarbf::values::{Integrator, NoiseKind};
     let mut b = backend();
-    let step = std::sync::Arc::new(random_step(1300, 6));
+    let step = std::sync::Arc::new(box_step(1300, 6));
     let points = queries(&step, 7);
     for (k, classification) in [
         (1, Classification::Post),
@@ -772,7 +433,7 @@ fn lbvh_traversal_on_the_same_device_matches_the_rt_pipeline() {
     let rt = render(Traversal::RtPipeline);
     let lbvh = render(Traversal::Lbvh);
     assert_images_close("lbvh-vs-rt-marching", &rt, &lbvh, 1e-4, 1e-3);
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// The ash backend's images against the wgpu backend's (the same shared GLSL integrators over
@@ -826,7 +487,7 @@ fn renders_match_the_wgpu_backend() {
     let actual = gpu.render_frames_on_half_lattice(&settings, 0, 2).unwrap();
     assert_eq!((actual.width, actual.height), (24, 20));
     assert_images_close("wgpu-lattice", &expected, &actual, 1e-4, 1e-3);
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// A step larger than one storage-buffer binding (maxStorageBufferRange: 128 MiB on lavapipe,
@@ -921,7 +582,7 @@ fn a_step_larger_than_one_binding_is_not_refused() {
         checked >= 80,
         "only {checked} of 96 queries away from an edge"
     );
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
 /// An image whose accumulation is larger than one storage-buffer binding (a 4K frame's f32
@@ -953,7 +614,7 @@ fn an_image_larger_than_one_binding_is_not_refused() {
             " (no overflow tested on this device)"
         }
     );
-    let step = random_step(1300, 8);
+    let step = box_step(1300, 8);
     let series = aarbf::scene::TimeSeries::from_steps(vec![step]);
     let field = FieldSettings::new(Some("s"), 0.2);
     let centre = series.bounds().center();
@@ -997,205 +658,38 @@ fn an_image_larger_than_one_binding_is_not_refused() {
             );
         }
     }
-    assert_no_validation_messages();
+    assert_no_driver_messages();
 }
 
-/// Preparing a step on the device equals the CPU preparation bit for bit (order, positions
-/// with t, lo parts, radius attribute; the order is `hilbert_order`), for a series of awkward,
-/// changing counts far from the origin with and without a radius attribute and double-single
-/// positions, the outputs poisoned before each step; and after field changes that gather a new
-/// radius attribute and lo parts through the kept order. Twice: reading the staged step in
-/// place (lavapipe's memory is device-local and host-visible, as an integrated GPU's or one
-/// with resizable BAR) and through the copies a discrete GPU needs.
+/// The voxel baseline's grid of a cube at 1024³ (16 GiB, 2^32 words) is more than the device
+/// allocates (lavapipe: 2 GiB) or the kernels index: refused before anything is allocated;
+/// the same cube's 16³ grid is made.
 #[test]
-fn device_preparation_equals_the_cpu_preparation() {
-    let in_place = device_preparation_equals_the_cpu_preparation_on(backend());
-    let mut b = backend();
-    b.always_copy_staging();
-    let copied = device_preparation_equals_the_cpu_preparation_on(b);
-    // Same capacity and arrays: the copies' device arrays are the only difference.
-    assert!(
-        in_place < copied,
-        "staging read in place holds {in_place} B, through copies {copied} B"
-    );
-}
-
-/// Runs the checks; the preparation's bytes at the end.
-fn device_preparation_equals_the_cpu_preparation_on(mut b: AshBackend) -> usize {
-    use aarbf::accel::hilbert_order;
+fn a_voxel_grid_beyond_the_allocation_limit_is_refused() {
+    use crate::voxel_baseline as voxel;
     use aarbf::backend::Precision;
-
-    let bounds = Bounds {
-        min: DVec3::new(1000.0, -50.0, 3.0),
-        max: DVec3::new(1002.0, -48.0, 5.0),
-    };
-    b.reserve(1_000_003);
-    let plain = FieldSettings::new(Some("s"), 0.02);
-    let mut with_radius = plain.clone();
-    with_radius.radius_attribute = Some("h".into());
-    let check = |b: &mut AshBackend, input: &StepInput<'_>, what: &str| {
-        let (_, cpu) = GpuStepData::prepare(input).unwrap();
-        let gpu = b.sorted_particles().unwrap();
-        assert!(
-            gpu.order == hilbert_order(&input.step.positions, input.series_bounds),
-            "{what}: the device's order is not hilbert_order"
-        );
-        let bits =
-            |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
-        assert!(bits(&gpu.points) == bits(&cpu.points), "{what}: points");
-        assert_eq!(gpu.points_lo.is_some(), cpu.points_lo.is_some(), "{what}");
-        if let (Some(g), Some(c)) = (&gpu.points_lo, &cpu.points_lo) {
-            assert!(bits(g) == bits(c), "{what}: lo parts");
-        }
-        assert_eq!(
-            gpu.radius_attribute, cpu.radius_attribute,
-            "{what}: radius attribute"
-        );
-    };
-    for (i, n) in [65537usize, 0, 1, 255, 257, 1_000_003, 4097]
-        .into_iter()
-        .enumerate()
-    {
-        let step = Arc::new(random_step(n, 800 + i as u64));
-        let (field, precision) = match i % 3 {
-            0 => (&plain, Precision::RENDER),
-            1 => (&with_radius, Precision::RENDER),
-            _ => (&with_radius, Precision::DoubleSingle),
-        };
-        let input = StepInput {
-            step: &step,
-            field,
-            cluster: ClusterSize::new(4).unwrap(),
-            series_bounds: bounds,
-            series_range: Some((-3.0, 5.0)),
-            precision,
-        };
-        if i > 0 {
-            b.poison_prepared().unwrap();
-        }
-        b.upload(&input).unwrap();
-        check(&mut b, &input, &format!("step {i} ({n} particles)"));
-    }
-
-    let step = Arc::new(random_step(70_001, 900));
-    let wide = FieldSettings::new(Some("s"), 0.3);
-    let input = |field| StepInput {
-        step: &step,
-        field,
-        cluster: ClusterSize::new(4).unwrap(),
-        series_bounds: bounds,
-        series_range: Some((-3.0, 5.0)),
-        precision: Precision::RENDER,
-    };
-    b.upload(&input(&wide)).unwrap();
-    b.build().unwrap();
-    let mut tiny = wide.clone();
-    tiny.radius = 1e-5;
-    tiny.radius_attribute = Some("h".into());
-    b.refit(&tiny).unwrap();
-    check(&mut b, &input(&tiny), "after a refit that needs lo parts");
+    use aarbf::backend::voxel::MAX_GRID;
+    let corners: Vec<DVec3> = (0..8)
+        .map(|i| DVec3::new((i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64))
+        .collect();
+    let cube = aarbf::scene::TimeSeries::from_steps(vec![Step {
+        name: "cube".into(),
+        attributes: vec![Attribute {
+            name: "a".into(),
+            values: (0..8).map(f64::from).collect(),
+        }],
+        positions: corners,
+    }]);
+    let field = FieldSettings::new(Some("a"), 0.06);
+    let (_, frame) = voxel::frame_of(&cube, &field, &Default::default());
+    let mut b = backend();
+    voxel::upload(&mut b, &cube, &field, 4, Precision::RENDER);
+    let e = b.voxelize(&frame, MAX_GRID).unwrap_err().to_string();
     assert!(
-        b.representation().map(|r| r.positions)
-            == Some(aarbf::backend::precision::PositionKind::DoubleSingle),
-        "the tiny radii need double-single positions"
+        e.contains("maxMemoryAllocationSize") || e.contains("2^32 words"),
+        "{e}"
     );
-    assert_no_validation_messages();
-    b.memory().preparation_bytes
-}
-
-/// The preparation's stages on the ash device against their CPU twins, outputs poisoned
-/// first, at awkward sizes: the Hilbert keys of f32 local coordinates far from the origin
-/// (bit for bit, with the identity permutation), and the radix sort of random keys and of
-/// keys with few distinct values (stability decides their order).
-#[test]
-fn preparation_stages_equal_their_cpu_twins() {
-    use aarbf::accel::HilbertQuantizer;
-    use aarbf::backend::shaders::cpu::{hilbert_keys, radix_sort};
-
-    let mut b = backend();
-    let bounds = Bounds {
-        min: DVec3::new(1000.0, -50.0, 3.0),
-        max: DVec3::new(1002.0, -48.0, 5.0),
-    };
-    let q = HilbertQuantizer::new(bounds);
-    for (i, n) in [0usize, 1, 255, 257, 65537, 1_000_003]
-        .into_iter()
-        .enumerate()
-    {
-        let step = random_step(n, 1000 + i as u64);
-        let points: Vec<[f32; 4]> = step
-            .positions
-            .iter()
-            .map(|&p| {
-                let [x, y, z] = q.local(p);
-                [x, y, z, 0.25]
-            })
-            .collect();
-        let (keys, values) = b.prepare_hilbert_keys(&points, &q).unwrap();
-        assert!(
-            keys == hilbert_keys::hilbert_keys(&points, &q),
-            "n {n}: keys differ from the twin's"
-        );
-        assert!(
-            values.iter().enumerate().all(|(i, &v)| v as usize == i),
-            "n {n}"
-        );
-
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(2000 + i as u64);
-        for few in [false, true] {
-            let keys: Vec<u32> = (0..n)
-                .map(|_| match few {
-                    false => rng.random(),
-                    true => rng.random_range(0..13u32) << 20,
-                })
-                .collect();
-            assert!(
-                b.prepare_sort_pairs(&keys).unwrap() == radix_sort::sort_pairs(&keys),
-                "n {n}, few distinct keys {few}: the sort differs from its twin"
-            );
-        }
-    }
-    assert_no_validation_messages();
-}
-
-/// Once the series' maximum is reserved, stepping makes no buffer: the staging memory, the
-/// step's arrays, the sort's buffers, the BLAS and its scratch are all made by the first upload
-/// and build (one with every optional array: a radius attribute and double-single positions)
-/// and reused by steps of any count up to the reserved one.
-#[test]
-fn stepping_through_a_reserved_series_makes_no_buffers() {
-    use aarbf::backend::Precision;
-
-    let mut b = backend();
-    b.reserve(20_000);
-    let mut f = FieldSettings::new(Some("s"), 0.05);
-    f.radius_attribute = Some("h".into());
-    let bounds = Bounds {
-        min: DVec3::new(1000.0, -50.0, 3.0),
-        max: DVec3::new(1002.0, -48.0, 5.0),
-    };
-    for (i, n) in [20_000usize, 5_003, 19_999, 1, 0, 12_345]
-        .into_iter()
-        .enumerate()
-    {
-        let step = Arc::new(random_step(n, 1100 + i as u64));
-        let before = ash_rt::resources::buffers_made();
-        b.upload(&StepInput {
-            step: &step,
-            field: &f,
-            cluster: ClusterSize::new(2).unwrap(),
-            series_bounds: bounds,
-            series_range: Some((-3.0, 5.0)),
-            precision: Precision::DoubleSingle,
-        })
-        .unwrap();
-        b.build().unwrap();
-        let made = ash_rt::resources::buffers_made() - before;
-        if i > 0 {
-            assert_eq!(made, 0, "step {i} ({n} particles) made {made} buffers");
-        } else {
-            assert!(made > 0, "the counter counts");
-        }
-    }
-    assert_no_validation_messages();
+    b.voxelize(&frame, 16).unwrap();
+    assert_eq!(b.voxel_grid().unwrap().dims(), [16, 16, 16]);
+    assert_no_driver_messages();
 }

@@ -1,15 +1,15 @@
 //! The integration tests, one binary for them all (Cargo.toml says why): one module a file,
-//! named after what it checks (`cli`, `readers`, `precision_promise`, ...), or after the backend
-//! it drives where a check is for one backend only (`ash_rt`, `wgpu_lbvh`, `render_cpu`).
-//! Run one file's tests with `cargo test --profile checked --test suite -- readers::`.
+//! named after what it checks (`cli`, `readers`, `gpu_backends`, ...), or after the backend it
+//! drives where a check is for one backend only (`ash_rt`, `wgpu_lbvh`, `render_cpu`). A check
+//! every GPU backend must pass is one body run on each (`common::on_every_gpu!`: `NAME::ash`,
+//! `NAME::wgpu`). Run one file's tests with `cargo test --profile checked --test suite --
+//! readers::`.
 //! `tests/ash_validation.rs` is a binary of its own: it provokes a validation message on
 //! purpose, and every GPU test here asserts that the process saw none.
 
 mod common;
-mod voxel_cli;
 
 mod architecture;
-mod ash_cli;
 mod ash_rt;
 mod cli;
 mod collections;
@@ -21,6 +21,8 @@ mod field_checks;
 mod field_reference;
 mod first_contact;
 mod fuzz_regressions;
+mod gpu_backends;
+mod gpu_cli;
 mod hdf5_snapshots;
 mod knn_smoothing;
 mod mpirun;
@@ -34,16 +36,11 @@ mod render_cpu;
 mod sequences;
 mod series_streaming;
 mod sph_kernels;
-mod splat_ash;
 mod splat_baseline;
-mod splat_wgpu;
 mod studies;
 mod target_error;
 mod target_error_outside;
 mod viewer;
-mod voxel_ash;
 mod voxel_baseline;
-mod voxel_wgpu;
-mod wgpu_cli;
 mod wgpu_lbvh;
 mod wgpu_render;

@@ -1,5 +1,8 @@
-//! The wgpu LBVH backend, stage by stage against its CPU twins (`aarbf::backend::shaders::cpu`), and as a
-//! whole against the f64 reference field and the CPU backend's images.
+//! The wgpu LBVH backend's own mechanisms: its tree, stage by stage against its CPU twins
+//! (`aarbf::backend::shaders::cpu`), refit and rebuilt; steps, trees, images and voxel grids
+//! split over bindings; a device with WebGPU's default limits; both ways a step reaches the
+//! device; and the splatter's poisoned accumulation. What every GPU backend must do is checked
+//! in `gpu_backends`.
 //!
 //! Every GPU output is poisoned (0xFF bytes) before the run that writes it, inputs are fresh
 //! random data of awkward sizes. All tests share one wgpu device (`GpuContext::shared`). With
@@ -11,115 +14,28 @@
 //!   `a + (b - a) f` may be fused into an FMA on the GPU, a rounding apart), emptiness exact.
 //! - bottom-up bounds: exactly equal (as floats) to the twin's over the GPU's own boxes (min and
 //!   max round nothing).
-//! - field queries vs the f64 reference: |dPhi| <= 3e-4 Phi + 1e-6 w_max and |dnum| <= 3e-4 Phi
-//!   (+ the colour table's interpolation error times Phi for pre-classification), from f32
-//!   positions relative to the radius (~1e-5) times the Gaussian's 4.5 d^2/r^2 slope; a query
-//!   within 1e-4 r of some particle's sphere may differ by that particle's whole contribution
-//!   (it lies on the cut-off in one precision and not the other), so those are checked
-//!   against the sum of such contributions instead.
+//! - field queries vs the f64 reference: as `gpu_backends::check_queries` says.
 
 use std::sync::Arc;
 
 use aarbf::accel::ClusterSize;
-use aarbf::accel::{HilbertQuantizer, hilbert_order};
-use aarbf::backend::gpu_data::GpuStepData;
-use aarbf::backend::shaders::cpu::hilbert_keys;
 use aarbf::backend::shaders::cpu::lbvh::{
-    self, GpuBox, LBVH_EMPTY_KEY, LBVH_NONE, LBVH_SENTINEL, Lbvh, box_is_empty,
+    self, GpuBox, LBVH_NONE, LBVH_SENTINEL, Lbvh, box_is_empty,
 };
 use aarbf::backend::shaders::cpu::rbf::RadiusRule;
 use aarbf::backend::shaders::cpu::{lbvh_boxes, lbvh_keys, radix_sort};
-use aarbf::backend::wgpu_lbvh::{self, BuildStage, GpuContext, WgpuBackend, prepare, sort};
+use aarbf::backend::wgpu_lbvh::{BuildStage, GpuContext, WgpuBackend};
 use aarbf::backend::{Backend, Precision, StepInput};
-use aarbf::field::{Classification, FieldSettings, ReferenceField};
-use aarbf::scene::maps::{DensityMap, RadiusMap};
-use aarbf::values::{Attribute, Bounds, Step};
+use aarbf::field::FieldSettings;
+use aarbf::scene::maps::RadiusMap;
+use aarbf::values::Step;
 use glam::DVec3;
-use rand::{Rng, SeedableRng};
-use rand_pcg::Pcg64;
 
-use crate::common;
-use common::assert_no_driver_messages;
-
-/// The shared device (the test fails without one).
-fn gpu() -> Arc<GpuContext> {
-    common::capture_driver_messages();
-    common::require("a wgpu adapter", GpuContext::shared())
-}
-
-fn rng(seed: u64) -> Pcg64 {
-    Pcg64::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15)
-}
-
-/// `n` particles: uniform in the unit cube, or (clumped) in a few tiny blobs that give many
-/// equal Morton keys; attribute `a` uniform in [0, 1], radius factor `h` in [0.5, 1.5].
-fn random_step(n: usize, seed: u64, clumped: bool) -> Step {
-    let mut r = rng(seed);
-    let centres: Vec<DVec3> = (0..5)
-        .map(|_| DVec3::new(r.random(), r.random(), r.random()))
-        .collect();
-    let positions = (0..n)
-        .map(|_| {
-            if clumped {
-                centres[r.random_range(0..centres.len())]
-                    + DVec3::new(r.random(), r.random(), r.random()) * 1e-4
-            } else {
-                DVec3::new(r.random(), r.random(), r.random())
-            }
-        })
-        .collect();
-    Step {
-        name: format!("random{n}"),
-        positions,
-        attributes: vec![
-            Attribute {
-                name: "a".into(),
-                values: (0..n).map(|_| r.random::<f64>()).collect(),
-            },
-            Attribute {
-                name: "h".into(),
-                values: (0..n).map(|_| r.random_range(0.5..1.5f64)).collect(),
-            },
-        ],
-    }
-}
-
-/// A field over `a` with radius `radius`; with `varying_maps`, maps whose control points lie
-/// off the tables' sample grid (every backend and the reference look maps up in the same
-/// tables, so they agree whatever the points), and radius 0 for t < 0.21.
-fn field(radius: f64, varying_maps: bool) -> FieldSettings {
-    let mut f = FieldSettings::new(Some("a"), radius);
-    if varying_maps {
-        f.radius_map = RadiusMap::new("0:0,0.21:0,0.633:1,1:0.6".parse().unwrap()).unwrap();
-        f.density_map = DensityMap::new("0:0.5,0.333:2,0.71:0.2,1:1".parse().unwrap()).unwrap();
-    }
-    f
-}
-
-fn bounds_of(step: &Step) -> Bounds {
-    let b = step.bounds();
-    if b.is_empty() {
-        Bounds {
-            min: DVec3::ZERO,
-            max: DVec3::ONE,
-        }
-    } else {
-        b
-    }
-}
-
-fn upload(backend: &mut WgpuBackend, step: &Arc<Step>, field: &FieldSettings, k: u32) {
-    backend
-        .upload(&StepInput {
-            step,
-            field,
-            cluster: ClusterSize::new(k).unwrap(),
-            series_bounds: bounds_of(step),
-            series_range: Some((0.0, 1.0)),
-            precision: aarbf::backend::Precision::FIELD,
-        })
-        .unwrap();
-}
+use crate::common::{self, GpuBackend, assert_no_driver_messages, wgpu_context as gpu};
+use crate::gpu_backends::{
+    assert_prepared_like_the_cpu, bounds_of, check_queries, maps_field, simulation_input,
+    simulation_step, unit_cube_step, upload,
+};
 
 /// The CPU twin's cluster boxes for what the backend holds.
 fn twin_boxes(backend: &WgpuBackend) -> Vec<GpuBox> {
@@ -161,238 +77,6 @@ fn assert_boxes_close(gpu: &[GpuBox], cpu: &[GpuBox], radius: f32, what: &str) {
     }
 }
 
-#[test]
-fn radix_sort_equals_a_stable_sort_by_key() {
-    let ctx = gpu();
-    for (i, n) in [0usize, 1, 2, 255, 256, 257, 4095, 4097, 65537, 1_000_003]
-        .into_iter()
-        .enumerate()
-    {
-        let mut r = rng(100 + i as u64);
-        let distributions: &[u32] = if n > 100_000 { &[0] } else { &[0, 1, 2] };
-        for &kind in distributions {
-            let keys: Vec<u32> = (0..n)
-                .map(|_| match kind {
-                    0 => r.random(),
-                    // Few distinct keys: stability decides the order.
-                    1 => r.random_range(0..17u32) << 9,
-                    // 30-bit keys with empty markers, as the tree sorts them.
-                    _ => {
-                        if r.random_range(0..8) == 0 {
-                            LBVH_EMPTY_KEY
-                        } else {
-                            r.random_range(0..1u32 << 30)
-                        }
-                    }
-                })
-                .collect();
-            let got = sort::sort_pairs(&ctx, &keys).unwrap();
-            let expected = radix_sort::sort_pairs(&keys);
-            assert!(
-                got == expected,
-                "n {n}, keys kind {kind}: the GPU sort differs from sort_by_key"
-            );
-        }
-    }
-    assert_no_driver_messages();
-}
-
-/// `n` particles as a simulation writes them: f64 positions far from the origin in a box of
-/// unequal sides (no f32-exact coordinates), an attribute `a` over [1000, 1001] and a radius
-/// attribute `h` in [0.5, 1.5].
-fn simulation_step(n: usize, seed: u64) -> Step {
-    let mut r = rng(seed);
-    let offset = DVec3::new(3.0e6, -1.25e5, 42.0);
-    let side = DVec3::new(17.0, 3.5, 9.25);
-    Step {
-        name: format!("simulation{n}"),
-        positions: (0..n)
-            .map(|_| offset + DVec3::new(r.random(), r.random(), r.random()) * side)
-            .collect(),
-        attributes: vec![
-            Attribute {
-                name: "a".into(),
-                values: (0..n).map(|_| 1000.0 + r.random::<f64>()).collect(),
-            },
-            Attribute {
-                name: "h".into(),
-                values: (0..n).map(|_| r.random_range(0.5..1.5f64)).collect(),
-            },
-        ],
-    }
-}
-
-/// The series' bounds of the simulation steps (every step lies inside).
-const SIMULATION_BOUNDS: Bounds = Bounds {
-    min: DVec3::new(3.0e6, -1.25e5, 42.0),
-    max: DVec3::new(3.0e6 + 17.0, -1.25e5 + 3.5, 42.0 + 9.25),
-};
-
-/// Preparing a step on the device, stage 1: the Hilbert keys of the f32 local coordinates
-/// equal their twin's bit for bit (outputs poisoned first), the permutation is the identity,
-/// and sorting the twin's keys is `hilbert_order` of the f64 positions.
-#[test]
-fn hilbert_keys_equal_their_twin_and_sort_to_the_hilbert_order() {
-    let ctx = gpu();
-    let quantizer = HilbertQuantizer::new(SIMULATION_BOUNDS);
-    for (i, n) in [0usize, 1, 255, 257, 65537, 1_000_003]
-        .into_iter()
-        .enumerate()
-    {
-        let step = simulation_step(n, 300 + i as u64);
-        let points: Vec<[f32; 4]> = step
-            .positions
-            .iter()
-            .map(|&p| {
-                let [x, y, z] = quantizer.local(p);
-                [x, y, z, 0.5]
-            })
-            .collect();
-        let (keys, values) = prepare::hilbert_keys(&ctx, &points, &quantizer).unwrap();
-        let twin = hilbert_keys::hilbert_keys(&points, &quantizer);
-        let differing = keys.iter().zip(&twin).filter(|(g, c)| g != c).count();
-        assert_eq!(differing, 0, "n {n}: GPU keys differ from the twin's");
-        assert_eq!(keys.len(), n);
-        assert!(
-            values.iter().enumerate().all(|(i, &v)| v as usize == i),
-            "n {n}"
-        );
-        let mut order: Vec<u32> = (0..n as u32).collect();
-        order.sort_by_key(|&i| twin[i as usize]);
-        assert!(
-            order == hilbert_order(&step.positions, SIMULATION_BOUNDS),
-            "n {n}: the twin's keys do not sort to hilbert_order"
-        );
-    }
-    // A series flat in z (zero extent: scale 0 on that axis), and points outside the grid
-    // (clamped), far from the origin.
-    let flat = Bounds {
-        min: DVec3::new(-7.0e7, 2.0, 5.5),
-        max: DVec3::new(-7.0e7 + 1.0e3, 2.0 + 1.0e-3, 5.5),
-    };
-    let q = HilbertQuantizer::new(flat);
-    let mut r = rng(399);
-    let points: Vec<[f32; 4]> = (0..4099)
-        .map(|_| {
-            let p = flat.min
-                + DVec3::new(r.random_range(-0.1..1.1), r.random_range(-0.1..1.1), 0.0)
-                    * (flat.max - flat.min + DVec3::Z);
-            let [x, y, z] = q.local(p);
-            [x, y, z, 0.0]
-        })
-        .collect();
-    let (keys, _) = prepare::hilbert_keys(&ctx, &points, &q).unwrap();
-    assert!(
-        keys == hilbert_keys::hilbert_keys(&points, &q),
-        "flat series"
-    );
-    assert_no_driver_messages();
-}
-
-fn simulation_input<'a>(
-    step: &'a Arc<Step>,
-    field: &'a FieldSettings,
-    precision: Precision,
-) -> StepInput<'a> {
-    StepInput {
-        step,
-        field,
-        cluster: ClusterSize::new(4).unwrap(),
-        series_bounds: SIMULATION_BOUNDS,
-        series_range: Some((1000.0, 1001.0)),
-        precision,
-    }
-}
-
-/// What the device prepared (read back) equals the CPU preparation bit for bit: order,
-/// positions with t, lo parts, radius attribute, and the step's data; the order is
-/// `hilbert_order`.
-fn assert_prepared_like_the_cpu(b: &WgpuBackend, input: &StepInput<'_>, what: &str) {
-    let (data, cpu) = GpuStepData::prepare(input).unwrap();
-    let gpu = b.sorted_particles().unwrap();
-    assert!(
-        gpu.order == hilbert_order(&input.step.positions, input.series_bounds),
-        "{what}: the device's order is not hilbert_order"
-    );
-    assert!(gpu.order == cpu.order, "{what}: order");
-    let bits =
-        |v: &[[f32; 4]]| -> Vec<[u32; 4]> { v.iter().map(|p| p.map(f32::to_bits)).collect() };
-    assert!(bits(&gpu.points) == bits(&cpu.points), "{what}: points");
-    assert_eq!(
-        gpu.points_lo.is_some(),
-        cpu.points_lo.is_some(),
-        "{what}: lo parts"
-    );
-    if let (Some(g), Some(c)) = (&gpu.points_lo, &cpu.points_lo) {
-        assert!(bits(g) == bits(c), "{what}: lo parts");
-    }
-    assert_eq!(
-        gpu.radius_attribute, cpu.radius_attribute,
-        "{what}: radius attribute"
-    );
-    assert_eq!(b.step_data(), Some(&data), "{what}: step data");
-}
-
-/// Preparing a step on the device equals the CPU preparation bit for bit, for a series as a
-/// simulation writes it: steps of awkward, changing counts far from the origin, with and
-/// without a radius attribute and double-single positions, the buffers reused (reserved for
-/// the largest) and poisoned before each step; also with the particles split over bindings,
-/// and after field changes that gather a new radius attribute or lo parts through the kept
-/// order.
-#[test]
-fn device_preparation_equals_the_cpu_preparation() {
-    let ctx = gpu();
-    let sizes = [65537usize, 0, 1, 255, 257, 1_000_003, 4097];
-    let mut b = backend(&ctx, None);
-    b.reserve(1_000_003);
-    let mut with_radius = field(0.01, true);
-    with_radius.attribute_range = None;
-    with_radius.radius_attribute = Some("h".into());
-    let plain = FieldSettings::new(Some("a"), 0.01);
-    for (i, &n) in sizes.iter().enumerate() {
-        let step = Arc::new(simulation_step(n, 400 + i as u64));
-        let (f, precision) = match i % 3 {
-            0 => (&plain, Precision::RENDER),
-            1 => (&with_radius, Precision::RENDER),
-            _ => (&with_radius, Precision::DoubleSingle),
-        };
-        let input = simulation_input(&step, f, precision);
-        if i > 0 {
-            b.poison_prepared().unwrap();
-        }
-        b.upload(&input).unwrap();
-        assert_prepared_like_the_cpu(&b, &input, &format!("step {i} ({n} particles)"));
-    }
-
-    // Split over parts: 16-byte particles in parts of 65,536 bytes (4096 particles).
-    let mut split = backend(&ctx, Some(65_536));
-    let step = Arc::new(simulation_step(10_001, 500));
-    let input = simulation_input(&step, &with_radius, Precision::DoubleSingle);
-    split.upload(&input).unwrap();
-    split.poison_prepared().unwrap();
-    split.upload(&input).unwrap();
-    split.build().unwrap();
-    assert_eq!(split.split_parts().map(|p| p.0), Some(3));
-    assert_prepared_like_the_cpu(&split, &input, "split over 3 parts");
-
-    // Field changes keep the particles: a radius attribute appears, and radii small enough
-    // to need double-single positions; the device gathers both through the order it kept.
-    let step = Arc::new(simulation_step(70_001, 600));
-    let wide = FieldSettings::new(Some("a"), 0.2);
-    let input = simulation_input(&step, &wide, Precision::RENDER);
-    b.upload(&input).unwrap();
-    b.build().unwrap();
-    assert!(!b.step_data().unwrap().double_single());
-    let mut tiny = wide.clone();
-    tiny.radius = 1e-5;
-    tiny.radius_attribute = Some("h".into());
-    b.refit(&tiny).unwrap();
-    let changed = simulation_input(&step, &tiny, Precision::RENDER);
-    assert!(b.step_data().unwrap().double_single());
-    assert_prepared_like_the_cpu(&b, &changed, "after a refit that needs lo parts");
-    assert_no_driver_messages();
-}
-
 /// Both ways a step reaches the device: written straight into mappable storage buffers where
 /// device memory is the host's (lavapipe here: no staging copy), and through staging buffers
 /// and a copy (a discrete GPU's way, forced here): the same preparation, in one part and split
@@ -414,12 +98,12 @@ fn a_step_reaches_the_device_alike_with_and_without_a_staging_copy() {
     let mut copying = GpuContext::with_limits(shared.limits.clone()).unwrap();
     copying.unified_memory = false;
     let copying = Arc::new(copying);
-    let mut with_radius = field(0.01, true);
+    let mut with_radius = maps_field(0.01, true);
     with_radius.attribute_range = None;
     with_radius.radius_attribute = Some("h".into());
     for (name, ctx) in [("unified", &shared), ("staged", &copying)] {
         for limit in [None, Some(65_536)] {
-            let mut b = backend(ctx, limit);
+            let mut b = GpuBackend::Wgpu(Box::new(backend(ctx, limit)));
             for (i, &n) in [10_001usize, 4097, 9000].iter().enumerate() {
                 let step = Arc::new(simulation_step(n, 700 + i as u64));
                 let precision = if i == 1 {
@@ -429,11 +113,11 @@ fn a_step_reaches_the_device_alike_with_and_without_a_staging_copy() {
                 };
                 let input = simulation_input(&step, &with_radius, precision);
                 if i > 0 {
-                    b.poison_prepared().unwrap();
+                    b.poison_prepared();
                 }
                 b.upload(&input).unwrap();
                 assert_prepared_like_the_cpu(
-                    &b,
+                    &mut b,
                     &input,
                     &format!("{name}, binding limit {limit:?}, step {i} ({n} particles)"),
                 );
@@ -443,36 +127,26 @@ fn a_step_reaches_the_device_alike_with_and_without_a_staging_copy() {
     assert_no_driver_messages();
 }
 
-/// Once the series' maximum is reserved, stepping makes no buffer: the staging memory, the
-/// step's arrays on the device, the sort's and the tree's buffers are all made by the first
-/// upload (here one with every optional array: a radius attribute and double-single
-/// positions) and reused by steps of any count up to the reserved one.
+/// A step split over bindings (16-byte particles in parts of 65,536 bytes: 4096 particles) is
+/// prepared as the CPU prepares it, over poisoned outputs.
 #[test]
-fn stepping_through_a_reserved_series_makes_no_buffers() {
-    let ctx = gpu();
-    let mut b = backend(&ctx, None);
-    b.reserve(20_000);
-    let mut f = FieldSettings::new(Some("a"), 0.05);
-    f.radius_attribute = Some("h".into());
-    for (i, n) in [20_000usize, 5_003, 19_999, 1, 0, 12_345]
-        .into_iter()
-        .enumerate()
-    {
-        let step = Arc::new(simulation_step(n, 700 + i as u64));
-        let input = simulation_input(&step, &f, Precision::DoubleSingle);
-        let before = wgpu_lbvh::buffers_made();
-        b.upload(&input).unwrap();
-        if i > 0 {
-            assert_eq!(
-                wgpu_lbvh::buffers_made(),
-                before,
-                "step {i} ({n} particles) made buffers"
-            );
-        } else {
-            assert!(wgpu_lbvh::buffers_made() > before, "the counter counts");
-        }
-        b.build().unwrap();
-    }
+fn a_step_split_over_parts_is_prepared_as_on_the_cpu() {
+    let mut with_radius = maps_field(0.01, true);
+    with_radius.attribute_range = None;
+    with_radius.radius_attribute = Some("h".into());
+    let mut split = backend(&gpu(), Some(65_536));
+    let step = Arc::new(simulation_step(10_001, 500));
+    let input = simulation_input(&step, &with_radius, Precision::DoubleSingle);
+    split.upload(&input).unwrap();
+    split.poison_prepared().unwrap();
+    split.upload(&input).unwrap();
+    split.build().unwrap();
+    assert_eq!(split.split_parts().map(|p| p.0), Some(3));
+    assert_prepared_like_the_cpu(
+        &mut GpuBackend::Wgpu(Box::new(split)),
+        &input,
+        "split over 3 parts",
+    );
     assert_no_driver_messages();
 }
 
@@ -599,11 +273,11 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
     let ctx = gpu();
     let radius = 0.02;
     for (i, n) in [0usize, 1, 2, 255, 256, 257, 65537].into_iter().enumerate() {
-        let step = std::sync::Arc::new(random_step(n, i as u64, false));
+        let step = std::sync::Arc::new(unit_cube_step(n, i as u64, false));
         check_build_stages(
             &ctx,
             &step,
-            &field(radius, false),
+            &maps_field(radius, false),
             1,
             &format!("n {n}, K 1"),
             None,
@@ -614,8 +288,8 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
         .into_iter()
         .enumerate()
     {
-        let step = std::sync::Arc::new(random_step(n, 50 + i as u64, false));
-        let mut f = field(radius, true);
+        let step = std::sync::Arc::new(unit_cube_step(n, 50 + i as u64, false));
+        let mut f = maps_field(radius, true);
         if k == 8 {
             f.radius_attribute = Some("h".into());
         }
@@ -628,11 +302,11 @@ fn every_build_stage_equals_its_cpu_twin_at_awkward_sizes() {
 fn a_million_particle_build_equals_its_twin() {
     let ctx = gpu();
     // A non-power-of-two million.
-    let step = std::sync::Arc::new(random_step(1_000_003, 7, false));
+    let step = std::sync::Arc::new(unit_cube_step(1_000_003, 7, false));
     check_build_stages(
         &ctx,
         &step,
-        &field(0.004, true),
+        &maps_field(0.004, true),
         1,
         "1000003 particles",
         None,
@@ -645,8 +319,8 @@ fn bottom_up_bounds_hold_under_load_and_duplicate_keys() {
     // Many equal keys (five tiny blobs) make deep subtrees split by index and long climbs
     // where many threads meet at the same nodes; repeat the build and compare each time.
     let ctx = gpu();
-    let step = std::sync::Arc::new(random_step(300_001, 11, true));
-    let f = field(0.01, false);
+    let step = std::sync::Arc::new(unit_cube_step(300_001, 11, true));
+    let f = maps_field(0.01, false);
     let mut b = WgpuBackend::with_context(ctx.clone());
     upload(&mut b, &step, &f, 1);
     let mut first: Option<Lbvh> = None;
@@ -676,10 +350,10 @@ fn bottom_up_bounds_hold_under_load_and_duplicate_keys() {
 #[test]
 fn refit_equals_a_fresh_build() {
     let ctx = gpu();
-    let step = std::sync::Arc::new(random_step(20_011, 21, false));
+    let step = std::sync::Arc::new(unit_cube_step(20_011, 21, false));
     for k in [1u32, 4] {
         let what = format!("K {k}");
-        let mut f = field(0.02, true);
+        let mut f = maps_field(0.02, true);
         let mut b = WgpuBackend::with_context(ctx.clone());
         upload(&mut b, &step, &f, k);
         b.build().unwrap();
@@ -739,127 +413,13 @@ fn refit_equals_a_fresh_build() {
     assert_no_driver_messages();
 }
 
-/// Queries at random points and at particle centres, compared with the f64 reference.
-fn check_queries(
-    ctx: &Arc<GpuContext>,
-    step: &Arc<Step>,
-    f: &FieldSettings,
-    k: u32,
-    what: &str,
-    limit: Option<u64>,
-) {
-    let cluster = ClusterSize::new(k).unwrap();
-    let mut b = backend(ctx, limit);
-    upload(&mut b, step, f, k);
-    b.build().unwrap();
-    let reference =
-        ReferenceField::of_step(step, f, cluster, bounds_of(step), Some((0.0, 1.0))).unwrap();
-    let mut r = rng(u64::from(k) * 7 + 3);
-    let mut points: Vec<DVec3> = (0..6000)
-        .map(|_| DVec3::new(r.random(), r.random(), r.random()) * 1.1 - DVec3::splat(0.05))
-        .collect();
-    points.extend(step.positions.iter().step_by(7).copied());
-    let got = b.query(&points).unwrap();
-    assert_eq!(got.len(), points.len());
-    let p = &reference.particles;
-    let w_max = p.weights.iter().fold(0.0f64, |m, w| m.max(*w));
-    let mut nonzero = 0;
-    let mut ambiguous = 0;
-    for (x, (phi, num)) in points.iter().zip(&got) {
-        let (rphi, rnum) = reference.eval_sums(*x);
-        if rphi > 0.0 {
-            nonzero += 1;
-        }
-        let tol_phi = 3e-4 * rphi + 1e-6 * w_max;
-        let tol_num = 3e-4 * rphi + 1e-6 * w_max;
-        let ok =
-            (phi - rphi).abs() <= tol_phi && (0..3).all(|c| (num[c] - rnum[c]).abs() <= tol_num);
-        if ok {
-            continue;
-        }
-        // On a sphere's edge in one precision and not the other: bound by those particles.
-        let edge: f64 = (0..p.len())
-            .filter(|&i| {
-                let d = (*x - p.origin - p.centers[i]).length();
-                p.radii[i] > 0.0 && (d - p.radii[i]).abs() <= 1e-4 * p.radii[i]
-            })
-            .map(|i| p.weights[i] * (-4.5f64).exp() * 1.01)
-            .sum();
-        assert!(
-            edge > 0.0 && (phi - rphi).abs() <= tol_phi + edge,
-            "{what}: at {x}: gpu ({phi}, {num:?}) vs reference ({rphi}, {rnum:?})"
-        );
-        ambiguous += 1;
-    }
-    if !step.is_empty() {
-        assert!(
-            nonzero > points.len() / 4,
-            "{what}: most queries see particles ({nonzero})"
-        );
-    }
-    assert!(
-        ambiguous < points.len() / 100,
-        "{what}: {ambiguous} edge cases"
-    );
-}
-
-#[test]
-fn queries_equal_the_f64_reference_for_every_cluster_size() {
-    let ctx = gpu();
-    let step = std::sync::Arc::new(random_step(20_000, 31, false));
-    // About 30 particles within reach of a point.
-    let radius = 0.07;
-    for k in [1u32, 2, 4, 8, 16] {
-        check_queries(
-            &ctx,
-            &step,
-            &field(radius, true),
-            k,
-            &format!("post, maps, K {k}"),
-            None,
-        );
-    }
-    let mut pre = field(radius, false);
-    pre.classification = Classification::Pre;
-    check_queries(&ctx, &step, &pre, 4, "pre-classification", None);
-    let mut density = FieldSettings::new(None, radius);
-    density.radius_attribute = Some("h".into());
-    check_queries(
-        &ctx,
-        &step,
-        &density,
-        2,
-        "density only, radius attribute",
-        None,
-    );
-    let empty = std::sync::Arc::new(random_step(0, 1, false));
-    check_queries(&ctx, &empty, &field(radius, false), 1, "no particles", None);
-    assert_no_driver_messages();
-}
-
-#[test]
-fn misuse_is_an_error_not_a_panic() {
-    let ctx = gpu();
-    let mut b = WgpuBackend::with_context(ctx.clone());
-    assert!(b.query(&[DVec3::ZERO]).is_err());
-    assert!(b.build().is_err());
-    assert!(b.image().is_err());
-    let step = std::sync::Arc::new(random_step(100, 2, false));
-    upload(&mut b, &step, &field(0.1, false), 1);
-    assert!(b.query(&[DVec3::ZERO]).is_err(), "uploaded but not built");
-    b.build().unwrap();
-    assert!(b.refit(&field(-1.0, false)).is_err(), "a negative radius");
-    assert!(b.query(&[]).unwrap().is_empty());
-    assert_no_driver_messages();
-}
-
 #[test]
 fn steps_larger_than_one_binding_are_split_over_parts() {
     // The binding limit lowered so that a small step needs 2-4 parts (of at most 4) for its
     // particles (16 B each), nodes and boxes (32 B per cluster): (K, limit, expected parts).
     let ctx = gpu();
     let n = 40_000;
-    let step = std::sync::Arc::new(random_step(n, 77, false));
+    let step = std::sync::Arc::new(unit_cube_step(n, 77, false));
     let cases = [
         // 640,000 B of particles in 2 parts; 1,280,000 B of nodes and boxes in 3; the
         // image's accumulation in 1.
@@ -871,7 +431,7 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
     let radius = 0.055;
     for (k, limit, parts, (width, height)) in cases {
         let what = format!("split, K {k}, limit {limit}");
-        let mut f = field(radius, true);
+        let mut f = maps_field(radius, true);
         if k == 4 {
             f.radius_attribute = Some("h".into());
         }
@@ -879,7 +439,7 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
         upload(&mut b, &step, &f, k);
         assert_eq!(b.split_parts(), Some((parts.0, parts.1)), "{what}");
         check_build_stages(&ctx, &step, &f, k, &what, Some(limit));
-        check_queries(&ctx, &step, &f, k, &what, Some(limit));
+        check_queries(&mut backend(&ctx, Some(limit)), &step, &f, k, &what);
 
         // The same image, bit for bit, as from a backend with one binding per array.
         let series = aarbf::scene::TimeSeries::from_steps(vec![(*step).clone()]);
@@ -920,7 +480,7 @@ fn steps_larger_than_one_binding_are_split_over_parts() {
     let e = b
         .upload(&StepInput {
             step: &step,
-            field: &field(radius, false),
+            field: &maps_field(radius, false),
             cluster: ClusterSize::new(1).unwrap(),
             series_bounds: bounds_of(&step),
             series_range: Some((0.0, 1.0)),
@@ -952,14 +512,14 @@ fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
             .expect("an adapter offering WebGPU's default limits"),
     );
     assert_eq!(limited.limits.max_storage_buffers_per_shader_stage, 8);
-    let step = std::sync::Arc::new(random_step(3_001, 91, false));
-    let mut f = field(0.06, true);
+    let step = std::sync::Arc::new(unit_cube_step(3_001, 91, false));
+    let mut f = maps_field(0.06, true);
     f.radius_attribute = Some("h".into());
     let k = 4;
 
     // The build stages and queries against their twins and the f64 reference.
     check_build_stages(&limited, &step, &f, k, "WebGPU limits", None);
-    check_queries(&limited, &step, &f, k, "WebGPU limits", None);
+    check_queries(&mut backend(&limited, None), &step, &f, k, "WebGPU limits");
 
     // Build, refit and render: the same bits as the full device.
     let series = aarbf::scene::TimeSeries::from_steps(vec![(*step).clone()]);
@@ -1025,5 +585,132 @@ fn a_device_with_webgpu_default_limits_runs_steps_that_fit_a_binding() {
     ] {
         assert!(e.contains(part), "error {e:?} lacks {part:?}");
     }
+    assert_no_driver_messages();
+}
+
+/// The voxel baseline's grid with bindings of 8 KiB (the particles split over parts, the slab
+/// buffer two layers, the first pass 256 particles at a time) equals the CPU's grid as one made
+/// in one binding does, over a poisoned texture; a layer larger than a binding is refused,
+/// naming the limit.
+#[test]
+fn a_voxel_grid_in_many_slabs_and_chunks_equals_one_in_one() {
+    use crate::voxel_baseline as voxel;
+    let series = voxel::random_series(1237, 5, DVec3::new(0.5, 0.25, -1.0));
+    let field = FieldSettings::new(Some("a"), 0.06);
+    let settings = aarbf::render::RenderSettings {
+        width: 16,
+        height: 16,
+        ..aarbf::render::RenderSettings::default()
+    };
+    let (mut cpu, frame) = voxel::frame_of(&series, &field, &settings);
+    cpu.backend_mut().voxelize(&frame, 13).unwrap();
+    let reference = cpu.backend_mut().voxel_grid().unwrap();
+    let mut small = WgpuBackend::with_max_binding(gpu(), 8192);
+    voxel::upload(&mut small, &series, &field, 4, Precision::RENDER);
+    small.voxelize(&frame, 13).unwrap();
+    small.poison_voxels().unwrap();
+    small.voxelize(&frame, 13).unwrap();
+    let (worst, finite) = voxel::grid_difference(&small.voxel_grid().unwrap(), &reference);
+    eprintln!("8 KiB bindings: largest relative difference per channel {worst:?}");
+    assert!(finite);
+    assert!(worst.iter().all(|&w| w < 1e-5), "{worst:?}");
+    let e = small.voxelize(&frame, 64).unwrap_err().to_string();
+    assert!(e.contains("slab buffer") && e.contains("8192"), "{e}");
+    assert_no_driver_messages();
+}
+
+/// A device whose 3D textures are at most 32 texels a side refuses the voxel baseline's
+/// 64-cell grid, naming the limit, and makes a 32-cell one.
+#[test]
+fn a_voxel_grid_beyond_the_3d_texture_limit_is_refused() {
+    use crate::voxel_baseline as voxel;
+    gpu();
+    let series = voxel::random_series(100, 3, DVec3::ZERO);
+    let field = FieldSettings::new(Some("a"), 0.06);
+    let (_, frame) = voxel::frame_of(&series, &field, &Default::default());
+    let limits = wgpu::Limits {
+        max_texture_dimension_3d: 32,
+        ..wgpu::Limits::default()
+    };
+    let small = Arc::new(common::require(
+        "a wgpu adapter",
+        GpuContext::with_limits(limits),
+    ));
+    let mut b = WgpuBackend::with_context(small);
+    voxel::upload(&mut b, &series, &field, 4, Precision::RENDER);
+    let e = b.voxelize(&frame, 64).unwrap_err().to_string();
+    assert!(
+        e.contains("max_texture_dimension_3d") && e.contains("32"),
+        "{e}"
+    );
+    b.voxelize(&frame, 32).unwrap();
+    assert_no_driver_messages();
+}
+
+/// The splatter writes every pixel: its first frame stores into the accumulation without
+/// clearing it, so with the sums poisoned (NaN) a missed pixel would show. At a size that is
+/// no multiple of the 8x8 tiles, so the edge tiles' pixels count too. A second frame adds to
+/// the first (the image, their mean, is the same deterministic frame).
+#[test]
+fn every_splatter_pixel_is_written_over_a_poisoned_accumulation() {
+    use crate::splat_baseline as splat;
+    let (series, field) = splat::dam_break();
+    let cpu = splat::cpu_session(&series, 7, &field, 4);
+    let mut wgpu = WgpuBackend::with_context(gpu());
+    splat::show(&mut wgpu, &series, 7, &field, 4, Precision::RENDER);
+    let settings = aarbf::render::RenderSettings {
+        width: 37,
+        height: 29,
+        integrator: aarbf::values::Integrator::Ea,
+        noise: aarbf::values::NoiseKind::Stbn,
+        ..aarbf::render::RenderSettings::default()
+    };
+    let frame = cpu.frame_params(&settings, 0).unwrap();
+    let first = splat::gpu_splat(&mut wgpu, &frame, 15);
+    assert!(splat::all_finite(&first));
+    assert!(first.pixels.iter().any(|p| p[3] > 0.3), "the data shows");
+    wgpu.poison_accumulation().unwrap();
+    wgpu.render_splat(&frame, 15).unwrap();
+    let again = wgpu.image().unwrap();
+    assert!(splat::all_finite(&again), "a pixel kept the poison");
+    assert_eq!(again.pixels, first.pixels, "the same frame");
+    wgpu.render_splat(&frame, 15).unwrap();
+    let twice = wgpu.image().unwrap();
+    assert_eq!(wgpu.frames(), 2);
+    let worst = splat::largest_difference(&twice, &first);
+    assert!(worst < 1e-6, "the mean of two equal frames: {worst}");
+    assert_no_driver_messages();
+}
+
+/// With the binding limit lowered so that the particles, the tree and the accumulation each
+/// span several storage bindings, the splatter (its 4-part kernel) draws the same image, bit
+/// for bit, as with one binding per array, over a poisoned accumulation.
+#[test]
+fn a_step_and_image_split_over_bindings_splat_the_same_image() {
+    use crate::splat_baseline as splat;
+    let (series, field) = splat::dam_break();
+    let cpu = splat::cpu_session(&series, 7, &field, 4);
+    let mut whole = WgpuBackend::with_context(gpu());
+    splat::show(&mut whole, &series, 7, &field, 4, Precision::RENDER);
+    // 3000 particles (48,000 B) in 3 parts of 16 KiB, 750 clusters' nodes and boxes (24,000
+    // B each) in 2, a 48x40 image's sums (30,720 B) in 2.
+    let mut split = WgpuBackend::with_max_binding(gpu(), 16 * 1024);
+    splat::show(&mut split, &series, 7, &field, 4, Precision::RENDER);
+    assert_eq!(split.split_parts(), Some((3, 2)));
+    let settings = aarbf::render::RenderSettings {
+        width: 48,
+        height: 40,
+        ..aarbf::render::RenderSettings::default()
+    };
+    let frame = cpu.frame_params(&settings, 0).unwrap();
+    let expected = splat::gpu_splat(&mut whole, &frame, 15);
+    assert!(expected.pixels.iter().any(|p| p[3] > 0.3), "the data shows");
+    splat::gpu_splat(&mut split, &frame, 15);
+    split.poison_accumulation().unwrap();
+    let image = splat::gpu_splat(&mut split, &frame, 15);
+    assert!(
+        image == expected,
+        "split and unsplit splatter images differ"
+    );
     assert_no_driver_messages();
 }

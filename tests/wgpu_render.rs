@@ -1,90 +1,23 @@
-//! The wgpu backend's images against the CPU backend's at equal settings, samples and seed,
-//! through a RenderSession as a user drives it. Shares one wgpu device (the process-wide
-//! `GpuContext`); without an adapter it fails.
-//!
-//! Tolerances: the two backends run the same integrator code (GLSL twin of the Rust), f32 on
-//! the GPU against f64 on the CPU, so emission–absorption and stochastic marching agree pixel
-//! for pixel up to rounding, except where rounding flips a free-flight decision (a few pixels).
-//! Delta tracking on the CPU skips empty space (the same distribution, different random
-//! numbers per pixel), so it is compared after a 1.5-pixel blur at more samples. Each case
-//! states its RMSE (linear RGB) and mean FLIP bounds; on failure the GPU image and the FLIP
-//! error map are written to the target directory as `*-actual.png` / `*-difference.png`.
+//! The wgpu backend through a RenderSession as a user drives it: frames following transfer
+//! function changes without a new upload (each as the CPU backend's), sessions that refit,
+//! restart and reproduce, and the device's timestamps. Shares one wgpu device (the
+//! process-wide `GpuContext`); without an adapter it fails. Its images against the CPU
+//! backend's, as every GPU backend's, are checked in `gpu_backends`.
 
 use aarbf::accel::ClusterSize;
-use aarbf::backend::wgpu_lbvh::{GpuContext, WgpuBackend};
+use aarbf::backend::wgpu_lbvh::WgpuBackend;
 use aarbf::backend::{self, BackendKind};
 use aarbf::field::{Classification, FieldSettings};
 use aarbf::render::{RenderSession, RenderSettings};
 use aarbf::scene::TimeSeries;
 use aarbf::scene::maps::{OpticalDensityMap, PiecewiseLinear};
-use aarbf::scene::synth::Generator;
-use aarbf::values::Image;
 use aarbf::values::{Integrator, NoiseKind};
 
-use crate::common;
-use common::assert_no_driver_messages;
-
-fn gpu() -> std::sync::Arc<GpuContext> {
-    common::capture_driver_messages();
-    common::require("a wgpu adapter", GpuContext::shared())
-}
-
-fn demo() -> TimeSeries {
-    TimeSeries::from_steps(Generator::DambreakDemo.generate(3000, 8, 1))
-}
+use crate::common::{assert_no_driver_messages, wgpu_context as gpu};
+use crate::gpu_backends::{assert_images_close, close_view, dambreak};
 
 fn field(series: &TimeSeries) -> FieldSettings {
     FieldSettings::new(Some("velocity"), 0.015 * series.bounds().diagonal())
-}
-
-fn close_view(series: &TimeSeries) -> aarbf::scene::Camera {
-    let b = series.bounds();
-    aarbf::scene::Camera {
-        eye: glam::DVec3::new(0.9, 0.45, 1.1),
-        at: glam::DVec3::new(0.55, 0.12, 0.5 * b.max.z),
-        up: glam::DVec3::Y,
-        fovy: 35.0,
-    }
-}
-
-fn srgb8(image: &Image) -> Vec<u8> {
-    image.to_srgb8().into_raw()
-}
-
-/// Mean FLIP between two images (sRGB 8-bit, default viewing conditions).
-fn flip(reference: &Image, test: &Image) -> (f32, nv_flip::FlipImageFloat) {
-    let r = nv_flip::FlipImageRgb8::with_data(reference.width, reference.height, &srgb8(reference));
-    let t = nv_flip::FlipImageRgb8::with_data(test.width, test.height, &srgb8(test));
-    let err = nv_flip::flip(r, t, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    let mean = nv_flip::FlipPool::from_image(&err).mean();
-    (mean, err)
-}
-
-fn compare(name: &str, cpu: &Image, gpu: &Image, max_rmse: f64, max_flip: f32) {
-    assert!(
-        gpu.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())),
-        "{name}: finite"
-    );
-    let rmse = gpu.rmse(cpu);
-    let (mean_flip, err) = flip(cpu, gpu);
-    eprintln!(
-        "{name}: RMSE {rmse:.5} (bound {max_rmse}), mean FLIP {mean_flip:.5} (bound {max_flip})"
-    );
-    if rmse > max_rmse || mean_flip > max_flip {
-        let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
-        let _ = gpu.to_srgb8().save(dir.join(format!("{name}-actual.png")));
-        let _ = cpu
-            .to_srgb8()
-            .save(dir.join(format!("{name}-expected.png")));
-        let diff = err.apply_color_lut(&nv_flip::magma_lut());
-        let _ = image::RgbImage::from_raw(diff.width(), diff.height(), diff.to_vec())
-            .map(|d| d.save(dir.join(format!("{name}-difference.png"))));
-        panic!(
-            "{name}: RMSE {rmse} (bound {max_rmse}), mean FLIP {mean_flip} (bound {max_flip}); \
-             images in {}",
-            dir.display()
-        );
-    }
 }
 
 fn session(kind: BackendKind, series: &TimeSeries, field: &FieldSettings) -> RenderSession {
@@ -98,72 +31,13 @@ fn session(kind: BackendKind, series: &TimeSeries, field: &FieldSettings) -> Ren
     s
 }
 
-#[test]
-fn images_match_the_cpu_backend_at_equal_samples_and_seed() {
-    gpu();
-    let series = demo();
-    let f = field(&series);
-    let mut cpu = session(BackendKind::Cpu, &series, &f);
-    let mut wgpu = session(BackendKind::Wgpu, &series, &f);
-    let camera = Some(close_view(&series));
-    // (integrator, noise, spp, blur, RMSE bound, FLIP bound)
-    let cases = [
-        // Measured on lavapipe: RMSE < 5e-6 and FLIP < 1e-4 for EA, marching and the SS
-        // reference; delta tracking 0.0026 / 0.033 after the blur.
-        (Integrator::Ea, NoiseKind::Stbn, 2, 0.0, 1e-4, 1e-3),
-        (Integrator::Ea, NoiseKind::White, 2, 0.0, 1e-4, 1e-3),
-        (Integrator::Marching, NoiseKind::Stbn, 4, 0.0, 5e-3, 0.01),
-        (Integrator::SsReference, NoiseKind::Stbn, 1, 0.0, 1e-4, 1e-3),
-        (Integrator::Delta, NoiseKind::Stbn, 32, 1.5, 0.008, 0.06),
-    ];
-    for (integrator, noise, spp, blur, max_rmse, max_flip) in cases {
-        let settings = RenderSettings {
-            width: 64,
-            height: 48,
-            integrator,
-            noise,
-            seed: 3,
-            camera,
-            ..RenderSettings::default()
-        };
-        let a = cpu.render(&settings, spp).unwrap();
-        let b = wgpu.render(&settings, spp).unwrap();
-        let (a, b) = if blur > 0.0 {
-            (a.blurred(blur), b.blurred(blur))
-        } else {
-            (a, b)
-        };
-        compare(
-            &format!("wgpu-{integrator:?}-{noise:?}-{spp}spp").to_lowercase(),
-            &a,
-            &b,
-            max_rmse,
-            max_flip,
-        );
-    }
-    // The half-resolution lattice a targeted render measures its noise on (odd sizes: the
-    // lattice keeps the last row and column): the same rays as on the CPU.
-    let settings = RenderSettings {
-        width: 63,
-        height: 47,
-        seed: 3,
-        camera,
-        ..RenderSettings::default()
-    };
-    let a = cpu.render_frames_on_half_lattice(&settings, 0, 2).unwrap();
-    let b = wgpu.render_frames_on_half_lattice(&settings, 0, 2).unwrap();
-    assert_eq!((b.width, b.height), (32, 24));
-    compare("wgpu-lattice", &a, &b, 1e-4, 1e-3);
-    assert_no_driver_messages();
-}
-
 /// A transfer-function change between frames of one uploaded step reaches the device (the
 /// backend writes its map tables only when their bytes change), and changing back gives the
 /// first image again bit for bit: each frame matches the CPU backend's.
 #[test]
 fn frames_follow_transfer_function_changes_without_a_new_upload() {
     gpu();
-    let series = demo();
+    let series = dambreak();
     let f = field(&series);
     let mut cpu = session(BackendKind::Cpu, &series, &f);
     let mut wgpu = session(BackendKind::Wgpu, &series, &f);
@@ -184,7 +58,7 @@ fn frames_follow_transfer_function_changes_without_a_new_upload() {
     for (name, settings) in [("ramp", &ramp), ("step", &step), ("ramp again", &ramp)] {
         let a = cpu.render(settings, 1).unwrap();
         let b = wgpu.render(settings, 1).unwrap();
-        compare(
+        assert_images_close(
             &format!("wgpu-transfer-{name}").replace(' ', "-"),
             &a,
             &b,
@@ -204,7 +78,7 @@ fn frames_follow_transfer_function_changes_without_a_new_upload() {
 #[test]
 fn sessions_refit_restart_and_reproduce_on_wgpu() {
     gpu();
-    let series = demo();
+    let series = dambreak();
     let mut f = field(&series);
     let settings = RenderSettings {
         width: 32,
@@ -257,7 +131,7 @@ fn gpu_work_is_timed_by_device_timestamps_where_the_adapter_writes_them() {
     let has = features.contains(
         wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS,
     );
-    let series = demo();
+    let series = dambreak();
     let mut s = session(BackendKind::Wgpu, &series, &field(&series));
     let caps = s.backend().capabilities().clone();
     assert_eq!(

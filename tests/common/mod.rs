@@ -1,9 +1,14 @@
-//! What the test files share: requiring a device (a GPU test fails without one, never passes
-//! without running); capturing the messages of wgpu and of the Vulkan validation layers it
-//! routes through `log`, so a test can fail on any of them; and, for the precision tests,
-//! NumPy files as NumPy writes them and exact distances for their f64 oracles.
+//! What the test files share: the GPU backends a test runs over (`gpu`); requiring a device
+//! (a GPU test fails without one, never passes without running); capturing the validation
+//! messages of wgpu, of the Vulkan layers it routes through `log` and of the ash backend's
+//! messenger, so a test can fail on any of them; and, for the precision tests, NumPy files as
+//! NumPy writes them and exact distances for their f64 oracles.
 
 #![allow(dead_code)] // each test file uses its own part
+
+mod gpu;
+#[allow(unused_imports)] // a binary of its own (ash_validation) shares this file
+pub(crate) use gpu::{Gpu, GpuBackend, on_every_gpu, wgpu_context};
 
 /// What a GPU test needs: the device (or backend) `result` holds. Without one the test fails,
 /// saying how to get one: a test that did not run must never read as passed.
@@ -36,11 +41,10 @@ impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for DriverMessages {
         }
         let mut text = Text(format!("{}: ", meta.target()));
         event.record(&mut text);
-        // An instance made for every backend probes OpenGL too, and on a machine without a
-        // GL driver EGL says so: a probe of a backend no test renders with, not a message about
-        // how a test used its device (the suite is one process, so one test's probe would
-        // otherwise fail every other GPU test).
-        if text.0.contains("EGL 'eglInitialize'") {
+        // Probing for an OpenGL adapter through EGL on a machine without a display (as
+        // `GpuContext::on_every_adapter` does for the traversal study) logs that EGL could not
+        // start: an adapter missing, not a message about anything a test did.
+        if text.0.contains("wgpu_hal::gles::egl") && text.0.contains("'eglInitialize'") {
             return;
         }
         // wgpu's `log` records arrive with target "log" and their own in `log.target`.
@@ -64,13 +68,21 @@ pub(crate) fn capture_driver_messages() {
 }
 
 /// Fails if the validation layers (on in builds with debug assertions, when installed) or
-/// wgpu reported anything so far.
-pub(crate) fn assert_no_driver_messages() {
+/// wgpu reported anything so far in this process: through wgpu, or to the ash backend's
+/// messenger.
+pub fn assert_no_driver_messages() {
     let m = DRIVER_MESSAGES
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .clone();
     assert!(m.is_empty(), "validation / driver messages: {m:#?}");
+    let m = aarbf::backend::ash_rt::validation_messages();
+    assert!(
+        m.is_empty(),
+        "{} Vulkan validation message(s):\n{}",
+        m.len(),
+        m.join("\n")
+    );
 }
 
 /// A float64 array as `numpy.save` writes it: magic, version 1.0, a header dict padded with
@@ -107,6 +119,28 @@ pub(crate) fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
             s * s + 2.0 * s * e
         })
         .sum()
+}
+
+/// `aarbf ARGS` as a user runs it (warnings logged), which must succeed and, with the
+/// validation layers on (debug assertions, as in the `checked` profile, when the layers are
+/// installed), report no validation message, through wgpu or the ash backend's messenger:
+/// what it printed.
+pub fn aarbf_ok(args: &[&str]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("AARBF_LOG", "warn")
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("the binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "aarbf {args:?} failed:\n{stderr}");
+    assert!(
+        !stderr.contains("VALIDATION")
+            && !stderr.contains("Validation Error")
+            && !stderr.contains("Vulkan validation"),
+        "aarbf {args:?}: validation messages:\n{stderr}"
+    );
+    String::from_utf8(out.stdout).unwrap()
 }
 
 /// `aarbf field ARGS --backend BACKEND --force --out OUT` as a user runs it: (Phi, Theta) per
