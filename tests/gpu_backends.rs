@@ -55,12 +55,12 @@ on_every_gpu!(
 // Scenes.
 
 /// How a test makes a step of `n` particles from a seed.
-pub type MakeStep = fn(usize, u64) -> Step;
+pub(crate) type MakeStep = fn(usize, u64) -> Step;
 
 /// `n` random particles in a 2-unit box far from the origin (so local coordinates matter),
 /// inside [`BOX_BOUNDS`], with an attribute `s` in -3..5 and a radius attribute `h` (some
 /// zeros).
-pub fn box_step(n: usize, seed: u64) -> Step {
+pub(crate) fn box_step(n: usize, seed: u64) -> Step {
     let mut rng = Pcg64::seed_from_u64(seed);
     let centre = DVec3::new(1000.0, -50.0, 3.0);
     let positions = (0..n)
@@ -93,18 +93,18 @@ pub fn box_step(n: usize, seed: u64) -> Step {
 }
 
 /// The series' bounds of the box steps (every step lies inside).
-pub const BOX_BOUNDS: Bounds = Bounds {
+pub(crate) const BOX_BOUNDS: Bounds = Bounds {
     min: DVec3::new(1000.0, -50.0, 3.0),
     max: DVec3::new(1002.0, -48.0, 5.0),
 };
 
-pub fn rng(seed: u64) -> Pcg64 {
+pub(crate) fn rng(seed: u64) -> Pcg64 {
     Pcg64::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15)
 }
 
 /// `n` particles: uniform in the unit cube, or (clumped) in a few tiny blobs that give many
 /// equal Morton keys; attribute `a` uniform in [0, 1], radius factor `h` in [0.5, 1.5].
-pub fn unit_cube_step(n: usize, seed: u64, clumped: bool) -> Step {
+pub(crate) fn unit_cube_step(n: usize, seed: u64, clumped: bool) -> Step {
     let mut r = rng(seed);
     let centres: Vec<DVec3> = (0..5)
         .map(|_| DVec3::new(r.random(), r.random(), r.random()))
@@ -138,7 +138,7 @@ pub fn unit_cube_step(n: usize, seed: u64, clumped: bool) -> Step {
 /// `n` particles as a simulation writes them: f64 positions far from the origin in a box of
 /// unequal sides (no f32-exact coordinates), an attribute `a` over [1000, 1001] and a radius
 /// attribute `h` in [0.5, 1.5].
-pub fn simulation_step(n: usize, seed: u64) -> Step {
+pub(crate) fn simulation_step(n: usize, seed: u64) -> Step {
     let mut r = rng(seed);
     let offset = DVec3::new(3.0e6, -1.25e5, 42.0);
     let side = DVec3::new(17.0, 3.5, 9.25);
@@ -161,13 +161,13 @@ pub fn simulation_step(n: usize, seed: u64) -> Step {
 }
 
 /// The series' bounds of the simulation steps (every step lies inside).
-pub const SIMULATION_BOUNDS: Bounds = Bounds {
+pub(crate) const SIMULATION_BOUNDS: Bounds = Bounds {
     min: DVec3::new(3.0e6, -1.25e5, 42.0),
     max: DVec3::new(3.0e6 + 17.0, -1.25e5 + 3.5, 42.0 + 9.25),
 };
 
 /// A simulation step as a backend receives it: cluster size 4, the series' bounds and range.
-pub fn simulation_input<'a>(
+pub(crate) fn simulation_input<'a>(
     step: &'a Arc<Step>,
     field: &'a FieldSettings,
     precision: Precision,
@@ -183,12 +183,12 @@ pub fn simulation_input<'a>(
 }
 
 /// The dam break's demo: 3000 particles, 8 steps.
-pub fn dambreak() -> TimeSeries {
+pub(crate) fn dambreak() -> TimeSeries {
     TimeSeries::from_steps(Generator::DambreakDemo.generate(3000, 8, 1))
 }
 
 /// A view close to the fluid, so most pixels see it.
-pub fn close_view(series: &TimeSeries) -> Camera {
+pub(crate) fn close_view(series: &TimeSeries) -> Camera {
     let b = series.bounds();
     Camera {
         eye: DVec3::new(0.9, 0.45, 1.1),
@@ -202,14 +202,14 @@ pub fn close_view(series: &TimeSeries) -> Camera {
 
 /// A radius map that is 0 below t = 0.2 (on the 256-sample table grid, so the GPU's table and
 /// the CPU's exact map agree).
-pub fn radius_map_with_zeros() -> RadiusMap {
+pub(crate) fn radius_map_with_zeros() -> RadiusMap {
     RadiusMap("0:0,0.2:0,0.6:1,1:0.5".parse().unwrap())
 }
 
 /// A field over `a` with radius `radius`; with `varying_maps`, maps whose control points lie
 /// off the tables' sample grid (every backend and the reference look maps up in the same
 /// tables, so they agree whatever the points), and radius 0 for t < 0.21.
-pub fn maps_field(radius: f64, varying_maps: bool) -> FieldSettings {
+pub(crate) fn maps_field(radius: f64, varying_maps: bool) -> FieldSettings {
     let mut f = FieldSettings::new(Some("a"), radius);
     if varying_maps {
         f.radius_map = RadiusMap::new("0:0,0.21:0,0.633:1,1:0.6".parse().unwrap()).unwrap();
@@ -219,7 +219,7 @@ pub fn maps_field(radius: f64, varying_maps: bool) -> FieldSettings {
 }
 
 /// `step` as a backend receives it alone: its own bounds, no series range, cluster size `k`.
-pub fn input<'a>(step: &'a Arc<Step>, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
+pub(crate) fn input<'a>(step: &'a Arc<Step>, field: &'a FieldSettings, k: u32) -> StepInput<'a> {
     StepInput {
         step,
         field,
@@ -231,7 +231,7 @@ pub fn input<'a>(step: &'a Arc<Step>, field: &'a FieldSettings, k: u32) -> StepI
 }
 
 /// The step's bounds, or the unit cube for an empty step.
-pub fn bounds_of(step: &Step) -> Bounds {
+pub(crate) fn bounds_of(step: &Step) -> Bounds {
     let b = step.bounds();
     if b.is_empty() {
         Bounds {
@@ -244,7 +244,7 @@ pub fn bounds_of(step: &Step) -> Bounds {
 }
 
 /// Uploads a unit-cube step (attribute range [0, 1]) with cluster size `k`.
-pub fn upload(backend: &mut dyn Backend, step: &Arc<Step>, field: &FieldSettings, k: u32) {
+pub(crate) fn upload(backend: &mut dyn Backend, step: &Arc<Step>, field: &FieldSettings, k: u32) {
     backend
         .upload(&StepInput {
             step,
@@ -262,7 +262,7 @@ pub fn upload(backend: &mut dyn Backend, step: &Arc<Step>, field: &FieldSettings
 /// What the device prepared (read back) equals the CPU preparation bit for bit: order,
 /// positions with t, lo parts, radius attribute, and (wgpu, which shows it) the step's data;
 /// the order is `hilbert_order`.
-pub fn assert_prepared_like_the_cpu(b: &mut GpuBackend, input: &StepInput<'_>, what: &str) {
+pub(crate) fn assert_prepared_like_the_cpu(b: &mut GpuBackend, input: &StepInput<'_>, what: &str) {
     let (data, cpu) = GpuStepData::prepare(input).unwrap();
     let gpu = b.sorted_particles();
     assert!(
@@ -303,7 +303,7 @@ fn double_single(b: &GpuBackend) -> bool {
 /// ~3e-6). A query within 1e-5 r of some particle's radius boundary may legitimately differ by
 /// a whole term (f32 decides in or out there); such queries are excused, and must be rare
 /// (≤ 0.5%). Returns the largest relative error seen.
-pub fn compare_sums(
+pub(crate) fn compare_sums(
     reference: &ReferenceField,
     points: &[DVec3],
     got: &[(f64, [f64; 3])],
@@ -355,7 +355,7 @@ pub fn compare_sums(
 }
 
 /// Query points: every particle centre and as many random points in the bounds.
-pub fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
+pub(crate) fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
     let mut rng = Pcg64::seed_from_u64(seed);
     let b = step.bounds();
     let mut q: Vec<DVec3> = step.positions.clone();
@@ -368,7 +368,13 @@ pub fn queries(step: &Step, seed: u64) -> Vec<DVec3> {
 
 /// Uploads the unit-cube `step` to `b` (fresh), builds, and compares queries at random points
 /// and at particle centres with the f64 reference.
-pub fn check_queries(b: &mut dyn Backend, step: &Arc<Step>, f: &FieldSettings, k: u32, what: &str) {
+pub(crate) fn check_queries(
+    b: &mut dyn Backend,
+    step: &Arc<Step>,
+    f: &FieldSettings,
+    k: u32,
+    what: &str,
+) {
     let cluster = ClusterSize::new(k).unwrap();
     upload(b, step, f, k);
     b.build().unwrap();
@@ -459,7 +465,7 @@ fn write_failure(
 
 /// Compares `actual` with `expected` by RMSE (linear RGB) and mean FLIP; on failure writes the
 /// images.
-pub fn assert_images_close(
+pub(crate) fn assert_images_close(
     name: &str,
     expected: &Image,
     actual: &Image,

@@ -235,7 +235,7 @@ on_every_gpu!(
 );
 
 /// A CPU session (f64) showing `step` of `series`, the reference.
-pub fn cpu_session(
+pub(crate) fn cpu_session(
     series: &TimeSeries,
     step: usize,
     field: &FieldSettings,
@@ -250,7 +250,7 @@ pub fn cpu_session(
 
 /// Uploads and builds `step` of `series` on `backend` as `RenderSession::show` does, with
 /// positions as `precision` says.
-pub fn show(
+pub(crate) fn show(
     backend: &mut dyn Backend,
     series: &TimeSeries,
     step: usize,
@@ -278,13 +278,13 @@ pub fn show(
 }
 
 /// One splatter frame of `backend` (its accumulation restarted), as an image.
-pub fn gpu_splat(backend: &mut dyn Backend, frame: &FrameParams, k: usize) -> Image {
+pub(crate) fn gpu_splat(backend: &mut dyn Backend, frame: &FrameParams, k: usize) -> Image {
     backend.reset();
     backend.render_splat(frame, k).unwrap();
     backend.image().unwrap()
 }
 
-pub fn largest_difference(a: &Image, b: &Image) -> f32 {
+pub(crate) fn largest_difference(a: &Image, b: &Image) -> f32 {
     a.pixels
         .iter()
         .zip(&b.pixels)
@@ -292,11 +292,11 @@ pub fn largest_difference(a: &Image, b: &Image) -> f32 {
         .fold(0.0f32, f32::max)
 }
 
-pub fn all_finite(image: &Image) -> bool {
+pub(crate) fn all_finite(image: &Image) -> bool {
     image.pixels.iter().flatten().all(|v| v.is_finite())
 }
 
-pub fn dam_break() -> (TimeSeries, FieldSettings) {
+pub(crate) fn dam_break() -> (TimeSeries, FieldSettings) {
     let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(3000, 8, 1));
     let field = FieldSettings::new(Some("velocity"), 0.03 * series.bounds().diagonal());
     (series, field)

@@ -195,7 +195,7 @@ on_every_gpu!(
 
 /// Uploads `step` of `series` to `backend` as `RenderSession::show` does (no build: the
 /// voxel path needs none).
-pub fn upload(
+pub(crate) fn upload(
     backend: &mut dyn Backend,
     series: &TimeSeries,
     field: &FieldSettings,
@@ -221,7 +221,7 @@ pub fn upload(
 
 /// `count` particles at random (not on a lattice) in a box off the origin, with an attribute
 /// `a` and a radius attribute `h` in 0.5..1.5.
-pub fn random_series(count: usize, seed: u64, offset: DVec3) -> TimeSeries {
+pub(crate) fn random_series(count: usize, seed: u64, offset: DVec3) -> TimeSeries {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let extent = DVec3::new(1.0, 0.7, 0.45);
     let positions = (0..count)
@@ -248,7 +248,7 @@ pub fn random_series(count: usize, seed: u64, offset: DVec3) -> TimeSeries {
 /// The largest difference between two grids' sums, per channel, relative to the channel's
 /// largest magnitude in `reference` (absolute where that is 0), and whether every sum of
 /// `grid` is finite.
-pub fn grid_difference(grid: &VoxelGrid, reference: &VoxelGrid) -> ([f64; 4], bool) {
+pub(crate) fn grid_difference(grid: &VoxelGrid, reference: &VoxelGrid) -> ([f64; 4], bool) {
     assert_eq!(grid.dims(), reference.dims());
     let mut scale = [0.0f64; 4];
     for s in reference.sums() {
@@ -269,7 +269,7 @@ pub fn grid_difference(grid: &VoxelGrid, reference: &VoxelGrid) -> ([f64; 4], bo
 }
 
 /// A CPU session (f64) showing `series`, and its frame constants for `settings`.
-pub fn frame_of(
+pub(crate) fn frame_of(
     series: &TimeSeries,
     field: &FieldSettings,
     settings: &RenderSettings,

@@ -34,7 +34,7 @@ pub(crate) use on_every_gpu;
 
 /// A GPU backend.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Gpu {
+pub(crate) enum Gpu {
     /// Vulkan ray tracing (`backend::ash_rt`).
     Ash,
     /// A software LBVH in compute shaders (`backend::wgpu_lbvh`).
@@ -48,13 +48,13 @@ impl std::fmt::Display for Gpu {
 }
 
 /// The wgpu backends' device, shared by every test of the process.
-pub fn wgpu_context() -> Arc<GpuContext> {
+pub(crate) fn wgpu_context() -> Arc<GpuContext> {
     super::capture_driver_messages();
     super::require("a wgpu adapter", GpuContext::shared())
 }
 
 impl Gpu {
-    pub fn kind(self) -> BackendKind {
+    pub(crate) fn kind(self) -> BackendKind {
         match self {
             Gpu::Ash => BackendKind::Ash,
             Gpu::Wgpu => BackendKind::Wgpu,
@@ -62,12 +62,12 @@ impl Gpu {
     }
 
     /// Fails the test unless this backend's device is there.
-    pub fn require(self) {
+    pub(crate) fn require(self) {
         self.backend();
     }
 
     /// A backend on this backend's shared device; the test fails without one.
-    pub fn backend(self) -> GpuBackend {
+    pub(crate) fn backend(self) -> GpuBackend {
         super::capture_driver_messages();
         match self {
             Gpu::Ash => GpuBackend::Ash(Box::new(super::require(
@@ -80,7 +80,7 @@ impl Gpu {
 
     /// A backend for each way this backend traverses the particles, named: ash's RT pipeline
     /// and its LBVH compute kernel; wgpu's LBVH.
-    pub fn traversals(self) -> Vec<(&'static str, GpuBackend)> {
+    pub(crate) fn traversals(self) -> Vec<(&'static str, GpuBackend)> {
         match self {
             Gpu::Ash => [
                 ("rt pipeline", Traversal::RtPipeline),
@@ -101,7 +101,7 @@ impl Gpu {
 
     /// Buffers this backend has made on this thread so far (each test runs on a thread of its
     /// own).
-    pub fn buffers_made(self) -> u64 {
+    pub(crate) fn buffers_made(self) -> u64 {
         match self {
             Gpu::Ash => ash_rt::resources::buffers_made(),
             Gpu::Wgpu => wgpu_lbvh::buffers_made(),
@@ -110,7 +110,7 @@ impl Gpu {
 }
 
 /// A GPU backend with the hooks the tests reach on either.
-pub enum GpuBackend {
+pub(crate) enum GpuBackend {
     Ash(Box<AshBackend>),
     Wgpu(Box<WgpuBackend>),
 }
@@ -135,7 +135,7 @@ impl DerefMut for GpuBackend {
 }
 
 impl GpuBackend {
-    pub fn boxed(self) -> Box<dyn Backend> {
+    pub(crate) fn boxed(self) -> Box<dyn Backend> {
         match self {
             GpuBackend::Ash(b) => b,
             GpuBackend::Wgpu(b) => b,
@@ -143,7 +143,7 @@ impl GpuBackend {
     }
 
     /// The uploaded step's particles as the device prepared them, with their order.
-    pub fn sorted_particles(&mut self) -> SortedParticles {
+    pub(crate) fn sorted_particles(&mut self) -> SortedParticles {
         match self {
             GpuBackend::Ash(b) => b.sorted_particles(),
             GpuBackend::Wgpu(b) => b.sorted_particles(),
@@ -152,7 +152,7 @@ impl GpuBackend {
     }
 
     /// Fills the prepared particles and the preparation's buffers with 0xFF.
-    pub fn poison_prepared(&mut self) {
+    pub(crate) fn poison_prepared(&mut self) {
         match self {
             GpuBackend::Ash(b) => b.poison_prepared(),
             GpuBackend::Wgpu(b) => b.poison_prepared(),
@@ -162,7 +162,7 @@ impl GpuBackend {
 
     /// The preparation's first stage on the device: the Hilbert keys of `points` (f32 local
     /// coordinates) with the identity permutation.
-    pub fn hilbert_keys(
+    pub(crate) fn hilbert_keys(
         &mut self,
         points: &[[f32; 4]],
         quantizer: &HilbertQuantizer,
@@ -175,7 +175,7 @@ impl GpuBackend {
     }
 
     /// The device's radix sort of (key, index) pairs.
-    pub fn sort_pairs(&mut self, keys: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    pub(crate) fn sort_pairs(&mut self, keys: &[u32]) -> (Vec<u32>, Vec<u32>) {
         match self {
             GpuBackend::Ash(b) => b.prepare_sort_pairs(keys),
             GpuBackend::Wgpu(b) => wgpu_lbvh::sort::sort_pairs(b.context(), keys),

@@ -70,7 +70,7 @@ pub(crate) fn capture_driver_messages() {
 /// Fails if the validation layers (on in builds with debug assertions, when installed) or
 /// wgpu reported anything so far in this process: through wgpu, or to the ash backend's
 /// messenger.
-pub fn assert_no_driver_messages() {
+pub(crate) fn assert_no_driver_messages() {
     let m = DRIVER_MESSAGES
         .lock()
         .unwrap_or_else(|e| e.into_inner())
@@ -125,7 +125,7 @@ pub(crate) fn exact_d2(x: glam::DVec3, c: glam::DVec3) -> f64 {
 /// validation layers on (debug assertions, as in the `checked` profile, when the layers are
 /// installed), report no validation message, through wgpu or the ash backend's messenger:
 /// what it printed.
-pub fn aarbf_ok(args: &[&str]) -> String {
+pub(crate) fn aarbf_ok(args: &[&str]) -> String {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
         .args(args)
         .env("AARBF_LOG", "warn")
