@@ -18,7 +18,6 @@
 //! - [`cli`], [`viewer`], [`study`] (the paper's benchmark studies) and [`scene_file`] (which
 //!   composes all of the above) at the top.
 
-#[expect(missing_docs, reason = "public items of accel still undocumented")]
 pub mod accel;
 #[expect(missing_docs, reason = "public items of backend still undocumented")]
 pub mod backend;
