@@ -33,7 +33,6 @@ pub mod dist;
 pub mod field;
 #[expect(missing_docs, reason = "public items of io still undocumented")]
 pub mod io;
-#[expect(missing_docs, reason = "public items of noise still undocumented")]
 pub mod noise;
 pub mod progress;
 #[expect(missing_docs, reason = "public items of render still undocumented")]
