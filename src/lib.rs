@@ -45,5 +45,4 @@ pub mod scene_file;
 pub mod study;
 #[expect(missing_docs, reason = "public items of values still undocumented")]
 pub mod values;
-#[expect(missing_docs, reason = "public items of viewer still undocumented")]
 pub mod viewer;
