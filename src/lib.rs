@@ -21,7 +21,6 @@
 pub mod accel;
 #[expect(missing_docs, reason = "public items of backend still undocumented")]
 pub mod backend;
-#[expect(missing_docs, reason = "public items of cli still undocumented")]
 #[expect(
     clippy::print_stdout,
     reason = "the command line prints its results to stdout"
