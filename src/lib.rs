@@ -28,7 +28,6 @@ pub mod backend;
 pub mod cli;
 #[expect(missing_docs, reason = "public items of dist still undocumented")]
 pub mod dist;
-#[expect(missing_docs, reason = "public items of field still undocumented")]
 pub mod field;
 #[expect(missing_docs, reason = "public items of io still undocumented")]
 pub mod io;
