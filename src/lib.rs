@@ -29,7 +29,6 @@ pub mod cli;
 #[expect(missing_docs, reason = "public items of dist still undocumented")]
 pub mod dist;
 pub mod field;
-#[expect(missing_docs, reason = "public items of io still undocumented")]
 pub mod io;
 pub mod noise;
 pub mod progress;
