@@ -18,11 +18,9 @@
 //! - [`cli`], [`viewer`], [`study`] (the paper's benchmark studies) and [`scene_file`] (which
 //!   composes all of the above) at the top.
 
-#[expect(missing_docs, reason = "public items of accel still undocumented")]
 pub mod accel;
 #[expect(missing_docs, reason = "public items of backend still undocumented")]
 pub mod backend;
-#[expect(missing_docs, reason = "public items of cli still undocumented")]
 #[expect(
     clippy::print_stdout,
     reason = "the command line prints its results to stdout"
@@ -30,11 +28,8 @@ pub mod backend;
 pub mod cli;
 #[expect(missing_docs, reason = "public items of dist still undocumented")]
 pub mod dist;
-#[expect(missing_docs, reason = "public items of field still undocumented")]
 pub mod field;
-#[expect(missing_docs, reason = "public items of io still undocumented")]
 pub mod io;
-#[expect(missing_docs, reason = "public items of noise still undocumented")]
 pub mod noise;
 pub mod progress;
 #[expect(missing_docs, reason = "public items of render still undocumented")]
@@ -47,5 +42,4 @@ pub mod scene_file;
 pub mod study;
 #[expect(missing_docs, reason = "public items of values still undocumented")]
 pub mod values;
-#[expect(missing_docs, reason = "public items of viewer still undocumented")]
 pub mod viewer;

@@ -29,6 +29,8 @@ pub struct ClusterBvh {
 }
 
 impl ClusterBvh {
+    /// Builds the tree over the non-empty boxes of `boxes` (none at all: an empty tree that no ray
+    /// crosses).
     pub fn build(boxes: &ClusterBoxes) -> ClusterBvh {
         let origin = boxes
             .boxes

@@ -19,6 +19,7 @@ pub const DENSE_OVERLAP: f64 = 4.0;
 pub struct ClusterSize(u32);
 
 impl ClusterSize {
+    /// Every allowed cluster size, smallest first.
     pub const ALL: [ClusterSize; 5] = [
         ClusterSize(1),
         ClusterSize(2),
@@ -27,6 +28,7 @@ impl ClusterSize {
         ClusterSize(16),
     ];
 
+    /// The cluster size `k`; an error message when `k` is not 1, 2, 4, 8 or 16.
     pub fn new(k: u32) -> Result<ClusterSize, String> {
         if matches!(k, 1 | 2 | 4 | 8 | 16) {
             Ok(ClusterSize(k))
@@ -52,6 +54,7 @@ impl ClusterSize {
         }
     }
 
+    /// K, the number of particles per cluster.
     pub fn get(self) -> usize {
         self.0 as usize
     }
@@ -143,7 +146,10 @@ pub fn cluster_box<F: Float>(
 /// member left is empty, `Bounds::is_empty`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClusterBoxes {
+    /// Particles per cluster (K): box `c` bounds particles `cK .. cK+K` in cluster order.
     pub size: ClusterSize,
+    /// One box per cluster, in cluster order (`Bounds::EMPTY` where no member has a positive
+    /// radius).
     pub boxes: Vec<Bounds>,
 }
 
@@ -168,10 +174,12 @@ impl ClusterBoxes {
         ClusterBoxes { size, boxes }
     }
 
+    /// The number of clusters (boxes, empty ones included).
     pub fn len(&self) -> usize {
         self.boxes.len()
     }
 
+    /// Whether there are no clusters at all (no particles).
     pub fn is_empty(&self) -> bool {
         self.boxes.is_empty()
     }

@@ -84,6 +84,9 @@ pub struct HilbertQuantizer {
 }
 
 impl HilbertQuantizer {
+    /// The quantiser over `bounds` (the series' bounds, so keys do not depend on which particles a
+    /// step holds): local coordinates relative to its centre, 2^[`HILBERT_BITS`] cells per axis
+    /// across its extent.
     pub fn new(bounds: Bounds) -> HilbertQuantizer {
         let cells = f64::from(1u32 << HILBERT_BITS);
         let extent = bounds.extent();
@@ -112,6 +115,7 @@ impl HilbertQuantizer {
         self.lo
     }
 
+    /// Cells per unit length on each axis, in f32 (0 on an axis of zero extent).
     pub fn scale(&self) -> [f32; 3] {
         self.scale
     }
@@ -132,11 +136,13 @@ impl HilbertQuantizer {
         std::array::from_fn(|i| ((l[i] - self.lo[i]) * self.scale[i]).clamp(0.0, max) as u32)
     }
 
+    /// The Hilbert grid cell of position `p` (world coordinates), each axis in `0..2^HILBERT_BITS`.
     #[inline]
     pub fn cell(&self, p: DVec3) -> [u32; 3] {
         self.cell_of_local(self.local(p))
     }
 
+    /// The 63-bit Hilbert key of position `p` (world coordinates).
     #[inline]
     pub fn key(&self, p: DVec3) -> u64 {
         hilbert_key(self.cell(p), HILBERT_BITS)

@@ -12,11 +12,17 @@ use crate::field::{Classification, RegularGrid, finish_sums};
 use crate::io::{At, npy};
 use crate::scene_file::resolve::{DataArgs, FieldOptions, Resolved, resolve};
 
+/// The arguments of `aarbf field`: the data and field as every command takes them, where to
+/// evaluate (query points or a grid), the output file, the backend and the precision.
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("where").required(true).args(["queries", "grid"])))]
 pub struct FieldArgs {
+    /// Where the data comes from (a scene file, or the data path and format), the step, and how
+    /// it is read (particle type, units, smoothing, periodic box, cache).
     #[command(flatten)]
     pub data: DataArgs,
+    /// How the field is defined: attribute and range, radii, maps, classification, cluster size,
+    /// kernel.
     #[command(flatten)]
     pub field: FieldOptions,
     /// Query points: an M x 3 .npy array (float32 or float64).
@@ -48,6 +54,8 @@ pub struct FieldArgs {
     pub force: bool,
 }
 
+/// Runs `aarbf field`: evaluates the fields at the query points or grid and writes them as an
+/// `.npy` array to `--out`, then reports the times.
 pub fn run(args: FieldArgs) -> anyhow::Result<()> {
     crate::io::output::check_writable(&args.out, args.force)?;
     let resolved = resolve(&args.data, &args.field)?;
@@ -119,10 +127,14 @@ pub struct Evaluated {
     pub samples: Vec<[f64; 4]>,
     /// Whether the field is pre-classified (four columns, not two).
     pub pre: bool,
+    /// Uploading the step to the backend and building its structure (none when the backend scatters
+    /// onto a grid).
     pub build_time: std::time::Duration,
+    /// Evaluating the fields at every query.
     pub eval_time: std::time::Duration,
     /// The step's particles.
     pub count: usize,
+    /// The backend that evaluated (`cpu`, `wgpu` or `ash`).
     pub backend_name: &'static str,
 }
 
@@ -225,11 +237,15 @@ pub fn evaluate(
 
 /// Where the field is evaluated.
 pub enum Queries {
+    /// Arbitrary points in data coordinates, one sample each, in the given order.
     Points(Vec<DVec3>),
+    /// The points of a regular grid, i fastest; a backend that scatters grids (the CPU) splats each
+    /// particle onto the points it reaches.
     Grid(RegularGrid),
 }
 
 impl Queries {
+    /// The number of query points.
     pub fn len(&self) -> usize {
         match self {
             Queries::Points(p) => p.len(),
@@ -237,6 +253,7 @@ impl Queries {
         }
     }
 
+    /// Whether there are no query points.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

@@ -7,6 +7,7 @@ use clap::Args;
 use crate::io::{self, Format};
 use crate::scene::synth::Generator;
 
+/// The arguments of `aarbf generate`: which synthetic data set, its size, seed and output format.
 #[derive(Debug, Args)]
 pub struct GenerateArgs {
     /// Which data set.

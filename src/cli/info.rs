@@ -7,6 +7,7 @@ use clap::Args;
 use crate::io::{Format, ParticleType, ReadOptions};
 use crate::scene::{OpenOptions, TimeSeries};
 
+/// The arguments of `aarbf info`: the data to describe (or `--devices`) and how to read it.
 #[derive(Debug, Args)]
 pub struct InfoArgs {
     /// The data: a file, a directory or a glob.

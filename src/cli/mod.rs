@@ -21,6 +21,8 @@ pub use slice::SliceArgs;
 pub use stbn::StbnArgs;
 pub use view::ViewArgs;
 
+/// The parsed command line: one [`Command`] (clap takes the help texts from the attributes, not
+/// from this comment).
 #[derive(Debug, Parser)]
 #[command(
     name = "aarbf",
@@ -32,11 +34,13 @@ pub use view::ViewArgs;
                   a directory or a glob is a time series."
 )]
 pub struct Cli {
+    /// The subcommand given.
     #[command(subcommand)]
     pub command: Command,
 }
 
 // Parsed once per process: the size difference between variants costs nothing.
+/// The subcommands of `aarbf`; each variant's doc comment is its help text.
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -85,6 +89,7 @@ impl Cli {
     }
 }
 
+/// Runs the subcommand `cli` names, to completion.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(a) => info::run(a),

@@ -10,8 +10,12 @@ use crate::render::legend::Legend;
 /// package's `Image.save` writes through it too).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OutputFormat {
+    /// An 8-bit sRGB PNG, background composited (opaque); the only format the colour legend is
+    /// drawn on.
     Png8,
+    /// A 16-bit sRGB PNG with straight alpha, the background taken out.
     Png16,
+    /// An OpenEXR file: linear 32-bit float RGBA, premultiplied alpha, the background taken out.
     Exr,
 }
 
@@ -42,6 +46,9 @@ impl OutputFormat {
         }
     }
 
+    /// Writes `image` to `path` in this format, atomically, replacing an existing file;
+    /// `background` is the colour taken out again for the formats with alpha, `legend` is drawn on
+    /// 8-bit PNGs only.
     pub fn write(
         self,
         path: &Path,

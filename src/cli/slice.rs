@@ -19,10 +19,16 @@ pub enum Axis {
     Z,
 }
 
+/// The arguments of `aarbf slice`: the data and field, the plane (its axis and position) and the
+/// output PNG.
 #[derive(Debug, Args)]
 pub struct SliceArgs {
+    /// Where the data comes from (a scene file, or the data path and format), the step, and how
+    /// it is read (particle type, units, smoothing, periodic box, cache).
     #[command(flatten)]
     pub data: DataArgs,
+    /// How the field is defined: attribute and range, radii, maps, classification, cluster size,
+    /// kernel.
     #[command(flatten)]
     pub field: FieldOptions,
     /// The axis normal to the slice.

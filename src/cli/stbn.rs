@@ -6,10 +6,14 @@ use clap::Args;
 
 use crate::noise::stbn;
 
+/// The arguments of `aarbf stbn`: the mask's size, the energy's sigma, the seed and the output
+/// file.
 #[derive(Debug, Args)]
 pub struct StbnArgs {
+    /// Width of the mask in pixels (1..=4096).
     #[arg(long, default_value_t = 128)]
     pub width: u32,
+    /// Height of the mask in pixels (1..=4096).
     #[arg(long, default_value_t = 128)]
     pub height: u32,
     /// Slices (frames) of the mask.
@@ -18,8 +22,10 @@ pub struct StbnArgs {
     /// Standard deviation of the energy's Gaussians, in pixels (and frames).
     #[arg(long, default_value_t = stbn::DEFAULT_SIGMA)]
     pub sigma: f64,
+    /// Random seed; the same seed gives the same mask.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The mask file to write (the STBN asset format).
     #[arg(long)]
     pub out: PathBuf,
     /// Overwrite an existing output.

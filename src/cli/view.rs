@@ -8,12 +8,18 @@ use crate::backend::BackendKind;
 use crate::scene_file::resolve::{DataArgs, FieldOptions, ViewFlags, resolve_for_images};
 use crate::viewer::{ViewOptions, WindowOptions};
 
+/// The arguments of `aarbf view`: the data, field and view to start with, and the window.
 #[derive(Debug, Args)]
 pub struct ViewArgs {
+    /// Where the data comes from (a scene file, or the data path and format), the step, and how
+    /// it is read (particle type, units, smoothing, periodic box, cache).
     #[command(flatten)]
     pub data: DataArgs,
+    /// How the field is defined: attribute and range, radii, maps, classification, cluster size,
+    /// kernel.
     #[command(flatten)]
     pub field: FieldOptions,
+    /// The camera: the up axis and where it looks from (over the scene file's `[camera]`).
     #[command(flatten)]
     pub view: ViewFlags,
     /// The backend to start with (switchable in the window). `auto` picks the CPU backend

@@ -28,9 +28,15 @@ use super::{Particles, ReferenceField, Sample, Theta};
 /// negative (image rows run down while y runs up).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RegularGrid {
+    /// The first point (i = j = k = 0), in data coordinates.
     pub origin: DVec3,
+    /// The data axis (0 = x, 1 = y, 2 = z) each grid index (i, j, k) runs along: a permutation
+    /// of 0, 1 and 2.
     pub axes: [usize; 3],
+    /// The distance between neighbouring points along each grid index, in data units
+    /// (negative: the index runs down its axis).
     pub spacing: [f64; 3],
+    /// Points along each grid index (i, j, k).
     pub dims: [usize; 3],
 }
 
@@ -47,10 +53,12 @@ impl RegularGrid {
         }
     }
 
+    /// The number of points: the product of `dims`.
     pub fn len(&self) -> usize {
         self.dims.iter().product()
     }
 
+    /// Whether the grid has no points (a dimension is 0).
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

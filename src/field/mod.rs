@@ -59,9 +59,16 @@ pub struct FieldSettings {
     pub radius: f64,
     /// Per-particle radius attribute h (scaled by R).
     pub radius_attribute: Option<String>,
+    /// Radius map m(t) in [0, 1]: a particle's radius as a fraction of R, by its normalised
+    /// attribute t (constant without an attribute).
     pub radius_map: RadiusMap,
+    /// Density map w(t) >= 0: a particle's weight in the density sum, by its normalised
+    /// attribute t (constant without an attribute).
     pub density_map: DensityMap,
+    /// Colour map C(t): the colour of the normalised attribute (of the averaged one for
+    /// post-classification, of each particle's for pre-).
     pub color_map: ColorMap,
+    /// Whether the attribute is averaged then coloured (post) or coloured then averaged (pre).
     pub classification: Classification,
     /// The kernel (the paper's Gaussian RBF by default). An SPH kernel weights each term by
     /// the particle's volume `m/ρ`, from [`Self::mass`] and [`Self::density`].
@@ -126,42 +133,70 @@ impl FieldSettings {
 /// Why a field cannot be set up.
 #[derive(Debug, thiserror::Error)]
 pub enum FieldError {
+    /// A named attribute (the field's, the radius attribute, or an SPH mass or density) is not in
+    /// the step.
     #[error("step '{step}' has no attribute '{name}'; it has: {available}")]
     MissingAttribute {
+        /// The step's name (its file's, or a `.particles` header's step name).
         step: String,
+        /// The attribute asked for.
         name: String,
+        /// The step's attribute names, comma-separated.
         available: String,
     },
+    /// The global radius R is not positive and finite (the value given).
     #[error("the global radius must be a positive finite number, got {0}")]
     BadRadius(f64),
+    /// A radius or density map varies with t, but no attribute gives t; which map it is
+    /// ("radius map" or "density map").
     #[error("the {0} varies with the attribute, but no attribute was chosen")]
     MapNeedsAttribute(&'static str),
+    /// The attribute range given is not finite and ascending (lo, hi).
     #[error("the attribute range {0}..{1} is not a finite ascending pair")]
     BadRange(f64, f64),
+    /// The radius attribute holds a negative value.
     #[error(
         "step '{step}': radius attribute '{name}' holds {value} for particle {index}; radii must be >= 0"
     )]
     NegativeRadius {
+        /// The step's name (its file's, or a `.particles` header's step name).
         step: String,
+        /// The radius attribute's name.
         name: String,
+        /// The first negative value.
         value: f64,
+        /// Its particle's index in the step.
         index: usize,
     },
+    /// An SPH kernel was chosen without a mass or a density to weight each particle's volume by.
     #[error(
         "the {kernel} kernel weights each particle by its volume m/rho: it needs a {what} (--mass and --density, each an attribute or one value)"
     )]
-    SphNeedsVolume { kernel: Kernel, what: &'static str },
+    SphNeedsVolume {
+        /// The SPH kernel chosen.
+        kernel: Kernel,
+        /// What is missing: "mass" or "density".
+        what: &'static str,
+    },
+    /// An SPH kernel's mass is negative or not finite, or its density is not positive and finite.
     #[error(
         "step '{step}': {what} '{name}' holds {value} for particle {index}; an SPH kernel needs {need}"
     )]
     BadVolume {
+        /// The step's name (its file's, or a `.particles` header's step name).
         step: String,
+        /// "mass" or "density".
         what: &'static str,
+        /// The attribute's name, or "the value given" for a constant.
         name: String,
+        /// The first bad value.
         value: f64,
+        /// Its particle's index in the step (0 for a constant).
         index: usize,
+        /// What is required: "masses >= 0" or "densities > 0".
         need: &'static str,
     },
+    /// The periodic box cannot be used.
     #[error(transparent)]
     Periodic(#[from] periodic::PeriodicError),
 }

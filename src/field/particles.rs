@@ -29,9 +29,15 @@ pub enum Theta {
 pub struct Particles {
     /// Data coordinates are `origin + centers[i]`.
     pub origin: DVec3,
+    /// Particle centres relative to `origin` (local coordinates), in Hilbert order.
     pub centers: Vec<DVec3>,
+    /// Radii r_i = R · m(t_i) · h_i in data units (0: the particle reaches nothing); empty
+    /// before a field is applied.
     pub radii: Vec<f64>,
+    /// Weights: the density map's w(t_i), times the normalisation and the volume m/ρ for an
+    /// SPH kernel; empty before a field is applied.
     pub weights: Vec<f64>,
+    /// theta_i per particle: none, t_i (post-classification) or linear-light colour (pre).
     pub theta: Theta,
     /// The attribute range t is normalised over (`lo == hi` for a constant attribute, where
     /// every t is 0.5).
@@ -48,12 +54,16 @@ pub struct Particles {
 /// onto them; [`crate::scene::maps::PiecewiseLinear::table_error`] says by how much).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FieldTables {
+    /// The density map w(t), one sample per table entry.
     pub density: Vec<f32>,
+    /// The radius map m(t), one sample per table entry.
     pub radius: Vec<f32>,
+    /// The colour map as linear-light RGB, one sample per table entry.
     pub colour: Vec<[f32; 3]>,
 }
 
 impl FieldTables {
+    /// The tables of `settings`' density, radius and colour maps.
     pub fn of(settings: &FieldSettings) -> FieldTables {
         FieldTables {
             density: settings.density_map.0.bake(),
@@ -191,10 +201,12 @@ impl Particles {
         Ok(())
     }
 
+    /// The number of particles.
     pub fn len(&self) -> usize {
         self.centers.len()
     }
 
+    /// Whether the step has no particles.
     pub fn is_empty(&self) -> bool {
         self.centers.is_empty()
     }

@@ -20,21 +20,28 @@ use crate::values::{Attribute, Bounds, Step};
 /// Why a periodic box cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum PeriodicError {
+    /// A side of the box is not positive and finite (the sides given).
     #[error(
         "the periodic box must have positive finite sides, got {} x {} x {}",
         .0[0], .0[1], .0[2]
     )]
     BadBox([f64; 3]),
+    /// A particle reaches half the box's side or more, so it would meet its own image.
     #[error(
         "step '{step}': particle {index} reaches {reach} (its radius), but the periodic box's \
          {axis} side is {side}: a particle must reach less than half the box, or it would meet \
          its own periodic image. Pass a smaller --radius, or --no-periodic for an open box"
     )]
     ReachTooLarge {
+        /// The step's name (its file's, or a `.particles` header's step name).
         step: String,
+        /// The particle's index in the step.
         index: usize,
+        /// Its reach (its radius), in data units.
         reach: f64,
+        /// The axis whose side it reaches half of: 'x', 'y' or 'z'.
         axis: char,
+        /// That side of the box, in data units.
         side: f64,
     },
 }
@@ -42,7 +49,9 @@ pub enum PeriodicError {
 /// A box `[min, min + size)` whose opposite faces are one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PeriodicBox {
+    /// The lower corner, in data coordinates.
     pub min: DVec3,
+    /// The sides along x, y and z, in data units (each positive).
     pub size: DVec3,
 }
 
@@ -52,6 +61,7 @@ pub struct Images {
     /// The wrapped particles (the first [`Images::originals`]) and their images after them,
     /// each image carrying its particle's attributes.
     pub step: std::sync::Arc<Step>,
+    /// The particles of the step itself, at the front of `step`; the images are the rest.
     pub originals: usize,
     /// The largest reach of any particle: the images lie within it of the box.
     pub largest_reach: f64,

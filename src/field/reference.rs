@@ -84,6 +84,7 @@ pub fn finish_sums(phi: f64, num: [f64; 3], post: bool, range: (f64, f64)) -> Sa
 /// are built when first asked for (the splatter walks them). All in the particles' local
 /// coordinates; every method takes data coordinates.
 pub struct ReferenceField {
+    /// The step's particles with the field applied (Hilbert order, local coordinates).
     pub particles: Particles,
     cluster: ClusterSize,
     clusters: OnceLock<(ClusterBoxes, ClusterBvh)>,
@@ -95,6 +96,8 @@ pub struct ReferenceField {
 }
 
 impl ReferenceField {
+    /// The field of `particles` (with their field applied): sorts them into a grid of cells now;
+    /// the cluster boxes, of `cluster` particles each, wait for their first use.
     pub fn new(particles: Particles, cluster: ClusterSize) -> ReferenceField {
         let (cells, cell_order) = CellGrid::build(&particles.centers, &particles.radii);
         let by_cell = Packed64::gather(&particles, &cell_order);

@@ -10,6 +10,8 @@ use crate::values::{Attribute, Step};
 
 const POSITION_NAMES: [[&str; 3]; 2] = [["x", "y", "z"], ["points:0", "points:1", "points:2"]];
 
+/// Reads a CSV step: positions from the `x, y, z` (or `Points:0..2`) columns, the selected other
+/// columns as attributes.
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let mut reader = ::csv::ReaderBuilder::new()
         .has_headers(true)
@@ -130,6 +132,8 @@ fn csv_error(at: At<'_>, e: ::csv::Error) -> DataError {
     }
 }
 
+/// Writes `step` as CSV: a header row `x, y, z` and the attribute names, then one row per particle,
+/// each value in the shortest text that reads back as the same f64.
 pub fn write_step(path: &Path, step: &Step) -> std::io::Result<()> {
     let mut w = ::csv::Writer::from_path(path)?;
     let mut header = vec!["x".to_owned(), "y".into(), "z".into()];

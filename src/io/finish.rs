@@ -9,6 +9,7 @@ use crate::values::{Attribute, Step};
 
 /// What a reader hands over: positions and named columns, not yet checked.
 pub struct Columns {
+    /// Particle positions in data coordinates, as the file holds them (not yet checked finite).
     pub positions: Vec<DVec3>,
     /// The selected attributes (a reader decodes only what the selection keeps).
     pub attributes: Vec<Attribute>,

@@ -31,6 +31,7 @@ pub enum Format {
 }
 
 impl Format {
+    /// Every format, in the order messages list them.
     pub const ALL: [Format; 8] = [
         Format::Particles,
         Format::VtkXml,
@@ -66,6 +67,8 @@ impl Format {
         }
     }
 
+    /// The format's name as `--format` takes it and messages print it (`particles`, `vtk-xml`,
+    /// `vtk`, `csv`, `ply`, `raw`, `npy`, `hdf5`).
     pub fn name(self) -> &'static str {
         match self {
             Format::Particles => "particles",

@@ -12,7 +12,10 @@ use super::{
 pub struct StepRef {
     /// The step's file (of a snapshot split over several files, the first).
     pub path: PathBuf,
+    /// The step's file format.
     pub format: Format,
+    /// The step's name for messages: a `.particles` header's step name, a split snapshot's name,
+    /// else the file name without its extension.
     pub name: String,
     /// What to read from files that hold a choice (HDF5 snapshots' particle types).
     pub read: ReadOptions,
@@ -180,7 +183,9 @@ fn with_formats(
 pub struct SimulationBox {
     /// The box is `[0, size)` on each axis.
     pub size: [f64; 3],
+    /// Whether the run's box is periodic (opposite faces are one).
     pub periodic: bool,
+    /// What in the file says so (as "/Config PERIODIC"), for messages.
     pub because: String,
 }
 

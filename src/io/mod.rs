@@ -51,8 +51,10 @@ use crate::values::Step;
 /// to what it uses.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub enum AttributeSelection {
+    /// Every attribute the data holds.
     #[default]
     All,
+    /// Only the attributes of these names, kept in this order (a name the data lacks is an error).
     Only(Vec<String>),
 }
 

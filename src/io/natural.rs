@@ -2,6 +2,8 @@
 
 use std::cmp::Ordering;
 
+/// Compares names in natural order: runs of digits compare as numbers (`step2` < `step10`),
+/// everything else byte by byte.
 pub fn compare(a: &str, b: &str) -> Ordering {
     let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
     loop {

@@ -17,12 +17,16 @@ use crate::values::Attribute;
 /// A 2-D array in row-major order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Matrix {
+    /// Rows (M).
     pub rows: usize,
+    /// Columns.
     pub cols: usize,
+    /// `rows · cols` values, row after row.
     pub data: Vec<f64>,
 }
 
 impl Matrix {
+    /// Row `i`'s `cols` values.
     pub fn row(&self, i: usize) -> &[f64] {
         &self.data[i * self.cols..(i + 1) * self.cols]
     }
@@ -296,6 +300,8 @@ pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
     Ok(Matrix { rows, cols, data })
 }
 
+/// Reads a particle step from an N x (3 + k) `.npy` array: columns x, y, z, then the attributes
+/// `col3`, `col4`, ... (only the selected ones decoded).
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let array = MappedArray::open(at)?;
     if array.cols < 3 {

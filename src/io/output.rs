@@ -7,11 +7,18 @@ use std::path::Path;
 /// Why an output was not written.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
+    /// The output exists and `--force` was not given (its path as displayed).
     #[error("{0} exists; pass --force to overwrite it")]
     Exists(String),
+    /// Writing the temporary file or renaming it into place failed.
     // `error`, not `source`: the message includes it, and a source would print it twice.
     #[error("cannot write {path}: {error}")]
-    Io { path: String, error: std::io::Error },
+    Io {
+        /// The output's path as displayed.
+        path: String,
+        /// The I/O error, quoted in the message.
+        error: std::io::Error,
+    },
 }
 
 /// Fails if `path` exists and `force` is not set.

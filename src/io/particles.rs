@@ -43,6 +43,8 @@ pub fn step_path(header: &Path, name: &str) -> PathBuf {
     PathBuf::from(s)
 }
 
+/// Reads one `.particles` step file: a little-endian u64 count, then count records of four f32 (x,
+/// y, z, [`ATTRIBUTE_NAME`]).
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let bytes = Mapped::open(at)?;
     let size = bytes.len() as u64;

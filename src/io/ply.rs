@@ -199,6 +199,8 @@ impl Body<'_> {
     }
 }
 
+/// Reads a PLY file: the `vertex` element's `x, y, z` as positions, its other scalar properties as
+/// attributes (the selected ones).
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let bytes = super::mapped::Mapped::open(at)?;
     let header = parse_header(at, &bytes)?;

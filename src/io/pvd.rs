@@ -22,8 +22,12 @@ use super::{At, DataError, Format, Problem, ReadOptions, StepRef};
 /// One `DataSet` entry: its file as written, and its time (`None` without `timestep`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Entry {
+    /// The `file` attribute as written (a relative path is resolved against the `.pvd`'s folder).
     pub file: String,
+    /// The `timestep` attribute (`None` without one).
     pub time: Option<f64>,
+    /// The `part` attribute (`None` without one); a collection with more than one part per time is
+    /// refused.
     pub part: Option<String>,
 }
 

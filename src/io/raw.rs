@@ -8,8 +8,11 @@ use glam::DVec3;
 use super::{At, AttributeSelection, Columns, DataError, Problem};
 use crate::values::{Attribute, Step};
 
+/// The name the format's fourth value, w, gets as an attribute.
 pub const ATTRIBUTE_NAME: &str = "w";
 
+/// Reads a `.raw` file: records of four little-endian f32 (x, y, z, w), w as the attribute
+/// [`ATTRIBUTE_NAME`]; a size that is not a multiple of 16 bytes is a truncated file.
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
     let bytes = super::mapped::Mapped::open(at)?;
     if bytes.len() % 16 != 0 {
@@ -82,6 +85,8 @@ pub(crate) fn xyzw_bytes(step: &Step, attribute: &str) -> std::io::Result<Vec<u8
     Ok(bytes)
 }
 
+/// Writes `step` as `.raw`: each particle's x, y, z and its value of the attribute `attribute`, as
+/// f32 (rounded from f64); an error when the step has no such attribute.
 pub fn write_step(path: &Path, step: &Step, attribute: &str) -> std::io::Result<()> {
     std::fs::write(path, xyzw_bytes(step, attribute)?)
 }

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 pub struct ParticleType(u8);
 
 impl ParticleType {
+    /// Type 0, gas (SPH) particles: the default.
     pub const GAS: ParticleType = ParticleType(0);
     /// The names of types 0 to 5, in order.
     pub const NAMES: [&'static str; 6] = ["gas", "dm", "disk", "bulge", "stars", "bh"];
@@ -28,6 +29,7 @@ impl ParticleType {
         format!("PartType{}", self.0)
     }
 
+    /// The type's name as GADGET names it: gas, dm, disk, bulge, stars or bh.
     pub fn name(self) -> &'static str {
         Self::NAMES[self.index()]
     }

@@ -21,8 +21,11 @@ pub struct StemGroup {
     /// The file name with its step number as `*` (`fluid_*.vtp`), or the name itself when it
     /// has no number: a glob that selects this group alone within its folder.
     pub pattern: String,
+    /// The files' format.
     pub format: Format,
+    /// The group's files.
     pub files: Vec<PathBuf>,
+    /// The files' total size in bytes (of two groups with as many steps, the larger is the series).
     pub bytes: u64,
 }
 

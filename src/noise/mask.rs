@@ -36,40 +36,72 @@ static BUILTIN_BYTES: &[u8] = include_bytes!("../../assets/stbn_128x128x64.bin")
 /// mask") and what is wrong.
 #[derive(Debug, thiserror::Error)]
 pub enum NoiseError {
+    /// Opening, reading, creating or writing the file failed.
     #[error("{origin}: cannot read or write: {error}")]
     Io {
+        /// The file's path as displayed, or "built-in mask".
         origin: String,
+        /// The I/O error, quoted in the message.
         // Not a `#[source]`: the message includes it.
         error: std::io::Error,
     },
+    /// The first four bytes are not [`MAGIC`].
     #[error("{origin}: not a blue-noise mask: the magic is {found:?}, expected \"STBN\"")]
-    BadMagic { origin: String, found: [u8; 4] },
+    BadMagic {
+        /// The file's path as displayed, or "built-in mask".
+        origin: String,
+        /// The first four bytes as found.
+        found: [u8; 4],
+    },
+    /// The file is shorter than the [`HEADER_LEN`]-byte header.
     #[error("{origin}: file is truncated: the header needs 16 bytes but the file has {size}")]
-    TruncatedHeader { origin: String, size: u64 },
+    TruncatedHeader {
+        /// The file's path as displayed, or "built-in mask".
+        origin: String,
+        /// Bytes the file has (fewer than 16).
+        size: u64,
+    },
+    /// A declared width, height or depth is 0 or above [`MAX_DIM`].
     #[error("{origin}: bad dimensions {width} x {height} x {depth}: each must be in 1..={MAX_DIM}")]
     BadDimensions {
+        /// The file's path as displayed, or "built-in mask".
         origin: String,
+        /// Declared width (the header's bytes 4..8).
         width: u32,
+        /// Declared height (bytes 8..12).
         height: u32,
+        /// Declared depth (bytes 12..16).
         depth: u32,
     },
+    /// The file size is not the header plus two bytes per value of the declared dimensions.
     #[error(
         "{origin}: size mismatch: a {width} x {height} x {depth} mask needs {expected} bytes \
          but the file has {size} ({problem})"
     )]
     SizeMismatch {
+        /// The file's path as displayed, or "built-in mask".
         origin: String,
+        /// Declared width.
         width: u32,
+        /// Declared height.
         height: u32,
+        /// Declared depth.
         depth: u32,
+        /// Bytes a file of these dimensions has: 16 + 2·W·H·D.
         expected: u64,
+        /// Bytes the file has.
         size: u64,
+        /// "truncated" (too few bytes) or "trailing bytes" (too many).
         problem: &'static str,
     },
+    /// A mask about to be written holds more or fewer values than W·H·D.
     #[error("{origin}: the mask holds {values} values but its dimensions need {expected}")]
     ValueCount {
+        /// The destination path as displayed.
         origin: String,
+        /// Values the mask holds.
         values: usize,
+        /// W·H·D.
         expected: u64,
     },
 }
@@ -77,8 +109,11 @@ pub enum NoiseError {
 /// A W x H x D spatiotemporal blue-noise mask: slice `z` is the mask for frame `z` (mod D).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct BlueNoiseMask {
+    /// Pixels per row (W), 1..=[`MAX_DIM`].
     pub width: u32,
+    /// Rows per slice (H), 1..=[`MAX_DIM`].
     pub height: u32,
+    /// Slices (D): frames before the mask repeats, 1..=[`MAX_DIM`].
     pub depth: u32,
     /// W·H·D values, slice-major then row-major; value v stands for v / 65536.
     pub values: Vec<u16>,
@@ -118,6 +153,7 @@ impl BlueNoiseMask {
         [h & 0xffff, h >> 16]
     }
 
+    /// The mask's number at pixel (x, y) of frame `frame`, in [0, 1); all coordinates wrap.
     pub fn get(&self, x: u32, y: u32, frame: u32) -> f32 {
         f32::from(self.values[self.index(x, y, frame)]) * (1.0 / 65536.0)
     }

@@ -60,12 +60,16 @@ pub struct ViewOptions {
     pub cache_mib: usize,
 }
 
+/// The viewer's window contents: the [`ViewState`] the panels edit, the [`RenderWorker`] that
+/// renders it, and the window's own controls (playback, the range mode, the paths typed).
 pub struct ViewerApp {
     ctx: egui::Context,
     options: ViewOptions,
     source: DataSource,
     series: Arc<TimeSeries>,
     attributes_in_data: Vec<String>,
+    /// What is shown: the panels edit it, the worker's refusals revert it, and every frame sends it
+    /// to the worker when it changed (with a new generation).
     pub state: ViewState,
     generation: u64,
     sent: Option<(ViewState, Interaction)>,
@@ -86,12 +90,16 @@ pub struct ViewerApp {
     range_mode: RangeMode,
     /// The paths typed into the state panel.
     pub scene_path: String,
+    /// The image file the screenshot button writes (PNG), as typed; it starts beside `scene_path`.
     pub screenshot_path: String,
     paraview_path: String,
     messages: Vec<String>,
 }
 
 impl ViewerApp {
+    /// Opens the viewer on `loaded` with `backend` (as the user picked it, `auto` included) and
+    /// starts the render worker; an error when the scene's state cannot be made (its render
+    /// settings, or the attributes the data holds, cannot be read).
     pub fn new(
         ctx: &egui::Context,
         loaded: Loaded,
@@ -148,6 +156,7 @@ impl ViewerApp {
         })
     }
 
+    /// The render worker, for its [`Shown`] output and for screenshots.
     pub fn worker(&self) -> &RenderWorker {
         &self.worker
     }
@@ -158,6 +167,8 @@ impl ViewerApp {
         self.generation
     }
 
+    /// The newest messages said to the user (at most six, oldest first): the worker's problems and
+    /// fallbacks, and what the panels did or failed to do.
     pub fn messages(&self) -> &[String] {
         &self.messages
     }

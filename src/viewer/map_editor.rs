@@ -23,11 +23,14 @@ struct DragState {
 
 /// Where control points are drawn: x over the width, y from `y_max` at the top to 0.
 pub struct MapFrame {
+    /// The editor's area on screen, in points.
     pub rect: Rect,
+    /// The map value drawn at the top edge (the bottom is 0).
     pub y_max: f64,
 }
 
 impl MapFrame {
+    /// The screen position of control point `p` (x in [0, 1], y in [0, `y_max`]).
     pub fn to_screen(&self, p: [f64; 2]) -> Pos2 {
         Pos2::new(
             self.rect.left() + p[0] as f32 * self.rect.width(),
@@ -35,6 +38,7 @@ impl MapFrame {
         )
     }
 
+    /// The control point at screen position `pos`, clamped to x in [0, 1] and y in [0, `y_max`].
     pub fn from_screen(&self, pos: Pos2) -> [f64; 2] {
         let x = f64::from((pos.x - self.rect.left()) / self.rect.width());
         let y = f64::from((self.rect.bottom() - pos.y) / self.rect.height()) * self.y_max;

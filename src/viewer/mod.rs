@@ -27,12 +27,21 @@ use crate::scene_file::resolve::Resolved as Loaded;
 /// The viewer could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum ViewerError {
+    /// The viewer's state could not be set up; the message says why.
     #[error("viewer: {0}")]
     State(String),
+    /// eframe could not open or run the window (no display, no adapter, or the app failed to
+    /// start); its message.
     #[error("viewer window: {0}")]
     Window(String),
+    /// The screenshot asked for with [`WindowOptions::screenshot`] was not written.
     #[error("window screenshot {path}: {problem}")]
-    Screenshot { path: PathBuf, problem: String },
+    Screenshot {
+        /// Where the screenshot was to be written.
+        path: PathBuf,
+        /// Why it was not: the write failed, or the window closed before the render converged.
+        problem: String,
+    },
 }
 
 /// How the window opens.

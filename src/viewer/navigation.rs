@@ -67,15 +67,22 @@ pub fn dolly(camera: Camera, amount: f64) -> Camera {
 /// distance of the default view.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AxisView {
+    /// Looking along +X.
     PlusX,
+    /// Looking along -X.
     MinusX,
+    /// Looking along +Y.
     PlusY,
+    /// Looking along -Y.
     MinusY,
+    /// Looking along +Z.
     PlusZ,
+    /// Looking along -Z.
     MinusZ,
 }
 
 impl AxisView {
+    /// The six views, in the order their buttons appear.
     pub const ALL: [AxisView; 6] = [
         AxisView::PlusX,
         AxisView::MinusX,
@@ -85,6 +92,7 @@ impl AxisView {
         AxisView::MinusZ,
     ];
 
+    /// The button text: "+X", "-X", "+Y", "-Y", "+Z" or "-Z".
     pub fn label(self) -> &'static str {
         match self {
             AxisView::PlusX => "+X",
@@ -108,6 +116,9 @@ impl AxisView {
         }
     }
 
+    /// The camera of this view of data in `bounds`: looking along the axis at the default view's
+    /// target from the default view's distance, with vertical field of view `fovy` in degrees; up
+    /// is +Y, or +Z when looking along Y.
     pub fn camera(self, bounds: Bounds, fovy: f64) -> Camera {
         let default = Camera::default_for(bounds);
         let distance = (default.eye - default.at).length();

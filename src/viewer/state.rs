@@ -16,18 +16,26 @@ use crate::values::Bounds;
 /// Where the shown data comes from (fixed while a series is open).
 #[derive(Clone, Debug, PartialEq)]
 pub struct DataSource {
+    /// The data file, directory or glob pattern the series was opened from, as given.
     pub path: PathBuf,
+    /// The format as the user forced it; `None`: detected from the file extensions.
     pub format: Option<Format>,
+    /// What was read of files that hold a choice (an HDF5 snapshot's particle type, physical or
+    /// comoving units).
     pub read: crate::io::ReadOptions,
 }
 
 /// Everything the viewer renders, as a scene file states it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ViewState {
+    /// The shown step's index in the series (0-based).
     pub step: usize,
+    /// How the field is computed and coloured: the attribute and its range, the density, radius and
+    /// colour maps, the kernel, the classification.
     pub field: FieldSettings,
     /// The colour map as the user named it: a preset, or a ParaView JSON file.
     pub colormap: String,
+    /// Particles per cluster in the acceleration structure.
     pub cluster: ClusterSize,
     /// The camera is always set (the view the user moved to).
     pub settings: RenderSettings,
@@ -36,6 +44,7 @@ pub struct ViewState {
     /// How positions are held and the field computed (`auto`, `auto:TOLERANCE`, `f32`, `ds`,
     /// `f64`).
     pub precision: String,
+    /// The backend that renders, as the user picked it (`auto` resolved by the worker).
     pub backend: BackendKind,
     /// The periodic box the field wraps at, if any (fixed while a series is open).
     pub periodic: Option<crate::field::PeriodicBox>,
@@ -73,6 +82,7 @@ impl ViewState {
         })
     }
 
+    /// The camera of the view (always set in the viewer's state).
     pub fn camera(&self) -> Camera {
         self.settings
             .camera

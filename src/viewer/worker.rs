@@ -55,7 +55,9 @@ enum Request {
 /// An sRGB image the window can show.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShownImage {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
     /// RGBA, 8 bits a channel, sRGB, opaque.
     pub rgba: Vec<u8>,
@@ -78,9 +80,11 @@ pub struct Histogram {
 pub struct Shown {
     /// The state generation the image and figures belong to.
     pub generation: u64,
+    /// The latest image (`None` before the first frame); a reduced one while the user interacts.
     pub image: Option<Arc<ShownImage>>,
     /// Frames accumulated in the image.
     pub spp: u32,
+    /// Whether `image` is at the state's full size (false while interacting).
     pub full_resolution: bool,
     /// The state's full image size (what `image` is a reduced version of while interacting).
     pub full_size: (u32, u32),
@@ -93,14 +97,22 @@ pub struct Shown {
     pub readback: Duration,
     /// The backend's name and device.
     pub backend: Option<(String, String)>,
+    /// The backend's phase timings as of the latest published image.
     pub timings: Timings,
+    /// The memory the backend holds for the shown step.
     pub memory: MemoryReport,
     /// The step shown, after its build (or refit), and what that took.
     pub step: Option<usize>,
+    /// The latest step change that cost work (maps, a refit or a build), and how long showing the
+    /// step took with it; kept while later states need none.
     pub step_change: Option<(StepChange, Duration)>,
+    /// How the backend holds the step's positions and sums its terms, with the error bound, as text
+    /// (`None` before a step is uploaded).
     pub positions: Option<String>,
     /// The automatic values as resolved for the state (what a saved scene records).
     pub used: Option<Resolved>,
+    /// The histogram of the field's attribute in the shown step (`None` when the field has no
+    /// attribute).
     pub histogram: Option<Arc<Histogram>>,
     /// Problems and fallbacks, newest last; the window shows them.
     pub messages: Vec<String>,

@@ -6,6 +6,8 @@ use crate::accel::clusters::cluster_box;
 /// A box as the GPU stores it: `[min.xyz, 0]`, `[max.xyz, 0]`.
 pub type GpuBox = [[f32; 4]; 2];
 
+/// The box of a cluster with no member: `min = +inf`, `max = -inf`, which [`box_is_empty`] reports
+/// and every union leaves unchanged.
 pub const EMPTY_BOX: GpuBox = [
     [f32::INFINITY, f32::INFINITY, f32::INFINITY, 0.0],
     [f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, 0.0],

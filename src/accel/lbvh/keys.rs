@@ -61,6 +61,7 @@ pub fn morton_key(b: &GpuBox, grid: &KeyGrid) -> u32 {
     (expand_bits(q[0]) << 2) | (expand_bits(q[1]) << 1) | expand_bits(q[2])
 }
 
+/// Stage 2 over every cluster: `keys[c]` is [`morton_key`] of `boxes[c]`.
 pub fn morton_keys(boxes: &[GpuBox], grid: &KeyGrid) -> Vec<u32> {
     boxes.iter().map(|b| morton_key(b, grid)).collect()
 }

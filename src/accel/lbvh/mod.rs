@@ -51,6 +51,7 @@ pub use keys::{KeyGrid, expand_bits, morton_key, morton_keys};
 pub const NODE_WORDS: usize = 8;
 /// Bytes per node (nodes), per cluster box, and per parent entry.
 pub const NODE_BYTES: usize = 32;
+/// Bytes per cluster box ([`GpuBox`]: two rows of four f32).
 pub const BOX_BYTES: usize = 32;
 
 /// An LBVH over cluster boxes, laid out as the GPU holds it (see the module documentation).
@@ -58,6 +59,7 @@ pub const BOX_BYTES: usize = 32;
 pub struct Lbvh {
     /// Node 0 the header, nodes `1..leaves` the internal nodes.
     pub nodes: Vec<[u32; NODE_WORDS]>,
+    /// Per node: the index of its parent node ([`LBVH_NONE`] for the root and the header).
     pub node_parents: Vec<u32>,
     /// Per cluster.
     pub leaf_parents: Vec<u32>,
@@ -94,6 +96,8 @@ impl Lbvh {
         tree
     }
 
+    /// The root pointer (word 3 of the header): [`LBVH_NONE`] for an empty tree, a leaf pointer for
+    /// a one-leaf tree, else 1.
     pub fn root(&self) -> u32 {
         self.nodes[0][3]
     }

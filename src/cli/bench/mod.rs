@@ -21,8 +21,10 @@ use crate::scene_file::resolve::{DataArgs, FieldOptions, Resolved, resolve};
 use crate::study::Study;
 use crate::values::Step;
 
+/// The arguments of `aarbf bench`: which measurement to run.
 #[derive(Debug, Args)]
 pub struct BenchArgs {
+    /// The measurement: `playback` or one of the paper's studies, with its own options.
     #[command(subcommand)]
     pub what: BenchCommand,
 }

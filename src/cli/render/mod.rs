@@ -25,12 +25,19 @@ use crate::scene_file::resolve::{
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
 
+/// The arguments of `aarbf render`: the data, field and camera as the scene file states them, the
+/// steps to render, the output file, and the renderer's settings.
 #[derive(Debug, Args)]
 pub struct RenderArgs {
+    /// Where the data comes from (a scene file, or the data path and format), the step, and how
+    /// it is read (particle type, units, smoothing, periodic box, cache).
     #[command(flatten)]
     pub data: DataArgs,
+    /// How the field is defined: attribute and range, radii, maps, classification, cluster size,
+    /// kernel.
     #[command(flatten)]
     pub field: FieldOptions,
+    /// The camera: the up axis and where it looks from (over the scene file's `[camera]`).
     #[command(flatten)]
     pub view: ViewFlags,
     /// A range of steps, `a..b` (b excluded) or `a..=b`, optionally every n-th (`0..48:4`):

@@ -53,6 +53,7 @@ pub const LANE_TERMS: usize = 8;
 /// (measured by `exp_errors_are_as_stated` below): the baseline build ([`exp_neg`]) and the
 /// fused multiply-add build (AVX2 and AVX-512).
 pub const EXP_ERROR_BASELINE: f64 = 8.5e-8;
+/// The fused multiply-add build's bound (AVX2 and AVX-512); see [`EXP_ERROR_BASELINE`].
 pub const EXP_ERROR_FMA: f64 = 8.5e-8;
 
 /// [`EXP_ERROR_BASELINE`] or [`EXP_ERROR_FMA`], for the build field evaluation runs here.
@@ -159,8 +160,11 @@ pub fn exp_neg(x: f32) -> f32 {
 /// on.
 #[derive(Clone, Debug, Default)]
 pub struct Packed {
+    /// Particle centres' x in f32 local coordinates (relative to the field's origin).
     pub x: Vec<f32>,
+    /// Particle centres' y in f32 local coordinates.
     pub y: Vec<f32>,
+    /// Particle centres' z in f32 local coordinates.
     pub z: Vec<f32>,
     /// r², or -1 (reaches no point) for the padding.
     pub r2: Vec<f32>,
@@ -170,6 +174,8 @@ pub struct Packed {
     pub w: Vec<f32>,
     /// theta per channel (the normalised attribute, or linear RGB); `channels` of them.
     pub theta: [Vec<f32>; 3],
+    /// Theta channels per particle: 0 (density only), 1 (post-classification: t) or 3
+    /// (pre-classification: linear RGB).
     pub channels: usize,
     /// `k` and `r2` where every particle has the same (one radius: no radius map, no
     /// smoothing lengths), and `w` likewise (no density map); set by [`Packed::pad`]. The
@@ -178,6 +184,8 @@ pub struct Packed {
     /// docs/notes/2026-12-04-cpu-point-kernel.md, "What a term gathers" and "One radius
     /// broadcasts r² too").
     pub one_radius: Option<OneRadius>,
+    /// The weight `w` when every particle has the same (bit for bit), else `None`; set by
+    /// [`Packed::pad`].
     pub same_w: Option<f32>,
 }
 
@@ -185,7 +193,9 @@ pub struct Packed {
 /// arrays hold them.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OneRadius {
+    /// 4.5 / r², the exponent factor (the kernel is `exp(-k d²)`).
     pub k: f32,
+    /// r², the squared radius a distance is tested against.
     pub r2: f32,
 }
 

@@ -11,17 +11,25 @@ use crate::io::{At, DataError};
 pub struct Header {
     /// The code that wrote the file, when the file names it (SWIFT, GIZMO).
     pub code: Option<String>,
+    /// Whether SWIFT wrote the file (its `Code` names SWIFT): its comoving exponents and scale
+    /// factor are then read from SWIFT's own attributes.
     pub swift: bool,
     /// Particles of each type in this file.
     pub num_this_file: Vec<u64>,
     /// Particles of each type in the whole snapshot (with `NumPart_Total_HighWord`).
     pub num_total: Vec<u64>,
+    /// Files the snapshot is split over (`NumFilesPerSnapshot`; 1 when absent).
     pub num_files: u64,
+    /// `BoxSize` on each axis (one value in the file: a cube), in the file's comoving length units;
+    /// `None` when absent.
     pub box_size: Option<[f64; 3]>,
     /// Whether the run's box is periodic, and what in the file says so
     /// ([`periodicity`]).
     pub periodic: (bool, &'static str),
+    /// `Time` as the header states it (a GADGET cosmological run stores its scale factor there);
+    /// `None` when absent.
     pub time: Option<f64>,
+    /// `Redshift` as the header states it; `None` when absent.
     pub redshift: Option<f64>,
     /// The scale factor of a cosmological run (`None` otherwise: comoving is physical).
     pub scale_factor: Option<f64>,
@@ -34,6 +42,8 @@ pub struct Header {
 }
 
 impl Header {
+    /// Reads the header of the open snapshot `file` (with its units, cosmology and periodicity); an
+    /// error when there is no `/Header` or it lacks `NumPart_ThisFile`.
     pub fn read(at: At<'_>, file: &File) -> Result<Header, DataError> {
         let group = file.group("Header").map_err(|_| {
             at.malformed(

@@ -22,6 +22,9 @@ use crate::values::{Attribute, Step};
 /// file could hold even compressed is refused before anything is allocated.
 const MAX_COMPRESSION_RATIO: u64 = 1100;
 
+/// Reads a VTK file (`legacy`: a legacy `.vtk` file, else XML `.vtp`, `.vtu` or `.vts`): its points
+/// as positions, its point-data arrays as attributes (a 3-component array `v` as `v_x`, `v_y`,
+/// `v_z` and `v_magnitude`; only the selected ones decoded).
 pub fn read_step(
     at: At<'_>,
     legacy: bool,
