@@ -28,7 +28,6 @@ pub mod backend;
     reason = "the command line prints its results to stdout"
 )]
 pub mod cli;
-#[expect(missing_docs, reason = "public items of dist still undocumented")]
 pub mod dist;
 #[expect(missing_docs, reason = "public items of field still undocumented")]
 pub mod field;
