@@ -40,7 +40,6 @@ pub mod progress;
 pub mod render;
 #[expect(missing_docs, reason = "public items of scene still undocumented")]
 pub mod scene;
-#[expect(missing_docs, reason = "public items of scene_file still undocumented")]
 pub mod scene_file;
 #[expect(missing_docs, reason = "public items of study still undocumented")]
 pub mod study;
