@@ -36,7 +36,6 @@ pub mod io;
 #[expect(missing_docs, reason = "public items of noise still undocumented")]
 pub mod noise;
 pub mod progress;
-#[expect(missing_docs, reason = "public items of render still undocumented")]
 pub mod render;
 #[expect(missing_docs, reason = "public items of scene still undocumented")]
 pub mod scene;
