@@ -37,7 +37,6 @@ pub mod io;
 pub mod noise;
 pub mod progress;
 pub mod render;
-#[expect(missing_docs, reason = "public items of scene still undocumented")]
 pub mod scene;
 pub mod scene_file;
 #[expect(missing_docs, reason = "public items of study still undocumented")]

@@ -315,7 +315,8 @@ impl RadiusSpec {
 pub struct FieldSection {
     /// The global radius R; unset: derived from the data's spacing.
     pub radius: Option<RadiusSpec>,
-    /// The radius multiplier per normalised attribute value; unset: 1 everywhere.
+    /// A particle's radius as a fraction of the global radius, per normalised attribute value,
+    /// in [0, 1]; unset: 1 everywhere.
     pub radius_map: Option<MapSpec>,
     /// The density weight per normalised attribute value; unset: 1 everywhere.
     pub density_map: Option<MapSpec>,
