@@ -41,7 +41,6 @@ pub mod scene;
 pub mod scene_file;
 #[expect(missing_docs, reason = "public items of study still undocumented")]
 pub mod study;
-#[expect(missing_docs, reason = "public items of values still undocumented")]
 pub mod values;
 #[expect(missing_docs, reason = "public items of viewer still undocumented")]
 pub mod viewer;
