@@ -39,7 +39,6 @@ pub mod progress;
 pub mod render;
 pub mod scene;
 pub mod scene_file;
-#[expect(missing_docs, reason = "public items of study still undocumented")]
 pub mod study;
 pub mod values;
 #[expect(missing_docs, reason = "public items of viewer still undocumented")]
