@@ -20,7 +20,6 @@
 
 #[expect(missing_docs, reason = "public items of accel still undocumented")]
 pub mod accel;
-#[expect(missing_docs, reason = "public items of backend still undocumented")]
 pub mod backend;
 #[expect(missing_docs, reason = "public items of cli still undocumented")]
 #[expect(
