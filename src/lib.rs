@@ -19,27 +19,20 @@
 //!   composes all of the above) at the top.
 
 pub mod accel;
-#[expect(missing_docs, reason = "public items of backend still undocumented")]
 pub mod backend;
 #[expect(
     clippy::print_stdout,
     reason = "the command line prints its results to stdout"
 )]
 pub mod cli;
-#[expect(missing_docs, reason = "public items of dist still undocumented")]
 pub mod dist;
 pub mod field;
 pub mod io;
 pub mod noise;
 pub mod progress;
-#[expect(missing_docs, reason = "public items of render still undocumented")]
 pub mod render;
-#[expect(missing_docs, reason = "public items of scene still undocumented")]
 pub mod scene;
-#[expect(missing_docs, reason = "public items of scene_file still undocumented")]
 pub mod scene_file;
-#[expect(missing_docs, reason = "public items of study still undocumented")]
 pub mod study;
-#[expect(missing_docs, reason = "public items of values still undocumented")]
 pub mod values;
 pub mod viewer;

@@ -63,6 +63,7 @@ pub struct GpuStepData {
     /// The precision asked for, and what it chose for this scene: positions, sums and the
     /// error bound that follows (`double_single` and `compensated` follow it).
     pub precision: Precision,
+    /// How it holds positions and sums terms, and the error bound that follows.
     pub representation: Representation,
     /// The largest |local coordinate| (of the f32 positions), which the bound needs again when
     /// the radii change.
@@ -76,9 +77,13 @@ pub struct GpuStepData {
     pub kernel: Kernel,
     /// The smallest positive and the largest volume (an SPH kernel's; (1, 1) otherwise).
     pub volume_range: (f64, f64),
+    /// Particles per cluster box K.
     pub cluster: ClusterSize,
+    /// The field's uniform: the global radius, constant map values and `k`.
     pub field: GpuField,
+    /// Whether the radius map varies (looked up per particle).
     pub radius_map_varies: bool,
+    /// Whether the density map varies (looked up per particle).
     pub density_map_varies: bool,
     /// The density, radius and colour maps' tables.
     pub tables: FieldTables,
@@ -206,6 +211,7 @@ impl StepStaging<'_> {
         self.input.step.len()
     }
 
+    /// Whether the step has no particles.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

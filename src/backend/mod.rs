@@ -101,6 +101,7 @@ fn auto() -> Box<dyn Backend> {
 /// What a backend is and can do.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Capabilities {
+    /// The backend's short name (`cpu`, `wgpu`, `ash`), as the command line spells it.
     pub name: &'static str,
     /// The device it runs on, in words.
     pub device: String,
@@ -131,6 +132,7 @@ pub enum FrameTimer {
     WallClock,
 }
 
+/// Time spent in each stage, for the last time each ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Timings {
     /// CPU work on a new step: the check and the conversion into what the device copies
@@ -142,9 +144,14 @@ pub struct Timings {
     pub upload: Duration,
     /// Preparing the step on the device after the copy (wgpu: Hilbert keys, sort, gather).
     pub device_prepare: Duration,
+    /// The last [`Backend::build`] of the acceleration structure.
     pub build: Duration,
+    /// The last [`Backend::refit`].
     pub refit: Duration,
+    /// The last frame ([`Backend::render`] and its kin), taken as [`Capabilities::frame_timer`]
+    /// says.
     pub frame: Duration,
+    /// The last [`Backend::query`].
     pub query: Duration,
     /// The last [`Backend::voxelize`]: the splat into the grid, on the device where the
     /// backend has one (its march is timed as a frame).
@@ -172,7 +179,9 @@ pub struct MemoryReport {
 pub struct StepInput<'a> {
     /// Shared with the series' cache: a backend keeps the step by reference, never a copy.
     pub step: &'a std::sync::Arc<Step>,
+    /// The field the particles define: attribute, radius, maps, kernel.
     pub field: &'a FieldSettings,
+    /// Particles per cluster box K.
     pub cluster: ClusterSize,
     /// The series' bounds (Hilbert grid, local coordinates).
     pub series_bounds: Bounds,
@@ -210,15 +219,21 @@ pub fn query_in_hilbert_order<B: Backend + ?Sized>(
 /// Why a backend cannot do what was asked.
 #[derive(Debug, thiserror::Error)]
 pub enum BackendError {
+    /// The field settings do not fit the step.
     #[error(transparent)]
     Field(#[from] FieldError),
+    /// A call that needs a step before any upload; names the backend.
     #[error("{0}: no step uploaded yet")]
     NothingUploaded(&'static str),
+    /// The device or its API failed, or refused what was asked.
     #[error("{backend}: {message}")]
     Device {
+        /// The backend's name.
         backend: &'static str,
+        /// What went wrong.
         message: String,
     },
+    /// The backend (first) cannot run here, and why (second).
     #[error("the {0} backend is not available on this machine: {1}")]
     Unavailable(&'static str, String),
     /// [`Backend::render_voxels`] or [`Backend::voxel_grid`] before any [`Backend::voxelize`].
@@ -229,7 +244,12 @@ pub enum BackendError {
     Abandoned,
     /// [`Backend::render_owned`] where it is not implemented yet.
     #[error("{backend}: {what} is not distributed yet")]
-    NotDistributed { backend: &'static str, what: String },
+    NotDistributed {
+        /// The backend's name.
+        backend: &'static str,
+        /// What it cannot render distributed.
+        what: String,
+    },
 }
 
 /// A rendering and query backend.
@@ -248,7 +268,10 @@ pub(crate) fn check_gpu_splat_k(backend: &'static str, k: usize) -> Result<(), B
     Ok(())
 }
 
+/// A rendering and query backend: holds one step of particles and its acceleration structure,
+/// answers field queries and renders frames into a progressive accumulation.
 pub trait Backend: Send {
+    /// What the backend is and can do.
     fn capabilities(&self) -> &Capabilities;
 
     /// Makes room for steps of up to `max_particles` particles (a series' maximum count), so
@@ -353,8 +376,10 @@ pub trait Backend: Send {
     /// The mean of the frames accumulated so far.
     fn image(&mut self) -> Result<Image, BackendError>;
 
+    /// Time spent in each stage, the last time each ran.
     fn timings(&self) -> Timings;
 
+    /// Memory held for the current step.
     fn memory(&self) -> MemoryReport;
 
     /// How the uploaded step's positions are held and its terms summed, with the error bound

@@ -53,7 +53,10 @@ pub enum Precision {
     /// relative error of Phi below `tolerance` in this scene: f32 positions and plain sums where
     /// they do, compensated sums or double-single positions where the scene needs them
     /// (GPU backends), the f64 reference where f32 cannot (the CPU).
-    Auto { tolerance: f64 },
+    Auto {
+        /// The largest relative error of Phi allowed.
+        tolerance: f64,
+    },
     /// f32 positions in local coordinates and plain f32 sums (on the CPU, the f32 kernel),
     /// whatever the error.
     F32,
@@ -112,13 +115,19 @@ pub enum Summation {
     F64,
     /// f32 blocks of at most `lane_terms` terms per SIMD lane, the blocks added in f64 (the
     /// CPU's f32 kernel).
-    Blocked { lane_terms: u32 },
+    Blocked {
+        /// The most terms one lane adds in f32 before its block goes to f64.
+        lane_terms: u32,
+    },
     /// One f32 sum per point, term after term (a cluster's in the intersection shader, then
     /// the clusters'): the GPU backends' plain sums.
     F32,
     /// A cluster's terms in f32, the clusters' sums compensated (Neumaier): the GPU backends'
     /// `COMPENSATED_SUM`.
-    Compensated { cluster: u32 },
+    Compensated {
+        /// Particles per cluster (the terms summed in plain f32).
+        cluster: u32,
+    },
 }
 
 /// Whose f32 arithmetic computes the terms.
@@ -126,7 +135,11 @@ pub enum Summation {
 pub enum Arithmetic {
     /// The CPU's f32 kernel: `k = 4.5/r²` and the weight rounded from f64 on the host; `exp` its
     /// polynomial, with this relative error (per build).
-    Cpu { exp_error: f64 },
+    Cpu {
+        /// The relative error of the kernel's `exp` polynomial in this build (with or without
+        /// FMA).
+        exp_error: f64,
+    },
     /// The shared GLSL: the radius and weight from f32 parameters or tables, `exp` as GLSL's.
     Glsl,
 }
@@ -144,11 +157,13 @@ pub struct SceneNumbers {
     pub largest: f64,
     /// The smallest positive and the largest radius.
     pub r_min: f64,
+    /// The largest radius.
     pub r_max: f64,
     /// At most this many terms at one point ([`crate::accel::max_reach_count`]).
     pub max_terms: usize,
     /// The smallest positive and the largest weight.
     pub w_min: f64,
+    /// The largest weight.
     pub w_max: f64,
     /// Whether radii come from a radius map that varies or a radius attribute (the GPU then
     /// computes `4.5 d²/r²` with a division instead of the host's `k`).
@@ -157,6 +172,7 @@ pub struct SceneNumbers {
     /// tables (0 for constant maps): what an f32 t costs a weight or radius looked up on the
     /// GPU.
     pub density_slope: f64,
+    /// The same for the radius map.
     pub radius_slope: f64,
     /// The kernel the terms are computed with.
     pub kernel: Kernel,
@@ -192,9 +208,13 @@ impl SceneNumbers {
 /// A bound on the relative error of Phi, by source, and of Theta over the attribute's range.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ErrorBound {
+    /// From the positions' rounding (the offset to each particle).
     pub positions: f64,
+    /// From computing the kernel's argument and the kernel itself.
     pub kernel: f64,
+    /// From the weight and its product with the kernel.
     pub terms: f64,
+    /// From adding the terms up.
     pub summation: f64,
     /// The most terms at one point the summation bound assumed.
     pub max_terms: usize,
@@ -415,8 +435,11 @@ pub fn position_error(largest: f64, r_min: f64, r_max: f64) -> f64 {
 /// How a backend holds and sums the uploaded step, and the error bound that follows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Representation {
+    /// How positions are held.
     pub positions: PositionKind,
+    /// How a point's terms are added up.
     pub summation: Summation,
+    /// The bound on Phi's relative error that follows.
     pub bound: ErrorBound,
     /// The tolerance `auto` was asked to meet, and whether the bound meets it (a GPU backend
     /// whose most precise representation cannot says so: the CPU's f64 can).

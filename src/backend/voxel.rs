@@ -29,8 +29,11 @@ const SLAB_CELLS: usize = 1 << 22;
 /// Where a grid's cells lie: cell-centred over `lo..hi`, `dims` cells along each axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VoxelGeometry {
+    /// The grid's least corner (a cell's outer face), data units.
     pub lo: DVec3,
+    /// The grid's largest corner, data units.
     pub hi: DVec3,
+    /// Cells along x, y and z.
     pub dims: [usize; 3],
 }
 
@@ -82,6 +85,7 @@ impl VoxelGeometry {
         self.lo + 0.5 * self.cell()
     }
 
+    /// How many cells the grid has.
     pub fn cells(&self) -> usize {
         self.dims.iter().product()
     }
@@ -147,10 +151,12 @@ impl VoxelGrid {
         Ok(VoxelGrid::from_sums(geometry, sums))
     }
 
+    /// Where its cells lie.
     pub fn geometry(&self) -> VoxelGeometry {
         self.geometry
     }
 
+    /// Cells along x, y and z.
     pub fn dims(&self) -> [usize; 3] {
         self.geometry.dims
     }

@@ -32,13 +32,22 @@ pub fn node_local_size() -> Option<usize> {
 pub enum CommError {
     /// Another rank failed (its error, or its panic): every rank's collectives end with this.
     #[error("rank {rank} failed: {message}")]
-    PeerFailed { rank: usize, message: String },
+    PeerFailed {
+        /// The rank that failed.
+        rank: usize,
+        /// Its error or panic message.
+        message: String,
+    },
     /// Ranks called different collectives at the same point: a bug in the caller.
     #[error("rank {rank} called {theirs} while rank {me} called {mine}")]
     Mismatched {
+        /// This rank.
         me: usize,
+        /// The collective this rank called.
         mine: &'static str,
+        /// The rank that called another collective.
         rank: usize,
+        /// The collective that rank called.
         theirs: &'static str,
     },
     /// A buffer's length is not a whole number of the values it should hold.
@@ -46,18 +55,31 @@ pub enum CommError {
         "a message of {bytes} bytes from rank {rank} is not a whole number of {size}-byte values"
     )]
     Malformed {
+        /// The rank that sent it.
         rank: usize,
+        /// Its length in bytes.
         bytes: usize,
+        /// The size in bytes of one value it should hold.
         size: usize,
     },
     /// More bytes than one MPI collective can address (its counts and displacements are C ints).
     #[error(
         "{bytes} bytes in one collective is more than MPI can address ({limit}): run more ranks"
     )]
-    TooLarge { bytes: usize, limit: usize },
+    TooLarge {
+        /// Bytes the collective would move.
+        bytes: usize,
+        /// The most bytes one collective can address (`i32::MAX`).
+        limit: usize,
+    },
     /// A send that names more or fewer destinations than there are ranks.
     #[error("{parts} parts sent among {size} ranks")]
-    WrongPartCount { parts: usize, size: usize },
+    WrongPartCount {
+        /// Parts the caller gave.
+        parts: usize,
+        /// Ranks in the communicator.
+        size: usize,
+    },
 }
 
 /// One buffer per rank, stored end to end (as MPI's `v` collectives take and give them).
@@ -106,6 +128,7 @@ impl Parts {
         self.offsets.len().saturating_sub(1)
     }
 
+    /// Whether it holds no parts.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -134,10 +157,13 @@ impl Parts {
 /// A communicator among `size()` ranks. Each rank calls the same collectives in the same
 /// order; a collective returns only when every rank has called it (or one has failed).
 pub trait Comm {
+    /// This rank's index, `0..size()`.
     fn rank(&self) -> usize;
 
+    /// How many ranks the communicator has.
     fn size(&self) -> usize;
 
+    /// Returns when every rank has called it.
     fn barrier(&self) -> Result<(), CommError>;
 
     /// Every rank's `mine`, in rank order.

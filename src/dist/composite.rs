@@ -23,8 +23,11 @@ pub const TILE: u32 = 64;
 /// The image's tiles, row-major, tile t owned by rank `t mod P`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TileGrid {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
+    /// Ranks the tiles are dealt among.
     pub ranks: usize,
 }
 
@@ -33,10 +36,12 @@ impl TileGrid {
         self.width.div_ceil(TILE)
     }
 
+    /// How many tiles cover the image.
     pub fn count(&self) -> usize {
         (self.tiles_x() * self.height.div_ceil(TILE)) as usize
     }
 
+    /// Tile `tile`'s pixels (the last row and column of tiles cut at the image's edge).
     pub fn rect(&self, tile: usize) -> PixelRect {
         let (tx, ty) = (tile as u32 % self.tiles_x(), tile as u32 / self.tiles_x());
         PixelRect {
@@ -47,6 +52,7 @@ impl TileGrid {
         }
     }
 
+    /// The rank that owns tile `tile`.
     pub fn owner(&self, tile: usize) -> usize {
         tile % self.ranks
     }
@@ -220,13 +226,17 @@ pub fn direct_send(
 /// A rank's tiles' sums of finished frames (the accumulation a single-rank backend keeps,
 /// split by tile owner).
 pub struct TileSums {
+    /// The image's tiles.
     pub grid: TileGrid,
+    /// The rank whose tiles these are.
     pub rank: usize,
+    /// Frames accumulated so far.
     pub frames: u32,
     sums: Vec<Vec<[f64; 4]>>,
 }
 
 impl TileSums {
+    /// Zero sums for the tiles `rank` owns.
     pub fn new(grid: TileGrid, rank: usize) -> TileSums {
         TileSums {
             grid,

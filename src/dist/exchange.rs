@@ -64,11 +64,14 @@ pub struct Brick {
     /// Owned particles first (from each rank in rank order, each in its reading order), then
     /// the ghosts (likewise).
     pub step: Step,
+    /// How many particles at the start of `step` are owned (the rest are ghosts).
     pub owned: usize,
+    /// The k-d leaf this rank owns: the part of space whose samples it renders.
     pub leaf: HalfOpenBox,
 }
 
 impl Brick {
+    /// How many ghost particles `step` holds.
     pub fn ghosts(&self) -> usize {
         self.step.len() - self.owned
     }

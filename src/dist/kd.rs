@@ -14,7 +14,9 @@ use crate::values::{Bounds, HalfOpenBox};
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct WeightedPoint {
+    /// Position, in world units.
     pub at: [f64; 3],
+    /// How many particles it stands for.
     pub weight: f64,
 }
 

@@ -37,10 +37,13 @@ use crate::field::FieldError;
 /// Why a distributed render failed.
 #[derive(Debug, thiserror::Error)]
 pub enum DistError {
+    /// A collective failed.
     #[error(transparent)]
     Comm(#[from] CommError),
+    /// The backend failed to build or render a brick.
     #[error(transparent)]
     Backend(#[from] BackendError),
+    /// The field settings are invalid for this step.
     #[error(transparent)]
     Field(#[from] FieldError),
     /// What a distributed render cannot do yet.
@@ -49,14 +52,21 @@ pub enum DistError {
     /// A message that does not hold what its collective should: a bug, or ranks that disagree.
     #[error("malformed message: {0}")]
     Malformed(String),
+    /// The communicator has no ranks.
     #[error("a distributed render needs at least one rank")]
     NoRanks,
+    /// A rank's render panicked (threads of [`LocalComm`] only).
     #[error("panicked: {message}")]
-    Panicked { message: String },
+    Panicked {
+        /// The panic's payload, as text.
+        message: String,
+    },
     /// A rank's own failure, naming it.
     #[error("rank {rank}: {source}")]
     Rank {
+        /// The rank that failed.
         rank: usize,
+        /// Its error.
         #[source]
         source: Box<DistError>,
     },

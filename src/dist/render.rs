@@ -18,7 +18,9 @@ use crate::values::{Bounds, FrameParams, Image, Integrator, Step};
 /// rank's), so that every brick's field is the single-rank field over its leaf.
 #[derive(Clone, Copy, Debug)]
 pub struct DistScene<'a> {
+    /// The field every brick renders: attribute, radius, maps, kernel.
     pub field: &'a FieldSettings,
+    /// The cluster size every brick's BVH is built with.
     pub cluster: ClusterSize,
     /// The series' bounds: the Hilbert grid and local origin of every brick.
     pub series_bounds: Bounds,
@@ -36,9 +38,11 @@ pub struct RankReport {
     pub read: u64,
     /// Particles its leaf owns, and ghosts it received.
     pub owned: u64,
+    /// Ghost particles it received from the leaves around its own.
     pub ghosts: u64,
     /// Bytes sent to other ranks: particles, then tiles (over all frames).
     pub particle_bytes: u64,
+    /// Bytes of tiles sent to other ranks in compositing (all frames).
     pub tile_bytes: u64,
     /// Whether its brick was built in f64 (1) or f32 (0).
     pub f64_positions: u64,
@@ -46,16 +50,22 @@ pub struct RankReport {
     /// (all frames); compositing (all frames). A collective's time includes waiting in it
     /// for the slowest rank.
     pub exchange_seconds: f64,
+    /// Seconds uploading the brick and building its acceleration structure.
     pub build_seconds: f64,
+    /// Seconds rendering its brick's samples (all frames).
     pub render_seconds: f64,
+    /// Seconds compositing (all frames).
     pub composite_seconds: f64,
 }
 
 /// The image at the root: the mean of the frames per pixel, in f64.
 #[derive(Clone, Debug)]
 pub struct DistImage {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
+    /// Frames accumulated into `mean`.
     pub frames: u32,
     /// Row-major linear RGBA (the background composited), as a single-rank backend's mean.
     pub mean: Vec<[f64; 4]>,

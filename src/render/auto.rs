@@ -31,8 +31,14 @@ const PHI_REF_MIN_SAMPLES: usize = 64;
 /// The values derived from the series and the field.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AutoValues {
+    /// The density that maps to 1 for colour and extinction: the 95th percentile of Phi at particle
+    /// centres of the first step.
     pub phi_ref: f64,
+    /// The typical particle radius `R · max m · mean h`, data units: sets the default step and
+    /// density scale.
     pub typical_radius: f64,
+    /// The largest radius any particle of the series can have, `R · max m · max h`, data units:
+    /// sets the march box's margin.
     pub max_radius: f64,
 }
 

@@ -65,9 +65,13 @@ pub fn default_cache() -> Option<PathBuf> {
 /// A converged reference and how converged it is.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Reference {
+    /// The converged image; always `Some` once made or read (the cache file stores its pixels apart
+    /// from these fields).
     #[serde(skip)]
     pub image: Option<Image>,
+    /// The march step it converged at, data units.
     pub step_size: f64,
+    /// Samples per pixel it converged at.
     pub spp: u32,
     /// RMSE between the image at `spp / 2` and at `spp` samples (at twice its step): its own
     /// noise, as the dual-buffer estimate has it.
@@ -75,16 +79,20 @@ pub struct Reference {
     /// RMSE between the image at its step and at twice it (both at `spp`); `None` where the
     /// step could not be halved within the march's sample bound.
     pub step_change: Option<f64>,
+    /// The RMSE (linear RGB) that both changes were to stay within.
     pub tolerance: f64,
     /// Whether both changes are within the tolerance (false: the sample or step limit came
     /// first; the changes say how close it got).
     pub converged: bool,
+    /// Seconds it took to render (when first rendered, for one read from the cache).
     pub seconds: f64,
+    /// Whether it was read from the cache instead of rendered.
     #[serde(skip)]
     pub from_cache: bool,
 }
 
 impl Reference {
+    /// The converged image; panics where it holds none.
     pub fn image(&self) -> &Image {
         self.image.as_ref().expect("a reference holds its image")
     }

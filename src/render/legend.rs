@@ -16,18 +16,23 @@ pub struct Legend {
     pub title: String,
     /// The values at the bar's two ends.
     pub low: f64,
+    /// The value at the bar's high end.
     pub high: f64,
+    /// The colour map the bar shows.
     pub color_map: ColorMap,
 }
 
+/// Why a legend cannot be drawn.
 #[derive(Debug, thiserror::Error)]
 pub enum LegendError {
+    /// The image (width, height in pixels) is smaller than [`MIN_SIZE`].
     #[error(
         "--legend needs an image of at least {min_w}x{min_h} pixels, not {0}x{1}",
         min_w = MIN_SIZE.0,
         min_h = MIN_SIZE.1
     )]
     TooSmall(u32, u32),
+    /// Drawing the text or bar failed.
     #[error("cannot draw the legend: {0}")]
     Draw(String),
 }

@@ -43,8 +43,11 @@ pub enum StepChange {
 /// a saved scene records so the frame can be reproduced exactly.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Resolved {
+    /// The density that maps to 1 for colour and extinction.
     pub phi_ref: f64,
+    /// The ray-marching step, data units.
     pub step_size: f64,
+    /// Extinction per unit optical density (per data unit).
     pub density_scale: f64,
     /// The march box's margin around the series' bounds (twice the largest radius).
     pub margin: f64,
@@ -55,6 +58,8 @@ pub const DEFAULT_SAMPLES_PER_RAY: f64 = 4096.0;
 /// No march takes more samples than this across the data's box (bounded work per pixel).
 pub const MAX_SAMPLES_PER_RAY: f64 = 100_000.0;
 
+/// A backend driven through one series: it holds the step and field loaded, the automatic values,
+/// and the frames accumulated since the last change.
 pub struct RenderSession {
     backend: Box<dyn Backend>,
     /// How GPU backends hold positions (`Precision::RENDER` unless set).
@@ -77,6 +82,8 @@ pub struct RenderSession {
 }
 
 impl RenderSession {
+    /// A session over `series` on `backend`, nothing loaded yet, the backend's buffers reserved for
+    /// the series' largest step.
     pub fn new(mut backend: Box<dyn Backend>, series: &TimeSeries) -> RenderSession {
         // Allocate once for the largest step, so stepping through time allocates nothing.
         backend.reserve(series.max_count());
@@ -114,10 +121,12 @@ impl RenderSession {
         }
     }
 
+    /// The backend it drives.
     pub fn backend(&self) -> &dyn Backend {
         self.backend.as_ref()
     }
 
+    /// The backend it drives, to change it directly.
     pub fn backend_mut(&mut self) -> &mut dyn Backend {
         self.backend.as_mut()
     }
@@ -382,10 +391,13 @@ impl RenderSession {
 pub struct FrameBasis<'a> {
     /// The domain: the series' bounds, or the periodic box.
     pub bounds: Bounds,
+    /// Particles in the series' largest step.
     pub max_count: usize,
     /// Whether the domain's faces wrap (the march box then has no margin).
     pub periodic: bool,
+    /// The field the frames render.
     pub field: &'a FieldSettings,
+    /// The series' automatic values under `field`.
     pub auto: AutoValues,
 }
 

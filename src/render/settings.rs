@@ -7,10 +7,15 @@ use crate::values::frame::{Integrator, Light, NoiseKind};
 /// Everything about an image except the data and the field.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderSettings {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
+    /// How a ray's radiance is integrated: emission–absorption or single scattering.
     pub integrator: Integrator,
+    /// The noise that jitters samples: spatiotemporal blue noise or white noise.
     pub noise: NoiseKind,
+    /// The noise's seed.
     pub seed: u32,
     /// `None`: a default view of the data's bounds.
     pub camera: Option<Camera>,
@@ -23,10 +28,12 @@ pub struct RenderSettings {
     pub optical: OpticalDensityMap,
     /// Colour by density instead of the attribute.
     pub colour_by_density: bool,
+    /// The directional light and ambient term for single scattering.
     pub light: Light,
     /// The scene's vertical, which the light's azimuth and elevation are about (kept apart
     /// from the camera's up vector, which turns as the viewer's trackball does).
     pub up_axis: UpAxis,
+    /// Linear RGB behind the volume.
     pub background: [f64; 3],
     /// Ray marching stops when a pixel's opacity reaches this.
     pub opacity_threshold: f64,

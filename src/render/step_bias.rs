@@ -22,6 +22,7 @@ use crate::values::Image;
 /// (docs/notes/2026-12-06-target-error.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepBias {
+    /// The finest step calibrated, data units.
     pub dt0: f64,
     /// The estimated bias at `dt0`, `2 dt0`, `4 dt0`.
     pub levels: [f64; 3],

@@ -10,8 +10,11 @@ use crate::values::frame::CameraFrame;
 /// A pinhole camera looking from `eye` at `at`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Camera {
+    /// The camera's position, data units.
     pub eye: DVec3,
+    /// The point it looks at, data units.
     pub at: DVec3,
+    /// The direction that is up in the image (any length, not parallel to the view).
     pub up: DVec3,
     /// Vertical field of view in degrees.
     pub fovy: f64,
@@ -20,14 +23,19 @@ pub struct Camera {
 /// A camera that cannot form an image.
 #[derive(Debug, thiserror::Error)]
 pub enum CameraError {
+    /// `eye` and `at` are the same point.
     #[error("camera eye and target coincide ({0})")]
     EyeIsTarget(DVec3),
+    /// `up` points along the view direction.
     #[error("camera up vector {0} is parallel to the view direction")]
     UpParallel(DVec3),
+    /// The field of view, degrees, is not in (0, 180).
     #[error("field of view {0} degrees is outside (0, 180)")]
     Fov(f64),
+    /// A value is NaN or infinite.
     #[error("camera values must be finite")]
     NotFinite,
+    /// A camera string that does not parse as `ex,ey,ez,ax,ay,az,ux,uy,uz,fovy`.
     #[error("cannot read camera '{0}': expected ex,ey,ez,ax,ay,az,ux,uy,uz,fovy")]
     Syntax(String),
 }
@@ -157,15 +165,22 @@ fn planar_axis(bounds: Bounds) -> Option<usize> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum UpAxis {
+    /// +x is up.
     X,
+    /// +y is up.
     Y,
+    /// +z is up.
     Z,
+    /// -x is up.
     NegX,
+    /// -y is up.
     NegY,
+    /// -z is up.
     NegZ,
 }
 
 impl UpAxis {
+    /// Every axis, positive then negative.
     pub const ALL: [UpAxis; 6] = [
         UpAxis::X,
         UpAxis::Y,
@@ -175,6 +190,7 @@ impl UpAxis {
         UpAxis::NegZ,
     ];
 
+    /// The axis's unit vector.
     pub fn vector(self) -> DVec3 {
         match self {
             UpAxis::X => DVec3::X,
@@ -212,6 +228,7 @@ impl UpAxis {
         }
     }
 
+    /// The name the command line and the scene file use (`"z"`, `"-y"`, ...).
     pub fn name(self) -> &'static str {
         match self {
             UpAxis::X => "x",

@@ -29,7 +29,9 @@ const VERSION: u32 = 2;
 pub struct StepStats {
     /// Particles after the reader dropped those with NaN/Inf values.
     pub count: usize,
+    /// Bounds of the particles' positions.
     pub bounds: Bounds,
+    /// Bytes the step occupies in memory as read (positions and the attributes read).
     pub bytes: usize,
     /// Every attribute of the step as read.
     pub attributes: Vec<AttributeStats>,
@@ -42,12 +44,17 @@ pub struct StepStats {
 /// `AttributeInfo`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AttributeStats {
+    /// The attribute's name as the file spells it.
     pub name: String,
+    /// The least value.
     pub min: f64,
+    /// The largest value.
     pub max: f64,
     /// The 1st and 99th percentiles ([`robust_range`]).
     pub p01: f64,
+    /// The 99th percentile.
     pub p99: f64,
+    /// The mean value.
     pub mean: f64,
     /// Values the mean is over.
     pub count: usize,
@@ -75,6 +82,8 @@ pub fn robust_range(values: &[f64]) -> Option<(f64, f64)> {
 }
 
 impl StepStats {
+    /// The statistics of `step`, read with `selection` (which says whether it holds every attribute
+    /// of its file).
     pub fn of(step: &Step, selection: &AttributeSelection) -> StepStats {
         StepStats {
             count: step.len(),
@@ -296,6 +305,8 @@ impl SeriesIndex {
 pub struct FileStamp(Stamp);
 
 impl FileStamp {
+    /// The stamp (size and modification time) of the file at `path`; `None` where it cannot be
+    /// read.
     pub fn of(path: &Path) -> Option<FileStamp> {
         Stamp::of(path).map(FileStamp)
     }

@@ -32,6 +32,7 @@ pub struct Prefetcher<'scope> {
 }
 
 impl<'scope> Prefetcher<'scope> {
+    /// Starts the worker on `scope`, with nothing planned yet.
     pub fn spawn<'env>(scope: &'scope Scope<'scope, 'env>, series: &'env TimeSeries) -> Self {
         let plan = Arc::new((Mutex::new(Plan::default()), Condvar::new()));
         let shared = plan.clone();

@@ -27,10 +27,12 @@ pub const NO_SCALE: f64 = 1.0;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub struct Smoothing {
+    /// K: the neighbour whose distance is h (the 1st is the nearest other particle).
     pub neighbours: usize,
 }
 
 impl Smoothing {
+    /// K when `--smoothing knn` gives none.
     pub const DEFAULT_NEIGHBOURS: usize = 32;
 
     /// The attribute the lengths are given as (usable as `--radius-attribute`): `h_knn32`,

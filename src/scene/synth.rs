@@ -27,6 +27,7 @@ pub enum Generator {
 }
 
 impl Generator {
+    /// Particles it generates unless asked for another count.
     pub fn default_count(self) -> usize {
         match self {
             Generator::Uniform | Generator::Random => 60_000,
@@ -35,6 +36,7 @@ impl Generator {
         }
     }
 
+    /// Time steps it generates unless asked (1 for the static generators).
     pub fn default_steps(self) -> usize {
         match self {
             Generator::DambreakDemo => 48,

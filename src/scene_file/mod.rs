@@ -40,12 +40,18 @@ use crate::values::Bounds;
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DataSection {
+    /// The particle file or directory (relative to the scene file).
     pub path: Option<PathBuf>,
+    /// The file format; unset: from the path's extension.
     pub format: Option<Format>,
+    /// The time step to show, counted from 0; unset: the first.
     pub step: Option<usize>,
+    /// The attribute the field carries (colour and the maps' input); unset: the first attribute
+    /// where an image needs a colour, else density only.
     pub attribute: Option<String>,
     /// `[lo, hi]`, or `"series"`, `"robust"`, `"step"`, `"robust-step"` ([`RangeSpec`]).
     pub attribute_range: Option<RangeSpec>,
+    /// The attribute holding each particle's radius h (a multiple of the global radius).
     pub radius_attribute: Option<String>,
     /// An HDF5 snapshot's particle type (`gas`, `dm`, ... or 0..5).
     pub particle_type: Option<ParticleType>,
@@ -203,12 +209,16 @@ impl RangeSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum MapSpec {
+    /// The same value for every attribute value.
     Constant(f64),
+    /// A map's CLI text (`"ramp"`, `"0:0.5,1:1"`).
     Text(String),
+    /// Control points `[x, y]`, x the normalised attribute in [0, 1].
     Points(Vec<[f64; 2]>),
 }
 
 impl MapSpec {
+    /// The piecewise-linear map it describes.
     pub fn to_map(&self) -> Result<PiecewiseLinear, MapError> {
         match self {
             MapSpec::Constant(y) => y.to_string().parse(),
@@ -222,7 +232,9 @@ impl MapSpec {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "RadiusText", into = "RadiusText")]
 pub enum RadiusSpec {
+    /// A length in data units.
     Absolute(f64),
+    /// A percentage (1.0 is 1%) of the bounding-box diagonal.
     PercentOfDiagonal(f64),
 }
 
@@ -288,6 +300,7 @@ impl RadiusSpec {
     /// data has no spacing to measure (see `resolve::default_radius`).
     pub const DEFAULT: RadiusSpec = RadiusSpec::PercentOfDiagonal(1.0);
 
+    /// The radius in data units, given the bounding-box diagonal.
     pub fn resolve(self, diagonal: f64) -> f64 {
         match self {
             RadiusSpec::Absolute(r) => r,
@@ -300,11 +313,19 @@ impl RadiusSpec {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FieldSection {
+    /// The global radius R; unset: derived from the data's spacing.
     pub radius: Option<RadiusSpec>,
+    /// A particle's radius as a fraction of the global radius, per normalised attribute value,
+    /// in [0, 1]; unset: 1 everywhere.
     pub radius_map: Option<MapSpec>,
+    /// The density weight per normalised attribute value; unset: 1 everywhere.
     pub density_map: Option<MapSpec>,
+    /// A colour-map preset's name or a ParaView JSON file; unset: viridis.
     pub colormap: Option<String>,
+    /// Whether the attribute is averaged before (`post`, the default) or after (`pre`) colour
+    /// mapping.
     pub classification: Option<Classification>,
+    /// The BVH's particles per cluster K; unset: chosen from how much the particles overlap.
     pub cluster: Option<ClusterSize>,
     /// The kernel (`gaussian-rbf`, `sph-cubic`, ...).
     pub kernel: Option<Kernel>,
@@ -318,8 +339,11 @@ pub struct FieldSection {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSection {
+    /// The camera's position, data units.
     pub eye: Option<[f64; 3]>,
+    /// The point the camera looks at, data units.
     pub at: Option<[f64; 3]>,
+    /// The camera's up vector.
     pub up: Option<[f64; 3]>,
     /// Vertical field of view, degrees.
     pub fovy: Option<f64>,
@@ -360,19 +384,33 @@ pub fn parse_camera_from(text: &str) -> Result<(f64, f64, Option<f64>), String> 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RenderSection {
+    /// Image width in pixels; unset: 512.
     pub width: Option<u32>,
+    /// Image height in pixels; unset: 512.
     pub height: Option<u32>,
+    /// Samples per pixel (frames accumulated); unset: [`DEFAULT_SPP`].
     pub spp: Option<u32>,
+    /// The integrator; unset: emission–absorption.
     pub integrator: Option<crate::values::Integrator>,
+    /// The noise that jitters samples; unset: spatiotemporal blue noise.
     pub noise: Option<crate::values::NoiseKind>,
+    /// The noise's seed; unset: 1.
     pub seed: Option<u32>,
+    /// Ray-marching step in data units; unset: from the radius and the mean particle spacing.
     pub step_size: Option<f64>,
+    /// Extinction per unit optical density; unset: 0.4 / radius.
     pub density_scale: Option<f64>,
+    /// The density normalising Phi for colour and extinction; unset: estimated from the data.
     pub phi_ref: Option<f64>,
+    /// The optical-density map D over Phi / Phi_ref; unset: the ramp from 0 to 1.
     pub optical_map: Option<MapSpec>,
+    /// Colour by density instead of the attribute; unset: false.
     pub color_by_density: Option<bool>,
+    /// Linear RGB behind the volume; unset: black.
     pub background: Option<[f64; 3]>,
+    /// The opacity in (0, 1] at which a ray stops; unset: 0.99.
     pub opacity_threshold: Option<f64>,
+    /// The light for single scattering; unset: [`crate::values::Light`]'s default.
     pub light: Option<crate::values::Light>,
     /// How GPU backends hold positions (`auto`, `auto:TOLERANCE`, `f32`, `ds`).
     pub precision: Option<String>,
@@ -395,12 +433,16 @@ pub struct RenderSection {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneFile {
+    /// `[data]`: where the particles come from.
     #[serde(default)]
     pub data: DataSection,
+    /// `[field]`: the radius, maps and kernel.
     #[serde(default)]
     pub field: FieldSection,
+    /// `[camera]`: the view.
     #[serde(default)]
     pub camera: CameraSection,
+    /// `[render]`: image size, samples and the integrator's settings.
     #[serde(default)]
     pub render: RenderSection,
 }
@@ -409,7 +451,9 @@ pub struct SceneFile {
 #[derive(Debug, thiserror::Error)]
 #[error("scene file {path}: {problem}")]
 pub struct SceneFileError {
+    /// The scene file.
     pub path: PathBuf,
+    /// What is wrong with it (a read, parse or write error).
     pub problem: String,
 }
 
@@ -624,6 +668,8 @@ impl SceneFile {
             .map_err(|e| err(e.to_string()))
     }
 
+    /// Reads and parses the scene file at `path`, its relative data path and colour-map file
+    /// joined to the scene file's directory.
     pub fn load(path: &Path) -> Result<SceneFile, SceneFileError> {
         let err = |problem: String| SceneFileError {
             path: path.to_path_buf(),

@@ -43,7 +43,9 @@ impl std::str::FromStr for PeriodicSpec {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum PeriodicSetting {
+    /// `true`: the snapshot header's box; `false`: open, no wrapping.
     Flag(bool),
+    /// `[LX, LY, LZ]`: the box [0, L), in data units.
     Box([f64; 3]),
 }
 

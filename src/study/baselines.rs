@@ -24,6 +24,7 @@ use crate::render::{RenderSession, RenderSettings};
 use crate::scene::Camera;
 use crate::values::{Image, Integrator, NoiseKind};
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "RBF vs voxel grid and splatter, rebuilt every frame (paper Table 3)",
     paper: "The paper compares, for emission-absorption at 1 spp with the structure rebuilt every \
@@ -52,6 +53,8 @@ pub const DESCRIPTION: Description = Description {
 const ERROR_SPP: u32 = 64;
 const REFERENCE_SEED: u32 = 1000;
 
+/// Measures every configuration on every data set and backend asked for, recording each row as it
+/// is taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let bar = ctx.bar(
@@ -356,6 +359,8 @@ fn error_image(o: &Options, seed: u32) -> RenderSettings {
     }
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let category = |r: &Row| format!("{} {}", r.device.backend, r.variant);
     let (categories, mut series) = plot::bars(rows, "frame", category, |_| {

@@ -11,6 +11,7 @@ use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
 use crate::values::NoiseKind;
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "Cluster size: frame, build, refit and bytes (paper Fig. 9 red, Tables 1-2)",
     paper: "The paper varies the particles per cluster K from 1 to 16 at a fixed radius: frame \
@@ -21,6 +22,8 @@ pub const DESCRIPTION: Description = Description {
     settings: frame_columns!["radius", "k"],
 };
 
+/// Measures every configuration on every data set and backend asked for, recording each row as it
+/// is taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let bar = ctx.bar(
@@ -83,6 +86,8 @@ fn find<'a>(rows: &'a [Row], like: &Row, metric: &str, k: &str) -> Option<&'a Ro
     })
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let name = |r: &Row| super::line_name(r, rows);
     let mut notes = Vec::new();

@@ -13,7 +13,9 @@ use crate::values::{Bounds, Step};
 /// `--data`: a generator's name or a path.
 #[derive(Clone, Debug, PartialEq)]
 pub enum DataSpec {
+    /// A generated data set.
     Generated(Generator),
+    /// A particle file or directory.
     Path(PathBuf),
 }
 
@@ -43,8 +45,12 @@ impl std::fmt::Display for DataSpec {
 pub struct Dataset {
     /// The name in rows and tables.
     pub name: String,
+    /// The data set's series.
     pub series: TimeSeries,
+    /// The step measured, counted from 0.
     pub step: usize,
+    /// The attribute to colour by (the generator's main one, or the data's first); `None` where the
+    /// data has none.
     pub attribute: Option<String>,
     /// The particles of `step`.
     pub n: usize,

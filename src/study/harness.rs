@@ -17,11 +17,17 @@ use crate::values::{Bounds, NoiseKind};
 /// order). Its rows differ only in what was measured ([`Measurement::row`]).
 #[derive(Clone, Debug)]
 pub struct Measurement {
+    /// The device it ran on.
     pub device: Device,
+    /// What distinguishes its line beside the backend (empty: nothing).
     pub variant: String,
+    /// The data set's name.
     pub data: String,
+    /// The step measured.
     pub step: usize,
+    /// Particles in the step.
     pub n: usize,
+    /// The study's settings as (column, value), in its columns' order.
     pub settings: Vec<(&'static str, String)>,
 }
 
@@ -64,9 +70,13 @@ impl Measurement {
 
 /// What a study's measuring code works with.
 pub struct Ctx<'a> {
+    /// How the study runs.
     pub options: &'a Options,
+    /// Where the rows go.
     pub recorder: &'a mut Recorder,
+    /// The data sets to measure.
     pub data: &'a [DataSpec],
+    /// The backends to measure.
     pub backends: &'a [BackendKind],
 }
 

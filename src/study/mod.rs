@@ -52,23 +52,36 @@ pub use record::{Device, Machine, Recorder, Row};
 /// Why a study could not run or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum StudyError {
+    /// A render failed.
     #[error(transparent)]
     Render(#[from] RenderError),
+    /// A backend could not be made or failed.
     #[error(transparent)]
     Backend(#[from] BackendError),
+    /// The data could not be read.
     #[error(transparent)]
     Data(#[from] DataError),
+    /// An output file could not be written.
     #[error(transparent)]
     Output(#[from] OutputError),
+    /// A file or directory could not be created or written.
     #[error("{path}: {error}")]
-    Io { path: String, error: std::io::Error },
+    Io {
+        /// The file or directory.
+        path: String,
+        /// What failed.
+        error: std::io::Error,
+    },
+    /// The figure could not be drawn.
     #[error("drawing the figure: {0}")]
     Plot(String),
+    /// The options are invalid; the message names the one.
     #[error("{0}")]
     Invalid(String),
 }
 
 impl StudyError {
+    /// The I/O error `error` on `path`.
     pub fn io(path: &Path, error: std::io::Error) -> StudyError {
         StudyError::Io {
             path: path.display().to_string(),
@@ -80,17 +93,27 @@ impl StudyError {
 /// The studies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Study {
+    /// Frame time vs the global radius at K = 1 and K = 16 (Fig. 9, blue).
     Radius,
+    /// Frame, build and refit time and structure bytes vs K (Fig. 9 red, Tables 1–2).
     Cluster,
+    /// The RT pipeline vs the LBVH traversal on one device, and the wgpu LBVH (Fig. 10a).
     Traversal,
+    /// Blue vs white noise: frame time and error vs spp (Fig. 10b).
     Noise,
+    /// Build, refit, query and frame time vs N, with fitted exponents.
     Scaling,
+    /// Our method against the voxel grid and the splatter, rebuilt every frame (Table 3).
     Baselines,
+    /// Every knob's time and error against a converged reference.
     Accuracy,
+    /// The f32 and double-single field error against the f64 reference at extreme radii, offsets
+    /// and densities.
     Extremes,
 }
 
 impl Study {
+    /// Every study, in the order `run_all` runs them.
     pub const ALL: [Study; 8] = [
         Study::Radius,
         Study::Cluster,
@@ -102,6 +125,7 @@ impl Study {
         Study::Extremes,
     ];
 
+    /// The name the command line, the output directory and the files use.
     pub fn name(self) -> &'static str {
         match self {
             Study::Radius => "radius",
@@ -148,6 +172,7 @@ pub struct Options {
     pub count: Option<usize>,
     /// The step of the series (default: the last).
     pub step: Option<usize>,
+    /// The attribute to colour by (default: the generator's main one, or the data's first).
     pub attribute: Option<String>,
     /// The radius as a percentage of the step's diagonal (default: [`data::default_radius`]).
     pub radius: Option<crate::scene_file::RadiusSpec>,
@@ -155,10 +180,13 @@ pub struct Options {
     pub backends: Vec<BackendKind>,
     /// Results go to `out/<study>/`.
     pub out: PathBuf,
+    /// Overwrite existing results.
     pub force: bool,
+    /// Image width and height in pixels of timed frames.
     pub image: (u32, u32),
     /// Benchmark-orbit cameras (the paper: 50).
     pub cameras: usize,
+    /// Timed repetitions of each configuration.
     pub repetitions: usize,
     /// The integrator of timed frames (the paper times frames with shadows).
     pub integrator: Integrator,
@@ -177,6 +205,7 @@ pub struct Options {
     pub noise_image: (u32, u32),
     /// The `scaling` study's sizes: from `min_n`, times 4, up to `max_n`.
     pub min_n: usize,
+    /// The `scaling` study's largest size.
     pub max_n: usize,
     /// Query points per timed query in the `scaling` study.
     pub queries: usize,
@@ -295,17 +324,23 @@ impl Options {
 /// What a finished study wrote.
 #[derive(Debug)]
 pub struct Written {
+    /// The CSV of every measurement.
     pub csv: PathBuf,
+    /// The Markdown page.
     pub markdown: PathBuf,
+    /// The PNG figure.
     pub png: PathBuf,
+    /// Rows measured.
     pub rows: usize,
 }
 
 /// What a study module provides besides measuring: its page and figure from its rows.
 pub struct Description {
+    /// The page's and the figure's title.
     pub title: &'static str,
     /// What the paper measures and found (the caption's first line, the page's preface).
     pub paper: &'static str,
+    /// The names of the study's own CSV columns, in order (the frame settings among them).
     pub settings: &'static [&'static str],
 }
 

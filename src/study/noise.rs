@@ -19,6 +19,7 @@ use crate::field::FieldSettings;
 use crate::render::RenderSettings;
 use crate::values::NoiseKind;
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "Blue vs white noise: frame time and error (paper Fig. 10b)",
     paper: "The paper replaces white noise by spatiotemporal blue noise (STBN) for the random \
@@ -41,6 +42,8 @@ pub const DESCRIPTION: Description = Description {
 /// The seed of the reference (the repetitions use seeds 0, 1, ...).
 const REFERENCE_SEED: u32 = 1000;
 
+/// Measures every configuration on every data set and backend asked for, recording each row as it
+/// is taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let mut spps = o.spps.clone();
@@ -125,6 +128,8 @@ fn spp_of(r: &Row) -> f64 {
     r.number("spp")
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let mut notes = Vec::new();
     for blue in rows.iter().filter(|r| r.variant == "stbn") {

@@ -15,7 +15,9 @@ use super::record::Row;
 
 /// A whole figure.
 pub struct Figure {
+    /// The title above the panels.
     pub title: String,
+    /// The charts, two to a row, in reading order.
     pub panels: Vec<Panel>,
     /// Lines of text under the panels (the paper's trend, the settings).
     pub caption: Vec<String>,
@@ -23,18 +25,30 @@ pub struct Figure {
 
 /// One chart.
 pub enum Panel {
+    /// Lines over a numeric x axis.
     Lines {
+        /// The chart's title.
         title: String,
+        /// The x axis's label.
         x_label: String,
+        /// The y axis's label.
         y_label: String,
+        /// How the x axis maps values.
         x_scale: Scale,
+        /// How the y axis maps values.
         y_scale: Scale,
+        /// The lines.
         series: Vec<Series>,
     },
+    /// Groups of bars, one group per category.
     Bars {
+        /// The chart's title.
         title: String,
+        /// The y axis's label.
         y_label: String,
+        /// The categories along x, in order.
         categories: Vec<String>,
+        /// One bar of each category per series.
         series: Vec<BarSeries>,
     },
 }
@@ -42,6 +56,7 @@ pub enum Panel {
 /// How an axis maps values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Scale {
+    /// Values as they are.
     Linear,
     /// Ticks at 1, 2 and 5 times powers of 10.
     Log10,
@@ -93,7 +108,9 @@ impl Scale {
 
 /// A line: (x, median, lowest, highest) per point, in x order.
 pub struct Series {
+    /// The legend's label.
     pub label: String,
+    /// (x, median, lowest, highest) per point, in x order.
     pub points: Vec<(f64, f64, f64, f64)>,
     /// Drawn dashed (a reference, such as the particles' bytes beside the structure's).
     pub dashed: bool,
@@ -124,7 +141,9 @@ pub fn span(xs: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
 
 /// Bars over the categories: (median, lowest, highest) per category, if measured.
 pub struct BarSeries {
+    /// The legend's label.
     pub label: String,
+    /// (median, lowest, highest) per category; `None` where not measured.
     pub values: Vec<Option<(f64, f64, f64)>>,
 }
 

@@ -14,6 +14,7 @@ use crate::field::FieldSettings;
 use crate::render::RenderSettings;
 use crate::values::NoiseKind;
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "Frame time vs radius (paper Fig. 9, blue)",
     paper: "The paper (Fig. 9, blue lines) renders each data set from 50 orbit cameras at radii \
@@ -26,6 +27,8 @@ pub const DESCRIPTION: Description = Description {
 /// The cluster sizes of Fig. 9's blue lines.
 const KS: [u32; 2] = [1, 16];
 
+/// Measures every configuration on every data set and backend asked for, recording each row as it
+/// is taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let bar = ctx.bar(
@@ -84,6 +87,8 @@ fn pct(r: &Row) -> f64 {
     r.number("radius_pct_diagonal")
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let series = plot::lines(rows, "frame", |r| super::line_name(r, rows), pct, 1.0);
     let mut notes = Vec::new();

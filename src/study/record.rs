@@ -11,8 +11,11 @@ use super::StudyError;
 pub struct Machine {
     /// UTC, ISO 8601, when the study started.
     pub date: String,
+    /// The host name.
     pub host: String,
+    /// The CPU's model name.
     pub cpu: String,
+    /// Threads rayon runs on.
     pub threads: usize,
 }
 
@@ -69,7 +72,9 @@ fn utc_now() -> String {
 pub struct Device {
     /// cpu, wgpu or ash.
     pub backend: String,
+    /// The adapter's name.
     pub adapter: String,
+    /// The driver, as the device string names it (empty if it does not).
     pub driver: String,
     /// How its times were taken: device timestamps or the wall clock.
     pub timer: &'static str,
@@ -115,29 +120,38 @@ impl Device {
 /// One measurement: a metric under one set of settings, with the value of each repetition.
 #[derive(Clone, Debug)]
 pub struct Row {
+    /// The device it ran on.
     pub device: Device,
     /// What distinguishes a line in the plot beside the backend (e.g. `K=16`, `rt pipeline`).
     pub variant: String,
+    /// The data set's name.
     pub data: String,
+    /// The step measured.
     pub step: usize,
+    /// Particles in the step.
     pub n: usize,
     /// The study's settings, in the order of its columns.
     pub settings: Vec<(&'static str, String)>,
+    /// What was measured (e.g. `build`), the CSV's metric column.
     pub metric: &'static str,
+    /// The metric's unit.
     pub unit: &'static str,
     /// One value per repetition, in the order measured.
     pub values: Vec<f64>,
 }
 
 impl Row {
+    /// The median of the repetitions.
     pub fn median(&self) -> f64 {
         median(&self.values)
     }
 
+    /// The least repetition.
     pub fn min(&self) -> f64 {
         self.values.iter().copied().fold(f64::INFINITY, f64::min)
     }
 
+    /// The largest repetition.
     pub fn max(&self) -> f64 {
         self.values
             .iter()
@@ -236,10 +250,12 @@ impl Recorder {
         })
     }
 
+    /// Where the study ran.
     pub fn machine(&self) -> &Machine {
         &self.machine
     }
 
+    /// The CSV file the rows are appended to.
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -308,6 +324,7 @@ impl Recorder {
         Ok(())
     }
 
+    /// Every row recorded so far, in order.
     pub fn rows(&self) -> &[Row] {
         &self.rows
     }

@@ -8,11 +8,15 @@ use super::record::{Recorder, Row};
 
 /// What a study says about itself beside its rows.
 pub struct Page<'a> {
+    /// The study's name.
     pub study: &'a str,
+    /// The page's title.
     pub title: &'a str,
     /// What the paper measures and shows (the figure or table).
     pub paper: &'a str,
+    /// The command line that ran it.
     pub command: &'a str,
+    /// What the rows say against the paper, one paragraph each.
     pub notes: &'a [String],
     /// Markdown of the study's own after the notes (a table shaped as its question is), or
     /// empty.

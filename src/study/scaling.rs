@@ -19,6 +19,7 @@ use crate::field::FieldSettings;
 use crate::scene::synth::Generator;
 use crate::values::NoiseKind;
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "Scaling with the particle count",
     paper: "Not a figure of the paper: how build, refit, query and frame time grow with N at a \
@@ -42,6 +43,8 @@ pub fn sizes(min_n: usize, max_n: usize) -> Vec<usize> {
     out
 }
 
+/// Measures every configuration on every data set and backend asked for, recording each row as it
+/// is taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let ns = sizes(o.min_n, o.max_n);
@@ -143,6 +146,8 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     Ok(())
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let mut notes = Vec::new();
     let mut panels = Vec::new();

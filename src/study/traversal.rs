@@ -19,6 +19,7 @@ use crate::field::FieldSettings;
 use crate::render::RenderSession;
 use crate::values::NoiseKind;
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "RT pipeline vs LBVH traversal (paper Fig. 10a)",
     paper: "The paper renders Uniform and Random (60K particles in the unit cube) and the Cabana \
@@ -115,6 +116,8 @@ fn ash_devices() -> Result<Vec<std::sync::Arc<AshContext>>, StudyError> {
     }
 }
 
+/// Measures every configuration on every data set and backend asked for, recording each row as it
+/// is taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let adapters = if ctx.backends.contains(&BackendKind::Wgpu) {
@@ -173,6 +176,8 @@ pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     Ok(())
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let mut notes = Vec::new();
     for rt in rows.iter().filter(|r| r.variant == "rt pipeline") {

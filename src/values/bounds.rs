@@ -6,20 +6,25 @@ use serde::{Deserialize, Serialize};
 /// An axis-aligned box in the data's coordinates. An empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Bounds {
+    /// The least corner.
     pub min: DVec3,
+    /// The largest corner.
     pub max: DVec3,
 }
 
 impl Bounds {
+    /// The box holding no point (`min` +∞, `max` -∞): the identity of [`Bounds::union`].
     pub const EMPTY: Bounds = Bounds {
         min: DVec3::splat(f64::INFINITY),
         max: DVec3::splat(f64::NEG_INFINITY),
     };
 
+    /// The smallest box holding every point (empty for none).
     pub fn of_points(points: &[DVec3]) -> Bounds {
         points.iter().fold(Bounds::EMPTY, |b, &p| b.grown_by(p))
     }
 
+    /// The smallest box holding this one and `p`.
     pub fn grown_by(self, p: DVec3) -> Bounds {
         Bounds {
             min: self.min.min(p),
@@ -27,6 +32,7 @@ impl Bounds {
         }
     }
 
+    /// The smallest box holding both.
     pub fn union(self, other: Bounds) -> Bounds {
         Bounds {
             min: self.min.min(other.min),
@@ -34,10 +40,12 @@ impl Bounds {
         }
     }
 
+    /// Whether it holds no point (`min > max` on some axis).
     pub fn is_empty(&self) -> bool {
         self.min.cmpgt(self.max).any()
     }
 
+    /// The side lengths (zero for an empty box).
     pub fn extent(&self) -> DVec3 {
         if self.is_empty() {
             DVec3::ZERO
@@ -46,6 +54,7 @@ impl Bounds {
         }
     }
 
+    /// The length of its diagonal (0 for an empty box).
     pub fn diagonal(&self) -> f64 {
         self.extent().length()
     }

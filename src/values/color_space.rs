@@ -1,6 +1,7 @@
 //! Colour-space conversions: sRGB and linear light, CIELAB and Moreland's Msh (for colour-map
 //! interpolation as ParaView does it).
 
+/// An sRGB-encoded channel in [0, 1] as linear light.
 pub fn srgb_to_linear(c: f64) -> f64 {
     if c <= 0.04045 {
         c / 12.92
@@ -9,6 +10,7 @@ pub fn srgb_to_linear(c: f64) -> f64 {
     }
 }
 
+/// A linear-light channel in [0, 1] as sRGB-encoded.
 pub fn linear_to_srgb(c: f64) -> f64 {
     if c <= 0.0031308 {
         c * 12.92
@@ -56,6 +58,7 @@ fn lab_to_srgb(lab: [f64; 3]) -> [f64; 3] {
     [r, g, b].map(|c| linear_to_srgb(c.clamp(0.0, 1.0)))
 }
 
+/// The sRGB colour a fraction `u` of the way from `a` to `b`, interpolated in CIELAB.
 pub fn lab_mix(a: [f64; 3], b: [f64; 3], u: f64) -> [f64; 3] {
     let (la, lb) = (srgb_to_lab(a), srgb_to_lab(b));
     lab_to_srgb(std::array::from_fn(|i| la[i] + u * (lb[i] - la[i])))

@@ -28,6 +28,7 @@ pub enum Integrator {
 }
 
 impl Integrator {
+    /// Whether it computes single scattering (every integrator but emission–absorption).
     pub fn scatters(self) -> bool {
         self != Integrator::Ea
     }
@@ -76,7 +77,9 @@ pub struct Light {
     pub azimuth: f64,
     /// Degrees above the horizon.
     pub elevation: f64,
+    /// The directional light's radiance (1 by default).
     pub intensity: f64,
+    /// Light reaching every point regardless of shadowing (0.25 by default).
     pub ambient: f64,
 }
 
@@ -109,9 +112,13 @@ impl Light {
 /// coordinates (sx, sy) in [-1, 1] looks along `forward + sx * right + sy * up`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraFrame {
+    /// The camera's position, data units.
     pub eye: DVec3,
+    /// The unit view direction.
     pub forward: DVec3,
+    /// Rightwards in the image, as long as the tangent of half the horizontal field of view.
     pub right: DVec3,
+    /// Upwards in the image, as long as the tangent of half the vertical field of view.
     pub up: DVec3,
 }
 
@@ -146,27 +153,47 @@ pub fn half_lattice_size(width: u32, height: u32) -> (u32, u32) {
 /// Everything fixed for one frame.
 #[derive(Clone, Debug)]
 pub struct FrameParams {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
+    /// The frame's index in the accumulation (the noise's time coordinate).
     pub frame: u32,
+    /// The noise's seed.
     pub seed: u32,
+    /// The camera's frame for generating rays.
     pub camera: CameraFrame,
+    /// The march box's least corner: the domain grown by the margin.
     pub box_min: DVec3,
+    /// The march box's largest corner.
     pub box_max: DVec3,
+    /// The ray-marching step, data units.
     pub dt: f64,
+    /// The opacity at which a ray stops, in (0, 1].
     pub opacity_threshold: f64,
+    /// The density that maps to 1 for colour and extinction.
     pub phi_ref: f64,
+    /// Extinction per unit optical density (per data unit).
     pub density_scale: f64,
     /// `density_scale * max D`: bounds sigma everywhere (delta tracking's majorant).
     pub majorant: f64,
+    /// Unit vector towards the light, in data coordinates.
     pub light_dir: DVec3,
+    /// The directional light's radiance.
     pub light_intensity: f64,
+    /// Light reaching every point regardless of shadowing.
     pub ambient: f64,
+    /// Linear RGB behind the volume.
     pub background: [f64; 3],
+    /// How a ray's radiance is integrated.
     pub integrator: Integrator,
+    /// The noise that jitters samples.
     pub noise: NoiseKind,
+    /// What the colour map is applied to.
     pub colour: ColourMode,
+    /// The optical-density map D baked to `TABLE_SIZE` samples over [0, 1].
     pub optical_table: Arc<Vec<f32>>,
+    /// The colour map baked to `TABLE_SIZE` linear-RGB samples over [0, 1].
     pub colour_table: Arc<Vec<[f32; 3]>>,
 }
 

@@ -6,8 +6,11 @@ use crate::values::color_space::linear_to_srgb;
 /// A linear-light RGBA image (the mean over accumulated frames).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// Row-major linear RGBA, `width * height` of them, the top row first.
     pub pixels: Vec<[f32; 4]>,
 }
 

@@ -48,6 +48,7 @@ pub enum Kernel {
 }
 
 impl Kernel {
+    /// Every kernel, in the order of their `KERNEL` values.
     pub const ALL: [Kernel; 5] = [
         Kernel::GaussianRbf,
         Kernel::SphCubic,

@@ -11,7 +11,9 @@ use super::Bounds;
 /// whose boxes share faces, because each shared face belongs to the box above it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HalfOpenBox {
+    /// The least corner, on the box (may be -∞).
     pub lo: DVec3,
+    /// The largest corner, just outside the box (may be +∞).
     pub hi: DVec3,
 }
 
@@ -22,6 +24,7 @@ impl HalfOpenBox {
         hi: DVec3::splat(f64::INFINITY),
     };
 
+    /// Whether `x` lies in the box (`lo <= x < hi` on every axis).
     pub fn contains(&self, x: DVec3) -> bool {
         x.cmpge(self.lo).all() && x.cmplt(self.hi).all()
     }
@@ -46,9 +49,13 @@ impl HalfOpenBox {
 /// The pixels `(x, y)` with `x0 <= x < x1` and `y0 <= y < y1`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct PixelRect {
+    /// The first column.
     pub x0: u32,
+    /// The first row.
     pub y0: u32,
+    /// One past the last column.
     pub x1: u32,
+    /// One past the last row.
     pub y1: u32,
 }
 
@@ -63,14 +70,17 @@ impl PixelRect {
         }
     }
 
+    /// Columns it spans (0 where `x1 <= x0`).
     pub fn width(&self) -> u32 {
         self.x1.saturating_sub(self.x0)
     }
 
+    /// Rows it spans (0 where `y1 <= y0`).
     pub fn height(&self) -> u32 {
         self.y1.saturating_sub(self.y0)
     }
 
+    /// Whether it holds no pixel.
     pub fn is_empty(&self) -> bool {
         self.width() == 0 || self.height() == 0
     }
@@ -95,6 +105,7 @@ impl PixelRect {
         }
     }
 
+    /// Whether it holds pixel `(x, y)`.
     pub fn contains(&self, x: u32, y: u32) -> bool {
         x >= self.x0 && x < self.x1 && y >= self.y0 && y < self.y1
     }

@@ -11,15 +11,20 @@ pub const TABLE_SIZE: usize = 256;
 /// Where each map's table starts in the map-table buffer (floats): density, radius, optical
 /// density, then the colour map as interleaved linear RGB (3 x `TABLE_SIZE`).
 pub const TABLE_DENSITY: usize = 0;
+/// The radius map's table.
 pub const TABLE_RADIUS: usize = TABLE_SIZE;
+/// The optical-density map's table.
 pub const TABLE_OPTICAL: usize = 2 * TABLE_SIZE;
+/// The colour map's table (3 x `TABLE_SIZE` floats).
 pub const TABLE_COLOUR: usize = 3 * TABLE_SIZE;
 /// Floats in the map-table buffer.
 pub const TABLE_FLOATS: usize = 6 * TABLE_SIZE;
 
 /// The shipped blue-noise mask's size (`assets/stbn_128x128x64.bin`), which the shaders index.
 pub const STBN_WIDTH: u32 = 128;
+/// The blue-noise mask's rows.
 pub const STBN_HEIGHT: u32 = 128;
+/// The blue-noise mask's slices in time.
 pub const STBN_DEPTH: u32 = 64;
 /// Toroidal offsets of the blue-noise mask per random dimension, so a pixel's different
 /// decisions read different (decorrelated) mask values.
@@ -56,6 +61,7 @@ pub const SPLAT_K_MAX: u32 = 64;
 
 /// Keys per radix-sort tile (`shaders_wgsl/radix_sort.wgsl`) and digits per pass.
 pub const SORT_TILE: u32 = 4096;
+/// Values of one radix-sort digit (4 bits a pass).
 pub const SORT_RADIX: u32 = 16;
 
 /// Bits per axis of the Hilbert keys particles are sorted by (`accel::hilbert`, and on the
@@ -115,16 +121,27 @@ pub const SPEC_CONSTANTS: [(&str, &str); 11] = [
 ];
 /// Indices into [`SPEC_CONSTANTS`].
 pub mod spec {
+    /// `INTEGRATOR`: which integrator.
     pub const INTEGRATOR: usize = 0;
+    /// `COLOUR_MODE`: what the colour map is applied to.
     pub const COLOUR_MODE: usize = 1;
+    /// `NOISE_KIND`: blue or white noise.
     pub const NOISE_KIND: usize = 2;
+    /// `CLUSTER_SIZE`: particles per cluster box.
     pub const CLUSTER_SIZE: usize = 3;
+    /// `RADIUS_MAP_VARIES`: whether the radius map is looked up per particle.
     pub const RADIUS_MAP_VARIES: usize = 4;
+    /// `DENSITY_MAP_VARIES`: whether the density map is looked up per particle.
     pub const DENSITY_MAP_VARIES: usize = 5;
+    /// `HAS_RADIUS_ATTRIBUTE`: whether there is a per-particle radius buffer.
     pub const HAS_RADIUS_ATTRIBUTE: usize = 6;
+    /// `POSITION_DS`: whether positions are double-single pairs.
     pub const POSITION_DS: usize = 7;
+    /// `RT_HIT_PER_PARTICLE`: whether ray tracing reports one hit per particle.
     pub const RT_HIT_PER_PARTICLE: usize = 8;
+    /// `COMPENSATED_SUM`: whether cluster sums are added compensated.
     pub const COMPENSATED_SUM: usize = 9;
+    /// `KERNEL`: which kernel.
     pub const KERNEL: usize = 10;
 }
 
@@ -133,9 +150,13 @@ pub mod spec {
 /// Price (2012), Phantom and sarracen, where h is the smoothing length and the support is a
 /// multiple of it.
 pub const KERNEL_GAUSSIAN_RBF: u32 = 0;
+/// The M4 cubic spline, support 2h.
 pub const KERNEL_SPH_CUBIC: u32 = 1;
+/// The M6 quintic spline, support 3h.
 pub const KERNEL_SPH_QUINTIC: u32 = 2;
+/// Wendland C2, support 2h.
 pub const KERNEL_SPH_WENDLAND_C2: u32 = 3;
+/// Wendland C4, support 2h.
 pub const KERNEL_SPH_WENDLAND_C4: u32 = 4;
 /// Each kernel's support in units of h (indexed by `KERNEL`; the Gaussian's radius is its own
 /// unit).
@@ -152,13 +173,21 @@ pub const KERNEL_SIGMA: [f64; 5] = [
 
 /// Values of the `INTEGRATOR`, `COLOUR_MODE` and `NOISE_KIND` specialisation constants.
 pub const INTEGRATOR_EA: u32 = 0;
+/// Single scattering by delta tracking.
 pub const INTEGRATOR_DELTA: u32 = 1;
+/// Single scattering by stochastic ray marching.
 pub const INTEGRATOR_MARCHING: u32 = 2;
+/// Single scattering by deterministic marching with a shadow ray per sample.
 pub const INTEGRATOR_SS_REFERENCE: u32 = 3;
+/// Colour-map the averaged attribute.
 pub const COLOUR_POST: u32 = 0;
+/// Average the colour-mapped particles.
 pub const COLOUR_PRE: u32 = 1;
+/// Colour by density only.
 pub const COLOUR_DENSITY: u32 = 2;
+/// Spatiotemporal blue noise.
 pub const NOISE_STBN: u32 = 0;
+/// White noise (a hash).
 pub const NOISE_WHITE: u32 = 1;
 
 /// The unsigned constants both languages get, with their names there.

@@ -8,7 +8,9 @@ use super::Bounds;
 /// A named per-particle scalar array.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Attribute {
+    /// The attribute's name as the file spells it.
     pub name: String,
+    /// One value per particle, in the step's particle order.
     pub values: Vec<f64>,
 }
 
@@ -20,27 +22,34 @@ pub struct Attribute {
 pub struct Step {
     /// A name for messages: the file name, or the step name in a `.particles` header.
     pub name: String,
+    /// Particle positions, data units.
     pub positions: Vec<DVec3>,
+    /// Per-particle attributes, each as long as `positions`.
     pub attributes: Vec<Attribute>,
 }
 
 impl Step {
+    /// Particles in the step.
     pub fn len(&self) -> usize {
         self.positions.len()
     }
 
+    /// Whether it has no particles.
     pub fn is_empty(&self) -> bool {
         self.positions.is_empty()
     }
 
+    /// The attribute called `name`, if the step has it.
     pub fn attribute(&self, name: &str) -> Option<&Attribute> {
         self.attributes.iter().find(|a| a.name == name)
     }
 
+    /// The attributes' names, in order.
     pub fn attribute_names(&self) -> Vec<&str> {
         self.attributes.iter().map(|a| a.name.as_str()).collect()
     }
 
+    /// The smallest box holding every position.
     pub fn bounds(&self) -> Bounds {
         Bounds::of_points(&self.positions)
     }

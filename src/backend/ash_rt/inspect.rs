@@ -13,6 +13,7 @@ impl AshBackend {
         self.traversal = traversal;
     }
 
+    /// How queries and frames traverse the particles.
     pub fn traversal(&self) -> Traversal {
         self.traversal
     }

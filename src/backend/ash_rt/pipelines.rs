@@ -47,13 +47,21 @@ use crate::values::shader_constants::SPEC_CONSTANTS;
 /// gone: those arrays grow with the step and are reached by device address (`Push`), so no
 /// binding limit applies.
 pub mod binding {
+    /// The TLAS.
     pub const TLAS: u32 = 0;
+    /// The frame's parameters (`Params`: frame, field and voxel uniforms).
     pub const PARAMS: u32 = 1;
+    /// The maps' baked tables.
     pub const TABLES: u32 = 4;
+    /// The blue-noise mask.
     pub const STBN: u32 = 5;
+    /// A query launch's points.
     pub const QUERY_POINTS: u32 = 7;
+    /// A query launch's results.
     pub const QUERY_RESULTS: u32 = 8;
+    /// The LBVH's nodes (the traversal without RT hardware).
     pub const LBVH_NODES: u32 = 10;
+    /// The LBVH's boxes.
     pub const LBVH_BOXES: u32 = 11;
 }
 
@@ -119,9 +127,13 @@ pub struct Push {
     /// the frame's accumulation and of the particles' lo parts (filled in by the backend when
     /// it records a dispatch; 0 for what the step does not have).
     pub particle_address: u64,
+    /// The radius attributes' device address (0 without them).
     pub radius_address: u64,
+    /// The BLAS input boxes' device address.
     pub boxes_address: u64,
+    /// The frame's accumulation's device address.
     pub accum_address: u64,
+    /// The particles' lo parts' device address (0 without double-single positions).
     pub particle_lo_address: u64,
     /// The voxel baseline's grid (0 before a voxelisation).
     pub voxel_address: u64,
@@ -133,16 +145,24 @@ pub struct Push {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct PreparePush {
+    /// The Hilbert grid's origin: a cell is `(p - grid_lo) * grid_scale`.
     pub grid_lo: [f32; 4],
+    /// The Hilbert grid's cells per unit length.
     pub grid_scale: [f32; 4],
+    /// Elements to process (particles, keys).
     pub count: u32,
+    /// The sort pass's digit, as a bit shift.
     pub shift: u32,
+    /// The sort's tiles of `SORT_TILE` keys.
     pub tiles: u32,
+    /// Row width of a 2D launch over a 1D array.
     pub width: u32,
+    /// Each pass's arrays by device address, in the order its kernel's comment gives.
     pub arrays: [u64; 5],
 }
 
 impl Layouts {
+    /// The layouts, their set-0 bindings reflected from the shader table.
     pub fn new(device: &ash::Device) -> Result<Layouts, vk::Result> {
         let bindings: Vec<vk::DescriptorSetLayoutBinding> = set_bindings()
             .into_iter()
@@ -472,12 +492,17 @@ fn align_up(x: u64, a: u64) -> u64 {
 /// region's size equal to its stride (as the specification requires).
 pub struct BindingTable {
     _buffer: Buffer,
+    /// The raygen regions, one per raygen of the program.
     pub raygens: Vec<vk::StridedDeviceAddressRegionKHR>,
+    /// The miss shader's region.
     pub miss: vk::StridedDeviceAddressRegionKHR,
+    /// The hit group's region.
     pub hit: vk::StridedDeviceAddressRegionKHR,
 }
 
 impl BindingTable {
+    /// The table of `pipeline`, made for `program`: its handles read back and written into a new
+    /// buffer.
     pub fn new(
         ctx: &Arc<Context>,
         pipeline: vk::Pipeline,

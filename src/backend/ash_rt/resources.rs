@@ -19,8 +19,10 @@ use crate::backend::BackendError;
 /// longer uses it: every submission here is waited for).
 pub struct Buffer {
     ctx: Arc<Context>,
+    /// The Vulkan buffer.
     pub raw: vk::Buffer,
     allocation: Option<Allocation>,
+    /// Its size in bytes.
     pub size: u64,
     /// The device address (0 unless created with `SHADER_DEVICE_ADDRESS`).
     pub address: u64,
@@ -270,13 +272,16 @@ fn one_off(ctx: &Arc<Context>, record: impl FnOnce(vk::CommandBuffer)) -> Result
 pub struct Commands {
     ctx: Arc<Context>,
     pool: vk::CommandPool,
+    /// The command buffer being recorded.
     pub cb: vk::CommandBuffer,
     fence: vk::Fence,
+    /// The timestamp query pool.
     pub queries: vk::QueryPool,
     query_count: u32,
 }
 
 impl Commands {
+    /// A pool, command buffer and fence on `ctx`'s queue, with `timestamps` timestamp queries.
     pub fn new(ctx: &Arc<Context>, timestamps: u32) -> Result<Commands, BackendError> {
         let device = &ctx.device;
         let pool_info = vk::CommandPoolCreateInfo::default()
@@ -445,6 +450,7 @@ pub const COMPUTE_READ: (vk::PipelineStageFlags, vk::AccessFlags) = (
     vk::AccessFlags::SHADER_READ,
 );
 
+/// Records a global memory barrier from the `src` (stage, access) to the `dst` one.
 pub fn barrier(
     ctx: &Context,
     cb: vk::CommandBuffer,

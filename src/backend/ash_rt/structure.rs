@@ -163,6 +163,7 @@ pub struct Structure {
 }
 
 impl Structure {
+    /// The structures and their buffers for up to `boxes` boxes, nothing built yet.
     pub fn new(ctx: &Arc<Context>, boxes: u32) -> Result<Structure, BackendError> {
         if u64::from(boxes) > ctx.info.max_primitive_count {
             return Err(device_error(
@@ -255,6 +256,7 @@ impl Structure {
         })
     }
 
+    /// The TLAS, which the frames and queries trace.
     pub fn tlas(&self) -> vk::AccelerationStructureKHR {
         self.tlas.raw
     }

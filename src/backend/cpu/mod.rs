@@ -84,6 +84,8 @@ impl Prepared {
     }
 }
 
+/// The CPU backend: the reference renderer, the field in f64 or in f32 over a grid of cells, rayon
+/// over image tiles (module docs).
 pub struct CpuBackend {
     capabilities: Capabilities,
     uploaded: Option<Uploaded>,
@@ -104,6 +106,7 @@ impl Default for CpuBackend {
 }
 
 impl CpuBackend {
+    /// A CPU backend with nothing uploaded.
     pub fn new() -> CpuBackend {
         CpuBackend {
             capabilities: Capabilities {

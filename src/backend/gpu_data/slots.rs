@@ -45,11 +45,13 @@ impl<'a, T> Slots<'a, T> {
         unsafe { Slots::from_raw(NonNull::from(slice).cast(), len) }
     }
 
+    /// How many slots.
     #[inline]
     pub fn len(&self) -> usize {
         self.len
     }
 
+    /// Whether there are no slots.
     #[inline]
     pub fn is_empty(&self) -> bool {
         self.len == 0
@@ -108,6 +110,7 @@ impl<'a, T> Slots<'a, T> {
 /// Write-only slots of an array of 16-byte elements (a particle's vec4) or 4-byte ones (its
 /// radius attribute).
 pub type Slots16<'a> = Slots<'a, [u8; 16]>;
+/// Write-only slots of an array of 4-byte elements (a particle's radius attribute).
 pub type Slots4<'a> = Slots<'a, [u8; 4]>;
 
 /// Slots over a host array of vec4s.

@@ -68,15 +68,25 @@ pub fn glsl_with_includes(source: &str) -> String {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuFrame {
+    /// The camera's position, xyz local coordinates; w unused.
     pub eye: [f32; 4],
+    /// The unit view direction; w unused.
     pub forward: [f32; 4],
+    /// The camera's right vector, scaled as [`crate::values::CameraFrame`]'s; w unused.
     pub right: [f32; 4],
+    /// The camera's up vector, scaled as [`crate::values::CameraFrame`]'s; w unused.
     pub up: [f32; 4],
+    /// xyz the march box's least corner, local coordinates; w the march step.
     pub box_min: [f32; 4],
+    /// xyz the march box's largest corner, local coordinates; w the opacity threshold.
     pub box_max: [f32; 4],
+    /// xyz the unit vector towards the light; w its intensity.
     pub light: [f32; 4],
+    /// xyz the background's linear RGB; w the ambient light.
     pub background: [f32; 4],
+    /// Phi_ref, the density scale, delta tracking's majorant; w unused.
     pub shading: [f32; 4],
+    /// Width, height in pixels, the frame's index and the seed.
     pub image: [u32; 4],
 }
 
@@ -117,11 +127,19 @@ impl GpuFrame {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuVoxels {
+    /// xyz the first cell's centre, local coordinates (the hi part with double-single positions); w
+    /// unused.
     pub origin: [f32; 4],
+    /// xyz the lo part of `origin` (double-single positions; else 0); w unused.
     pub origin_lo: [f32; 4],
+    /// xyz the cell's size; w unused.
     pub cell: [f32; 4],
+    /// xyz cells per axis; w cells per row of the splat's slab buffer.
     pub dims: [u32; 4],
+    /// The splat's pass: x the first particle, y particles, z the slab's first layer, w its layers.
     pub range: [u32; 4],
+    /// x the sums each cell receives: 1 (Phi), 2 (and a scalar Theta numerator) or 4 (and an RGB
+    /// one); yzw unused.
     pub channels: [u32; 4],
 }
 
@@ -176,6 +194,7 @@ pub struct GpuField {
 /// bounds the boxes of the LBVH it builds on the CPU by it.
 #[derive(Clone, Copy, Debug)]
 pub struct RadiusRule<'a> {
+    /// The field's uniform: the global radius, constant map values and `k`.
     pub field: GpuField,
     /// The radius-map table when the map varies (`RADIUS_MAP_VARIES`), else the constant
     /// `field.radius[1]` applies.
@@ -202,16 +221,27 @@ impl RadiusRule<'_> {
 /// The specialisation constants (`shader_constants::SPEC_CONSTANTS` names and numbers them).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SpecConstants {
+    /// `INTEGRATOR`: [`SpecConstants::integrator_id`].
     pub integrator: u32,
+    /// `COLOUR_MODE`: [`SpecConstants::colour_id`].
     pub colour_mode: u32,
+    /// `NOISE_KIND`: [`SpecConstants::noise_id`].
     pub noise_kind: u32,
+    /// `CLUSTER_SIZE`: particles per cluster box (1, 2, 4, 8, 16).
     pub cluster_size: u32,
+    /// `RADIUS_MAP_VARIES`: 1 to look the radius map up per particle.
     pub radius_map_varies: u32,
+    /// `DENSITY_MAP_VARIES`: 1 to look the density map up per particle.
     pub density_map_varies: u32,
+    /// `HAS_RADIUS_ATTRIBUTE`: 1 where there is a per-particle radius buffer.
     pub has_radius_attribute: u32,
+    /// `POSITION_DS`: 1 for double-single positions.
     pub position_ds: u32,
+    /// `RT_HIT_PER_PARTICLE`: 1 for one ray-tracing hit per particle, 0 for one per cluster.
     pub rt_hit_per_particle: u32,
+    /// `COMPENSATED_SUM`: 1 to add a point's clusters' sums compensated.
     pub compensated_sum: u32,
+    /// `KERNEL`: the kernel's `KERNEL_*` value.
     pub kernel: u32,
 }
 
@@ -234,6 +264,7 @@ impl SpecConstants {
         v
     }
 
+    /// The `INTEGRATOR` value of `i`.
     pub fn integrator_id(i: Integrator) -> u32 {
         match i {
             Integrator::Ea => INTEGRATOR_EA,
@@ -243,6 +274,7 @@ impl SpecConstants {
         }
     }
 
+    /// The `COLOUR_MODE` value of `c`.
     pub fn colour_id(c: ColourMode) -> u32 {
         match c {
             ColourMode::Post => COLOUR_POST,
@@ -251,6 +283,7 @@ impl SpecConstants {
         }
     }
 
+    /// The `NOISE_KIND` value of `n`.
     pub fn noise_id(n: NoiseKind) -> u32 {
         match n {
             NoiseKind::Stbn => NOISE_STBN,

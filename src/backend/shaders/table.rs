@@ -38,29 +38,46 @@ pub enum GpuBackend {
 /// The pipeline stage of an entry point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum StageKind {
+    /// A compute kernel.
     Compute,
+    /// A ray-generation shader.
     RayGeneration,
+    /// An intersection shader (the particles' or clusters' sphere test).
     Intersection,
+    /// An any-hit shader.
     AnyHit,
+    /// A closest-hit shader.
     ClosestHit,
+    /// A miss shader.
     Miss,
 }
 
 /// What a binding holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BindingKind {
+    /// A uniform buffer.
     Uniform,
-    Storage { read_only: bool },
+    /// A storage buffer.
+    Storage {
+        /// Whether the entry point only reads it.
+        read_only: bool,
+    },
+    /// A sampled texture.
     Texture,
+    /// A sampler.
     Sampler,
+    /// A ray-tracing acceleration structure.
     AccelerationStructure,
 }
 
 /// One resource an entry point uses (bindings it declares but never uses are left out).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Binding {
+    /// Its bind group (wgpu) or descriptor set (ash).
     pub group: u32,
+    /// Its binding number within the group.
     pub binding: u32,
+    /// What it holds.
     pub kind: BindingKind,
 }
 
@@ -70,6 +87,7 @@ pub struct EntryPoint {
     /// Its name in the module (`main` for a GLSL file of one entry point; for a Vulkan GLSL
     /// file of several, the `ENTRY_<name>` block it is compiled from).
     pub name: &'static str,
+    /// Its pipeline stage.
     pub stage: StageKind,
     /// Threads per workgroup (compute); `[0; 3]` for a ray-tracing stage.
     pub workgroup_size: [u32; 3],
@@ -97,11 +115,16 @@ pub enum Twin {
     /// Code elsewhere in the crate that computes the same (its path), as the shader's
     /// `// twin: <path>: <why>` line says.
     Elsewhere {
+        /// The twin's path, relative to the crate root.
         path: &'static str,
+        /// Why it lives there.
         why: &'static str,
     },
     /// None by nature, as the shader's `// twin: none: <why>` line says.
-    None { why: &'static str },
+    None {
+        /// Why it has none.
+        why: &'static str,
+    },
 }
 
 /// Why a stage is written twice, once per backend ([`Shader::also`]).
@@ -126,11 +149,15 @@ pub struct Shader {
     pub name: &'static str,
     /// The file, relative to the crate root.
     pub file: &'static str,
+    /// The language it is written in.
     pub language: Language,
+    /// The backend that runs it.
     pub backend: GpuBackend,
     /// The file's text (includes unresolved).
     pub source: &'static str,
+    /// Its entry points, in the order they appear.
     pub entry_points: &'static [EntryPoint],
+    /// What its results are compared against.
     pub twin: Twin,
     /// The same stage for the other backend, and why it is written twice.
     pub also: Option<(&'static str, Twice)>,
@@ -144,10 +171,12 @@ pub struct Entry {
 }
 
 impl Entry {
+    /// The shader file it is in.
     pub fn shader(self) -> &'static Shader {
         &SHADERS[usize::from(self.shader)]
     }
 
+    /// The entry point itself.
     pub fn point(self) -> &'static EntryPoint {
         &self.shader().entry_points[usize::from(self.entry)]
     }

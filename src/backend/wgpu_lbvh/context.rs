@@ -62,8 +62,11 @@ impl Layout {
 /// A wgpu adapter, as `aarbf info --devices` lists it.
 #[derive(Clone, Debug)]
 pub struct AdapterSummary {
+    /// Its name, vendor, device type, driver and backend.
     pub info: wgpu::AdapterInfo,
+    /// The optional features it offers.
     pub features: wgpu::Features,
+    /// Its limits.
     pub limits: wgpu::Limits,
 }
 
@@ -106,10 +109,15 @@ fn instance_for(backends: Option<wgpu::Backends>) -> wgpu::Instance {
 
 /// A device, its queue and compiled kernels.
 pub struct GpuContext {
+    /// The adapter the device was requested from.
     pub adapter: wgpu::Adapter,
+    /// The device.
     pub device: wgpu::Device,
+    /// Its queue, which every submission goes to.
     pub queue: wgpu::Queue,
+    /// The adapter's name, vendor, device type, driver and backend.
     pub info: wgpu::AdapterInfo,
+    /// The limits the device was created with.
     pub limits: wgpu::Limits,
     /// Timestamp queries, where the adapter has them inside command encoders.
     pub timestamps: Option<Timestamps>,

@@ -121,6 +121,7 @@ impl WgpuBackend {
         Ok(WgpuBackend::with_context(GpuContext::shared()?))
     }
 
+    /// A backend on the device of `ctx`, nothing uploaded.
     pub fn with_context(ctx: Arc<GpuContext>) -> WgpuBackend {
         let max_binding = ctx.max_binding();
         WgpuBackend::with_max_binding(ctx, max_binding)
@@ -169,6 +170,7 @@ impl WgpuBackend {
         }
     }
 
+    /// The device context it runs on.
     pub fn context(&self) -> &Arc<GpuContext> {
         &self.ctx
     }

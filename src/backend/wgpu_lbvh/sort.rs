@@ -31,6 +31,7 @@ pub struct RadixSort {
 }
 
 impl RadixSort {
+    /// The buffers for sorts of up to `capacity` keys, on `ctx`'s device.
     pub fn new(ctx: &GpuContext, capacity: usize) -> RadixSort {
         let stride = u64::from(ctx.limits.min_uniform_buffer_offset_alignment).max(16);
         let tiles_capacity = (capacity as u32).div_ceil(SORT_TILE).max(1);
@@ -51,6 +52,7 @@ impl RadixSort {
         }
     }
 
+    /// Bytes of its digit histogram (the parameters' few bytes left out).
     pub fn bytes(&self) -> usize {
         self.histogram.size() as usize
     }

@@ -14,10 +14,15 @@ use crate::backend::shaders::on_wgpu;
 /// How far a build goes (tests stop early to compare a stage with its twin).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum BuildStage {
+    /// The cluster boxes only.
     Bounds,
+    /// And the clusters' Morton keys.
     Keys,
+    /// And the keys sorted.
     Sort,
+    /// And the hierarchy (Karras's radix tree) over the sorted keys.
     Hierarchy,
+    /// And the nodes' bounds fitted bottom up: the whole build.
     Fit,
 }
 
@@ -25,12 +30,17 @@ pub enum BuildStage {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct TreeParams {
+    /// The key grid's origin: a cell is `(centre - key_lo) * key_scale` on the 1024³ Morton grid.
     pub key_lo: [f32; 4],
+    /// The key grid's cells per unit length.
     pub key_scale: [f32; 4],
+    /// Clusters to build over.
     pub clusters: u32,
+    /// What the bottom-up pass computes: 7, bounds and heights (a build); 6, bounds only (a refit).
     pub components: u32,
     /// Per part of the split boxes and nodes: vec4s and words (u32::MAX unsplit).
     pub part_vec4s: u32,
+    /// Words per part of the split nodes (u32::MAX unsplit).
     pub part_words: u32,
 }
 
@@ -49,9 +59,13 @@ pub struct TreeReport {
 
 /// The scene's buffers a tree pass reads.
 pub struct SceneBindings<'a> {
+    /// The field's uniform.
     pub field: &'a wgpu::Buffer,
+    /// The particles, in Hilbert order.
     pub particles: &'a SplitBuffer,
+    /// The maps' baked tables.
     pub maps: &'a wgpu::Buffer,
+    /// The per-particle radius attribute (and an SPH kernel's volumes).
     pub radius_attribute: &'a wgpu::Buffer,
     /// The bounds kernel's specialisation constants.
     pub variant: Variant,
@@ -59,19 +73,27 @@ pub struct SceneBindings<'a> {
 
 /// The tree's buffers, for up to `capacity` clusters.
 pub struct GpuTree {
+    /// Clusters its buffers hold.
     pub capacity: usize,
     params: wgpu::Buffer,
     /// Cluster boxes and nodes (32 bytes per cluster each): the largest per-cluster arrays,
     /// split over up to `PARTS` buffers; their parts have equal lengths.
     pub boxes: SplitBuffer,
+    /// The clusters' Morton keys (sorted after the sort).
     pub keys: wgpu::Buffer,
+    /// Cluster indices, sorted with the keys.
     pub values: wgpu::Buffer,
     /// Sort scratch; after the sort, the bottom-up pass's height words.
     pub keys_tmp: wgpu::Buffer,
+    /// Sort scratch for the values.
     pub values_tmp: wgpu::Buffer,
+    /// The nodes (node 0 the header, then the internal nodes), split over up to `PARTS` buffers.
     pub nodes: SplitBuffer,
+    /// Each internal node's parent.
     pub node_parents: wgpu::Buffer,
+    /// Each leaf's (cluster's) parent.
     pub leaf_parents: wgpu::Buffer,
+    /// The passes' counters: leaves, depth, a refit's rebuild flag, one word unused.
     pub counters: wgpu::Buffer,
     sort: RadixSort,
 }
@@ -400,9 +422,14 @@ impl GpuTree {
 /// A tree read back from the GPU.
 #[derive(Clone, Debug)]
 pub struct TreeSnapshot {
+    /// The cluster boxes.
     pub boxes: Vec<GpuBox>,
+    /// The Morton keys, sorted.
     pub keys: Vec<u32>,
+    /// Cluster indices in key order.
     pub values: Vec<u32>,
+    /// The hierarchy, as the CPU twin holds it.
     pub lbvh: Lbvh,
+    /// The counters as read: leaves, depth, the rebuild flag, one word unused.
     pub counters: [u32; 4],
 }

@@ -68,6 +68,7 @@ pub enum ErrorMetric {
 }
 
 impl ErrorMetric {
+    /// The name the command line and the scene file use.
     pub fn name(self) -> &'static str {
         match self {
             ErrorMetric::Rmse => "rmse",
@@ -86,8 +87,11 @@ pub fn noise_of_pair(a: &Image, b: &Image) -> f64 {
 /// (0.5 for independent samples; blue noise falls faster while its mask stratifies).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Convergence {
+    /// The frames the noise was last estimated at.
     pub frames: u32,
+    /// The noise (RMSE over linear RGB) at `frames`.
     pub noise: f64,
+    /// The exponent the noise falls with, `noise(N) ∝ N^-rate`, in [0.5, 1].
     pub rate: f64,
 }
 
@@ -121,16 +125,22 @@ impl Convergence {
 /// What a targeted render aims for: an error, a time, or both (whichever is reached first).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Target {
+    /// The error to reach, in `metric`; `None`: only the time budget.
     pub error: Option<f64>,
+    /// The time to render for; `None`: until the error is reached.
     pub time_budget: Option<Duration>,
+    /// How `error` is measured.
     pub metric: ErrorMetric,
     /// The most samples per pixel it may take.
     pub max_spp: u32,
 }
 
 impl Target {
+    /// The default for `max_spp`.
     pub const DEFAULT_MAX_SPP: u32 = 1 << 16;
 
+    /// Rejects a target with neither an error nor a time budget, a non-positive error or budget, or
+    /// fewer than 8 samples per pixel.
     pub fn check(&self) -> Result<(), RenderError> {
         if self.error.is_none() && self.time_budget.is_none() {
             return Err(RenderError::Settings(
@@ -164,18 +174,25 @@ impl Target {
 /// A targeted render's image and what it estimates about it.
 #[derive(Clone, Debug)]
 pub struct Targeted {
+    /// The accumulated image.
     pub image: Image,
+    /// The march step chosen, data units.
     pub step_size: f64,
+    /// Samples per pixel accumulated.
     pub spp: u32,
     /// The estimated error in the target's metric.
     pub estimate: f64,
+    /// The estimated noise (RMSE over linear RGB).
     pub noise_rmse: f64,
+    /// The step's bias as calibrated.
     pub bias: StepBias,
     /// How the noise fell with the frames (the last two estimates).
     pub convergence: Convergence,
     /// Whether the estimate meets the target error (always true with only a time budget).
     pub met: bool,
+    /// Wall time of the whole render, calibration included.
     pub elapsed: Duration,
+    /// Wall time of the calibration alone.
     pub calibration: Duration,
     /// Every frame rendered, the calibration's included, in frames at the starting step (a
     /// frame at twice the step counts a half): the work, free of the machine's speed.

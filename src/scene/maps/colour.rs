@@ -11,7 +11,9 @@ use crate::values::tables::TABLE_SIZE;
 /// One control point of a colour map: position in [0, 1] and an sRGB colour in [0, 1].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ColorPoint {
+    /// Position along the map, in [0, 1].
     pub x: f64,
+    /// sRGB colour, each channel in [0, 1].
     pub rgb: [f64; 3],
 }
 
@@ -20,7 +22,9 @@ pub struct ColorPoint {
 /// colours are averaged and composited in.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ColorMap {
+    /// The preset's name, or the ParaView map's `Name` (`imported` where it has none).
     pub name: String,
+    /// Control points, ascending in `x`.
     pub points: Vec<ColorPoint>,
 }
 
@@ -39,6 +43,7 @@ pub const PRESETS: [&str; 7] = [
 pub(super) const SAMPLES: usize = 256;
 
 impl ColorMap {
+    /// The preset called `name` (one of [`PRESETS`]).
     pub fn preset(name: &str) -> Result<ColorMap, MapError> {
         let gradient = match name {
             "viridis" => Some(colorous::VIRIDIS),

@@ -10,6 +10,7 @@ use super::{MapError, PiecewiseLinear, invalid};
 pub struct DensityMap(pub PiecewiseLinear);
 
 impl DensityMap {
+    /// The density map `map`; an error where it has a negative weight.
     pub fn new(map: PiecewiseLinear) -> Result<DensityMap, MapError> {
         if map.min_value() < 0.0 {
             return Err(invalid(

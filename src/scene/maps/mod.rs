@@ -22,10 +22,22 @@ pub use radius::RadiusMap;
 /// A problem with a map definition.
 #[derive(Debug, thiserror::Error)]
 pub enum MapError {
+    /// A map whose values or control points are out of range.
     #[error("{what}: {problem}")]
-    Invalid { what: String, problem: String },
+    Invalid {
+        /// Which map or value (`"radius map"`, `"density scale"`, ...).
+        what: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// A colour-map file that cannot be read or parsed.
     #[error("cannot read colour map {path}: {problem}")]
-    File { path: String, problem: String },
+    File {
+        /// The file's path.
+        path: String,
+        /// The read or parse error.
+        problem: String,
+    },
 }
 
 pub(crate) fn invalid(what: &str, problem: impl Into<String>) -> MapError {

@@ -37,6 +37,7 @@ impl OpticalDensityMap {
         Ok(OpticalDensityMap { map, scale })
     }
 
+    /// The optical-density map D over Phi / Phi_ref.
     pub fn map(&self) -> &PiecewiseLinear {
         &self.map
     }

@@ -20,6 +20,8 @@ impl ColorMap {
         ColorMap::from_paraview_json(&text).map_err(|e| file_err(e.to_string()))
     }
 
+    /// The map in ParaView's JSON colour-map text: one map, or the first of an array that has
+    /// `RGBPoints`.
     pub fn from_paraview_json(text: &str) -> Result<ColorMap, MapError> {
         let value: serde_json::Value =
             serde_json::from_str(text).map_err(|e| invalid("colour-map JSON", e.to_string()))?;

@@ -16,6 +16,7 @@ pub struct PiecewiseLinear {
 }
 
 impl PiecewiseLinear {
+    /// The map with the value `y` everywhere.
     pub fn constant(y: f64) -> PiecewiseLinear {
         PiecewiseLinear {
             points: vec![[0.0, y], [1.0, y]],
@@ -83,10 +84,12 @@ impl PiecewiseLinear {
             .fold(rounding, f64::max)
     }
 
+    /// The control points `[x, y]`, ascending in x.
     pub fn points(&self) -> &[[f64; 2]] {
         &self.points
     }
 
+    /// The value at `t` (NaN taken as 0).
     pub fn eval(&self, t: f64) -> f64 {
         let p = &self.points;
         let t = if t.is_nan() { 0.0 } else { t };
@@ -109,6 +112,7 @@ impl PiecewiseLinear {
         self.points.iter().all(|p| p[1] == self.points[0][1])
     }
 
+    /// The least value over [0, 1].
     pub fn min_value(&self) -> f64 {
         self.points
             .iter()
@@ -116,6 +120,7 @@ impl PiecewiseLinear {
             .fold(f64::INFINITY, f64::min)
     }
 
+    /// The largest value over [0, 1].
     pub fn max_value(&self) -> f64 {
         self.points
             .iter()

@@ -10,6 +10,7 @@ use super::{MapError, PiecewiseLinear, invalid};
 pub struct RadiusMap(pub PiecewiseLinear);
 
 impl RadiusMap {
+    /// The radius map `map`; an error where a value lies outside [0, 1].
     pub fn new(map: PiecewiseLinear) -> Result<RadiusMap, MapError> {
         if map.min_value() < 0.0 || map.max_value() > 1.0 {
             return Err(invalid(

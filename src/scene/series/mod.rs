@@ -93,9 +93,13 @@ fn read_file_step(
 /// What is known about one step without holding it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepInfo {
+    /// A name for messages: the file name, or the step name in a `.particles` header.
     pub name: String,
+    /// Particles in the step (0 until scanned).
     pub count: usize,
+    /// Bounds of its positions (empty until scanned).
     pub bounds: Bounds,
+    /// Bytes it occupies in memory (its file's size until scanned).
     pub bytes: usize,
     /// Whether count, bounds and bytes come from the step's data (from the index or a scan);
     /// a step not scanned yet has count 0, empty bounds and its file's size as `bytes`.
@@ -147,6 +151,7 @@ pub struct SeriesValues {
     /// Per step; a step not scanned yet has `scanned: false`, count 0, empty bounds and its
     /// file's size as `bytes`.
     pub steps: Vec<StepInfo>,
+    /// Each attribute's statistics merged over the scanned steps.
     pub attributes: Vec<AttributeInfo>,
     /// Bounds over the scanned steps.
     pub bounds: Bounds,
@@ -174,6 +179,7 @@ impl SeriesValues {
         self.scanned < self.steps.len()
     }
 
+    /// The statistics of the attribute called `name`, if the series has it.
     pub fn attribute(&self, name: &str) -> Option<&AttributeInfo> {
         self.attributes.iter().find(|a| a.name == name)
     }
@@ -358,10 +364,12 @@ impl TimeSeries {
         }
     }
 
+    /// How many steps the series has.
     pub fn len(&self) -> usize {
         self.len
     }
 
+    /// Whether the series has no steps.
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
@@ -443,6 +451,7 @@ impl TimeSeries {
         self.shared.values.read().unwrap().steps.get(index).cloned()
     }
 
+    /// Each selected attribute's statistics over the steps scanned so far.
     pub fn attributes(&self) -> Vec<AttributeInfo> {
         self.shared.values.read().unwrap().attributes.clone()
     }
@@ -475,6 +484,8 @@ impl TimeSeries {
         }
     }
 
+    /// The statistics of the attribute called `name` over the steps scanned so far, if the series
+    /// has it.
     pub fn attribute(&self, name: &str) -> Option<AttributeInfo> {
         self.shared.values.read().unwrap().attribute(name).cloned()
     }

@@ -29,20 +29,27 @@ use crate::scene::TimeSeries;
 pub struct Resolved {
     /// The scene file (or an empty one), for the sections a command reads itself.
     pub scene: SceneFile,
+    /// The time series opened from the data.
     pub series: TimeSeries,
+    /// The step to show, counted from 0.
     pub step: usize,
+    /// The field: attribute, ranges, radius, maps, kernel.
     pub field: FieldSettings,
+    /// The BVH's particles per cluster K, as asked or chosen from the data.
     pub cluster: ClusterSize,
     /// Where the data came from, and how it was spelled, for writing a scene file back.
     pub data_path: PathBuf,
+    /// The format asked for; `None`: from the path's extension.
     pub format: Option<Format>,
     /// What was read of files that hold a choice (an HDF5 snapshot's particle type).
     pub read: ReadOptions,
+    /// The colour map as asked (a preset's name or a file); `None`: the default.
     pub colormap: Option<String>,
     /// How long opening the series took, and the steps it decoded: the rest of resolving is
     /// the settings taken from the data (the cluster size, ranges), which `bench playback`
     /// reports apart.
     pub opened_in: std::time::Duration,
+    /// Steps decoded while opening the series.
     pub decoded_at_open: usize,
     /// How the attribute's range was chosen: a per-step range is chosen again for each step
     /// shown ([`Resolved::range_for_step`]).

@@ -35,6 +35,7 @@ mod summary;
 
 pub use summary::summarise;
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "Speed vs accuracy: error against time, the Pareto front",
     paper: "The paper trades image quality for speed with the march step, the samples per pixel, \
@@ -153,6 +154,8 @@ fn configs(o: &Options, k: u32) -> Vec<Config> {
     out
 }
 
+/// Measures every configuration on every data set and backend asked for, recording each row as it
+/// is taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     let mut spps = o.spps.clone();

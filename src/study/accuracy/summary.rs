@@ -122,6 +122,8 @@ fn groups(rows: &[Row]) -> Vec<&Row> {
     out
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let mut notes = Vec::new();
     let mut panels = Vec::new();

@@ -51,6 +51,7 @@ mod tests;
 
 pub use summary::{summarise, table};
 
+/// The study's title, what the paper found and its settings' columns.
 pub const DESCRIPTION: Description = Description {
     title: "f32 against f64 at the extremes",
     paper: "Not a figure of the paper: the field error of each backend's f32 path (and of the \
@@ -114,6 +115,7 @@ pub enum Family {
 }
 
 impl Family {
+    /// The name rows and tables use.
     pub fn name(self) -> &'static str {
         match self {
             Family::Radius => "radius",
@@ -133,8 +135,10 @@ pub enum Inputs {
 }
 
 impl Inputs {
+    /// Both kinds, f64 first.
     pub const BOTH: [Inputs; 2] = [Inputs::F64, Inputs::F32Exact];
 
+    /// The name rows and tables use.
     pub fn name(self) -> &'static str {
         match self {
             Inputs::F64 => "f64",
@@ -147,9 +151,13 @@ impl Inputs {
 /// side) and density weight `weight`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Case {
+    /// The sweep it belongs to.
     pub family: Family,
+    /// The particles' radius as a fraction of the box's side.
     pub radius_fraction: f64,
+    /// Added to every coordinate, in box sides.
     pub offset: f64,
+    /// The density weight w (Phi scales with it).
     pub weight: f64,
 }
 
@@ -252,13 +260,16 @@ pub fn check_sweeps(options: &Options) -> Result<(), String> {
 
 /// A case's data, field settings, bounds and query points for one kind of inputs.
 pub struct Scene {
+    /// The particles.
     pub step: Arc<Step>,
+    /// The field over them.
     pub field: FieldSettings,
     /// The box the particles were drawn in: the series' bounds a backend gets, whose centre is
     /// the origin of its local coordinates.
     pub bounds: Bounds,
     /// The attribute's range the field normalises over.
     pub range: (f64, f64),
+    /// The points Phi and Theta are compared at: each within half a radius of a particle.
     pub queries: Vec<DVec3>,
 }
 
@@ -391,7 +402,9 @@ pub fn precisions(kind: BackendKind) -> Vec<(Precision, &'static str)> {
 /// The errors of one backend's field against the reference.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Errors {
+    /// The largest relative error of Phi.
     pub phi_max: f64,
+    /// The median relative error of Phi.
     pub phi_median: f64,
     /// As a fraction of the attribute's range.
     pub theta_max: f64,
@@ -457,6 +470,8 @@ fn positions_name(p: Option<Representation>) -> &'static str {
     }
 }
 
+/// Measures every case of every sweep on every backend asked for, recording each row as it is
+/// taken.
 pub fn measure(ctx: &mut Ctx<'_>) -> Result<(), StudyError> {
     let o = ctx.options;
     if !o.data.is_empty() {

@@ -121,6 +121,8 @@ pub fn table(rows: &[Row]) -> String {
     out
 }
 
+/// The page's notes (what the rows say against the paper) and the figure, from the rows measured so
+/// far.
 pub fn summarise(rows: &[Row], options: &Options) -> (Vec<String>, Figure) {
     let notes = series_names(rows)
         .iter()

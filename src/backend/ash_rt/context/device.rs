@@ -27,27 +27,41 @@ pub(super) enum DeviceChoice {
 /// Device properties the backend lays its work out by.
 #[derive(Clone, Debug)]
 pub struct DeviceInfo {
+    /// The device's name.
     pub name: String,
     /// A CPU implementation (lavapipe): correct, but slower than the CPU backend.
     pub software: bool,
+    /// The driver's own description of itself (`driverInfo`; empty if none).
     pub driver: String,
+    /// The Vulkan version it supports (`apiVersion`, packed).
     pub api_version: u32,
+    /// Bytes of a shader group handle (`shaderGroupHandleSize`).
     pub handle_size: u32,
+    /// Alignment of a record in a shader binding table (`shaderGroupHandleAlignment`).
     pub handle_alignment: u32,
+    /// Alignment of a shader binding table region's start (`shaderGroupBaseAlignment`).
     pub base_alignment: u32,
+    /// The largest stride of a shader binding table region (`maxShaderGroupStride`).
     pub max_group_stride: u32,
+    /// The most rays one trace launch may generate (`maxRayDispatchInvocationCount`).
     pub max_dispatch_invocations: u32,
+    /// Alignment of an acceleration structure's scratch address
+    /// (`minAccelerationStructureScratchOffsetAlignment`).
     pub scratch_alignment: u64,
+    /// The most primitives (boxes) a BLAS may hold (`maxPrimitiveCount`).
     pub max_primitive_count: u64,
+    /// The largest range of a storage-buffer binding, bytes (`maxStorageBufferRange`).
     pub max_storage_buffer_range: u64,
     /// The largest single allocation (maxMemoryAllocationSize): what bounds the particle and
     /// box buffers, which shaders reach by device address rather than through a binding.
     pub max_allocation: u64,
     /// The size of the largest device-local memory heap: what an out-of-memory error names.
     pub device_local_heap: u64,
+    /// The most workgroups of a compute dispatch per axis (`maxComputeWorkGroupCount`).
     pub max_workgroup_count: [u32; 3],
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period: Option<f64>,
+    /// The bits of a timestamp the queue writes, as a mask (`timestampValidBits`).
     pub timestamp_mask: u64,
 }
 

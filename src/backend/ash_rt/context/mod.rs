@@ -104,8 +104,12 @@ impl From<ContextError> for BackendError {
 /// kernels that prepare a step (push constants only: they reach every array by
 /// address). Made by `Layouts::new` in `pipelines.rs`.
 pub struct Layouts {
+    /// Set 0's descriptor-set layout, reflected from the shaders.
     pub set: vk::DescriptorSetLayout,
+    /// The pipeline layout of the ray-tracing and compute pipelines: set 0 and the `Push`
+    /// constants.
     pub pipeline: vk::PipelineLayout,
+    /// The pipeline layout of the kernels that prepare a step: `PreparePush` constants only.
     pub prepare: vk::PipelineLayout,
 }
 
@@ -123,15 +127,23 @@ pub struct Context {
     _entry: ash::Entry,
     instance: ash::Instance,
     debug: Option<Messenger>,
+    /// The physical device chosen.
     pub physical: vk::PhysicalDevice,
+    /// The logical device.
     pub device: ash::Device,
+    /// `VK_KHR_acceleration_structure`'s functions.
     pub accel: khr::acceleration_structure::Device,
+    /// `VK_KHR_ray_tracing_pipeline`'s functions.
     pub rt: khr::ray_tracing_pipeline::Device,
+    /// The family of the queue every submission goes to.
     pub queue_family: u32,
     queue: Mutex<vk::Queue>,
     allocator: Mutex<Option<Allocator>>,
+    /// The device's properties and limits.
     pub info: DeviceInfo,
+    /// Whether the Khronos validation layer runs (`AARBF_VK_VALIDATION`, else debug builds).
     pub validation: bool,
+    /// The layouts every pipeline uses.
     pub layouts: Layouts,
     pub(crate) rt_pipelines: Mutex<HashMap<(SpecConstants, RtProgram), vk::Pipeline>>,
     pub(crate) compute_pipelines: Mutex<HashMap<(Entry, SpecConstants), vk::Pipeline>>,

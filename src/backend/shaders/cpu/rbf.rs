@@ -9,7 +9,9 @@ use crate::values::Kernel;
 /// Kahan's compensation, in f32, one cluster's sum at a time.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PointSum {
+    /// The running sums: Phi and the Theta numerator.
     pub sum: [f32; 4],
+    /// Kahan's compensation of each sum (0 when summed plainly).
     pub comp: [f32; 4],
 }
 
