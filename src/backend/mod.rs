@@ -120,7 +120,6 @@ pub struct Capabilities {
     pub frame_timer: FrameTimer,
 }
 
-/// Time spent in each stage, for the last time each ran.
 /// How a backend times its frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FrameTimer {
@@ -252,7 +251,6 @@ pub enum BackendError {
     },
 }
 
-/// A rendering and query backend.
 /// The GPU splatters' rule for `k`, the hits a slab's buffer holds (a ray payload or a
 /// kernel's private array of [`crate::values::shader_constants::SPLAT_K_MAX`] entries).
 pub(crate) fn check_gpu_splat_k(backend: &'static str, k: usize) -> Result<(), BackendError> {

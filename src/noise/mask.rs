@@ -140,8 +140,6 @@ impl BlueNoiseMask {
         ((frame as usize % d) * h + (y as usize % h)) * w + (x as usize % w)
     }
 
-    /// The mask's number at pixel (x, y) of frame `frame`, in [0, 1); all coordinates wrap.
-    #[inline]
     /// The toroidal shift of the mask for the cycle of `depth` frames that `frame` lies in: a
     /// new one every cycle, drawn from the seed and the cycle's index. A pixel's numbers in
     /// the next cycle are then another pixel's column of the mask (as stratified over [0, 1)
@@ -154,6 +152,7 @@ impl BlueNoiseMask {
     }
 
     /// The mask's number at pixel (x, y) of frame `frame`, in [0, 1); all coordinates wrap.
+    #[inline]
     pub fn get(&self, x: u32, y: u32, frame: u32) -> f32 {
         f32::from(self.values[self.index(x, y, frame)]) * (1.0 / 65536.0)
     }

@@ -27,9 +27,6 @@ use crate::scene_file::resolve::Resolved as Loaded;
 /// The viewer could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum ViewerError {
-    /// The viewer's state could not be set up; the message says why.
-    #[error("viewer: {0}")]
-    State(String),
     /// eframe could not open or run the window (no display, no adapter, or the app failed to
     /// start); its message.
     #[error("viewer window: {0}")]
