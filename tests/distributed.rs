@@ -17,6 +17,8 @@ use aarbf::scene::{Camera, TimeSeries};
 use aarbf::values::{FrameParams, Integrator, Step};
 use glam::DVec3;
 
+use crate::common;
+
 /// A dam break of 30k particles, its third step (the column has begun to fall).
 struct Scene {
     series: TimeSeries,
@@ -211,14 +213,6 @@ fn single_scattering_is_refused_with_a_reason() {
     );
 }
 
-fn aarbf(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
-        .args(args)
-        .env("AARBF_LOG", "info")
-        .output()
-        .expect("the binary runs")
-}
-
 /// `aarbf render --ranks 3` as a user runs it: the same image as without `--ranks` (the
 /// default termination on: within its threshold), the ranks' counts logged, and what is not
 /// distributed yet refused by name.
@@ -226,52 +220,12 @@ fn aarbf(args: &[&str]) -> std::process::Output {
 fn the_command_line_renders_with_ranks() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let out = aarbf(&[
-        "generate",
-        "dambreak-demo",
-        "--out",
-        d.join("db").to_str().unwrap(),
-        "--count",
-        "4000",
-        "--steps",
-        "3",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let header = String::from_utf8(out.stdout).unwrap().trim().to_owned();
+    let header = common::generated_dam_break(d);
     let render = |name: &str, extra: &[&str]| {
         let path = d.join(name);
-        let mut args = vec![
-            "render",
-            "--data",
-            &header,
-            "--step",
-            "2",
-            "--attribute",
-            "attribute",
-            "--radius",
-            "2%",
-            "--width",
-            "64",
-            "--height",
-            "48",
-            "--spp",
-            "2",
-            "--backend",
-            "cpu",
-            "--precision",
-            "f64",
-            "--up",
-            "y",
-            "--out",
-        ];
-        let path_text = path.to_str().unwrap().to_owned();
-        args.push(&path_text);
-        args.extend_from_slice(extra);
-        let out = aarbf(&args);
+        let mut args = common::dam_break_render_args(&header, &path, (64, 48), 2);
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let out = common::aarbf_logged(&args.iter().map(String::as_str).collect::<Vec<_>>());
         (out, path)
     };
     let (single, single_path) = render("single.exr", &[]);

@@ -6,16 +6,10 @@
 #![cfg(feature = "mpi")]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-use std::time::{Duration, Instant};
+use std::process::Command;
 
-fn aarbf(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_aarbf"))
-        .args(args)
-        .env("AARBF_LOG", "info")
-        .output()
-        .expect("the binary runs")
-}
+use crate::common;
+use std::time::{Duration, Instant};
 
 /// `mpirun -np ranks aarbf args`, as root where the tests run as root, more ranks than cores,
 /// shared memory between the ranks.
@@ -33,57 +27,6 @@ fn mpirun(ranks: usize, args: &[String]) -> Command {
     cmd
 }
 
-/// A dam break of 4000 particles, written by `aarbf generate`; its header's path.
-fn dam_break(dir: &Path) -> String {
-    let out = aarbf(&[
-        "generate",
-        "dambreak-demo",
-        "--out",
-        dir.join("db").to_str().unwrap(),
-        "--count",
-        "4000",
-        "--steps",
-        "3",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap().trim().to_owned()
-}
-
-/// The arguments of a render of the dam break's last step into `out` (linear f32 EXR).
-fn render_args(header: &str, out: &Path, size: (u32, u32), spp: u32) -> Vec<String> {
-    [
-        "render",
-        "--data",
-        header,
-        "--step",
-        "2",
-        "--attribute",
-        "attribute",
-        "--radius",
-        "2%",
-        "--width",
-        &size.0.to_string(),
-        "--height",
-        &size.1.to_string(),
-        "--spp",
-        &spp.to_string(),
-        "--backend",
-        "cpu",
-        "--precision",
-        "f64",
-        "--up",
-        "y",
-        "--out",
-        out.to_str().unwrap(),
-    ]
-    .map(String::from)
-    .to_vec()
-}
-
 fn pixels(path: &Path) -> Vec<f32> {
     image::open(path)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -95,10 +38,10 @@ fn pixels(path: &Path) -> Vec<f32> {
 fn mpi_processes_render_the_image_of_as_many_threads() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let header = dam_break(d);
+    let header = common::generated_dam_break(d);
     let single_path = d.join("single.exr");
-    let single = aarbf(
-        &render_args(&header, &single_path, (64, 48), 2)
+    let single = common::aarbf_logged(
+        &common::dam_break_render_args(&header, &single_path, (64, 48), 2)
             .iter()
             .map(String::as_str)
             .collect::<Vec<_>>(),
@@ -112,9 +55,9 @@ fn mpi_processes_render_the_image_of_as_many_threads() {
     assert!(single.iter().any(|&v| v > 0.05), "the fluid shows");
     for ranks in 1..=4 {
         let threads_path = d.join(format!("threads-{ranks}.exr"));
-        let mut args = render_args(&header, &threads_path, (64, 48), 2);
+        let mut args = common::dam_break_render_args(&header, &threads_path, (64, 48), 2);
         args.extend(["--ranks".into(), ranks.to_string()]);
-        let threads = aarbf(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let threads = common::aarbf_logged(&args.iter().map(String::as_str).collect::<Vec<_>>());
         assert!(
             threads.status.success(),
             "{}",
@@ -124,9 +67,12 @@ fn mpi_processes_render_the_image_of_as_many_threads() {
         let mpi_dir = d.join(format!("mpi-{ranks}"));
         std::fs::create_dir(&mpi_dir).unwrap();
         let mpi_path = mpi_dir.join("image.exr");
-        let out = mpirun(ranks, &render_args(&header, &mpi_path, (64, 48), 2))
-            .output()
-            .expect("mpirun runs (cargo xtask setup --mpi installs Open MPI)");
+        let out = mpirun(
+            ranks,
+            &common::dam_break_render_args(&header, &mpi_path, (64, 48), 2),
+        )
+        .output()
+        .expect("mpirun runs (cargo xtask setup --mpi installs Open MPI)");
         let log = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "mpirun -np {ranks}:\n{log}");
         for rank in 0..ranks {
@@ -213,14 +159,17 @@ fn rank_of(pid: u32) -> Option<usize> {
 fn a_rank_that_dies_ends_the_job_with_a_failure() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let header = dam_break(d);
+    let header = common::generated_dam_break(d);
     let out_path = d.join("never.exr");
     // Long enough (several seconds a rank) that rank 1 is killed mid-render.
-    let mut job = mpirun(3, &render_args(&header, &out_path, (512, 512), 64))
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("mpirun starts");
+    let mut job = mpirun(
+        3,
+        &common::dam_break_render_args(&header, &out_path, (512, 512), 64),
+    )
+    .stdout(std::process::Stdio::null())
+    .stderr(std::process::Stdio::piped())
+    .spawn()
+    .expect("mpirun starts");
     let started = Instant::now();
     let victim = loop {
         let ranks: Vec<(u32, usize)> = descendants(job.id())

@@ -172,3 +172,71 @@ pub(crate) fn aarbf_field(
     let got = (0..m.rows).map(|i| [m.row(i)[0], m.row(i)[1]]).collect();
     (got, stderr)
 }
+
+/// `aarbf ARGS` with the log at `info` (what the distributed tests read: each rank's report),
+/// its exit status and output as they came.
+pub(crate) fn aarbf_logged(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(args)
+        .env("AARBF_LOG", "info")
+        .output()
+        .expect("the binary runs")
+}
+
+/// A dam break of 4000 particles in 3 steps written by `aarbf generate` under `dir`; its
+/// header's path.
+pub(crate) fn generated_dam_break(dir: &std::path::Path) -> String {
+    let out = aarbf_logged(&[
+        "generate",
+        "dambreak-demo",
+        "--out",
+        dir.join("db").to_str().unwrap(),
+        "--count",
+        "4000",
+        "--steps",
+        "3",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap().trim().to_owned()
+}
+
+/// The arguments of `aarbf render` of that dam break's last step into `out` on the CPU in
+/// f64 (the distributed tests compare these images).
+pub(crate) fn dam_break_render_args(
+    header: &str,
+    out: &std::path::Path,
+    size: (u32, u32),
+    spp: u32,
+) -> Vec<String> {
+    [
+        "render",
+        "--data",
+        header,
+        "--step",
+        "2",
+        "--attribute",
+        "attribute",
+        "--radius",
+        "2%",
+        "--width",
+        &size.0.to_string(),
+        "--height",
+        &size.1.to_string(),
+        "--spp",
+        &spp.to_string(),
+        "--backend",
+        "cpu",
+        "--precision",
+        "f64",
+        "--up",
+        "y",
+        "--out",
+        out.to_str().unwrap(),
+    ]
+    .map(String::from)
+    .to_vec()
+}
