@@ -117,6 +117,72 @@ fn mpi_processes_render_the_image_of_as_many_threads() {
     }
 }
 
+/// A SWIFT snapshot as h5py writes it (tests/data/h5py_swift: gas and dark matter, f64
+/// coordinates, a periodic box in its header), rendered as a user would, with no data flags:
+/// the box's periodicity is refused by name with its way out, and the open box renders under
+/// mpirun what the same ranks as threads render.
+#[test]
+fn an_hdf5_snapshot_renders_under_mpirun_as_with_ranks() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A copy: reading writes an index beside the files, and the inputs stay untouched.
+    let data = d.join("swift");
+    std::fs::create_dir(&data).unwrap();
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/h5py_swift");
+    for name in ["snap_0000.hdf5", "snap_0001.hdf5"] {
+        std::fs::copy(fixture.join(name), data.join(name)).unwrap();
+    }
+    let args = |out: &Path| -> Vec<String> {
+        [
+            "render",
+            "--data",
+            data.to_str().unwrap(),
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--spp",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let refused = mpirun(2, &args(&d.join("periodic.exr"))).output().unwrap();
+    let log = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        log.contains("mpirun: a periodic domain is not distributed yet")
+            && log.contains("--no-periodic"),
+        "{log}"
+    );
+    assert!(!d.join("periodic.exr").exists());
+
+    let mut open = args(&d.join("mpi.exr"));
+    open.push("--no-periodic".into());
+    let out = mpirun(2, &open).output().unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{log}");
+    assert!(log.contains("203 particles owned once each"), "{log}");
+    let mut threads = args(&d.join("threads.exr"));
+    threads.extend(["--no-periodic", "--ranks", "2"].map(String::from));
+    let out = common::aarbf_logged(&threads.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (mpi, threads) = (pixels(&d.join("mpi.exr")), pixels(&d.join("threads.exr")));
+    assert!(mpi.iter().any(|&v| v > 0.01), "the gas shows");
+    assert!(
+        mpi.iter()
+            .zip(&threads)
+            .all(|(a, b)| a.to_bits() == b.to_bits()),
+        "mpirun -np 2 differs from --ranks 2"
+    );
+}
+
 /// The processes `root` started, and theirs.
 fn descendants(root: u32) -> Vec<u32> {
     let mut parents: Vec<(u32, u32)> = Vec::new();

@@ -30,6 +30,15 @@ pub(super) enum Ranks {
 }
 
 impl Ranks {
+    /// How the user asked for the ranks, for messages.
+    fn asked_by(&self) -> &'static str {
+        match self {
+            Ranks::Threads(_) => "--ranks",
+            #[cfg(feature = "mpi")]
+            Ranks::Mpi(_) => "mpirun",
+        }
+    }
+
     fn size(&self) -> usize {
         match self {
             Ranks::Threads(n) => *n,
@@ -94,21 +103,22 @@ fn check_supported(
     args: &RenderArgs,
     resolved: &Resolved,
     settings: &RenderSettings,
-    ranks: usize,
+    ranks: &Ranks,
 ) -> anyhow::Result<()> {
-    ensure!(ranks >= 1, "--ranks must be at least 1");
+    let how = ranks.asked_by();
+    ensure!(ranks.size() >= 1, "{how} needs at least 1 rank");
     ensure!(
         matches!(args.backend, BackendKind::Auto | BackendKind::Cpu),
-        "--ranks renders on the cpu backend so far (the {} backend does not render a brick yet)",
+        "{how} renders on the cpu backend so far (the {} backend does not render a brick yet)",
         args.backend
     );
     ensure!(
         args.method == Method::Rbf && settings.splat_k.is_none() && settings.voxel_grid.is_none(),
-        "--ranks renders with --method rbf (the baselines are not distributed)"
+        "{how} renders with --method rbf (the baselines are not distributed)"
     );
     ensure!(
         !args.reference && args.target_error.is_none() && args.time_budget.is_none(),
-        "--ranks renders a set number of samples: --reference, --target-error and \
+        "{how} renders a set number of samples: --reference, --target-error and \
          --time-budget are not distributed yet"
     );
     ensure!(
@@ -117,22 +127,23 @@ fn check_supported(
             .target()
             .map_err(anyhow::Error::msg)?
             .is_none(),
-        "--ranks renders a set number of samples: the scene's target_error and time_budget \
+        "{how} renders a set number of samples: the scene's target_error and time_budget \
          are not distributed yet"
     );
     ensure!(
         resolved.periodic.is_none(),
-        "--ranks: a periodic domain is not distributed yet (ghosts across the wrapped faces)"
+        "{how}: a periodic domain is not distributed yet (ghosts across the wrapped faces); \
+         --no-periodic renders the box open"
     );
     ensure!(
         args.save_scene.is_none(),
-        "--ranks: --save-scene is not distributed yet; save the scene from a single-rank render"
+        "{how}: --save-scene is not distributed yet; save the scene from a single-rank render"
     );
     let spp = resolved.scene.spp();
     if let Some(cycle) = stratified_cycle(settings) {
         ensure!(
             spp <= cycle,
-            "--ranks: {spp} spp of blue noise spans more than one mask cycle ({cycle} frames), \
+            "{how}: {spp} spp of blue noise spans more than one mask cycle ({cycle} frames), \
              whose frames a single-rank render weights by their measured noise; that weighting \
              is not distributed yet: use --spp {cycle} or less, or --noise white"
         );
@@ -153,7 +164,7 @@ pub(super) fn run(
     ranks: Ranks,
 ) -> anyhow::Result<()> {
     let size = ranks.size();
-    check_supported(args, &resolved, &settings, size)?;
+    check_supported(args, &resolved, &settings, &ranks)?;
     let spp = resolved.scene.spp();
     match &ranks {
         Ranks::Threads(_) => tracing::info!(
