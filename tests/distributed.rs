@@ -85,6 +85,7 @@ fn dist_scene(s: &Scene) -> DistScene<'_> {
         series_bounds: s.series.bounds(),
         series_range: s.series.attribute("velocity").map(|a| (a.min, a.max)),
         precision: Precision::F64,
+        periodic: None,
     }
 }
 
@@ -318,4 +319,187 @@ fn emission_absorption_in_f32_matches_to_f32_rounding() {
         eprintln!("P = {p}, f32: max |distributed - single rank| = {diff:.3e}");
         assert!(diff <= 1e-5, "P = {p}: max abs difference {diff:e}");
     }
+}
+
+/// A periodic box, as a cosmological code writes it: particles filling `[0, 1)³` (a few a
+/// rounding outside it, as codes leave them), each felt across the faces through its periodic
+/// images. Every rank wraps its own particles and makes their images; the images are then
+/// exchanged as particles, so a brick at a face sums those across it. The image matches the
+/// single rank's periodic render to rounding at every P, and differs from the open box's
+/// (the test sees the wrap).
+#[test]
+fn a_periodic_box_matches_the_single_rank_to_rounding() {
+    use aarbf::field::PeriodicBox;
+    let n: usize = 6001;
+    // A fixed quasi-random fill (R3 sequence), and every 97th particle pushed 1e-12 past a face.
+    let alpha = [
+        0.819_172_513_396_164_4,
+        0.671_043_606_703_789_2,
+        0.549_700_477_901_970_4,
+    ];
+    let positions: Vec<DVec3> = (0..n)
+        .map(|i| {
+            let p = DVec3::from_array(alpha.map(|a| (0.5 + a * i as f64).fract()));
+            if i % 97 == 0 {
+                p.with_x(1.0 + 1e-12)
+            } else {
+                p
+            }
+        })
+        .collect();
+    let attribute = positions.iter().map(|p| (6.0 * p.y).sin() + p.z).collect();
+    let step = Step {
+        name: "periodic".into(),
+        positions,
+        attributes: vec![aarbf::values::Attribute {
+            name: "a".into(),
+            values: attribute,
+        }],
+    };
+    let series = TimeSeries::from_steps(vec![step.clone()]);
+    let field = FieldSettings::new(Some("a"), 0.11);
+    let range = series.attribute("a").map(|a| (a.min, a.max));
+    let pbox = PeriodicBox::from_origin([1.0; 3]).unwrap();
+    let settings = RenderSettings {
+        width: 96,
+        height: 80,
+        camera: Some(Camera {
+            eye: DVec3::new(2.1, 1.4, 1.9),
+            at: DVec3::splat(0.5),
+            up: DVec3::Y,
+            fovy: 40.0,
+        }),
+        ..RenderSettings::default()
+    };
+    let basis = FrameBasis {
+        bounds: pbox.bounds(),
+        max_count: series.max_count(),
+        periodic: true,
+        field: &field,
+        auto: AutoValues::of(&series, &field).unwrap(),
+    };
+    let frames: Vec<FrameParams> = (0..2)
+        .map(|f| {
+            let mut frame = basis.frame_params(&settings, f).unwrap();
+            frame.opacity_threshold = 2.0;
+            frame
+        })
+        .collect();
+
+    // The single rank, as `render::Session` uploads a periodic step: with its images, the
+    // Hilbert grid over the box grown by the largest reach.
+    let images = pbox.images(&step, &field, range).unwrap();
+    assert_eq!(images.wrapped, n.div_ceil(97));
+    let mut single = CpuBackend::new();
+    single
+        .upload(&StepInput {
+            step: &images.step,
+            field: &field,
+            cluster: ClusterSize::new(4).unwrap(),
+            series_bounds: pbox.bounds().grown(images.largest_reach),
+            series_range: range,
+            precision: Precision::F64,
+        })
+        .unwrap();
+    single.build().unwrap();
+    for f in &frames {
+        single.render(f).unwrap();
+    }
+    let want = single.mean_f64().unwrap();
+    assert!(covered(&want) > 3000, "{} pixels show data", covered(&want));
+
+    let scene = |periodic| DistScene {
+        field: &field,
+        cluster: ClusterSize::new(4).unwrap(),
+        series_bounds: series.bounds(),
+        series_range: range,
+        precision: Precision::F64,
+        periodic,
+    };
+    let render = |ranks: usize, scene: &DistScene<'_>| {
+        run_local(ranks, |comm| {
+            let local = slice_of(&step, comm.rank(), comm.size());
+            render_distributed(comm, &mut CpuBackend::new(), &local, scene, &frames)
+        })
+        .unwrap()
+        .swap_remove(0)
+        .expect("rank 0 holds the image")
+    };
+    let periodic = scene(Some(pbox));
+    let one = render(1, &periodic);
+    assert!(one.mean == want, "P = 1: {:e}", max_abs(&one.mean, &want));
+    for p in [2, 3, 5, 8] {
+        let got = render(p, &periodic);
+        let diff = max_abs(&got.mean, &want);
+        let owned: u64 = got.reports.iter().map(|r| r.owned).sum();
+        eprintln!("periodic, P = {p}: max |distributed - single rank| = {diff:.3e}");
+        assert_eq!(
+            owned as usize,
+            images.step.len(),
+            "particles and images owned once"
+        );
+        assert!(diff <= 1e-12, "P = {p}: max abs difference {diff:e}");
+    }
+    let open = render(3, &scene(None));
+    let seen = max_abs(&open.mean, &want);
+    assert!(
+        seen > 1e-3,
+        "the open box renders the periodic image ({seen:e})"
+    );
+}
+
+/// A SWIFT snapshot as h5py writes it (tests/data/h5py_swift: two particle types, a periodic
+/// box in its header) rendered as a user would, with no data flags: `--ranks 3` renders the
+/// periodic box as one rank does, within the opacity threshold's remainder.
+#[test]
+fn an_hdf5_snapshot_in_a_periodic_box_renders_with_ranks() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A copy: reading writes an index beside the files, and the inputs stay untouched.
+    let data = d.join("swift");
+    std::fs::create_dir(&data).unwrap();
+    let fixture = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/h5py_swift");
+    for name in ["snap_0000.hdf5", "snap_0001.hdf5"] {
+        std::fs::copy(fixture.join(name), data.join(name)).unwrap();
+    }
+    let render = |name: &str, extra: &[&str]| {
+        let out = d.join(name);
+        let mut args = vec![
+            "render",
+            "--data",
+            data.to_str().unwrap(),
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--spp",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let run = common::aarbf_logged(&args);
+        let log = String::from_utf8_lossy(&run.stderr).into_owned();
+        assert!(run.status.success(), "{log}");
+        (image::open(&out).unwrap().to_rgba32f(), log)
+    };
+    let (single, _) = render("single.exr", &[]);
+    let (ranked, log) = render("ranks.exr", &["--ranks", "3"]);
+    assert!(log.contains("periodic box"), "{log}");
+    let (open, _) = render("open.exr", &["--ranks", "3", "--no-periodic"]);
+    let diff = |a: &image::Rgba32FImage, b: &image::Rgba32FImage| {
+        a.as_raw()
+            .iter()
+            .zip(b.as_raw())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max)
+    };
+    assert!(single.as_raw().iter().any(|&v| v > 0.01), "the gas shows");
+    let d_ranked = diff(&single, &ranked);
+    eprintln!("h5py SWIFT, periodic: max |--ranks 3 - single rank| = {d_ranked:e}");
+    assert!(d_ranked <= 0.01, "--ranks 3 differs by {d_ranked}");
+    assert!(
+        diff(&single, &open) > d_ranked,
+        "the open box renders as the periodic one"
+    );
 }

@@ -119,8 +119,7 @@ fn mpi_processes_render_the_image_of_as_many_threads() {
 
 /// A SWIFT snapshot as h5py writes it (tests/data/h5py_swift: gas and dark matter, f64
 /// coordinates, a periodic box in its header), rendered as a user would, with no data flags:
-/// the box's periodicity is refused by name with its way out, and the open box renders under
-/// mpirun what the same ranks as threads render.
+/// the periodic box renders under mpirun what the same ranks as threads render, bit for bit.
 #[test]
 fn an_hdf5_snapshot_renders_under_mpirun_as_with_ranks() {
     let dir = tempfile::tempdir().unwrap();
@@ -149,24 +148,13 @@ fn an_hdf5_snapshot_renders_under_mpirun_as_with_ranks() {
         .map(String::from)
         .to_vec()
     };
-    let refused = mpirun(2, &args(&d.join("periodic.exr"))).output().unwrap();
-    let log = String::from_utf8_lossy(&refused.stderr);
-    assert!(!refused.status.success());
-    assert!(
-        log.contains("mpirun: a periodic domain is not distributed yet")
-            && log.contains("--no-periodic"),
-        "{log}"
-    );
-    assert!(!d.join("periodic.exr").exists());
-
-    let mut open = args(&d.join("mpi.exr"));
-    open.push("--no-periodic".into());
-    let out = mpirun(2, &open).output().unwrap();
+    // The header's box is periodic: each rank wraps its particles and exchanges their images.
+    let out = mpirun(2, &args(&d.join("mpi.exr"))).output().unwrap();
     let log = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{log}");
-    assert!(log.contains("203 particles owned once each"), "{log}");
+    assert!(log.contains("periodic box"), "{log}");
     let mut threads = args(&d.join("threads.exr"));
-    threads.extend(["--no-periodic", "--ranks", "2"].map(String::from));
+    threads.extend(["--ranks", "2"].map(String::from));
     let out = common::aarbf_logged(&threads.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(
         out.status.success(),

@@ -11,7 +11,7 @@ use super::exchange::{decompose, exchange};
 use crate::accel::ClusterSize;
 use crate::backend::precision::PositionKind;
 use crate::backend::{Backend, Precision, StepInput};
-use crate::field::{FieldSettings, particle_reaches};
+use crate::field::{FieldSettings, PeriodicBox, particle_reaches};
 use crate::values::{Bounds, FrameParams, Image, Integrator, Step};
 
 /// What every rank renders with: the same on all of them (series-wide values, never one
@@ -22,12 +22,20 @@ pub struct DistScene<'a> {
     pub field: &'a FieldSettings,
     /// The cluster size every brick's BVH is built with.
     pub cluster: ClusterSize,
-    /// The series' bounds: the Hilbert grid and local origin of every brick.
+    /// The series' bounds: the Hilbert grid and local origin of every brick (with a periodic
+    /// box, the box grown by the largest reach of any rank's particles instead, as a single
+    /// rank grows it by its step's).
     pub series_bounds: Bounds,
     /// The attribute's range over the series (never a brick's).
     pub series_range: Option<(f64, f64)>,
     /// Asked of every brick; where bricks would choose differently (`auto`), all take f64.
     pub precision: Precision,
+    /// The box whose faces wrap, if any. Each rank wraps its own particles into it and makes
+    /// their periodic images ([`PeriodicBox::images`], the single rank's rule, which looks at
+    /// one particle at a time); the images then go through the exchange as particles, owned by
+    /// the leaf that holds them and ghosts of the leaves they reach, so a brick at a face sums
+    /// the particles across it.
+    pub periodic: Option<PeriodicBox>,
 }
 
 /// What one rank did, for the log and the benchmarks.
@@ -131,6 +139,35 @@ fn check_frames(frames: &[FrameParams]) -> Result<(), DistError> {
     Ok(())
 }
 
+/// With a periodic box, `local` wrapped into it with its periodic images, and the bounds every
+/// brick is prepared with: the box grown by the largest reach over all ranks (one all-gather),
+/// as the single rank grows it by its step's. Without one, nothing and the series' bounds.
+fn periodic_images(
+    comm: &dyn Comm,
+    local: &Step,
+    scene: &DistScene<'_>,
+) -> Result<(Option<Step>, Bounds), DistError> {
+    let Some(periodic) = &scene.periodic else {
+        return Ok((None, scene.series_bounds));
+    };
+    let images = periodic.images(local, scene.field, scene.series_range)?;
+    if images.wrapped > 0 {
+        tracing::info!(
+            "step '{}': {} particles outside the periodic box wrapped into it (rank {})",
+            local.name,
+            images.wrapped,
+            comm.rank()
+        );
+    }
+    let largest = comm
+        .all_gather_of(&[images.largest_reach])?
+        .iter()
+        .flatten()
+        .fold(0.0, |a: f64, &b| a.max(b));
+    let step = Arc::try_unwrap(images.step).unwrap_or_else(|shared| (*shared).clone());
+    Ok((Some(step), periodic.bounds().grown(largest)))
+}
+
 fn upload(
     backend: &mut dyn Backend,
     step: &Arc<Step>,
@@ -166,10 +203,17 @@ pub fn render_distributed(
     };
 
     let started = Instant::now();
+    let (with_images, bounds) = periodic_images(comm, local, scene)?;
+    let local = with_images.as_ref().unwrap_or(local);
+    let scene = &DistScene {
+        series_bounds: bounds,
+        ..*scene
+    };
     let reaches = particle_reaches(local, scene.field, scene.series_range)?;
     let tree = decompose(comm, &local.positions)?;
     let (brick, counts) = exchange(comm, &tree, local, &reaches)?;
     drop(reaches);
+    drop(with_images);
     report.owned = brick.owned as u64;
     report.ghosts = brick.ghosts() as u64;
     report.particle_bytes = counts.bytes_sent as u64;

@@ -402,6 +402,7 @@ fn empty_bricks_render_nothing_and_break_nothing() {
         series_bounds: step.bounds(),
         series_range: Some((0.0, 3.0)),
         precision: Precision::F64,
+        periodic: None,
     };
     let mut single = CpuBackend::new();
     single

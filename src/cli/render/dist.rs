@@ -131,11 +131,6 @@ fn check_supported(
          are not distributed yet"
     );
     ensure!(
-        resolved.periodic.is_none(),
-        "{how}: a periodic domain is not distributed yet (ghosts across the wrapped faces); \
-         --no-periodic renders the box open"
-    );
-    ensure!(
         args.save_scene.is_none(),
         "{how}: --save-scene is not distributed yet; save the scene from a single-rank render"
     );
@@ -177,6 +172,14 @@ pub(super) fn run(
             comm.rank()
         ),
     }
+    if let Some(b) = &resolved.periodic {
+        tracing::info!(
+            "periodic box from {:?} of sides {:?}: each rank wraps its particles into it and \
+             exchanges their images across the faces as particles",
+            b.min.to_array(),
+            b.size.to_array()
+        );
+    }
     for frame in frames {
         let started = Instant::now();
         settings.camera = Some(frame.camera);
@@ -185,7 +188,7 @@ pub(super) fn run(
         let basis = FrameBasis {
             bounds: resolved.domain(),
             max_count: resolved.series.max_count(),
-            periodic: false,
+            periodic: resolved.periodic.is_some(),
             field: &resolved.field,
             auto,
         };
@@ -200,6 +203,7 @@ pub(super) fn run(
             series_bounds: resolved.series.bounds(),
             series_range: resolved.series_range(),
             precision,
+            periodic: resolved.periodic,
         };
         let rank_body = |comm: &dyn Comm| {
             let local = slice_of(&step, comm.rank(), comm.size());
