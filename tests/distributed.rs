@@ -503,3 +503,74 @@ fn an_hdf5_snapshot_in_a_periodic_box_renders_with_ranks() {
         "the open box renders as the periodic one"
     );
 }
+
+/// `aarbf bench distributed` as a user runs it: a row per run and rank in the CSV, each run's
+/// particles owned once over its ranks, the summary's two tables, and no overwrite without
+/// `--force`.
+#[test]
+fn the_scaling_benchmark_reports_every_rank() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    let args = [
+        "bench",
+        "distributed",
+        "--ranks",
+        "1,3",
+        "--count",
+        "3001",
+        "--weak-count",
+        "1500",
+        "--size",
+        "48x40",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let summary = common::aarbf_ok(&args);
+    assert!(
+        summary.contains("## Strong scaling") && summary.contains("## Weak scaling"),
+        "{summary}"
+    );
+    let csv = std::fs::read_to_string(out.join("distributed.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    // Strong: 1 + 3 ranks; weak: 1 + 3 ranks.
+    assert_eq!(rows.len(), 8, "{csv}");
+    for (scaling, ranks, particles) in [
+        ("strong", 1, 3001),
+        ("strong", 3, 3001),
+        ("weak", 1, 1500),
+        ("weak", 3, 4500),
+    ] {
+        let run: Vec<&Vec<&str>> = rows
+            .iter()
+            .filter(|r| r[col("scaling")] == scaling && r[col("ranks")] == ranks.to_string())
+            .collect();
+        assert_eq!(run.len(), ranks, "{scaling} {ranks}: {csv}");
+        let sum = |name: &str| -> u64 {
+            run.iter()
+                .map(|r| r[col(name)].parse::<u64>().unwrap())
+                .sum()
+        };
+        assert_eq!(sum("owned"), particles, "{scaling} {ranks}");
+        assert_eq!(sum("read"), particles, "{scaling} {ranks}");
+        assert!(
+            run.iter()
+                .all(|r| r[col("render_cpu_s")].parse::<f64>().unwrap() > 0.0)
+        );
+        assert!(
+            run.iter()
+                .all(|r| r[col("memory_bytes")].parse::<u64>().unwrap() > 0)
+        );
+        if ranks > 1 {
+            assert!(
+                sum("ghosts") > 0 && sum("tile_bytes") > 0,
+                "{scaling} {ranks}"
+            );
+        }
+    }
+    let again = common::aarbf_logged(&args);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+}

@@ -16,6 +16,7 @@
 //! tests); `MpiComm` (the `mpi` feature) runs them as the processes of an MPI job
 //! (`mpirun -np N aarbf render`). Emission–absorption only, on the CPU backend, so far.
 
+pub(crate) mod clock;
 pub mod comm;
 pub mod composite;
 pub mod exchange;

@@ -2,9 +2,9 @@
 //! brick's samples, composite by direct send and accumulate; the image gathered at rank 0.
 
 use std::sync::Arc;
-use std::time::Instant;
 
 use super::DistError;
+use super::clock::StageClock;
 use super::comm::{Comm, CommExt};
 use super::composite::{TileGrid, TileSums, assemble, direct_send, screen_rect};
 use super::exchange::{decompose, exchange};
@@ -64,6 +64,19 @@ pub struct RankReport {
     pub render_seconds: f64,
     /// Seconds compositing (all frames).
     pub composite_seconds: f64,
+    /// CPU seconds of the rank's own thread in the same four stages: its work alone where it
+    /// runs on one thread (waiting in a collective is not charged), as `aarbf bench
+    /// distributed` runs each rank; with more threads, only the calling thread's share.
+    pub exchange_cpu_seconds: f64,
+    /// CPU seconds building (see [`RankReport::exchange_cpu_seconds`]).
+    pub build_cpu_seconds: f64,
+    /// CPU seconds rendering (see [`RankReport::exchange_cpu_seconds`]).
+    pub render_cpu_seconds: f64,
+    /// CPU seconds compositing (see [`RankReport::exchange_cpu_seconds`]).
+    pub composite_cpu_seconds: f64,
+    /// Bytes the rank holds for its brick: the brick's particles (position and attributes in
+    /// f64), the backend's arrays and structures, and its largest layer.
+    pub memory_bytes: u64,
 }
 
 /// The image at the root: the mean of the frames per pixel, in f64.
@@ -168,6 +181,16 @@ fn periodic_images(
     Ok((Some(step), periodic.bounds().grown(largest)))
 }
 
+/// The bytes of a step's positions and attributes.
+fn step_bytes(step: &Step) -> usize {
+    std::mem::size_of_val(step.positions.as_slice())
+        + step
+            .attributes
+            .iter()
+            .map(|a| std::mem::size_of_val(a.values.as_slice()))
+            .sum::<usize>()
+}
+
 fn upload(
     backend: &mut dyn Backend,
     step: &Arc<Step>,
@@ -202,7 +225,7 @@ pub fn render_distributed(
         ..RankReport::default()
     };
 
-    let started = Instant::now();
+    let clock = StageClock::start();
     let (with_images, bounds) = periodic_images(comm, local, scene)?;
     let local = with_images.as_ref().unwrap_or(local);
     let scene = &DistScene {
@@ -217,9 +240,9 @@ pub fn render_distributed(
     report.owned = brick.owned as u64;
     report.ghosts = brick.ghosts() as u64;
     report.particle_bytes = counts.bytes_sent as u64;
-    report.exchange_seconds = started.elapsed().as_secs_f64();
+    (report.exchange_seconds, report.exchange_cpu_seconds) = clock.stop();
 
-    let started = Instant::now();
+    let clock = StageClock::start();
     let leaf = brick.leaf;
     let step = Arc::new(brick.step);
     upload(backend, &step, scene, scene.precision)?;
@@ -236,7 +259,7 @@ pub fn render_distributed(
         upload(backend, &step, scene, Precision::F64)?;
     }
     report.f64_positions = u64::from(any_f64);
-    report.build_seconds = started.elapsed().as_secs_f64();
+    (report.build_seconds, report.build_cpu_seconds) = clock.stop();
 
     let grid = TileGrid {
         width: frames[0].width,
@@ -244,23 +267,35 @@ pub fn render_distributed(
         ranks: comm.size(),
     };
     let mut sums = TileSums::new(grid, comm.rank());
+    let mut largest_layer = 0;
     for frame in frames {
-        let started = Instant::now();
+        let clock = StageClock::start();
         let march_box = Bounds {
             min: frame.box_min,
             max: frame.box_max,
         };
         let rect = screen_rect(frame, leaf.clipped_to(march_box));
         let layer = backend.render_owned(frame, &leaf, rect)?;
-        report.render_seconds += started.elapsed().as_secs_f64();
+        largest_layer = largest_layer.max(std::mem::size_of_val(layer.as_slice()));
+        let (wall, cpu) = clock.stop();
+        report.render_seconds += wall;
+        report.render_cpu_seconds += cpu;
 
-        let started = Instant::now();
+        let clock = StageClock::start();
         let order = tree.front_to_back(frame.camera.eye);
         let blended = direct_send(comm, &grid, rect, &layer, &order)?;
         sums.add(&blended.tiles, frame.background);
         report.tile_bytes += blended.bytes_sent as u64;
-        report.composite_seconds += started.elapsed().as_secs_f64();
+        let (wall, cpu) = clock.stop();
+        report.composite_seconds += wall;
+        report.composite_cpu_seconds += cpu;
     }
+    let memory = backend.memory();
+    report.memory_bytes = (step_bytes(&step)
+        + memory.particle_bytes
+        + memory.structure_bytes
+        + memory.image_bytes
+        + largest_layer) as u64;
 
     let tiles = comm.gather_of(0, &sums.flat())?;
     let reports = comm.gather_of(0, &[report])?;

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::{Args, Subcommand};
 
+mod distributed;
 mod interactive;
 mod study;
 
@@ -63,6 +64,10 @@ pub enum BenchCommand {
     Extremes(study::StudyArgs),
     /// Every study above in turn, with the same options.
     All(study::StudyArgs),
+    /// Strong and weak scaling of the distributed renderer (docs/distributed.md): each rank's
+    /// bytes, times and memory per stage on the generated dam break, ranks as threads of one
+    /// thread each, P ranks on P cores modelled from their own CPU times.
+    Distributed(distributed::DistributedArgs),
 }
 
 #[derive(Debug, Args)]
@@ -117,6 +122,7 @@ pub(super) fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchCommand::Accuracy(a) => study::run(Some(Study::Accuracy), &a),
         BenchCommand::Extremes(a) => study::run(Some(Study::Extremes), &a),
         BenchCommand::All(a) => study::run(None, &a),
+        BenchCommand::Distributed(a) => distributed::run(a),
     }
 }
 
