@@ -44,6 +44,11 @@ pub struct DistributedArgs {
     /// Frames accumulated (samples per pixel).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
+    /// Early ray termination: the opacity a ray stops at (each brick stops on its own, so
+    /// bricks behind an opaque one render what a single rank skips); 1 composites every
+    /// sample.
+    #[arg(long, default_value_t = 0.99)]
+    pub opacity_threshold: f64,
     /// The particles' radius as a fraction of the step's diagonal.
     #[arg(long, default_value_t = 0.01)]
     pub radius: f64,
@@ -251,6 +256,7 @@ fn frames(
     let settings = RenderSettings {
         width: args.size.0,
         height: args.size.1,
+        opacity_threshold: args.opacity_threshold,
         ..RenderSettings::default()
     };
     let basis = FrameBasis {
@@ -344,9 +350,9 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
     let _ = writeln!(
         md,
         "# Distributed rendering: scaling\n\n`aarbf bench distributed --ranks {} --count {} \
-         --weak-count {} --size {w}x{h} --frames {} --radius {}`: the generated dam break's \
-         third step, radius {} of its diagonal, CPU backend (f32, K = 16), emission-absorption, {w}x{h}, \
-         {} frame(s).\n\nEach rank runs as a thread of one process in a pool of one thread; its \
+         --weak-count {} --size {w}x{h} --frames {} --radius {} --opacity-threshold {}`: the \
+         generated dam break's third step, radius {} of its diagonal, CPU backend (f32, K = 16), \
+         emission-absorption, {w}x{h}, {} frame(s).\n\nEach rank runs as a thread of one process in a pool of one thread; its \
          times are its thread's CPU seconds, its work alone however many ranks share the cores. \
          T(P) models P ranks on P cores: the slowest rank's work plus the communication, \
          α·messages + β·bytes of the rank that sends most, with α = {:.1} µs and β = 1/({:.2} GB/s) \
@@ -361,6 +367,7 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
         args.weak_count,
         args.frames,
         args.radius,
+        args.opacity_threshold,
         args.radius,
         args.frames,
         link.alpha * 1e6,
