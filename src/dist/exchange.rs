@@ -10,6 +10,7 @@
 use glam::DVec3;
 
 use super::DistError;
+use super::balance::CostModel;
 use super::comm::{Comm, CommExt};
 use super::kd::{KdTree, WeightedPoint};
 use crate::values::{Attribute, HalfOpenBox, Step};
@@ -20,15 +21,23 @@ pub const SAMPLE_PER_RANK: usize = 256;
 
 /// The k-d tree of `comm.size()` leaves over the ranks' particles, from at most
 /// [`SAMPLE_PER_RANK`] of each rank's `positions`, each weighted by the particles it stands
-/// for; every rank gathers the same sample and builds the same tree.
-pub fn decompose(comm: &dyn Comm, positions: &[DVec3]) -> Result<KdTree, DistError> {
+/// for (times its cost in `cost`, where given: [`CostModel`]); every rank gathers the same
+/// sample and builds the same tree.
+pub fn decompose(
+    comm: &dyn Comm,
+    positions: &[DVec3],
+    cost: Option<&CostModel>,
+) -> Result<KdTree, DistError> {
     let n = positions.len();
     let s = n.min(SAMPLE_PER_RANK);
     let weight = n as f64 / s.max(1) as f64;
     let mine: Vec<WeightedPoint> = (0..s)
-        .map(|k| WeightedPoint {
-            at: positions[k * n / s].to_array(),
-            weight,
+        .map(|k| {
+            let at = positions[k * n / s];
+            WeightedPoint {
+                at: at.to_array(),
+                weight: weight * cost.map_or(1.0, |c| c.at(at)),
+            }
         })
         .collect();
     let sample: Vec<WeightedPoint> = comm.all_gather_of(&mine)?.concat();

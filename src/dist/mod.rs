@@ -16,6 +16,7 @@
 //! tests); `MpiComm` (the `mpi` feature) runs them as the processes of an MPI job
 //! (`mpirun -np N aarbf render`). Emission–absorption only, on the CPU backend, so far.
 
+pub mod balance;
 pub(crate) mod clock;
 pub mod comm;
 pub mod composite;
@@ -26,11 +27,12 @@ pub mod local;
 pub mod mpi_comm;
 mod render;
 
+pub use balance::{Balance, CostModel};
 pub use comm::{Comm, CommError, CommExt, Parts, launched_size, node_local_size};
 pub use local::{LocalComm, run_local};
 #[cfg(feature = "mpi")]
 pub use mpi_comm::MpiComm;
-pub use render::{DistImage, DistScene, RankReport, render_distributed, slice_of};
+pub use render::{DistImage, DistScene, RankReport, render_balanced, render_distributed, slice_of};
 
 use crate::backend::BackendError;
 use crate::field::FieldError;

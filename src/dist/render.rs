@@ -4,6 +4,7 @@
 use std::sync::Arc;
 
 use super::DistError;
+use super::balance::CostModel;
 use super::clock::StageClock;
 use super::comm::{Comm, CommExt};
 use super::composite::{TileGrid, TileSums, assemble, direct_send, screen_rect};
@@ -211,7 +212,8 @@ fn upload(
 
 /// Renders `frames` (one accumulation: the same size, any camera) of the step whose part this
 /// rank read is `local`, on `backend`, and returns the image at rank 0 (`None` elsewhere).
-/// Every rank calls it with its own `local` and the same `scene` and `frames`.
+/// Every rank calls it with its own `local` and the same `scene` and `frames`. The leaves
+/// hold equal particles; [`render_balanced`] balances them by a measured cost.
 pub fn render_distributed(
     comm: &dyn Comm,
     backend: &mut dyn Backend,
@@ -219,6 +221,22 @@ pub fn render_distributed(
     scene: &DistScene<'_>,
     frames: &[FrameParams],
 ) -> Result<Option<DistImage>, DistError> {
+    render_balanced(comm, backend, local, scene, frames, None).map(|(image, _)| image)
+}
+
+/// [`render_distributed`] with the leaves balanced by `cost` (equal particles where `None`),
+/// returning, on every rank, what this render measured: each leaf's render seconds per
+/// particle it owned, for the next decomposition. A rank's render time is its thread's CPU
+/// time where it runs on one thread (its own work, whatever else shares the core), and the
+/// wall time otherwise (its threads are its own cores under MPI).
+pub fn render_balanced(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    local: &Step,
+    scene: &DistScene<'_>,
+    frames: &[FrameParams],
+    cost: Option<&CostModel>,
+) -> Result<(Option<DistImage>, CostModel), DistError> {
     check_frames(frames)?;
     let mut report = RankReport {
         read: local.len() as u64,
@@ -233,7 +251,7 @@ pub fn render_distributed(
         ..*scene
     };
     let reaches = particle_reaches(local, scene.field, scene.series_range)?;
-    let tree = decompose(comm, &local.positions)?;
+    let tree = decompose(comm, &local.positions, cost)?;
     let (brick, counts) = exchange(comm, &tree, local, &reaches)?;
     drop(reaches);
     drop(with_images);
@@ -297,21 +315,34 @@ pub fn render_distributed(
         + memory.image_bytes
         + largest_layer) as u64;
 
+    let seconds = if rayon::current_num_threads() == 1 {
+        report.render_cpu_seconds
+    } else {
+        report.render_seconds
+    };
+    let measured: Vec<(f64, f64)> = comm
+        .all_gather_of(&[report.owned as f64, seconds])?
+        .iter()
+        .map(|v| (v.first().copied().unwrap_or(0.0), v.get(1).copied().unwrap_or(0.0)))
+        .collect();
+    let measured = CostModel::new(tree, &measured);
+
     let tiles = comm.gather_of(0, &sums.flat())?;
     let reports = comm.gather_of(0, &[report])?;
     let (Some(tiles), Some(reports)) = (tiles, reports) else {
-        return Ok(None);
+        return Ok((None, measured));
     };
     let n = f64::from(sums.frames.max(1));
     let mean = assemble(&grid, &tiles)?
         .into_iter()
         .map(|s| s.map(|v| v / n))
         .collect();
-    Ok(Some(DistImage {
+    let image = DistImage {
         width: grid.width,
         height: grid.height,
         frames: sums.frames,
         mean,
         reports: reports.concat(),
-    }))
+    };
+    Ok((Some(image), measured))
 }
