@@ -1,5 +1,5 @@
 """sarracen's grid interpolation on the same particles as `aarbf field --grid`, for a side-by-side
-throughput figure (docs/benchmarks.md, "The field on a regular grid").
+throughput figure (docs/benchmarks.md, "Against other tools").
 
     python3 -m venv /tmp/sarracen && /tmp/sarracen/bin/pip install sarracen scikit-learn
     aarbf generate uniform --count 1000000 --format npy --out /tmp/u1m

@@ -1,6 +1,6 @@
 """sarracen's SPH grid interpolation against `aarbf field --grid --kernel sph-cubic` on the same
 particles, for a side-by-side throughput figure and a statement of agreement (docs/benchmarks.md,
-"SPH kernels against sarracen").
+"Against other tools").
 
     python3 -m venv /tmp/sarracen && /tmp/sarracen/bin/pip install sarracen scikit-learn
     aarbf generate uniform --count 1000000 --format npy --out /tmp/u1m

@@ -50,11 +50,9 @@ vec3 scattered(vec3 x, vec3 albedo, float shadow_jitter) {
 
 // The radiance of a pixel in this frame: linear RGB and opacity.
 vec4 render_pixel(uvec2 pixel) {
+    vec3 origin, dir;
+    vec2 span = primary_span(pixel, origin, dir);
     vec3 bg = frame.background.rgb;
-    vec3 origin;
-    vec3 dir;
-    primary_ray(pixel, origin, dir);
-    vec2 span = ray_box(origin, dir, frame.box_min.xyz, frame.box_max.xyz);
     if (!(span.x < span.y)) {
         return vec4(bg, 0.0);
     }

@@ -47,3 +47,10 @@ void primary_ray(uvec2 pixel, out vec3 origin, out vec3 dir) {
     origin = frame.eye.xyz;
     dir = normalize(frame.forward.xyz + frame.right.xyz * sx + frame.up.xyz * sy);
 }
+
+// The primary ray of a pixel, and the part of it in the march box: (enter, exit), empty
+// (!(x < y)) where the ray misses the box.
+vec2 primary_span(uvec2 pixel, out vec3 origin, out vec3 dir) {
+    primary_ray(pixel, origin, dir);
+    return ray_box(origin, dir, frame.box_min.xyz, frame.box_max.xyz);
+}

@@ -11,11 +11,9 @@
 // Knoll et al.'s; the CPU twin skips them (the image is the same).
 
 vec4 splat_pixel(uvec2 pixel) {
+    vec3 origin, dir;
+    vec2 span = primary_span(pixel, origin, dir);
     vec3 bg = frame.background.rgb;
-    vec3 origin;
-    vec3 dir;
-    primary_ray(pixel, origin, dir);
-    vec2 span = ray_box(origin, dir, frame.box_min.xyz, frame.box_max.xyz);
     if (!(span.x < span.y)) {
         return vec4(bg, 0.0);
     }

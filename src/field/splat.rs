@@ -210,6 +210,20 @@ mod tests {
     use crate::field::FieldSettings;
     use crate::values::{Attribute, Bounds, Step};
 
+    /// [`ReferenceField::splat_ray`] along +x from `(x0, 0, 0)` over t in `[0, t1]`, slabs 1
+    /// long, at most `k` hits a slab.
+    fn along_x(
+        field: &ReferenceField,
+        x0: f64,
+        t1: f64,
+        k: usize,
+        scratch: &mut SplatScratch,
+        composite: impl FnMut(&[SplatHit]) -> bool,
+    ) -> SplatCounts {
+        let origin = DVec3::new(x0, 0.0, 0.0);
+        field.splat_ray(origin, DVec3::X, 0.0, t1, 1.0, k, scratch, composite)
+    }
+
     fn field_of(centers: Vec<DVec3>, radius: f64, k: u32) -> ReferenceField {
         let n = centers.len();
         let step = Step {
@@ -255,19 +269,12 @@ mod tests {
         let field = field_of(centers, 0.5, 2);
         let mut scratch = SplatScratch::default();
         let mut slabs = Vec::new();
-        let counts = field.splat_ray(
-            DVec3::new(-1.0, 0.0, 0.0),
-            DVec3::X,
-            0.0,
-            10.0,
-            1.0,
-            8,
-            &mut scratch,
-            |hits| {
-                slabs.push(hits.iter().map(|h| h.t).collect::<Vec<_>>());
-                true
-            },
-        );
+        let mut phis = Vec::new();
+        let counts = along_x(&field, -1.0, 10.0, 8, &mut scratch, |hits| {
+            slabs.push(hits.iter().map(|h| h.t).collect::<Vec<_>>());
+            phis.extend(hits.iter().map(|h| (h.phi, h.length)));
+            true
+        });
         let close = |a: &[f64], b: &[f64]| {
             a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12)
         };
@@ -278,20 +285,7 @@ mod tests {
         }
         assert_eq!(counts, SplatCounts { kept: 6, lost: 0 });
         let expected_phi = (-4.5f64 * 0.01 / 0.25).exp();
-        let mut phis = Vec::new();
-        field.splat_ray(
-            DVec3::new(-1.0, 0.0, 0.0),
-            DVec3::X,
-            0.0,
-            10.0,
-            1.0,
-            8,
-            &mut scratch,
-            |hits| {
-                phis.extend(hits.iter().map(|h| (h.phi, h.length)));
-                true
-            },
-        );
+        assert_eq!(phis.len(), 6);
         for (phi, length) in phis {
             assert!((phi - expected_phi).abs() < 1e-12);
             assert!((length - chord_length(0.5, 0.01)).abs() < 1e-12);
@@ -307,52 +301,25 @@ mod tests {
         let field = field_of(centers.clone(), 0.3, 1);
         let mut scratch = SplatScratch::default();
         let mut seen = 0;
-        let counts = field.splat_ray(
-            DVec3::ZERO,
-            DVec3::X,
-            0.0,
-            2.0,
-            1.0,
-            3,
-            &mut scratch,
-            |hits| {
-                seen += hits.len();
-                assert!(hits.windows(2).all(|w| w[0].t <= w[1].t));
-                true
-            },
-        );
+        let counts = along_x(&field, 0.0, 2.0, 3, &mut scratch, |hits| {
+            seen += hits.len();
+            assert!(hits.windows(2).all(|w| w[0].t <= w[1].t));
+            true
+        });
         assert_eq!((seen, counts), (3, SplatCounts { kept: 3, lost: 7 }));
         assert!((counts.lost_fraction() - 0.7).abs() < 1e-12);
         // A buffer as large as the slab's hits keeps them all.
-        let counts = field.splat_ray(
-            DVec3::ZERO,
-            DVec3::X,
-            0.0,
-            2.0,
-            1.0,
-            10,
-            &mut scratch,
-            |_| true,
-        );
+        let counts = along_x(&field, 0.0, 2.0, 10, &mut scratch, |_| true);
         assert_eq!(counts, SplatCounts { kept: 10, lost: 0 });
         // Particles in two slabs; compositing stops after the first.
         let mut two = centers;
         two.push(DVec3::new(1.6, 0.0, 0.0));
         let field = field_of(two, 0.3, 4);
         let mut calls = 0;
-        field.splat_ray(
-            DVec3::ZERO,
-            DVec3::X,
-            0.0,
-            2.0,
-            1.0,
-            16,
-            &mut scratch,
-            |_| {
-                calls += 1;
-                false
-            },
-        );
+        along_x(&field, 0.0, 2.0, 16, &mut scratch, |_| {
+            calls += 1;
+            false
+        });
         assert_eq!(calls, 1);
     }
 }

@@ -152,29 +152,23 @@ mod tests {
             e.contains("--smoothing knn:32") && e.contains("rho, m"),
             "{e}"
         );
-        let e = resolve(
-            Kernel::SphCubic,
-            Some("h".into()),
-            None,
-            None,
-            &names(&["h"]),
-            &h,
-            false,
-        )
-        .unwrap_err()
-        .to_string();
+        // Data with only radii: the mass is asked for first, then the density.
+        let only_h = |mass: Option<PerParticle>| {
+            resolve(
+                Kernel::SphCubic,
+                Some("h".into()),
+                mass,
+                None,
+                &names(&["h"]),
+                &h,
+                false,
+            )
+            .unwrap_err()
+            .to_string()
+        };
+        let e = only_h(None);
         assert!(e.contains("--mass"), "{e}");
-        let e = resolve(
-            Kernel::SphCubic,
-            Some("h".into()),
-            Some(PerParticle::Constant(1.0)),
-            None,
-            &names(&["h"]),
-            &h,
-            false,
-        )
-        .unwrap_err()
-        .to_string();
+        let e = only_h(Some(PerParticle::Constant(1.0)));
         assert!(e.contains("--density"), "{e}");
     }
 }

@@ -420,20 +420,7 @@ impl ViewerApp {
 
     /// Replaces the state (and the data, if the scene names other data) by a scene file's.
     pub fn load_scene(&mut self, path: &Path) -> Result<(), String> {
-        let data = DataArgs {
-            scene: Some(path.to_path_buf()),
-            data: None,
-            format: None,
-            step: None,
-            time: None,
-            cache_mib: self.options.cache_mib,
-            particle_type: None,
-            physical: false,
-            smoothing: None,
-            rescan: false,
-            periodic: None,
-            no_periodic: false,
-        };
+        let data = DataArgs::of_scene(path.to_path_buf(), self.options.cache_mib);
         self.reload(&data, &FieldOptions::default())?;
         self.say(format!("loaded {}", path.display()));
         Ok(())
@@ -456,20 +443,7 @@ impl ViewerApp {
             .save(&path, true)
             .map_err(|e| e.to_string())
             .and_then(|()| {
-                let data = DataArgs {
-                    scene: Some(path.clone()),
-                    data: None,
-                    format: None,
-                    step: None,
-                    time: None,
-                    cache_mib: self.options.cache_mib,
-                    particle_type: None,
-                    physical: false,
-                    smoothing: None,
-                    rescan: false,
-                    periodic: None,
-                    no_periodic: false,
-                };
+                let data = DataArgs::of_scene(path.clone(), self.options.cache_mib);
                 self.reload(&data, &FieldOptions::default())
             });
         if let Err(e) = result {

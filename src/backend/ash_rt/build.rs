@@ -10,7 +10,7 @@ use super::StructureTimings;
 use super::buffers::storage;
 use super::context::{NAME, device_error};
 use super::pipelines::{self, Push};
-use super::resources::barrier;
+use super::resources::{COMPUTE_WRITE, barrier};
 use super::{AshBackend, BOX_ROW_GROUPS, TS_BLAS, TS_BOXES, TS_START, TS_TLAS};
 use crate::accel::lbvh::{KeyGrid, LBVH_STACK_SIZE, Lbvh, cluster_boxes};
 use crate::backend::BackendError;
@@ -62,10 +62,7 @@ impl AshBackend {
         barrier(
             &self.ctx,
             cb,
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_WRITE,
-            ),
+            COMPUTE_WRITE,
             (
                 vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
                 vk::AccessFlags::SHADER_READ | vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR,

@@ -8,7 +8,7 @@ use ash::vk;
 use super::context::NAME;
 use super::context::RtProgram;
 use super::pipelines::{self, BindingTable, Push};
-use super::resources::barrier;
+use super::resources::{TRANSFER_WRITE, barrier};
 use super::{AshBackend, HitReports, QUERY_WIDTH, TS_END, TS_START, Traversal};
 use crate::backend::BackendError;
 use crate::backend::shaders::SpecConstants;
@@ -188,10 +188,7 @@ impl AshBackend {
             barrier(
                 &self.ctx,
                 cb,
-                (
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::AccessFlags::TRANSFER_WRITE,
-                ),
+                TRANSFER_WRITE,
                 (
                     stage,
                     vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,

@@ -17,7 +17,9 @@ use gpu_allocator::MemoryLocation;
 use super::buffers::addressed;
 use super::context::{Context, device_error};
 use super::pipelines::{PreparePush, prepare_pipeline};
-use super::resources::{Buffer, COMPUTE_READ, Commands, TRANSFER_WRITE, barrier};
+use super::resources::{
+    Buffer, COMPUTE_READ, COMPUTE_READ_WRITE, COMPUTE_WRITE, Commands, TRANSFER_WRITE, barrier,
+};
 use crate::accel::HilbertQuantizer;
 use crate::backend::BackendError;
 use crate::backend::gpu_data::{GpuStepData, Slots, Slots4, Slots16, StepStaging};
@@ -297,18 +299,7 @@ impl Prepare {
             );
             ctx.device.cmd_dispatch(cb, groups.0, groups.1, 1);
         }
-        barrier(
-            ctx,
-            cb,
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_WRITE,
-            ),
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-            ),
-        );
+        barrier(ctx, cb, COMPUTE_WRITE, COMPUTE_READ_WRITE);
         Ok(())
     }
 
@@ -547,18 +538,7 @@ impl Prepare {
         self.points.staging.write(0, bytemuck::cast_slice(points))?;
         let cb = commands.begin()?;
         self.points.record_copy(&self.ctx, cb, n as u64 * 16);
-        barrier(
-            &self.ctx,
-            cb,
-            (
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-            ),
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_READ,
-            ),
-        );
+        barrier(&self.ctx, cb, TRANSFER_WRITE, COMPUTE_READ);
         self.elements(
             cb,
             on_ash::HILBERT_KEYS,

@@ -438,8 +438,7 @@ impl Drop for Commands {
     }
 }
 
-/// A memory barrier between two stages.
-/// A copy's writes, as the source of a [`barrier`].
+/// A copy's (or fill's) writes, as the source of a [`barrier`].
 pub const TRANSFER_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) = (
     vk::PipelineStageFlags::TRANSFER,
     vk::AccessFlags::TRANSFER_WRITE,
@@ -448,6 +447,19 @@ pub const TRANSFER_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) = (
 pub const COMPUTE_READ: (vk::PipelineStageFlags, vk::AccessFlags) = (
     vk::PipelineStageFlags::COMPUTE_SHADER,
     vk::AccessFlags::SHADER_READ,
+);
+/// A compute shader's writes, as the source of a [`barrier`].
+pub const COMPUTE_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) = (
+    vk::PipelineStageFlags::COMPUTE_SHADER,
+    vk::AccessFlags::SHADER_WRITE,
+);
+/// A compute shader's reads and writes (a pass that adds to what the one before wrote), as
+/// the destination of a [`barrier`].
+pub const COMPUTE_READ_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) = (
+    vk::PipelineStageFlags::COMPUTE_SHADER,
+    vk::AccessFlags::from_raw(
+        vk::AccessFlags::SHADER_READ.as_raw() | vk::AccessFlags::SHADER_WRITE.as_raw(),
+    ),
 );
 
 /// Records a global memory barrier from the `src` (stage, access) to the `dst` one.

@@ -13,7 +13,7 @@ use ash::vk;
 use super::buffers::addressed;
 use super::context::{NAME, device_error};
 use super::pipelines::{self, Push};
-use super::resources::{Buffer, barrier};
+use super::resources::{Buffer, COMPUTE_READ_WRITE, COMPUTE_WRITE, TRANSFER_WRITE, barrier};
 use super::{AshBackend, QUERY_WIDTH, TS_END, TS_START};
 use crate::backend::BackendError;
 use crate::backend::shaders::on_ash;
@@ -102,18 +102,7 @@ impl AshBackend {
                 .device
                 .cmd_fill_buffer(cb, grid, 0, vk::WHOLE_SIZE, 0)
         };
-        barrier(
-            &self.ctx,
-            cb,
-            (
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-            ),
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-            ),
-        );
+        barrier(&self.ctx, cb, TRANSFER_WRITE, COMPUTE_READ_WRITE);
         self.commands.timestamp(TS_START);
         self.bind(
             cb,
@@ -137,10 +126,7 @@ impl AshBackend {
         barrier(
             &self.ctx,
             cb,
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_WRITE,
-            ),
+            COMPUTE_WRITE,
             (
                 vk::PipelineStageFlags::COMPUTE_SHADER
                     | vk::PipelineStageFlags::TRANSFER

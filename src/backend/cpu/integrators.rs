@@ -35,18 +35,20 @@ pub trait FieldSampler: Sync {
     type Ray: Default + Send;
 
     /// Starts the ray `origin + t dir` over `[t0, t1]` and appends to `occupied` the ordered
-    /// sub-intervals where the field may be non-zero (all of it, for a sampler that does not
-    /// know where its particles are; outside them Phi is 0, and the integrators skip that
-    /// space when density 0 has no extinction, see `march_intervals`).
+    /// sub-intervals where the field may be non-zero (outside them Phi is 0, and the
+    /// integrators skip that space when density 0 has no extinction, see `march_intervals`).
+    /// The default is all of it, for a sampler that does not know where its particles are.
     fn begin(
         &self,
-        ray: &mut Self::Ray,
-        origin: DVec3,
-        dir: DVec3,
+        _ray: &mut Self::Ray,
+        _origin: DVec3,
+        _dir: DVec3,
         t0: f64,
         t1: f64,
         occupied: &mut Vec<(f64, f64)>,
-    );
+    ) {
+        occupied.push((t0, t1));
+    }
 
     /// Phi and the Theta numerator (Σ theta_i phi_i: normalised attribute in `[0]`, or
     /// linear RGB) at `x`, the ray's point `origin + t dir` at or after its last sample.

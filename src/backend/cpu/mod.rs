@@ -246,18 +246,8 @@ impl FieldSampler for VoxelGrid {
     type Ray = ();
     type Packet = ();
 
-    /// The whole interval: the grid does not skip empty space (as the baseline it models).
-    fn begin(
-        &self,
-        _: &mut (),
-        _: DVec3,
-        _: DVec3,
-        t0: f64,
-        t1: f64,
-        occupied: &mut Vec<(f64, f64)>,
-    ) {
-        occupied.push((t0, t1));
-    }
+    // `begin` is the default, the whole interval: the grid does not skip empty space (as the
+    // baseline it models).
 
     fn sample(&self, _: &mut (), x: DVec3) -> (f64, [f64; 3]) {
         self.trilinear(x)

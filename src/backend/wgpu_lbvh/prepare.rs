@@ -493,26 +493,20 @@ impl Prepare {
             self.encode_keys(ctx, &mut encoder, n)?;
             // Both sorts write the same per-pass parameters (same count, same shifts), so
             // encoding them before one submit is safe (`RadixSort::encode`).
-            let count = n as u32;
-            self.sort.encode(
-                ctx,
-                &mut encoder,
-                count,
-                &self.keys,
-                &self.values,
-                &self.keys_tmp,
-                &self.values_tmp,
-            )?;
+            let sort = |encoder: &mut wgpu::CommandEncoder| {
+                self.sort.encode(
+                    ctx,
+                    encoder,
+                    n as u32,
+                    &self.keys,
+                    &self.values,
+                    &self.keys_tmp,
+                    &self.values_tmp,
+                )
+            };
+            sort(&mut encoder)?;
             self.encode_gather_words(ctx, &mut encoder, &self.keys_hi, &self.keys, n)?;
-            self.sort.encode(
-                ctx,
-                &mut encoder,
-                count,
-                &self.keys,
-                &self.values,
-                &self.keys_tmp,
-                &self.values_tmp,
-            )?;
+            sort(&mut encoder)?;
             self.encode_gather_vec4s(ctx, &mut encoder, &self.points.device, targets.particles, n)?;
             if data.double_single
                 && let (Some(lo), Some(dst)) = (&self.points_lo, targets.particles_lo)

@@ -5,12 +5,12 @@
 
 use std::time::Instant;
 
-use super::context::{Layout, device_error};
+use super::context::{GpuContext, Layout, device_error};
 use super::util::{self, PARTS, SplitBuffer, bind, dispatch, grid, parts_needed, storage, write};
 use super::{Accumulation, WgpuBackend};
 use crate::backend::BackendError;
 use crate::backend::shaders::GpuFrame;
-use crate::backend::shaders::on_wgpu;
+use crate::backend::shaders::{Entry, on_wgpu};
 use crate::noise::BlueNoiseMask;
 use crate::values::FrameParams;
 use crate::values::shader_constants::{STBN_DEPTH, STBN_HEIGHT, STBN_WIDTH, spec};
@@ -69,30 +69,18 @@ impl WgpuBackend {
             }
         };
         let pipeline = ctx.pipeline(pipeline_kernel, Some(variant), layout)?;
-        let (w, h) = (frame.width, frame.height);
-        let [group_x, group_y, _] = pipeline_kernel.point().workgroup_size;
-        let tiles_x = w.div_ceil(group_x);
-        let tiles = tiles_x * h.div_ceil(group_y);
-        let (blocks, per_block, dispatched) = util::interleave(tiles);
         let acc = self.accumulation.as_mut().expect("made above");
-        let acc_part = acc.sums.part_len(16);
         // The splatter stores the first frame's pixels rather than adding them to cleared sums
         // (as the ash backend's kernels do): every pixel is written, so no clear is needed, and
         // a pixel the kernel missed keeps what the buffer held (tests poison it with NaN).
         let store_first = matches!(kernel, FrameKernel::Splat { .. }) && acc.clear;
-        write(
+        let dispatched = write_tiling(
             &ctx,
             &self.tiling_uniform,
-            bytemuck::cast_slice(&[
-                tiles_x,
-                tiles,
-                blocks,
-                per_block,
-                acc_part,
-                u32::from(store_first),
-                0,
-                0,
-            ]),
+            pipeline_kernel,
+            (frame.width, frame.height),
+            acc.sums.part_len(16),
+            store_first,
         );
         let stbn = self.stbn.as_ref();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -185,4 +173,34 @@ impl WgpuBackend {
         self.stbn = Some(buffer);
         Ok(())
     }
+}
+
+/// Writes a frame kernel's tiling (`TilingBlock` in the shaders) to `uniform`: a `w` x `h`
+/// frame in tiles of `kernel`'s workgroup size, [`util::interleave`]d, the accumulation's part
+/// length `acc_part` and whether the frame stores its pixels rather than adding them. Returns
+/// the workgroups to dispatch.
+pub(super) fn write_tiling(
+    ctx: &GpuContext,
+    uniform: &wgpu::Buffer,
+    kernel: Entry,
+    (w, h): (u32, u32),
+    acc_part: u32,
+    store_first: bool,
+) -> u32 {
+    let [group_x, group_y, _] = kernel.point().workgroup_size;
+    let tiles_x = w.div_ceil(group_x);
+    let tiles = tiles_x * h.div_ceil(group_y);
+    let (blocks, per_block, dispatched) = util::interleave(tiles);
+    let tiling = [
+        tiles_x,
+        tiles,
+        blocks,
+        per_block,
+        acc_part,
+        u32::from(store_first),
+        0,
+        0,
+    ];
+    write(ctx, uniform, bytemuck::cast_slice(&tiling));
+    dispatched
 }

@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use super::WgpuBackend;
 use super::context::{Layout, device_error};
+use super::render::write_tiling;
 use super::util::{self, bind, dispatch, grid, storage, write};
 use crate::backend::BackendError;
 use crate::backend::shaders::on_wgpu;
@@ -460,24 +461,13 @@ impl WgpuBackend {
             variant[unread] = 0;
         }
         let pipeline = ctx.pipeline(on_wgpu::VOXEL_RENDER, Some(variant), layout)?;
-        let (w, h) = (frame.width, frame.height);
-        let [group_x, group_y, _] = on_wgpu::VOXEL_RENDER.point().workgroup_size;
-        let tiles_x = w.div_ceil(group_x);
-        let tiles = tiles_x * h.div_ceil(group_y);
-        let (blocks, per_block, dispatched) = util::interleave(tiles);
-        write(
+        let dispatched = write_tiling(
             &ctx,
             &self.tiling_uniform,
-            bytemuck::cast_slice(&[
-                tiles_x,
-                tiles,
-                blocks,
-                per_block,
-                acc.sums.part_len(16),
-                0,
-                0,
-                0,
-            ]),
+            on_wgpu::VOXEL_RENDER,
+            (frame.width, frame.height),
+            acc.sums.part_len(16),
+            false,
         );
         let stbn = self.stbn.as_ref().expect("made above");
         let mut encoder = ctx.device.create_command_encoder(&Default::default());

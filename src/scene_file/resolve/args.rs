@@ -63,6 +63,24 @@ pub struct DataArgs {
 }
 
 impl DataArgs {
+    /// Everything from the scene file at `path` (no flag over it), with a cache of `cache_mib`.
+    pub fn of_scene(path: PathBuf, cache_mib: usize) -> DataArgs {
+        DataArgs {
+            scene: Some(path),
+            data: None,
+            format: None,
+            step: None,
+            time: None,
+            particle_type: None,
+            physical: false,
+            smoothing: None,
+            periodic: None,
+            no_periodic: false,
+            cache_mib,
+            rescan: false,
+        }
+    }
+
     /// What to read from files that hold a choice: the flags over the scene file's.
     pub fn read_options(&self, scene: &DataSection) -> ReadOptions {
         ReadOptions {

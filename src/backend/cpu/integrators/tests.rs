@@ -11,18 +11,6 @@ impl<F: Fn(DVec3) -> f64 + Sync> FieldSampler for Analytic<F> {
     type Ray = ();
     type Packet = ();
 
-    fn begin(
-        &self,
-        _: &mut (),
-        _: DVec3,
-        _: DVec3,
-        t0: f64,
-        t1: f64,
-        occupied: &mut Vec<(f64, f64)>,
-    ) {
-        occupied.push((t0, t1));
-    }
-
     fn sample(&self, _: &mut (), x: DVec3) -> (f64, [f64; 3]) {
         let phi = (self.0)(x);
         (phi, [0.5 * phi, 0.0, 0.0])
