@@ -574,3 +574,76 @@ fn the_scaling_benchmark_reports_every_rank() {
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
 }
+
+/// Balanced by measured cost (`--balance cost`), the leaves move and the image does not: a
+/// render decomposed by what an earlier one measured is still the single rank's to
+/// rounding, and a brick's particles follow the cost (they are no longer equal).
+#[test]
+fn a_cost_balanced_render_is_still_the_single_rank_image() {
+    use aarbf::dist::render_balanced;
+    let frames = frames(Integrator::Ea, 1, false);
+    let (want, _) = single_rank(&frames);
+    let s = scene();
+    let d = dist_scene(s);
+    let results = run_local(4, |comm| {
+        let local = slice_of(&s.step, comm.rank(), comm.size());
+        let mut backend = CpuBackend::new();
+        let (by_count, measured) = render_balanced(comm, &mut backend, &local, &d, &frames, None)?;
+        let (by_cost, _) =
+            render_balanced(comm, &mut backend, &local, &d, &frames, Some(&measured))?;
+        Ok((by_count, by_cost))
+    })
+    .unwrap();
+    let (Some(by_count), Some(by_cost)) = &results[0] else {
+        panic!("rank 0 holds the images");
+    };
+    let owned = |image: &DistImage| image.reports.iter().map(|r| r.owned).collect::<Vec<_>>();
+    assert_ne!(owned(by_count), owned(by_cost), "the leaves moved");
+    assert_eq!(owned(by_cost).iter().sum::<u64>(), 30_000);
+    let diff = max_abs(&by_cost.mean, &want);
+    eprintln!(
+        "balanced by cost: owned {:?} (by count {:?}); max |diff| {diff:.3e}",
+        owned(by_cost),
+        owned(by_count)
+    );
+    assert!(diff <= 1e-12, "max abs difference {diff:e}");
+}
+
+/// `--balance cost` on the command line: the image within the threshold's remainder of the
+/// single rank's, and refused, with the way to use it, where nothing is distributed.
+#[test]
+fn the_command_line_balances_by_cost() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = common::generated_dam_break(d);
+    let render = |name: &str, extra: &[&str]| {
+        let path = d.join(name);
+        let mut args = common::dam_break_render_args(&header, &path, (64, 48), 2);
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let out = common::aarbf_logged(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        (out, path)
+    };
+    let (single, single_path) = render("single.exr", &[]);
+    assert!(single.status.success());
+    let (cost, cost_path) = render("cost.exr", &["--ranks", "3", "--balance", "cost"]);
+    let log = String::from_utf8_lossy(&cost.stderr);
+    assert!(cost.status.success(), "{log}");
+    assert!(log.contains("slowest render"), "{log}");
+    let a = image::open(&single_path).unwrap().to_rgba32f();
+    let b = image::open(&cost_path).unwrap().to_rgba32f();
+    let diff = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    assert!(diff <= 0.01, "--balance cost differs by {diff}");
+    let (refused, path) = render("lone.exr", &["--balance", "cost"]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        err.contains("--balance cost") && err.contains("--ranks"),
+        "{err}"
+    );
+    assert!(!path.exists());
+}

@@ -323,7 +323,12 @@ pub fn render_balanced(
     let measured: Vec<(f64, f64)> = comm
         .all_gather_of(&[report.owned as f64, seconds])?
         .iter()
-        .map(|v| (v.first().copied().unwrap_or(0.0), v.get(1).copied().unwrap_or(0.0)))
+        .map(|v| {
+            (
+                v.first().copied().unwrap_or(0.0),
+                v.get(1).copied().unwrap_or(0.0),
+            )
+        })
         .collect();
     let measured = CostModel::new(tree, &measured);
 

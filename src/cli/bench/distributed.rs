@@ -18,7 +18,9 @@ use super::parse_size;
 use crate::accel::ClusterSize;
 use crate::backend::Precision;
 use crate::backend::cpu::CpuBackend;
-use crate::dist::{Comm, CommExt, DistImage, DistScene, RankReport, render_distributed, run_local};
+use crate::dist::{
+    Balance, Comm, CommExt, CostModel, DistImage, DistScene, RankReport, render_balanced, run_local,
+};
 use crate::field::FieldSettings;
 use crate::render::{AutoValues, FrameBasis, RenderSettings};
 use crate::scene::TimeSeries;
@@ -49,6 +51,10 @@ pub struct DistributedArgs {
     /// sample.
     #[arg(long, default_value_t = 0.99)]
     pub opacity_threshold: f64,
+    /// What the bricks are balanced by: `count` (equal particles) or `cost` (equal render
+    /// time, measured by a pilot render at a quarter of the size, which is not timed).
+    #[arg(long, value_enum, default_value_t = Balance::Count)]
+    pub balance: Balance,
     /// The particles' radius as a fraction of the step's diagonal.
     #[arg(long, default_value_t = 0.01)]
     pub radius: f64,
@@ -202,7 +208,17 @@ fn run_one(
     let step = series.step(STEP)?;
     let field = FieldSettings::new(Some("velocity"), args.radius * step.bounds().diagonal());
     let range = series.attribute("velocity").map(|a| (a.min, a.max));
-    let frames = frames(args, &series, &field)?;
+    let frames = frames_of(args, args.size, &series, &field)?;
+    let pilot = match args.balance {
+        Balance::Count => Vec::new(),
+        Balance::Cost => {
+            let size = (args.size.0.div_ceil(4), args.size.1.div_ceil(4));
+            frames_of(args, size, &series, &field)?
+                .into_iter()
+                .take(1)
+                .collect()
+        }
+    };
     let scene = DistScene {
         field: &field,
         cluster: ClusterSize::new(16).expect("16 is a cluster size"),
@@ -221,7 +237,13 @@ fn run_one(
             let clock = crate::dist::clock::StageClock::start();
             let local = crate::dist::slice_of(&step, comm.rank(), comm.size());
             let (_, read_cpu_seconds) = clock.stop();
-            let image = render_distributed(comm, &mut CpuBackend::new(), &local, &scene, &frames)?;
+            let mut backend = CpuBackend::new();
+            let model = match pilot.is_empty() {
+                true => None,
+                false => Some(render_balanced(comm, &mut backend, &local, &scene, &pilot, None)?.1),
+            };
+            let (image, _) =
+                render_balanced(comm, &mut backend, &local, &scene, &frames, model.as_ref())?;
             Ok((read_cpu_seconds, image))
         })
     })
@@ -246,16 +268,16 @@ fn run_one(
     })
 }
 
-/// The frames every run renders: the default view of the step's series, with the default
-/// opacity threshold.
-fn frames(
+/// The frames of a run at `size`: the default view of the step's series.
+fn frames_of(
     args: &DistributedArgs,
+    size: (u32, u32),
     series: &TimeSeries,
     field: &FieldSettings,
 ) -> anyhow::Result<Vec<FrameParams>> {
     let settings = RenderSettings {
-        width: args.size.0,
-        height: args.size.1,
+        width: size.0,
+        height: size.1,
         opacity_threshold: args.opacity_threshold,
         ..RenderSettings::default()
     };
@@ -350,7 +372,7 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
     let _ = writeln!(
         md,
         "# Distributed rendering: scaling\n\n`aarbf bench distributed --ranks {} --count {} \
-         --weak-count {} --size {w}x{h} --frames {} --radius {} --opacity-threshold {}`: the \
+         --weak-count {} --size {w}x{h} --frames {} --radius {} --opacity-threshold {} --balance {}`: the \
          generated dam break's third step, radius {} of its diagonal, CPU backend (f32, K = 16), \
          emission-absorption, {w}x{h}, {} frame(s).\n\nEach rank runs as a thread of one process in a pool of one thread; its \
          times are its thread's CPU seconds, its work alone however many ranks share the cores. \
@@ -368,6 +390,7 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
         args.frames,
         args.radius,
         args.opacity_threshold,
+        args.balance,
         args.radius,
         args.frames,
         link.alpha * 1e6,
@@ -381,7 +404,7 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
         let t1 = base.modelled(link, args.frames);
         let _ = writeln!(
             md,
-            "\n## {} scaling\n\n| P | particles | ghosts | largest brick / mean | slowest rank: read, exchange, build, render, composite (s) | communication (ms) | T(P) (s) | efficiency | composite a frame, slowest (ms) | memory a rank, max (MiB) |\n|---|---|---|---|---|---|---|---|---|---|",
+            "\n## {} scaling\n\n| P | particles | ghosts | largest brick / mean | slowest render / mean | slowest rank: read, exchange, build, render, composite (s) | communication (ms) | T(P) (s) | efficiency | composite a frame, slowest (ms) | memory a rank, max (MiB) |\n|---|---|---|---|---|---|---|---|---|---|---|",
             if scaling == "strong" {
                 "Strong"
             } else {
@@ -411,11 +434,17 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
                 .unwrap_or(0);
             let _ = writeln!(
                 md,
-                "| {} | {} | {:.1}% | {:.3} | {:.3}, {:.3}, {:.3}, {:.3}, {:.3} | {:.2} | {:.3} | {:.2} | {:.1} | {:.1} |",
+                "| {} | {} | {:.1}% | {:.3} | {:.3} | {:.3}, {:.3}, {:.3}, {:.3}, {:.3} | {:.2} | {:.3} | {:.2} | {:.1} | {:.1} |",
                 run.ranks,
                 run.particles,
                 100.0 * run.ghost_fraction(),
                 run.imbalance(),
+                CostModel::imbalance(
+                    &run.rows
+                        .iter()
+                        .map(|r| r.report.render_cpu_seconds)
+                        .collect::<Vec<_>>()
+                ),
                 s.read_cpu_seconds,
                 r.exchange_cpu_seconds,
                 r.build_cpu_seconds,

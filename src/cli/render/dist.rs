@@ -14,7 +14,9 @@ use super::plan::Frame;
 use crate::backend::cpu::CpuBackend;
 use crate::backend::{BackendKind, Precision};
 use crate::cli::output_format::OutputFormat;
-use crate::dist::{Comm, DistScene, RankReport, render_distributed, run_local, slice_of};
+use crate::dist::{
+    Balance, Comm, CostModel, DistScene, RankReport, render_balanced, run_local, slice_of,
+};
 use crate::render::legend::Legend;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings, stratified_cycle};
 use crate::scene_file::resolve::Resolved;
@@ -180,6 +182,7 @@ pub(super) fn run(
             b.size.to_array()
         );
     }
+    let mut cost: Option<CostModel> = None;
     for frame in frames {
         let started = Instant::now();
         settings.camera = Some(frame.camera);
@@ -205,31 +208,54 @@ pub(super) fn run(
             precision,
             periodic: resolved.periodic,
         };
+        // Balanced by cost, the first image starts from a pilot at a quarter of the size
+        // (a sixteenth of the samples), and every later one from the image before it.
+        let pilot: Vec<FrameParams> = if args.balance == Balance::Cost && cost.is_none() {
+            let small = RenderSettings {
+                width: settings.width.div_ceil(4),
+                height: settings.height.div_ceil(4),
+                ..settings.clone()
+            };
+            vec![basis.frame_params(&small, 0)?]
+        } else {
+            Vec::new()
+        };
         let rank_body = |comm: &dyn Comm| {
             let local = slice_of(&step, comm.rank(), comm.size());
             let mut backend = CpuBackend::new();
-            render_distributed(comm, &mut backend, &local, &scene, &params)
+            let mut model = cost.clone();
+            if !pilot.is_empty() {
+                let (_, measured) =
+                    render_balanced(comm, &mut backend, &local, &scene, &pilot, None)?;
+                model = Some(measured);
+            }
+            let by = model.as_ref().filter(|_| args.balance == Balance::Cost);
+            render_balanced(comm, &mut backend, &local, &scene, &params, by)
         };
-        let image = match &ranks {
+        let (image, measured) = match &ranks {
             Ranks::Threads(n) => {
                 let mut images = run_local(*n, |comm| rank_body(comm))
                     .with_context(|| format!("distributed render of step {}", frame.step))?;
-                let Some(image) = images.swap_remove(0) else {
+                let (Some(image), measured) = images.swap_remove(0) else {
                     bail!("rank 0 returned no image");
                 };
-                image
+                (image, measured)
             }
             #[cfg(feature = "mpi")]
             Ranks::Mpi(comm) => match rank_body(comm) {
-                Ok(Some(image)) => image,
+                Ok((Some(image), measured)) => (image, measured),
                 // Rank 0 writes the image.
-                Ok(None) => continue,
+                Ok((None, measured)) => {
+                    cost = Some(measured);
+                    continue;
+                }
                 Err(e) => {
                     comm.abort(&format!("distributed render of step {}: {e}", frame.step));
                     unreachable!("MPI_Abort returned");
                 }
             },
         };
+        cost = Some(measured);
         drop(step);
         log_reports(&image.reports);
         let legend = draw_legend.then(|| {
@@ -279,10 +305,13 @@ fn log_reports(reports: &[RankReport]) {
     let ghosts: u64 = reports.iter().map(|r| r.ghosts).sum();
     let max_owned = reports.iter().map(|r| r.owned).max().unwrap_or(0);
     let mean_owned = owned as f64 / reports.len().max(1) as f64;
+    let render: Vec<f64> = reports.iter().map(|r| r.render_seconds).collect();
     tracing::info!(
-        "{} particles owned once each, {ghosts} ghosts ({:.1}%); largest brick {:.3} x the mean",
+        "{} particles owned once each, {ghosts} ghosts ({:.1}%); largest brick {:.3} x the mean; \
+         slowest render {:.3} x the mean",
         owned,
         100.0 * ghosts as f64 / owned.max(1) as f64,
-        max_owned as f64 / mean_owned.max(1e-300)
+        max_owned as f64 / mean_owned.max(1e-300),
+        CostModel::imbalance(&render)
     );
 }

@@ -14,6 +14,7 @@ use super::output_format::OutputFormat;
 use plan::{Frame, plan_frames};
 
 use crate::backend::{self, BackendKind};
+use crate::dist::Balance;
 use crate::render::converged::reference_settings;
 use crate::render::legend::Legend;
 use crate::render::target::{ErrorMetric, Target};
@@ -179,6 +180,11 @@ pub struct RenderArgs {
     /// (docs/distributed.md).
     #[arg(long, value_name = "N")]
     pub ranks: Option<usize>,
+    /// What a distributed render's bricks are balanced by: `count` (equal particles) or
+    /// `cost` (equal measured render time: a pilot image at a quarter of the size measures
+    /// each brick, and each image of a sequence balances by the one before it).
+    #[arg(long, value_enum, default_value_t = Balance::Count)]
+    pub balance: Balance,
 }
 
 fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
@@ -355,6 +361,12 @@ impl Setup {
 
 pub(super) fn run(args: RenderArgs) -> anyhow::Result<()> {
     let ranks = dist::ranks(&args)?;
+    anyhow::ensure!(
+        ranks.is_some() || args.balance == Balance::Count,
+        "--balance {} balances the bricks of a distributed render: add --ranks N, or run \
+         under mpirun",
+        args.balance
+    );
     let draw_legend = check_flags(&args)?;
     let setup = settle(&args)?;
     let format = OutputFormat::of(&args.out, args.bit_depth)?;
