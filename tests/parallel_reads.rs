@@ -321,3 +321,52 @@ fn hdf5_snapshots_are_read_by_hyperslabs_across_their_files() {
     assert_eq!(part.decoded, 723 - 361);
     assert_eq!(part.step.attributes[0].values[0], 361.0);
 }
+
+/// Smoothing lengths from neighbours need the neighbours in other parts: each rank reads the
+/// whole step (the series says so in its log) and keeps its part, so the lengths are the
+/// single-rank lengths; without them in the selection, the part alone is read.
+#[test]
+fn a_series_with_neighbour_smoothing_cuts_its_parts_from_the_whole_step() {
+    use aarbf::scene::{OpenOptions, TimeSeries, smoothing::Smoothing};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cloud.npy");
+    let n = 301;
+    let values: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            let t = i as f64 * 0.37;
+            [t.sin(), t.cos(), 0.01 * t, t]
+        })
+        .collect();
+    common::write_numpy(&path, n, 4, &values);
+    let smoothing = Smoothing { neighbours: 8 };
+    let open = |attributes| {
+        TimeSeries::open(
+            &path,
+            &OpenOptions {
+                smoothing: Some(smoothing),
+                attributes,
+                ..OpenOptions::default()
+            },
+        )
+        .unwrap()
+    };
+    let series = open(AttributeSelection::All);
+    let whole = series.step(0).unwrap();
+    assert!(whole.attribute(&smoothing.attribute()).is_some());
+    for ranks in [2, 5] {
+        let parts: Vec<Step> = (0..ranks)
+            .map(|rank| {
+                let part = series.step_part(0, Part::new(rank, ranks)).unwrap();
+                assert_eq!(part.decoded, n);
+                part.step
+            })
+            .collect();
+        let together = joined(&parts, &whole);
+        assert_eq!(together.positions, whole.positions);
+        assert_eq!(together.attributes, whole.attributes);
+    }
+    let without = open(only(&["col3"]));
+    let part = without.step_part(0, Part::new(1, 3)).unwrap();
+    assert_eq!(part.decoded, Part::new(1, 3).range(n).len());
+    assert_eq!(part.step.attribute_names(), ["col3"]);
+}
