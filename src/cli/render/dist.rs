@@ -1,9 +1,9 @@
 //! `aarbf render --ranks N`, and `mpirun -np N aarbf render` in a build with the `mpi` feature:
 //! the distributed renderer ([`crate::dist`]) with N ranks, as threads of this process or as the
 //! processes of an MPI job. Each rank reads its share of the step's records (`[rN/P,
-//! (r+1)N/P)`, [`crate::io::read_step_part`]), and from there on sees the others only through the communicator:
-//! decomposition, particle exchange, its brick's render, direct-send compositing; rank 0 writes
-//! the image. A failing rank ends every rank, naming itself.
+//! (r+1)N/P)`, [`crate::io::read_step_part`]), and from there on sees the others only through
+//! the communicator: decomposition, particle exchange, its brick's render, direct-send
+//! compositing; rank 0 writes the image. A failing rank ends every rank, naming itself.
 
 use std::time::Instant;
 
