@@ -647,3 +647,51 @@ fn the_command_line_balances_by_cost() {
     );
     assert!(!path.exists());
 }
+
+/// Ranks that read their parts of a file (`TimeSeries::step_part`, as `aarbf render --ranks`
+/// does) render the image of ranks that cut their share from the whole step: the dam break
+/// written as NumPy writes a float64 array holds the same particles, in the same order, so the
+/// images are bit-identical, for P not dividing N.
+#[test]
+fn ranks_reading_their_parts_render_what_ranks_cutting_the_whole_step_render() {
+    let s = scene();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("dambreak.npy");
+    let velocity = &s.step.attribute("velocity").unwrap().values;
+    let table: Vec<f64> = s
+        .step
+        .positions
+        .iter()
+        .zip(velocity)
+        .flat_map(|(p, v)| [p.x, p.y, p.z, *v])
+        .collect();
+    common::write_numpy(&path, s.step.len(), 4, &table);
+    let series = TimeSeries::open(&path, &aarbf::scene::OpenOptions::default()).unwrap();
+    let field = FieldSettings::new(Some("col3"), 0.03);
+    let d = DistScene {
+        field: &field,
+        ..dist_scene(s)
+    };
+    let frames = frames(Integrator::Ea, 1, false);
+    for ranks in [3, 7] {
+        let parts = run_local(ranks, |comm| {
+            let part = aarbf::io::Part::new(comm.rank(), comm.size());
+            let read = series.step_part(0, part).unwrap();
+            assert_eq!(read.decoded, part.range(s.step.len()).len());
+            render_distributed(comm, &mut CpuBackend::new(), &read.step, &d, &frames)
+        })
+        .unwrap()
+        .swap_remove(0)
+        .unwrap();
+        let cut = distributed(ranks, &frames);
+        assert_eq!(parts.mean, cut.mean, "{ranks} ranks");
+        assert_eq!(parts.reports.len(), ranks);
+        for (r, (a, b)) in parts.reports.iter().zip(&cut.reports).enumerate() {
+            assert_eq!(
+                (a.read, a.owned, a.ghosts),
+                (b.read, b.owned, b.ghosts),
+                "rank {r}"
+            );
+        }
+    }
+}

@@ -379,7 +379,7 @@ fn write_gadget_part(
     path
 }
 
-fn write_gadget_snapshot(dir: &Path, snap: usize, counts: &[usize], time: f64) {
+pub(crate) fn write_gadget_snapshot(dir: &Path, snap: usize, counts: &[usize], time: f64) {
     let mut first = 0;
     for k in 0..counts.len() {
         write_gadget_part(dir, snap, k, counts, first, time);

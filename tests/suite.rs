@@ -28,6 +28,7 @@ mod knn_smoothing;
 mod mpirun;
 mod noise_convergence;
 mod optical_background;
+mod parallel_reads;
 mod periodic;
 mod precision;
 mod precision_promise;

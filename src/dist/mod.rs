@@ -46,6 +46,9 @@ pub enum DistError {
     /// The backend failed to build or render a brick.
     #[error(transparent)]
     Backend(#[from] BackendError),
+    /// This rank's part of the step could not be read.
+    #[error(transparent)]
+    Read(#[from] crate::io::DataError),
     /// The field settings are invalid for this step.
     #[error(transparent)]
     Field(#[from] FieldError),

@@ -106,22 +106,10 @@ impl DistImage {
     }
 }
 
-/// Records `[r N / P, (r + 1) N / P)` of `step`: the part rank r of P reads.
+/// Records `[r N / P, (r + 1) N / P)` of `step`: the part rank r of P reads
+/// ([`crate::io::Part`]).
 pub fn slice_of(step: &Step, rank: usize, ranks: usize) -> Step {
-    let n = step.len();
-    let range = (rank * n / ranks)..((rank + 1) * n / ranks);
-    Step {
-        name: step.name.clone(),
-        positions: step.positions[range.clone()].to_vec(),
-        attributes: step
-            .attributes
-            .iter()
-            .map(|a| crate::values::Attribute {
-                name: a.name.clone(),
-                values: a.values[range.clone()].to_vec(),
-            })
-            .collect(),
-    }
+    crate::io::slice_step(step, crate::io::Part::new(rank, ranks))
 }
 
 fn check_frames(frames: &[FrameParams]) -> Result<(), DistError> {

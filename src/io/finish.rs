@@ -30,6 +30,18 @@ pub fn finish_step(
     columns: Columns,
     selection: &AttributeSelection,
 ) -> Result<Step, DataError> {
+    finish(at, name, columns, selection, false)
+}
+
+/// [`finish_step`]'s checks and cleaning; `part`: the columns are one rank's part of a step
+/// ([`super::read_step_part`]), which may be empty or have every particle dropped.
+pub(super) fn finish(
+    at: At<'_>,
+    name: &str,
+    columns: Columns,
+    selection: &AttributeSelection,
+    part: bool,
+) -> Result<Step, DataError> {
     let Columns {
         positions,
         mut attributes,
@@ -64,7 +76,7 @@ pub fn finish_step(
         attributes.retain(|a| wanted.contains(&a.name));
         attributes.sort_by_key(|a| wanted.iter().position(|w| *w == a.name));
     }
-    if n == 0 {
+    if n == 0 && !part {
         return Err(at.err(Problem::EmptyStep(String::new())));
     }
 
@@ -77,7 +89,7 @@ pub fn finish_step(
     {
         (positions, attributes)
     } else {
-        drop_non_finite(at, positions, attributes)?
+        drop_non_finite(at, positions, attributes, part)?
     };
     Ok(Step {
         name: name.to_owned(),
@@ -87,11 +99,13 @@ pub fn finish_step(
 }
 
 /// The particles whose position and attributes are all finite, with a warning that counts
-/// the others and why they went; an error where none is left.
+/// the others and why they went; an error where none is left (of a whole step: a rank's part
+/// may be left empty).
 fn drop_non_finite(
     at: At<'_>,
     positions: Vec<DVec3>,
     attributes: Vec<Attribute>,
+    part: bool,
 ) -> Result<(Vec<DVec3>, Vec<Attribute>), DataError> {
     let n = positions.len();
     let mut keep = vec![true; n];
@@ -125,7 +139,7 @@ fn drop_non_finite(
     }
     why.extend(bad_attributes);
     let why = why.join(", ");
-    if dropped == n {
+    if dropped == n && !part {
         return Err(at.err(Problem::EmptyStep(format!(
             ": all {n} particles were dropped ({why})"
         ))));

@@ -5,7 +5,7 @@ use std::path::Path;
 
 #[cfg(not(feature = "hdf5"))]
 use super::Problem;
-use super::{At, AttributeSelection, Columns, DataError, ReadOptions};
+use super::{At, AttributeSelection, Columns, DataError, Part, ReadOptions};
 
 #[cfg(feature = "hdf5")]
 pub(super) fn read_step(
@@ -14,6 +14,26 @@ pub(super) fn read_step(
     selection: &AttributeSelection,
 ) -> Result<Columns, DataError> {
     super::hdf5_snapshot::read_step(at, read, selection)
+}
+
+#[cfg(feature = "hdf5")]
+pub(super) fn read_part(
+    at: At<'_>,
+    read: &ReadOptions,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
+    super::hdf5_snapshot::read_part(at, read, selection, part)
+}
+
+#[cfg(not(feature = "hdf5"))]
+pub(super) fn read_part(
+    at: At<'_>,
+    read: &ReadOptions,
+    selection: &AttributeSelection,
+    _part: Part,
+) -> Result<(Columns, usize), DataError> {
+    read_step(at, read, selection).map(|c| (c, 0))
 }
 
 #[cfg(not(feature = "hdf5"))]

@@ -5,7 +5,8 @@
 //! with NaN/Inf values (with a warning that counts them) and refuses empty steps. A series is a
 //! file, a directory or a glob, sorted naturally (`step2` before `step10`); in a folder of
 //! several name patterns (boundary, restart, species files beside the steps), the pattern with
-//! the most steps.
+//! the most steps. A rank of a distributed render reads only its part of a step
+//! ([`read_step_part`]).
 
 mod components;
 pub mod csv;
@@ -21,6 +22,7 @@ mod mapped;
 pub mod natural;
 pub mod npy;
 pub mod output;
+mod part;
 pub mod particles;
 pub mod ply;
 pub mod pvd;
@@ -42,6 +44,7 @@ pub use format::Format;
 pub use listing::{
     SimulationBox, StepRef, list_steps, list_steps_reading, simulation_box, step_time,
 };
+pub use part::{Part, StepPart, read_step_part, slice_step};
 pub use read_options::{ParticleType, ReadOptions};
 pub use write::{existing_outputs, write_series};
 

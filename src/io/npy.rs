@@ -3,6 +3,7 @@
 
 use std::fs::File;
 use std::io::{BufWriter, Cursor, Read, Seek};
+use std::ops::Range;
 use std::path::Path;
 
 use glam::DVec3;
@@ -11,7 +12,7 @@ use rayon::prelude::*;
 
 use super::mapped::Mapped;
 use super::scalar::{InRecord, Scalar, decode_records, strided_column};
-use super::{At, AttributeSelection, Columns, DataError, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Part, Problem};
 use crate::values::Attribute;
 
 /// A 2-D array in row-major order.
@@ -219,20 +220,27 @@ impl MappedArray {
         })
     }
 
-    /// The positions (columns 0, 1, 2) and the columns `attributes`, decoded in parallel
-    /// straight from the map: in C order a row at a time (one pass over the table), in Fortran
-    /// order a column at a time (each a contiguous run).
-    fn columns(&self, attributes: impl Iterator<Item = usize>) -> (Vec<DVec3>, Vec<Vec<f64>>) {
+    /// The positions (columns 0, 1, 2) and the columns `attributes` of the rows `rows`,
+    /// decoded in parallel straight from the map: in C order a row at a time (one pass over
+    /// the rows' bytes), in Fortran order a column at a time (each a contiguous run).
+    fn columns(
+        &self,
+        attributes: impl Iterator<Item = usize>,
+        rows: Range<usize>,
+    ) -> (Vec<DVec3>, Vec<Vec<f64>>) {
         let attributes: Vec<usize> = attributes.collect();
         if self.fortran {
-            let [x, y, z] = [0, 1, 2].map(|c| self.column(c));
+            let [x, y, z] = [0, 1, 2].map(|c| self.column(c, rows.clone()));
             let positions = (x, y, z)
                 .into_par_iter()
                 .map(|(x, y, z)| DVec3::new(x, y, z))
                 .collect();
             return (
                 positions,
-                attributes.iter().map(|&c| self.column(c)).collect(),
+                attributes
+                    .iter()
+                    .map(|&c| self.column(c, rows.clone()))
+                    .collect(),
             );
         }
         let item = self.scalar.size();
@@ -242,8 +250,8 @@ impl MappedArray {
         };
         let wanted: Vec<InRecord> = attributes.iter().map(|&c| at(c)).collect();
         decode_records(
-            &self.bytes[self.data_start..],
-            self.rows,
+            &self.bytes[self.data_start + rows.start * self.cols * item..],
+            rows.len(),
             self.cols * item,
             self.big_endian,
             [at(0), at(1), at(2)],
@@ -251,17 +259,17 @@ impl MappedArray {
         )
     }
 
-    /// Column `c`, decoded in parallel straight from the map.
-    fn column(&self, c: usize) -> Vec<f64> {
+    /// Column `c` of the rows `rows`, decoded in parallel straight from the map.
+    fn column(&self, c: usize, rows: Range<usize>) -> Vec<f64> {
         let item = self.scalar.size();
         let (stride, offset) = if self.fortran {
-            (item, c * self.rows * item)
+            (item, (c * self.rows + rows.start) * item)
         } else {
-            (self.cols * item, c * item)
+            (self.cols * item, (rows.start * self.cols + c) * item)
         };
         strided_column(
             &self.bytes[self.data_start..],
-            self.rows,
+            rows.len(),
             stride,
             offset,
             self.scalar,
@@ -288,7 +296,7 @@ pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
         );
         return Ok(Matrix { rows, cols, data });
     }
-    let columns: Vec<Vec<f64>> = (0..cols).map(|c| array.column(c)).collect();
+    let columns: Vec<Vec<f64>> = (0..cols).map(|c| array.column(c, 0..rows)).collect();
     let mut data = vec![0.0; rows * cols];
     if cols > 0 {
         data.par_chunks_mut(cols).enumerate().for_each(|(i, row)| {
@@ -303,6 +311,16 @@ pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
 /// Reads a particle step from an N x (3 + k) `.npy` array: columns x, y, z, then the attributes
 /// `col3`, `col4`, ... (only the selected ones decoded).
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
+    Ok(read_part(at, selection, Part::WHOLE)?.0)
+}
+
+/// [`read_step`] of `part`'s rows only (their bytes alone are decoded, in Fortran order each
+/// column's run of them), and how many.
+pub(super) fn read_part(
+    at: At<'_>,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
     let array = MappedArray::open(at)?;
     if array.cols < 3 {
         return Err(at.err(Problem::Dimensionality(format!(
@@ -313,7 +331,9 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
     // Only the columns the scene keeps are decoded.
     let (kept, skipped): (Vec<usize>, Vec<usize>) =
         (3..array.cols).partition(|c| selection.keeps(&format!("col{c}")));
-    let (positions, values) = array.columns(kept.iter().copied());
+    let rows = part.range(array.rows);
+    let decoded = rows.len();
+    let (positions, values) = array.columns(kept.iter().copied(), rows);
     let attributes = kept
         .into_iter()
         .zip(values)
@@ -322,12 +342,13 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             values,
         })
         .collect();
-    Ok(Columns {
+    let columns = Columns {
         positions,
         attributes,
         skipped: skipped.into_iter().map(|c| format!("col{c}")).collect(),
         finite: false,
-    })
+    };
+    Ok((columns, decoded))
 }
 
 /// Writes a row-major `rows x cols` array of f64 or f32 (the dtype follows the element type).

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use super::mapped::Mapped;
-use super::{At, AttributeSelection, Columns, DataError, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Part, Problem};
 use crate::values::Step;
 
 /// The name the format's single unnamed attribute gets.
@@ -46,6 +46,15 @@ pub fn step_path(header: &Path, name: &str) -> PathBuf {
 /// Reads one `.particles` step file: a little-endian u64 count, then count records of four f32 (x,
 /// y, z, [`ATTRIBUTE_NAME`]).
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
+    Ok(read_part(at, selection, Part::WHOLE)?.0)
+}
+
+/// [`read_step`] of `part`'s records only (their bytes alone are decoded), and how many.
+pub(super) fn read_part(
+    at: At<'_>,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
     let bytes = Mapped::open(at)?;
     let size = bytes.len() as u64;
     if size < 8 {
@@ -65,10 +74,12 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             size - expected
         );
     }
-    Ok(super::raw::xyzw_columns(
-        &bytes[8..expected as usize],
-        ATTRIBUTE_NAME,
-        selection,
+    let range = part.range(n);
+    let bytes =
+        &bytes[8 + range.start * RECORD_BYTES as usize..8 + range.end * RECORD_BYTES as usize];
+    Ok((
+        super::raw::xyzw_columns(bytes, ATTRIBUTE_NAME, selection),
+        range.len(),
     ))
 }
 

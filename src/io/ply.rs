@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::scalar::{InRecord, Scalar, decode_records};
-use super::{At, AttributeSelection, Columns, DataError, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Format, Part, Problem};
 use crate::values::{Attribute, Step};
 
 /// Largest header we accept: real headers are a few hundred bytes.
@@ -202,6 +202,17 @@ impl Body<'_> {
 /// Reads a PLY file: the `vertex` element's `x, y, z` as positions, its other scalar properties as
 /// attributes (the selected ones).
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
+    Ok(read_part(at, selection, Part::WHOLE)?.0)
+}
+
+/// [`read_step`] of `part`'s vertices, and how many vertices were decoded: binary rows of
+/// scalars only are of one size, so only the part's rows are decoded; ascii rows, and rows
+/// with lists, are read whole (each row must be parsed to find the next) and sliced.
+pub(super) fn read_part(
+    at: At<'_>,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
     let bytes = super::mapped::Mapped::open(at)?;
     let header = parse_header(at, &bytes)?;
     let body_len = (bytes.len() - header.body_start) as u64;
@@ -229,7 +240,7 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             body_len,
         )?;
         if element.name == "vertex" {
-            return read_vertices(at, &mut body, element, n, selection);
+            return read_vertices(at, &mut body, element, n, selection, part);
         }
         for row in 0..element.count {
             body.row(at, element, row, |_, _| {})?;
@@ -293,14 +304,17 @@ fn read_vertices(
     element: &Element,
     n: usize,
     selection: &AttributeSelection,
-) -> Result<Columns, DataError> {
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
     let layout = VertexLayout::new(at, element, selection)?;
-    let (positions, columns) =
-        if body.encoding != Encoding::Ascii && layout.scalars.len() == element.properties.len() {
-            decode_fixed_rows(at, body, &layout, n)?
-        } else {
-            decode_row_by_row(at, body, element, &layout, n)?
-        };
+    let fixed =
+        body.encoding != Encoding::Ascii && layout.scalars.len() == element.properties.len();
+    let rows = if fixed { part.range(n) } else { 0..n };
+    let (positions, columns) = if fixed {
+        decode_fixed_rows(at, body, &layout, n, rows.clone())?
+    } else {
+        decode_row_by_row(at, body, element, &layout, n)?
+    };
     let mut attributes = Vec::new();
     let mut skipped = Vec::new();
     for (k, ((name, _), values)) in layout.scalars.iter().zip(columns).enumerate() {
@@ -316,12 +330,22 @@ fn read_vertices(
             skipped.push((*name).to_owned());
         }
     }
-    Ok(Columns {
+    let columns = Columns {
         positions,
         attributes,
         skipped,
         finite: false,
-    })
+    };
+    if fixed {
+        Ok((columns, rows.len()))
+    } else {
+        let why = if body.encoding == Encoding::Ascii {
+            "ascii rows"
+        } else {
+            "rows with list properties"
+        };
+        Ok(super::part::read_whole(Format::Ply, why, columns, part))
+    }
 }
 
 /// Rows of scalars only have a fixed size: the positions and the stored properties are decoded
@@ -332,6 +356,7 @@ fn decode_fixed_rows(
     body: &Body<'_>,
     layout: &VertexLayout<'_>,
     n: usize,
+    rows: std::ops::Range<usize>,
 ) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
     let mut offsets = Vec::with_capacity(layout.scalars.len());
     let mut stride = 0;
@@ -352,8 +377,8 @@ fn decode_fixed_rows(
         .collect();
     let wanted: Vec<InRecord> = decoded.iter().map(|&k| offsets[k]).collect();
     let (positions, values) = decode_records(
-        rest,
-        n,
+        &rest[rows.start * stride..],
+        rows.len(),
         stride,
         body.encoding == Encoding::BigEndian,
         layout.xyz.map(|k| offsets[k]),

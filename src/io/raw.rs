@@ -5,7 +5,7 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::{At, AttributeSelection, Columns, DataError, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Part, Problem};
 use crate::values::{Attribute, Step};
 
 /// The name the format's fourth value, w, gets as an attribute.
@@ -14,6 +14,15 @@ pub const ATTRIBUTE_NAME: &str = "w";
 /// Reads a `.raw` file: records of four little-endian f32 (x, y, z, w), w as the attribute
 /// [`ATTRIBUTE_NAME`]; a size that is not a multiple of 16 bytes is a truncated file.
 pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
+    Ok(read_part(at, selection, Part::WHOLE)?.0)
+}
+
+/// [`read_step`] of `part`'s records only (their bytes alone are decoded), and how many.
+pub(super) fn read_part(
+    at: At<'_>,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
     let bytes = super::mapped::Mapped::open(at)?;
     if bytes.len() % 16 != 0 {
         let n = bytes.len() / 16;
@@ -23,7 +32,15 @@ pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, 
             available: bytes.len() as u64,
         }));
     }
-    Ok(xyzw_columns(&bytes, ATTRIBUTE_NAME, selection))
+    let range = part.range(bytes.len() / 16);
+    Ok((
+        xyzw_columns(
+            &bytes[range.start * 16..range.end * 16],
+            ATTRIBUTE_NAME,
+            selection,
+        ),
+        range.len(),
+    ))
 }
 
 /// Columns from little-endian records of four f32 (x, y, z, attribute): the body of both

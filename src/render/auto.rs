@@ -56,9 +56,22 @@ impl AutoValues {
 
     /// The values for `field` over `series`.
     pub fn of(series: &TimeSeries, field: &FieldSettings) -> Result<AutoValues, RenderError> {
+        AutoValues::with_phi_ref(series, field, None)
+    }
+
+    /// The values for `field` over `series`, with `phi_ref` where it is given (`--phi-ref`, `given`):
+    /// then the first step is not read (Phi_ref is the one value that needs a whole step; the
+    /// others come from the series' statistics).
+    pub fn with_phi_ref(
+        series: &TimeSeries,
+        field: &FieldSettings,
+        given: Option<f64>,
+    ) -> Result<AutoValues, RenderError> {
         let tables = FieldTables::of(field);
         let (typical_radius, max_radius) = radii(series, field, &tables);
-        let phi_ref = if series.is_empty() {
+        let phi_ref = if let Some(given) = given {
+            given
+        } else if series.is_empty() {
             1.0
         } else {
             let step = series.step(0)?;

@@ -1,9 +1,9 @@
 //! `aarbf render --ranks N`, and `mpirun -np N aarbf render` in a build with the `mpi` feature:
 //! the distributed renderer ([`crate::dist`]) with N ranks, as threads of this process or as the
-//! processes of an MPI job. Each rank takes its share of the step's records (`[rN/P,
-//! (r+1)N/P)`), and from there on sees the others only through the communicator:
-//! decomposition, particle exchange, its brick's render, direct-send compositing; rank 0 writes
-//! the image. A failing rank ends every rank, naming itself.
+//! processes of an MPI job. Each rank reads its share of the step's records (`[rN/P,
+//! (r+1)N/P)`, [`crate::io::read_step_part`]), and from there on sees the others only through
+//! the communicator: decomposition, particle exchange, its brick's render, direct-send
+//! compositing; rank 0 writes the image. A failing rank ends every rank, naming itself.
 
 use std::time::Instant;
 
@@ -14,9 +14,8 @@ use super::plan::Frame;
 use crate::backend::cpu::CpuBackend;
 use crate::backend::{BackendKind, Precision};
 use crate::cli::output_format::OutputFormat;
-use crate::dist::{
-    Balance, Comm, CostModel, DistScene, RankReport, render_balanced, run_local, slice_of,
-};
+use crate::dist::{Balance, Comm, CostModel, DistScene, RankReport, render_balanced, run_local};
+use crate::io::Part;
 use crate::render::legend::Legend;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings, stratified_cycle};
 use crate::scene_file::resolve::Resolved;
@@ -187,7 +186,10 @@ pub(super) fn run(
         let started = Instant::now();
         settings.camera = Some(frame.camera);
         resolved.range_for_step(frame.step)?;
-        let auto = AutoValues::of(&resolved.series, &resolved.field)?;
+        // Phi_ref is a statistic of the whole first step: read here once unless --phi-ref
+        // gives it, and not kept while the ranks read their parts.
+        let auto = AutoValues::with_phi_ref(&resolved.series, &resolved.field, settings.phi_ref)?;
+        resolved.series.clear_cache();
         let basis = FrameBasis {
             bounds: resolved.domain(),
             max_count: resolved.series.max_count(),
@@ -199,7 +201,6 @@ pub(super) fn run(
         let params: Vec<FrameParams> = (0..spp)
             .map(|f| basis.frame_params(&settings, f))
             .collect::<Result<_, _>>()?;
-        let step = resolved.series.step(frame.step)?;
         let scene = DistScene {
             field: &resolved.field,
             cluster: resolved.cluster,
@@ -221,7 +222,8 @@ pub(super) fn run(
             Vec::new()
         };
         let rank_body = |comm: &dyn Comm| {
-            let local = slice_of(&step, comm.rank(), comm.size());
+            let part = Part::new(comm.rank(), comm.size());
+            let local = resolved.series.step_part(frame.step, part)?.step;
             let mut backend = CpuBackend::new();
             let mut model = cost.clone();
             if !pilot.is_empty() {
@@ -256,7 +258,6 @@ pub(super) fn run(
             },
         };
         cost = Some(measured);
-        drop(step);
         log_reports(&image.reports);
         let legend = draw_legend.then(|| {
             Legend::of_field(

@@ -6,6 +6,8 @@
 //! type (decompressed chunk by chunk into the one array) and converted in parallel; doubles
 //! are used as read.
 
+use std::ops::Range;
+
 use ::hdf5::Dataset;
 use ::hdf5::types::{FloatSize, IntSize, TypeDescriptor};
 
@@ -77,18 +79,20 @@ impl Column {
         })
     }
 
-    /// Reads every value (row-major, `components` per particle) as f64 into `out` (exactly
-    /// rows x components long), after checking the file stores as many bytes as the shape
-    /// claims, and says whether every value is finite. A contiguous dataset of native floats
-    /// or doubles is read from the file directly ([`read_direct`]); otherwise doubles are read
-    /// by HDF5 straight into `out`, other types into one buffer of their own, converted into
-    /// `out` in parallel. (Read block by block through HDF5's hyperslabs it was 8x h5py's time
-    /// on 4M uncompressed particles: each block's selection, copy and conversion.)
+    /// Reads the values of the rows `rows` (row-major, `components` per particle) as f64 into
+    /// `out` (exactly that many rows x components long), after checking the file stores as
+    /// many bytes as the shape claims, and says whether every value is finite. A contiguous
+    /// dataset of native floats or doubles is read from the file directly ([`read_direct`]);
+    /// otherwise all rows are read by HDF5 (doubles straight into `out`, other types into one
+    /// buffer of their own, converted into `out` in parallel), and some rows as a hyperslab.
+    /// (Read block by block through HDF5's hyperslabs it was 8x h5py's time on 4M uncompressed
+    /// particles: each block's selection, copy and conversion; a rank's part is one hyperslab.)
     pub(super) fn read_into(
         &self,
         at: At<'_>,
         group: &str,
         dataset: &Dataset,
+        rows: Range<usize>,
         out: &mut [f64],
     ) -> Result<bool, DataError> {
         let values = self.rows as u64 * self.components as u64;
@@ -106,21 +110,39 @@ impl Column {
                 self.name, self.rows, self.components
             )));
         }
-        if out.len() as u64 != values {
+        let wanted = rows.len() as u64 * self.components as u64;
+        if rows.end > self.rows || out.len() as u64 != wanted {
             return Err(at.malformed(format!(
-                "dataset '/{group}/{}' has {values} values where {} were expected",
+                "dataset '/{group}/{}' has {} rows of {} values where rows {}..{} ({} values) \
+                 were expected",
                 self.name,
+                self.rows,
+                self.components,
+                rows.start,
+                rows.end,
                 out.len()
             )));
         }
+        let cannot = |e: String| {
+            at.malformed(format!(
+                "dataset '/{group}/{}': cannot read its {} x {} values: {e}",
+                self.name, self.rows, self.components
+            ))
+        };
         #[cfg(unix)]
         if let Some(offset) = self.direct_offset(at, dataset, logical) {
-            return read_direct(at.file, offset, self.kind, out).map_err(|e| {
-                at.malformed(format!(
-                    "dataset '/{group}/{}': cannot read its {} x {} values: {e}",
-                    self.name, self.rows, self.components
-                ))
-            });
+            let skip = rows.start as u64 * self.components as u64 * self.bytes_per_value;
+            return read_direct(at.file, offset + skip, self.kind, out)
+                .map_err(|e| cannot(e.to_string()));
+        }
+        if rows.len() < self.rows {
+            let read = match self.kind {
+                Kind::F64 => self.read_rows::<f64>(dataset, rows, out, |x| x),
+                Kind::F32 => self.read_rows::<f32>(dataset, rows, out, f64::from),
+                Kind::I64 => self.read_rows::<i64>(dataset, rows, out, |x| x as f64),
+                Kind::U64 => self.read_rows::<u64>(dataset, rows, out, |x| x as f64),
+            };
+            return read.map_err(|e| cannot(e.to_string()));
         }
         let n = out.len();
         let read = match self.kind {
@@ -131,12 +153,35 @@ impl Column {
             Kind::I64 => read_widened::<i64>(dataset, n, out, |x| x as f64),
             Kind::U64 => read_widened::<u64>(dataset, n, out, |x| x as f64),
         };
-        read.map_err(|e| {
-            at.malformed(format!(
-                "dataset '/{group}/{}': cannot read its {} x {} values: {e}",
-                self.name, self.rows, self.components
-            ))
-        })
+        read.map_err(|e| cannot(e.to_string()))
+    }
+
+    /// The rows `rows` of `dataset` in the type `T` (one hyperslab, which HDF5 reads chunk by
+    /// chunk), converted into `out`; whether every value is finite.
+    fn read_rows<T: ::hdf5::H5Type + Copy>(
+        &self,
+        dataset: &Dataset,
+        rows: Range<usize>,
+        out: &mut [f64],
+        convert: impl Fn(T) -> f64,
+    ) -> ::hdf5::Result<bool> {
+        if rows.is_empty() {
+            return Ok(true);
+        }
+        let stored: Vec<T> = if self.components == 1 && dataset.ndim() == 1 {
+            dataset
+                .read_slice_1d::<T, _>(rows)?
+                .iter()
+                .copied()
+                .collect()
+        } else {
+            dataset
+                .read_slice_2d::<T, _>((rows, ..))?
+                .iter()
+                .copied()
+                .collect()
+        };
+        Ok(widen_checked(&stored, out, convert))
     }
 
     /// Where the dataset's values lie in its file as one run of bytes that are the values

@@ -17,7 +17,7 @@ use ::hdf5::{File, Group};
 
 use self::datasets::Column;
 pub use self::header::Header;
-use super::{At, AttributeSelection, Columns, DataError, ReadOptions};
+use super::{At, AttributeSelection, Columns, DataError, Part, ReadOptions};
 use crate::values::Attribute;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -150,6 +150,19 @@ pub fn read_step(
     options: &ReadOptions,
     selection: &AttributeSelection,
 ) -> Result<Columns, DataError> {
+    Ok(read_part(at, options, selection, Part::WHOLE)?.0)
+}
+
+/// [`read_step`] of `part`'s particles of the chosen type, and how many: the type's particles
+/// numbered over the snapshot's files in order, each dataset read only over the rows of the
+/// files the part spans (a hyperslab, or directly from the file where it is contiguous);
+/// the other files have only their header read.
+pub(crate) fn read_part(
+    at: At<'_>,
+    options: &ReadOptions,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
     let t = options.particle_type.index();
     let group_name = options.particle_type.group();
     let first = open(at)?;
@@ -209,17 +222,33 @@ pub fn read_step(
         )));
     }
     let physical = Scaling::new(&header, options.physical);
+    // Each file's rows of the part (in the file's own numbering).
+    let wanted = part.range(total as usize);
+    let mut first_row = 0;
+    let spans: Vec<std::ops::Range<usize>> = parts
+        .iter()
+        .map(|p| {
+            let rows = first_row..first_row + p.2 as usize;
+            first_row = rows.end;
+            let (start, end) = (wanted.start.max(rows.start), wanted.end.min(rows.end));
+            if start < end {
+                start - rows.start..end - rows.start
+            } else {
+                0..0
+            }
+        })
+        .collect();
     let read = |column: &Column| -> Result<Values, DataError> {
-        // One array for the whole snapshot, each file's rows read into their part of it.
-        let total = parts.iter().map(|p| p.2 as usize).sum::<usize>() * column.components;
-        let mut values = datasets::fresh::<f64>(total);
+        // One array for the part, each file's rows read into their place in it.
+        let mut values = datasets::fresh::<f64>(wanted.len() * column.components);
         let mut finite = true;
         let mut offset = 0;
-        for (path, file, count) in &parts {
-            if *count > 0 {
-                let len = *count as usize * column.components;
+        for ((path, file, count), rows) in parts.iter().zip(&spans) {
+            if !rows.is_empty() {
+                let len = rows.len() * column.components;
                 let out = &mut values[offset..offset + len];
-                finite &= read_part(At::new(path, at.step), file, &catalog, column, *count, out)?;
+                let file_at = At::new(path, at.step);
+                finite &= read_rows(file_at, file, &catalog, column, *count, rows, out)?;
                 offset += len;
             }
         }
@@ -255,12 +284,13 @@ pub fn read_step(
         .into_iter()
         .filter(|n| !attributes.iter().any(|a| &a.name == n))
         .collect();
-    Ok(Columns {
+    let columns = Columns {
         positions,
         attributes,
         skipped,
         finite: positions_finite && attributes_finite,
-    })
+    };
+    Ok((columns, wanted.len()))
 }
 
 /// A dataset's values, and whether every one is finite.
@@ -338,14 +368,15 @@ pub fn derived_smoothing_length(mass: f64, density: f64) -> f64 {
     0.5 * (DERIVED_NEIGHBOURS * 3.0 * mass / (4.0 * std::f64::consts::PI * density)).cbrt()
 }
 
-/// One file's rows of `column` into `out`, checked against the file's own header count;
-/// whether every value is finite.
-fn read_part(
+/// The rows `rows` of one file's `column` into `out`, the dataset checked against the file's
+/// own header count; whether every value is finite.
+fn read_rows(
     at: At<'_>,
     file: &File,
     catalog: &Catalog,
     column: &Column,
     count: u64,
+    rows: &std::ops::Range<usize>,
     out: &mut [f64],
 ) -> Result<bool, DataError> {
     let path = format!("{}/{}", catalog.group, column.name);
@@ -369,7 +400,7 @@ fn read_part(
             here.rows
         )));
     }
-    here.read_into(at, &catalog.group, &dataset, out)
+    here.read_into(at, &catalog.group, &dataset, rows.clone(), out)
 }
 
 /// Comoving to physical: each dataset times a^exponent (SWIFT states the exponent on every

@@ -547,6 +547,51 @@ impl TimeSeries {
         }
     }
 
+    /// Rank `part.rank`'s part of step `index` ([`io::read_step_part`]): read from the file
+    /// without the cache (it is one rank's, and the cache is for whole steps), or cut from a
+    /// step held in memory. Where the series computes smoothing lengths from neighbours, the
+    /// part's lengths need the neighbours in other parts: the step is read whole (or comes from
+    /// the cache) and cut, with a line in the log that says so, so that the field is the
+    /// single-rank field.
+    pub fn step_part(&self, index: usize, part: io::Part) -> Result<io::StepPart, DataError> {
+        let whole_and_cut = |step: &Step| io::StepPart {
+            step: io::slice_step(step, part),
+            decoded: step.len(),
+        };
+        let (steps, selection, smoothing) = match &self.shared.source {
+            Source::Memory(_) => return self.step(index).map(|s| whole_and_cut(&s)),
+            Source::Files {
+                steps,
+                selection,
+                smoothing,
+            } => (steps, selection, smoothing),
+        };
+        if let Some(smoothing) = smoothing.filter(|s| selection.keeps(&s.attribute())) {
+            if part.rank == 0 {
+                tracing::info!(
+                    "smoothing lengths from the {} nearest neighbours: each of the {} ranks \
+                     reads the whole step, since a part's neighbours lie in other parts",
+                    smoothing.neighbours,
+                    part.ranks
+                );
+            }
+            return self.step(index).map(|s| whole_and_cut(&s));
+        }
+        let Some(step) = steps.get(index) else {
+            return self.step(index).map(|s| whole_and_cut(&s));
+        };
+        let read = io::read_step_part(step, selection, part)?;
+        tracing::debug!(
+            "{}: rank {} of {} decoded {} records, keeps {}",
+            step.name,
+            part.rank,
+            part.ranks,
+            read.decoded,
+            read.step.len()
+        );
+        Ok(read)
+    }
+
     /// How long the last read of step `index` from its file took (reading and decoding, on
     /// whichever thread read it), if it was read from a file.
     pub fn read_time(&self, index: usize) -> Option<Duration> {

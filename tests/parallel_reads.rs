@@ -1,0 +1,372 @@
+//! Each rank of a distributed render reads its part of a step (`io::read_step_part`, issue 49):
+//! on files as NumPy, h5py, GADGET-style writers and text writers make them, for P = 1..9 and
+//! 16 ranks, the parts put together in rank order are the whole step's records, and each part
+//! decoded no more than its share: exactly its records `[rN/P, (r+1)N/P)` for fixed-size
+//! records and HDF5; for CSV the records whose first byte lies in its share of the body's bytes,
+//! at most `ceil(N/P · longest row / shortest row) + 1`. Formats read whole decode N records on
+//! every rank, and say so.
+
+use std::path::Path;
+
+use aarbf::io::{self, AttributeSelection, Part, ReadOptions, StepRef};
+use aarbf::values::{Attribute, Step};
+use glam::DVec3;
+
+use crate::common;
+
+const RANKS: [usize; 10] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 16];
+
+/// How many records a part may decode.
+#[derive(Clone, Copy, Debug)]
+enum Bound {
+    /// Exactly its own records.
+    Exact,
+    /// Records by bytes: at most ceil(N/P · longest / shortest record) + 1.
+    Bytes { longest: usize, shortest: usize },
+    /// Every record (the format is read whole).
+    Whole,
+}
+
+fn only(names: &[&str]) -> AttributeSelection {
+    AttributeSelection::Only(names.iter().map(|n| n.to_string()).collect())
+}
+
+fn the_step(path: &Path) -> StepRef {
+    let mut steps = io::list_steps(path, None).unwrap();
+    assert_eq!(steps.len(), 1, "{}", path.display());
+    steps.remove(0)
+}
+
+/// The records of `parts`, one after another.
+fn joined(parts: &[Step], like: &Step) -> Step {
+    Step {
+        name: like.name.clone(),
+        positions: parts.iter().flat_map(|p| p.positions.clone()).collect(),
+        attributes: like
+            .attributes
+            .iter()
+            .enumerate()
+            .map(|(k, a)| Attribute {
+                name: a.name.clone(),
+                values: parts
+                    .iter()
+                    .flat_map(|p| {
+                        assert_eq!(p.attributes[k].name, a.name);
+                        p.attributes[k].values.clone()
+                    })
+                    .collect(),
+            })
+            .collect(),
+    }
+}
+
+/// Every part count of [`RANKS`]: the parts joined are `io::read_step`'s step, bit for bit,
+/// and each decoded what `bound` allows. `records`: the records the file holds (N, before
+/// non-finite ones are dropped).
+fn check_parts(step: &StepRef, selection: &AttributeSelection, records: usize, bound: Bound) {
+    let whole = io::read_step(step, selection).unwrap();
+    for ranks in RANKS {
+        let mut parts = Vec::new();
+        let mut decoded = 0;
+        for rank in 0..ranks {
+            let part = io::read_step_part(step, selection, Part::new(rank, ranks))
+                .unwrap_or_else(|e| panic!("{}: rank {rank} of {ranks}: {e}", step.name));
+            let share = Part::new(rank, ranks).range(records).len();
+            let limit = match bound {
+                Bound::Exact => share,
+                Bound::Bytes { longest, shortest } => {
+                    (records * longest).div_ceil(ranks * shortest) + 1
+                }
+                Bound::Whole => records,
+            };
+            match bound {
+                Bound::Exact => assert_eq!(part.decoded, share, "{} {rank}/{ranks}", step.name),
+                Bound::Whole => assert_eq!(part.decoded, records, "{} {rank}/{ranks}", step.name),
+                Bound::Bytes { .. } => assert!(
+                    part.decoded <= limit,
+                    "{}: rank {rank} of {ranks} decoded {} records, more than {limit}",
+                    step.name,
+                    part.decoded
+                ),
+            }
+            assert!(part.step.len() <= part.decoded.min(limit));
+            decoded += part.decoded;
+            parts.push(part.step);
+        }
+        if !matches!(bound, Bound::Whole) {
+            assert_eq!(decoded, records, "{}: {ranks} ranks", step.name);
+        }
+        let together = joined(&parts, &whole);
+        assert_eq!(together.positions, whole.positions, "{} {ranks}", step.name);
+        assert_eq!(
+            together.attributes, whole.attributes,
+            "{} {ranks}",
+            step.name
+        );
+    }
+}
+
+fn data(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// Row lengths of a text file's body (the lines after its first), newline included.
+fn row_lengths(path: &Path) -> (usize, usize) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let lengths: Vec<usize> = text
+        .split_inclusive('\n')
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .map(str::len)
+        .collect();
+    (
+        *lengths.iter().max().unwrap(),
+        *lengths.iter().min().unwrap(),
+    )
+}
+
+#[test]
+fn numpy_arrays_are_read_by_row_ranges_in_either_order() {
+    // Fortran order, big-endian float64, 1001 x 5 (numpy.save of numpy.asfortranarray).
+    let fortran = the_step(&data("numpy_fortran_be.npy"));
+    check_parts(&fortran, &AttributeSelection::All, 1001, Bound::Exact);
+    check_parts(&fortran, &only(&["col4"]), 1001, Bound::Exact);
+    // int64, 7 x 4: fewer rows than ranks, so some parts are empty.
+    let small = the_step(&data("numpy_int64.npy"));
+    check_parts(&small, &AttributeSelection::All, 7, Bound::Exact);
+    let empty = io::read_step_part(&small, &AttributeSelection::All, Part::new(0, 16)).unwrap();
+    assert_eq!((empty.step.len(), empty.decoded), (0, 0));
+    assert_eq!(empty.step.attributes[0].name, "col3");
+    // C order with non-finite rows (numpy.save's layout): dropped within each part as in the
+    // whole step.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("c_order.npy");
+    let n = 1003;
+    let mut values = Vec::new();
+    for i in 0..n {
+        let x = i as f64 * 0.1 + 1.0 / 3.0;
+        let bad = if i % 97 == 5 { f64::NAN } else { 1.0 };
+        let inf = if i % 211 == 7 { f64::INFINITY } else { 2.0 };
+        values.extend([x, bad * x.sin(), -x, x * x, inf]);
+    }
+    common::write_numpy(&path, n, 5, &values);
+    let c = the_step(&path);
+    check_parts(&c, &AttributeSelection::All, n, Bound::Exact);
+    check_parts(&c, &only(&["col3"]), n, Bound::Exact);
+}
+
+#[test]
+fn binary_records_are_read_by_byte_ranges() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1009;
+    let step = Step {
+        name: "s".into(),
+        positions: (0..n)
+            .map(|i| DVec3::new(i as f64 * 0.25, 1.0 - i as f64, 0.5))
+            .collect(),
+        attributes: vec![Attribute {
+            name: "rho".into(),
+            values: (0..n)
+                .map(|i| if i == 500 { f32::NAN as f64 } else { i as f64 })
+                .collect(),
+        }],
+    };
+    let raw = dir.path().join("knoll.raw");
+    io::raw::write_step(&raw, &step, "rho").unwrap();
+    check_parts(&the_step(&raw), &AttributeSelection::All, n, Bound::Exact);
+    let header = dir.path().join("run.particles");
+    io::particles::write_series(&header, std::slice::from_ref(&step), "rho").unwrap();
+    check_parts(
+        &the_step(&header),
+        &AttributeSelection::All,
+        n,
+        Bound::Exact,
+    );
+    // Binary big-endian PLY of scalar properties from a NumPy structured array.
+    let ply = the_step(&data("numpy_struct_be.ply"));
+    check_parts(&ply, &AttributeSelection::All, 1001, Bound::Exact);
+    check_parts(&ply, &only(&["id"]), 1001, Bound::Exact);
+}
+
+#[test]
+fn csv_is_read_by_byte_ranges_moved_to_line_starts() {
+    // 17-digit text from NumPy's repr, 1001 rows.
+    let path = data("numpy_particles.csv");
+    let (longest, shortest) = row_lengths(&path);
+    let bound = Bound::Bytes { longest, shortest };
+    check_parts(&the_step(&path), &AttributeSelection::All, 1001, bound);
+    check_parts(&the_step(&path), &only(&["temperature"]), 1001, bound);
+
+    // Comments and blank lines, CRLF line ends, a missing value (NaN, dropped), a label
+    // column (not numeric in the first record: not an attribute), fewer rows than ranks.
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from("# written by a script\r\nlabel,x,y,z,rho\r\n");
+    for i in 0..11 {
+        let rho = if i == 4 {
+            String::new()
+        } else {
+            format!("{}", 0.1 * i as f64)
+        };
+        text.push_str(&format!(
+            "p{i},{:.17e},{},-{i}.5,{rho}\r\n",
+            i as f64 / 3.0,
+            i * 7
+        ));
+        if i == 6 {
+            text.push_str("# a comment between records\r\n\r\n");
+        }
+    }
+    let odd = dir.path().join("odd.csv");
+    std::fs::write(&odd, &text).unwrap();
+    let whole = io::read_step(&the_step(&odd), &AttributeSelection::All).unwrap();
+    assert_eq!(whole.len(), 10);
+    assert_eq!(whole.attribute_names(), ["rho"]);
+    // A comment line counts as a record for the byte bound.
+    let (longest, shortest) = (row_lengths(&odd).0, 4);
+    check_parts(
+        &the_step(&odd),
+        &AttributeSelection::All,
+        11,
+        Bound::Bytes { longest, shortest },
+    );
+}
+
+#[test]
+fn a_bad_record_in_a_part_is_named_by_its_byte_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.csv");
+    let mut text = String::from("x,y,z\n");
+    for i in 0..100 {
+        text.push_str(&format!("{i},{i},{i}\n"));
+    }
+    let at = text.len();
+    text.push_str("1,two,3\n");
+    std::fs::write(&path, &text).unwrap();
+    let step = the_step(&path);
+    let err = io::read_step(&step, &AttributeSelection::All)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("line 102") && err.contains("'two'"), "{err}");
+    let err = io::read_step_part(&step, &AttributeSelection::All, Part::new(1, 2))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("bad.csv") && err.contains(&format!("byte {at}")) && err.contains("'two'"),
+        "{err}"
+    );
+}
+
+#[test]
+fn formats_without_a_partial_read_are_read_whole_and_cut() {
+    // VTK XML written by PySPH (appended, base64 or compressed arrays).
+    let vtp = the_step(&data("sph_runs/pysph_dam_break/fluid_00000.vtp"));
+    let n = io::read_step(&vtp, &AttributeSelection::All).unwrap().len();
+    check_parts(&vtp, &AttributeSelection::All, n, Bound::Whole);
+    // Ascii PLY: each row must be parsed to find the next.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ascii.ply");
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 13\nproperty float x\nproperty float y\n\
+         property float z\nproperty float rho\nend_header\n",
+    );
+    for i in 0..13 {
+        text.push_str(&format!("{i} {} 0.5 {}\n", i * 2, i as f64 / 7.0));
+    }
+    std::fs::write(&path, text).unwrap();
+    check_parts(&the_step(&path), &AttributeSelection::All, 13, Bound::Whole);
+}
+
+#[cfg(feature = "hdf5")]
+#[test]
+fn hdf5_snapshots_are_read_by_hyperslabs_across_their_files() {
+    use io::ParticleType;
+    // h5py's SWIFT-like snapshot: chunked, gzip + shuffle, 203 gas and 50 dark matter.
+    let swift = data("h5py_swift/snap_0000.hdf5");
+    check_parts(
+        &the_step(&swift),
+        &AttributeSelection::All,
+        203,
+        Bound::Exact,
+    );
+    check_parts(&the_step(&swift), &only(&["Densities"]), 203, Bound::Exact);
+    let dark = io::list_steps_reading(
+        &swift,
+        None,
+        ReadOptions {
+            particle_type: "1".parse::<ParticleType>().unwrap(),
+            physical: false,
+        },
+    )
+    .unwrap()
+    .remove(0);
+    check_parts(&dark, &AttributeSelection::All, 50, Bound::Exact);
+
+    // GADGET-style, over three files, one of them empty (compressed coordinates, contiguous
+    // float32 velocities read straight from the file, masses from the mass table).
+    let dir = tempfile::tempdir().unwrap();
+    crate::hdf5_snapshots::write_gadget_snapshot(dir.path(), 0, &[301, 0, 422], 0.5);
+    let first = dir.path().join("snap_000.0.hdf5");
+    check_parts(
+        &the_step(&first),
+        &AttributeSelection::All,
+        723,
+        Bound::Exact,
+    );
+    let velocities = only(&["Velocities_x", "Masses"]);
+    check_parts(&the_step(&first), &velocities, 723, Bound::Exact);
+    // Rank 1 of 2 reads only the third file's rows.
+    let part = io::read_step_part(&the_step(&first), &velocities, Part::new(1, 2)).unwrap();
+    assert_eq!(part.decoded, 723 - 361);
+    assert_eq!(part.step.attributes[0].values[0], 361.0);
+}
+
+/// Smoothing lengths from neighbours need the neighbours in other parts: each rank reads the
+/// whole step (the series says so in its log) and keeps its part, so the lengths are the
+/// single-rank lengths; without them in the selection, the part alone is read.
+#[test]
+fn a_series_with_neighbour_smoothing_cuts_its_parts_from_the_whole_step() {
+    use aarbf::scene::{OpenOptions, TimeSeries, smoothing::Smoothing};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cloud.npy");
+    let n = 301;
+    let values: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            let t = i as f64 * 0.37;
+            [t.sin(), t.cos(), 0.01 * t, t]
+        })
+        .collect();
+    common::write_numpy(&path, n, 4, &values);
+    let smoothing = Smoothing { neighbours: 8 };
+    let open = |attributes| {
+        TimeSeries::open(
+            &path,
+            &OpenOptions {
+                smoothing: Some(smoothing),
+                attributes,
+                ..OpenOptions::default()
+            },
+        )
+        .unwrap()
+    };
+    let series = open(AttributeSelection::All);
+    let whole = series.step(0).unwrap();
+    assert!(whole.attribute(&smoothing.attribute()).is_some());
+    for ranks in [2, 5] {
+        let parts: Vec<Step> = (0..ranks)
+            .map(|rank| {
+                let part = series.step_part(0, Part::new(rank, ranks)).unwrap();
+                assert_eq!(part.decoded, n);
+                part.step
+            })
+            .collect();
+        let together = joined(&parts, &whole);
+        assert_eq!(together.positions, whole.positions);
+        assert_eq!(together.attributes, whole.attributes);
+    }
+    let without = open(only(&["col3"]));
+    let part = without.step_part(0, Part::new(1, 3)).unwrap();
+    assert_eq!(part.decoded, Part::new(1, 3).range(n).len());
+    assert_eq!(part.step.attribute_names(), ["col3"]);
+}
