@@ -203,7 +203,8 @@ fn used_paths(code: &str, own: &[String]) -> Vec<Vec<String>> {
     let bytes = code.as_bytes();
     let mut i = 0;
     while i < code.len() {
-        let starts = |word: &str| code[i..].starts_with(word);
+        // Bytes, not str: `i` steps through non-ASCII text (a string's α) a byte at a time.
+        let starts = |word: &str| bytes[i..].starts_with(word.as_bytes());
         let preceded = i > 0
             && (bytes[i - 1].is_ascii_alphanumeric()
                 || bytes[i - 1] == b'_'

@@ -13,12 +13,6 @@ use crate::values::{Attribute, Step};
 
 const POSITION_NAMES: [[&str; 3]; 2] = [["x", "y", "z"], ["points:0", "points:1", "points:2"]];
 
-/// Reads a CSV step: positions from the `x, y, z` (or `Points:0..2`) columns, the selected other
-/// columns as attributes.
-pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    Ok(read_part(at, selection, Part::WHOLE)?.0)
-}
-
 /// The header row's columns, which are positions and which attributes, and where the records
 /// start.
 struct Layout {
@@ -103,11 +97,14 @@ impl Layout {
     }
 }
 
+/// Reads a CSV step: positions from the `x, y, z` (or `Points:0..2`) columns, the selected other
+/// columns as attributes.
+///
 /// [`read_step`] of the records whose first byte lies in `part`'s share of the body's bytes
 /// (each share's ends moved forward to the start of a line), and how many: only those bytes
 /// are read. A record's place in an error is its line for the whole file, its byte offset for
 /// a part.
-pub(super) fn read_part(
+pub(super) fn read_step(
     at: At<'_>,
     selection: &AttributeSelection,
     part: Part,

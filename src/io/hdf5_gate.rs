@@ -7,41 +7,25 @@ use std::path::Path;
 use super::Problem;
 use super::{At, AttributeSelection, Columns, DataError, Part, ReadOptions};
 
+/// `part`'s particles of the snapshot, and how many were decoded.
 #[cfg(feature = "hdf5")]
 pub(super) fn read_step(
     at: At<'_>,
     read: &ReadOptions,
     selection: &AttributeSelection,
-) -> Result<Columns, DataError> {
-    super::hdf5_snapshot::read_step(at, read, selection)
-}
-
-#[cfg(feature = "hdf5")]
-pub(super) fn read_part(
-    at: At<'_>,
-    read: &ReadOptions,
-    selection: &AttributeSelection,
     part: Part,
 ) -> Result<(Columns, usize), DataError> {
-    super::hdf5_snapshot::read_part(at, read, selection, part)
+    super::hdf5_snapshot::read_step(at, read, selection, part)
 }
 
+/// Without HDF5 support: an error that says how to get it.
 #[cfg(not(feature = "hdf5"))]
-pub(super) fn read_part(
-    at: At<'_>,
-    read: &ReadOptions,
-    selection: &AttributeSelection,
-    _part: Part,
-) -> Result<(Columns, usize), DataError> {
-    read_step(at, read, selection).map(|c| (c, 0))
-}
-
-#[cfg(not(feature = "hdf5"))]
-pub fn read_step(
+pub(super) fn read_step(
     at: At<'_>,
     _read: &ReadOptions,
     _selection: &AttributeSelection,
-) -> Result<Columns, DataError> {
+    _part: Part,
+) -> Result<(Columns, usize), DataError> {
     Err(at.err(Problem::UnknownFormat(
         "this aarbf was built without HDF5 support; build it with the default features \
          (the `hdf5` feature, which needs the HDF5 library: `apt-get install libhdf5-dev` or \

@@ -44,7 +44,7 @@ pub use format::Format;
 pub use listing::{
     SimulationBox, StepRef, list_steps, list_steps_reading, simulation_box, step_time,
 };
-pub use part::{Part, StepPart, read_step_part, slice_step};
+pub use part::{Part, StepPart, slice_step};
 pub use read_options::{ParticleType, ReadOptions};
 pub use write::{existing_outputs, write_series};
 
@@ -74,17 +74,49 @@ impl AttributeSelection {
 /// Reads one step, keeping the attributes `selection` names.
 pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step, DataError> {
     let at = step.at();
-    let columns = match step.format {
-        Format::Particles => particles::read_step(at, selection)?,
-        Format::VtkXml => vtk::read_step(at, false, selection)?,
-        Format::Vtk => vtk::read_step(at, true, selection)?,
-        Format::Csv => csv::read_step(at, selection)?,
-        Format::Ply => ply::read_step(at, selection)?,
-        Format::Raw => raw::read_step(at, selection)?,
-        Format::Npy => npy::read_step(at, selection)?,
-        Format::Hdf5 => hdf5_gate::read_step(at, &step.read, selection)?,
-    };
+    let (columns, _) = read_columns(step, selection, Part::WHOLE)?;
     finish_step(at, &step.name, columns, selection)
+}
+
+/// Reads rank `part.rank`'s part of one step, keeping the attributes `selection` names: the
+/// same records, checks and cleaning as [`read_step`] on them, but possibly empty.
+pub fn read_step_part(
+    step: &StepRef,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<StepPart, DataError> {
+    let at = step.at();
+    let (columns, decoded) = read_columns(step, selection, part)?;
+    let step = finish::finish(at, &step.name, columns, selection, true)?;
+    Ok(StepPart { step, decoded })
+}
+
+/// `part`'s columns of one step, before the checks and cleaning, and the records decoded:
+/// every format's reader, each reading what it can of a part alone.
+fn read_columns(
+    step: &StepRef,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
+    let at = step.at();
+    Ok(match step.format {
+        Format::Particles => particles::read_step(at, selection, part)?,
+        Format::Raw => raw::read_step(at, selection, part)?,
+        Format::Npy => npy::read_step(at, selection, part)?,
+        Format::Csv => csv::read_step(at, selection, part)?,
+        Format::Ply => ply::read_step(at, selection, part)?,
+        Format::Hdf5 => hdf5_gate::read_step(at, &step.read, selection, part)?,
+        Format::Vtk | Format::VtkXml => {
+            let legacy = step.format == Format::Vtk;
+            let columns = vtk::read_step(at, legacy, selection)?;
+            part::read_whole(
+                step.format,
+                "its arrays may be compressed or ascii",
+                columns,
+                part,
+            )
+        }
+    })
 }
 
 /// The size of an open file, for checking counts against it.

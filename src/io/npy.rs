@@ -310,13 +310,10 @@ pub fn read_matrix(at: At<'_>) -> Result<Matrix, DataError> {
 
 /// Reads a particle step from an N x (3 + k) `.npy` array: columns x, y, z, then the attributes
 /// `col3`, `col4`, ... (only the selected ones decoded).
-pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    Ok(read_part(at, selection, Part::WHOLE)?.0)
-}
-
-/// [`read_step`] of `part`'s rows only (their bytes alone are decoded, in Fortran order each
+///
+/// Of that, `part`'s rows only (their bytes alone are decoded, in Fortran order each
 /// column's run of them), and how many.
-pub(super) fn read_part(
+pub(super) fn read_step(
     at: At<'_>,
     selection: &AttributeSelection,
     part: Part,

@@ -21,7 +21,7 @@
 use std::ops::Range;
 use std::sync::atomic::{AtomicU8, Ordering};
 
-use super::{AttributeSelection, Columns, DataError, Format, StepRef};
+use super::{Columns, Format};
 use crate::values::{Attribute, Step};
 
 /// Rank `rank` of `ranks`: the part of a step it reads.
@@ -64,38 +64,6 @@ pub struct StepPart {
     /// Records decoded from the file: the part's own (CSV: the records whose first byte lies in
     /// the part's byte range), or every record of the step for a format read whole.
     pub decoded: usize,
-}
-
-/// Reads rank `part.rank`'s part of one step, keeping the attributes `selection` names: the
-/// same records, checks and cleaning as [`super::read_step`] on them, but possibly empty.
-pub fn read_step_part(
-    step: &StepRef,
-    selection: &AttributeSelection,
-    part: Part,
-) -> Result<StepPart, DataError> {
-    let at = step.at();
-    let (columns, decoded) = match step.format {
-        Format::Particles => super::particles::read_part(at, selection, part)?,
-        Format::Raw => super::raw::read_part(at, selection, part)?,
-        Format::Npy => super::npy::read_part(at, selection, part)?,
-        Format::Csv => super::csv::read_part(at, selection, part)?,
-        Format::Ply => super::ply::read_part(at, selection, part)?,
-        Format::Hdf5 => super::hdf5_gate::read_part(at, &step.read, selection, part)?,
-        Format::Vtk | Format::VtkXml => {
-            let columns = match step.format {
-                Format::Vtk => super::vtk::read_step(at, true, selection)?,
-                _ => super::vtk::read_step(at, false, selection)?,
-            };
-            read_whole(
-                step.format,
-                "its arrays may be compressed or ascii",
-                columns,
-                part,
-            )
-        }
-    };
-    let step = super::finish::finish(at, &step.name, columns, selection, true)?;
-    Ok(StepPart { step, decoded })
 }
 
 /// A whole step's columns cut to `part` (for a format that cannot read a part alone), with a

@@ -45,12 +45,9 @@ pub fn step_path(header: &Path, name: &str) -> PathBuf {
 
 /// Reads one `.particles` step file: a little-endian u64 count, then count records of four f32 (x,
 /// y, z, [`ATTRIBUTE_NAME`]).
-pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    Ok(read_part(at, selection, Part::WHOLE)?.0)
-}
-
-/// [`read_step`] of `part`'s records only (their bytes alone are decoded), and how many.
-pub(super) fn read_part(
+///
+/// Of that, `part`'s records only (their bytes alone are decoded), and how many.
+pub(super) fn read_step(
     at: At<'_>,
     selection: &AttributeSelection,
     part: Part,

@@ -201,14 +201,11 @@ impl Body<'_> {
 
 /// Reads a PLY file: the `vertex` element's `x, y, z` as positions, its other scalar properties as
 /// attributes (the selected ones).
-pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    Ok(read_part(at, selection, Part::WHOLE)?.0)
-}
-
-/// [`read_step`] of `part`'s vertices, and how many vertices were decoded: binary rows of
+///
+/// Of that, `part`'s vertices, and how many vertices were decoded: binary rows of
 /// scalars only are of one size, so only the part's rows are decoded; ascii rows, and rows
 /// with lists, are read whole (each row must be parsed to find the next) and sliced.
-pub(super) fn read_part(
+pub(super) fn read_step(
     at: At<'_>,
     selection: &AttributeSelection,
     part: Part,

@@ -13,12 +13,9 @@ pub const ATTRIBUTE_NAME: &str = "w";
 
 /// Reads a `.raw` file: records of four little-endian f32 (x, y, z, w), w as the attribute
 /// [`ATTRIBUTE_NAME`]; a size that is not a multiple of 16 bytes is a truncated file.
-pub fn read_step(at: At<'_>, selection: &AttributeSelection) -> Result<Columns, DataError> {
-    Ok(read_part(at, selection, Part::WHOLE)?.0)
-}
-
-/// [`read_step`] of `part`'s records only (their bytes alone are decoded), and how many.
-pub(super) fn read_part(
+///
+/// Of that, `part`'s records only (their bytes alone are decoded), and how many.
+pub(super) fn read_step(
     at: At<'_>,
     selection: &AttributeSelection,
     part: Part,

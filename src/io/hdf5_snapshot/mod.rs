@@ -145,19 +145,12 @@ impl Catalog {
 }
 
 /// Reads the chosen particle type of the snapshot whose (first) file `at` names.
-pub fn read_step(
-    at: At<'_>,
-    options: &ReadOptions,
-    selection: &AttributeSelection,
-) -> Result<Columns, DataError> {
-    Ok(read_part(at, options, selection, Part::WHOLE)?.0)
-}
-
-/// [`read_step`] of `part`'s particles of the chosen type, and how many: the type's particles
+///
+/// Of that, `part`'s particles of the chosen type, and how many: the type's particles
 /// numbered over the snapshot's files in order, each dataset read only over the rows of the
 /// files the part spans (a hyperslab, or directly from the file where it is contiguous);
 /// the other files have only their header read.
-pub(crate) fn read_part(
+pub(crate) fn read_step(
     at: At<'_>,
     options: &ReadOptions,
     selection: &AttributeSelection,
