@@ -13,6 +13,7 @@ use crate::accel::ClusterSize;
 use crate::backend::precision::PositionKind;
 use crate::backend::{Backend, Precision, StepInput};
 use crate::field::{FieldSettings, PeriodicBox, particle_reaches};
+use crate::render::CycleWeights;
 use crate::values::{Bounds, FrameParams, Image, Integrator, Step};
 
 /// What every rank renders with: the same on all of them (series-wide values, never one
@@ -91,18 +92,22 @@ pub struct DistImage {
     pub frames: u32,
     /// Row-major linear RGBA (the background composited), as a single-rank backend's mean.
     pub mean: Vec<[f64; 4]>,
+    /// Past a blue-noise mask cycle, the image with the cycles weighted by their measured
+    /// noise, as a single rank's session makes it (`None` where the mean is the image).
+    pub weighted: Option<Image>,
     /// Every rank's report, rank order.
     pub reports: Vec<RankReport>,
 }
 
 impl DistImage {
-    /// The image as a backend returns it (the f64 mean rounded to f32).
+    /// The image as a single rank's session returns it: the f64 mean rounded to f32, or past
+    /// a blue-noise mask cycle the cycles weighted by their noise.
     pub fn image(&self) -> Image {
-        Image {
+        self.weighted.clone().unwrap_or_else(|| Image {
             width: self.width,
             height: self.height,
             pixels: self.mean.iter().map(|p| p.map(|v| v as f32)).collect(),
-        }
+        })
     }
 }
 
@@ -168,6 +173,15 @@ fn periodic_images(
         .fold(0.0, |a: f64, &b| a.max(b));
     let step = Arc::try_unwrap(images.step).unwrap_or_else(|shared| (*shared).clone());
     Ok((Some(step), periodic.bounds().grown(largest)))
+}
+
+/// A mean image of the grid's size, rounded to f32 as a backend returns it.
+fn f32_image(grid: &TileGrid, mean: &[[f64; 4]]) -> Image {
+    Image {
+        width: grid.width,
+        height: grid.height,
+        pixels: mean.iter().map(|p| p.map(|v| v as f32)).collect(),
+    }
 }
 
 /// The bytes of a step's positions and attributes.
@@ -273,8 +287,19 @@ pub fn render_balanced(
         ranks: comm.size(),
     };
     let mut sums = TileSums::new(grid, comm.rank());
+    // Past a blue-noise mask cycle the image weights the cycles by their measured noise
+    // (`render::cycles`), from the means at a few frame counts: each tile's owner keeps its
+    // sums at every count that can be asked for, and rank 0 replays the single rank's choice.
+    let cycles = CycleWeights::of_frames(frames[0].noise, frames[0].integrator);
+    let mut kept: Vec<(u32, Vec<[f64; 4]>)> = Vec::new();
     let mut largest_layer = 0;
     for frame in frames {
+        if cycles
+            .as_ref()
+            .is_some_and(|c| c.may_want_mean_at(sums.frames))
+        {
+            kept.push((sums.frames, sums.flat()));
+        }
         let clock = StageClock::start();
         let march_box = Bounds {
             min: frame.box_min,
@@ -320,21 +345,47 @@ pub fn render_balanced(
         .collect();
     let measured = CostModel::new(tree, &measured);
 
-    let tiles = comm.gather_of(0, &sums.flat())?;
+    // The kept sums, then the final ones, end to end: one gather.
+    let mut flat: Vec<[f64; 4]> = kept.iter().flat_map(|(_, k)| k.iter().copied()).collect();
+    flat.extend(sums.flat());
+    let tiles = comm.gather_of(0, &flat)?;
     let reports = comm.gather_of(0, &[report])?;
     let (Some(tiles), Some(reports)) = (tiles, reports) else {
         return Ok((None, measured));
     };
-    let n = f64::from(sums.frames.max(1));
-    let mean = assemble(&grid, &tiles)?
-        .into_iter()
-        .map(|s| s.map(|v| v / n))
-        .collect();
+    let sums_at = |j: usize| -> Result<Vec<[f64; 4]>, DistError> {
+        let parts: Vec<Vec<[f64; 4]>> = tiles
+            .iter()
+            .map(|t| {
+                let len = t.len() / (kept.len() + 1);
+                t[j * len..(j + 1) * len].to_vec()
+            })
+            .collect();
+        assemble(&grid, &parts)
+    };
+    let mean_of = |sums: Vec<[f64; 4]>, frames: u32| -> Vec<[f64; 4]> {
+        let n = f64::from(frames.max(1));
+        sums.into_iter().map(|s| s.map(|v| v / n)).collect()
+    };
+    let mean = mean_of(sums_at(kept.len())?, sums.frames);
+    let weighted = match cycles {
+        Some(mut cycles) if !kept.is_empty() => {
+            for (j, (at, _)) in kept.iter().enumerate() {
+                if cycles.wants_mean_at(*at) {
+                    let image = f32_image(&grid, &mean_of(sums_at(j)?, *at));
+                    cycles.took_mean(*at, image);
+                }
+            }
+            Some(cycles.image(sums.frames, f32_image(&grid, &mean)))
+        }
+        _ => None,
+    };
     let image = DistImage {
         width: grid.width,
         height: grid.height,
         frames: sums.frames,
         mean,
+        weighted,
         reports: reports.concat(),
     };
     Ok((Some(image), measured))

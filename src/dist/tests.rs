@@ -435,3 +435,82 @@ fn empty_bricks_render_nothing_and_break_nothing() {
         .fold(0.0, f64::max);
     assert!(diff <= 1e-12, "{diff:e}");
 }
+
+/// Past a blue-noise mask cycle a single rank weights the cycles by their measured noise
+/// (`render::cycles`); the distributed image is that same weighted image: the tiles' owners
+/// keep their sums at every frame count the weights can ask for, and rank 0 replays the
+/// single rank's choice. The weighted image is not the plain mean, so the test sees it.
+#[test]
+fn past_a_mask_cycle_the_cycles_are_weighted_as_a_single_rank_weights_them() {
+    use crate::backend::cpu::CpuBackend;
+    use crate::backend::{Backend, Precision, StepInput};
+    use crate::render::CycleWeights;
+    let step = std::sync::Arc::new(cloud(300, 5));
+    let field = field();
+    let march = step.bounds().grown(0.2);
+    let d = crate::noise::BlueNoiseMask::builtin().depth;
+    let n = d + d / 2 + 3;
+    let frames: Vec<FrameParams> = (0..n)
+        .map(|i| {
+            let mut f = frame(DVec3::new(2.6, 1.5, 1.8), march.center(), march, 40, 30);
+            f.frame = i;
+            f.colour = ColourMode::Post;
+            f.density_scale = 5.0;
+            f.optical_table = std::sync::Arc::new((0..64).map(|i| i as f32 / 63.0).collect());
+            f
+        })
+        .collect();
+    let scene = DistScene {
+        field: &field,
+        cluster: crate::accel::ClusterSize::new(4).unwrap(),
+        series_bounds: step.bounds(),
+        series_range: Some((0.0, 3.0)),
+        precision: Precision::F64,
+        periodic: None,
+    };
+    // The single rank, as `render::RenderSession` accumulates.
+    let mut single = CpuBackend::new();
+    single
+        .upload(&StepInput {
+            step: &step,
+            field: &field,
+            cluster: scene.cluster,
+            series_bounds: scene.series_bounds,
+            series_range: scene.series_range,
+            precision: scene.precision,
+        })
+        .unwrap();
+    single.build().unwrap();
+    let mut cycles = CycleWeights::of_frames(NoiseKind::Stbn, Integrator::Ea).unwrap();
+    for (i, f) in frames.iter().enumerate() {
+        if cycles.wants_mean_at(i as u32) {
+            cycles.took_mean(i as u32, single.image().unwrap());
+        }
+        single.render(f).unwrap();
+    }
+    let plain = single.image().unwrap();
+    let want = cycles.image(n, plain.clone());
+    let differ = |a: &crate::values::Image, b: &crate::values::Image| {
+        a.pixels
+            .iter()
+            .zip(&b.pixels)
+            .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
+            .fold(0.0f32, f32::max)
+    };
+    assert!(differ(&want, &plain) > 1e-4, "the weights change the image");
+    for p in [1, 3] {
+        let got = run_local(p, |comm| {
+            let local = slice_of(&step, comm.rank(), comm.size());
+            render_distributed(comm, &mut CpuBackend::new(), &local, &scene, &frames)
+        })
+        .unwrap()
+        .swap_remove(0)
+        .unwrap();
+        assert_eq!(got.frames, n);
+        let diff = differ(&got.image(), &want);
+        assert!(
+            diff <= 1e-6,
+            "P = {p}: {diff:e} from the weighted single-rank image"
+        );
+    }
+}

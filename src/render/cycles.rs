@@ -34,7 +34,11 @@ use crate::values::{Image, Integrator, NoiseKind};
 /// The frames of one mask cycle where `settings` draw blue noise (every backend draws from the
 /// built-in mask), `None` for white noise.
 pub(crate) fn mask_cycle(settings: &RenderSettings) -> Option<u32> {
-    match settings.noise {
+    mask_cycle_of(settings.noise)
+}
+
+fn mask_cycle_of(noise: NoiseKind) -> Option<u32> {
+    match noise {
         NoiseKind::Stbn => Some(BlueNoiseMask::builtin().depth),
         NoiseKind::White => None,
     }
@@ -44,9 +48,12 @@ pub(crate) fn mask_cycle(settings: &RenderSettings) -> Option<u32> {
 /// and an integrator that draws its numbers from it: not delta tracking, which draws most of
 /// its numbers from white noise); `None` where its frames are as good as independent.
 pub(crate) fn stratified_cycle(settings: &RenderSettings) -> Option<u32> {
-    let cycle = mask_cycle(settings)?;
-    (settings.integrator != Integrator::Delta && cycle >= 4 && cycle.is_multiple_of(4))
-        .then_some(cycle)
+    stratified_cycle_of(settings.noise, settings.integrator)
+}
+
+fn stratified_cycle_of(noise: NoiseKind, integrator: Integrator) -> Option<u32> {
+    let cycle = mask_cycle_of(noise)?;
+    (integrator != Integrator::Delta && cycle >= 4 && cycle.is_multiple_of(4)).then_some(cycle)
 }
 
 /// The combination of one accumulation's whole mask cycles and its incomplete one (see the
@@ -69,7 +76,12 @@ impl CycleWeights {
     /// The weights of an accumulation of `settings`: `None` where its frames are not
     /// stratified over a mask cycle and the plain mean is the image.
     pub(crate) fn of(settings: &RenderSettings) -> Option<CycleWeights> {
-        let cycle = stratified_cycle(settings)?;
+        CycleWeights::of_frames(settings.noise, settings.integrator)
+    }
+
+    /// The weights of an accumulation of frames drawn from `noise` by `integrator`.
+    pub(crate) fn of_frames(noise: NoiseKind, integrator: Integrator) -> Option<CycleWeights> {
+        let cycle = stratified_cycle_of(noise, integrator)?;
         Some(CycleWeights {
             cycle,
             whole: None,
@@ -87,6 +99,16 @@ impl CycleWeights {
             && (in_cycle == 0
                 || ((in_cycle == d / 4 || in_cycle == d / 2)
                     && (frames < d || (frames < 2 * d && self.cycle_variance_pending(in_cycle)))))
+    }
+
+    /// Whether the mean at `frames` frames may be wanted, whatever was measured before: every
+    /// frame count [`wants_mean_at`](Self::wants_mean_at) can name, for a renderer that keeps
+    /// the means before it can ask (the distributed one keeps them in its tiles' owners).
+    pub(crate) fn may_want_mean_at(&self, frames: u32) -> bool {
+        let d = self.cycle;
+        let in_cycle = frames % d;
+        frames > 0
+            && (in_cycle == 0 || ((in_cycle == d / 4 || in_cycle == d / 2) && frames < 2 * d))
     }
 
     fn cycle_variance_pending(&self, prefix: u32) -> bool {

@@ -15,7 +15,7 @@ mod step_bias;
 pub mod target;
 
 pub use auto::AutoValues;
-pub(crate) use cycles::stratified_cycle;
+pub(crate) use cycles::CycleWeights;
 pub use error::RenderError;
 pub use session::{FrameBasis, RenderSession, Resolved, StepChange};
 pub use settings::{Method, RenderSettings, SPLAT_K, VOXEL_GRID};

@@ -17,7 +17,7 @@ use crate::cli::output_format::OutputFormat;
 use crate::dist::{Balance, Comm, CostModel, DistScene, RankReport, render_balanced, run_local};
 use crate::io::Part;
 use crate::render::legend::Legend;
-use crate::render::{AutoValues, FrameBasis, Method, RenderSettings, stratified_cycle};
+use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
 use crate::scene_file::resolve::Resolved;
 use crate::values::FrameParams;
 
@@ -135,15 +135,6 @@ fn check_supported(
         args.save_scene.is_none(),
         "{how}: --save-scene is not distributed yet; save the scene from a single-rank render"
     );
-    let spp = resolved.scene.spp();
-    if let Some(cycle) = stratified_cycle(settings) {
-        ensure!(
-            spp <= cycle,
-            "{how}: {spp} spp of blue noise spans more than one mask cycle ({cycle} frames), \
-             whose frames a single-rank render weights by their measured noise; that weighting \
-             is not distributed yet: use --spp {cycle} or less, or --noise white"
-        );
-    }
     Ok(())
 }
 
