@@ -215,8 +215,8 @@ fn single_scattering_is_refused_with_a_reason() {
 }
 
 /// `aarbf render --ranks 3` as a user runs it: the same image as without `--ranks` (the
-/// default termination on: within its threshold), the ranks' counts logged, and what is not
-/// distributed yet refused by name.
+/// default termination on: within its threshold), also with `--balance cost`, the ranks'
+/// counts logged, and what is not distributed yet refused by name.
 #[test]
 fn the_command_line_renders_with_ranks() {
     let dir = tempfile::tempdir().unwrap();
@@ -243,19 +243,29 @@ fn the_command_line_renders_with_ranks() {
         "{log}"
     );
     let a = image::open(&single_path).unwrap().to_rgba32f();
-    let b = image::open(&ranked_path).unwrap().to_rgba32f();
     assert_eq!(a.dimensions(), (64, 48));
-    let diff = a
-        .as_raw()
-        .iter()
-        .zip(b.as_raw())
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0f32, f32::max);
+    let diff = common::max_image_difference(&single_path, &ranked_path);
     assert!(a.as_raw().iter().any(|&v| v > 0.05), "the fluid shows");
     assert!(
         diff <= 0.01,
         "--ranks 3 differs from the single-rank image by {diff}"
     );
+
+    // Balanced by measured cost: the same image, and refused where nothing is distributed.
+    let (cost, cost_path) = render("cost.exr", &["--ranks", "3", "--balance", "cost"]);
+    let log = String::from_utf8_lossy(&cost.stderr);
+    assert!(cost.status.success(), "{log}");
+    assert!(log.contains("slowest render"), "{log}");
+    let diff = common::max_image_difference(&single_path, &cost_path);
+    assert!(diff <= 0.01, "--balance cost differs by {diff}");
+    let (refused, path) = render("lone.exr", &["--balance", "cost"]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        err.contains("--balance cost") && err.contains("--ranks"),
+        "{err}"
+    );
+    assert!(!path.exists());
 
     let (refused, _) = render("ss.exr", &["--ranks", "2", "--integrator", "marching"]);
     let err = String::from_utf8_lossy(&refused.stderr);
@@ -455,51 +465,27 @@ fn a_periodic_box_matches_the_single_rank_to_rounding() {
 fn an_hdf5_snapshot_in_a_periodic_box_renders_with_ranks() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    // A copy: reading writes an index beside the files, and the inputs stay untouched.
-    let data = d.join("swift");
-    std::fs::create_dir(&data).unwrap();
-    let fixture = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/h5py_swift");
-    for name in ["snap_0000.hdf5", "snap_0001.hdf5"] {
-        std::fs::copy(fixture.join(name), data.join(name)).unwrap();
-    }
+    let data = common::swift_snapshot_copy(d);
     let render = |name: &str, extra: &[&str]| {
         let out = d.join(name);
-        let mut args = vec![
-            "render",
-            "--data",
-            data.to_str().unwrap(),
-            "--width",
-            "64",
-            "--height",
-            "64",
-            "--spp",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        let run = common::aarbf_logged(&args);
+        let mut args = common::swift_render_args(&data, &out);
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let run = common::aarbf_logged(&args.iter().map(String::as_str).collect::<Vec<_>>());
         let log = String::from_utf8_lossy(&run.stderr).into_owned();
         assert!(run.status.success(), "{log}");
-        (image::open(&out).unwrap().to_rgba32f(), log)
+        (out, log)
     };
     let (single, _) = render("single.exr", &[]);
     let (ranked, log) = render("ranks.exr", &["--ranks", "3"]);
     assert!(log.contains("periodic box"), "{log}");
     let (open, _) = render("open.exr", &["--ranks", "3", "--no-periodic"]);
-    let diff = |a: &image::Rgba32FImage, b: &image::Rgba32FImage| {
-        a.as_raw()
-            .iter()
-            .zip(b.as_raw())
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0f32, f32::max)
-    };
-    assert!(single.as_raw().iter().any(|&v| v > 0.01), "the gas shows");
-    let d_ranked = diff(&single, &ranked);
+    let gas = image::open(&single).unwrap().to_rgba32f();
+    assert!(gas.as_raw().iter().any(|&v| v > 0.01), "the gas shows");
+    let d_ranked = common::max_image_difference(&single, &ranked);
     eprintln!("h5py SWIFT, periodic: max |--ranks 3 - single rank| = {d_ranked:e}");
     assert!(d_ranked <= 0.01, "--ranks 3 differs by {d_ranked}");
     assert!(
-        diff(&single, &open) > d_ranked,
+        common::max_image_difference(&single, &open) > d_ranked,
         "the open box renders as the periodic one"
     );
 }
@@ -607,45 +593,6 @@ fn a_cost_balanced_render_is_still_the_single_rank_image() {
         owned(by_count)
     );
     assert!(diff <= 1e-12, "max abs difference {diff:e}");
-}
-
-/// `--balance cost` on the command line: the image within the threshold's remainder of the
-/// single rank's, and refused, with the way to use it, where nothing is distributed.
-#[test]
-fn the_command_line_balances_by_cost() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let header = common::generated_dam_break(d);
-    let render = |name: &str, extra: &[&str]| {
-        let path = d.join(name);
-        let mut args = common::dam_break_render_args(&header, &path, (64, 48), 2);
-        args.extend(extra.iter().map(|a| a.to_string()));
-        let out = common::aarbf_logged(&args.iter().map(String::as_str).collect::<Vec<_>>());
-        (out, path)
-    };
-    let (single, single_path) = render("single.exr", &[]);
-    assert!(single.status.success());
-    let (cost, cost_path) = render("cost.exr", &["--ranks", "3", "--balance", "cost"]);
-    let log = String::from_utf8_lossy(&cost.stderr);
-    assert!(cost.status.success(), "{log}");
-    assert!(log.contains("slowest render"), "{log}");
-    let a = image::open(&single_path).unwrap().to_rgba32f();
-    let b = image::open(&cost_path).unwrap().to_rgba32f();
-    let diff = a
-        .as_raw()
-        .iter()
-        .zip(b.as_raw())
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0f32, f32::max);
-    assert!(diff <= 0.01, "--balance cost differs by {diff}");
-    let (refused, path) = render("lone.exr", &["--balance", "cost"]);
-    let err = String::from_utf8_lossy(&refused.stderr);
-    assert!(!refused.status.success());
-    assert!(
-        err.contains("--balance cost") && err.contains("--ranks"),
-        "{err}"
-    );
-    assert!(!path.exists());
 }
 
 /// Ranks that read their parts of a file (`TimeSeries::step_part`, as `aarbf render --ranks`

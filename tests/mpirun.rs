@@ -124,30 +124,8 @@ fn mpi_processes_render_the_image_of_as_many_threads() {
 fn an_hdf5_snapshot_renders_under_mpirun_as_with_ranks() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    // A copy: reading writes an index beside the files, and the inputs stay untouched.
-    let data = d.join("swift");
-    std::fs::create_dir(&data).unwrap();
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/h5py_swift");
-    for name in ["snap_0000.hdf5", "snap_0001.hdf5"] {
-        std::fs::copy(fixture.join(name), data.join(name)).unwrap();
-    }
-    let args = |out: &Path| -> Vec<String> {
-        [
-            "render",
-            "--data",
-            data.to_str().unwrap(),
-            "--width",
-            "64",
-            "--height",
-            "64",
-            "--spp",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-        ]
-        .map(String::from)
-        .to_vec()
-    };
+    let data = common::swift_snapshot_copy(d);
+    let args = |out: &Path| common::swift_render_args(&data, out);
     // The header's box is periodic: each rank wraps its particles and exchanges their images.
     let out = mpirun(2, &args(&d.join("mpi.exr"))).output().unwrap();
     let log = String::from_utf8_lossy(&out.stderr);

@@ -387,7 +387,7 @@ fn direct_send_blends_every_rank_s_pieces_front_to_back() {
 #[test]
 fn empty_bricks_render_nothing_and_break_nothing() {
     use crate::backend::cpu::CpuBackend;
-    use crate::backend::{Backend, Precision, StepInput};
+    use crate::backend::{Backend, Precision};
     let step = std::sync::Arc::new(cloud(12, 8));
     let field = field();
     let march = step.bounds().grown(0.2);
@@ -404,18 +404,7 @@ fn empty_bricks_render_nothing_and_break_nothing() {
         precision: Precision::F64,
         periodic: None,
     };
-    let mut single = CpuBackend::new();
-    single
-        .upload(&StepInput {
-            step: &step,
-            field: &field,
-            cluster: scene.cluster,
-            series_bounds: scene.series_bounds,
-            series_range: scene.series_range,
-            precision: scene.precision,
-        })
-        .unwrap();
-    single.build().unwrap();
+    let mut single = single_rank(&step, &scene);
     single.render(&frames[0]).unwrap();
     let want = single.mean_f64().unwrap();
     assert!(want.iter().any(|p| p[3] > 0.05), "the particles show");
@@ -443,7 +432,7 @@ fn empty_bricks_render_nothing_and_break_nothing() {
 #[test]
 fn past_a_mask_cycle_the_cycles_are_weighted_as_a_single_rank_weights_them() {
     use crate::backend::cpu::CpuBackend;
-    use crate::backend::{Backend, Precision, StepInput};
+    use crate::backend::{Backend, Precision};
     use crate::render::CycleWeights;
     let step = std::sync::Arc::new(cloud(300, 5));
     let field = field();
@@ -469,18 +458,7 @@ fn past_a_mask_cycle_the_cycles_are_weighted_as_a_single_rank_weights_them() {
         periodic: None,
     };
     // The single rank, as `render::RenderSession` accumulates.
-    let mut single = CpuBackend::new();
-    single
-        .upload(&StepInput {
-            step: &step,
-            field: &field,
-            cluster: scene.cluster,
-            series_bounds: scene.series_bounds,
-            series_range: scene.series_range,
-            precision: scene.precision,
-        })
-        .unwrap();
-    single.build().unwrap();
+    let mut single = single_rank(&step, &scene);
     let mut cycles = CycleWeights::of_frames(NoiseKind::Stbn, Integrator::Ea).unwrap();
     for (i, f) in frames.iter().enumerate() {
         if cycles.wants_mean_at(i as u32) {
@@ -513,4 +491,25 @@ fn past_a_mask_cycle_the_cycles_are_weighted_as_a_single_rank_weights_them() {
             "P = {p}: {diff:e} from the weighted single-rank image"
         );
     }
+}
+
+/// The whole step on one CPU backend, prepared as every brick of `scene` is.
+fn single_rank(
+    step: &std::sync::Arc<Step>,
+    scene: &DistScene<'_>,
+) -> crate::backend::cpu::CpuBackend {
+    use crate::backend::{Backend, StepInput};
+    let mut single = crate::backend::cpu::CpuBackend::new();
+    single
+        .upload(&StepInput {
+            step,
+            field: scene.field,
+            cluster: scene.cluster,
+            series_bounds: scene.series_bounds,
+            series_range: scene.series_range,
+            precision: scene.precision,
+        })
+        .unwrap();
+    single.build().unwrap();
+    single
 }

@@ -240,3 +240,48 @@ pub(crate) fn dam_break_render_args(
     .map(String::from)
     .to_vec()
 }
+
+/// A copy under `dir` of the SWIFT snapshot h5py wrote (tests/data/h5py_swift: gas and dark
+/// matter, f64 coordinates, a periodic box in its header): reading writes an index beside the
+/// files, and the inputs stay untouched.
+pub(crate) fn swift_snapshot_copy(dir: &std::path::Path) -> std::path::PathBuf {
+    let data = dir.join("swift");
+    std::fs::create_dir(&data).unwrap();
+    let fixture = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/h5py_swift");
+    for name in ["snap_0000.hdf5", "snap_0001.hdf5"] {
+        std::fs::copy(fixture.join(name), data.join(name)).unwrap();
+    }
+    data
+}
+
+/// The largest difference of any channel of any pixel between two images of one size.
+pub(crate) fn max_image_difference(a: &std::path::Path, b: &std::path::Path) -> f32 {
+    let a = image::open(a).unwrap().to_rgba32f();
+    let b = image::open(b).unwrap().to_rgba32f();
+    assert_eq!(a.dimensions(), b.dimensions());
+    a.as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max)
+}
+
+/// The arguments of `aarbf render` of that snapshot copy into `out` as a user gives them: no
+/// data flags (the header's periodic box, the default particle type), 64 x 64, 2 spp.
+pub(crate) fn swift_render_args(data: &std::path::Path, out: &std::path::Path) -> Vec<String> {
+    [
+        "render",
+        "--data",
+        data.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--spp",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]
+    .map(String::from)
+    .to_vec()
+}
