@@ -123,6 +123,28 @@ pub fn screen_rect(frame: &FrameParams, b: Bounds) -> PixelRect {
 /// Bytes of a piece's header: tile, x0, y0, x1, y1.
 const HEADER: usize = 5 * 4;
 
+/// The smallest rectangle within `piece` (a part of the layer's rectangle `rect`) that holds
+/// every pixel of `layer` other than the identity `[0, 0, 0, 1]` (empty where none is).
+fn changed_part(layer: &[[f64; 4]], rect: PixelRect, piece: PixelRect) -> PixelRect {
+    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+    for y in piece.y0..piece.y1 {
+        let row = rect.index(piece.x0, y);
+        let pixels = &layer[row..row + piece.width() as usize];
+        let mut changed = (0..pixels.len()).filter(|&i| pixels[i] != [0.0, 0.0, 0.0, 1.0]);
+        if let Some(first) = changed.next() {
+            let last = changed.last().unwrap_or(first);
+            x0 = x0.min(piece.x0 + first as u32);
+            x1 = x1.max(piece.x0 + last as u32 + 1);
+            y0 = y0.min(y);
+            y1 = y + 1;
+        }
+    }
+    if x0 >= x1 {
+        return PixelRect::default();
+    }
+    PixelRect { x0, y0, x1, y1 }
+}
+
 /// A rank's tiles after one frame's direct send.
 pub struct Blended {
     /// This rank's tiles ([`TileGrid::owned_by`] order), each row-major `[r, g, b, T]`.
@@ -146,30 +168,36 @@ pub fn direct_send(
         rect.len(),
         "one layer pixel per pixel of its rectangle"
     );
-    let mut messages: Vec<Vec<u8>> = vec![Vec::new(); comm.size()];
-    for tile in grid.touching(rect) {
-        let piece = grid.rect(tile).intersection(&rect);
-        if piece.is_empty() {
-            continue;
-        }
-        let out = &mut messages[grid.owner(tile)];
-        let header = [tile as u32, piece.x0, piece.y0, piece.x1, piece.y1];
-        out.extend_from_slice(bytemuck::cast_slice(&header));
-        for y in piece.y0..piece.y1 {
-            let row = rect.index(piece.x0, y);
-            let pixels = &layer[row..row + piece.width() as usize];
-            out.extend_from_slice(bytemuck::cast_slice(pixels));
-        }
-    }
+    // The pieces for each owner in rank order, written once into the buffer the collective
+    // sends (`Parts`: rank r's bytes, then r + 1's).
     let me = comm.rank();
-    let bytes_sent = messages
-        .iter()
-        .enumerate()
-        .filter(|(to, _)| *to != me)
-        .map(|(_, m)| m.len())
-        .sum();
-    let parts = super::comm::Parts::from_parts(messages.iter().map(Vec::as_slice));
-    drop(messages);
+    let touching = grid.touching(rect);
+    let mut parts = super::comm::Parts::default();
+    let mut bytes_sent = 0;
+    let mut message = Vec::new();
+    for to in 0..comm.size() {
+        message.clear();
+        for &tile in touching.iter().filter(|&&t| grid.owner(t) == to) {
+            // Only the part of the piece whose pixels the brick changed: a pixel whose rays
+            // met no density in the brick is exactly [0, 0, 0, 1], which blends as the
+            // identity.
+            let piece = changed_part(layer, rect, grid.rect(tile).intersection(&rect));
+            if piece.is_empty() {
+                continue;
+            }
+            let header = [tile as u32, piece.x0, piece.y0, piece.x1, piece.y1];
+            message.extend_from_slice(bytemuck::cast_slice(&header));
+            for y in piece.y0..piece.y1 {
+                let row = rect.index(piece.x0, y);
+                let pixels = &layer[row..row + piece.width() as usize];
+                message.extend_from_slice(bytemuck::cast_slice(pixels));
+            }
+        }
+        if to != me {
+            bytes_sent += message.len();
+        }
+        parts.push(&message);
+    }
     let received = comm.all_to_all_v(&parts)?;
     drop(parts);
 
@@ -198,11 +226,12 @@ pub fn direct_send(
             {
                 return Err(malformed());
             }
-            let pixels: Vec<[f64; 4]> =
-                bytemuck::pod_collect_to_vec(&bytes[HEADER..HEADER + pixel_bytes]);
             let tile_rect = grid.rect(tile);
             let target = &mut blended[slot(tile)];
-            let mut next = pixels.iter();
+            // Read in place (the pieces are not 8-byte aligned in the buffer).
+            let mut next = bytes[HEADER..HEADER + pixel_bytes]
+                .chunks_exact(32)
+                .map(bytemuck::pod_read_unaligned::<[f64; 4]>);
             for y in piece.y0..piece.y1 {
                 for x in piece.x0..piece.x1 {
                     let behind = next.next().expect("sized above");

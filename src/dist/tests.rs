@@ -337,11 +337,21 @@ fn direct_send_blends_every_rank_s_pieces_front_to_back() {
                     x1: rng.random_range(x0..=w),
                     y1: rng.random_range(y0..=h),
                 };
-                let pixels = (0..rect.len())
-                    .map(|_| {
+                // The data covers a disc of the rectangle; elsewhere the brick changes nothing
+                // (the identity [0, 0, 0, 1], which is not sent).
+                let (cx, cy) = (rng.random_range(0..w) as f64, rng.random_range(0..h) as f64);
+                let r = rng.random_range(10.0..60.0);
+                let pixels = (rect.y0..rect.y1)
+                    .flat_map(|y| (rect.x0..rect.x1).map(move |x| (x, y)))
+                    .map(|(x, y)| {
                         let t: f64 = rng.random();
                         let c = (1.0 - t) * rng.random::<f64>();
-                        [c, c * 0.5, c * 0.25, t]
+                        let inside = (x as f64 - cx).hypot(y as f64 - cy) < r;
+                        if inside {
+                            [c, c * 0.5, c * 0.25, t]
+                        } else {
+                            [0.0, 0.0, 0.0, 1.0]
+                        }
                     })
                     .collect();
                 (rect, pixels)
@@ -354,11 +364,32 @@ fn direct_send_blends_every_rank_s_pieces_front_to_back() {
             height: h,
             ranks: p,
         };
-        let tiles = run_local(p, |comm| {
+        let sent = run_local(p, |comm| {
             let (rect, layer) = &layers[comm.rank()];
-            Ok(direct_send(comm, &grid, *rect, layer, &order)?.tiles)
+            let blended = direct_send(comm, &grid, *rect, layer, &order)?;
+            Ok((blended.tiles, blended.bytes_sent))
         })
         .unwrap();
+        // Each rank sends at most the pixels of the box around those it changed, with a
+        // header a piece.
+        for (r, (_, bytes)) in sent.iter().enumerate() {
+            let (rect, layer) = &layers[r];
+            let changed: Vec<(u32, u32)> = (rect.y0..rect.y1)
+                .flat_map(|y| (rect.x0..rect.x1).map(move |x| (x, y)))
+                .filter(|&(x, y)| layer[rect.index(x, y)] != [0.0, 0.0, 0.0, 1.0])
+                .collect();
+            let span = |a: &dyn Fn(&(u32, u32)) -> u32| {
+                changed.iter().map(a).max().map_or(0, |m| m + 1)
+                    - changed.iter().map(a).min().unwrap_or(0)
+            };
+            let boxed = (span(&|q| q.0) * span(&|q| q.1)) as usize;
+            let headers = 20 * grid.touching(*rect).len();
+            assert!(*bytes <= 32 * boxed + headers, "rank {r}: {bytes} bytes");
+            if changed.is_empty() {
+                assert_eq!(*bytes, 0, "rank {r} changed nothing and sent {bytes} bytes");
+            }
+        }
+        let tiles: Vec<_> = sent.into_iter().map(|(t, _)| t).collect();
         for t in 0..grid.count() {
             let tile_rect = grid.rect(t);
             let got = &tiles[grid.owner(t)][t / p];
