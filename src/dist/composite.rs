@@ -130,9 +130,9 @@ fn changed_part(layer: &[[f64; 4]], rect: PixelRect, piece: PixelRect) -> PixelR
     for y in piece.y0..piece.y1 {
         let row = rect.index(piece.x0, y);
         let pixels = &layer[row..row + piece.width() as usize];
-        let mut changed = (0..pixels.len()).filter(|&i| pixels[i] != [0.0, 0.0, 0.0, 1.0]);
-        if let Some(first) = changed.next() {
-            let last = changed.last().unwrap_or(first);
+        let changed = |p: &[f64; 4]| *p != [0.0, 0.0, 0.0, 1.0];
+        if let Some(first) = pixels.iter().position(changed) {
+            let last = pixels.iter().rposition(changed).unwrap_or(first);
             x0 = x0.min(piece.x0 + first as u32);
             x1 = x1.max(piece.x0 + last as u32 + 1);
             y0 = y0.min(y);
