@@ -583,7 +583,7 @@ fn a_cost_balanced_render_is_still_the_single_rank_image() {
             weight: 1.0,
         })
         .collect();
-    let model = CostModel::new(KdTree::build(&sample, 2), &[(1000.0, 3.0), (1000.0, 1.0)]);
+    let model = CostModel::new(KdTree::build(&sample, 2), &[[1000.0, 3.0], [1000.0, 1.0]]);
     let results = run_local(4, |comm| {
         let local = slice_of(&s.step, comm.rank(), comm.size());
         let mut backend = CpuBackend::new();

@@ -32,6 +32,12 @@ impl std::fmt::Display for Balance {
     }
 }
 
+/// The size of the pilot image that measures the cost of the first decomposition balanced
+/// by cost: a quarter of each side, a sixteenth of the samples.
+pub fn pilot_size(width: u32, height: u32) -> (u32, u32) {
+    (width.div_ceil(4), height.div_ceil(4))
+}
+
 /// Render seconds per owned particle of each leaf of a decomposition, as measured.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CostModel {
@@ -45,10 +51,10 @@ impl CostModel {
     /// it by the next step), and no leaf's cost falls below a thousandth of the mean (a leaf
     /// out of view still costs its exchange and build, and a weight of zero would let one
     /// leaf take every particle that costs nothing now).
-    pub fn new(tree: KdTree, owned_and_seconds: &[(f64, f64)]) -> CostModel {
+    pub fn new(tree: KdTree, owned_and_seconds: &[[f64; 2]]) -> CostModel {
         let (owned, seconds) = owned_and_seconds
             .iter()
-            .fold((0.0, 0.0), |(n, t), &(o, s)| (n + o, t + s));
+            .fold((0.0, 0.0), |(n, t), &[o, s]| (n + o, t + s));
         let mean = if owned > 0.0 && seconds > 0.0 {
             seconds / owned
         } else {
@@ -56,7 +62,7 @@ impl CostModel {
         };
         let per_particle = owned_and_seconds
             .iter()
-            .map(|&(o, s)| {
+            .map(|&[o, s]| {
                 if o > 0.0 {
                     (s / o).max(1e-3 * mean)
                 } else {
@@ -107,7 +113,7 @@ mod tests {
         let by_count = KdTree::build(&line(999, |_| 1.0), 2);
         let split = by_count.leaves()[0].hi.x;
         assert!((split - 0.5).abs() < 2e-3, "{split}");
-        let model = CostModel::new(by_count, &[(500.0, 3.0), (499.0, 0.998)]);
+        let model = CostModel::new(by_count, &[[500.0, 3.0], [499.0, 0.998]]);
         let weighted = line(999, |x| model.at(DVec3::new(x, 0.5 * x, 0.25)));
         let by_cost = KdTree::build(&weighted, 2);
         let split = by_cost.leaves()[0].hi.x;
@@ -118,7 +124,7 @@ mod tests {
     #[test]
     fn no_leaf_costs_nothing() {
         let tree = KdTree::build(&line(100, |_| 1.0), 3);
-        let model = CostModel::new(tree, &[(50.0, 1.0), (0.0, 0.0), (50.0, 0.0)]);
+        let model = CostModel::new(tree, &[[50.0, 1.0], [0.0, 0.0], [50.0, 0.0]]);
         assert_eq!(model.per_particle, vec![0.02, 0.01, 1e-5]);
         assert_eq!(CostModel::imbalance(&[1.0, 2.0, 3.0]), 1.5);
     }

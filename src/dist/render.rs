@@ -103,11 +103,9 @@ impl DistImage {
     /// The image as a single rank's session returns it: the f64 mean rounded to f32, or past
     /// a blue-noise mask cycle the cycles weighted by their noise.
     pub fn image(&self) -> Image {
-        self.weighted.clone().unwrap_or_else(|| Image {
-            width: self.width,
-            height: self.height,
-            pixels: self.mean.iter().map(|p| p.map(|v| v as f32)).collect(),
-        })
+        self.weighted
+            .clone()
+            .unwrap_or_else(|| f32_image(self.width, self.height, &self.mean))
     }
 }
 
@@ -175,11 +173,11 @@ fn periodic_images(
     Ok((Some(step), periodic.bounds().grown(largest)))
 }
 
-/// A mean image of the grid's size, rounded to f32 as a backend returns it.
-fn f32_image(grid: &TileGrid, mean: &[[f64; 4]]) -> Image {
+/// A mean image, rounded to f32 as a backend returns it.
+fn f32_image(width: u32, height: u32, mean: &[[f64; 4]]) -> Image {
     Image {
-        width: grid.width,
-        height: grid.height,
+        width,
+        height,
         pixels: mean.iter().map(|p| p.map(|v| v as f32)).collect(),
     }
 }
@@ -333,17 +331,8 @@ pub fn render_balanced(
     } else {
         report.render_seconds
     };
-    let measured: Vec<(f64, f64)> = comm
-        .all_gather_of(&[report.owned as f64, seconds])?
-        .iter()
-        .map(|v| {
-            (
-                v.first().copied().unwrap_or(0.0),
-                v.get(1).copied().unwrap_or(0.0),
-            )
-        })
-        .collect();
-    let measured = CostModel::new(tree, &measured);
+    let measured = comm.all_gather_of(&[[report.owned as f64, seconds]])?;
+    let measured = CostModel::new(tree, &measured.concat());
 
     // The kept sums, then the final ones, end to end: one gather.
     let mut flat: Vec<[f64; 4]> = kept.iter().flat_map(|(_, k)| k.iter().copied()).collect();
@@ -372,11 +361,11 @@ pub fn render_balanced(
         Some(mut cycles) if !kept.is_empty() => {
             for (j, (at, _)) in kept.iter().enumerate() {
                 if cycles.wants_mean_at(*at) {
-                    let image = f32_image(&grid, &mean_of(sums_at(j)?, *at));
+                    let image = f32_image(grid.width, grid.height, &mean_of(sums_at(j)?, *at));
                     cycles.took_mean(*at, image);
                 }
             }
-            Some(cycles.image(sums.frames, f32_image(&grid, &mean)))
+            Some(cycles.image(sums.frames, f32_image(grid.width, grid.height, &mean)))
         }
         _ => None,
     };

@@ -93,12 +93,11 @@ impl CycleWeights {
     /// Whether the accumulation's mean at `frames` frames is needed (read it back and give it
     /// to [`took_mean`](Self::took_mean) before rendering the next frame).
     pub(crate) fn wants_mean_at(&self, frames: u32) -> bool {
-        let d = self.cycle;
-        let in_cycle = frames % d;
-        frames > 0
-            && (in_cycle == 0
-                || ((in_cycle == d / 4 || in_cycle == d / 2)
-                    && (frames < d || (frames < 2 * d && self.cycle_variance_pending(in_cycle)))))
+        // Of the counts that may be wanted, the second cycle's prefixes only while the first
+        // cycle's prefix of as many frames waits for its twin.
+        let in_cycle = frames % self.cycle;
+        self.may_want_mean_at(frames)
+            && (in_cycle == 0 || frames < self.cycle || self.cycle_variance_pending(in_cycle))
     }
 
     /// Whether the mean at `frames` frames may be wanted, whatever was measured before: every

@@ -18,6 +18,7 @@ use super::parse_size;
 use crate::accel::ClusterSize;
 use crate::backend::Precision;
 use crate::backend::cpu::CpuBackend;
+use crate::dist::balance::pilot_size;
 use crate::dist::{
     Balance, Comm, CommExt, CostModel, DistImage, DistScene, RankReport, render_balanced, run_local,
 };
@@ -208,17 +209,7 @@ fn run_one(
     let step = series.step(STEP)?;
     let field = FieldSettings::new(Some("velocity"), args.radius * step.bounds().diagonal());
     let range = series.attribute("velocity").map(|a| (a.min, a.max));
-    let frames = frames_of(args, args.size, &series, &field)?;
-    let pilot = match args.balance {
-        Balance::Count => Vec::new(),
-        Balance::Cost => {
-            let size = (args.size.0.div_ceil(4), args.size.1.div_ceil(4));
-            frames_of(args, size, &series, &field)?
-                .into_iter()
-                .take(1)
-                .collect()
-        }
-    };
+    let (frames, pilot) = frames_of(args, &series, &field)?;
     let scene = DistScene {
         field: &field,
         cluster: ClusterSize::new(16).expect("16 is a cluster size"),
@@ -238,9 +229,19 @@ fn run_one(
             let local = crate::dist::slice_of(&step, comm.rank(), comm.size());
             let (_, read_cpu_seconds) = clock.stop();
             let mut backend = CpuBackend::new();
-            let model = match pilot.is_empty() {
-                true => None,
-                false => Some(render_balanced(comm, &mut backend, &local, &scene, &pilot, None)?.1),
+            let model = match &pilot {
+                Some(p) => Some(
+                    render_balanced(
+                        comm,
+                        &mut backend,
+                        &local,
+                        &scene,
+                        std::slice::from_ref(p),
+                        None,
+                    )?
+                    .1,
+                ),
+                None => None,
             };
             let (image, _) =
                 render_balanced(comm, &mut backend, &local, &scene, &frames, model.as_ref())?;
@@ -268,16 +269,16 @@ fn run_one(
     })
 }
 
-/// The frames of a run at `size`: the default view of the step's series.
+/// The frames of a run: the default view of the step's series; and with `--balance cost`,
+/// the pilot frame that measures the first decomposition's cost.
 fn frames_of(
     args: &DistributedArgs,
-    size: (u32, u32),
     series: &TimeSeries,
     field: &FieldSettings,
-) -> anyhow::Result<Vec<FrameParams>> {
+) -> anyhow::Result<(Vec<FrameParams>, Option<FrameParams>)> {
     let settings = RenderSettings {
-        width: size.0,
-        height: size.1,
+        width: args.size.0,
+        height: args.size.1,
         opacity_threshold: args.opacity_threshold,
         ..RenderSettings::default()
     };
@@ -288,9 +289,22 @@ fn frames_of(
         field,
         auto: AutoValues::of(series, field)?,
     };
-    Ok((0..args.frames)
+    let frames = (0..args.frames)
         .map(|f| basis.frame_params(&settings, f))
-        .collect::<Result<_, _>>()?)
+        .collect::<Result<_, _>>()?;
+    let pilot = match args.balance {
+        Balance::Count => None,
+        Balance::Cost => {
+            let (width, height) = pilot_size(args.size.0, args.size.1);
+            let small = RenderSettings {
+                width,
+                height,
+                ..settings
+            };
+            Some(basis.frame_params(&small, 0)?)
+        }
+    };
+    Ok((frames, pilot))
 }
 
 /// α and β of the communicator here: two ranks exchange messages of 0 B to 8 MiB in

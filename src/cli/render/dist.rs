@@ -14,7 +14,9 @@ use super::plan::Frame;
 use crate::backend::cpu::CpuBackend;
 use crate::backend::{BackendKind, Precision};
 use crate::cli::output_format::OutputFormat;
+use crate::dist::balance::pilot_size;
 use crate::dist::{Balance, Comm, CostModel, DistScene, RankReport, render_balanced, run_local};
+use crate::field::FieldSettings;
 use crate::io::Part;
 use crate::render::legend::Legend;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
@@ -172,15 +174,26 @@ pub(super) fn run(
             b.size.to_array()
         );
     }
+    // With --balance cost, what the last image measured: the next one's decomposition.
     let mut cost: Option<CostModel> = None;
+    let mut auto_for: Option<(FieldSettings, AutoValues)> = None;
     for frame in frames {
         let started = Instant::now();
         settings.camera = Some(frame.camera);
         resolved.range_for_step(frame.step)?;
-        // Phi_ref is a statistic of the whole first step: read here once unless --phi-ref
-        // gives it, and not kept while the ranks read their parts.
-        let auto = AutoValues::with_phi_ref(&resolved.series, &resolved.field, settings.phi_ref)?;
-        resolved.series.clear_cache();
+        // Phi_ref is a statistic of the whole first step: read once for each field (a
+        // per-step attribute range changes it) unless --phi-ref gives it, and not kept while
+        // the ranks read their parts.
+        let auto = match &auto_for {
+            Some((field, auto)) if AutoValues::same_for(field, &resolved.field) => *auto,
+            _ => {
+                let auto =
+                    AutoValues::with_phi_ref(&resolved.series, &resolved.field, settings.phi_ref)?;
+                resolved.series.clear_cache();
+                auto_for = Some((resolved.field.clone(), auto));
+                auto
+            }
+        };
         let basis = FrameBasis {
             bounds: resolved.domain(),
             max_count: resolved.series.max_count(),
@@ -200,29 +213,38 @@ pub(super) fn run(
             precision,
             periodic: resolved.periodic,
         };
-        // Balanced by cost, the first image starts from a pilot at a quarter of the size
-        // (a sixteenth of the samples), and every later one from the image before it.
-        let pilot: Vec<FrameParams> = if args.balance == Balance::Cost && cost.is_none() {
+        // Balanced by cost, the first image starts from a pilot image, and every later one
+        // from the image before it.
+        let pilot = if args.balance == Balance::Cost && cost.is_none() {
+            let (width, height) = pilot_size(settings.width, settings.height);
             let small = RenderSettings {
-                width: settings.width.div_ceil(4),
-                height: settings.height.div_ceil(4),
+                width,
+                height,
                 ..settings.clone()
             };
-            vec![basis.frame_params(&small, 0)?]
+            Some(basis.frame_params(&small, 0)?)
         } else {
-            Vec::new()
+            None
         };
         let rank_body = |comm: &dyn Comm| {
             let part = Part::new(comm.rank(), comm.size());
             let local = resolved.series.step_part(frame.step, part)?.step;
             let mut backend = CpuBackend::new();
-            let mut model = cost.clone();
-            if !pilot.is_empty() {
-                let (_, measured) =
-                    render_balanced(comm, &mut backend, &local, &scene, &pilot, None)?;
-                model = Some(measured);
-            }
-            let by = model.as_ref().filter(|_| args.balance == Balance::Cost);
+            let piloted = match &pilot {
+                Some(p) => Some(
+                    render_balanced(
+                        comm,
+                        &mut backend,
+                        &local,
+                        &scene,
+                        std::slice::from_ref(p),
+                        None,
+                    )?
+                    .1,
+                ),
+                None => None,
+            };
+            let by = piloted.as_ref().or(cost.as_ref());
             render_balanced(comm, &mut backend, &local, &scene, &params, by)
         };
         let (image, measured) = match &ranks {
@@ -239,7 +261,9 @@ pub(super) fn run(
                 Ok((Some(image), measured)) => (image, measured),
                 // Rank 0 writes the image.
                 Ok((None, measured)) => {
-                    cost = Some(measured);
+                    if args.balance == Balance::Cost {
+                        cost = Some(measured);
+                    }
                     continue;
                 }
                 Err(e) => {
@@ -248,7 +272,9 @@ pub(super) fn run(
                 }
             },
         };
-        cost = Some(measured);
+        if args.balance == Balance::Cost {
+            cost = Some(measured);
+        }
         log_reports(&image.reports);
         let legend = draw_legend.then(|| {
             Legend::of_field(
