@@ -158,12 +158,15 @@ pub(super) fn run(
     match &ranks {
         Ranks::Threads(_) => tracing::info!(
             "distributed: {size} ranks as threads of this process, cpu backend, \
-             emission-absorption"
+             emission-absorption, bricks balanced by {} (--balance)",
+            args.balance
         ),
         #[cfg(feature = "mpi")]
         Ranks::Mpi(comm) => tracing::info!(
-            "distributed: rank {} of {size} MPI processes, cpu backend, emission-absorption",
-            comm.rank()
+            "distributed: rank {} of {size} MPI processes, cpu backend, emission-absorption, \
+             bricks balanced by {} (--balance)",
+            comm.rank(),
+            args.balance
         ),
     }
     if let Some(b) = &resolved.periodic {
