@@ -10,7 +10,9 @@ use std::sync::{Arc, OnceLock};
 use aarbf::accel::ClusterSize;
 use aarbf::backend::cpu::CpuBackend;
 use aarbf::backend::{Backend, Precision, StepInput};
-use aarbf::dist::{Comm, DistImage, DistScene, render_distributed, run_local, slice_of};
+use aarbf::dist::{
+    Comm, DistImage, DistScene, DistShadows, render_distributed, run_local, slice_of,
+};
 use aarbf::field::FieldSettings;
 use aarbf::render::{AutoValues, FrameBasis, RenderSettings};
 use aarbf::scene::{Camera, TimeSeries};
@@ -45,10 +47,22 @@ fn scene() -> &'static Scene {
 /// `frames` frames of a 128 x 128 image from a view close to the fluid, over a coloured
 /// background (so the finish over it is compared too).
 fn frames(integrator: Integrator, count: u32, terminate: bool) -> Vec<FrameParams> {
+    frames_sized(integrator, count, terminate, (128, 128), 1)
+}
+
+/// [`frames`] of another size and seed.
+fn frames_sized(
+    integrator: Integrator,
+    count: u32,
+    terminate: bool,
+    (width, height): (u32, u32),
+    seed: u32,
+) -> Vec<FrameParams> {
     let s = scene();
     let settings = RenderSettings {
-        width: 128,
-        height: 128,
+        width,
+        height,
+        seed,
         integrator,
         camera: Some(Camera {
             eye: DVec3::new(1.1, 0.6, 1.2),
@@ -86,6 +100,7 @@ fn dist_scene(s: &Scene) -> DistScene<'_> {
         series_range: s.series.attribute("velocity").map(|a| (a.min, a.max)),
         precision: Precision::F64,
         periodic: None,
+        shadows: DistShadows::default(),
     }
 }
 
@@ -197,21 +212,136 @@ fn emission_absorption_with_termination_stays_within_the_threshold() {
     }
 }
 
-#[test]
-fn single_scattering_is_refused_with_a_reason() {
-    let frames = frames(Integrator::Marching, 1, true);
+fn distributed_shadowed(ranks: usize, frames: &[FrameParams], shadows: DistShadows) -> DistImage {
     let s = scene();
-    let d = dist_scene(s);
-    let err = run_local(2, |comm| {
+    let d = DistScene {
+        shadows,
+        ..dist_scene(s)
+    };
+    run_local(ranks, |comm| {
         let local = slice_of(&s.step, comm.rank(), comm.size());
-        render_distributed(comm, &mut CpuBackend::new(), &local, &d, &frames)
+        render_distributed(comm, &mut CpuBackend::new(), &local, &d, frames)
     })
-    .unwrap_err()
-    .to_string();
-    assert!(
-        err.contains("single scattering across bricks") && err.contains("not distributed yet"),
-        "{err}"
-    );
+    .unwrap()
+    .swap_remove(0)
+    .expect("rank 0 holds the image")
+}
+
+/// One rank of every single-scattering integrator is the single-rank render bit for bit
+/// (its brick is all of space: no depth in front, no brick nearer the light, brick 0's
+/// numbers).
+#[test]
+fn one_rank_single_scattering_is_bit_identical() {
+    for integrator in [
+        Integrator::Marching,
+        Integrator::Delta,
+        Integrator::SsReference,
+    ] {
+        let frames = frames(integrator, 2, true);
+        let (want, _) = single_rank(&frames);
+        let got = distributed_shadowed(1, &frames, DistShadows::default());
+        assert!(
+            covered(&want) > 2000,
+            "{integrator:?}: {} pixels",
+            covered(&want)
+        );
+        assert!(
+            got.mean == want,
+            "{integrator:?}: max |diff| {:e}",
+            max_abs(&got.mean, &want)
+        );
+    }
+}
+
+/// Stochastic marching scatters in the brick where the single rank does: the depth in front
+/// of each brick (pass 1, scanned in view order) plus its own passes the same free-flight
+/// depth at the same sample. Under ambient light only (no shadow ray to cross bricks) the
+/// image is the single rank's up to rounding.
+#[test]
+fn stochastic_marching_scatters_where_the_single_rank_does() {
+    let mut frames = frames(Integrator::Marching, 2, true);
+    for f in &mut frames {
+        f.light_intensity = 0.0;
+        f.ambient = 1.0;
+    }
+    let (want, _) = single_rank(&frames);
+    assert!(covered(&want) > 2000, "{} pixels", covered(&want));
+    for p in [2, 3, 4, 8] {
+        let got = distributed_shadowed(p, &frames, DistShadows::Local);
+        let diff = max_abs(&got.mean, &want);
+        eprintln!("marching, ambient only, P = {p}: max |diff| = {diff:.3e}");
+        assert!(diff <= 1e-12, "P = {p}: max abs difference {diff:e}");
+    }
+}
+
+/// Shadows across bricks by the prefix map follow the single rank's shadows: FLIP at most
+/// 0.02, and far closer than shadows from each ray's own brick only (`local`, which lets
+/// light through every brick nearer the light).
+#[test]
+fn shadows_across_bricks_follow_the_single_rank() {
+    let frames = frames(Integrator::Marching, 1, true);
+    let (_, want) = single_rank(&frames);
+    for p in [2, 3, 4, 8] {
+        let image = |shadows| distributed_shadowed(p, &frames, shadows).image();
+        let (map, local) = (
+            image(DistShadows::PrefixMap(256)),
+            image(DistShadows::Local),
+        );
+        let (flip_map, flip_local) = (map.flip(&want), local.flip(&want));
+        eprintln!(
+            "P = {p}: prefix map 256² FLIP {flip_map:.4} RMSE {:.4}; local FLIP {flip_local:.4} RMSE {:.4}",
+            map.rmse(&want),
+            local.rmse(&want)
+        );
+        assert!(flip_map <= 0.02, "P = {p}: FLIP {flip_map}");
+        assert!(
+            flip_map < 0.5 * flip_local,
+            "P = {p}: prefix map {flip_map} against local {flip_local}"
+        );
+    }
+}
+
+/// Delta tracking restarts in every brick with the brick's own numbers (a free flight is
+/// memoryless), so a distributed image is another sample of the same estimate: at 1024 spp it
+/// differs from the single rank's by what two single-rank seeds differ by, and no more on
+/// average (no bias).
+#[test]
+fn delta_tracking_across_bricks_is_within_two_seeds_noise() {
+    let size = (16, 16);
+    let spp = 1024;
+    let frames_a = frames_sized(Integrator::Delta, spp, true, size, 1);
+    let frames_b = frames_sized(Integrator::Delta, spp, true, size, 2);
+    let (_, a) = single_rank(&frames_a);
+    let (_, b) = single_rank(&frames_b);
+    let mean_difference = |x: &aarbf::values::Image, y: &aarbf::values::Image| {
+        let sum: f64 = x
+            .pixels
+            .iter()
+            .zip(&y.pixels)
+            .flat_map(|(p, q)| (0..3).map(move |c| f64::from(p[c]) - f64::from(q[c])))
+            .sum();
+        sum / (3 * x.pixels.len()) as f64
+    };
+    let seeds = a.rmse(&b);
+    // The standard error of a mean difference of independent estimates over the image.
+    let standard_error = seeds / ((3 * a.pixels.len()) as f64).sqrt();
+    assert!(seeds > 0.0);
+    for p in [3, 8] {
+        let got = distributed_shadowed(p, &frames_a, DistShadows::PrefixMap(256)).image();
+        let (rmse, bias) = (got.rmse(&b), mean_difference(&got, &b));
+        eprintln!(
+            "delta, {spp} spp, P = {p}: RMSE against seed 2 {rmse:.5} (seeds 1 and 2: {seeds:.5}); \
+             mean difference {bias:.2e} (standard error {standard_error:.2e})"
+        );
+        assert!(
+            rmse <= 1.25 * seeds,
+            "P = {p}: RMSE {rmse} against the seeds' {seeds}"
+        );
+        assert!(
+            bias.abs() <= 4.0 * standard_error,
+            "P = {p}: mean difference {bias:e}, standard error {standard_error:e}"
+        );
+    }
 }
 
 /// `aarbf render --ranks 3` as a user runs it: the same image as without `--ranks` (the
@@ -267,10 +397,36 @@ fn the_command_line_renders_with_ranks() {
     );
     assert!(!path.exists());
 
-    let (refused, _) = render("ss.exr", &["--ranks", "2", "--integrator", "marching"]);
+    // Single scattering, shadows across bricks by the light map: the single rank's image up
+    // to the map's interpolation across the light.
+    let (single_ss, single_ss_path) = render("ss1.exr", &["--integrator", "marching"]);
+    assert!(single_ss.status.success());
+    let (ss, ss_path) = render("ss.exr", &["--ranks", "2", "--integrator", "marching"]);
+    let log = String::from_utf8_lossy(&ss.stderr);
+    assert!(ss.status.success(), "{log}");
+    assert!(log.contains("64x64 light map"), "{log}");
+    let (a, b) = (
+        image::open(&single_ss_path).unwrap().to_rgba32f(),
+        image::open(&ss_path).unwrap().to_rgba32f(),
+    );
+    let mean: f32 = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| (x - y).abs())
+        .sum::<f32>()
+        / a.as_raw().len() as f32;
+    assert!(
+        mean <= 0.005,
+        "--ranks 2 marching: mean |difference| {mean}"
+    );
+    let (refused, _) = render("lonely.exr", &["--dist-shadows", "local"]);
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success());
-    assert!(err.contains("single scattering across bricks"), "{err}");
+    assert!(
+        err.contains("--dist-shadows") && err.contains("--ranks"),
+        "{err}"
+    );
 
     // A build without MPI started by mpirun: each process would render the whole image.
     #[cfg(not(feature = "mpi"))]
@@ -425,6 +581,7 @@ fn a_periodic_box_matches_the_single_rank_to_rounding() {
         series_range: range,
         precision: Precision::F64,
         periodic,
+        shadows: DistShadows::default(),
     };
     let render = |ranks: usize, scene: &DistScene<'_>| {
         run_local(ranks, |comm| {

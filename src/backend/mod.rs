@@ -8,6 +8,7 @@
 //! radius attribute) means [`Backend::refit`]; anything else only restarts accumulation.
 
 pub mod ash_rt;
+pub mod brick;
 pub mod cpu;
 pub mod gpu_data;
 pub mod precision;
@@ -22,8 +23,9 @@ use glam::DVec3;
 
 use crate::accel::ClusterSize;
 use crate::field::{FieldError, FieldSettings};
-use crate::values::{Bounds, FrameParams, HalfOpenBox, Image, PixelRect, Step};
+use crate::values::{Bounds, FrameParams, HalfOpenBox, Image, Step};
 
+pub use brick::{BrickShare, DepthRays, LightMap, LightPrefix};
 pub use precision::{Precision, Representation, parse_precision};
 
 /// Which backend.
@@ -320,24 +322,44 @@ pub trait Backend: Send {
         k: usize,
     ) -> Result<Option<crate::field::splat::SplatCounts>, BackendError>;
 
-    /// The part of one frame whose samples lie in `owned`, for the pixels of `rect`, row-major,
-    /// each `[r, g, b, T]`: the premultiplied colour gathered from those samples and the
-    /// transmittance through them, composited from transmittance 1 with no background (a
-    /// rank's share of a distributed frame). The samples are the whole frame's lattice
-    /// `t_enter + (k + jitter) dt`, from the entry into the frame's march box, with the whole
-    /// frame's noise, so boxes that tile space split each pixel's samples between them, one
-    /// box to each; composited in the order a ray meets the boxes they give the whole frame up
-    /// to rounding. Nothing is accumulated. Emission–absorption only (single scattering makes
-    /// one decision per ray, which no box can make alone); by default not implemented.
+    /// A brick's share of one frame ([`BrickShare`]): for the pixels of `share.rect`,
+    /// row-major, each `[r, g, b, T]` of the samples in `share.owned`, the premultiplied colour
+    /// gathered from them and the transmittance through them, from transmittance 1 with no
+    /// background (a rank's share of a distributed frame). The samples are the whole frame's
+    /// lattice `t_enter + (k + jitter) dt`, from the entry into the frame's march box, with the
+    /// whole frame's noise, so boxes that tile space split each pixel's samples between them,
+    /// one box to each; composited in the order a ray meets the boxes they give the whole
+    /// frame. Emission–absorption up to rounding. Single scattering with what the share says of
+    /// the bricks before it: stochastic marching scatters in the brick where the depth in front
+    /// plus its own passes the free-flight depth (the single rank's decision), delta tracking
+    /// tracks the brick's own segment with the brick's numbers, and a shadow ray is marched to
+    /// its brick's exit and adds the depth nearer the light ([`BrickShare::light`]); a pixel
+    /// that scatters gives `[L, 0]`, one that does not `[0, 0, 0, 1]`. Nothing is accumulated.
+    /// By default not implemented.
     fn render_owned(
         &mut self,
         _frame: &FrameParams,
-        _owned: &HalfOpenBox,
-        _rect: PixelRect,
+        _share: &BrickShare<'_>,
     ) -> Result<Vec<[f64; 4]>, BackendError> {
         Err(BackendError::NotDistributed {
             backend: self.capabilities().name,
             what: "rendering a part of a frame (distributed renders run on the cpu backend)".into(),
+        })
+    }
+
+    /// The optical depth `Σ sigma dt` of the samples in `owned` along each of `rays`, row-major
+    /// over its rectangle: pass 1 of single scattering across bricks ([`DepthRays`]), summed
+    /// over the bricks in front by an exclusive scan. By default not implemented.
+    fn owned_depth(
+        &mut self,
+        _frame: &FrameParams,
+        _owned: &HalfOpenBox,
+        _rays: DepthRays<'_>,
+    ) -> Result<Vec<f64>, BackendError> {
+        Err(BackendError::NotDistributed {
+            backend: self.capabilities().name,
+            what: "the optical depth of a brick (distributed renders run on the cpu backend)"
+                .into(),
         })
     }
 

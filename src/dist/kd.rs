@@ -152,6 +152,18 @@ impl KdTree {
     /// the eye first. A ray crosses a plane at most once, from the eye's side to the other, so
     /// every leaf it meets comes after those it met before (the painter's order of a BSP).
     pub fn front_to_back(&self, eye: DVec3) -> Vec<usize> {
+        self.ordered(|axis, at| eye[axis] < at)
+    }
+
+    /// The leaves in the order rays travelling against `toward` (from a directional light
+    /// infinitely far along it) can meet them: at each split the side nearer the light first.
+    /// The order [`KdTree::front_to_back`] gives for an eye far along `toward`.
+    pub fn nearest_first_along(&self, toward: DVec3) -> Vec<usize> {
+        self.ordered(|axis, _| toward[axis] < 0.0)
+    }
+
+    /// The leaves, at each split the side below it first where `below_first(axis, at)`.
+    fn ordered(&self, below_first: impl Fn(usize, f64) -> bool) -> Vec<usize> {
         let mut order = Vec::with_capacity(self.leaves.len());
         let mut stack = vec![0];
         while let Some(node) = stack.pop() {
@@ -163,7 +175,7 @@ impl KdTree {
                     below,
                     above,
                 } => {
-                    let (near, far) = if eye[axis] < at {
+                    let (near, far) = if below_first(axis, at) {
                         (below, above)
                     } else {
                         (above, below)
@@ -368,6 +380,50 @@ mod tests {
                             assert!(
                                 position[leaf] > position[prev],
                                 "P = {p}, eye {eye}: the ray meets leaf {leaf} after leaf {prev}, against the order {order:?}"
+                            );
+                        }
+                        last = Some(leaf);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Every ray travelling away from a directional light meets the leaves in the order
+    /// `nearest_first_along` gives.
+    #[test]
+    fn the_order_from_a_light_holds_along_its_rays() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        for p in (2..=9).chain([16]) {
+            let tree = KdTree::build(&cloud(64 * p, 300 + p as u64), p);
+            for case in 0..30 {
+                let mut toward = DVec3::new(
+                    rng.random::<f64>() - 0.5,
+                    rng.random::<f64>() - 0.5,
+                    rng.random::<f64>() - 0.5,
+                )
+                .normalize();
+                if case == 0 {
+                    // Along an axis: rays parallel to the other splits.
+                    toward = DVec3::Y;
+                }
+                let order = tree.nearest_first_along(toward);
+                let mut position = vec![0; p];
+                for (k, &r) in order.iter().enumerate() {
+                    position[r] = k;
+                }
+                for _ in 0..40 {
+                    let start = DVec3::new(rng.random(), rng.random(), rng.random()) * 8.0 - 2.0
+                        + toward * 10.0;
+                    let mut last = None;
+                    for k in 0..4000 {
+                        let leaf = tree.leaf_of(start - toward * (f64::from(k) * 0.005));
+                        if let Some(prev) = last
+                            && prev != leaf
+                        {
+                            assert!(
+                                position[leaf] > position[prev],
+                                "P = {p}: light ray meets leaf {leaf} after {prev}, against {order:?}"
                             );
                         }
                         last = Some(leaf);

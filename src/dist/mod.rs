@@ -26,13 +26,17 @@ pub mod local;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
 mod render;
+pub mod scan;
 
 pub use balance::{Balance, CostModel};
 pub use comm::{Comm, CommError, CommExt, Parts, launched_size, node_local_size};
 pub use local::{LocalComm, run_local};
 #[cfg(feature = "mpi")]
 pub use mpi_comm::MpiComm;
-pub use render::{DistImage, DistScene, RankReport, render_balanced, render_distributed, slice_of};
+pub use render::{
+    DEFAULT_SHADOW_MAP, DistImage, DistScene, DistShadows, RankReport, render_balanced,
+    render_distributed, shadow_map_for, slice_of,
+};
 
 use crate::backend::BackendError;
 use crate::field::FieldError;

@@ -9,12 +9,14 @@ use super::clock::StageClock;
 use super::comm::{Comm, CommExt};
 use super::composite::{TileGrid, TileSums, assemble, direct_send, screen_rect};
 use super::exchange::{decompose, exchange};
+use super::kd::KdTree;
+use super::scan::exclusive_scan;
 use crate::accel::ClusterSize;
 use crate::backend::precision::PositionKind;
-use crate::backend::{Backend, Precision, StepInput};
+use crate::backend::{Backend, BrickShare, DepthRays, LightMap, LightPrefix, Precision, StepInput};
 use crate::field::{FieldSettings, PeriodicBox, particle_reaches};
 use crate::render::CycleWeights;
-use crate::values::{Bounds, FrameParams, Image, Integrator, Step};
+use crate::values::{Bounds, FrameParams, HalfOpenBox, Image, Integrator, PixelRect, Step};
 
 /// What every rank renders with: the same on all of them (series-wide values, never one
 /// rank's), so that every brick's field is the single-rank field over its leaf.
@@ -38,6 +40,38 @@ pub struct DistScene<'a> {
     /// the leaf that holds them and ghosts of the leaves they reach, so a brick at a face sums
     /// the particles across it.
     pub periodic: Option<PeriodicBox>,
+    /// How single scattering's shadow rays cross bricks.
+    pub shadows: DistShadows,
+}
+
+/// How a shadow ray that leaves its brick is continued (`--dist-shadows`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DistShadows {
+    /// Through the other bricks: each brick marches the rays of an orthographic light map of
+    /// this many texels a side through its own box, and an exclusive scan in the order from
+    /// the light gives each brick the depth nearer the light, looked up bilinearly at the
+    /// brick's exit ([`LightPrefix`]). Exact along the light, interpolated across it.
+    PrefixMap(u32),
+    /// Only through the ray's own brick (as OSPRay's distributed renderer shadows): light
+    /// passes every other brick unattenuated. The baseline the prefix map is measured against.
+    Local,
+}
+
+impl Default for DistShadows {
+    fn default() -> Self {
+        DistShadows::PrefixMap(DEFAULT_SHADOW_MAP)
+    }
+}
+
+/// The light map's texels a side where a benchmark does not say (the issue's 1024).
+pub const DEFAULT_SHADOW_MAP: u32 = 1024;
+
+/// The light map's side for an image of `width` x `height` where the user does not say
+/// (`--shadow-map`): as many texels as the image's longer side (at least 64), so the map
+/// resolves the light about as finely as the image resolves the view, and a small image
+/// does not pay for a large map (M² rays a light).
+pub fn shadow_map_for(width: u32, height: u32) -> u32 {
+    width.max(height).max(64)
 }
 
 /// What one rank did, for the log and the benchmarks.
@@ -52,8 +86,11 @@ pub struct RankReport {
     pub ghosts: u64,
     /// Bytes sent to other ranks: particles, then tiles (over all frames).
     pub particle_bytes: u64,
-    /// Bytes of tiles sent to other ranks in compositing (all frames).
+    /// Bytes of tiles sent to other ranks in compositing, and of the depth in front of each
+    /// brick (stochastic marching), all frames.
     pub tile_bytes: u64,
+    /// Bytes of light map depths sent to other ranks (shadows across bricks).
+    pub shadow_map_bytes: u64,
     /// Whether its brick was built in f64 (1) or f32 (0).
     pub f64_positions: u64,
     /// Seconds: sampling, decomposition and exchange; upload and build; rendering its brick
@@ -64,8 +101,11 @@ pub struct RankReport {
     pub build_seconds: f64,
     /// Seconds rendering its brick's samples (all frames).
     pub render_seconds: f64,
-    /// Seconds compositing (all frames).
+    /// Seconds compositing (all frames), with the scan of the depth in front of each brick.
     pub composite_seconds: f64,
+    /// Seconds marching the light map through the brick and scanning it (shadows across
+    /// bricks; once per light).
+    pub shadow_map_seconds: f64,
     /// CPU seconds of the rank's own thread in the same four stages: its work alone where it
     /// runs on one thread (waiting in a collective is not charged), as `aarbf bench
     /// distributed` runs each rank; with more threads, only the calling thread's share.
@@ -76,6 +116,8 @@ pub struct RankReport {
     pub render_cpu_seconds: f64,
     /// CPU seconds compositing (see [`RankReport::exchange_cpu_seconds`]).
     pub composite_cpu_seconds: f64,
+    /// CPU seconds of the light map (see [`RankReport::exchange_cpu_seconds`]).
+    pub shadow_map_cpu_seconds: f64,
     /// Bytes the rank holds for its brick: the brick's particles (position and attributes in
     /// f64), the backend's arrays and structures, and its largest layer.
     pub memory_bytes: u64,
@@ -122,19 +164,6 @@ fn check_frames(frames: &[FrameParams]) -> Result<(), DistError> {
         ));
     };
     for f in frames {
-        if f.integrator != Integrator::Ea {
-            return Err(DistError::NotDistributed(format!(
-                "--integrator {}: single scattering across bricks (a free flight or a shadow ray \
-                 that crosses ranks) is not distributed yet; distributed renders are \
-                 emission-absorption (--integrator ea)",
-                match f.integrator {
-                    Integrator::Delta => "delta",
-                    Integrator::Marching => "marching",
-                    Integrator::SsReference => "ss-reference",
-                    Integrator::Ea => "ea",
-                }
-            )));
-        }
         if (f.width, f.height) != (first.width, first.height) {
             return Err(DistError::NotDistributed(
                 "frames of different sizes in one accumulation".into(),
@@ -142,6 +171,51 @@ fn check_frames(frames: &[FrameParams]) -> Result<(), DistError> {
         }
     }
     Ok(())
+}
+
+/// Whether a frame's image depends on light that crosses bricks: a scattering integrator with
+/// a light to shadow (else no light map is made).
+fn shadows_cross_bricks(frame: &FrameParams) -> bool {
+    frame.integrator != Integrator::Ea && frame.light_intensity != 0.0
+}
+
+/// Whether two frames have the same light map: the same light through the same field.
+fn same_light(a: &FrameParams, b: &FrameParams) -> bool {
+    a.light_dir == b.light_dir
+        && a.box_min == b.box_min
+        && a.box_max == b.box_max
+        && a.dt == b.dt
+        && a.phi_ref == b.phi_ref
+        && a.density_scale == b.density_scale
+        && a.optical_table == b.optical_table
+}
+
+/// The brick's [`LightPrefix`] for `frame`'s light: every brick marches the map's texels near
+/// its box through its own samples, and an exclusive scan in the order from the light sums,
+/// per texel, the bricks nearer the light. Returns the bytes sent.
+fn light_prefix(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    tree: &KdTree,
+    frame: &FrameParams,
+    size: u32,
+) -> Result<(LightPrefix, usize), DistError> {
+    let map = LightMap::new(frame.light_dir, frame.march_box(), size);
+    let near: Vec<PixelRect> = tree
+        .leaves()
+        .iter()
+        .map(|l| map.texels_near(l.clipped_to(frame.march_box())))
+        .collect();
+    let me = comm.rank();
+    let mine = backend.owned_depth(frame, &tree.leaves()[me], DepthRays::Light(&map, near[me]))?;
+    let order = tree.nearest_first_along(frame.light_dir);
+    let scanned = exclusive_scan(comm, &order, &near, &near, &mine)?;
+    let prefix = LightPrefix {
+        map,
+        rect: near[me],
+        depth: scanned.sums,
+    };
+    Ok((prefix, scanned.bytes_sent))
 }
 
 /// With a periodic box, `local` wrapped into it with its periodic images, and the bounds every
@@ -171,6 +245,33 @@ fn periodic_images(
         .fold(0.0, |a: f64, &b| a.max(b));
     let step = Arc::try_unwrap(images.step).unwrap_or_else(|shared| (*shared).clone());
     Ok((Some(step), periodic.bounds().grown(largest)))
+}
+
+/// Stochastic marching's pass 1: the brick's optical depth along its pixels' primary rays
+/// (each stopped past its free-flight depth), and the exclusive scan of them in view order:
+/// per pixel of this brick's rectangle, the depth of the bricks in front. The march is timed
+/// as rendering, the scan as compositing.
+fn depth_in_front(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    frame: &FrameParams,
+    leaf: &HalfOpenBox,
+    order: &[usize],
+    rects: &[PixelRect],
+    report: &mut RankReport,
+) -> Result<Vec<f64>, DistError> {
+    let clock = StageClock::start();
+    let mine = backend.owned_depth(frame, leaf, DepthRays::Primary(rects[comm.rank()]))?;
+    let (wall, cpu) = clock.stop();
+    report.render_seconds += wall;
+    report.render_cpu_seconds += cpu;
+    let clock = StageClock::start();
+    let scanned = exclusive_scan(comm, order, rects, rects, &mine)?;
+    report.tile_bytes += scanned.bytes_sent as u64;
+    let (wall, cpu) = clock.stop();
+    report.composite_seconds += wall;
+    report.composite_cpu_seconds += cpu;
+    Ok(scanned.sums)
 }
 
 /// A mean image, rounded to f32 as a backend returns it.
@@ -291,6 +392,7 @@ pub fn render_balanced(
     let cycles = CycleWeights::of_frames(frames[0].noise, frames[0].integrator);
     let mut kept: Vec<(u32, Vec<[f64; 4]>)> = Vec::new();
     let mut largest_layer = 0;
+    let mut light: Option<(FrameParams, LightPrefix)> = None;
     for frame in frames {
         if cycles
             .as_ref()
@@ -298,20 +400,59 @@ pub fn render_balanced(
         {
             kept.push((sums.frames, sums.flat()));
         }
-        let clock = StageClock::start();
-        let march_box = Bounds {
-            min: frame.box_min,
-            max: frame.box_max,
+        let light_here = match scene.shadows {
+            // One brick has no brick nearer the light.
+            DistShadows::PrefixMap(size) if comm.size() > 1 && shadows_cross_bricks(frame) => {
+                if light.as_ref().is_none_or(|(f, _)| !same_light(f, frame)) {
+                    let clock = StageClock::start();
+                    let (prefix, bytes) = light_prefix(comm, backend, &tree, frame, size)?;
+                    light = Some((frame.clone(), prefix));
+                    let (wall, cpu) = clock.stop();
+                    report.shadow_map_seconds += wall;
+                    report.shadow_map_cpu_seconds += cpu;
+                    report.shadow_map_bytes += bytes as u64;
+                }
+                light.as_ref().map(|(_, l)| l)
+            }
+            _ => None,
         };
-        let rect = screen_rect(frame, leaf.clipped_to(march_box));
-        let layer = backend.render_owned(frame, &leaf, rect)?;
+        let march_box = frame.march_box();
+        let rects: Vec<PixelRect> = tree
+            .leaves()
+            .iter()
+            .map(|l| screen_rect(frame, l.clipped_to(march_box)))
+            .collect();
+        let rect = rects[comm.rank()];
+        let order = tree.front_to_back(frame.camera.eye);
+        let depth_in_front = if frame.integrator == Integrator::Marching {
+            Some(depth_in_front(
+                comm,
+                backend,
+                frame,
+                &leaf,
+                &order,
+                &rects,
+                &mut report,
+            )?)
+        } else {
+            None
+        };
+
+        let clock = StageClock::start();
+        let share = BrickShare {
+            owned: &leaf,
+            rect,
+            index: comm.rank() as u32,
+            depth_in_front: depth_in_front.as_deref(),
+            light: light_here,
+        };
+        let layer = backend.render_owned(frame, &share)?;
         largest_layer = largest_layer.max(std::mem::size_of_val(layer.as_slice()));
         let (wall, cpu) = clock.stop();
         report.render_seconds += wall;
         report.render_cpu_seconds += cpu;
 
         let clock = StageClock::start();
-        let order = tree.front_to_back(frame.camera.eye);
         let blended = direct_send(comm, &grid, rect, &layer, &order)?;
         sums.add(&blended.tiles, frame.background);
         report.tile_bytes += blended.bytes_sent as u64;

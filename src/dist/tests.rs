@@ -12,6 +12,7 @@ use super::composite::{TileGrid, direct_send, screen_rect};
 use super::exchange::{Brick, decompose, exchange, ghost_reach};
 use super::kd::KdTree;
 use super::*;
+use crate::backend::BrickShare;
 use crate::backend::cpu::integrators::{
     FieldSampler, PACKET, PixelScratch, ray_box, render_owned_pixels_with, render_pixels_with,
 };
@@ -234,7 +235,16 @@ fn sample_points(f: &FrameParams, owned: Option<&HalfOpenBox>) -> Vec<[u64; 3]> 
     let mut out = [[0.0; 4]; PACKET];
     for packet in pixels.chunks(PACKET) {
         match owned {
-            Some(b) => render_owned_pixels_with(f, &recorder, b, packet, &mut scratch, &mut out),
+            Some(b) => {
+                let share = BrickShare {
+                    owned: b,
+                    rect: PixelRect::full(f.width, f.height),
+                    index: 0,
+                    depth_in_front: None,
+                    light: None,
+                };
+                render_owned_pixels_with(f, &recorder, &share, packet, &mut scratch, &mut out)
+            }
             None => render_pixels_with(f, &recorder, packet, &mut scratch, &mut out),
         }
     }
@@ -434,6 +444,7 @@ fn empty_bricks_render_nothing_and_break_nothing() {
         series_range: Some((0.0, 3.0)),
         precision: Precision::F64,
         periodic: None,
+        shadows: DistShadows::default(),
     };
     let mut single = single_rank(&step, &scene);
     single.render(&frames[0]).unwrap();
@@ -487,6 +498,7 @@ fn past_a_mask_cycle_the_cycles_are_weighted_as_a_single_rank_weights_them() {
         series_range: Some((0.0, 3.0)),
         precision: Precision::F64,
         periodic: None,
+        shadows: DistShadows::default(),
     };
     // The single rank, as `render::RenderSession` accumulates.
     let mut single = single_rank(&step, &scene);

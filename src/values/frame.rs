@@ -198,6 +198,14 @@ pub struct FrameParams {
 }
 
 impl FrameParams {
+    /// The box primary and shadow rays are marched in.
+    pub fn march_box(&self) -> super::Bounds {
+        super::Bounds {
+            min: self.box_min,
+            max: self.box_max,
+        }
+    }
+
     /// This frame on its image's half-resolution lattice ([`CameraFrame::on_half_lattice`]):
     /// the same rays as the full frame's even pixels, a quarter of the work.
     pub fn on_half_lattice(self) -> FrameParams {

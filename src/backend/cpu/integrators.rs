@@ -20,11 +20,12 @@
 
 use glam::DVec3;
 
+use crate::backend::BrickShare;
 use crate::noise::{BlueNoiseMask, white::white};
 use crate::values::frame::{ColourMode, Integrator, NoiseKind};
 use crate::values::shader_constants::{NOISE_OFFSETS, PHI_EPSILON};
 use crate::values::tables::{lookup, lookup_colour};
-use crate::values::{Bounds, FrameParams, HalfOpenBox};
+use crate::values::{FrameParams, HalfOpenBox};
 
 /// The field as an integrator sees it: sampled along rays, each at increasing distances (every
 /// integrator marches or tracks forward), so a sampler may keep what one sample found for the
@@ -142,7 +143,7 @@ pub fn ray_box(origin: DVec3, dir: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, 
 /// disjoint intervals and before `t1`, in order: the one rule every marching integrator
 /// samples by, kept as a cursor so that rays of a packet can advance in step.
 #[derive(Clone, Copy, Debug)]
-struct MarchSamples {
+pub(super) struct MarchSamples {
     t0: f64,
     t1: f64,
     dt: f64,
@@ -153,7 +154,7 @@ struct MarchSamples {
 }
 
 impl MarchSamples {
-    fn new(t0: f64, t1: f64, dt: f64, jitter: f64) -> MarchSamples {
+    pub(super) fn new(t0: f64, t1: f64, dt: f64, jitter: f64) -> MarchSamples {
         MarchSamples {
             t0,
             t1,
@@ -165,7 +166,7 @@ impl MarchSamples {
     }
 
     /// The next sample in `intervals` (the same ones at every call), if any.
-    fn next(&mut self, intervals: &[(f64, f64)]) -> Option<f64> {
+    pub(super) fn next(&mut self, intervals: &[(f64, f64)]) -> Option<f64> {
         while let Some(&(a, b)) = intervals.get(self.interval) {
             let b = b.min(self.t1);
             let mut k = self
@@ -196,7 +197,7 @@ impl MarchSamples {
 /// where it is done. Returns whether empty space is clear: then a sample where Phi is 0 adds
 /// nothing and need not be shaded.
 #[allow(clippy::too_many_arguments)]
-fn march_intervals<F: FieldSampler>(
+pub(super) fn march_intervals<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
     ray: &mut F::Ray,
@@ -216,22 +217,29 @@ fn march_intervals<F: FieldSampler>(
 }
 
 /// Transmittance from `x` towards the light to the march box's exit: `exp(-Σ sigma dt)`.
+/// In a brick, marched to the brick's exit, plus the depth nearer the light that the bricks
+/// before it left ([`BrickShare::light`]).
 /// (Shadow rays marched as packets were measured and not kept: a packet's scattering points
 /// lie at different depths, so their samples rarely share cells.)
 fn shadow<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
+    brick: Option<&BrickShare<'_>>,
     ray: &mut F::Ray,
     x: DVec3,
     jitter: f64,
     scratch: &mut Vec<(f64, f64)>,
 ) -> f64 {
-    let Some((_, t_exit)) = ray_box(x, p.light_dir, p.box_min, p.box_max) else {
-        return 1.0;
+    let march_box = p.march_box();
+    let (exit_box, mut tau) = match brick {
+        Some(b) => (b.owned.clipped_to(march_box), b.light_depth_at(x)),
+        None => (march_box, 0.0),
+    };
+    let Some((_, t_exit)) = ray_box(x, p.light_dir, exit_box.min, exit_box.max) else {
+        return (-tau).exp();
     };
     scratch.clear();
     let clear_where_empty = march_intervals(p, field, ray, x, p.light_dir, 0.0, t_exit, scratch);
-    let mut tau = 0.0;
     let mut samples = MarchSamples::new(0.0, t_exit, p.dt, jitter);
     while let Some(t) = samples.next(scratch) {
         let (phi, num) = field.sample(ray, x + p.light_dir * t);
@@ -250,9 +258,9 @@ fn shadow<F: FieldSampler>(
 /// What a packet's rays keep while they are marched (their samplers' state and their
 /// intervals, the packet's shared state, a shadow ray), made once per thread and reused.
 pub struct PixelScratch<F: FieldSampler> {
-    primary: [F::Ray; PACKET],
-    intervals: [Vec<(f64, f64)>; PACKET],
-    packet: F::Packet,
+    pub(super) primary: [F::Ray; PACKET],
+    pub(super) intervals: [Vec<(f64, f64)>; PACKET],
+    pub(super) packet: F::Packet,
     shadow: F::Ray,
     shadow_intervals: Vec<(f64, f64)>,
 }
@@ -292,53 +300,54 @@ pub fn render_pixels_with<F: FieldSampler>(
         }
         Integrator::Delta => {
             for (o, &(x, y)) in out.iter_mut().zip(pixels) {
-                *o = render_pixel_with(p, field, x, y, scratch);
+                *o = delta_tracking(p, field, None, x, y, scratch);
             }
         }
     }
 }
 
-/// The part of each of `pixels`' emission–absorption that `owned` holds: the frame's samples
-/// (the same lattice `t_enter + (k + jitter) dt` from the march box's entry as the whole
-/// frame's) whose points lie in the half-open box, composited front to back from
-/// transmittance 1, as premultiplied colour and the transmittance left, `[r, g, b, T]`, with
-/// no background. Boxes that tile space split every pixel's samples between them, each sample
-/// to one box, so compositing their values in the order a ray meets the boxes
-/// (`C = C_front + T_front C`, `T = T_front T`) gives the whole frame's pixel up to rounding,
-/// and exactly its value for a box holding all of space. Early termination applies per box.
-/// Emission–absorption only: the other integrators make one decision per ray, which no box
-/// can make alone (the caller refuses them).
+/// A brick's share of each of `pixels` ([`crate::backend::Backend::render_owned`]): the
+/// frame's samples (the same lattice `t_enter + (k + jitter) dt` from the march box's entry as
+/// the whole frame's) whose points lie in the brick's half-open box, as premultiplied colour
+/// and the transmittance left, `[r, g, b, T]`, with no background. Boxes that tile space split
+/// every pixel's samples between them, each sample to one box, so compositing their values in
+/// the order a ray meets the boxes (`C = C_front + T_front C`, `T = T_front T`) gives the
+/// whole frame's emission–absorption up to rounding, and exactly its value for a box holding
+/// all of space. Early termination applies per box. Single scattering gives `[L, 0]` where
+/// the pixel scatters in this brick and `[0, 0, 0, 1]` elsewhere: stochastic marching starts
+/// from the depth in front of the brick, delta tracking tracks the brick's segment, and
+/// shadow rays add the depth nearer the light ([`BrickShare`]).
 pub fn render_owned_pixels_with<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
-    owned: &HalfOpenBox,
+    brick: &BrickShare<'_>,
     pixels: &[(u32, u32)],
     scratch: &mut PixelScratch<F>,
     out: &mut [[f64; 4]],
 ) {
-    assert_eq!(
-        p.integrator,
-        Integrator::Ea,
-        "a box's part of a frame is emission-absorption only"
-    );
-    march_packet(p, field, Some(owned), pixels, scratch, out)
+    match p.integrator {
+        Integrator::Ea | Integrator::SsReference | Integrator::Marching => {
+            march_packet(p, field, Some(brick), pixels, scratch, out)
+        }
+        Integrator::Delta => {
+            for (o, &(x, y)) in out.iter_mut().zip(pixels) {
+                *o = delta_tracking(p, field, Some(brick), x, y, scratch);
+            }
+        }
+    }
 }
 
 /// Keeps of a ray's `intervals` the part where it can meet `owned` within the march box. The
 /// box is grown by a step first, so that no rounding of where the ray crosses its faces drops
 /// a sample: which samples are owned is decided by their points, not by these bounds.
-fn clip_to_owned(
+pub(super) fn clip_to_owned(
     p: &FrameParams,
     owned: &HalfOpenBox,
     origin: DVec3,
     dir: DVec3,
     intervals: &mut Vec<(f64, f64)>,
 ) {
-    let march_box = Bounds {
-        min: p.box_min,
-        max: p.box_max,
-    };
-    let reach = owned.clipped_to(march_box).grown(p.dt);
+    let reach = owned.clipped_to(p.march_box()).grown(p.dt);
     match ray_box(origin, dir, reach.min, reach.max) {
         None => intervals.clear(),
         Some((a, b)) => intervals.retain_mut(|(s, e)| {
@@ -350,17 +359,19 @@ fn clip_to_owned(
 }
 
 /// Light reaching `at` (shadowed by the field, plus ambient) times `albedo`.
+#[allow(clippy::too_many_arguments)]
 fn radiance<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
+    brick: Option<&BrickShare<'_>>,
     shadow_ray: &mut F::Ray,
     scratch: &mut Vec<(f64, f64)>,
     at: DVec3,
     albedo: [f64; 3],
     shadow_jitter: f64,
 ) -> [f64; 3] {
-    let light =
-        p.light_intensity * shadow(p, field, shadow_ray, at, shadow_jitter, scratch) + p.ambient;
+    let light = p.light_intensity * shadow(p, field, brick, shadow_ray, at, shadow_jitter, scratch)
+        + p.ambient;
     albedo.map(|a| a * light)
 }
 
@@ -388,7 +399,7 @@ impl MarchedRay {
     fn start<F: FieldSampler>(
         p: &FrameParams,
         field: &F,
-        owned: Option<&HalfOpenBox>,
+        brick: Option<&BrickShare<'_>>,
         (x, y): (u32, u32),
         primary: &mut F::Ray,
         intervals: &mut Vec<(f64, f64)>,
@@ -398,8 +409,8 @@ impl MarchedRay {
         intervals.clear();
         let clear_where_empty =
             march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
-        if let Some(owned) = owned {
-            clip_to_owned(p, owned, origin, dir, intervals);
+        if let Some(b) = brick {
+            clip_to_owned(p, b.owned, origin, dir, intervals);
         }
         // Dimension 0 is the primary decision: emission–absorption's jitter, or stochastic
         // marching's free-flight number (its jitter is dimension 1, as the reference's).
@@ -408,7 +419,10 @@ impl MarchedRay {
             Integrator::Marching => (p.random(x, y, 1), -(1.0 - p.random(x, y, 0)).ln()),
             _ => (p.random(x, y, if scatter { 1 } else { 0 }), f64::INFINITY),
         };
-        Some(MarchedRay {
+        // In a brick, stochastic marching goes on from the depth of the bricks in front; past
+        // the free-flight depth already, the ray scattered in front of this brick.
+        let tau = brick.map_or(0.0, |b| b.depth_in_front(x, y));
+        (tau <= target_tau).then_some(MarchedRay {
             origin,
             dir,
             clear_where_empty,
@@ -416,7 +430,7 @@ impl MarchedRay {
             shadow_jitter: p.random(x, y, 2),
             colour: [0.0; 3],
             transmittance: 1.0,
-            tau: 0.0,
+            tau,
             target_tau,
         })
     }
@@ -424,8 +438,8 @@ impl MarchedRay {
     /// The pixel's value: what the ray gathered over the background; or, for a ray marched
     /// through an owned box only, what it gathered there, `[r, g, b, T]` (premultiplied colour
     /// and transmittance, no background).
-    fn finish(&self, bg: [f64; 3], owned: Option<&HalfOpenBox>) -> [f64; 4] {
-        if owned.is_some() {
+    fn finish(&self, bg: [f64; 3], brick: Option<&BrickShare<'_>>) -> [f64; 4] {
+        if brick.is_some() {
             let c = self.colour;
             return [c[0], c[1], c[2], self.transmittance];
         }
@@ -449,7 +463,7 @@ impl MarchedRay {
 fn march_packet<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
-    owned: Option<&HalfOpenBox>,
+    brick: Option<&BrickShare<'_>>,
     pixels: &[(u32, u32)],
     scratch: &mut PixelScratch<F>,
     out: &mut [[f64; 4]],
@@ -464,19 +478,21 @@ fn march_packet<F: FieldSampler>(
         shadow: shadow_ray,
         shadow_intervals,
     } = scratch;
+    let owned = brick.map(|b| b.owned);
     let mut rays: [Option<MarchedRay>; PACKET] = [None; PACKET];
     for (i, &pixel) in pixels.iter().enumerate() {
-        out[i] = match owned {
+        out[i] = match brick {
             None => [bg[0], bg[1], bg[2], 0.0],
             Some(_) => [0.0, 0.0, 0.0, 1.0],
         };
-        rays[i] = MarchedRay::start(p, field, owned, pixel, &mut primary[i], &mut intervals[i]);
+        rays[i] = MarchedRay::start(p, field, brick, pixel, &mut primary[i], &mut intervals[i]);
     }
     // What a ray's sample at `at` scatters towards the camera, `albedo` under the light there.
     let mut lit = |ray: &MarchedRay, at: DVec3, albedo: [f64; 3]| {
         radiance(
             p,
             field,
+            brick,
             shadow_ray,
             shadow_intervals,
             at,
@@ -502,7 +518,7 @@ fn march_packet<F: FieldSampler>(
                     any = true;
                 }
                 None => {
-                    out[i] = ray.finish(bg, owned);
+                    out[i] = ray.finish(bg, brick);
                     rays[i] = None;
                 }
             }
@@ -528,7 +544,8 @@ fn march_packet<F: FieldSampler>(
                 ray.tau += sigma * p.dt;
                 if ray.tau > ray.target_tau {
                     let l = lit(ray, at, rgb);
-                    out[i] = [l[0], l[1], l[2], 1.0];
+                    // Opaque: alpha 1 over the background, transmittance 0 in a brick.
+                    out[i] = [l[0], l[1], l[2], if brick.is_some() { 0.0 } else { 1.0 }];
                     rays[i] = None;
                 }
                 continue;
@@ -543,7 +560,7 @@ fn march_packet<F: FieldSampler>(
             }
             ray.transmittance *= 1.0 - alpha;
             if 1.0 - ray.transmittance >= p.opacity_threshold {
-                out[i] = ray.finish(bg, owned);
+                out[i] = ray.finish(bg, brick);
                 rays[i] = None;
             }
         }
@@ -551,7 +568,8 @@ fn march_packet<F: FieldSampler>(
 }
 
 /// The radiance of pixel (x, y) in this frame: linear RGB and opacity. The marching
-/// integrators march it as a packet of one (`march_packet`); delta tracking is here.
+/// integrators march it as a packet of one (`march_packet`); delta tracking is
+/// [`delta_tracking`].
 pub fn render_pixel_with<F: FieldSampler>(
     p: &FrameParams,
     field: &F,
@@ -559,18 +577,35 @@ pub fn render_pixel_with<F: FieldSampler>(
     y: u32,
     scratch: &mut PixelScratch<F>,
 ) -> [f64; 4] {
-    if matches!(
-        p.integrator,
-        Integrator::Ea | Integrator::SsReference | Integrator::Marching
-    ) {
-        let mut out = [[0.0; 4]];
-        march_packet(p, field, None, &[(x, y)], scratch, &mut out);
-        return out[0];
+    if p.integrator == Integrator::Delta {
+        return delta_tracking(p, field, None, x, y, scratch);
     }
+    let mut out = [[0.0; 4]];
+    march_packet(p, field, None, &[(x, y)], scratch, &mut out);
+    out[0]
+}
+
+/// Delta tracking of pixel (x, y): over the whole ray, or in a brick over the ray's segment in
+/// the brick's box (exactly: a free flight is memoryless, so a brick tracks its own segment,
+/// and the first brick along the ray where a collision happens decides, as the whole ray's
+/// tracking would in distribution). Returns linear RGB and opacity, or in a brick `[L, 0]`
+/// where it collides and `[0, 0, 0, 1]` where not.
+fn delta_tracking<F: FieldSampler>(
+    p: &FrameParams,
+    field: &F,
+    brick: Option<&BrickShare<'_>>,
+    x: u32,
+    y: u32,
+    scratch: &mut PixelScratch<F>,
+) -> [f64; 4] {
     let (origin, dir) = p.primary_ray(x, y);
     let bg = p.background;
+    let miss = match brick {
+        None => [bg[0], bg[1], bg[2], 0.0],
+        Some(_) => [0.0, 0.0, 0.0, 1.0],
+    };
     let Some((t_enter, t_exit)) = ray_box(origin, dir, p.box_min, p.box_max) else {
-        return [bg[0], bg[1], bg[2], 0.0];
+        return miss;
     };
     let PixelScratch {
         primary,
@@ -584,11 +619,23 @@ pub fn render_pixel_with<F: FieldSampler>(
     // Delta tracking: free flights skip the space outside the intervals (null collisions
     // only), so whether empty space is clear does not matter to it.
     march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
+    if let Some(b) = brick {
+        // The segment in the brick's box exactly: its samples are its own.
+        let own = b.owned.clipped_to(p.march_box());
+        match ray_box(origin, dir, own.min, own.max) {
+            None => intervals.clear(),
+            Some((a, e)) => intervals.retain_mut(|(s, t)| {
+                *s = s.max(a);
+                *t = t.min(e);
+                *s < *t
+            }),
+        }
+    }
     if p.majorant <= 0.0 {
-        return [bg[0], bg[1], bg[2], 0.0];
+        return miss;
     }
     let Some(&(first, _)) = intervals.first() else {
-        return [bg[0], bg[1], bg[2], 0.0];
+        return miss;
     };
     let mut dim = 0;
     let mut interval = 0;
@@ -604,7 +651,7 @@ pub fn render_pixel_with<F: FieldSampler>(
             let over = t - intervals[interval].1;
             interval += 1;
             if interval == intervals.len() {
-                return [bg[0], bg[1], bg[2], 0.0];
+                return miss;
             }
             t = intervals[interval].0 + over;
         }
@@ -614,13 +661,22 @@ pub fn render_pixel_with<F: FieldSampler>(
         let accept = p.random(x, y, dim);
         dim += 1;
         if accept * p.majorant < sigma {
-            let l = radiance(p, field, shadow_ray, scratch, at, rgb, p.random(x, y, 2));
-            return [l[0], l[1], l[2], 1.0];
+            let l = radiance(
+                p,
+                field,
+                brick,
+                shadow_ray,
+                scratch,
+                at,
+                rgb,
+                p.random(x, y, 2),
+            );
+            return [l[0], l[1], l[2], if brick.is_some() { 0.0 } else { 1.0 }];
         }
         if dim > 100_000 {
             // Bounded work per pixel: a majorant far above the real extinction would
             // otherwise take arbitrarily many null collisions.
-            return [bg[0], bg[1], bg[2], 0.0];
+            return miss;
         }
     }
 }

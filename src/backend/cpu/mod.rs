@@ -26,13 +26,16 @@ use self::accumulator::Accumulator;
 use self::integrators::{FieldSampler, PACKET, PACKET_SIZE, PixelScratch, render_pixels_with};
 use super::precision::{PositionKind, Representation, SceneNumbers, choose_cpu};
 use super::voxel::{VoxelGeometry, VoxelGrid};
-use super::{Backend, BackendError, Capabilities, MemoryReport, Precision, StepInput, Timings};
+use super::{
+    Backend, BackendError, BrickShare, Capabilities, DepthRays, MemoryReport, Precision, StepInput,
+    Timings,
+};
 use crate::accel::CellRuns;
 use crate::field::splat::{SplatCounts, SplatScratch};
 use crate::field::{
     F32Batch, F32Field, F32Packet, F32Ray, FieldSettings, Particles, ReferenceField,
 };
-use crate::values::{FrameParams, HalfOpenBox, Image, PixelRect, Step};
+use crate::values::{FrameParams, HalfOpenBox, Image, Step};
 
 const TILE: u32 = 16;
 
@@ -515,17 +518,27 @@ impl Backend for CpuBackend {
     fn render_owned(
         &mut self,
         frame: &FrameParams,
-        owned: &HalfOpenBox,
-        rect: PixelRect,
+        share: &BrickShare<'_>,
     ) -> Result<Vec<[f64; 4]>, BackendError> {
-        owned::check_integrator(frame)?;
         let started = Instant::now();
         let pixels = match self.sampler()? {
-            Sampler::F64(field) => owned::render_rect(frame, field, owned, rect),
-            Sampler::F32(field) => owned::render_rect(frame, field, owned, rect),
+            Sampler::F64(field) => owned::render_rect(frame, field, share),
+            Sampler::F32(field) => owned::render_rect(frame, field, share),
         };
         self.timings.frame = started.elapsed();
         Ok(pixels)
+    }
+
+    fn owned_depth(
+        &mut self,
+        frame: &FrameParams,
+        owned: &HalfOpenBox,
+        rays: DepthRays<'_>,
+    ) -> Result<Vec<f64>, BackendError> {
+        Ok(match self.sampler()? {
+            Sampler::F64(field) => owned::depth_rect(frame, field, owned, rays),
+            Sampler::F32(field) => owned::depth_rect(frame, field, owned, rays),
+        })
     }
 
     /// The splatter collects its hits through the f64 reference's cluster BVH: a scene

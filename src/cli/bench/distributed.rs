@@ -20,13 +20,15 @@ use crate::backend::Precision;
 use crate::backend::cpu::CpuBackend;
 use crate::dist::balance::pilot_size;
 use crate::dist::{
-    Balance, Comm, CommExt, CostModel, DistImage, DistScene, RankReport, render_balanced, run_local,
+    Balance, Comm, CommExt, CostModel, DEFAULT_SHADOW_MAP, DistImage, DistScene, DistShadows,
+    RankReport, render_balanced, run_local,
 };
 use crate::field::FieldSettings;
 use crate::render::{AutoValues, FrameBasis, RenderSettings};
 use crate::scene::TimeSeries;
 use crate::scene::synth::Generator;
 use crate::values::FrameParams;
+use crate::values::Integrator;
 
 /// The arguments of `aarbf bench distributed`.
 #[derive(Debug, Args)]
@@ -59,6 +61,18 @@ pub struct DistributedArgs {
     /// The particles' radius as a fraction of the step's diagonal.
     #[arg(long, default_value_t = 0.01)]
     pub radius: f64,
+    /// The integrator: `ea`, or single scattering (`marching`, `delta`, `ss-reference`),
+    /// whose runs add the light map of shadows across bricks to each rank's stages.
+    #[arg(long, value_enum, default_value_t = Integrator::Ea)]
+    pub integrator: Integrator,
+    /// The light map's side in the scaling runs of single scattering.
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_SHADOW_MAP)]
+    pub shadow_map: u32,
+    /// Single scattering: the light map sides whose images are compared with the single
+    /// rank's (FLIP, RMSE) at each rank count above 1, beside shadows from each ray's own brick
+    /// only (`local`); empty to skip the comparison.
+    #[arg(long, value_delimiter = ',', default_value = "256,512,1024,2048")]
+    pub shadow_maps: Vec<u32>,
     /// Where distributed.csv (a row per run and rank) and distributed.md are written.
     #[arg(long, default_value = "distributed")]
     pub out: PathBuf,
@@ -97,6 +111,7 @@ impl RankRow {
             + r.build_cpu_seconds
             + r.render_cpu_seconds
             + r.composite_cpu_seconds
+            + r.shadow_map_cpu_seconds
     }
 }
 
@@ -110,25 +125,33 @@ impl Run {
 
     /// Messages a rank sends: P - 1 in each collective (the sample's all-gather, the
     /// exchange, the precision's all-gather, a composite a frame, the gathers of the image
-    /// and the reports).
-    fn messages(&self, frames: u32) -> f64 {
-        ((self.ranks - 1) as f64) * f64::from(5 + frames)
+    /// and the reports; with single scattering, the light map's scan, and for stochastic
+    /// marching the scan of the depth in front each frame).
+    fn messages(&self, frames: u32, integrator: Integrator) -> f64 {
+        let collectives = 5
+            + frames
+            + match integrator {
+                Integrator::Ea => 0,
+                Integrator::Marching => 1 + frames,
+                Integrator::Delta | Integrator::SsReference => 1,
+            };
+        ((self.ranks - 1) as f64) * f64::from(collectives)
     }
 
     /// The modelled communication: the rank that sends most, at the link's α and β.
-    fn communication(&self, link: Link, frames: u32) -> f64 {
+    fn communication(&self, link: Link, frames: u32, integrator: Integrator) -> f64 {
         let bytes = self
             .rows
             .iter()
-            .map(|r| r.report.particle_bytes + r.report.tile_bytes)
+            .map(|r| r.report.particle_bytes + r.report.tile_bytes + r.report.shadow_map_bytes)
             .max()
             .unwrap_or(0);
-        link.alpha * self.messages(frames) + link.beta * bytes as f64
+        link.alpha * self.messages(frames, integrator) + link.beta * bytes as f64
     }
 
     /// The modelled time on P cores: the slowest rank's work plus the communication.
-    fn modelled(&self, link: Link, frames: u32) -> f64 {
-        self.slowest().work() + self.communication(link, frames)
+    fn modelled(&self, link: Link, frames: u32, integrator: Integrator) -> f64 {
+        self.slowest().work() + self.communication(link, frames, integrator)
     }
 
     fn owned(&self) -> u64 {
@@ -167,6 +190,11 @@ pub(super) fn run(args: DistributedArgs) -> anyhow::Result<()> {
         link.alpha * 1e6,
         1e-9 / link.beta
     );
+    anyhow::ensure!(
+        (1..=16384).contains(&args.shadow_map)
+            && args.shadow_maps.iter().all(|m| (1..=16384).contains(m)),
+        "light map sides are 1 to 16384 texels"
+    );
     let mut runs = Vec::new();
     let mut plan: Vec<(&'static str, usize, usize)> = args
         .ranks
@@ -187,7 +215,15 @@ pub(super) fn run(args: DistributedArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     crate::io::output::write_atomically(&csv, true, |p| std::fs::write(p, csv_rows(&runs)))?;
-    let summary = summarise(&args, &runs, link, peak);
+    let mut summary = summarise(&args, &runs, link, peak);
+    if args.integrator != Integrator::Ea && !args.shadow_maps.is_empty() {
+        let compared = super::dist_shadows::compare(&args)?;
+        let path = args.out.join("shadows.csv");
+        crate::io::output::write_atomically(&path, args.force, |p| {
+            std::fs::write(p, super::dist_shadows::csv_rows(&compared))
+        })?;
+        summary.push_str(&super::dist_shadows::summarise(&args, &compared));
+    }
     crate::io::output::write_atomically(&md, true, |p| std::fs::write(p, &summary))?;
     #[expect(clippy::print_stdout, reason = "the summary is the command's output")]
     {
@@ -204,20 +240,9 @@ fn run_one(
     ranks: usize,
     particles: usize,
 ) -> anyhow::Result<Run> {
-    const STEP: usize = 2;
-    let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(particles, STEP + 1, 1));
-    let step = series.step(STEP)?;
-    let field = FieldSettings::new(Some("velocity"), args.radius * step.bounds().diagonal());
-    let range = series.attribute("velocity").map(|a| (a.min, a.max));
+    let (series, step, field) = dam_break(args, particles)?;
     let (frames, pilot) = frames_of(args, &series, &field)?;
-    let scene = DistScene {
-        field: &field,
-        cluster: ClusterSize::new(16).expect("16 is a cluster size"),
-        series_bounds: series.bounds(),
-        series_range: range,
-        precision: Precision::F32,
-        periodic: None,
-    };
+    let scene = scene_of(&series, &field, DistShadows::PrefixMap(args.shadow_map));
     tracing::info!("{scaling} scaling: {particles} particles, {ranks} ranks");
     let results = run_local(ranks, |comm| {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -269,9 +294,42 @@ fn run_one(
     })
 }
 
+/// The generated dam break of `particles` (its third step) and the field at `--radius`.
+pub(super) fn dam_break(
+    args: &DistributedArgs,
+    particles: usize,
+) -> anyhow::Result<(
+    TimeSeries,
+    std::sync::Arc<crate::values::Step>,
+    FieldSettings,
+)> {
+    const STEP: usize = 2;
+    let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(particles, STEP + 1, 1));
+    let step = series.step(STEP)?;
+    let field = FieldSettings::new(Some("velocity"), args.radius * step.bounds().diagonal());
+    Ok((series, step, field))
+}
+
+/// What every rank of a run renders with: the CPU backend in f32, K = 16.
+pub(super) fn scene_of<'a>(
+    series: &TimeSeries,
+    field: &'a FieldSettings,
+    shadows: DistShadows,
+) -> DistScene<'a> {
+    DistScene {
+        field,
+        cluster: ClusterSize::new(16).expect("16 is a cluster size"),
+        series_bounds: series.bounds(),
+        series_range: series.attribute("velocity").map(|a| (a.min, a.max)),
+        precision: Precision::F32,
+        periodic: None,
+        shadows,
+    }
+}
+
 /// The frames of a run: the default view of the step's series; and with `--balance cost`,
 /// the pilot frame that measures the first decomposition's cost.
-fn frames_of(
+pub(super) fn frames_of(
     args: &DistributedArgs,
     series: &TimeSeries,
     field: &FieldSettings,
@@ -280,6 +338,7 @@ fn frames_of(
         width: args.size.0,
         height: args.size.1,
         opacity_threshold: args.opacity_threshold,
+        integrator: args.integrator,
         ..RenderSettings::default()
     };
     let basis = FrameBasis {
@@ -347,15 +406,16 @@ fn measure_link() -> anyhow::Result<Link> {
 fn csv_rows(runs: &[Run]) -> String {
     let mut out = String::from(
         "scaling,ranks,particles,rank,read,owned,ghosts,particle_bytes,tile_bytes,memory_bytes,\
-         read_cpu_s,exchange_cpu_s,build_cpu_s,render_cpu_s,composite_cpu_s,\
-         exchange_wall_s,build_wall_s,render_wall_s,composite_wall_s\n",
+         shadow_map_bytes,read_cpu_s,exchange_cpu_s,build_cpu_s,shadow_map_cpu_s,render_cpu_s,\
+         composite_cpu_s,exchange_wall_s,build_wall_s,shadow_map_wall_s,render_wall_s,\
+         composite_wall_s\n",
     );
     for run in runs {
         for (rank, row) in run.rows.iter().enumerate() {
             let r = &row.report;
             let _ = writeln!(
                 out,
-                "{},{},{},{rank},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+                "{},{},{},{rank},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
                 run.scaling,
                 run.ranks,
                 run.particles,
@@ -365,13 +425,16 @@ fn csv_rows(runs: &[Run]) -> String {
                 r.particle_bytes,
                 r.tile_bytes,
                 r.memory_bytes,
+                r.shadow_map_bytes,
                 row.read_cpu_seconds,
                 r.exchange_cpu_seconds,
                 r.build_cpu_seconds,
+                r.shadow_map_cpu_seconds,
                 r.render_cpu_seconds,
                 r.composite_cpu_seconds,
                 r.exchange_seconds,
                 r.build_seconds,
+                r.shadow_map_seconds,
                 r.render_seconds,
                 r.composite_seconds,
             );
@@ -386,9 +449,9 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
     let _ = writeln!(
         md,
         "# Distributed rendering: scaling\n\n`aarbf bench distributed --ranks {} --count {} \
-         --weak-count {} --size {w}x{h} --frames {} --radius {} --opacity-threshold {} --balance {}`: the \
-         generated dam break's third step, radius {} of its diagonal, CPU backend (f32, K = 16), \
-         emission-absorption, {w}x{h}, {} frame(s).\n\nEach rank runs as a thread of one process in a pool of one thread; its \
+         --weak-count {} --size {w}x{h} --frames {} --radius {} --opacity-threshold {} --balance {} \
+         --integrator {}{}`: the generated dam break's third step, radius {} of its diagonal, CPU \
+         backend (f32, K = 16), {}, {w}x{h}, {} frame(s).\n\nEach rank runs as a thread of one process in a pool of one thread; its \
          times are its thread's CPU seconds, its work alone however many ranks share the cores. \
          T(P) models P ranks on P cores: the slowest rank's work plus the communication, \
          α·messages + β·bytes of the rank that sends most, with α = {:.1} µs and β = 1/({:.2} GB/s) \
@@ -405,7 +468,21 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
         args.radius,
         args.opacity_threshold,
         args.balance,
+        integrator_name(args.integrator),
+        if args.integrator == Integrator::Ea {
+            String::new()
+        } else {
+            format!(" --shadow-map {}", args.shadow_map)
+        },
         args.radius,
+        match args.integrator {
+            Integrator::Ea => "emission-absorption".to_owned(),
+            _ => format!(
+                "single scattering ({}) with shadows across bricks by a {m}x{m} light map",
+                integrator_name(args.integrator),
+                m = args.shadow_map
+            ),
+        },
         args.frames,
         link.alpha * 1e6,
         1e-9 / link.beta.max(1e-30),
@@ -415,10 +492,10 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
         let Some(base) = these.iter().find(|r| r.ranks == 1).or(these.first()) else {
             continue;
         };
-        let t1 = base.modelled(link, args.frames);
+        let t1 = base.modelled(link, args.frames, args.integrator);
         let _ = writeln!(
             md,
-            "\n## {} scaling\n\n| P | particles | ghosts | largest brick / mean | slowest render / mean | slowest rank: read, exchange, build, render, composite (s) | communication (ms) | T(P) (s) | efficiency | composite a frame, slowest (ms) | memory a rank, max (MiB) |\n|---|---|---|---|---|---|---|---|---|---|---|",
+            "\n## {} scaling\n\n| P | particles | ghosts | largest brick / mean | slowest render / mean | slowest rank: read, exchange, build, light map, render, composite (s) | communication (ms) | T(P) (s) | efficiency | composite a frame, slowest (ms) | memory a rank, max (MiB) |\n|---|---|---|---|---|---|---|---|---|---|---|",
             if scaling == "strong" {
                 "Strong"
             } else {
@@ -428,7 +505,7 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
         for run in &these {
             let s = &run.slowest();
             let r = &s.report;
-            let t = run.modelled(link, args.frames);
+            let t = run.modelled(link, args.frames, args.integrator);
             let efficiency = if scaling == "strong" {
                 t1 * base.ranks as f64 / (run.ranks as f64 * t)
             } else {
@@ -448,7 +525,7 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
                 .unwrap_or(0);
             let _ = writeln!(
                 md,
-                "| {} | {} | {:.1}% | {:.3} | {:.3} | {:.3}, {:.3}, {:.3}, {:.3}, {:.3} | {:.2} | {:.3} | {:.2} | {:.1} | {:.1} |",
+                "| {} | {} | {:.1}% | {:.3} | {:.3} | {:.3}, {:.3}, {:.3}, {:.3}, {:.3}, {:.3} | {:.2} | {:.3} | {:.2} | {:.1} | {:.1} |",
                 run.ranks,
                 run.particles,
                 100.0 * run.ghost_fraction(),
@@ -462,9 +539,10 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
                 s.read_cpu_seconds,
                 r.exchange_cpu_seconds,
                 r.build_cpu_seconds,
+                r.shadow_map_cpu_seconds,
                 r.render_cpu_seconds,
                 r.composite_cpu_seconds,
-                1e3 * run.communication(link, args.frames),
+                1e3 * run.communication(link, args.frames, args.integrator),
                 t,
                 efficiency,
                 1e3 * composite,
@@ -481,6 +559,14 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
         );
     }
     md
+}
+
+/// The integrator's name as `--integrator` takes it.
+pub(super) fn integrator_name(integrator: Integrator) -> String {
+    use clap::ValueEnum as _;
+    integrator
+        .to_possible_value()
+        .map_or_else(|| format!("{integrator:?}"), |v| v.get_name().to_owned())
 }
 
 #[cfg(test)]
@@ -519,8 +605,11 @@ mod tests {
         };
         assert_eq!(run.slowest().work(), 2.5);
         let comm = 1e-3 * 2.0 * 6.0 + 1e-6 * 1000.0;
-        assert!((run.communication(link, 1) - comm).abs() < 1e-15);
-        assert!((run.modelled(link, 1) - (2.5 + comm)).abs() < 1e-12);
+        assert!((run.communication(link, 1, Integrator::Ea) - comm).abs() < 1e-15);
+        assert!((run.modelled(link, 1, Integrator::Ea) - (2.5 + comm)).abs() < 1e-12);
+        // Stochastic marching adds the light map's scan and a depth scan a frame.
+        let comm = 1e-3 * 2.0 * 8.0 + 1e-6 * 1000.0;
+        assert!((run.communication(link, 1, Integrator::Marching) - comm).abs() < 1e-15);
         assert!((run.ghost_fraction() - 12.0 / 300.0).abs() < 1e-15);
         assert!((run.imbalance() - 1.2).abs() < 1e-12);
     }

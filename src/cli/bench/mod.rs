@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::{Args, Subcommand};
 
+mod dist_shadows;
 mod distributed;
 mod interactive;
 mod study;

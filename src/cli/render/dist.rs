@@ -15,13 +15,48 @@ use crate::backend::cpu::CpuBackend;
 use crate::backend::{BackendKind, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
-use crate::dist::{Balance, Comm, CostModel, DistScene, RankReport, render_balanced, run_local};
+use crate::dist::{
+    Balance, Comm, CostModel, DistScene, DistShadows, RankReport, render_balanced, run_local,
+    shadow_map_for,
+};
 use crate::field::FieldSettings;
 use crate::io::Part;
 use crate::render::legend::Legend;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
 use crate::scene_file::resolve::Resolved;
-use crate::values::FrameParams;
+use crate::values::{FrameParams, Integrator};
+
+/// `--dist-shadows`: how shadow rays cross the bricks of a distributed render.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ShadowsAcross {
+    /// Through every brick, by a light map scanned from the light ([`DistShadows::PrefixMap`]).
+    PrefixMap,
+    /// Through the ray's own brick only ([`DistShadows::Local`]).
+    Local,
+}
+
+/// The shadows `args` ask for: by default a light map as fine as the image
+/// ([`shadow_map_for`]).
+fn shadows(args: &RenderArgs, settings: &RenderSettings) -> anyhow::Result<DistShadows> {
+    let size = args
+        .shadow_map
+        .unwrap_or_else(|| shadow_map_for(settings.width, settings.height));
+    ensure!(
+        (1..=16384).contains(&size),
+        "--shadow-map {size}: the light map's side is 1 to 16384 texels"
+    );
+    match args.dist_shadows.unwrap_or(ShadowsAcross::PrefixMap) {
+        ShadowsAcross::PrefixMap => Ok(DistShadows::PrefixMap(size)),
+        ShadowsAcross::Local => {
+            ensure!(
+                args.shadow_map.is_none(),
+                "--shadow-map sizes the light map of --dist-shadows prefix-map; --dist-shadows \
+                 local has none"
+            );
+            Ok(DistShadows::Local)
+        }
+    }
+}
 
 /// How the ranks of a distributed render run.
 pub(super) enum Ranks {
@@ -154,21 +189,27 @@ pub(super) fn run(
 ) -> anyhow::Result<()> {
     let size = ranks.size();
     check_supported(args, &resolved, &settings, &ranks)?;
+    let shadows = shadows(args, &settings)?;
     let spp = resolved.scene.spp();
-    match &ranks {
-        Ranks::Threads(_) => tracing::info!(
-            "distributed: {size} ranks as threads of this process, cpu backend, \
-             emission-absorption, bricks balanced by {} (--balance)",
-            args.balance
-        ),
+    let how = match &ranks {
+        Ranks::Threads(_) => format!("{size} ranks as threads of this process"),
         #[cfg(feature = "mpi")]
-        Ranks::Mpi(comm) => tracing::info!(
-            "distributed: rank {} of {size} MPI processes, cpu backend, emission-absorption, \
-             bricks balanced by {} (--balance)",
-            comm.rank(),
-            args.balance
+        Ranks::Mpi(comm) => format!("rank {} of {size} MPI processes", comm.rank()),
+    };
+    let shading = match (settings.integrator, shadows) {
+        (Integrator::Ea, _) => "emission-absorption".to_owned(),
+        (_, DistShadows::PrefixMap(m)) => format!(
+            "single scattering, shadows across bricks by a {m}x{m} light map (--dist-shadows \
+             prefix-map)"
         ),
-    }
+        (_, DistShadows::Local) => {
+            "single scattering, shadows within each brick only (--dist-shadows local)".to_owned()
+        }
+    };
+    tracing::info!(
+        "distributed: {how}, cpu backend, {shading}, bricks balanced by {} (--balance)",
+        args.balance
+    );
     if let Some(b) = &resolved.periodic {
         tracing::info!(
             "periodic box from {:?} of sides {:?}: each rank wraps its particles into it and \
@@ -215,6 +256,7 @@ pub(super) fn run(
             series_range: resolved.series_range(),
             precision,
             periodic: resolved.periodic,
+            shadows,
         };
         // Balanced by cost, the first image starts from a pilot image, and every later one
         // from the image before it.
@@ -310,14 +352,16 @@ pub(super) fn run(
 fn log_reports(reports: &[RankReport]) {
     for (rank, r) in reports.iter().enumerate() {
         tracing::info!(
-            "rank {rank}: read {}, owns {}, {} ghosts; sent {:.1} MiB of particles, {:.1} MiB of tiles; exchange {:.3} s, build {:.3} s, render {:.3} s, composite {:.3} s",
+            "rank {rank}: read {}, owns {}, {} ghosts; sent {:.1} MiB of particles, {:.1} MiB of tiles, {:.1} MiB of light map; exchange {:.3} s, build {:.3} s, light map {:.3} s, render {:.3} s, composite {:.3} s",
             r.read,
             r.owned,
             r.ghosts,
             r.particle_bytes as f64 / 1048576.0,
             r.tile_bytes as f64 / 1048576.0,
+            r.shadow_map_bytes as f64 / 1048576.0,
             r.exchange_seconds,
             r.build_seconds,
+            r.shadow_map_seconds,
             r.render_seconds,
             r.composite_seconds
         );

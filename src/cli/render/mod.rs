@@ -176,7 +176,7 @@ pub struct RenderArgs {
     pub no_legend: bool,
     /// Render with N ranks: threads of this process, each holding one k-d brick of the step
     /// (its particles and their ghosts) and rendering its samples, composited by direct send;
-    /// the code path an MPI launch will take. Emission-absorption on the cpu backend
+    /// the code path an MPI launch will take. Every integrator, on the cpu backend
     /// (docs/distributed.md).
     #[arg(long, value_name = "N")]
     pub ranks: Option<usize>,
@@ -185,6 +185,17 @@ pub struct RenderArgs {
     /// each brick, and each image of a sequence balances by the one before it).
     #[arg(long, value_enum, default_value_t = Balance::Count)]
     pub balance: Balance,
+    /// How a distributed render's shadow rays (single scattering) cross bricks: `prefix-map`
+    /// (through every brick: each brick marches a light map through its own samples, and a
+    /// scan from the light gives each brick the depth nearer the light; default) or `local`
+    /// (through the ray's own brick only, as OSPRay's distributed renderer shadows).
+    #[arg(long, value_enum, value_name = "HOW")]
+    pub dist_shadows: Option<dist::ShadowsAcross>,
+    /// The light map's texels a side for --dist-shadows prefix-map (default: the image's
+    /// longer side, at least 64): finer follows the shadows' edges across the light more
+    /// closely and costs M² rays a light.
+    #[arg(long, value_name = "M")]
+    pub shadow_map: Option<u32>,
 }
 
 fn numbers<const N: usize>(flag: &str, text: &str) -> anyhow::Result<[f64; N]> {
@@ -366,6 +377,11 @@ pub(super) fn run(args: RenderArgs) -> anyhow::Result<()> {
         "--balance {} balances the bricks of a distributed render: add --ranks N, or run \
          under mpirun",
         args.balance
+    );
+    anyhow::ensure!(
+        ranks.is_some() || (args.dist_shadows.is_none() && args.shadow_map.is_none()),
+        "--dist-shadows and --shadow-map say how shadows cross the bricks of a distributed \
+         render: add --ranks N, or run under mpirun (a single rank's shadows are exact)"
     );
     let draw_legend = check_flags(&args)?;
     let setup = settle(&args)?;

@@ -1,0 +1,142 @@
+//! `aarbf bench distributed --integrator marching|delta|ss-reference`: how far shadows across
+//! bricks fall from the single rank's, over the light map's side M and the rank count P, with
+//! shadows from each ray's own brick only (`local`, OSPRay's distributed shadows) beside them.
+//! FLIP and RMSE of the distributed image against the single rank's, both from the same
+//! frames, so with stochastic marching (whose primary decisions the bricks make exactly as the
+//! single rank) the difference is the shadows' alone.
+
+use std::fmt::Write as _;
+
+use anyhow::Context;
+
+use super::distributed::{DistributedArgs, dam_break, frames_of, integrator_name, scene_of};
+use crate::backend::cpu::CpuBackend;
+use crate::backend::{Backend, StepInput};
+use crate::dist::{Comm, DistShadows, render_distributed, run_local, slice_of};
+
+/// One distributed image against the single rank's.
+pub(super) struct Compared {
+    ranks: usize,
+    shadows: DistShadows,
+    flip: f64,
+    rmse: f64,
+    /// The largest light map bytes and CPU seconds of any rank.
+    light_map_bytes: u64,
+    light_map_seconds: f64,
+}
+
+/// Renders the strong-scaling step on one rank and at every rank count above 1 with every
+/// light map side and `local`, and compares.
+pub(super) fn compare(args: &DistributedArgs) -> anyhow::Result<Vec<Compared>> {
+    let (series, step, field) = dam_break(args, args.count)?;
+    let (frames, _) = frames_of(args, &series, &field)?;
+    let single = {
+        let scene = scene_of(&series, &field, DistShadows::Local);
+        let mut backend = CpuBackend::new();
+        backend.upload(&StepInput {
+            step: &step,
+            field: scene.field,
+            cluster: scene.cluster,
+            series_bounds: scene.series_bounds,
+            series_range: scene.series_range,
+            precision: scene.precision,
+        })?;
+        backend.build()?;
+        for f in &frames {
+            backend.render(f)?;
+        }
+        backend.image()?
+    };
+    let mut how: Vec<DistShadows> = vec![DistShadows::Local];
+    how.extend(args.shadow_maps.iter().map(|&m| DistShadows::PrefixMap(m)));
+    let ranks: Vec<usize> = args.ranks.iter().copied().filter(|&p| p > 1).collect();
+    let bar = crate::progress::bar((ranks.len() * how.len()) as u64, "shadow comparisons");
+    let mut out = Vec::new();
+    for &p in &ranks {
+        for &shadows in &how {
+            let scene = scene_of(&series, &field, shadows);
+            let image = run_local(p, |comm| {
+                let local = slice_of(&step, comm.rank(), comm.size());
+                render_distributed(comm, &mut CpuBackend::new(), &local, &scene, &frames)
+            })
+            .with_context(|| format!("{p} ranks, {shadows:?}"))?
+            .swap_remove(0)
+            .context("rank 0 returned no image")?;
+            let got = image.image();
+            out.push(Compared {
+                ranks: p,
+                shadows,
+                flip: got.flip(&single),
+                rmse: got.rmse(&single),
+                light_map_bytes: image
+                    .reports
+                    .iter()
+                    .map(|r| r.shadow_map_bytes)
+                    .max()
+                    .unwrap_or(0),
+                light_map_seconds: image
+                    .reports
+                    .iter()
+                    .map(|r| r.shadow_map_seconds)
+                    .fold(0.0, f64::max),
+            });
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    Ok(out)
+}
+
+fn label(shadows: DistShadows) -> String {
+    match shadows {
+        DistShadows::Local => "local".to_owned(),
+        DistShadows::PrefixMap(m) => format!("prefix map {m}²"),
+    }
+}
+
+pub(super) fn csv_rows(compared: &[Compared]) -> String {
+    let mut out = String::from("ranks,shadows,map,flip,rmse,light_map_bytes,light_map_wall_s\n");
+    for c in compared {
+        let (how, map) = match c.shadows {
+            DistShadows::Local => ("local", 0),
+            DistShadows::PrefixMap(m) => ("prefix-map", m),
+        };
+        let _ = writeln!(
+            out,
+            "{},{how},{map},{:.6},{:.6},{},{:.6}",
+            c.ranks, c.flip, c.rmse, c.light_map_bytes, c.light_map_seconds
+        );
+    }
+    out
+}
+
+pub(super) fn summarise(args: &DistributedArgs, compared: &[Compared]) -> String {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "\n## Shadows across bricks against the single rank\n\n{} on the strong-scaling step \
+         ({} particles, {}x{}, {} frame(s)), the distributed image against the single rank's \
+         from the same frames: FLIP (0 identical) and RMSE of linear RGB. `local` shadows each \
+         ray through its own brick only; the prefix map through every brick, by an M² light \
+         map scanned from the light. Light map time: the slowest rank's wall time with every \
+         rank's threads sharing this machine.\n\n| P | shadows | FLIP | RMSE | light map, largest rank (MiB sent, s) |\n|---|---|---|---|---|",
+        integrator_name(args.integrator),
+        args.count,
+        args.size.0,
+        args.size.1,
+        args.frames,
+    );
+    for c in compared {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.4} | {:.5} | {:.2}, {:.2} |",
+            c.ranks,
+            label(c.shadows),
+            c.flip,
+            c.rmse,
+            c.light_map_bytes as f64 / 1048576.0,
+            c.light_map_seconds
+        );
+    }
+    md
+}
