@@ -407,6 +407,7 @@ mod tests {
         check_against_the_single_rank("cloud", &cloud, &field);
         field.radius = 0.4;
         let stride = whole_stride(&cloud, &field);
+        eprintln!("cloud, large radii: every {stride}th record sampled");
         assert!(
             stride > 10_007usize.div_ceil(PHI_REF_SAMPLES) && stride < 10_007 / 64,
             "the work bound sets the stride: {stride}"
