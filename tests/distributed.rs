@@ -346,7 +346,8 @@ fn delta_tracking_across_bricks_is_within_two_seeds_noise() {
 
 /// `aarbf render --ranks 3` as a user runs it: the same image as without `--ranks` (the
 /// default termination on: within its threshold), also with `--balance cost`, the ranks'
-/// counts logged, and what is not distributed yet refused by name.
+/// counts logged, the single rank's Phi_ref and cluster size found from the ranks' parts of
+/// step 0, and what is not distributed yet refused by name.
 #[test]
 fn the_command_line_renders_with_ranks() {
     let dir = tempfile::tempdir().unwrap();
@@ -372,6 +373,21 @@ fn the_command_line_renders_with_ranks() {
         log.contains("rank 2: read") && log.contains("owned once each"),
         "{log}"
     );
+    // The automatic values that come from step 0, computed by the ranks from their parts of
+    // it: the single rank's Phi_ref (to the order of its sums) and cluster size.
+    let single_log = String::from_utf8_lossy(&single.stderr);
+    let (phi_ref, single_phi_ref) = (logged_phi_ref(&log), logged_phi_ref(&single_log));
+    assert!(
+        (phi_ref - single_phi_ref).abs() <= 1e-12 * single_phi_ref,
+        "--ranks 3: phi_ref {phi_ref}, single rank {single_phi_ref}"
+    );
+    assert!(log.contains("from the 3 ranks' parts of step 0"), "{log}");
+    let cluster = |log: &str| {
+        log.lines()
+            .find_map(|l| l.split_once("cluster size K = ").map(|(_, k)| k.to_owned()))
+            .unwrap_or_else(|| panic!("no cluster size in {log}"))
+    };
+    assert_eq!(cluster(&log), cluster(&single_log));
     let a = image::open(&single_path).unwrap().to_rgba32f();
     assert_eq!(a.dimensions(), (64, 48));
     let diff = common::max_image_difference(&single_path, &ranked_path);
@@ -445,6 +461,16 @@ fn the_command_line_renders_with_ranks() {
         );
         assert!(!d.join("mpi.png").exists());
     }
+}
+
+/// The Phi_ref a render's log says it used (`phi_ref X (...)`).
+fn logged_phi_ref(log: &str) -> f64 {
+    log.lines()
+        .find_map(|line| {
+            let (_, after) = line.split_once("phi_ref ")?;
+            after.split_whitespace().next()?.parse().ok()
+        })
+        .unwrap_or_else(|| panic!("no phi_ref in the log:\n{log}"))
 }
 
 /// The f32 path (the CPU's fast kernel, where its bound allows): each brick holds its own

@@ -15,7 +15,12 @@
 //! [`LocalComm`] runs the ranks as threads of one process (`aarbf render --ranks N`, and the
 //! tests); `MpiComm` (the `mpi` feature) runs them as the processes of an MPI job
 //! (`mpirun -np N aarbf render`). Emission–absorption only, on the CPU backend, so far.
+//!
+//! Before the frames, [`auto`] computes the automatic values that come from the first step
+//! (Phi_ref, the mean overlap that chooses the cluster size) from the ranks' parts of it, so
+//! that no rank reads a whole step.
 
+pub mod auto;
 pub mod balance;
 pub(crate) mod clock;
 pub mod comm;

@@ -11,6 +11,11 @@
 //!   f64 on the CPU from the field's own rules (the maps' tables, the radius rule), so it is
 //!   the same number on every backend. Neighbours are found with a grid of cells as wide as
 //!   the largest radius, built once per series and step 0 and kept while only the maps change.
+//!
+//! The pieces of both estimates at particle centres (the rules, [`Estimate`]; the grid; which
+//! records are sampled; the percentile) are the crate's, so that the distributed estimates
+//! ([`crate::dist::auto`]), where each rank holds only its part of the first step, apply the
+//! same ones and find the same numbers.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -60,28 +65,38 @@ impl AutoValues {
     }
 
     /// The values for `field` over `series`, with `phi_ref` where it is given (`--phi-ref`, `given`):
-    /// then the first step is not read (Phi_ref is the one value that needs a whole step; the
-    /// others come from the series' statistics).
+    /// then the first step is not read (Phi_ref is the one value that needs the first step,
+    /// read whole here; the others come from the series' statistics). A distributed render's
+    /// ranks find the same values each reading only its part ([`crate::dist::auto`]).
     pub fn with_phi_ref(
         series: &TimeSeries,
         field: &FieldSettings,
         given: Option<f64>,
     ) -> Result<AutoValues, RenderError> {
-        let tables = FieldTables::of(field);
-        let (typical_radius, max_radius) = radii(series, field, &tables);
-        let phi_ref = if let Some(given) = given {
-            given
-        } else if series.is_empty() {
-            1.0
-        } else {
-            let step = series.step(0)?;
-            let range = attribute_range(series, field);
-            phi_ref(&step, field, &tables, range, max_radius)
+        AutoValues::estimated(series, field, given, |estimate| {
+            Ok(estimate.phi_ref(&*series.step(0)?))
+        })
+    }
+
+    /// The values for `field` over `series`, Phi_ref (unless `given`, or the series has no
+    /// step) by `estimate_phi_ref` under the series' rules: from the whole first step
+    /// ([`AutoValues::with_phi_ref`]) or from each rank's part of it ([`crate::dist::auto`]).
+    pub(crate) fn estimated<E>(
+        series: &TimeSeries,
+        field: &FieldSettings,
+        given: Option<f64>,
+        estimate_phi_ref: impl FnOnce(&Estimate) -> Result<f64, E>,
+    ) -> Result<AutoValues, E> {
+        let estimate = Estimate::new(series, field);
+        let phi_ref = match given {
+            Some(given) => given,
+            None if series.is_empty() => 1.0,
+            None => estimate_phi_ref(&estimate)?,
         };
         Ok(AutoValues {
             phi_ref,
-            typical_radius,
-            max_radius,
+            typical_radius: estimate.typical_radius,
+            max_radius: estimate.max_radius,
         })
     }
 }
@@ -120,123 +135,198 @@ pub fn mean_overlap(series: &TimeSeries, field: &FieldSettings) -> Result<f64, R
     if series.is_empty() {
         return Ok(0.0);
     }
-    let step = series.step(0)?;
-    let tables = FieldTables::of(field);
-    let (_, max_radius) = radii(series, field, &tables);
-    let n = step.len();
-    if n == 0 || max_radius.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return Ok(0.0);
-    }
-    let rule = ParticleRule::new(&step, field, &tables, attribute_range(series, field));
-    let grid = Grid::new(&step.positions, max_radius);
-    let samples = n.min(OVERLAP_SAMPLES);
-    let stride = n.div_ceil(samples).max(1);
-    let counts: Vec<usize> = (0..n)
-        .into_par_iter()
-        .step_by(stride)
-        .map(|j| {
-            let x = step.positions[j];
-            let mut count = 0;
-            grid.for_each_near(x, |i| {
-                let r = rule.radius(rule.t(i), i);
-                count += usize::from(r > 0.0 && (x - step.positions[i]).length_squared() <= r * r);
-            });
-            count
-        })
-        .collect();
-    Ok(counts.iter().sum::<usize>() as f64 / counts.len().max(1) as f64)
+    Ok(Estimate::new(series, field).mean_overlap(&*series.step(0)?))
 }
 
-/// The 95th percentile of Phi (positive values) at every k-th particle centre of `step`.
-fn phi_ref(
-    step: &Step,
-    field: &FieldSettings,
-    tables: &FieldTables,
-    range: (f64, f64),
-    max_radius: f64,
-) -> f64 {
-    let n = step.len();
-    if n == 0 || max_radius.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return 1.0;
-    }
-    let grid = Grid::new(&step.positions, max_radius);
-    let rule = ParticleRule::new(step, field, tables, range);
-    // Fewer samples where every sample meets most of the step (radii spanning the data).
-    let per_sample = grid.mean_candidates().max(1.0);
-    let samples = ((PHI_REF_WORK as f64 / per_sample) as usize)
-        .clamp(PHI_REF_MIN_SAMPLES, PHI_REF_SAMPLES)
-        .min(n);
-    let stride = n.div_ceil(samples).max(1);
-    let centres: Vec<usize> = (0..n).step_by(stride).collect();
-    let mut phi: Vec<f64> = centres
-        .par_iter()
-        .map(|&j| {
-            let x = step.positions[j];
-            let mut sum = 0.0;
-            grid.for_each_near(x, |i| {
-                let t = rule.t(i);
-                let r = rule.radius(t, i);
-                let d2 = (x - step.positions[i]).length_squared();
-                if r > 0.0 && d2 <= r * r {
-                    sum += lookup(&tables.density, t) * (-4.5 * d2 / (r * r)).exp();
-                }
-            });
-            sum
-        })
-        .filter(|p| *p > 0.0)
-        .collect();
-    phi.sort_by(f64::total_cmp);
-    phi.get(phi.len() * 95 / 100).copied().unwrap_or(1.0)
-}
-
-/// A step's particles under the field's rules, evaluated in f64 on the CPU: each one's
-/// normalised attribute and radius.
-struct ParticleRule<'a> {
+/// The field's rules over a series as the estimates at particle centres of its first step
+/// apply them, in f64 on the CPU: the maps' tables, the range the attribute is normalised over
+/// and the radii, all from the field and the series' statistics (never from the step), so a
+/// rank holding part of the step has them whole.
+pub(crate) struct Estimate<'a> {
     field: &'a FieldSettings,
-    tables: &'a FieldTables,
+    tables: FieldTables,
     range: (f64, f64),
-    attribute: Option<&'a Attribute>,
-    h: Option<&'a Attribute>,
+    typical_radius: f64,
+    max_radius: f64,
 }
 
-impl<'a> ParticleRule<'a> {
-    fn new(
-        step: &'a Step,
-        field: &'a FieldSettings,
-        tables: &'a FieldTables,
-        range: (f64, f64),
-    ) -> Self {
-        ParticleRule {
+impl<'a> Estimate<'a> {
+    pub(crate) fn new(series: &TimeSeries, field: &'a FieldSettings) -> Estimate<'a> {
+        let tables = FieldTables::of(field);
+        let (typical_radius, max_radius) = radii(series, field, &tables);
+        Estimate {
             field,
+            range: attribute_range(series, field),
             tables,
-            range,
-            attribute: field.attribute.as_deref().and_then(|a| step.attribute(a)),
-            h: field
+            typical_radius,
+            max_radius,
+        }
+    }
+
+    /// Whether any particle has a positive radius (without, Phi is 0 everywhere, Phi_ref is 1
+    /// and no particle reaches a centre).
+    pub(crate) fn reaches(&self) -> bool {
+        self.max_radius > 0.0
+    }
+
+    /// A grid of `positions` in cells as wide as the largest radius, laid over `bounds` (the
+    /// whole step's least and greatest corner: a rank's part is laid in the whole step's grid).
+    pub(crate) fn grid(&self, positions: &[DVec3], bounds: (DVec3, DVec3)) -> Grid {
+        Grid::over(positions, bounds, self.max_radius)
+    }
+
+    /// `step`'s particles (a whole step, or a rank's part of one) under the rules.
+    pub(crate) fn particles<'s>(&'s self, step: &'s Step) -> ParticleRule<'s> {
+        ParticleRule {
+            estimate: self,
+            positions: &step.positions,
+            attribute: self
+                .field
+                .attribute
+                .as_deref()
+                .and_then(|a| step.attribute(a)),
+            h: self
+                .field
                 .radius_attribute
                 .as_deref()
                 .and_then(|a| step.attribute(a)),
         }
     }
 
+    /// The 95th percentile of Phi (positive values) at every k-th particle centre of `step`.
+    fn phi_ref(&self, step: &Step) -> f64 {
+        let n = step.len();
+        if n == 0 || !self.reaches() {
+            return 1.0;
+        }
+        let grid = self.grid(&step.positions, bounds_of(&step.positions));
+        let particles = self.particles(step);
+        let stride = phi_ref_stride(n, grid.mean_candidates());
+        let phi = (0..n)
+            .into_par_iter()
+            .step_by(stride)
+            .map(|j| particles.phi_at(step.positions[j], &grid))
+            .collect();
+        phi_percentile(phi)
+    }
+
+    /// How many particles reach every k-th particle centre of `step`, on average.
+    fn mean_overlap(&self, step: &Step) -> f64 {
+        let n = step.len();
+        if n == 0 || !self.reaches() {
+            return 0.0;
+        }
+        let grid = self.grid(&step.positions, bounds_of(&step.positions));
+        let particles = self.particles(step);
+        let counts: Vec<u64> = (0..n)
+            .into_par_iter()
+            .step_by(overlap_stride(n))
+            .map(|j| particles.reaching(step.positions[j], &grid))
+            .collect();
+        mean_count(&counts)
+    }
+}
+
+/// Every how many records of a step of `n` Phi_ref is sampled at (records 0, k, 2k, ...):
+/// [`PHI_REF_SAMPLES`] centres, fewer where each sample would visit many particles
+/// (`per_sample`, [`Grid::mean_candidates`]: radii spanning the data).
+pub(crate) fn phi_ref_stride(n: usize, per_sample: f64) -> usize {
+    let samples = ((PHI_REF_WORK as f64 / per_sample.max(1.0)) as usize)
+        .clamp(PHI_REF_MIN_SAMPLES, PHI_REF_SAMPLES)
+        .min(n);
+    n.div_ceil(samples.max(1)).max(1)
+}
+
+/// Every how many records of a step of `n` the mean overlap is counted at.
+pub(crate) fn overlap_stride(n: usize) -> usize {
+    n.div_ceil(n.clamp(1, OVERLAP_SAMPLES)).max(1)
+}
+
+/// Phi_ref from Phi at the sampled centres: the 95th percentile of the positive values (1
+/// where none is).
+pub(crate) fn phi_percentile(mut phi: Vec<f64>) -> f64 {
+    phi.retain(|p| *p > 0.0);
+    phi.sort_by(f64::total_cmp);
+    phi.get(phi.len() * 95 / 100).copied().unwrap_or(1.0)
+}
+
+/// The mean of the particle counts at the sampled centres.
+pub(crate) fn mean_count(counts: &[u64]) -> f64 {
+    counts.iter().sum::<u64>() as f64 / counts.len().max(1) as f64
+}
+
+/// The least and the greatest corner of `positions` (infinite, inverted, for none).
+pub(crate) fn bounds_of(positions: &[DVec3]) -> (DVec3, DVec3) {
+    positions
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(*p), hi.max(*p))
+        })
+}
+
+/// About how many particles the 27 cells around a particle hold, on average (what one sample of
+/// Phi costs), from `squares`, the sum over occupied cells of their particle counts squared, and
+/// `n` particles: a particle's own cell holds Σ n² / N particles on average, its neighbourhood
+/// about 27 cells' worth at that density. The sum is an exact integer, so that a step's cells
+/// counted by parts give the whole step's number.
+pub(crate) fn mean_candidates(squares: u128, n: usize) -> f64 {
+    27.0 * squares as f64 / n.max(1) as f64
+}
+
+/// A step's particles under the field's rules, evaluated in f64 on the CPU: each one's
+/// normalised attribute and radius.
+pub(crate) struct ParticleRule<'a> {
+    estimate: &'a Estimate<'a>,
+    positions: &'a [DVec3],
+    attribute: Option<&'a Attribute>,
+    h: Option<&'a Attribute>,
+}
+
+impl ParticleRule<'_> {
     /// Particle `i`'s attribute, normalised (0.5 without one).
     fn t(&self, i: usize) -> f64 {
         self.attribute
-            .map_or(0.5, |a| normalise(a.values[i], self.range))
+            .map_or(0.5, |a| normalise(a.values[i], self.estimate.range))
     }
 
     /// Particle `i`'s radius, `t` being its [`ParticleRule::t`].
     fn radius(&self, t: f64, i: usize) -> f64 {
         particle_radius(
-            self.field.radius,
-            lookup(&self.tables.radius, t),
+            self.estimate.field.radius,
+            lookup(&self.estimate.tables.radius, t),
             self.h.map(|h| h.values[i]),
         )
+    }
+
+    /// Phi at `x` of these particles (`grid` holds them): each one within its radius adds
+    /// its density map's value times `exp(-4.5 d² / r²)`.
+    pub(crate) fn phi_at(&self, x: DVec3, grid: &Grid) -> f64 {
+        let mut sum = 0.0;
+        grid.for_each_near(x, |i| {
+            let t = self.t(i);
+            let r = self.radius(t, i);
+            let d2 = (x - self.positions[i]).length_squared();
+            if r > 0.0 && d2 <= r * r {
+                sum += lookup(&self.estimate.tables.density, t) * (-4.5 * d2 / (r * r)).exp();
+            }
+        });
+        sum
+    }
+
+    /// How many of these particles (`grid` holds them) reach `x` with their own radius.
+    pub(crate) fn reaching(&self, x: DVec3, grid: &Grid) -> u64 {
+        let mut count = 0;
+        grid.for_each_near(x, |i| {
+            let r = self.radius(self.t(i), i);
+            count += u64::from(r > 0.0 && (x - self.positions[i]).length_squared() <= r * r);
+        });
+        count
     }
 }
 
 /// Particles bucketed in cubic cells of side `cell` (sorted by cell key), for finding every
 /// particle within `cell` of a point in the 27 cells around it.
-struct Grid {
+pub(crate) struct Grid {
     origin: DVec3,
     cell: f64,
     /// (cell key, particle index), sorted.
@@ -244,10 +334,12 @@ struct Grid {
 }
 
 impl Grid {
-    fn new(positions: &[DVec3], cell: f64) -> Grid {
-        let origin = positions.iter().fold(DVec3::INFINITY, |m, p| m.min(*p));
-        let extent = positions.iter().fold(DVec3::NEG_INFINITY, |m, p| m.max(*p)) - origin;
-        // At most 2^20 cells per axis (keys of 60 bits); larger radii need fewer.
+    /// `positions` in cells of side `cell` at least, laid from `bounds.0` so that `bounds`
+    /// spans at most 2^20 cells per axis (keys of 60 bits; larger radii need fewer). The
+    /// positions lie in `bounds`.
+    fn over(positions: &[DVec3], bounds: (DVec3, DVec3), cell: f64) -> Grid {
+        let (origin, greatest) = bounds;
+        let extent = greatest - origin;
         let cell = cell
             .max(extent.max_element() / f64::from(1u32 << 20))
             .max(1e-300);
@@ -296,20 +388,22 @@ impl Grid {
         }
     }
 
-    /// About how many particles the 27 cells around a particle hold, on average (what one
-    /// sample of Phi costs): a particle's own cell holds Σ n² / N particles on average (n per
-    /// occupied cell), its neighbourhood about 27 cells' worth at that density.
+    /// Each occupied cell's key and particle count, in key order.
+    pub(crate) fn cell_counts(&self) -> Vec<(u64, u64)> {
+        self.entries
+            .chunk_by(|a, b| a.0 == b.0)
+            .map(|run| (run[0].0, run.len() as u64))
+            .collect()
+    }
+
+    /// [`mean_candidates`] of the particles it holds.
     fn mean_candidates(&self) -> f64 {
-        let mut squares = 0f64;
-        let mut run = 0usize;
-        for (k, e) in self.entries.iter().enumerate() {
-            run += 1;
-            if self.entries.get(k + 1).is_none_or(|next| next.0 != e.0) {
-                squares += (run * run) as f64;
-                run = 0;
-            }
-        }
-        27.0 * squares / self.entries.len().max(1) as f64
+        let squares = self
+            .cell_counts()
+            .iter()
+            .map(|&(_, count)| u128::from(count) * u128::from(count))
+            .sum();
+        mean_candidates(squares, self.entries.len())
     }
 }
 

@@ -3,7 +3,10 @@
 //! processes of an MPI job. Each rank reads its share of the step's records (`[rN/P,
 //! (r+1)N/P)`, [`crate::io::read_step_part`]), and from there on sees the others only through
 //! the communicator: decomposition, particle exchange, its brick's render, direct-send
-//! compositing; rank 0 writes the image. A failing rank ends every rank, naming itself.
+//! compositing; rank 0 writes the image. A failing rank ends every rank, naming itself. The
+//! automatic values that come from the first step (Phi_ref without `--phi-ref`, the cluster
+//! size without `--cluster`) are computed by the ranks from their parts of it
+//! ([`crate::dist::auto`]): no process reads a whole step for them.
 
 use std::time::Instant;
 
@@ -16,13 +19,14 @@ use crate::backend::{BackendKind, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
 use crate::dist::{
-    Balance, Comm, CostModel, DistScene, DistShadows, RankReport, render_balanced, run_local,
-    shadow_map_for,
+    Balance, Comm, CostModel, DistError, DistScene, DistShadows, RankReport, render_balanced,
+    run_local, shadow_map_for,
 };
 use crate::field::FieldSettings;
 use crate::io::Part;
 use crate::render::legend::Legend;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
+use crate::scene::TimeSeries;
 use crate::scene_file::resolve::Resolved;
 use crate::values::{FrameParams, Integrator};
 
@@ -136,6 +140,56 @@ fn mpi_job(launched: usize) -> anyhow::Result<Option<Ranks>> {
     )
 }
 
+/// `compute` on every rank, each holding its communicator: as threads of this process, rank 0's
+/// result (every rank's is the same); under MPI, this process's, a failure ending the job.
+fn on_every_rank<T: Send>(
+    ranks: &Ranks,
+    what: &str,
+    compute: impl Fn(&dyn Comm) -> Result<T, DistError> + Sync,
+) -> anyhow::Result<T> {
+    match ranks {
+        Ranks::Threads(n) => {
+            let mut results = run_local(*n, |comm| compute(comm)).context(what.to_owned())?;
+            Ok(results.swap_remove(0))
+        }
+        #[cfg(feature = "mpi")]
+        Ranks::Mpi(comm) => match compute(comm) {
+            Ok(value) => Ok(value),
+            Err(e) => {
+                comm.abort(&format!("{what}: {e}"));
+                unreachable!("MPI_Abort returned");
+            }
+        },
+    }
+}
+
+/// The automatic values of `field` over `series` ([`AutoValues::with_phi_ref`]), Phi_ref (unless
+/// `given`) computed by the ranks from their parts of the first step ([`crate::dist::auto`]).
+fn auto_values(
+    ranks: &Ranks,
+    series: &TimeSeries,
+    field: &FieldSettings,
+    given: Option<f64>,
+) -> anyhow::Result<AutoValues> {
+    on_every_rank(ranks, "Phi_ref from the ranks' parts of step 0", |comm| {
+        crate::dist::auto::auto_values(comm, series, field, given)
+    })
+}
+
+/// The mean overlap that chooses the cluster size ([`crate::render::auto::mean_overlap`]),
+/// computed by the ranks from their parts of the first step ([`crate::dist::auto`]).
+pub(super) fn mean_overlap(
+    ranks: &Ranks,
+    series: &TimeSeries,
+    field: &FieldSettings,
+) -> anyhow::Result<f64> {
+    on_every_rank(
+        ranks,
+        "the mean overlap from the ranks' parts of step 0",
+        |comm| crate::dist::auto::mean_overlap(comm, series, field),
+    )
+}
+
 /// Refuses what the distributed renderer does not do yet, naming it.
 fn check_supported(
     args: &RenderArgs,
@@ -225,14 +279,25 @@ pub(super) fn run(
         let started = Instant::now();
         settings.camera = Some(frame.camera);
         resolved.range_for_step(frame.step)?;
-        // Phi_ref is a statistic of the whole first step: read once for each field (a
-        // per-step attribute range changes it) unless --phi-ref gives it, and not kept while
-        // the ranks read their parts.
+        // Phi_ref is a statistic of the first step: computed once for each field (a per-step
+        // attribute range changes it) unless --phi-ref gives it, by the ranks from their parts
+        // of the step, so that no process reads it whole. A whole step that opening the series
+        // left in its cache (the scan of a series without an index) is not kept while the
+        // ranks read their parts.
         let auto = match &auto_for {
             Some((field, auto)) if AutoValues::same_for(field, &resolved.field) => *auto,
             _ => {
                 let auto =
-                    AutoValues::with_phi_ref(&resolved.series, &resolved.field, settings.phi_ref)?;
+                    auto_values(&ranks, &resolved.series, &resolved.field, settings.phi_ref)?;
+                tracing::info!(
+                    "phi_ref {} ({})",
+                    auto.phi_ref,
+                    if settings.phi_ref.is_some() {
+                        "set".to_owned()
+                    } else {
+                        format!("automatic, from the {size} ranks' parts of step 0")
+                    }
+                );
                 resolved.series.clear_cache();
                 auto_for = Some((resolved.field.clone(), auto));
                 auto

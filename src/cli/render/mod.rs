@@ -21,7 +21,7 @@ use crate::render::target::{ErrorMetric, Target};
 use crate::render::{Method, RenderSession, RenderSettings, SPLAT_K};
 use crate::scene::Camera;
 use crate::scene_file::resolve::{
-    DataArgs, FieldOptions, Resolved, ViewFlags, resolve, resolve_for_images,
+    DataArgs, FieldOptions, Resolved, ViewFlags, resolve, resolve_for_images, resolve_with_overlap,
 };
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
@@ -384,7 +384,7 @@ pub(super) fn run(args: RenderArgs) -> anyhow::Result<()> {
          render: add --ranks N, or run under mpirun (a single rank's shadows are exact)"
     );
     let draw_legend = check_flags(&args)?;
-    let setup = settle(&args)?;
+    let setup = settle(&args, ranks.as_ref())?;
     let format = OutputFormat::of(&args.out, args.bit_depth)?;
     let start_camera = setup
         .settings
@@ -425,12 +425,19 @@ pub(super) fn run(args: RenderArgs) -> anyhow::Result<()> {
 }
 
 /// Resolves the data and the field, writes the flags over the scene file, and settles the
-/// method, refusing the combinations it does not render.
-fn settle(args: &RenderArgs) -> anyhow::Result<Setup> {
-    let mut resolved = if args.color_by_density {
-        resolve(&args.data, &args.field)?
-    } else {
-        resolve_for_images(&args.data, &args.field)?
+/// method, refusing the combinations it does not render. A distributed render's `ranks`
+/// compute the mean overlap that chooses the cluster size from their parts of the first step.
+fn settle(args: &RenderArgs, ranks: Option<&dist::Ranks>) -> anyhow::Result<Setup> {
+    let first_attribute_by_default = !args.color_by_density;
+    let mut resolved = match ranks {
+        Some(ranks) => resolve_with_overlap(
+            &args.data,
+            &args.field,
+            first_attribute_by_default,
+            &|series, field| dist::mean_overlap(ranks, series, field),
+        )?,
+        None if args.color_by_density => resolve(&args.data, &args.field)?,
+        None => resolve_for_images(&args.data, &args.field)?,
     };
     apply_flags(args, &mut resolved.scene)?;
     match args.method {

@@ -130,16 +130,18 @@ pub(super) fn attribute_range(
     Ok(attribute_range)
 }
 
-/// The cluster size asked for, else the one for how much the particles overlap, said.
+/// The cluster size asked for, else the one for how much the particles overlap (by `overlap`),
+/// said.
 pub(super) fn cluster_size(
     asked: Option<ClusterSize>,
     series: &TimeSeries,
     field: &FieldSettings,
+    overlap: super::MeanOverlap,
 ) -> anyhow::Result<ClusterSize> {
     Ok(match asked {
         Some(k) => k,
         None => {
-            let overlap = crate::render::auto::mean_overlap(series, field)?;
+            let overlap = overlap(series, field)?;
             let k = ClusterSize::for_overlap(overlap);
             tracing::info!(
                 "cluster size K = {k} ({overlap:.1} particles reach a particle centre on average; --cluster sets it)"

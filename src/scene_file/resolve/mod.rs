@@ -106,26 +106,46 @@ impl Resolved {
 /// without an attribute (flag or scene file), the image is coloured by the data's first
 /// attribute, which is said with the others (`--color-by-density` colours by density).
 pub fn resolve_for_images(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolved> {
-    resolve_choosing(data, options, true)
+    resolve_with_overlap(data, options, true, &overlap_of_first_step)
 }
 
 /// Resolves the data and the field: flags over the scene file, the series opened with the
 /// attributes the field uses, and the automatic values of the data (radius, cluster size,
 /// range) chosen and said. Without an attribute the field carries none (density only).
 pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolved> {
-    resolve_choosing(data, options, false)
+    resolve_with_overlap(data, options, false, &overlap_of_first_step)
 }
 
-fn resolve_choosing(
+/// Resolves as [`resolve`] (or, with `first_attribute_by_default`, [`resolve_for_images`])
+/// does, the mean overlap that chooses the cluster size (when none is asked for) found by
+/// `overlap`: a distributed render's ranks compute it from their parts of the first step.
+pub fn resolve_with_overlap(
     data: &DataArgs,
     options: &FieldOptions,
     first_attribute_by_default: bool,
+    overlap: MeanOverlap,
 ) -> anyhow::Result<Resolved> {
     let scene = match &data.scene {
         Some(path) => SceneFile::load(path)?,
         None => SceneFile::default(),
     };
-    resolve_from(scene, None, data, options, first_attribute_by_default)
+    resolve_from(
+        scene,
+        None,
+        data,
+        options,
+        first_attribute_by_default,
+        overlap,
+    )
+}
+
+/// How the mean overlap that chooses the cluster size is found over the series and the field
+/// ([`crate::render::auto::mean_overlap`]'s number).
+pub type MeanOverlap<'a> = &'a dyn Fn(&TimeSeries, &FieldSettings) -> anyhow::Result<f64>;
+
+/// The mean overlap from the whole first step, read in this process.
+fn overlap_of_first_step(series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64> {
+    Ok(crate::render::auto::mean_overlap(series, field)?)
 }
 
 /// Resolves as [`resolve`] (or, with `first_attribute_by_default`, [`resolve_for_images`])
@@ -137,7 +157,14 @@ pub fn resolve_scene(
     options: &FieldOptions,
     first_attribute_by_default: bool,
 ) -> anyhow::Result<Resolved> {
-    resolve_from(scene, None, data, options, first_attribute_by_default)
+    resolve_from(
+        scene,
+        None,
+        data,
+        options,
+        first_attribute_by_default,
+        &overlap_of_first_step,
+    )
 }
 
 /// Resolves the field over a series already in memory ([`TimeSeries::from_steps`]: arrays the
@@ -157,6 +184,7 @@ pub fn resolve_in_memory(
         data,
         options,
         first_attribute_by_default,
+        &overlap_of_first_step,
     )
 }
 
@@ -167,6 +195,7 @@ fn resolve_from(
     data: &DataArgs,
     options: &FieldOptions,
     first_attribute_by_default: bool,
+    overlap: MeanOverlap,
 ) -> anyhow::Result<Resolved> {
     let mut source = source::Source::new(&scene, memory, data)?;
     let (mut wanted, first_in_full) =
@@ -229,8 +258,12 @@ fn resolve_from(
         mass: wanted.mass,
         density: wanted.density,
     };
-    let cluster =
-        field_settings::cluster_size(options.cluster.or(scene.field.cluster), &series, &field)?;
+    let cluster = field_settings::cluster_size(
+        options.cluster.or(scene.field.cluster),
+        &series,
+        &field,
+        overlap,
+    )?;
     field_settings::say_rounded_maps(&field);
     Ok(Resolved {
         format: source.format,
