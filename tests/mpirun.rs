@@ -149,6 +149,48 @@ fn an_hdf5_snapshot_renders_under_mpirun_as_with_ranks() {
     );
 }
 
+/// Single scattering under mpirun: stochastic marching and delta tracking with shadows across
+/// bricks by the light map render what the same ranks as threads render, bit for bit (the
+/// scans and the light map are the same collectives over MPI).
+#[test]
+fn single_scattering_renders_under_mpirun_as_with_ranks() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = common::generated_dam_break(d);
+    for integrator in ["marching", "delta"] {
+        let args = |out: &Path| {
+            let mut a = common::dam_break_render_args(&header, out, (64, 48), 2);
+            a.extend(["--integrator", integrator].map(String::from));
+            a
+        };
+        let mpi_path = d.join(format!("mpi-{integrator}.exr"));
+        let out = mpirun(3, &args(&mpi_path)).output().unwrap();
+        let log = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{integrator}:\n{log}");
+        assert!(log.contains("light map"), "{log}");
+        let threads_path = d.join(format!("threads-{integrator}.exr"));
+        let mut threads = args(&threads_path);
+        threads.extend(["--ranks", "3"].map(String::from));
+        let out = common::aarbf_logged(&threads.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let (mpi, threads) = (pixels(&mpi_path), pixels(&threads_path));
+        assert!(
+            mpi.iter().any(|&v| v > 0.01),
+            "{integrator}: the fluid shows"
+        );
+        assert!(
+            mpi.iter()
+                .zip(&threads)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{integrator}: mpirun -np 3 differs from --ranks 3"
+        );
+    }
+}
+
 /// The processes `root` started, and theirs.
 fn descendants(root: u32) -> Vec<u32> {
     let mut parents: Vec<(u32, u32)> = Vec::new();

@@ -14,7 +14,10 @@
 //!
 //! [`LocalComm`] runs the ranks as threads of one process (`aarbf render --ranks N`, and the
 //! tests); `MpiComm` (the `mpi` feature) runs them as the processes of an MPI job
-//! (`mpirun -np N aarbf render`). Emission–absorption only, on the CPU backend, so far.
+//! (`mpirun -np N aarbf render`). Every integrator, on the CPU backend: single scattering's
+//! free flight and shadow rays cross bricks by exclusive scans of optical depth ([`scan`]),
+//! in view order for stochastic marching and in the order from the light for shadows (a light
+//! map, [`crate::backend::LightPrefix`]).
 //!
 //! Before the frames, [`auto`] computes the automatic values that come from the first step
 //! (Phi_ref, the mean overlap that chooses the cluster size) from the ranks' parts of it, so

@@ -67,11 +67,12 @@ impl Default for DistShadows {
 pub const DEFAULT_SHADOW_MAP: u32 = 1024;
 
 /// The light map's side for an image of `width` x `height` where the user does not say
-/// (`--shadow-map`): as many texels as the image's longer side (at least 64), so the map
-/// resolves the light about as finely as the image resolves the view, and a small image
-/// does not pay for a large map (M² rays a light).
+/// (`--shadow-map`): half the image's longer side, 64 to 512 texels. On the 1M dam break at
+/// 1024² the distributed image's FLIP against the single rank's levels off at M = 512
+/// (0.0003–0.0009 for 512 … 2048 at P = 2 … 8, docs/distributed.md), while the map's M² rays,
+/// marched through the whole volume, cost more than the image's own beyond it.
 pub fn shadow_map_for(width: u32, height: u32) -> u32 {
-    width.max(height).max(64)
+    (width.max(height) / 2).clamp(64, 512)
 }
 
 /// What one rank did, for the log and the benchmarks.

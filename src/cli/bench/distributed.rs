@@ -70,8 +70,8 @@ pub struct DistributedArgs {
     pub shadow_map: u32,
     /// Single scattering: the light map sides whose images are compared with the single
     /// rank's (FLIP, RMSE) at each rank count above 1, beside shadows from each ray's own brick
-    /// only (`local`); empty to skip the comparison.
-    #[arg(long, value_delimiter = ',', default_value = "256,512,1024,2048")]
+    /// only (`local`); `--shadow-maps` with no value skips the comparison.
+    #[arg(long, value_delimiter = ',', num_args = 0.., default_value = "256,512,1024,2048")]
     pub shadow_maps: Vec<u32>,
     /// Where distributed.csv (a row per run and rank) and distributed.md are written.
     #[arg(long, default_value = "distributed")]

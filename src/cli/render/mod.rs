@@ -191,8 +191,8 @@ pub struct RenderArgs {
     /// (through the ray's own brick only, as OSPRay's distributed renderer shadows).
     #[arg(long, value_enum, value_name = "HOW")]
     pub dist_shadows: Option<dist::ShadowsAcross>,
-    /// The light map's texels a side for --dist-shadows prefix-map (default: the image's
-    /// longer side, at least 64): finer follows the shadows' edges across the light more
+    /// The light map's texels a side for --dist-shadows prefix-map (default: half the image's
+    /// longer side, 64 to 512): finer follows the shadows' edges across the light more
     /// closely and costs M² rays a light.
     #[arg(long, value_name = "M")]
     pub shadow_map: Option<u32>,
