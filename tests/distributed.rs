@@ -742,6 +742,67 @@ fn the_scaling_benchmark_reports_every_rank() {
     let again = common::aarbf_logged(&args);
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+
+    // Single scattering: the light map is a stage of its own, and the shadows are compared
+    // with the single rank's for each map side and `local`.
+    let out = dir.path().join("bench-ss");
+    let summary = common::aarbf_ok(&[
+        "bench",
+        "distributed",
+        "--ranks",
+        "1,3",
+        "--count",
+        "3001",
+        "--weak-count",
+        "0",
+        "--size",
+        "48x40",
+        "--integrator",
+        "marching",
+        "--shadow-map",
+        "32",
+        "--shadow-maps",
+        "16,64",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        summary.contains("## Shadows across bricks against the single rank"),
+        "{summary}"
+    );
+    let csv = std::fs::read_to_string(out.join("distributed.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let three: Vec<Vec<&str>> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|r| r[col("ranks")] == "3")
+        .collect();
+    assert_eq!(three.len(), 3, "{csv}");
+    assert!(
+        three
+            .iter()
+            .all(|r| r[col("shadow_map_cpu_s")].parse::<f64>().unwrap() > 0.0),
+        "{csv}"
+    );
+    let shadows = std::fs::read_to_string(out.join("shadows.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = shadows
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    let flip = |how: &str, map: &str| -> f64 {
+        rows.iter()
+            .find(|r| r[1] == how && r[2] == map)
+            .unwrap_or_else(|| panic!("{how} {map}: {shadows}"))[3]
+            .parse()
+            .unwrap()
+    };
+    assert_eq!(rows.len(), 3, "{shadows}");
+    assert!(
+        flip("prefix-map", "64") < flip("local", "0"),
+        "the light map is closer to the single rank than local shadows: {shadows}"
+    );
 }
 
 /// Balanced by cost (`--balance cost`), the leaves move and the image does not: a render

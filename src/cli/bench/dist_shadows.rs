@@ -6,13 +6,14 @@
 //! single rank) the difference is the shadows' alone.
 
 use std::fmt::Write as _;
+use std::sync::Arc;
 
 use anyhow::Context;
 
-use super::distributed::{DistributedArgs, dam_break, frames_of, integrator_name, scene_of};
 use crate::backend::cpu::CpuBackend;
 use crate::backend::{Backend, StepInput};
-use crate::dist::{Comm, DistShadows, render_distributed, run_local, slice_of};
+use crate::dist::{Comm, DistScene, DistShadows, render_distributed, run_local, slice_of};
+use crate::values::{FrameParams, Step};
 
 /// One distributed image against the single rank's.
 pub(super) struct Compared {
@@ -25,16 +26,19 @@ pub(super) struct Compared {
     light_map_seconds: f64,
 }
 
-/// Renders the strong-scaling step on one rank and at every rank count above 1 with every
-/// light map side and `local`, and compares.
-pub(super) fn compare(args: &DistributedArgs) -> anyhow::Result<Vec<Compared>> {
-    let (series, step, field) = dam_break(args, args.count)?;
-    let (frames, _) = frames_of(args, &series, &field)?;
+/// Renders `frames` of `step` on one rank and at every count of `ranks` above 1 with every
+/// light map side of `maps` and `local`, every rank with `scene`, and compares.
+pub(super) fn compare(
+    step: &Arc<Step>,
+    scene: &DistScene<'_>,
+    frames: &[FrameParams],
+    ranks: &[usize],
+    maps: &[u32],
+) -> anyhow::Result<Vec<Compared>> {
     let single = {
-        let scene = scene_of(&series, &field, DistShadows::Local);
         let mut backend = CpuBackend::new();
         backend.upload(&StepInput {
-            step: &step,
+            step,
             field: scene.field,
             cluster: scene.cluster,
             series_bounds: scene.series_bounds,
@@ -42,22 +46,22 @@ pub(super) fn compare(args: &DistributedArgs) -> anyhow::Result<Vec<Compared>> {
             precision: scene.precision,
         })?;
         backend.build()?;
-        for f in &frames {
+        for f in frames {
             backend.render(f)?;
         }
         backend.image()?
     };
     let mut how: Vec<DistShadows> = vec![DistShadows::Local];
-    how.extend(args.shadow_maps.iter().map(|&m| DistShadows::PrefixMap(m)));
-    let ranks: Vec<usize> = args.ranks.iter().copied().filter(|&p| p > 1).collect();
+    how.extend(maps.iter().map(|&m| DistShadows::PrefixMap(m)));
+    let ranks: Vec<usize> = ranks.iter().copied().filter(|&p| p > 1).collect();
     let bar = crate::progress::bar((ranks.len() * how.len()) as u64, "shadow comparisons");
     let mut out = Vec::new();
     for &p in &ranks {
         for &shadows in &how {
-            let scene = scene_of(&series, &field, shadows);
+            let scene = DistScene { shadows, ..*scene };
             let image = run_local(p, |comm| {
-                let local = slice_of(&step, comm.rank(), comm.size());
-                render_distributed(comm, &mut CpuBackend::new(), &local, &scene, &frames)
+                let local = slice_of(step, comm.rank(), comm.size());
+                render_distributed(comm, &mut CpuBackend::new(), &local, &scene, frames)
             })
             .with_context(|| format!("{p} ranks, {shadows:?}"))?
             .swap_remove(0)
@@ -110,21 +114,16 @@ pub(super) fn csv_rows(compared: &[Compared]) -> String {
     out
 }
 
-pub(super) fn summarise(args: &DistributedArgs, compared: &[Compared]) -> String {
+/// The comparison's section of the benchmark's summary; `what` says what was rendered.
+pub(super) fn summarise(what: &str, compared: &[Compared]) -> String {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "\n## Shadows across bricks against the single rank\n\n{} on the strong-scaling step \
-         ({} particles, {}x{}, {} frame(s)), the distributed image against the single rank's \
+        "\n## Shadows across bricks against the single rank\n\n{what}, the distributed image against the single rank's \
          from the same frames: FLIP (0 identical) and RMSE of linear RGB. `local` shadows each \
          ray through its own brick only; the prefix map through every brick, by an M² light \
          map scanned from the light. Light map time: the slowest rank's wall time with every \
          rank's threads sharing this machine.\n\n| P | shadows | FLIP | RMSE | light map, largest rank (MiB sent, s) |\n|---|---|---|---|---|",
-        integrator_name(args.integrator),
-        args.count,
-        args.size.0,
-        args.size.1,
-        args.frames,
     );
     for c in compared {
         let _ = writeln!(

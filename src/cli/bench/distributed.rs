@@ -217,12 +217,26 @@ pub(super) fn run(args: DistributedArgs) -> anyhow::Result<()> {
     crate::io::output::write_atomically(&csv, true, |p| std::fs::write(p, csv_rows(&runs)))?;
     let mut summary = summarise(&args, &runs, link, peak);
     if args.integrator != Integrator::Ea && !args.shadow_maps.is_empty() {
-        let compared = super::dist_shadows::compare(&args)?;
+        let (series, step, field) = dam_break(&args, args.count)?;
+        let (frames, _) = frames_of(&args, &series, &field)?;
+        let scene = scene_of(&series, &field, DistShadows::Local);
+        let compared =
+            super::dist_shadows::compare(&step, &scene, &frames, &args.ranks, &args.shadow_maps)?;
         let path = args.out.join("shadows.csv");
         crate::io::output::write_atomically(&path, args.force, |p| {
             std::fs::write(p, super::dist_shadows::csv_rows(&compared))
         })?;
-        summary.push_str(&super::dist_shadows::summarise(&args, &compared));
+        summary.push_str(&super::dist_shadows::summarise(
+            &format!(
+                "{} on the strong-scaling step ({} particles, {}x{}, {} frame(s))",
+                integrator_name(args.integrator),
+                args.count,
+                args.size.0,
+                args.size.1,
+                args.frames
+            ),
+            &compared,
+        ));
     }
     crate::io::output::write_atomically(&md, true, |p| std::fs::write(p, &summary))?;
     #[expect(clippy::print_stdout, reason = "the summary is the command's output")]
@@ -295,7 +309,7 @@ fn run_one(
 }
 
 /// The generated dam break of `particles` (its third step) and the field at `--radius`.
-pub(super) fn dam_break(
+fn dam_break(
     args: &DistributedArgs,
     particles: usize,
 ) -> anyhow::Result<(
@@ -311,7 +325,7 @@ pub(super) fn dam_break(
 }
 
 /// What every rank of a run renders with: the CPU backend in f32, K = 16.
-pub(super) fn scene_of<'a>(
+fn scene_of<'a>(
     series: &TimeSeries,
     field: &'a FieldSettings,
     shadows: DistShadows,
@@ -329,7 +343,7 @@ pub(super) fn scene_of<'a>(
 
 /// The frames of a run: the default view of the step's series; and with `--balance cost`,
 /// the pilot frame that measures the first decomposition's cost.
-pub(super) fn frames_of(
+fn frames_of(
     args: &DistributedArgs,
     series: &TimeSeries,
     field: &FieldSettings,
@@ -562,7 +576,7 @@ fn summarise(args: &DistributedArgs, runs: &[Run], link: Link, peak: Option<usiz
 }
 
 /// The integrator's name as `--integrator` takes it.
-pub(super) fn integrator_name(integrator: Integrator) -> String {
+fn integrator_name(integrator: Integrator) -> String {
     use clap::ValueEnum as _;
     integrator
         .to_possible_value()
