@@ -44,11 +44,13 @@ pub(super) fn run(args: GenerateArgs) -> anyhow::Result<()> {
         args.name,
         args.seed
     );
-    let data = args.name.generate(count, steps, args.seed);
-    let path = io::write_series(
+    // A step above the simulated count is written a run of particles at a time where the
+    // format allows, never whole in memory.
+    let series = args.name.series(count, steps, args.seed);
+    let path = io::write_series_from(
         &args.out,
         &args.name.to_string(),
-        &data,
+        &series,
         args.format,
         args.name.main_attribute(),
     )?;

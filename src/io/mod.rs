@@ -29,6 +29,7 @@ pub mod pvd;
 pub mod raw;
 pub mod read_options;
 mod scalar;
+mod source;
 pub mod stems;
 pub mod text;
 pub mod vtk;
@@ -46,7 +47,8 @@ pub use listing::{
 };
 pub use part::{Part, StepPart, slice_step};
 pub use read_options::{ParticleType, ReadOptions};
-pub use write::{existing_outputs, write_series};
+pub use source::SeriesSource;
+pub use write::{existing_outputs, write_series, write_series_from};
 
 use crate::values::Step;
 

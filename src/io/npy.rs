@@ -356,11 +356,35 @@ pub fn write_matrix<T: npyz::AutoSerialize + Copy>(
     data: &[T],
 ) -> std::io::Result<()> {
     assert_eq!(data.len(), rows * cols);
-    let mut writer = npyz::WriteOptions::new()
-        .default_dtype()
-        .shape(&[rows as u64, cols as u64])
-        .writer(BufWriter::new(File::create(path)?))
-        .begin_nd()?;
-    writer.extend(data.iter().copied())?;
+    let mut writer = MatrixWriter::create(path, rows, cols)?;
+    writer.append(data)?;
     writer.finish()
+}
+
+/// A row-major `rows x cols` `.npy` array written a run of rows at a time, so the whole array
+/// need never be in memory (the shape is in the header, so it is known from the start).
+pub struct MatrixWriter<T: npyz::AutoSerialize + Copy> {
+    writer: npyz::NpyWriter<T, BufWriter<File>>,
+}
+
+impl<T: npyz::AutoSerialize + Copy> MatrixWriter<T> {
+    /// Creates `path` with the header of a `rows x cols` array of `T`.
+    pub fn create(path: &Path, rows: usize, cols: usize) -> std::io::Result<Self> {
+        let writer = npyz::WriteOptions::new()
+            .default_dtype()
+            .shape(&[rows as u64, cols as u64])
+            .writer(BufWriter::new(File::create(path)?))
+            .begin_nd()?;
+        Ok(MatrixWriter { writer })
+    }
+
+    /// Appends elements, row-major (whole rows or not: rows are only a view of the sequence).
+    pub fn append(&mut self, data: &[T]) -> std::io::Result<()> {
+        self.writer.extend(data.iter().copied())
+    }
+
+    /// Flushes the file; an error if fewer or more than `rows x cols` elements were appended.
+    pub fn finish(self) -> std::io::Result<()> {
+        self.writer.finish()
+    }
 }

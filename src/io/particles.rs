@@ -4,9 +4,14 @@
 //! `<header path>_<name>`: a little-endian u64 particle count, then count records of four
 //! little-endian f32 (x, y, z, attribute).
 
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use indicatif::ProgressBar;
+
 use super::mapped::Mapped;
+use super::source::{SeriesSource, write_step_chunks};
 use super::{At, AttributeSelection, Columns, DataError, Part, Problem};
 use crate::values::Step;
 
@@ -83,14 +88,29 @@ pub(super) fn read_step(
 /// Writes a series as a `.particles` header and one file per step, carrying `attribute`.
 /// Step names are the zero-padded step indices.
 pub fn write_series(header: &Path, steps: &[Step], attribute: &str) -> std::io::Result<()> {
-    let width = steps.len().saturating_sub(1).to_string().len().max(4);
+    write_series_from(header, steps, attribute, &ProgressBar::hidden())
+}
+
+/// [`write_series`] from a [`SeriesSource`]: each step file is written a run of particles at a
+/// time (the count first, then the run's records appended), atomically, advancing `bar`.
+pub(super) fn write_series_from(
+    header: &Path,
+    source: &(impl SeriesSource + ?Sized),
+    attribute: &str,
+    bar: &ProgressBar,
+) -> std::io::Result<()> {
+    let steps = source.step_count();
+    let width = steps.saturating_sub(1).to_string().len().max(4);
     let mut names = String::new();
-    for (i, step) in steps.iter().enumerate() {
+    for i in 0..steps {
         let name = format!("{i:0width$}");
-        let mut bytes = (step.len() as u64).to_le_bytes().to_vec();
-        bytes.extend(super::raw::xyzw_bytes(step, attribute)?);
         super::output::write_atomically(&step_path(header, &name), true, |tmp| {
-            std::fs::write(tmp, &bytes)
+            let mut out = BufWriter::new(File::create(tmp)?);
+            out.write_all(&(source.step_len(i) as u64).to_le_bytes())?;
+            write_step_chunks(source, i, bar, |chunk| {
+                out.write_all(&super::raw::xyzw_bytes(chunk, attribute)?)
+            })?;
+            out.flush()
         })
         .map_err(std::io::Error::other)?;
         names.push_str(&name);

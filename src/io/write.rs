@@ -1,7 +1,12 @@
 //! Writing a series: one file a step, each written atomically.
 
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use indicatif::ProgressBar;
+
+use super::source::{SeriesSource, write_step_chunks};
 use super::{Format, csv, npy, output, particles, ply, raw, vtk};
 use crate::values::Step;
 
@@ -32,13 +37,20 @@ pub fn write_series(
     format: Format,
     attribute: &str,
 ) -> std::io::Result<PathBuf> {
-    std::fs::create_dir_all(dir)?;
-    if format == Format::Particles {
-        let header = dir.join(format!("{stem}.particles"));
-        particles::write_series(&header, steps, attribute)?;
-        return Ok(header);
-    }
-    let width = steps.len().saturating_sub(1).to_string().len().max(4);
+    write_series_from(dir, stem, steps, format, attribute)
+}
+
+/// [`write_series`] from a [`SeriesSource`]: `.particles`, `.raw` and `.npy` (fixed-size
+/// records) are written a run of particles at a time, appended to the step's temporary file, so
+/// only one run is in memory; the other formats take each step whole. Shows a progress bar over
+/// the particles written.
+pub fn write_series_from(
+    dir: &Path,
+    stem: &str,
+    source: &(impl SeriesSource + ?Sized),
+    format: Format,
+    attribute: &str,
+) -> std::io::Result<PathBuf> {
     if matches!(format, Format::Vtk | Format::Hdf5) {
         return Err(std::io::Error::new(
             std::io::ErrorKind::Unsupported,
@@ -47,30 +59,83 @@ pub fn write_series(
             ),
         ));
     }
+    std::fs::create_dir_all(dir)?;
+    let steps = source.step_count();
+    let total = (0..steps).map(|i| source.step_len(i) as u64).sum();
+    let bar = crate::progress::bar(total, "writing");
+    if format == Format::Particles {
+        let header = dir.join(format!("{stem}.particles"));
+        particles::write_series_from(&header, source, attribute, &bar)?;
+        bar.finish_and_clear();
+        return Ok(header);
+    }
+    let width = steps.saturating_sub(1).to_string().len().max(4);
     let ext = format.extension();
-    for (i, step) in steps.iter().enumerate() {
+    for i in 0..steps {
         let path = dir.join(format!("{stem}_{i:0width$}.{ext}"));
         output::write_atomically(&path, true, |path| match format {
-            Format::VtkXml => vtk::write_vtp(path, step),
-            Format::Csv => csv::write_step(path, step),
-            Format::Ply => ply::write_step(path, step),
-            Format::Raw => raw::write_step(path, step, attribute),
-            Format::Npy => {
-                let cols = 3 + step.attributes.len();
-                let mut data = Vec::with_capacity(step.len() * cols);
-                for (k, p) in step.positions.iter().enumerate() {
-                    data.extend_from_slice(&p.to_array());
-                    data.extend(step.attributes.iter().map(|a| a.values[k]));
+            Format::Raw => {
+                let mut out = BufWriter::new(File::create(path)?);
+                write_step_chunks(source, i, &bar, |chunk| {
+                    out.write_all(&raw::xyzw_bytes(chunk, attribute)?)
+                })?;
+                out.flush()
+            }
+            Format::Npy => write_npy(path, source, i, &bar),
+            Format::VtkXml | Format::Csv | Format::Ply => {
+                let step = source.whole_step(i);
+                match format {
+                    Format::VtkXml => vtk::write_vtp(path, &step)?,
+                    Format::Csv => csv::write_step(path, &step)?,
+                    _ => ply::write_step(path, &step)?,
                 }
-                npy::write_matrix(path, step.len(), cols, &data)
+                bar.inc(step.len() as u64);
+                Ok(())
             }
             Format::Vtk | Format::Particles | Format::Hdf5 => unreachable!("handled above"),
         })
         .map_err(std::io::Error::other)?;
     }
-    Ok(if steps.len() == 1 {
+    bar.finish_and_clear();
+    Ok(if steps == 1 {
         dir.join(format!("{stem}_{:0width$}.{ext}", 0))
     } else {
         dir.join(format!("{stem}_*.{ext}"))
     })
+}
+
+/// Step `step` of `source` as an N x (3 + k) `.npy` array of f64: x, y, z, then every
+/// attribute in order (the reader names them `col3`, `col4`, ...), a run of rows at a time.
+fn write_npy(
+    path: &Path,
+    source: &(impl SeriesSource + ?Sized),
+    step: usize,
+    bar: &ProgressBar,
+) -> std::io::Result<()> {
+    let mut out: Option<npy::MatrixWriter<f64>> = None;
+    let mut rows = Vec::new();
+    write_step_chunks(source, step, bar, |chunk| {
+        let cols = 3 + chunk.attributes.len();
+        let writer = match &mut out {
+            Some(writer) => writer,
+            // The columns are known from the first run (every run has the same attributes).
+            None => out.insert(npy::MatrixWriter::create(
+                path,
+                source.step_len(step),
+                cols,
+            )?),
+        };
+        rows.clear();
+        rows.reserve(chunk.len() * cols);
+        for (k, p) in chunk.positions.iter().enumerate() {
+            rows.extend_from_slice(&p.to_array());
+            rows.extend(chunk.attributes.iter().map(|a| a.values[k]));
+        }
+        writer.append(&rows)
+    })?;
+    match out {
+        Some(writer) => writer.finish(),
+        // No runs: an empty step (its columns unknown, x, y, z only).
+        None => npy::MatrixWriter::<f64>::create(path, 0, 3)?.finish(),
+    }
 }

@@ -1,7 +1,9 @@
 //! Synthetic data sets, deterministic from a seed: the paper's `uniform` and `random` sets,
 //! a `clusters` stress case, and an animated `dambreak-demo` time series.
 
+use std::borrow::Cow;
 use std::fmt;
+use std::ops::Range;
 use std::str::FromStr;
 
 use glam::DVec3;
@@ -10,6 +12,7 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;
 
+use crate::io;
 use crate::values::{Attribute, Step};
 
 /// The generators.
@@ -55,6 +58,30 @@ impl Generator {
 
     /// Generates `steps` steps of about `count` particles (exactly `count` except where noted).
     pub fn generate(self, count: usize, steps: usize, seed: u64) -> Vec<Step> {
+        self.series(count, steps, seed).into_steps()
+    }
+
+    /// The series [`Generator::generate`] makes, held so that a step can be written a run of
+    /// particles at a time ([`io::write_series_from`]): a dam break above
+    /// [`DAMBREAK_SIMULATED`] particles keeps only its simulated steps and makes any run of the
+    /// riding particles from them on demand, so a step is never whole in memory.
+    pub fn series(self, count: usize, steps: usize, seed: u64) -> GeneratedSeries {
+        let (steps, riders) = match self {
+            Generator::DambreakDemo if count > DAMBREAK_SIMULATED => (
+                dambreak(DAMBREAK_SIMULATED, steps.max(1), seed),
+                Some(Riders { count, seed }),
+            ),
+            _ => (self.whole_steps(count, steps, seed), None),
+        };
+        GeneratedSeries {
+            steps,
+            riders,
+            chunk_len: GENERATED_CHUNK_LEN,
+        }
+    }
+
+    /// The steps of every generator that makes them whole.
+    fn whole_steps(self, count: usize, steps: usize, seed: u64) -> Vec<Step> {
         match self {
             Generator::Uniform | Generator::Random => {
                 let (points, radius) = poisson_disk_unit_cube(count, seed);
@@ -86,12 +113,75 @@ impl Generator {
                     })
                     .collect()
             }
-            Generator::DambreakDemo if count > DAMBREAK_SIMULATED => refine(
-                &dambreak(DAMBREAK_SIMULATED, steps.max(1), seed),
-                count,
-                seed,
-            ),
             Generator::DambreakDemo => dambreak(count, steps.max(1), seed),
+        }
+    }
+}
+
+/// The particles a run of a generated step holds when it is written a run at a time: 4M
+/// particles are 160 MB as a step (positions and two attributes in f64) and 64 MB as
+/// `.particles` records, small beside the 1.6 GB of a 100M-particle step.
+pub const GENERATED_CHUNK_LEN: usize = 4_000_000;
+
+/// A generated series (see [`Generator::series`]): its steps whole, or the simulated steps
+/// that the rest of the particles ride with.
+pub struct GeneratedSeries {
+    steps: Vec<Step>,
+    riders: Option<Riders>,
+    chunk_len: usize,
+}
+
+impl GeneratedSeries {
+    /// The same series, handed to writers `chunk_len` particles at a time (at least 1).
+    pub fn with_chunk_len(mut self, chunk_len: usize) -> GeneratedSeries {
+        self.chunk_len = chunk_len.max(1);
+        self
+    }
+
+    /// Every step whole.
+    pub fn into_steps(self) -> Vec<Step> {
+        match self.riders {
+            None => self.steps,
+            Some(riders) => self
+                .steps
+                .iter()
+                .map(|simulated| riders.ride(simulated, 0..riders.count))
+                .collect(),
+        }
+    }
+}
+
+impl io::SeriesSource for GeneratedSeries {
+    fn step_count(&self) -> usize {
+        self.steps.len()
+    }
+
+    fn step_len(&self, step: usize) -> usize {
+        match self.riders {
+            None => self.steps[step].len(),
+            Some(riders) => riders.count,
+        }
+    }
+
+    fn for_each_chunk(
+        &self,
+        step: usize,
+        write: &mut dyn FnMut(&Step) -> std::io::Result<()>,
+    ) -> std::io::Result<()> {
+        let Some(riders) = self.riders else {
+            return write(&self.steps[step]);
+        };
+        for start in (0..riders.count).step_by(self.chunk_len) {
+            let end = (start + self.chunk_len).min(riders.count);
+            write(&riders.ride(&self.steps[step], start..end))?;
+        }
+        Ok(())
+    }
+
+    fn whole_step(&self, step: usize) -> Cow<'_, Step> {
+        match self.riders {
+            None => Cow::Borrowed(&self.steps[step]),
+            Some(riders) => Cow::Owned(riders.ride(&self.steps[step], 0..riders.count)),
         }
     }
 }
@@ -331,39 +421,58 @@ fn dambreak_spacing(n: usize) -> f64 {
 /// The most particles the dam break simulates. Its fixed time step resolves the collapse at
 /// up to about this resolution; finer, particles cross several spacings per substep, crowd,
 /// and the projection's cost grows faster than the count (1M simulated particles did not
-/// finish 20 steps in 25 CPU-minutes). Larger counts are made by [`refine`].
+/// finish 20 steps in 25 CPU-minutes). Larger counts ride with the simulated particles (see
+/// [`Riders`]).
 pub const DAMBREAK_SIMULATED: usize = 100_000;
 
-/// `count` particles that follow `steps`: particle k rides with simulated particle
-/// `k mod n` at a fixed offset within its spacing (the same in every step, so each keeps
-/// its identity and moves smoothly), carrying its velocity; the neighbour count scales with
-/// the density. Positions stay within the tank.
-fn refine(steps: &[Step], count: usize, seed: u64) -> Vec<Step> {
-    let Some(first) = steps.first() else {
-        return Vec::new();
-    };
-    let n = first.len();
-    let tank = DAMBREAK_TANK;
-    let spacing = dambreak_spacing(n);
-    let mut rng = Pcg64::seed_from_u64(seed ^ 0x00fe_11e5);
-    let offsets: Vec<DVec3> = (0..count)
-        .map(|_| (DVec3::new(rng.random(), rng.random(), rng.random()) - 0.5) * spacing)
-        .collect();
-    let scale = count as f64 / n as f64;
-    steps
-        .iter()
-        .map(|step| Step {
-            name: step.name.clone(),
-            positions: (0..count)
-                .into_par_iter()
-                .map(|k| (step.positions[k % n] + offsets[k]).clamp(DVec3::ZERO, tank))
-                .collect(),
-            attributes: step
+/// The particles of a dam break that ride with its simulation: `count` a step, their offsets
+/// drawn from `seed`.
+#[derive(Clone, Copy, Debug)]
+struct Riders {
+    count: usize,
+    seed: u64,
+}
+
+impl Riders {
+    /// Particles `range` of the `count` that follow the simulated step `simulated`: particle k
+    /// rides with simulated particle `k mod n` at a fixed offset within its spacing (the same
+    /// in every step, so each keeps its identity and moves smoothly), carrying its velocity;
+    /// the neighbour count scales with the density. Positions stay within the tank. Any range
+    /// gives the values the whole step has there, bit for bit.
+    fn ride(&self, simulated: &Step, range: Range<usize>) -> Step {
+        let n = simulated.len();
+        let tank = DAMBREAK_TANK;
+        let spacing = dambreak_spacing(n);
+        let stream = Pcg64::seed_from_u64(self.seed ^ 0x00fe_11e5);
+        // Particle k's offset is draws 3k, 3k + 1 and 3k + 2 of one stream (a draw of an f64
+        // is one u64, one step of the generator), so a block of particles starting at k jumps
+        // the stream 3k steps ahead instead of drawing every earlier particle's offset.
+        const BLOCK: usize = 4096;
+        let positions: Vec<DVec3> = range
+            .clone()
+            .into_par_iter()
+            .step_by(BLOCK)
+            .flat_map_iter(|start| {
+                let mut rng = stream.clone();
+                rng.advance(3 * start as u128);
+                (start..(start + BLOCK).min(range.end)).map(move |k| {
+                    let offset =
+                        (DVec3::new(rng.random(), rng.random(), rng.random()) - 0.5) * spacing;
+                    (simulated.positions[k % n] + offset).clamp(DVec3::ZERO, tank)
+                })
+            })
+            .collect();
+        let scale = self.count as f64 / n as f64;
+        Step {
+            name: simulated.name.clone(),
+            positions,
+            attributes: simulated
                 .attributes
                 .iter()
                 .map(|a| Attribute {
                     name: a.name.clone(),
-                    values: (0..count)
+                    values: range
+                        .clone()
                         .into_par_iter()
                         .map(|k| {
                             let v = a.values[k % n];
@@ -372,8 +481,8 @@ fn refine(steps: &[Step], count: usize, seed: u64) -> Vec<Step> {
                         .collect(),
                 })
                 .collect(),
-        })
-        .collect()
+        }
+    }
 }
 
 /// A dam break: a column of particles in the corner of a 1.2 x 0.8 x 0.3 tank collapses under
@@ -558,7 +667,11 @@ mod tests {
     #[test]
     fn a_refined_dam_break_moves_with_the_simulation() {
         let simulated = dambreak(2000, 3, 5);
-        let fine = refine(&simulated, 7001, 5);
+        let riders = Riders {
+            count: 7001,
+            seed: 5,
+        };
+        let fine: Vec<Step> = simulated.iter().map(|s| riders.ride(s, 0..7001)).collect();
         assert_eq!(fine.len(), 3);
         let inside =
             |p: DVec3| p.cmpgt(DVec3::splat(1e-9)).all() && p.cmplt(DAMBREAK_TANK - 1e-9).all();
@@ -581,5 +694,100 @@ mod tests {
         assert!(checked > 500, "{checked}");
         assert_eq!(fine[0].attributes[0].name, "velocity");
         assert_eq!(fine[2].positions.len(), 7001);
+    }
+
+    /// A count above the simulated one that is no multiple of the run, the runs small.
+    const RIDING: usize = 250_001;
+    const RUN: usize = 100_000;
+
+    /// Every format that is written a run at a time gives the same bytes as the step written
+    /// whole, and the runs are the sizes asked for.
+    #[test]
+    fn a_step_written_in_runs_is_the_step_written_whole() {
+        use io::{Format, SeriesSource};
+        let (steps, seed) = (2, 3);
+        let whole = Generator::DambreakDemo.generate(RIDING, steps, seed);
+        let series = Generator::DambreakDemo
+            .series(RIDING, steps, seed)
+            .with_chunk_len(RUN);
+        let mut runs = Vec::new();
+        series
+            .for_each_chunk(1, &mut |run| {
+                runs.push(run.len());
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(runs, [RUN, RUN, RIDING - 2 * RUN]);
+        for format in [Format::Particles, Format::Raw, Format::Npy] {
+            let dir = tempfile::tempdir().unwrap();
+            let (at_once, in_runs) = (dir.path().join("whole"), dir.path().join("runs"));
+            io::write_series(&at_once, "db", &whole, format, "velocity").unwrap();
+            io::write_series_from(&in_runs, "db", &series, format, "velocity").unwrap();
+            let files = |d: &std::path::Path| {
+                let mut names: Vec<_> = std::fs::read_dir(d)
+                    .unwrap()
+                    .map(|e| e.unwrap().file_name())
+                    .collect();
+                names.sort();
+                names
+            };
+            let names = files(&at_once);
+            assert_eq!(names, files(&in_runs), "{format}");
+            // The .particles header and a file a step.
+            assert_eq!(
+                names.len(),
+                steps + usize::from(format == Format::Particles),
+                "{format}"
+            );
+            for name in names {
+                let a = std::fs::read(at_once.join(&name)).unwrap();
+                let b = std::fs::read(in_runs.join(&name)).unwrap();
+                assert!(a == b, "{format}: {name:?} differs");
+            }
+        }
+    }
+
+    /// A step written in runs reads back through the ordinary readers as the generated step
+    /// (rounded to f32 where the format holds f32).
+    #[test]
+    fn a_step_written_in_runs_reads_back_as_generated() {
+        use io::{AttributeSelection, Format};
+        let whole = Generator::DambreakDemo.generate(RIDING, 1, 9);
+        let series = Generator::DambreakDemo
+            .series(RIDING, 1, 9)
+            .with_chunk_len(RUN);
+        let expected = &whole[0];
+        for format in [Format::Particles, Format::Raw, Format::Npy] {
+            let dir = tempfile::tempdir().unwrap();
+            let path =
+                io::write_series_from(dir.path(), "db", &series, format, "velocity").unwrap();
+            let refs = io::list_steps(&path, None).unwrap();
+            assert_eq!(refs.len(), 1, "{format}");
+            let back = io::read_step(&refs[0], &AttributeSelection::All).unwrap();
+            let f32_format = format != Format::Npy;
+            let stored = |v: f64| if f32_format { f64::from(v as f32) } else { v };
+            let positions: Vec<DVec3> = expected
+                .positions
+                .iter()
+                .map(|p| DVec3::from_array(p.to_array().map(stored)))
+                .collect();
+            assert_eq!(back.len(), RIDING, "{format}");
+            assert!(back.positions == positions, "{format}: positions differ");
+            // .particles and .raw carry the velocity alone; .npy every attribute, as columns.
+            let names: &[&str] = match format {
+                Format::Particles => &["attribute"],
+                Format::Raw => &["w"],
+                _ => &["col3", "col4"],
+            };
+            assert_eq!(back.attributes.len(), names.len(), "{format}");
+            for (a, name) in expected.attributes.iter().zip(names) {
+                let values: Vec<f64> = a.values.iter().map(|&v| stored(v)).collect();
+                assert!(
+                    back.attribute(name).unwrap().values == values,
+                    "{format}: {name} differs from {}",
+                    a.name
+                );
+            }
+        }
     }
 }
