@@ -109,16 +109,7 @@ fn single_rank(frames: &[FrameParams]) -> (Vec<[f64; 4]>, aarbf::values::Image) 
     let s = scene();
     let d = dist_scene(s);
     let mut backend = CpuBackend::new();
-    backend
-        .upload(&StepInput {
-            step: &s.step,
-            field: d.field,
-            cluster: d.cluster,
-            series_bounds: d.series_bounds,
-            series_range: d.series_range,
-            precision: d.precision,
-        })
-        .unwrap();
+    backend.upload(&d.step_input(&s.step, d.precision)).unwrap();
     backend.build().unwrap();
     for f in frames {
         backend.render(f).unwrap();
@@ -485,16 +476,7 @@ fn emission_absorption_in_f32_matches_to_f32_rounding() {
         ..dist_scene(s)
     };
     let mut backend = CpuBackend::new();
-    backend
-        .upload(&StepInput {
-            step: &s.step,
-            field: d.field,
-            cluster: d.cluster,
-            series_bounds: d.series_bounds,
-            series_range: d.series_range,
-            precision: d.precision,
-        })
-        .unwrap();
+    backend.upload(&d.step_input(&s.step, d.precision)).unwrap();
     backend.build().unwrap();
     backend.render(&frames[0]).unwrap();
     let want = backend.mean_f64().unwrap();

@@ -44,6 +44,24 @@ pub struct DistScene<'a> {
     pub shadows: DistShadows,
 }
 
+impl<'a> DistScene<'a> {
+    /// What a backend is given to hold `step` under this scene in `precision`: a rank's
+    /// brick, or the whole step on one rank (the single-rank render a distributed one equals).
+    pub fn step_input<'s>(&self, step: &'s Arc<Step>, precision: Precision) -> StepInput<'s>
+    where
+        'a: 's,
+    {
+        StepInput {
+            step,
+            field: self.field,
+            cluster: self.cluster,
+            series_bounds: self.series_bounds,
+            series_range: self.series_range,
+            precision,
+        }
+    }
+}
+
 /// How a shadow ray that leaves its brick is continued (`--dist-shadows`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DistShadows {
@@ -300,14 +318,7 @@ fn upload(
     scene: &DistScene<'_>,
     precision: Precision,
 ) -> Result<(), DistError> {
-    backend.upload(&StepInput {
-        step,
-        field: scene.field,
-        cluster: scene.cluster,
-        series_bounds: scene.series_bounds,
-        series_range: scene.series_range,
-        precision,
-    })?;
+    backend.upload(&scene.step_input(step, precision))?;
     backend.build()?;
     Ok(())
 }

@@ -541,17 +541,10 @@ fn single_rank(
     step: &std::sync::Arc<Step>,
     scene: &DistScene<'_>,
 ) -> crate::backend::cpu::CpuBackend {
-    use crate::backend::{Backend, StepInput};
+    use crate::backend::Backend;
     let mut single = crate::backend::cpu::CpuBackend::new();
     single
-        .upload(&StepInput {
-            step,
-            field: scene.field,
-            cluster: scene.cluster,
-            series_bounds: scene.series_bounds,
-            series_range: scene.series_range,
-            precision: scene.precision,
-        })
+        .upload(&scene.step_input(step, scene.precision))
         .unwrap();
     single.build().unwrap();
     single

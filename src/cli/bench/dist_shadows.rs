@@ -10,8 +10,8 @@ use std::sync::Arc;
 
 use anyhow::Context;
 
+use crate::backend::Backend;
 use crate::backend::cpu::CpuBackend;
-use crate::backend::{Backend, StepInput};
 use crate::dist::{Comm, DistScene, DistShadows, render_distributed, run_local, slice_of};
 use crate::values::{FrameParams, Step};
 
@@ -37,14 +37,7 @@ pub(super) fn compare(
 ) -> anyhow::Result<Vec<Compared>> {
     let single = {
         let mut backend = CpuBackend::new();
-        backend.upload(&StepInput {
-            step,
-            field: scene.field,
-            cluster: scene.cluster,
-            series_bounds: scene.series_bounds,
-            series_range: scene.series_range,
-            precision: scene.precision,
-        })?;
+        backend.upload(&scene.step_input(step, scene.precision))?;
         backend.build()?;
         for f in frames {
             backend.render(f)?;
