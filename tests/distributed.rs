@@ -427,6 +427,10 @@ fn the_command_line_renders_with_ranks() {
         mean <= 0.005,
         "--ranks 2 marching: mean |difference| {mean}"
     );
+    let (ea, _) = render("ea-shadows.exr", &["--ranks", "2", "--shadow-map", "32"]);
+    let log = String::from_utf8_lossy(&ea.stderr);
+    assert!(ea.status.success(), "{log}");
+    assert!(log.contains("no effect on emission-absorption"), "{log}");
     let (refused, _) = render("lonely.exr", &["--dist-shadows", "local"]);
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success());

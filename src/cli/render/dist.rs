@@ -244,6 +244,14 @@ pub(super) fn run(
     let size = ranks.size();
     check_supported(args, &resolved, &settings, &ranks)?;
     let shadows = shadows(args, &settings)?;
+    if settings.integrator == Integrator::Ea
+        && (args.dist_shadows.is_some() || args.shadow_map.is_some())
+    {
+        tracing::warn!(
+            "--dist-shadows and --shadow-map have no effect on emission-absorption, which casts \
+             no shadow rays (--integrator marching, delta or ss-reference does)"
+        );
+    }
     let spp = resolved.scene.spp();
     let how = match &ranks {
         Ranks::Threads(_) => format!("{size} ranks as threads of this process"),
