@@ -43,7 +43,7 @@ pub use local::{LocalComm, run_local};
 pub use mpi_comm::MpiComm;
 pub use render::{
     DEFAULT_SHADOW_MAP, DistImage, DistScene, DistShadows, RankReport, render_balanced,
-    render_distributed, shadow_map_for, slice_of,
+    render_distributed, render_piloted, shadow_map_for, slice_of,
 };
 
 use crate::backend::BackendError;

@@ -266,6 +266,33 @@ fn periodic_images(
     Ok((Some(step), periodic.bounds().grown(largest)))
 }
 
+/// [`render_balanced`] balanced by what a `pilot` frame measures where one is given (rendered
+/// first on the same bricks' rules and not kept: how `--balance cost` starts), else by `cost`.
+pub fn render_piloted(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    local: &Step,
+    scene: &DistScene<'_>,
+    frames: &[FrameParams],
+    pilot: Option<&FrameParams>,
+    cost: Option<&CostModel>,
+) -> Result<(Option<DistImage>, CostModel), DistError> {
+    let piloted = match pilot {
+        Some(p) => {
+            Some(render_balanced(comm, backend, local, scene, std::slice::from_ref(p), None)?.1)
+        }
+        None => None,
+    };
+    render_balanced(
+        comm,
+        backend,
+        local,
+        scene,
+        frames,
+        piloted.as_ref().or(cost),
+    )
+}
+
 /// Stochastic marching's pass 1: the brick's optical depth along its pixels' primary rays
 /// (each stopped past its free-flight depth), and the exclusive scan of them in view order:
 /// per pixel of this brick's rectangle, the depth of the bricks in front. The march is timed

@@ -49,7 +49,8 @@ pub fn exclusive_scan(
             continue;
         }
         let overlap = have[me].intersection(&need[r]);
-        let values: Vec<f64> = pixels(overlap)
+        let values: Vec<f64> = overlap
+            .pixels()
             .map(|(x, y)| mine[have[me].index(x, y)])
             .collect();
         bytes_sent += std::mem::size_of_val(values.as_slice());
@@ -68,16 +69,11 @@ pub fn exclusive_scan(
                 overlap.len()
             )));
         }
-        for ((x, y), v) in pixels(overlap).zip(values) {
+        for ((x, y), v) in overlap.pixels().zip(values) {
             sums[mine_needed.index(x, y)] += v;
         }
     }
     Ok(Scanned { sums, bytes_sent })
-}
-
-/// A rectangle's pixels, row-major.
-fn pixels(rect: PixelRect) -> impl Iterator<Item = (u32, u32)> {
-    (rect.y0..rect.y1).flat_map(move |y| (rect.x0..rect.x1).map(move |x| (x, y)))
 }
 
 #[cfg(test)]
@@ -111,14 +107,14 @@ mod tests {
             let value = |r: usize, x: u32, y: u32| (r as f64 + 1.0) * 0.37 + f64::from(x * 31 + y);
             let results = run_local(p, |comm| {
                 let me = comm.rank();
-                let mine: Vec<f64> = pixels(have[me]).map(|(x, y)| value(me, x, y)).collect();
+                let mine: Vec<f64> = have[me].pixels().map(|(x, y)| value(me, x, y)).collect();
                 exclusive_scan(comm, &order, &have, &need, &mine).map(|s| s.sums)
             })
             .unwrap();
             for (me, sums) in results.into_iter().enumerate() {
                 let before = &order[..order.iter().position(|&r| r == me).unwrap()];
                 assert_eq!(sums.len(), need[me].len());
-                for (x, y) in pixels(need[me]) {
+                for (x, y) in need[me].pixels() {
                     let mut expected = 0.0;
                     for &s in before {
                         if have[s].contains(x, y) {

@@ -110,6 +110,11 @@ impl PixelRect {
         x >= self.x0 && x < self.x1 && y >= self.y0 && y < self.y1
     }
 
+    /// Its pixels `(x, y)`, row-major.
+    pub fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
+        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+
     /// The index of pixel (x, y) in the rectangle's row-major pixels.
     pub fn index(&self, x: u32, y: u32) -> usize {
         (y - self.y0) as usize * self.width() as usize + (x - self.x0) as usize

@@ -25,7 +25,7 @@ use crate::noise::{BlueNoiseMask, white::white};
 use crate::values::frame::{ColourMode, Integrator, NoiseKind};
 use crate::values::shader_constants::{NOISE_OFFSETS, PHI_EPSILON};
 use crate::values::tables::{lookup, lookup_colour};
-use crate::values::{FrameParams, HalfOpenBox};
+use crate::values::{Bounds, FrameParams, HalfOpenBox};
 
 /// The field as an integrator sees it: sampled along rays, each at increasing distances (every
 /// integrator marches or tracks forward), so a sampler may keep what one sample found for the
@@ -104,6 +104,12 @@ impl FrameParams {
             }
             _ => f64::from(white(x, y, self.frame, dim, self.seed)),
         }
+    }
+
+    /// Stochastic marching's numbers for pixel (x, y): the lattice's jitter (dimension 1) and
+    /// the free-flight depth `-ln(1 - xi)` it scatters past (dimension 0).
+    pub fn free_flight(&self, x: u32, y: u32) -> (f64, f64) {
+        (self.random(x, y, 1), -(1.0 - self.random(x, y, 0)).ln())
     }
 
     /// The primary ray of pixel (x, y): origin and unit direction.
@@ -347,13 +353,22 @@ pub(super) fn clip_to_owned(
     dir: DVec3,
     intervals: &mut Vec<(f64, f64)>,
 ) {
-    let reach = owned.clipped_to(p.march_box()).grown(p.dt);
-    match ray_box(origin, dir, reach.min, reach.max) {
+    clip_to_box(
+        owned.clipped_to(p.march_box()).grown(p.dt),
+        origin,
+        dir,
+        intervals,
+    );
+}
+
+/// Keeps of a ray's `intervals` the part inside `b`.
+fn clip_to_box(b: Bounds, origin: DVec3, dir: DVec3, intervals: &mut Vec<(f64, f64)>) {
+    match ray_box(origin, dir, b.min, b.max) {
         None => intervals.clear(),
-        Some((a, b)) => intervals.retain_mut(|(s, e)| {
+        Some((a, e)) => intervals.retain_mut(|(s, t)| {
             *s = s.max(a);
-            *e = e.min(b);
-            *s < *e
+            *t = t.min(e);
+            *s < *t
         }),
     }
 }
@@ -414,10 +429,10 @@ impl MarchedRay {
         }
         // Dimension 0 is the primary decision: emission–absorption's jitter, or stochastic
         // marching's free-flight number (its jitter is dimension 1, as the reference's).
-        let scatter = p.integrator == Integrator::SsReference;
         let (jitter, target_tau) = match p.integrator {
-            Integrator::Marching => (p.random(x, y, 1), -(1.0 - p.random(x, y, 0)).ln()),
-            _ => (p.random(x, y, if scatter { 1 } else { 0 }), f64::INFINITY),
+            Integrator::Marching => p.free_flight(x, y),
+            Integrator::SsReference => (p.random(x, y, 1), f64::INFINITY),
+            _ => (p.random(x, y, 0), f64::INFINITY),
         };
         // In a brick, stochastic marching goes on from the depth of the bricks in front; past
         // the free-flight depth already, the ray scattered in front of this brick.
@@ -621,15 +636,7 @@ fn delta_tracking<F: FieldSampler>(
     march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
     if let Some(b) = brick {
         // The segment in the brick's box exactly: its samples are its own.
-        let own = b.owned.clipped_to(p.march_box());
-        match ray_box(origin, dir, own.min, own.max) {
-            None => intervals.clear(),
-            Some((a, e)) => intervals.retain_mut(|(s, t)| {
-                *s = s.max(a);
-                *t = t.min(e);
-                *s < *t
-            }),
-        }
+        clip_to_box(b.owned.clipped_to(p.march_box()), origin, dir, intervals);
     }
     if p.majorant <= 0.0 {
         return miss;

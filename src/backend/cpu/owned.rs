@@ -106,12 +106,8 @@ fn in_packets<F: FieldSampler, T: Copy + Send + Sync>(
         .collect();
     let mut pixels = vec![zero; rect.len()];
     for (index, values) in rendered.into_iter().enumerate() {
-        let tile = tile_rect(index);
-        let mut values = values.into_iter();
-        for y in tile.y0..tile.y1 {
-            for x in tile.x0..tile.x1 {
-                pixels[rect.index(x, y)] = values.next().expect("one value per pixel");
-            }
+        for ((x, y), v) in tile_rect(index).pixels().zip(values) {
+            pixels[rect.index(x, y)] = v;
         }
     }
     pixels
@@ -139,11 +135,12 @@ impl DepthRay {
         match rays {
             DepthRays::Primary(_) => {
                 let (origin, dir) = frame.primary_ray(x, y);
+                let (jitter, stop_past) = frame.free_flight(x, y);
                 DepthRay {
                     origin,
                     dir,
-                    jitter: frame.random(x, y, 1),
-                    stop_past: -(1.0 - frame.random(x, y, 0)).ln(),
+                    jitter,
+                    stop_past,
                 }
             }
             DepthRays::Light(map, _) => {

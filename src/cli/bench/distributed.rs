@@ -21,7 +21,7 @@ use crate::backend::cpu::CpuBackend;
 use crate::dist::balance::pilot_size;
 use crate::dist::{
     Balance, Comm, CommExt, CostModel, DEFAULT_SHADOW_MAP, DistImage, DistScene, DistShadows,
-    RankReport, render_balanced, run_local,
+    RankReport, render_piloted, run_local,
 };
 use crate::field::FieldSettings;
 use crate::render::{AutoValues, FrameBasis, RenderSettings};
@@ -267,23 +267,15 @@ fn run_one(
             let clock = crate::dist::clock::StageClock::start();
             let local = crate::dist::slice_of(&step, comm.rank(), comm.size());
             let (_, read_cpu_seconds) = clock.stop();
-            let mut backend = CpuBackend::new();
-            let model = match &pilot {
-                Some(p) => Some(
-                    render_balanced(
-                        comm,
-                        &mut backend,
-                        &local,
-                        &scene,
-                        std::slice::from_ref(p),
-                        None,
-                    )?
-                    .1,
-                ),
-                None => None,
-            };
-            let (image, _) =
-                render_balanced(comm, &mut backend, &local, &scene, &frames, model.as_ref())?;
+            let (image, _) = render_piloted(
+                comm,
+                &mut CpuBackend::new(),
+                &local,
+                &scene,
+                &frames,
+                pilot.as_ref(),
+                None,
+            )?;
             Ok((read_cpu_seconds, image))
         })
     })

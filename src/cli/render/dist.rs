@@ -19,7 +19,7 @@ use crate::backend::{BackendKind, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
 use crate::dist::{
-    Balance, Comm, CostModel, DistError, DistScene, DistShadows, RankReport, render_balanced,
+    Balance, Comm, CostModel, DistError, DistScene, DistShadows, RankReport, render_piloted,
     run_local, shadow_map_for,
 };
 use crate::field::FieldSettings;
@@ -347,23 +347,15 @@ pub(super) fn run(
         let rank_body = |comm: &dyn Comm| {
             let part = Part::new(comm.rank(), comm.size());
             let local = resolved.series.step_part(frame.step, part)?.step;
-            let mut backend = CpuBackend::new();
-            let piloted = match &pilot {
-                Some(p) => Some(
-                    render_balanced(
-                        comm,
-                        &mut backend,
-                        &local,
-                        &scene,
-                        std::slice::from_ref(p),
-                        None,
-                    )?
-                    .1,
-                ),
-                None => None,
-            };
-            let by = piloted.as_ref().or(cost.as_ref());
-            render_balanced(comm, &mut backend, &local, &scene, &params, by)
+            render_piloted(
+                comm,
+                &mut CpuBackend::new(),
+                &local,
+                &scene,
+                &params,
+                pilot.as_ref(),
+                cost.as_ref(),
+            )
         };
         let (image, measured) = match &ranks {
             Ranks::Threads(n) => {
