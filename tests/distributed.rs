@@ -657,6 +657,31 @@ fn an_hdf5_snapshot_in_a_periodic_box_renders_with_ranks() {
         common::max_image_difference(&single, &open) > d_ranked,
         "the open box renders as the periodic one"
     );
+
+    // Single scattering on the same snapshot: shadows across the bricks of a periodic box.
+    let (single, _) = render("ss-single.exr", &["--integrator", "marching"]);
+    let (ranked, log) = render(
+        "ss-ranks.exr",
+        &["--integrator", "marching", "--ranks", "3"],
+    );
+    assert!(log.contains("light map"), "{log}");
+    let (a, b) = (
+        image::open(&single).unwrap().to_rgba32f(),
+        image::open(&ranked).unwrap().to_rgba32f(),
+    );
+    assert!(a.as_raw().iter().any(|&v| v > 0.01), "the gas shows");
+    let mean = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| (x - y).abs())
+        .sum::<f32>()
+        / a.as_raw().len() as f32;
+    eprintln!("h5py SWIFT, periodic, marching: mean |--ranks 3 - single rank| = {mean:e}");
+    assert!(
+        mean <= 0.005,
+        "--ranks 3 marching differs by {mean} on average"
+    );
 }
 
 /// `aarbf bench distributed` as a user runs it: a row per run and rank in the CSV, each run's
