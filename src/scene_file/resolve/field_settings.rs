@@ -136,12 +136,12 @@ pub(super) fn cluster_size(
     asked: Option<ClusterSize>,
     series: &TimeSeries,
     field: &FieldSettings,
-    overlap: super::MeanOverlap,
+    reads: &dyn super::DataReads,
 ) -> anyhow::Result<ClusterSize> {
     Ok(match asked {
         Some(k) => k,
         None => {
-            let overlap = overlap(series, field)?;
+            let overlap = reads.mean_overlap(series, field)?;
             let k = ClusterSize::for_overlap(overlap);
             tracing::info!(
                 "cluster size K = {k} ({overlap:.1} particles reach a particle centre on average; --cluster sets it)"
