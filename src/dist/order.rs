@@ -75,6 +75,20 @@ pub fn kth_smallest(comm: &dyn Comm, queries: &[(&[f64], u64)]) -> Result<Vec<f6
     Ok(prefix.into_iter().map(from_order_key).collect())
 }
 
+/// The median of every rank's `values` together: the value at rank `n / 2` in sorted order of
+/// all `n` (`None` for none), as a single process that holds them all takes it.
+pub fn median(comm: &dyn Comm, values: &[f64]) -> Result<Option<f64>, DistError> {
+    let n: u64 = comm
+        .all_gather_of(&[values.len() as u64])?
+        .iter()
+        .map(|c| c.first().copied().unwrap_or(0))
+        .sum();
+    if n == 0 {
+        return Ok(None);
+    }
+    Ok(kth_smallest(comm, &[(values, n / 2)])?.first().copied())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

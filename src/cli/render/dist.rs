@@ -31,7 +31,9 @@ use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
 use crate::scene::StepsScan;
 use crate::scene::TimeSeries;
 use crate::scene::index::StepStats;
-use crate::scene_file::resolve::{DataReads, Resolved};
+use crate::scene_file::resolve::{
+    DataReads, FirstStep, FirstStepFacts, Resolved, positive, smoothing_length_in,
+};
 use crate::values::{FrameParams, Integrator};
 
 /// `--dist-shadows`: how shadow rays cross the bricks of a distributed render.
@@ -203,6 +205,48 @@ impl DataReads for Ranks {
 
     fn mean_overlap(&self, series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64> {
         mean_overlap(self, series, field)
+    }
+
+    /// Each rank reads its part of the step with every attribute: the names, and the median of
+    /// a smoothing length over the parts ([`crate::dist::order::median`]).
+    fn first_step(&self, first: &StepRef) -> anyhow::Result<FirstStep> {
+        on_every_rank(
+            self,
+            "the first step's attributes from the ranks' parts",
+            |comm| {
+                let part = crate::io::read_step_part(
+                    first,
+                    &AttributeSelection::All,
+                    Part::new(comm.rank(), comm.size()),
+                )?
+                .step;
+                let names: Vec<String> = part
+                    .attribute_names()
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect();
+                let smoothing_length = match smoothing_length_in(&names) {
+                    Some(name) => {
+                        let values = part.attribute(name).map_or(&[][..], |a| &a.values[..]);
+                        let median = crate::dist::order::median(comm, &positive(values))?;
+                        Some((name.to_owned(), median))
+                    }
+                    None => None,
+                };
+                Ok(FirstStep::FromParts(FirstStepFacts {
+                    names,
+                    smoothing_length,
+                }))
+            },
+        )
+    }
+
+    fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>> {
+        on_every_rank(
+            self,
+            "the particles' spacing from the ranks' parts",
+            |comm| crate::dist::auto::first_step_spacing(comm, series),
+        )
     }
 }
 

@@ -139,6 +139,9 @@ pub struct StepInfo {
     /// Whether count, bounds and bytes come from the step's data (from the index or a scan);
     /// a step not scanned yet has count 0, empty bounds and its file's size as `bytes`.
     pub scanned: bool,
+    /// Each attribute's range, robust range and mean in this step (none until scanned): a
+    /// per-step colour range needs no read of the step.
+    pub attributes: Vec<AttributeStats>,
 }
 
 impl StepInfo {
@@ -150,6 +153,7 @@ impl StepInfo {
                 bounds: s.bounds,
                 bytes: s.bytes,
                 scanned: true,
+                attributes: s.attributes.clone(),
             },
             None => StepInfo {
                 name: step.name.clone(),
@@ -157,6 +161,7 @@ impl StepInfo {
                 bounds: Bounds::EMPTY,
                 bytes: std::fs::metadata(&step.path).map_or(0, |m| m.len() as usize),
                 scanned: false,
+                attributes: Vec::new(),
             },
         }
     }
@@ -412,6 +417,7 @@ impl TimeSeries {
                 bounds: s.bounds,
                 bytes: s.bytes,
                 scanned: true,
+                attributes: s.attributes.clone(),
             })
             .collect();
         let ranges = series_ranges(stats.iter());
@@ -692,6 +698,14 @@ impl TimeSeries {
             .read_times
             .get(&index)
             .copied()
+    }
+
+    /// The step file `index` refers to (`None` for a series held in memory).
+    pub fn step_ref(&self, index: usize) -> Option<&StepRef> {
+        match &self.shared.source {
+            Source::Files { steps, .. } => steps.get(index),
+            Source::Memory(_) => None,
+        }
     }
 
     /// The file step `index` is read from (`None` for a series held in memory).

@@ -6,6 +6,7 @@
 mod args;
 mod attributes;
 mod field_settings;
+mod first_step;
 mod open;
 mod radius;
 mod sections;
@@ -16,13 +17,16 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 
 pub use args::{DataArgs, FieldOptions, ViewFlags};
+pub use first_step::{
+    FirstStep, FirstStepFacts, median_of_positive, positive, smoothing_length_in,
+};
 pub use radius::{RADIUS_PER_SMOOTHING_LENGTH, RADIUS_PER_SPACING, default_radius};
 pub use sections::scene_sections;
 
 use super::{DataSection, FieldSection, RangeSpec, SceneFile};
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
-use crate::io::{Format, ReadOptions};
+use crate::io::{Format, ReadOptions, StepRef};
 use crate::scene::{StepsScan, TimeSeries};
 
 /// Data and field settings after merging flags over the scene file.
@@ -150,6 +154,14 @@ pub trait DataReads {
     /// The mean overlap that chooses the cluster size over the series' first step and the
     /// field ([`crate::render::auto::mean_overlap`]'s number).
     fn mean_overlap(&self, series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64>;
+
+    /// The series' first step, `first`, as the defaults see it ([`FirstStep`]), with every
+    /// attribute its file holds.
+    fn first_step(&self, first: &StepRef) -> anyhow::Result<FirstStep>;
+
+    /// The particles' spacing in the series' first step, as the default radius measures it
+    /// ([`crate::accel::spacing::median_nearest_distance`]).
+    fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>>;
 }
 
 /// One process reads what it needs, whole.
@@ -158,6 +170,19 @@ pub struct InOneProcess;
 impl DataReads for InOneProcess {
     fn steps_scan(&self) -> Option<&dyn StepsScan> {
         None
+    }
+
+    fn first_step(&self, first: &StepRef) -> anyhow::Result<FirstStep> {
+        Ok(FirstStep::Whole(std::sync::Arc::new(crate::io::read_step(
+            first,
+            &crate::io::AttributeSelection::All,
+        )?)))
+    }
+
+    fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>> {
+        Ok(crate::accel::spacing::median_nearest_distance(
+            &series.step(0)?.positions,
+        ))
     }
 
     fn mean_overlap(&self, series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64> {
@@ -215,8 +240,14 @@ fn resolve_from(
     reads: &dyn DataReads,
 ) -> anyhow::Result<Resolved> {
     let mut source = source::Source::new(&scene, memory, data)?;
-    let (mut wanted, first_in_full) =
-        attributes::choose(&source, &scene, data, options, first_attribute_by_default)?;
+    let (mut wanted, first) = attributes::choose(
+        &source,
+        &scene,
+        data,
+        options,
+        first_attribute_by_default,
+        reads,
+    )?;
     let opening = std::time::Instant::now();
     let mut step = data.step.or(scene.data.step).unwrap_or(0);
     let series = match source.memory.take() {
@@ -247,12 +278,11 @@ fn resolve_from(
     let colormap = options.colormap.clone().or(scene.field.colormap.clone());
     let color_map = field_settings::color_map(colormap.as_deref())?;
     let radius_spec = options.radius.or(scene.field.radius);
-    let first_in_full =
-        field_settings::first_in_full_if_needed(first_in_full, &series, &wanted, radius_spec)?;
+    let first = field_settings::first_step_if_needed(first, &series, reads, &wanted, radius_spec)?;
     if wanted.attribute.is_none() && !first_attribute_by_default {
-        field_settings::say_colour_by_density(first_in_full.as_deref());
+        field_settings::say_colour_by_density(first.as_ref());
     }
-    let radius = field_settings::radius(&series, &wanted, radius_spec, first_in_full.as_deref())?;
+    let radius = field_settings::radius(&series, &wanted, radius_spec, first.as_ref(), reads)?;
     let range = options
         .attribute_range
         .or(scene.data.attribute_range)
