@@ -836,6 +836,7 @@ fn a_cost_balanced_render_is_still_the_single_rank_image() {
         .map(|p| WeightedPoint {
             at: p.to_array(),
             weight: 1.0,
+            reach: 0.0,
         })
         .collect();
     let model = CostModel::new(KdTree::build(&sample, 2), &[[1000.0, 3.0], [1000.0, 1.0]]);
