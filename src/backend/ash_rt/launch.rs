@@ -24,6 +24,8 @@ pub(super) enum Launch {
     Splat,
     /// A frame over the voxel baseline's grid (a compute kernel whatever the traversal).
     Voxels,
+    /// A brick's share or optical depth (`lbvh_owned.comp`, the LBVH whatever the traversal).
+    Owned,
 }
 
 impl AshBackend {
@@ -130,13 +132,19 @@ impl AshBackend {
     ) -> Result<Duration, BackendError> {
         let (w, h) = match launch {
             Launch::Query => (size.0.min(QUERY_WIDTH), size.0.div_ceil(QUERY_WIDTH)),
-            Launch::Render | Launch::Splat | Launch::Voxels => size,
+            Launch::Render | Launch::Splat | Launch::Voxels | Launch::Owned => size,
         };
         enum Work {
             Rays(vk::Pipeline, [vk::StridedDeviceAddressRegionKHR; 3]),
             Compute(vk::Pipeline, [u32; 2]),
         }
         let work = match self.traversal {
+            _ if launch == Launch::Owned => {
+                self.ensure_lbvh()?;
+                let kind = on_ash::LBVH_OWNED;
+                let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
+                Work::Compute(pipeline, groups(kind, w, h))
+            }
             _ if launch == Launch::Voxels => {
                 let kind = on_ash::VOXEL_RENDER;
                 let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
@@ -145,13 +153,17 @@ impl AshBackend {
             Traversal::RtPipeline => {
                 let program = match launch {
                     Launch::Splat => RtProgram::Splat,
-                    Launch::Query | Launch::Render | Launch::Voxels => RtProgram::Field,
+                    Launch::Query | Launch::Render | Launch::Voxels | Launch::Owned => {
+                        RtProgram::Field
+                    }
                 };
                 let (pipeline, table) = self.rt(spec, program)?;
                 // The field pipeline's raygens: render, then query.
                 let raygen = match launch {
                     Launch::Query => table.raygens[1],
-                    Launch::Render | Launch::Splat | Launch::Voxels => table.raygens[0],
+                    Launch::Render | Launch::Splat | Launch::Voxels | Launch::Owned => {
+                        table.raygens[0]
+                    }
                 };
                 Work::Rays(pipeline, [raygen, table.miss, table.hit])
             }
@@ -162,6 +174,7 @@ impl AshBackend {
                     Launch::Render => on_ash::LBVH_RENDER,
                     Launch::Splat => on_ash::LBVH_SPLAT,
                     Launch::Voxels => on_ash::VOXEL_RENDER,
+                    Launch::Owned => on_ash::LBVH_OWNED,
                 };
                 let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
                 Work::Compute(pipeline, groups(kind, w, h))

@@ -137,6 +137,8 @@ pub struct Push {
     pub particle_lo_address: u64,
     /// The voxel baseline's grid (0 before a voxelisation).
     pub voxel_address: u64,
+    /// A brick kernel's brick, output and inputs (`lbvh_owned.comp`; 0 for every other launch).
+    pub owned_address: u64,
 }
 
 /// The push constants of the kernels that prepare a step (`PreparePush` in
