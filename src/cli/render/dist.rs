@@ -88,21 +88,13 @@ impl Ranks {
             Ranks::Mpi(comm) => comm.size(),
         }
     }
+
     /// The ranks this process runs: all of them as threads, or itself in an MPI job.
     fn local_count(&self) -> usize {
         match self {
             Ranks::Threads(n) => (*n).max(1),
             #[cfg(feature = "mpi")]
             Ranks::Mpi(_) => 1,
-        }
-    }
-
-    /// Which of this process's ranks `comm` is (its backend's slot).
-    fn local_index(&self, comm: &dyn Comm) -> usize {
-        match self {
-            Ranks::Threads(_) => comm.rank(),
-            #[cfg(feature = "mpi")]
-            Ranks::Mpi(_) => 0,
         }
     }
 }
@@ -283,6 +275,7 @@ pub(super) fn run(
     // Each rank renders its brick on a backend of its own, made once and kept for every
     // image: on the CPU, or on the process's GPU device (one device per process, shared by
     // the ranks that are its threads; under MPI each process opens its own).
+    let threads = matches!(ranks, Ranks::Threads(_));
     let slots: Vec<Mutex<Option<Box<dyn Backend>>>> =
         (0..ranks.local_count()).map(|_| Mutex::new(None)).collect();
     let backend_name = {
@@ -373,7 +366,8 @@ pub(super) fn run(
         let rank_body = |comm: &dyn Comm| {
             let part = Part::new(comm.rank(), comm.size());
             let local = resolved.series.step_part(frame.step, part)?.step;
-            let mut slot = lock(&slots[ranks.local_index(comm)]);
+            // Ranks as threads have a slot each; an MPI process's one rank the first.
+            let mut slot = lock(&slots[if threads { comm.rank() } else { 0 }]);
             let backend = match &mut *slot {
                 Some(b) => b,
                 None => slot.insert(crate::backend::create(args.backend)?),
