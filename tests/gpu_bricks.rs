@@ -31,6 +31,7 @@ use crate::common::{self, Gpu, assert_no_driver_messages, on_every_gpu};
 
 on_every_gpu!(
     brick_shares_match_the_cpu_backend,
+    misused_brick_shares_are_errors_not_panics,
     owned_depths_match_the_cpu_backend,
     distributed_gpu_renders_are_the_single_rank_gpu_image,
     shadows_across_gpu_bricks_are_the_cpu_bricks_shadows,
@@ -507,5 +508,78 @@ fn delta_tracking_across_gpu_bricks_is_within_two_seeds_noise(gpu: Gpu) {
         bias.abs() <= 4.0 * standard_error,
         "mean difference {bias:e}, standard error {standard_error:e}"
     );
+    assert_no_driver_messages();
+}
+
+/// A share before any step, or with a depth in front or a light prefix of the wrong length, is
+/// an error; an empty rectangle is no pixels.
+fn misused_brick_shares_are_errors_not_panics(gpu: Gpu) {
+    let frame = frame(Integrator::Marching, (16, 12), 1);
+    let everywhere = HalfOpenBox {
+        lo: DVec3::splat(f64::NEG_INFINITY),
+        hi: DVec3::splat(f64::INFINITY),
+    };
+    let rect = PixelRect::full(16, 12);
+    let share = BrickShare {
+        owned: &everywhere,
+        rect,
+        index: 0,
+        depth_in_front: None,
+        light: None,
+    };
+    let mut fresh = gpu.backend();
+    assert!(fresh.render_owned(&frame, &share).is_err());
+    assert!(
+        fresh
+            .owned_depth(&frame, &everywhere, DepthRays::Primary(rect))
+            .is_err()
+    );
+    let (_, mut device) = backends(gpu);
+    let short = vec![0.0; rect.len() - 1];
+    let e = device
+        .render_owned(
+            &frame,
+            &BrickShare {
+                depth_in_front: Some(&short),
+                ..share
+            },
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("depth in front"), "{e}");
+    let map = LightMap::new(frame.light_dir, frame.march_box(), 8);
+    let prefix = LightPrefix {
+        map,
+        rect: map.full(),
+        depth: vec![0.0; 3],
+    };
+    let e = device
+        .render_owned(
+            &frame,
+            &BrickShare {
+                light: Some(&prefix),
+                ..share
+            },
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("light prefix"), "{e}");
+    let empty = PixelRect::default();
+    let none = device
+        .render_owned(
+            &frame,
+            &BrickShare {
+                rect: empty,
+                ..share
+            },
+        )
+        .unwrap();
+    assert!(none.is_empty());
+    let depths = device
+        .owned_depth(&frame, &everywhere, DepthRays::Light(&map, empty))
+        .unwrap();
+    assert!(depths.is_empty());
+    // The whole of space as one brick: every pixel written, none NaN.
+    let all = device.render_owned(&frame, &share).unwrap();
+    assert_eq!(all.len(), rect.len());
+    assert!(all.iter().flatten().all(|v| v.is_finite()));
     assert_no_driver_messages();
 }
