@@ -101,19 +101,28 @@ fn frame(integrator: Integrator, (width, height): (u32, u32), seed: u32) -> Fram
     frame
 }
 
-/// The whole step on the CPU backend (f64) and on `gpu`'s backend.
-fn backends(gpu: Gpu) -> (CpuBackend, Box<dyn Backend>) {
+/// The whole step on the CPU backend (f64) and on `gpu`'s backend, one for each way it
+/// traverses the particles (ash: the RT pipeline, `owned.rgen`, and the LBVH,
+/// `lbvh_owned.comp`), named.
+fn backends(gpu: Gpu) -> (CpuBackend, Vec<(&'static str, Box<dyn Backend>)>) {
     let s = scene();
     let mut cpu = CpuBackend::new();
     let d = dist_scene(s, Precision::F64);
     cpu.upload(&d.step_input(&s.step, Precision::F64)).unwrap();
     cpu.build().unwrap();
-    let mut device = gpu.backend().boxed();
-    device
-        .upload(&d.step_input(&s.step, Precision::F32))
-        .unwrap();
-    device.build().unwrap();
-    (cpu, device)
+    let devices = gpu
+        .traversals()
+        .into_iter()
+        .map(|(name, device)| {
+            let mut device = device.boxed();
+            device
+                .upload(&d.step_input(&s.step, Precision::F32))
+                .unwrap();
+            device.build().unwrap();
+            (name, device)
+        })
+        .collect();
+    (cpu, devices)
 }
 
 /// Four bricks tiling all of space: x cut at a random point of the march box, the low side cut
@@ -174,8 +183,13 @@ fn flat(pixels: &[[f64; 4]]) -> Vec<f64> {
 
 const TOLERANCE: f64 = 2e-5;
 
+/// The traversals compared, for messages.
+fn names(devices: &[(&'static str, Box<dyn Backend>)]) -> String {
+    devices.iter().map(|d| d.0).collect::<Vec<_>>().join(", ")
+}
+
 fn brick_shares_match_the_cpu_backend(gpu: Gpu) {
-    let (mut cpu, mut device) = backends(gpu);
+    let (mut cpu, mut devices) = backends(gpu);
     let mut rng = Pcg64::seed_from_u64(0xb41c);
     let size = (64, 48);
     for integrator in [
@@ -211,17 +225,20 @@ fn brick_shares_match_the_cpu_backend(gpu: Gpu) {
                 light: (integrator != Integrator::Ea).then_some(&prefix),
             };
             let want = cpu.render_owned(&frame, &share).unwrap();
-            let got = device.render_owned(&frame, &share).unwrap();
-            assert_eq!(got.len(), rect.len());
-            let (max, n) = differences(&flat(&got), &flat(&want), TOLERANCE);
-            worst = worst.max(max);
-            over += n;
-            values += 4 * rect.len();
             lit += want.iter().filter(|p| p[3] < 0.999).count();
+            for (_, device) in &mut devices {
+                let got = device.render_owned(&frame, &share).unwrap();
+                assert_eq!(got.len(), rect.len());
+                let (max, n) = differences(&flat(&got), &flat(&want), TOLERANCE);
+                worst = worst.max(max);
+                over += n;
+                values += 4 * rect.len();
+            }
         }
         eprintln!(
-            "{gpu} {integrator:?}: max relative difference {worst:.2e}, {over} of {values} \
-             values over {TOLERANCE:e}, {lit} pixels with something owned"
+            "{gpu} ({}) {integrator:?}: max relative difference {worst:.2e}, {over} of {values} \
+             values over {TOLERANCE:e}, {lit} pixels with something owned",
+            names(&devices)
         );
         assert!(
             lit > 200,
@@ -239,7 +256,7 @@ fn brick_shares_match_the_cpu_backend(gpu: Gpu) {
 }
 
 fn owned_depths_match_the_cpu_backend(gpu: Gpu) {
-    let (mut cpu, mut device) = backends(gpu);
+    let (mut cpu, mut devices) = backends(gpu);
     let mut rng = Pcg64::seed_from_u64(0xde97);
     let size = (40, 32);
     let frame = frame(Integrator::Marching, size, rng.random_range(1..1000));
@@ -255,13 +272,18 @@ fn owned_depths_match_the_cpu_backend(gpu: Gpu) {
         let mut deep = 0;
         for owned in bricks(&frame, &mut rng) {
             let want = cpu.owned_depth(&frame, &owned, rays).unwrap();
-            let got = device.owned_depth(&frame, &owned, rays).unwrap();
-            let (max, over) = differences(&got, &want, TOLERANCE);
-            worst = worst.max(max);
             deep += want.iter().filter(|&&d| d > 0.01).count();
-            assert_eq!(over, 0, "{name}: max {max:e}");
+            for (traversal, device) in &mut devices {
+                let got = device.owned_depth(&frame, &owned, rays).unwrap();
+                let (max, over) = differences(&got, &want, TOLERANCE);
+                worst = worst.max(max);
+                assert_eq!(over, 0, "{name} rays, {traversal}: max {max:e}");
+            }
         }
-        eprintln!("{gpu} {name} rays: max relative difference {worst:.2e}, {deep} rays with depth");
+        eprintln!(
+            "{gpu} ({}) {name} rays: max relative difference {worst:.2e}, {deep} rays with depth",
+            names(&devices)
+        );
         assert!(deep > 100, "{name}: the rays meet the fluid: {deep}");
     }
     assert_no_driver_messages();
@@ -534,7 +556,8 @@ fn misused_brick_shares_are_errors_not_panics(gpu: Gpu) {
             .owned_depth(&frame, &everywhere, DepthRays::Primary(rect))
             .is_err()
     );
-    let (_, mut device) = backends(gpu);
+    let (_, mut devices) = backends(gpu);
+    let device = &mut devices[0].1;
     let short = vec![0.0; rect.len() - 1];
     let e = device
         .render_owned(

@@ -24,7 +24,7 @@ pub(super) enum Launch {
     Splat,
     /// A frame over the voxel baseline's grid (a compute kernel whatever the traversal).
     Voxels,
-    /// A brick's share or optical depth (`lbvh_owned.comp`, the LBVH whatever the traversal).
+    /// A brick's share or optical depth (`owned.rgen`; `lbvh_owned.comp` with the LBVH).
     Owned,
 }
 
@@ -139,12 +139,6 @@ impl AshBackend {
             Compute(vk::Pipeline, [u32; 2]),
         }
         let work = match self.traversal {
-            _ if launch == Launch::Owned => {
-                self.ensure_lbvh()?;
-                let kind = on_ash::LBVH_OWNED;
-                let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
-                Work::Compute(pipeline, groups(kind, w, h))
-            }
             _ if launch == Launch::Voxels => {
                 let kind = on_ash::VOXEL_RENDER;
                 let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
@@ -153,9 +147,8 @@ impl AshBackend {
             Traversal::RtPipeline => {
                 let program = match launch {
                     Launch::Splat => RtProgram::Splat,
-                    Launch::Query | Launch::Render | Launch::Voxels | Launch::Owned => {
-                        RtProgram::Field
-                    }
+                    Launch::Owned => RtProgram::Owned,
+                    Launch::Query | Launch::Render | Launch::Voxels => RtProgram::Field,
                 };
                 let (pipeline, table) = self.rt(spec, program)?;
                 // The field pipeline's raygens: render, then query.

@@ -587,8 +587,8 @@ impl Backend for AshBackend {
         self.render_launch(frame, Launch::Render, 0)
     }
 
-    /// `lbvh_owned.comp` over the share's rectangle (the shared integrators' brick variant,
-    /// with the LBVH traversal whatever [`Traversal`] says).
+    /// `owned.rgen` over the share's rectangle (the shared integrators' brick variant), or
+    /// `lbvh_owned.comp` with [`Traversal::Lbvh`].
     fn render_owned(
         &mut self,
         frame: &FrameParams,
@@ -601,7 +601,7 @@ impl Backend for AshBackend {
         Ok(BrickLaunch::pixels(&bytes))
     }
 
-    /// `lbvh_owned.comp` along the rays' rectangle.
+    /// `owned.rgen` (or `lbvh_owned.comp`) along the rays' rectangle.
     fn owned_depth(
         &mut self,
         frame: &FrameParams,

@@ -1,9 +1,8 @@
 //! A brick's share of a distributed frame on the ash backend ([`Backend::render_owned`],
-//! [`Backend::owned_depth`]): `lbvh_owned.comp` over the brick's rectangle, its brick, output
-//! and inputs in one buffer reached by device address ([`BrickLaunch`]), read back as f64.
-//! The kernel walks the LBVH (built on the CPU the first time, as [`super::Traversal::Lbvh`]
-//! does) whatever the traversal: a share is a compute launch, not the RT pipeline's. Nothing
-//! is accumulated.
+//! [`Backend::owned_depth`]): one launch over the brick's rectangle, its brick, output
+//! and inputs in one buffer reached by device address ([`BrickLaunch`]), read back as f64:
+//! `owned.rgen` on the RT pipeline, or `lbvh_owned.comp` with [`super::Traversal::Lbvh`].
+//! Nothing is accumulated.
 //!
 //! [`Backend::render_owned`]: crate::backend::Backend::render_owned
 //! [`Backend::owned_depth`]: crate::backend::Backend::owned_depth
