@@ -101,10 +101,13 @@ fn frame(integrator: Integrator, (width, height): (u32, u32), seed: u32) -> Fram
     frame
 }
 
+/// A GPU backend with the step, named by how it traverses the particles.
+type Traversal = (&'static str, Box<dyn Backend>);
+
 /// The whole step on the CPU backend (f64) and on `gpu`'s backend, one for each way it
 /// traverses the particles (ash: the RT pipeline, `owned.rgen`, and the LBVH,
 /// `lbvh_owned.comp`), named.
-fn backends(gpu: Gpu) -> (CpuBackend, Vec<(&'static str, Box<dyn Backend>)>) {
+fn backends(gpu: Gpu) -> (CpuBackend, Vec<Traversal>) {
     let s = scene();
     let mut cpu = CpuBackend::new();
     let d = dist_scene(s, Precision::F64);
@@ -184,7 +187,7 @@ fn flat(pixels: &[[f64; 4]]) -> Vec<f64> {
 const TOLERANCE: f64 = 2e-5;
 
 /// The traversals compared, for messages.
-fn names(devices: &[(&'static str, Box<dyn Backend>)]) -> String {
+fn names(devices: &[Traversal]) -> String {
     devices.iter().map(|d| d.0).collect::<Vec<_>>().join(", ")
 }
 
