@@ -67,7 +67,8 @@ fn dist_scene(s: &Scene, precision: Precision) -> DistScene<'_> {
         series_range: s.series.attribute("velocity").map(|a| (a.min, a.max)),
         precision,
         periodic: None,
-        shadows: DistShadows::default(),
+        // What `aarbf render --ranks` takes for these small images (`shadow_map_for`).
+        shadows: DistShadows::PrefixMap(64),
     }
 }
 
@@ -446,7 +447,7 @@ fn distributed(
 /// (f64) up to f32: the maps, the depths in front and the shadows are each brick's
 /// `owned_depth` and `render_owned`, compared one by one above; here they go through the
 /// scans and the compositing together. At most 2% of pixels may differ by more than 1e-4
-/// (f32's decisions at the free-flight depth); measured: see the message.
+/// (f32's decisions at the free-flight depth); measured on lavapipe: none, at most 6.3e-7.
 fn shadows_across_gpu_bricks_are_the_cpu_bricks_shadows(gpu: Gpu) {
     let s = scene();
     let frames = frames(Integrator::Marching, (40, 32), 1, 5);
