@@ -836,6 +836,7 @@ fn a_cost_balanced_render_is_still_the_single_rank_image() {
         .map(|p| WeightedPoint {
             at: p.to_array(),
             weight: 1.0,
+            reach: 0.0,
         })
         .collect();
     let model = CostModel::new(KdTree::build(&sample, 2), &[[1000.0, 3.0], [1000.0, 1.0]]);
@@ -907,5 +908,87 @@ fn ranks_reading_their_parts_render_what_ranks_cutting_the_whole_step_render() {
                 "rank {r}"
             );
         }
+    }
+}
+
+/// Series as SPH codes lay them out, with no index beside them and no `--attribute`,
+/// `--radius` or `--phi-ref`: under `--ranks`, the ranks scan the steps the index lacks and find
+/// the defaults (the colour, the radius from the median smoothing length or from the spacing)
+/// from their parts, and say the single rank's values; the image is the single rank's.
+#[test]
+fn ranks_find_a_new_series_defaults_from_their_parts() {
+    let runs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sph_runs");
+    // SWIFT-like CSV (%.17g; 'SmoothingLength': radius 2 x its median); GADGET-like NumPy
+    // (no smoothing length: radius from the spacing).
+    let series = [
+        (
+            "swift_like",
+            "output_*.csv",
+            "median smoothing length 'SmoothingLength'",
+        ),
+        ("gadget_like", "snapshot_*.npy", "particles' spacing"),
+    ];
+    for (folder, pattern, how) in series {
+        let copy = |dir: &std::path::Path| {
+            for entry in std::fs::read_dir(runs.join(folder)).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_file() {
+                    std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+                }
+            }
+            dir.join(pattern)
+        };
+        let (one, ranked) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let render = |data: std::path::PathBuf, out: std::path::PathBuf, extra: &[&str]| {
+            let mut args: Vec<String> = ["render", "--width", "64", "--height", "48", "--spp", "1"]
+                .map(String::from)
+                .to_vec();
+            args.extend(["--data".into(), data.display().to_string()]);
+            args.extend(["--out".into(), out.display().to_string()]);
+            args.extend(extra.iter().map(|a| a.to_string()));
+            let out = common::aarbf_logged(&args.iter().map(String::as_str).collect::<Vec<_>>());
+            let log = String::from_utf8_lossy(&out.stderr).into_owned();
+            assert!(out.status.success(), "{folder} {extra:?}: {log}");
+            log
+        };
+        let single_log = render(copy(one.path()), one.path().join("single.exr"), &[]);
+        let log = render(
+            copy(ranked.path()),
+            ranked.path().join("ranks.exr"),
+            &["--ranks", "3"],
+        );
+        let line = |log: &str, start: &str| {
+            log.lines()
+                .find_map(|l| l.split_once(start).map(|(_, rest)| rest.to_owned()))
+                .unwrap_or_else(|| panic!("{folder}: no '{start}' in {log}"))
+        };
+        for start in ["radius: ", "colour: ", "cluster size K = "] {
+            assert_eq!(
+                line(&log, start),
+                line(&single_log, start),
+                "{folder}: {start}"
+            );
+        }
+        assert!(line(&log, "radius: ").contains(how), "{folder}: {log}");
+        assert!(
+            log.contains("steps the series' index lacks, each rank its part of each"),
+            "{folder}: {log}"
+        );
+        let a = image::open(one.path().join("single.exr"))
+            .unwrap()
+            .into_rgba32f();
+        let b = image::open(ranked.path().join("ranks.exr"))
+            .unwrap()
+            .into_rgba32f();
+        let diff = a
+            .as_raw()
+            .iter()
+            .zip(b.as_raw())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        eprintln!("{folder}: --ranks 3 max |difference| {diff:.2e}");
+        assert!(diff <= 1e-5, "{folder}: max |difference| {diff}");
+        // The ranks wrote the index a later open uses.
+        assert!(ranked.path().join(".aarbf-index.json").exists());
     }
 }

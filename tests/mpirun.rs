@@ -342,3 +342,68 @@ fn gpu_processes_render_the_image_of_as_many_gpu_threads(gpu: common::Gpu) {
     assert!(a.iter().any(|&v| v > 0.05), "the fluid shows");
     assert_eq!(a, b, "max difference {diff:e}");
 }
+
+/// A SWIFT-like series of CSV steps (%.17g, steps of 500 to 511 rows) with no index beside it
+/// and no flags but the image's: the MPI processes scan it and find its defaults (colour,
+/// radius from the median smoothing length, cluster size) each from its parts, as the same
+/// ranks as threads do, and render their image bit for bit; rank 0 alone writes the index.
+#[test]
+fn a_new_series_is_scanned_from_the_processes_parts() {
+    let runs = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sph_runs/swift_like");
+    let copy = |dir: &Path| {
+        for n in 0..4 {
+            let name = format!("output_{n:04}.csv");
+            std::fs::copy(runs.join(&name), dir.join(&name)).unwrap();
+        }
+        dir.join("output_*.csv")
+    };
+    let args = |data: &Path, out: &Path| -> Vec<String> {
+        let mut a: Vec<String> = ["render", "--width", "64", "--height", "48", "--spp", "1"]
+            .map(String::from)
+            .to_vec();
+        a.extend(["--data".into(), data.display().to_string()]);
+        a.extend(["--out".into(), out.display().to_string()]);
+        a
+    };
+    let (mpi_dir, threads_dir) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let mpi_out = mpi_dir.path().join("mpi.exr");
+    let out = mpirun(3, &args(&copy(mpi_dir.path()), &mpi_out))
+        .output()
+        .unwrap();
+    let mpi_log = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{mpi_log}");
+    assert!(
+        mpi_log.contains("steps the series' index lacks, each rank its part of each"),
+        "{mpi_log}"
+    );
+    let threads_out = threads_dir.path().join("threads.exr");
+    let mut threads = args(&copy(threads_dir.path()), &threads_out);
+    threads.extend(["--ranks", "3"].map(String::from));
+    let out = common::aarbf_logged(&threads.iter().map(String::as_str).collect::<Vec<_>>());
+    let threads_log = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{threads_log}");
+    let line = |log: &str, start: &str| {
+        log.lines()
+            .find_map(|l| l.split_once(start).map(|(_, rest)| rest.to_owned()))
+            .unwrap_or_else(|| panic!("no '{start}' in {log}"))
+    };
+    for start in ["radius: ", "colour: ", "cluster size K = "] {
+        assert_eq!(line(&mpi_log, start), line(&threads_log, start), "{start}");
+    }
+    let (mpi, threads) = (pixels(&mpi_out), pixels(&threads_out));
+    assert!(mpi.iter().any(|&v| v > 0.01), "the gas shows");
+    assert!(
+        mpi.iter()
+            .zip(&threads)
+            .all(|(a, b)| a.to_bits() == b.to_bits()),
+        "mpirun -np 3 differs from --ranks 3"
+    );
+    // The index, written once (no other rank's temporary file left), serves a later open.
+    let mut written: Vec<String> = std::fs::read_dir(mpi_dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.starts_with("output_"))
+        .collect();
+    written.sort();
+    assert_eq!(written, [".aarbf-index.json", "mpi.exr"]);
+}

@@ -370,3 +370,112 @@ fn a_series_with_neighbour_smoothing_cuts_its_parts_from_the_whole_step() {
     assert_eq!(part.decoded, Part::new(1, 3).range(n).len());
     assert_eq!(part.step.attribute_names(), ["col3"]);
 }
+
+/// Ranks that scan a series from their parts ([`aarbf::dist::step_stats`]) as threads, keeping
+/// the most records any rank decoded in one call and the records the whole steps scanned held.
+struct ScanByRanks {
+    ranks: usize,
+    most_decoded: std::sync::Mutex<Vec<(usize, usize)>>,
+}
+
+impl aarbf::scene::StepsScan for ScanByRanks {
+    fn stats(
+        &self,
+        steps: &[StepRef],
+        which: &[usize],
+        selection: &AttributeSelection,
+    ) -> Result<Vec<aarbf::scene::index::StepStats>, io::DataError> {
+        let found = aarbf::dist::run_local(self.ranks, |comm| {
+            aarbf::dist::step_stats::of_parts(comm, steps, which, selection)
+        })
+        .unwrap();
+        let records: usize = found[0].0.iter().map(|s| s.count).sum();
+        let decoded = found.iter().map(|(_, d)| *d).max().unwrap();
+        self.most_decoded.lock().unwrap().push((decoded, records));
+        for (stats, _) in &found[1..] {
+            assert_eq!(stats, &found[0].0, "every rank finds the same statistics");
+        }
+        Ok(found.into_iter().next().unwrap().0)
+    }
+}
+
+/// A copy of the series files `names` of `from` in a new directory (no index beside them).
+fn copied(from: &Path, names: &[&str]) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    for n in names {
+        std::fs::copy(from.join(n), dir.path().join(n)).unwrap();
+    }
+    dir
+}
+
+#[test]
+fn a_series_without_an_index_is_scanned_from_the_ranks_parts_bit_for_bit() {
+    use aarbf::scene::{OpenOptions, TimeSeries};
+    let runs = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sph_runs");
+    // As SWIFT-like CSV (%.17g, 500, 503, 497, 511 rows), GADGET-like NumPy (N x 5 float64,
+    // 1000 .. 1003 rows) and h5py's SWIFT snapshots (HDF5 hyperslabs) hold them.
+    let series: [(std::path::PathBuf, Vec<&str>, &str); 3] = [
+        (
+            runs.join("swift_like"),
+            vec![
+                "output_0000.csv",
+                "output_0001.csv",
+                "output_0002.csv",
+                "output_0003.csv",
+            ],
+            "output_*.csv",
+        ),
+        (
+            runs.join("gadget_like"),
+            vec![
+                "snapshot_000.npy",
+                "snapshot_001.npy",
+                "snapshot_002.npy",
+                "snapshot_003.npy",
+                "snapshot_004.npy",
+            ],
+            "snapshot_*.npy",
+        ),
+        (
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/h5py_swift"),
+            vec!["snap_0000.hdf5", "snap_0001.hdf5"],
+            "snap_*.hdf5",
+        ),
+    ];
+    for (from, names, pattern) in &series {
+        for selection in [AttributeSelection::All, only(&[])] {
+            let options = OpenOptions {
+                attributes: selection.clone(),
+                ..OpenOptions::default()
+            };
+            let whole_dir = copied(from, names);
+            let whole = TimeSeries::open(&whole_dir.path().join(pattern), &options).unwrap();
+            assert!(whole.steps_decoded() >= 1);
+            for ranks in [2, 3, 5, 8] {
+                let dir = copied(from, names);
+                let path = dir.path().join(pattern);
+                let scan = ScanByRanks {
+                    ranks,
+                    most_decoded: Default::default(),
+                };
+                let by_ranks = TimeSeries::open_scanned_by(&path, &options, &scan).unwrap();
+                let what = format!("{} over {ranks} ranks, {selection:?}", from.display());
+                assert_eq!(by_ranks.values(), whole.values(), "{what}");
+                assert_eq!(by_ranks.steps_decoded(), 0, "{what}: no step read whole");
+                // Each call's rank decoded at most its share of each step (CSV: by bytes, rows
+                // of similar lengths: within a few records).
+                for &(decoded, records) in scan.most_decoded.lock().unwrap().iter() {
+                    let steps = names.len();
+                    assert!(
+                        decoded <= records.div_ceil(ranks) + 4 * steps,
+                        "{what}: a rank decoded {decoded} of {records} records"
+                    );
+                }
+                // The index the ranks wrote serves a later open, which reads nothing.
+                let reopened = TimeSeries::open(&path, &options).unwrap();
+                assert_eq!(reopened.steps_decoded(), 0, "{what}");
+                assert_eq!(reopened.values(), whole.values(), "{what}");
+            }
+        }
+    }
+}

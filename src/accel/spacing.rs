@@ -13,7 +13,7 @@ pub const SAMPLE: usize = 2048;
 
 /// Neighbours asked for per sampled particle, so a few co-located copies of it (duplicated
 /// boundary particles, restarts) are passed over to the first particle at a distance.
-const NEIGHBOURS: usize = 8;
+pub const NEIGHBOURS: usize = 8;
 
 /// The median, over an evenly strided sample of at most [`SAMPLE`] particles, of the distance
 /// to the nearest particle at another position. `None` when no sampled particle has one (a

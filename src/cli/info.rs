@@ -120,8 +120,11 @@ fn defaults(series: &TimeSeries) -> anyhow::Result<String> {
     let (_, radius) = crate::scene_file::resolve::default_radius(
         series,
         None,
-        first.as_deref(),
+        first
+            .map(crate::scene_file::resolve::FirstStep::Whole)
+            .as_ref(),
         crate::field::Kernel::GaussianRbf,
+        &crate::scene_file::resolve::InOneProcess,
     )?;
     let camera = crate::scene::Camera::default_for(series.bounds());
     let mut out = String::new();

@@ -68,6 +68,91 @@ pub fn mean_overlap(
     )
 }
 
+/// The particles' spacing in the series' first step as
+/// [`crate::accel::spacing::median_nearest_distance`] measures it over the whole step, each
+/// rank holding its part: the same evenly strided sample by global index, each sample's
+/// nearest neighbours found by every rank among its own particles and the nearest of them
+/// kept, so every rank finds the single process's value, exactly. Three collectives: the
+/// parts' lengths; the sample's points; each sample's distances sent to the rank that merges
+/// them, and the merged nearest distances to every rank.
+pub fn first_step_spacing(comm: &dyn Comm, series: &TimeSeries) -> Result<Option<f64>, DistError> {
+    if series.is_empty() {
+        return Ok(None);
+    }
+    let part = first_part(comm, series)?;
+    median_nearest_distance(comm, &part.positions)
+}
+
+/// [`first_step_spacing`] over the parts `mine` of the ranks' positions, in rank order.
+pub fn median_nearest_distance(comm: &dyn Comm, mine: &[DVec3]) -> Result<Option<f64>, DistError> {
+    use crate::accel::spacing::{NEIGHBOURS, SAMPLE};
+    use kiddo::{ImmutableKdTree, SquaredEuclidean};
+    let lengths = one_each(comm.all_gather_of(&[mine.len() as u64])?, "a part's length")?;
+    let n: u64 = lengths.iter().sum();
+    if n < 2 {
+        return Ok(None);
+    }
+    let first: u64 = lengths[..comm.rank()].iter().sum();
+    let stride = n.div_ceil(SAMPLE as u64);
+    // This part's samples: the whole step's records 0, stride, 2 stride, ... that it holds.
+    let start = first.div_ceil(stride) * stride;
+    let samples: Vec<[f64; 3]> = (start..first + mine.len() as u64)
+        .step_by(stride as usize)
+        .map(|i| mine[(i - first) as usize].to_array())
+        .collect();
+    let samples: Vec<[f64; 3]> = comm.all_gather_of(&samples)?.concat();
+    let k = NEIGHBOURS.min(n as usize);
+    // Each sample's k nearest squared distances among this part's particles (fewer where the
+    // part holds fewer), padded with +inf, sent to the sample's merging rank s mod P.
+    let size = comm.size();
+    let mut send: Vec<Vec<f64>> = vec![Vec::new(); size];
+    let points: Vec<[f64; 3]> = mine.iter().map(|p| p.to_array()).collect();
+    let tree: Option<ImmutableKdTree<f64, 3>> =
+        (!points.is_empty()).then(|| ImmutableKdTree::new_from_slice(&points));
+    for (s, q) in samples.iter().enumerate() {
+        let mut d: Vec<f64> = match (&tree, std::num::NonZero::new(k.min(points.len()))) {
+            (Some(tree), Some(kk)) => tree
+                .nearest_n::<SquaredEuclidean>(q, kk)
+                .into_iter()
+                .map(|nn| nn.distance)
+                .collect(),
+            _ => Vec::new(),
+        };
+        d.resize(k, f64::INFINITY);
+        send[s % size].extend(d);
+    }
+    let received = comm.all_to_all_of(&send)?;
+    // The samples this rank merges, in order: the k nearest over every part, and the first
+    // of them at a distance (the single process's rule).
+    let mine_merged: Vec<f64> = (0..samples.len())
+        .filter(|s| s % size == comm.rank())
+        .enumerate()
+        .map(|(j, _)| {
+            let mut all: Vec<f64> = received
+                .iter()
+                .flat_map(|r| r.get(j * k..(j + 1) * k).unwrap_or(&[]).iter().copied())
+                .collect();
+            all.sort_by(f64::total_cmp);
+            all.truncate(k);
+            all.into_iter()
+                .find(|&d2| d2 > 0.0 && d2.is_finite())
+                .map_or(f64::NAN, f64::sqrt)
+        })
+        .collect();
+    let merged = comm.all_gather_of(&mine_merged)?;
+    // Back in sample order; NaN: a sample with no particle at a distance.
+    let mut nearest: Vec<f64> = (0..samples.len())
+        .map(|s| merged[s % size].get(s / size).copied().unwrap_or(f64::NAN))
+        .filter(|d| !d.is_nan())
+        .collect();
+    if nearest.is_empty() {
+        return Ok(None);
+    }
+    let middle = nearest.len() / 2;
+    let (_, median, _) = nearest.select_nth_unstable_by(middle, f64::total_cmp);
+    Ok(Some(*median))
+}
+
 /// This rank's part of the series' first step.
 fn first_part(comm: &dyn Comm, series: &TimeSeries) -> Result<Step, DistError> {
     Ok(series
@@ -544,5 +629,72 @@ mod tests {
             );
             assert!(!series.is_cached(0), "{what}: no whole step is held");
         }
+    }
+
+    #[test]
+    fn the_spacing_from_parts_is_the_whole_step_s_exactly() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(49);
+        // A jittered lattice off the origin with co-located copies (boundary particles written
+        // twice), in sizes around and past the sample's 2048 and not powers of two.
+        for n in [2usize, 9, 1000, 2049, 5003] {
+            let mut points: Vec<DVec3> = (0..n)
+                .map(|i| {
+                    let (x, y, z) = ((i % 17) as f64, ((i / 17) % 13) as f64, (i / 221) as f64);
+                    DVec3::new(1e4 + 0.04 * x, -3.0 + 0.04 * y, 0.04 * z)
+                        + DVec3::new(rng.random(), rng.random(), rng.random()) * 1e-6
+                })
+                .collect();
+            for i in (0..n).step_by(7) {
+                let copy = points[i];
+                points.push(copy);
+            }
+            let want = crate::accel::spacing::median_nearest_distance(&points);
+            for ranks in [1, 2, 3, 4, 5, 8, 9, 16] {
+                let got = run_local(ranks, |comm| {
+                    let part = Part::new(comm.rank(), comm.size()).range(points.len());
+                    median_nearest_distance(comm, &points[part])
+                })
+                .unwrap();
+                for g in got {
+                    assert_eq!(
+                        g.map(f64::to_bits),
+                        want.map(f64::to_bits),
+                        "n = {n}, P = {ranks}: {g:?} against {want:?}"
+                    );
+                }
+            }
+        }
+        // No two particles apart: none, as for the whole step.
+        let same = vec![DVec3::ONE; 5];
+        assert_eq!(crate::accel::spacing::median_nearest_distance(&same), None);
+        let got = run_local(3, |comm| {
+            median_nearest_distance(comm, &same[Part::new(comm.rank(), 3).range(5)])
+        })
+        .unwrap();
+        assert!(got.iter().all(Option::is_none));
+    }
+
+    #[test]
+    fn the_median_over_parts_is_the_whole_sort_s() {
+        let values: Vec<f64> = (0..1001)
+            .map(|i| ((i * 7919) % 1013) as f64 * 0.01)
+            .collect();
+        let mut sorted = values.clone();
+        sorted.sort_by(f64::total_cmp);
+        for ranks in [1, 2, 3, 7] {
+            let got = run_local(ranks, |comm| {
+                crate::dist::order::median(
+                    comm,
+                    &values[Part::new(comm.rank(), ranks).range(values.len())],
+                )
+            })
+            .unwrap();
+            assert!(
+                got.iter().all(|m| *m == Some(sorted[values.len() / 2])),
+                "{got:?}"
+            );
+        }
+        let none = run_local(2, |comm| crate::dist::order::median(comm, &[])).unwrap();
+        assert_eq!(none, vec![None, None]);
     }
 }

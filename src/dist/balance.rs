@@ -101,6 +101,7 @@ mod tests {
                 WeightedPoint {
                     at: [x, 0.5 * x, 0.25],
                     weight: weight(x),
+                    reach: 0.0,
                 }
             })
             .collect()

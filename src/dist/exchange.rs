@@ -21,11 +21,13 @@ pub const SAMPLE_PER_RANK: usize = 256;
 
 /// The k-d tree of `comm.size()` leaves over the ranks' particles, from at most
 /// [`SAMPLE_PER_RANK`] of each rank's `positions`, each weighted by the particles it stands
-/// for (times its cost in `cost`, where given: [`CostModel`]); every rank gathers the same
-/// sample and builds the same tree.
+/// for (times its cost in `cost`, where given: [`CostModel`]) and reaching as far as its
+/// ghost reach in `reaches` (none where not given), which chooses the axes that make the
+/// fewest ghosts; every rank gathers the same sample and builds the same tree.
 pub fn decompose(
     comm: &dyn Comm,
     positions: &[DVec3],
+    reaches: Option<&[f64]>,
     cost: Option<&CostModel>,
 ) -> Result<KdTree, DistError> {
     let n = positions.len();
@@ -37,6 +39,9 @@ pub fn decompose(
             WeightedPoint {
                 at: at.to_array(),
                 weight: weight * cost.map_or(1.0, |c| c.at(at)),
+                reach: reaches
+                    .and_then(|r| ghost_reach(at, r[k * n / s]))
+                    .unwrap_or(0.0),
             }
         })
         .collect();

@@ -2,7 +2,9 @@
 //! (the outer faces are infinite, so no particle and no sample is left without an owner),
 //! from a weighted sample of the particles that every rank holds in full, so that every rank
 //! builds the same tree. A node of P leaves splits ⌊P/2⌋ : ⌈P/2⌉ at that quantile of the
-//! sample along its longest axis, so the leaves hold about N/P particles each for any P.
+//! sample, so the leaves hold about N/P particles each for any P, along the axis whose plane
+//! the fewest sampled particles reach across (each becomes a ghost of the other side), the
+//! longest where they tie.
 //! Unlike ranges of a space-filling curve, the leaves are boxes: convex, so a ray enters each
 //! at most once, and ordered front to back for any eye by the tree ([`KdTree::front_to_back`]).
 
@@ -18,6 +20,8 @@ pub struct WeightedPoint {
     pub at: [f64; 3],
     /// How many particles it stands for.
     pub weight: f64,
+    /// How far its particle reaches (its ghost reach; 0: it is nobody's ghost).
+    pub reach: f64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -202,9 +206,11 @@ fn partition(points: &mut [WeightedPoint], below: impl Fn(&WeightedPoint) -> boo
     mid
 }
 
-/// The axis (the longest of the points' bounds, or of the region's finite part where there
-/// are no points) and the plane splitting `points` so that the fraction `q` of their weight
-/// lies below it (as near as the points allow: those on the plane go above).
+/// The axis and the plane splitting `points` so that the fraction `q` of their weight lies
+/// below it (as near as the points allow: those on the plane go above). Of the axes along which
+/// the points spread, the one whose plane the least weight reaches across (the particles it
+/// makes ghosts), the longest of the points' bounds where that ties (as where no point reaches
+/// at all); where there are no points, the longest of the region's finite part.
 fn split_plane(
     points: &mut [WeightedPoint],
     q: f64,
@@ -222,7 +228,7 @@ fn split_plane(
         )
     };
     let size = bounds.max - bounds.min;
-    let axis = if size.is_finite() && size.max_element() > 0.0 {
+    let longest = if size.is_finite() && size.max_element() > 0.0 {
         size.max_position()
     } else {
         0
@@ -230,6 +236,7 @@ fn split_plane(
     if points.is_empty() {
         // No particle to balance: halve what the sample spans of the region (or its
         // plane, if it spans nothing).
+        let axis = longest;
         let at = if size.is_finite() && !bounds.is_empty() {
             0.5 * (bounds.min[axis] + bounds.max[axis])
         } else if region.lo[axis].is_finite() {
@@ -241,19 +248,52 @@ fn split_plane(
         };
         return (axis, at);
     }
+    let mut best = (longest, balanced_plane(points, q, longest));
+    let mut least = cut_weight(points, best.0, best.1);
+    for axis in (0..3).filter(|&a| a != longest && size[a] > 0.0 && size[a].is_finite()) {
+        let at = balanced_plane(points, q, axis);
+        let cut = cut_weight(points, axis, at);
+        if cut < least {
+            (best, least) = ((axis, at), cut);
+        }
+    }
+    best
+}
+
+/// The plane along `axis` with the fraction `q` of the points' weight below it, midway
+/// between the last point below and the first above (the gap between them is where the
+/// fewest particles reach across).
+fn balanced_plane(points: &mut [WeightedPoint], q: f64, axis: usize) -> f64 {
     points.sort_by(|a, b| a.at[axis].total_cmp(&b.at[axis]));
     let total: f64 = points.iter().map(|p| p.weight).sum();
     let target = q * total;
     let mut before = 0.0;
+    let mut last_below = f64::NEG_INFINITY;
     for p in points.iter() {
+        let x = p.at[axis];
         if before >= target {
-            return (axis, p.at[axis]);
+            let midway = 0.5 * (last_below + x);
+            // Strictly above the last point below, so that it stays below.
+            return if midway > last_below && midway <= x {
+                midway
+            } else {
+                x
+            };
         }
         before += p.weight;
+        last_below = x;
     }
     // All the weight lies below the last point: put the plane just above it.
-    let last = points.last().expect("not empty").at[axis];
-    (axis, last.next_up())
+    points.last().expect("not empty").at[axis].next_up()
+}
+
+/// The weight of the points that reach across the plane `x[axis] = at`.
+fn cut_weight(points: &[WeightedPoint], axis: usize, at: f64) -> f64 {
+    points
+        .iter()
+        .filter(|p| (p.at[axis] - at).abs() <= p.reach)
+        .map(|p| p.weight)
+        .sum()
 }
 
 #[cfg(test)]
@@ -272,6 +312,7 @@ mod tests {
                     rng.random::<f64>().powi(3),
                 ],
                 weight: 1.0,
+                reach: 0.0,
             })
             .collect()
     }
@@ -307,17 +348,48 @@ mod tests {
     }
 
     #[test]
+    fn the_split_takes_the_axis_its_particles_reach_across_least() {
+        // Two layers 2 apart along y, each spread over 4 along x: the longest axis, x, cuts
+        // through both layers, where y's balanced plane runs between them.
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut layers = |reach: f64| -> Vec<WeightedPoint> {
+            (0..400)
+                .map(|i| WeightedPoint {
+                    at: [
+                        rng.random::<f64>() * 4.0,
+                        if i % 2 == 0 { 0.0 } else { 2.0 } + rng.random::<f64>() * 0.1,
+                        rng.random::<f64>(),
+                    ],
+                    weight: 1.0,
+                    reach,
+                })
+                .collect()
+        };
+        let tree = KdTree::build(&layers(0.3), 2);
+        assert!(
+            tree.leaves()[0].hi.y.is_finite() && tree.leaves()[0].hi.x.is_infinite(),
+            "{:?}",
+            tree.leaves()
+        );
+        // Reaching nowhere, every axis cuts nothing: the longest, as before.
+        let tree = KdTree::build(&layers(0.0), 2);
+        assert!(tree.leaves()[0].hi.x.is_finite(), "{:?}", tree.leaves());
+    }
+
+    #[test]
     fn unequal_weights_move_the_split() {
         // Two clusters; the right one's points stand for three particles each.
         let mut sample: Vec<WeightedPoint> = (0..100)
             .map(|i| WeightedPoint {
                 at: [f64::from(i) * 0.01, 0.0, 0.0],
                 weight: 1.0,
+                reach: 0.0,
             })
             .collect();
         sample.extend((0..100).map(|i| WeightedPoint {
             at: [10.0 + f64::from(i) * 0.01, 0.0, 0.0],
             weight: 3.0,
+            reach: 0.0,
         }));
         let tree = KdTree::build(&sample, 2);
         // Half of the weight (400 of 800) lies below x = 10 + 1/3.
@@ -333,6 +405,7 @@ mod tests {
                 WeightedPoint {
                     at: [1.0, 2.0, 3.0],
                     weight: 1.0,
+                    reach: 0.0,
                 };
                 50
             ],

@@ -33,8 +33,10 @@ pub mod kd;
 pub mod local;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
+pub mod order;
 mod render;
 pub mod scan;
+pub mod step_stats;
 
 pub use balance::{Balance, CostModel};
 pub use comm::{Comm, CommError, CommExt, Parts, launched_size, node_local_size};

@@ -413,7 +413,7 @@ pub fn render_balanced(
         ..*scene
     };
     let reaches = particle_reaches(local, scene.field, scene.series_range)?;
-    let tree = decompose(comm, &local.positions, cost)?;
+    let tree = decompose(comm, &local.positions, Some(&reaches), cost)?;
     let (brick, counts) = exchange(comm, &tree, local, &reaches)?;
     drop(reaches);
     drop(with_images);

@@ -75,7 +75,7 @@ fn each_particle_is_owned_once_and_the_ghosts_are_the_brute_force_set() {
         let bricks = run_local(p, |comm| {
             let local = slice_of(&step, comm.rank(), comm.size());
             let local_reaches = particle_reaches(&local, &field, range)?;
-            let tree = decompose(comm, &local.positions, None)?;
+            let tree = decompose(comm, &local.positions, Some(&local_reaches), None)?;
             let (brick, _) = exchange(comm, &tree, &local, &local_reaches)?;
             Ok((tree, brick))
         })
@@ -143,12 +143,12 @@ fn every_particle_reaching_a_point_of_a_leaf_is_in_its_brick() {
         let bricks = run_local(p, |comm| {
             let local = slice_of(&step, comm.rank(), comm.size());
             let local_reaches = particle_reaches(&local, &field, range)?;
-            let tree = decompose(comm, &local.positions, None)?;
+            let tree = decompose(comm, &local.positions, None, None)?;
             Ok(exchange(comm, &tree, &local, &local_reaches)?.0)
         })
         .unwrap();
         let tree = run_local(p, |comm| {
-            decompose(comm, &slice_of(&step, comm.rank(), p).positions, None)
+            decompose(comm, &slice_of(&step, comm.rank(), p).positions, None, None)
         })
         .unwrap()
         .swap_remove(0);
@@ -263,7 +263,7 @@ fn each_lattice_sample_is_owned_once() {
     ];
     for p in RANKS {
         let tree = run_local(p, |comm| {
-            decompose(comm, &slice_of(&step, comm.rank(), p).positions, None)
+            decompose(comm, &slice_of(&step, comm.rank(), p).positions, None, None)
         })
         .unwrap()
         .swap_remove(0);
@@ -301,6 +301,7 @@ fn screen_rectangles_hold_every_pixel_whose_ray_meets_the_box() {
             .map(|p| kd::WeightedPoint {
                 at: p.to_array(),
                 weight: 1.0,
+                reach: 0.0,
             })
             .collect::<Vec<_>>(),
         9,

@@ -15,6 +15,7 @@ use std::time::UNIX_EPOCH;
 use serde::{Deserialize, Serialize};
 
 use crate::io::{AttributeSelection, Format, ReadOptions, StepRef};
+use crate::values::exact::exact_sum;
 use crate::values::{Bounds, Step, value_range};
 
 /// The index's file name, in the directory of the series' first step.
@@ -22,7 +23,7 @@ pub const INDEX_FILE: &str = ".aarbf-index.json";
 
 /// Bumped whenever a reader's output or a statistic's definition changes, so an index written
 /// by another version is never trusted.
-const VERSION: u32 = 2;
+const VERSION: u32 = 3;
 
 /// What a scan of one step learns.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -54,7 +55,8 @@ pub struct AttributeStats {
     pub p01: f64,
     /// The 99th percentile.
     pub p99: f64,
-    /// The mean value.
+    /// The mean value: the exactly rounded sum over the count ([`exact_sum`]), so that it is
+    /// the same however the values were split between readers.
     pub mean: f64,
     /// Values the mean is over.
     pub count: usize,
@@ -101,7 +103,7 @@ impl StepStats {
                         max,
                         p01,
                         p99,
-                        mean: a.values.iter().sum::<f64>() / a.values.len() as f64,
+                        mean: exact_sum(&a.values) / a.values.len() as f64,
                         count: a.values.len(),
                     })
                 })

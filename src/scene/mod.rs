@@ -10,4 +10,4 @@ pub mod smoothing;
 pub mod synth;
 
 pub use camera::{Camera, CameraError, UpAxis};
-pub use series::{AttributeInfo, OpenOptions, StepInfo, TimeSeries};
+pub use series::{AttributeInfo, OpenOptions, StepInfo, StepsScan, TimeSeries};

@@ -183,6 +183,16 @@ impl RangeSpec {
             return Ok((None, "no attribute"));
         };
         let of_step = |robust: bool| -> Result<Option<(f64, f64)>, crate::io::DataError> {
+            // The step's statistics, from the index or the scan: the same values as a read.
+            if let Some(info) = series.step_info(step).filter(|i| i.scanned)
+                && let Some(a) = info.attributes.iter().find(|a| a.name == name)
+            {
+                return Ok(Some(if robust {
+                    (a.p01, a.p99)
+                } else {
+                    (a.min, a.max)
+                }));
+            }
             let step = series.step(step)?;
             Ok(step.attribute(name).and_then(|a| {
                 if robust {

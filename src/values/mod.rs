@@ -5,6 +5,7 @@
 
 pub mod bounds;
 pub mod color_space;
+pub mod exact;
 pub mod frame;
 pub mod image;
 pub mod kernel;

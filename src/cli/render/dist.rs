@@ -18,16 +18,22 @@ use super::plan::Frame;
 use crate::backend::{Backend, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
+use crate::dist::step_stats;
 use crate::dist::{
     Balance, Comm, CostModel, DistError, DistScene, DistShadows, RankReport, render_piloted,
     run_local, shadow_map_for,
 };
 use crate::field::FieldSettings;
 use crate::io::Part;
+use crate::io::{AttributeSelection, DataError, Problem, StepRef};
 use crate::render::legend::Legend;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
+use crate::scene::StepsScan;
 use crate::scene::TimeSeries;
-use crate::scene_file::resolve::Resolved;
+use crate::scene::index::StepStats;
+use crate::scene_file::resolve::{
+    DataReads, FirstStep, FirstStepFacts, Resolved, positive, smoothing_length_in,
+};
 use crate::values::{FrameParams, Integrator};
 
 /// `--dist-shadows`: how shadow rays cross the bricks of a distributed render.
@@ -197,6 +203,127 @@ pub(super) fn mean_overlap(
         "the mean overlap from the ranks' parts of step 0",
         |comm| crate::dist::auto::mean_overlap(comm, series, field),
     )
+}
+
+/// The ranks learn what resolving needs from their parts of the data: the statistics of the
+/// steps the series' index lacks ([`crate::dist::step_stats`]) and the mean overlap.
+impl DataReads for Ranks {
+    fn steps_scan(&self) -> Option<&dyn StepsScan> {
+        Some(self)
+    }
+
+    fn mean_overlap(&self, series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64> {
+        mean_overlap(self, series, field)
+    }
+
+    /// Each rank reads its part of the step with every attribute: the names, and the median of
+    /// a smoothing length over the parts ([`crate::dist::order::median`]).
+    fn first_step(&self, first: &StepRef) -> anyhow::Result<FirstStep> {
+        on_every_rank(
+            self,
+            "the first step's attributes from the ranks' parts",
+            |comm| {
+                let part = crate::io::read_step_part(
+                    first,
+                    &AttributeSelection::All,
+                    Part::new(comm.rank(), comm.size()),
+                )?
+                .step;
+                let names: Vec<String> = part
+                    .attribute_names()
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect();
+                let smoothing_length = match smoothing_length_in(&names) {
+                    Some(name) => {
+                        let values = part.attribute(name).map_or(&[][..], |a| &a.values[..]);
+                        let median = crate::dist::order::median(comm, &positive(values))?;
+                        Some((name.to_owned(), median))
+                    }
+                    None => None,
+                };
+                Ok(FirstStep::FromParts(FirstStepFacts {
+                    names,
+                    smoothing_length,
+                }))
+            },
+        )
+    }
+
+    fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>> {
+        on_every_rank(
+            self,
+            "the particles' spacing from the ranks' parts",
+            |comm| crate::dist::auto::first_step_spacing(comm, series),
+        )
+    }
+}
+
+impl StepsScan for Ranks {
+    fn stats(
+        &self,
+        steps: &[StepRef],
+        which: &[usize],
+        selection: &AttributeSelection,
+    ) -> Result<Vec<StepStats>, DataError> {
+        let scan = |comm: &dyn Comm| {
+            let (stats, decoded) = step_stats::of_parts(comm, steps, which, selection)?;
+            tracing::debug!(
+                "rank {} decoded {decoded} records scanning {} steps the index lacks",
+                comm.rank(),
+                which.len()
+            );
+            Ok(stats)
+        };
+        let as_data_error = |e: DistError| match e {
+            DistError::Read(e) => e,
+            DistError::Rank { source, .. } if matches!(*source, DistError::Read(_)) => {
+                let DistError::Read(e) = *source else {
+                    unreachable!("matched above")
+                };
+                e
+            }
+            other => DataError::new(
+                &steps[which.first().copied().unwrap_or(0)].path,
+                None,
+                Problem::Malformed(format!("the ranks' scan of the series: {other}")),
+            ),
+        };
+        if which.len() > 1 {
+            tracing::info!(
+                "scanning {} steps the series' index lacks, each rank its part of each",
+                which.len()
+            );
+        }
+        match self {
+            Ranks::Threads(n) => run_local(*n, |comm| scan(comm))
+                .map(|mut stats| stats.swap_remove(0))
+                .map_err(as_data_error),
+            #[cfg(feature = "mpi")]
+            Ranks::Mpi(comm) => match scan(comm) {
+                Ok(stats) => Ok(stats),
+                // A name the data lacks is every rank's answer (each reads the same header):
+                // said as a single process says it (the caller may try another spelling).
+                Err(DistError::Read(e))
+                    if matches!(e.problem, Problem::MissingAttribute { .. }) =>
+                {
+                    Err(e)
+                }
+                Err(e) => {
+                    comm.abort(&format!("scanning the series: {e}"));
+                    unreachable!("MPI_Abort returned");
+                }
+            },
+        }
+    }
+
+    fn writes_index(&self) -> bool {
+        match self {
+            Ranks::Threads(_) => true,
+            #[cfg(feature = "mpi")]
+            Ranks::Mpi(comm) => comm.rank() == 0,
+        }
+    }
 }
 
 /// Refuses what the distributed renderer does not do yet, naming it.

@@ -21,7 +21,7 @@ use crate::render::target::{ErrorMetric, Target};
 use crate::render::{Method, RenderSession, RenderSettings, SPLAT_K};
 use crate::scene::Camera;
 use crate::scene_file::resolve::{
-    DataArgs, FieldOptions, Resolved, ViewFlags, resolve, resolve_for_images, resolve_with_overlap,
+    DataArgs, FieldOptions, Resolved, ViewFlags, resolve, resolve_for_images, resolve_with_reads,
 };
 use crate::scene_file::{CameraSection, MapSpec, SceneFile};
 use crate::values::{Integrator, Light, NoiseKind};
@@ -430,12 +430,9 @@ pub(super) fn run(args: RenderArgs) -> anyhow::Result<()> {
 fn settle(args: &RenderArgs, ranks: Option<&dist::Ranks>) -> anyhow::Result<Setup> {
     let first_attribute_by_default = !args.color_by_density;
     let mut resolved = match ranks {
-        Some(ranks) => resolve_with_overlap(
-            &args.data,
-            &args.field,
-            first_attribute_by_default,
-            &|series, field| dist::mean_overlap(ranks, series, field),
-        )?,
+        Some(ranks) => {
+            resolve_with_reads(&args.data, &args.field, first_attribute_by_default, ranks)?
+        }
         None if args.color_by_density => resolve(&args.data, &args.field)?,
         None => resolve_for_images(&args.data, &args.field)?,
     };

@@ -60,6 +60,41 @@ impl Default for OpenOptions {
     }
 }
 
+/// The statistics of steps of a series ([`StepStats`]) gathered without this process reading
+/// each step whole: by a distributed render's ranks, each reading its part of each step
+/// (`crate::dist::step_stats`). They must be the statistics a read of the whole step gives
+/// ([`StepStats::of`]), bit for bit.
+pub trait StepsScan {
+    /// The statistics of `steps[i]` for each `i` of `which`, in that order, read with
+    /// `selection`. Collective: every rank calls it with the same arguments.
+    fn stats(
+        &self,
+        steps: &[StepRef],
+        which: &[usize],
+        selection: &AttributeSelection,
+    ) -> Result<Vec<StepStats>, DataError>;
+
+    /// Whether this process writes what the scan found into the series' index (one rank of a
+    /// job does: the others would write the same bytes).
+    fn writes_index(&self) -> bool {
+        true
+    }
+}
+
+/// The one step's statistics a scan of one step returned.
+fn one(found: Vec<StepStats>, step: &StepRef) -> Result<StepStats, DataError> {
+    let n = found.len();
+    found.into_iter().next().filter(|_| n == 1).ok_or_else(|| {
+        DataError::new(
+            &step.path,
+            None,
+            io::Problem::Malformed(format!(
+                "the ranks' scan returned the statistics of {n} steps for 1"
+            )),
+        )
+    })
+}
+
 /// Reads a step from its file, with the smoothing lengths from neighbours where `smoothing`
 /// asks for them and the selection keeps them (the file does not hold them: they are
 /// computed, or read from their cache, from the step's positions).
@@ -104,6 +139,9 @@ pub struct StepInfo {
     /// Whether count, bounds and bytes come from the step's data (from the index or a scan);
     /// a step not scanned yet has count 0, empty bounds and its file's size as `bytes`.
     pub scanned: bool,
+    /// Each attribute's range, robust range and mean in this step (none until scanned): a
+    /// per-step colour range needs no read of the step.
+    pub attributes: Vec<AttributeStats>,
 }
 
 impl StepInfo {
@@ -115,6 +153,7 @@ impl StepInfo {
                 bounds: s.bounds,
                 bytes: s.bytes,
                 scanned: true,
+                attributes: s.attributes.clone(),
             },
             None => StepInfo {
                 name: step.name.clone(),
@@ -122,6 +161,7 @@ impl StepInfo {
                 bounds: Bounds::EMPTY,
                 bytes: std::fs::metadata(&step.path).map_or(0, |m| m.len() as usize),
                 scanned: false,
+                attributes: Vec::new(),
             },
         }
     }
@@ -227,7 +267,30 @@ impl TimeSeries {
     /// [`TimeSeries::wait_for_scan`] returns, [`TimeSeries::values`] are provisional. The final
     /// values are the same, bit for bit, however the statistics were gathered.
     pub fn open(path: &Path, options: &OpenOptions) -> Result<TimeSeries, DataError> {
+        TimeSeries::open_with(path, options, None)
+    }
+
+    /// Opens the series at `path` as [`TimeSeries::open`] does, the statistics of the steps
+    /// the index does not know gathered by `scan` (a distributed render's ranks, each reading
+    /// its part of each step: [`StepsScan`]) instead of this process reading them whole, before
+    /// it returns. The series' values are the same, bit for bit. A series whose smoothing
+    /// lengths come from neighbours is scanned whole (a part's neighbours lie in other parts).
+    /// Every rank calls it, at the same point: the scan is collective.
+    pub fn open_scanned_by(
+        path: &Path,
+        options: &OpenOptions,
+        scan: &dyn StepsScan,
+    ) -> Result<TimeSeries, DataError> {
+        TimeSeries::open_with(path, options, Some(scan))
+    }
+
+    fn open_with(
+        path: &Path,
+        options: &OpenOptions,
+        parts: Option<&dyn StepsScan>,
+    ) -> Result<TimeSeries, DataError> {
         let refs = io::list_steps_reading(path, options.format, options.read)?;
+        let parts = parts.filter(|_| options.smoothing.is_none());
         let mut index = SeriesIndex::load(&refs);
         if options.rescan {
             index.forget();
@@ -248,9 +311,15 @@ impl TimeSeries {
             ));
         };
         // Every later step must carry the first step's attributes.
-        let first_stats = match index.get(first, &options.attributes) {
-            Some(stats) => stats,
-            None => {
+        let first_stats = match (index.get(first, &options.attributes), parts) {
+            (Some(stats), _) => stats,
+            (None, Some(parts)) => {
+                let stamp = FileStamp::of(&first.path);
+                let stats = one(parts.stats(&refs, &[0], &options.attributes)?, first)?;
+                index.insert(first, stamp, &stats);
+                stats
+            }
+            (None, None) => {
                 let stamp = FileStamp::of(&first.path);
                 let step = read_file_step(first, &options.attributes, options.smoothing)?;
                 decoded += 1;
@@ -270,12 +339,36 @@ impl TimeSeries {
         let stats: Vec<Option<StepStats>> = std::iter::once(Some(first_stats))
             .chain(refs[1..].iter().map(|r| index.get(r, &selection)))
             .collect();
+        let mut stats = stats;
+        let mut missing: Vec<usize> = (0..stats.len()).filter(|&i| stats[i].is_none()).collect();
+        if let Some(parts) = parts.filter(|_| !missing.is_empty()) {
+            let stamps: Vec<_> = missing
+                .iter()
+                .map(|&i| FileStamp::of(&refs[i].path))
+                .collect();
+            let found = parts.stats(&refs, &missing, &selection)?;
+            if found.len() != missing.len() {
+                return Err(DataError::new(
+                    &refs[missing[0]].path,
+                    None,
+                    io::Problem::Malformed(format!(
+                        "the ranks' scan returned the statistics of {} steps for {}",
+                        found.len(),
+                        missing.len()
+                    )),
+                ));
+            }
+            for ((&i, stamp), s) in missing.iter().zip(stamps).zip(found) {
+                index.insert(&refs[i], stamp, &s);
+                stats[i] = Some(s);
+            }
+            missing.clear();
+        }
         let infos = refs
             .iter()
             .zip(&stats)
             .map(|(r, s)| StepInfo::of(r, s.as_ref()))
             .collect();
-        let missing: Vec<usize> = (0..stats.len()).filter(|&i| stats[i].is_none()).collect();
         let mut series = TimeSeries::assemble_with(
             Source::Files {
                 steps: refs,
@@ -287,7 +380,9 @@ impl TimeSeries {
         );
         series.shared.decoded.store(decoded, Ordering::Relaxed);
         if missing.is_empty() {
-            index.save();
+            if parts.is_none_or(|p| p.writes_index()) {
+                index.save();
+            }
         } else {
             *series.shared.scan_running.lock().unwrap() = true;
             let shared = series.shared.clone();
@@ -322,6 +417,7 @@ impl TimeSeries {
                 bounds: s.bounds,
                 bytes: s.bytes,
                 scanned: true,
+                attributes: s.attributes.clone(),
             })
             .collect();
         let ranges = series_ranges(stats.iter());
@@ -602,6 +698,14 @@ impl TimeSeries {
             .read_times
             .get(&index)
             .copied()
+    }
+
+    /// The step file `index` refers to (`None` for a series held in memory).
+    pub fn step_ref(&self, index: usize) -> Option<&StepRef> {
+        match &self.shared.source {
+            Source::Files { steps, .. } => steps.get(index),
+            Source::Memory(_) => None,
+        }
     }
 
     /// The file step `index` is read from (`None` for a series held in memory).

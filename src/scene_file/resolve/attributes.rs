@@ -2,15 +2,14 @@
 //! SPH kernel's masses and densities, from the flags over the scene file, and from the data's
 //! names where a default needs them.
 
-use std::sync::Arc;
-
+use super::DataReads;
 use super::args::{DataArgs, FieldOptions};
-use super::radius::SMOOTHING_LENGTH_NAMES;
-use super::source::{Source, names_of};
+use super::first_step::FirstStep;
+use super::first_step::SMOOTHING_LENGTH_NAMES;
+use super::source::Source;
 use crate::field::{Kernel, PerParticle};
 use crate::scene::smoothing::Smoothing;
 use crate::scene_file::SceneFile;
-use crate::values::Step;
 
 /// What the field asks of the data, before the series opens.
 pub(super) struct Wanted {
@@ -45,13 +44,14 @@ pub(super) fn choose(
     data: &DataArgs,
     options: &FieldOptions,
     first_attribute_by_default: bool,
-) -> anyhow::Result<(Wanted, Option<Arc<Step>>)> {
+    reads: &dyn DataReads,
+) -> anyhow::Result<(Wanted, Option<FirstStep>)> {
     let mut attribute = options.attribute.clone().or(scene.data.attribute.clone());
     // The first step with every attribute it holds, read where a default needs it.
-    let mut first_in_full: Option<Arc<Step>> = None;
+    let mut first: Option<FirstStep> = None;
     if attribute.is_none() && first_attribute_by_default {
-        first_in_full = source.first_in_full()?;
-        attribute = first_attribute(first_in_full.as_deref());
+        first = source.first_step(reads)?;
+        attribute = first_attribute(first.as_ref());
     }
     let smoothing = data.smoothing.or(scene.data.smoothing);
     let radius_attribute = options
@@ -63,17 +63,15 @@ pub(super) fn choose(
     let (radius_attribute, mass, density) = if kernel.is_sph() {
         let mass = options.mass.clone().or(scene.field.mass.clone());
         let density = options.density.clone().or(scene.field.density.clone());
-        if first_in_full.is_none()
-            && (radius_attribute.is_none() || mass.is_none() || density.is_none())
-        {
-            first_in_full = source.first_in_full()?;
+        if first.is_none() && (radius_attribute.is_none() || mass.is_none() || density.is_none()) {
+            first = source.first_step(reads)?;
         }
         let sph = crate::scene_file::kernel::resolve(
             kernel,
             radius_attribute,
             mass,
             density,
-            &names_of(first_in_full.as_deref()),
+            &first.as_ref().map(FirstStep::names).unwrap_or_default(),
             &SMOOTHING_LENGTH_NAMES,
             options.radius.or(scene.field.radius).is_some(),
         )?;
@@ -89,12 +87,12 @@ pub(super) fn choose(
         density,
         smoothing,
     };
-    Ok((wanted, first_in_full))
+    Ok((wanted, first))
 }
 
 /// The data's first attribute, the colour of an image given none, said with the others.
-fn first_attribute(first_in_full: Option<&Step>) -> Option<String> {
-    let names = names_of(first_in_full);
+fn first_attribute(first: Option<&FirstStep>) -> Option<String> {
+    let names = first.map(FirstStep::names).unwrap_or_default();
     let attribute = names.first().cloned();
     match &attribute {
         Some(first) => tracing::info!(

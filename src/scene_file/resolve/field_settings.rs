@@ -1,18 +1,16 @@
 //! The field's settings taken from the flags over the scene file, and the automatic values of
 //! the data (radius, colour range, cluster size) chosen and said in the log.
 
-use std::sync::Arc;
-
+use super::DataReads;
 use super::args::FieldOptions;
 use super::attributes::Wanted;
+use super::first_step::FirstStep;
 use super::radius::default_radius;
-use super::source::names_of;
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
 use crate::scene::TimeSeries;
 use crate::scene::maps::{ColorMap, DensityMap, PiecewiseLinear, RadiusMap};
 use crate::scene_file::{FieldSection, MapSpec, RadiusSpec, RangeSpec};
-use crate::values::Step;
 
 /// The radius and density maps: a flag's spelling over the scene file's entry, else the
 /// identity.
@@ -51,18 +49,22 @@ pub(super) fn color_map(spec: Option<&str>) -> anyhow::Result<ColorMap> {
 /// The first step in full, read from the series only where a message or a default needs what
 /// the series did not select: the data's attributes when the field carries none, a smoothing
 /// length for the default radius.
-pub(super) fn first_in_full_if_needed(
-    first_in_full: Option<Arc<Step>>,
+pub(super) fn first_step_if_needed(
+    first: Option<FirstStep>,
     series: &TimeSeries,
+    reads: &dyn DataReads,
     wanted: &Wanted,
     radius_spec: Option<RadiusSpec>,
-) -> anyhow::Result<Option<Arc<Step>>> {
-    Ok(match first_in_full {
+) -> anyhow::Result<Option<FirstStep>> {
+    Ok(match first {
         Some(step) => Some(step),
         None if wanted.attribute.is_none()
             || (radius_spec.is_none() && wanted.radius_attribute.is_none()) =>
         {
-            series.first_step_in_full()?
+            match series.step_ref(0) {
+                Some(first) => Some(reads.first_step(first)?),
+                None => series.first_step_in_full()?.map(FirstStep::Whole),
+            }
         }
         None => None,
     })
@@ -70,8 +72,8 @@ pub(super) fn first_in_full_if_needed(
 
 /// Says that a field without an attribute is coloured by density, with the attributes the
 /// data offers instead.
-pub(super) fn say_colour_by_density(first_in_full: Option<&Step>) {
-    let names_in_data = names_of(first_in_full);
+pub(super) fn say_colour_by_density(first: Option<&FirstStep>) {
+    let names_in_data = first.map(FirstStep::names).unwrap_or_default();
     tracing::info!(
         "colour: by density (no --attribute given); the data's attributes: {} (--attribute \
          NAME colours by one)",
@@ -88,7 +90,8 @@ pub(super) fn radius(
     series: &TimeSeries,
     wanted: &Wanted,
     radius_spec: Option<RadiusSpec>,
-    first_in_full: Option<&Step>,
+    first: Option<&FirstStep>,
+    reads: &dyn DataReads,
 ) -> anyhow::Result<f64> {
     Ok(match radius_spec {
         Some(spec) => spec.resolve(series.bounds().diagonal()),
@@ -96,8 +99,9 @@ pub(super) fn radius(
             let (radius, how) = default_radius(
                 series,
                 wanted.radius_attribute.as_deref(),
-                first_in_full,
+                first,
                 wanted.kernel,
+                reads,
             )?;
             tracing::info!("radius: {how}");
             radius
@@ -136,12 +140,12 @@ pub(super) fn cluster_size(
     asked: Option<ClusterSize>,
     series: &TimeSeries,
     field: &FieldSettings,
-    overlap: super::MeanOverlap,
+    reads: &dyn super::DataReads,
 ) -> anyhow::Result<ClusterSize> {
     Ok(match asked {
         Some(k) => k,
         None => {
-            let overlap = overlap(series, field)?;
+            let overlap = reads.mean_overlap(series, field)?;
             let k = ClusterSize::for_overlap(overlap);
             tracing::info!(
                 "cluster size K = {k} ({overlap:.1} particles reach a particle centre on average; --cluster sets it)"

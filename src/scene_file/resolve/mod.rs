@@ -6,6 +6,7 @@
 mod args;
 mod attributes;
 mod field_settings;
+mod first_step;
 mod open;
 mod radius;
 mod sections;
@@ -16,14 +17,17 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 
 pub use args::{DataArgs, FieldOptions, ViewFlags};
+pub use first_step::{
+    FirstStep, FirstStepFacts, median_of_positive, positive, smoothing_length_in,
+};
 pub use radius::{RADIUS_PER_SMOOTHING_LENGTH, RADIUS_PER_SPACING, default_radius};
 pub use sections::scene_sections;
 
 use super::{DataSection, FieldSection, RangeSpec, SceneFile};
 use crate::accel::ClusterSize;
 use crate::field::FieldSettings;
-use crate::io::{Format, ReadOptions};
-use crate::scene::TimeSeries;
+use crate::io::{Format, ReadOptions, StepRef};
+use crate::scene::{StepsScan, TimeSeries};
 
 /// Data and field settings after merging flags over the scene file.
 pub struct Resolved {
@@ -106,24 +110,24 @@ impl Resolved {
 /// without an attribute (flag or scene file), the image is coloured by the data's first
 /// attribute, which is said with the others (`--color-by-density` colours by density).
 pub fn resolve_for_images(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolved> {
-    resolve_with_overlap(data, options, true, &overlap_of_first_step)
+    resolve_with_reads(data, options, true, &InOneProcess)
 }
 
 /// Resolves the data and the field: flags over the scene file, the series opened with the
 /// attributes the field uses, and the automatic values of the data (radius, cluster size,
 /// range) chosen and said. Without an attribute the field carries none (density only).
 pub fn resolve(data: &DataArgs, options: &FieldOptions) -> anyhow::Result<Resolved> {
-    resolve_with_overlap(data, options, false, &overlap_of_first_step)
+    resolve_with_reads(data, options, false, &InOneProcess)
 }
 
 /// Resolves as [`resolve`] (or, with `first_attribute_by_default`, [`resolve_for_images`])
-/// does, the mean overlap that chooses the cluster size (when none is asked for) found by
-/// `overlap`: a distributed render's ranks compute it from their parts of the first step.
-pub fn resolve_with_overlap(
+/// does, what the data says beyond the flags and the series' index learned as `reads` says: a
+/// distributed render's ranks learn it from their parts of each step.
+pub fn resolve_with_reads(
     data: &DataArgs,
     options: &FieldOptions,
     first_attribute_by_default: bool,
-    overlap: MeanOverlap,
+    reads: &dyn DataReads,
 ) -> anyhow::Result<Resolved> {
     let scene = match &data.scene {
         Some(path) => SceneFile::load(path)?,
@@ -135,17 +139,55 @@ pub fn resolve_with_overlap(
         data,
         options,
         first_attribute_by_default,
-        overlap,
+        reads,
     )
 }
 
-/// How the mean overlap that chooses the cluster size is found over the series and the field
-/// ([`crate::render::auto::mean_overlap`]'s number).
-pub type MeanOverlap<'a> = &'a dyn Fn(&TimeSeries, &FieldSettings) -> anyhow::Result<f64>;
+/// How resolving learns from the data what neither the flags nor the series' index say: this
+/// process reading the steps it needs whole ([`InOneProcess`]), or a distributed render's ranks
+/// each reading its part of them (`cli::render::dist`), which find the same values.
+pub trait DataReads {
+    /// Who scans the steps the series' index does not know when the series opens (`None`:
+    /// this process, reading each step whole).
+    fn steps_scan(&self) -> Option<&dyn StepsScan>;
 
-/// The mean overlap from the whole first step, read in this process.
-fn overlap_of_first_step(series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64> {
-    Ok(crate::render::auto::mean_overlap(series, field)?)
+    /// The mean overlap that chooses the cluster size over the series' first step and the
+    /// field ([`crate::render::auto::mean_overlap`]'s number).
+    fn mean_overlap(&self, series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64>;
+
+    /// The series' first step, `first`, as the defaults see it ([`FirstStep`]), with every
+    /// attribute its file holds.
+    fn first_step(&self, first: &StepRef) -> anyhow::Result<FirstStep>;
+
+    /// The particles' spacing in the series' first step, as the default radius measures it
+    /// ([`crate::accel::spacing::median_nearest_distance`]).
+    fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>>;
+}
+
+/// One process reads what it needs, whole.
+pub struct InOneProcess;
+
+impl DataReads for InOneProcess {
+    fn steps_scan(&self) -> Option<&dyn StepsScan> {
+        None
+    }
+
+    fn first_step(&self, first: &StepRef) -> anyhow::Result<FirstStep> {
+        Ok(FirstStep::Whole(std::sync::Arc::new(crate::io::read_step(
+            first,
+            &crate::io::AttributeSelection::All,
+        )?)))
+    }
+
+    fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>> {
+        Ok(crate::accel::spacing::median_nearest_distance(
+            &series.step(0)?.positions,
+        ))
+    }
+
+    fn mean_overlap(&self, series: &TimeSeries, field: &FieldSettings) -> anyhow::Result<f64> {
+        Ok(crate::render::auto::mean_overlap(series, field)?)
+    }
 }
 
 /// Resolves as [`resolve`] (or, with `first_attribute_by_default`, [`resolve_for_images`])
@@ -163,7 +205,7 @@ pub fn resolve_scene(
         data,
         options,
         first_attribute_by_default,
-        &overlap_of_first_step,
+        &InOneProcess,
     )
 }
 
@@ -184,7 +226,7 @@ pub fn resolve_in_memory(
         data,
         options,
         first_attribute_by_default,
-        &overlap_of_first_step,
+        &InOneProcess,
     )
 }
 
@@ -195,16 +237,22 @@ fn resolve_from(
     data: &DataArgs,
     options: &FieldOptions,
     first_attribute_by_default: bool,
-    overlap: MeanOverlap,
+    reads: &dyn DataReads,
 ) -> anyhow::Result<Resolved> {
     let mut source = source::Source::new(&scene, memory, data)?;
-    let (mut wanted, first_in_full) =
-        attributes::choose(&source, &scene, data, options, first_attribute_by_default)?;
+    let (mut wanted, first) = attributes::choose(
+        &source,
+        &scene,
+        data,
+        options,
+        first_attribute_by_default,
+        reads,
+    )?;
     let opening = std::time::Instant::now();
     let mut step = data.step.or(scene.data.step).unwrap_or(0);
     let series = match source.memory.take() {
         Some(series) => open::check_in_memory(series, &source.path, &mut wanted)?,
-        None => open::from_files(&source, &mut wanted, data, step)?,
+        None => open::from_files(&source, &mut wanted, data, step, reads.steps_scan())?,
     };
     if let Some(time) = data.time {
         let (nearest, at) = series
@@ -230,12 +278,11 @@ fn resolve_from(
     let colormap = options.colormap.clone().or(scene.field.colormap.clone());
     let color_map = field_settings::color_map(colormap.as_deref())?;
     let radius_spec = options.radius.or(scene.field.radius);
-    let first_in_full =
-        field_settings::first_in_full_if_needed(first_in_full, &series, &wanted, radius_spec)?;
+    let first = field_settings::first_step_if_needed(first, &series, reads, &wanted, radius_spec)?;
     if wanted.attribute.is_none() && !first_attribute_by_default {
-        field_settings::say_colour_by_density(first_in_full.as_deref());
+        field_settings::say_colour_by_density(first.as_ref());
     }
-    let radius = field_settings::radius(&series, &wanted, radius_spec, first_in_full.as_deref())?;
+    let radius = field_settings::radius(&series, &wanted, radius_spec, first.as_ref(), reads)?;
     let range = options
         .attribute_range
         .or(scene.data.attribute_range)
@@ -262,7 +309,7 @@ fn resolve_from(
         options.cluster.or(scene.field.cluster),
         &series,
         &field,
-        overlap,
+        reads,
     )?;
     field_settings::say_rounded_maps(&field);
     Ok(Resolved {

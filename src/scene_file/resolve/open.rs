@@ -10,7 +10,7 @@ use super::args::DataArgs;
 use super::attributes::Wanted;
 use super::source::{Source, names_of};
 use crate::io::AttributeSelection;
-use crate::scene::{OpenOptions, TimeSeries};
+use crate::scene::{OpenOptions, StepsScan, TimeSeries};
 
 /// A series held whole in memory: every attribute is there; checks the ones `wanted` asks for,
 /// a name in the other number or case being the data's, as for a file.
@@ -60,30 +60,32 @@ pub(super) fn from_files(
     wanted: &mut Wanted,
     data: &DataArgs,
     asked_step: usize,
+    scan: Option<&dyn StepsScan>,
 ) -> anyhow::Result<TimeSeries> {
     let (mass_attribute, density_attribute) = wanted.mass_and_density_attributes();
     let open = |attribute: &Option<String>, radius_attribute: &Option<String>| {
-        TimeSeries::open(
-            &source.path,
-            &OpenOptions {
-                format: source.format,
-                read: source.read,
-                smoothing: wanted.smoothing,
-                attributes: AttributeSelection::Only(
-                    attribute
-                        .iter()
-                        .chain(radius_attribute.iter())
-                        .chain(mass_attribute.iter())
-                        .chain(density_attribute.iter())
-                        .cloned()
-                        .collect(),
-                ),
-                cache_bytes: data.cache_mib << 20,
-                // A batch frame uses the final series values, never provisional ones.
-                background_scan: false,
-                rescan: data.rescan,
-            },
-        )
+        let options = OpenOptions {
+            format: source.format,
+            read: source.read,
+            smoothing: wanted.smoothing,
+            attributes: AttributeSelection::Only(
+                attribute
+                    .iter()
+                    .chain(radius_attribute.iter())
+                    .chain(mass_attribute.iter())
+                    .chain(density_attribute.iter())
+                    .cloned()
+                    .collect(),
+            ),
+            cache_bytes: data.cache_mib << 20,
+            // A batch frame uses the final series values, never provisional ones.
+            background_scan: false,
+            rescan: data.rescan,
+        };
+        match scan {
+            Some(scan) => TimeSeries::open_scanned_by(&source.path, &options, scan),
+            None => TimeSeries::open(&source.path, &options),
+        }
     };
     let (mut attribute, mut radius_attribute) =
         (wanted.attribute.clone(), wanted.radius_attribute.clone());

@@ -1,9 +1,10 @@
 //! The global radius when none is given, from the data's smoothing lengths or spacing.
 
+use super::DataReads;
+use super::first_step::FirstStep;
 use crate::field::Kernel;
 use crate::scene::TimeSeries;
 use crate::scene_file::RadiusSpec;
-use crate::values::Step;
 
 /// The default global radius over the particles' spacing: twice the median nearest-neighbour
 /// distance joins neighbours (the particle's Gaussian then has a standard deviation of 2/3 of
@@ -14,25 +15,16 @@ pub const RADIUS_PER_SPACING: f64 = 2.0;
 /// of the cubic-spline SPH kernel as SWIFT and sarracen define h.
 pub const RADIUS_PER_SMOOTHING_LENGTH: f64 = 2.0;
 
-/// Names smoothing-length arrays go by in SPH codes' output (compared ignoring case).
-pub(super) const SMOOTHING_LENGTH_NAMES: [&str; 6] = [
-    "h",
-    "hsml",
-    "smoothinglength",
-    "smoothinglengths",
-    "smoothing_length",
-    "smoothing_lengths",
-];
-
 /// The global radius when none is given, derived from the data as the other automatic values
 /// are, from the series' first step (so every step and command agrees), with a sentence saying
-/// how (for the log and `aarbf info`). `first_in_full` is that step with every attribute its
-/// file holds (to find a smoothing length the field does not use).
+/// how (for the log and `aarbf info`). `first` is that step as the defaults see it (to find a
+/// smoothing length the field does not use), `reads` how the particles' spacing is measured.
 pub fn default_radius(
     series: &TimeSeries,
     radius_attribute: Option<&str>,
-    first_in_full: Option<&Step>,
+    first: Option<&FirstStep>,
     kernel: Kernel,
+    reads: &dyn DataReads,
 ) -> anyhow::Result<(f64, String)> {
     if let Some(h) = radius_attribute {
         if kernel.is_sph() {
@@ -54,38 +46,22 @@ pub fn default_radius(
         ));
     }
     // A smoothing length in the data: its median sets the radius (2h, the kernel's support).
-    let smoothing_length = first_in_full.and_then(|step| {
-        step.attributes
-            .iter()
-            .find(|a| SMOOTHING_LENGTH_NAMES.contains(&a.name.to_ascii_lowercase().as_str()))
-    });
-    if let Some(h) = smoothing_length {
-        let mut positive: Vec<f64> = h
-            .values
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .collect();
-        if !positive.is_empty() {
-            let middle = positive.len() / 2;
-            let (_, &mut median, _) = positive.select_nth_unstable_by(middle, f64::total_cmp);
-            let r = RADIUS_PER_SMOOTHING_LENGTH * median;
-            let name = &h.name;
-            return Ok((
-                r,
-                format!(
-                    "{r:.6e}, {RADIUS_PER_SMOOTHING_LENGTH} x the median smoothing length \
-                     '{name}' in step 0 ({median:.6e}); --radius-attribute {name} gives each \
-                     particle its own, --radius sets a length or a percentage of the diagonal \
-                     (\"1.5%\")"
-                ),
-            ));
-        }
+    if let Some((name, Some(median))) = first.and_then(FirstStep::smoothing_length) {
+        let r = RADIUS_PER_SMOOTHING_LENGTH * median;
+        return Ok((
+            r,
+            format!(
+                "{r:.6e}, {RADIUS_PER_SMOOTHING_LENGTH} x the median smoothing length \
+                 '{name}' in step 0 ({median:.6e}); --radius-attribute {name} gives each \
+                 particle its own, --radius sets a length or a percentage of the diagonal \
+                 (\"1.5%\")"
+            ),
+        ));
     }
     let spacing = if series.is_empty() {
         None
     } else {
-        crate::accel::spacing::median_nearest_distance(&series.step(0)?.positions)
+        reads.first_step_spacing(series)?
     };
     Ok(match spacing {
         Some(d) => {

@@ -2,12 +2,13 @@
 //! whole where a default needs the names of the data's attributes.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use anyhow::Context;
 
+use super::DataReads;
 use super::args::DataArgs;
-use crate::io::{AttributeSelection, Format, ReadOptions};
+use super::first_step::FirstStep;
+use crate::io::{Format, ReadOptions};
 use crate::scene::TimeSeries;
 use crate::scene_file::SceneFile;
 use crate::values::Step;
@@ -47,19 +48,16 @@ impl Source {
         })
     }
 
-    /// The first step with every attribute it holds: from memory, or read from its file.
-    pub(super) fn first_in_full(&self) -> anyhow::Result<Option<Arc<Step>>> {
+    /// The first step with every attribute it holds, as the defaults see it: from memory, or
+    /// from its file as `reads` reads it.
+    pub(super) fn first_step(&self, reads: &dyn DataReads) -> anyhow::Result<Option<FirstStep>> {
         if let Some(series) = &self.memory {
-            return Ok(series.first_step_in_full()?);
+            return Ok(series.first_step_in_full()?.map(FirstStep::Whole));
         }
         let refs = crate::io::list_steps_reading(&self.path, self.format, self.read)?;
-        Ok(match refs.first() {
-            Some(first) => Some(Arc::new(crate::io::read_step(
-                first,
-                &AttributeSelection::All,
-            )?)),
-            None => None,
-        })
+        refs.first()
+            .map(|first| reads.first_step(first))
+            .transpose()
     }
 }
 
