@@ -406,4 +406,14 @@ fn a_new_series_is_scanned_from_the_processes_parts() {
         .collect();
     written.sort();
     assert_eq!(written, [".aarbf-index.json", "mpi.exr"]);
+    // Without AARBF_LOG, rank 0 alone says what every process resolved.
+    let again = mpi_dir.path().join("again.exr");
+    let out = mpirun(3, &args(&mpi_dir.path().join("output_*.csv"), &again))
+        .env_remove("AARBF_LOG")
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{log}");
+    assert_eq!(log.matches("radius: ").count(), 1, "{log}");
+    assert_eq!(pixels(&again), mpi, "the same image from the index");
 }

@@ -20,6 +20,14 @@ pub fn launched_size() -> Option<usize> {
         .find_map(|var| std::env::var(var).ok()?.trim().parse().ok())
 }
 
+/// This process's rank in the MPI job the launcher says it is one of (`None` outside one).
+pub fn launched_rank() -> Option<usize> {
+    launched_size()?;
+    ["OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK"]
+        .iter()
+        .find_map(|var| std::env::var(var).ok()?.trim().parse().ok())
+}
+
 /// How many ranks of the job share this node (Open MPI and MPICH say), if the launcher says.
 pub fn node_local_size() -> Option<usize> {
     ["OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS"]

@@ -39,7 +39,7 @@ pub mod scan;
 pub mod step_stats;
 
 pub use balance::{Balance, CostModel};
-pub use comm::{Comm, CommError, CommExt, Parts, launched_size, node_local_size};
+pub use comm::{Comm, CommError, CommExt, Parts, launched_rank, launched_size, node_local_size};
 pub use local::{LocalComm, run_local};
 #[cfg(feature = "mpi")]
 pub use mpi_comm::MpiComm;

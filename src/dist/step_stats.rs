@@ -14,7 +14,7 @@ use super::DistError;
 use super::comm::{Comm, CommExt};
 use super::order::kth_smallest;
 use crate::io::{self, AttributeSelection, DataError, Part, Problem, StepRef};
-use crate::scene::index::{AttributeStats, StepStats};
+use crate::scene::index::{AttributeStats, StepStats, robust_ranks};
 use crate::values::Bounds;
 use crate::values::exact::ExactSum;
 use glam::DVec3;
@@ -135,17 +135,15 @@ fn of_part(
         )
         .into());
     }
-    // The robust range's ranks in the whole step (`crate::scene::index::robust_range`).
+    // The robust range's ranks in the whole step.
     let queries: Vec<(&[f64], u64)> = part
         .attributes
         .iter()
         .zip(&per_attribute)
         .flat_map(|(a, &(n, ..))| {
-            let last = n.saturating_sub(1);
-            [
-                (&a.values[..], (last / 100) as u64),
-                (&a.values[..], (99 * last).div_ceil(100) as u64),
-            ]
+            // n > 0: the step holds particles, and each of them every attribute.
+            let (lo, hi) = robust_ranks(n).unwrap_or((0, 0));
+            [(&a.values[..], lo as u64), (&a.values[..], hi as u64)]
         })
         .collect();
     let percentiles = kth_smallest(comm, &queries)?;

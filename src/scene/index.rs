@@ -62,15 +62,19 @@ pub struct AttributeStats {
     pub count: usize,
 }
 
+/// The ranks, from 0 in sorted order, of the 1st and 99th percentiles of `n` values (nearest
+/// rank: floor(0.01 (n - 1)) and ceil(0.99 (n - 1))); `None` for none. A distributed scan takes
+/// the same ranks over the ranks' parts (`crate::dist::step_stats`).
+pub fn robust_ranks(n: usize) -> Option<(usize, usize)> {
+    let last = n.checked_sub(1)?;
+    Some((last / 100, (99 * last).div_ceil(100)))
+}
+
 /// The 1st and 99th percentiles of `values` (nearest rank: the values at ranks
-/// floor(0.01 (n - 1)) and ceil(0.99 (n - 1)) in sorted order), the range a colour map spans
+/// [`robust_ranks`] in sorted order), the range a colour map spans
 /// without a few outliers washing the rest into one colour. `None` for no values.
 pub fn robust_range(values: &[f64]) -> Option<(f64, f64)> {
-    if values.is_empty() {
-        return None;
-    }
-    let last = values.len() - 1;
-    let (lo, hi) = (last / 100, (99 * last).div_ceil(100));
+    let (lo, hi) = robust_ranks(values.len())?;
     let mut v = values.to_vec();
     let (_, &mut low, above) = v.select_nth_unstable_by(lo, f64::total_cmp);
     let high = if hi == lo {
