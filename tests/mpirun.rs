@@ -294,6 +294,55 @@ fn a_rank_that_dies_ends_the_job_with_a_failure() {
     );
 }
 
+common::on_every_gpu!(gpu_processes_render_the_image_of_as_many_gpu_threads);
+
+/// `mpirun -np 2 aarbf render --backend <gpu>`: each process renders its brick on its own
+/// device (the first adapter; on a machine of one GPU, that one), and the image is the one two
+/// ranks as threads sharing one device render (measured: bit for bit, see the message).
+fn gpu_processes_render_the_image_of_as_many_gpu_threads(gpu: common::Gpu) {
+    gpu.require();
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = common::generated_dam_break(d);
+    let args = |path: &Path| {
+        let mut args = common::dam_break_render_args(&header, path, (48, 40), 2);
+        let at = args.iter().position(|a| a == "--backend").unwrap();
+        args[at + 1] = gpu.to_string();
+        let at = args.iter().position(|a| a == "--precision").unwrap();
+        args[at + 1] = "f32".into();
+        args.extend(["--integrator".into(), "marching".into()]);
+        args
+    };
+    let threads_path = d.join("threads.exr");
+    let mut threads_args = args(&threads_path);
+    threads_args.extend(["--ranks".into(), "2".into()]);
+    let threads =
+        common::aarbf_logged(&threads_args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        threads.status.success(),
+        "{}",
+        String::from_utf8_lossy(&threads.stderr)
+    );
+    let mpi_dir = d.join("mpi");
+    std::fs::create_dir(&mpi_dir).unwrap();
+    let mpi_path = mpi_dir.join("image.exr");
+    let out = mpirun(2, &args(&mpi_path))
+        .output()
+        .expect("mpirun runs (cargo xtask setup --mpi installs Open MPI)");
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "mpirun -np 2:\n{log}");
+    assert!(log.contains(&format!("{gpu} backend")), "{log}");
+    let (a, b) = (pixels(&threads_path), pixels(&mpi_path));
+    let diff = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    eprintln!("{gpu}: mpirun -np 2 against --ranks 2: max difference {diff:e}");
+    assert!(a.iter().any(|&v| v > 0.05), "the fluid shows");
+    assert_eq!(a, b, "max difference {diff:e}");
+}
+
 /// A SWIFT-like series of CSV steps (%.17g, steps of 500 to 511 rows) with no index beside it
 /// and no flags but the image's: the MPI processes scan it and find its defaults (colour,
 /// radius from the median smoothing length, cluster size) each from its parts, as the same

@@ -22,6 +22,7 @@ mod field_reference;
 mod first_contact;
 mod fuzz_regressions;
 mod gpu_backends;
+mod gpu_bricks;
 mod gpu_cli;
 mod hdf5_snapshots;
 mod knn_smoothing;

@@ -24,15 +24,26 @@ float first_sample(float t0, float a, float dt, float jitter) {
     return max(ceil((a - t0) / dt - jitter), 0.0);
 }
 
-// Transmittance from x towards the light to the march box's exit: exp(-Σ sigma dt).
+#ifdef OWNED_BRICK
+#include "shared/owned.glsl"
+#endif
+
+// Transmittance from x towards the light to the march box's exit: exp(-Σ sigma dt). In a
+// brick (OWNED_BRICK), marched to the brick's exit, plus the depth nearer the light that the
+// bricks before it left.
 float shadow_transmittance(vec3 x, float jitter) {
     vec3 dir = frame.light.xyz;
+#ifdef OWNED_BRICK
+    vec2 span = ray_box(x, dir, brick.clip_lo.xyz, brick.clip_hi.xyz);
+    float tau = light_depth_at(x);
+#else
     vec2 span = ray_box(x, dir, frame.box_min.xyz, frame.box_max.xyz);
+    float tau = 0.0;
+#endif
     if (!(span.x < span.y)) {
-        return 1.0;
+        return exp(-tau);
     }
     float dt = frame.box_min.w;
-    float tau = 0.0;
     for (float k = 0.0;; k += 1.0) {
         float t = (k + jitter) * dt;
         if (t >= span.y || tau >= 745.0) {
@@ -131,3 +142,162 @@ vec4 render_pixel(uvec2 pixel) {
     // Unreachable (every branch returns); naga's validator wants a return on every path.
     return vec4(bg, 0.0);
 }
+
+#ifdef OWNED_BRICK
+// A brick's share of pixel `pixel`: the twin of render_owned_pixels_with (march_packet and
+// delta_tracking with Some(brick)) in src/backend/cpu/integrators.rs. The whole frame's
+// lattice t_enter + (k + jitter) dt and numbers; only the samples whose points the brick's
+// half-open box holds count. Returns premultiplied colour and transmittance [r, g, b, T] from
+// T = 1 with no background; single scattering [L, 0] where it scatters in this brick, else
+// [0, 0, 0, 1].
+vec4 render_owned_pixel(uvec2 pixel) {
+    vec4 miss = vec4(0.0, 0.0, 0.0, 1.0);
+    vec3 origin, dir;
+    vec2 span = primary_span(pixel, origin, dir);
+    if (!(span.x < span.y)) {
+        return miss;
+    }
+    float t_enter = span.x;
+    float t_exit = span.y;
+    float dt = frame.box_min.w;
+
+    if (INTEGRATOR != INTEGRATOR_DELTA) {
+        // clip_to_owned: the part of the ray that can meet the box, grown by a step.
+        vec2 part = ray_box(origin, dir, brick.march_lo.xyz, brick.march_hi.xyz);
+        float a = max(part.x, t_enter);
+        float b = min(part.y, t_exit);
+        if (!(a < b)) {
+            return miss;
+        }
+        bool scatter = INTEGRATOR == INTEGRATOR_SS_REFERENCE;
+        bool stochastic = INTEGRATOR == INTEGRATOR_MARCHING;
+        float jitter = random_number(pixel, (scatter || stochastic) ? 1u : 0u);
+        float shadow_jitter = random_number(pixel, 2u);
+        float target_tau = stochastic ? -log(1.0 - random_number(pixel, 0u)) : 3.0e38;
+        // Stochastic marching goes on from the depth of the bricks in front; past the
+        // free-flight depth already, the ray scattered in front of this brick.
+        float tau = owned_depth_in_front(pixel);
+        if (!(tau <= target_tau)) {
+            return miss;
+        }
+        vec3 colour = vec3(0.0);
+        float transmittance = 1.0;
+        for (float k = first_sample(t_enter, a, dt, jitter);; k += 1.0) {
+            float t = t_enter + (k + jitter) * dt;
+            if (t >= b) {
+                break;
+            }
+            vec3 at = origin + dir * t;
+            // Another box's sample is another rank's (the ray marches on).
+            if (!owned_contains(at)) {
+                continue;
+            }
+            vec4 s = shade(field_query(at));
+            if (stochastic) {
+                tau += s.w * dt;
+                if (tau > target_tau) {
+                    return vec4(scattered(at, s.rgb, shadow_jitter), 0.0);
+                }
+                continue;
+            }
+            if (s.w <= 0.0) {
+                continue;
+            }
+            float alpha = 1.0 - exp(-s.w * dt);
+            vec3 emitted = scatter ? scattered(at, s.rgb, shadow_jitter) : s.rgb;
+            colour += transmittance * alpha * emitted;
+            transmittance *= 1.0 - alpha;
+            if (1.0 - transmittance >= frame.box_max.w) {
+                break;
+            }
+        }
+        if (stochastic) {
+            return miss;
+        }
+        return vec4(colour, transmittance);
+    } else {
+        // The ray's segment in the brick's box exactly (its samples are its own), tracked
+        // with the brick's numbers (the host writes the brick's seed into the frame).
+        vec2 part = ray_box(origin, dir, brick.clip_lo.xyz, brick.clip_hi.xyz);
+        float a = max(part.x, t_enter);
+        float b = min(part.y, t_exit);
+        float majorant = frame.shading.z;
+        if (majorant <= 0.0 || !(a < b)) {
+            return miss;
+        }
+        uint dim = 0u;
+        float t = a;
+        for (;;) {
+            float xi = random_number(pixel, dim);
+            dim = (dim == 0u) ? 3u : dim + 1u;
+            t -= log(1.0 - xi) / majorant;
+            if (t >= b) {
+                return miss;
+            }
+            vec3 at = origin + dir * t;
+            vec4 s = shade(field_query(at));
+            float accept = random_number(pixel, dim);
+            dim += 1u;
+            if (accept * majorant < s.w) {
+                return vec4(scattered(at, s.rgb, random_number(pixel, 2u)), 0.0);
+            }
+            if (dim > 100000u) {
+                return miss;
+            }
+        }
+    }
+    return miss;
+}
+
+// The optical depth Σ sigma dt of the samples the brick owns along one ray of a depth pass:
+// the twin of depth_packet (with DepthRay::of) in src/backend/cpu/owned.rs. A primary ray
+// on stochastic marching's lattice (jitter dimension 1), stopped past its free-flight depth
+// (dimension 0); a light map texel's ray marched whole.
+float owned_depth_ray(uvec2 texel) {
+    vec3 origin, dir;
+    float jitter;
+    float stop_past;
+    if (brick.task.x == OWNED_TASK_PRIMARY_DEPTH) {
+        primary_ray(texel, origin, dir);
+        jitter = random_number(texel, 1u);
+        stop_past = -log(1.0 - random_number(texel, 0u));
+    } else {
+        // LightMap::texel_ray.
+        float u = brick.light_u.w + (float(texel.x) + 0.5) * brick.light_texel.x;
+        float v = brick.light_v.w + (float(texel.y) + 0.5) * brick.light_texel.y;
+        dir = brick.light_dir.xyz;
+        origin = brick.light_centre.xyz + brick.light_u.xyz * u + brick.light_v.xyz * v
+            - dir * brick.light_centre.w;
+        jitter = white_noise(texel.x, texel.y, 0u, 0u, LIGHT_MAP_SEED);
+        stop_past = 3.0e38;
+    }
+    vec2 span = ray_box(origin, dir, frame.box_min.xyz, frame.box_max.xyz);
+    if (!(span.x < span.y)) {
+        return 0.0;
+    }
+    float t_enter = span.x;
+    float dt = frame.box_min.w;
+    vec2 part = ray_box(origin, dir, brick.march_lo.xyz, brick.march_hi.xyz);
+    float a = max(part.x, t_enter);
+    float b = min(part.y, span.y);
+    float tau = 0.0;
+    if (!(a < b)) {
+        return tau;
+    }
+    for (float k = first_sample(t_enter, a, dt, jitter);; k += 1.0) {
+        float t = t_enter + (k + jitter) * dt;
+        if (t >= b) {
+            break;
+        }
+        vec3 at = origin + dir * t;
+        if (!owned_contains(at)) {
+            continue;
+        }
+        tau += shade(field_query(at)).w * dt;
+        if (tau > stop_past) {
+            break;
+        }
+    }
+    return tau;
+}
+#endif

@@ -46,3 +46,29 @@ struct Voxels {
     uvec4 channels;  // x the sums each cell receives: 1 (Phi), 2 (and a scalar Theta
                      // numerator) or 4 (and an RGB one); yzw unused
 };
+
+// A brick's share of a distributed frame (the brick kernels, `lbvh_owned.comp`; the Rust twin
+// is `GpuBrick` in src/backend/shaders/mod.rs, which says how it is made from a BrickShare or
+// DepthRays). Positions are local coordinates, as the Frame's; a half-open box's infinite
+// faces stay infinite (f32 inf), which the comparisons of owned_contains take as they are.
+struct Brick {
+    vec4 owned_lo;     // xyz the half-open box's least corner (may be -inf); w unused
+    vec4 owned_hi;     // xyz its largest corner (may be +inf); w unused
+    vec4 clip_lo;      // xyz the closed box within the march box (shadow rays' exit, delta
+                       // tracking's segment); w unused
+    vec4 clip_hi;
+    vec4 march_lo;     // xyz the clipped box grown by a step: the part of a ray that is marched
+                       // (clip_to_owned); w unused
+    vec4 march_hi;
+    uvec4 rect;        // x0, y0, x1, y1: the pixels (or light map texels) written, row-major
+    uvec4 task;        // x OWNED_TASK_*; y 1 when a depth in front is given (first in the
+                       // inputs, one per pixel of rect); z where the inputs start (vec4s into
+                       // the output array); w unused
+    uvec4 prefix;      // x0, y0, x1, y1: the light prefix's texels (empty: local shadows)
+    uvec4 prefix_at;   // x the prefix's first float in the inputs; yzw unused
+    vec4 light_centre; // the light map (LightMap): xyz its centre; w how far behind it rays start
+    vec4 light_u;      // xyz the texel columns' axis; w the map's least u
+    vec4 light_v;      // xyz the rows' axis; w the map's least v
+    vec4 light_dir;    // xyz towards the light; w unused
+    vec4 light_texel;  // x, y a texel's width along u and v; zw unused
+};

@@ -51,6 +51,7 @@ layout(push_constant) uniform Push {
     uvec2 accum_address;        // Vec4Array: the frame's f32 RGBA sums per pixel
     uvec2 particle_lo_address;  // ParticleArray of the lo parts (POSITION_DS; else 0)
     uvec2 voxel_address;        // the voxel baseline's grid: 4 f32 sums per cell (else 0)
+    uvec2 owned_address;        // a brick kernel's brick, output and inputs (lbvh_owned.comp; else 0)
 } push;
 
 // Query points (query launches): one vec4 each, or with double-single positions two, hi then

@@ -12,7 +12,7 @@
 
 use glam::DVec3;
 
-use crate::values::{Bounds, HalfOpenBox, PixelRect};
+use crate::values::{Bounds, FrameParams, HalfOpenBox, Integrator, PixelRect};
 
 /// The rays of an orthographic light map: `size`² texels over the projection of a box onto the
 /// plane across the light, each a ray towards the light that starts behind the box.
@@ -192,6 +192,17 @@ pub struct BrickShare<'a> {
 }
 
 impl BrickShare<'_> {
+    /// The frame this brick renders, where it is not `frame` itself: delta tracking draws each
+    /// brick's numbers from its own seed (brick 0 the frame's), since bricks track their
+    /// segments independently; every other integrator uses the frame's numbers, which make
+    /// the single rank's decisions. Every backend renders a share with it.
+    pub fn own_frame(&self, frame: &FrameParams) -> Option<FrameParams> {
+        (frame.integrator == Integrator::Delta && self.index > 0).then(|| FrameParams {
+            seed: frame.seed ^ self.index.wrapping_mul(0x9E37_79B9),
+            ..frame.clone()
+        })
+    }
+
     /// The depth in front of this brick along pixel `(x, y)`'s primary ray (0 when not given).
     pub fn depth_in_front(&self, x: u32, y: u32) -> f64 {
         self.depth_in_front

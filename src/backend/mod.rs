@@ -100,6 +100,26 @@ fn auto() -> Box<dyn Backend> {
     Box::new(cpu::CpuBackend::new())
 }
 
+/// This process's index among the processes of its job on its node, as the launcher says it
+/// (Open MPI, MPICH and Intel MPI, Slurm); `None` outside such a job. A GPU backend opens the
+/// device [`device_for_rank`] picks by it, so the ranks of a node spread over its GPUs.
+pub fn node_local_rank() -> Option<usize> {
+    [
+        "OMPI_COMM_WORLD_LOCAL_RANK",
+        "MPI_LOCALRANKID",
+        "SLURM_LOCALID",
+    ]
+    .iter()
+    .find_map(|name| std::env::var(name).ok()?.trim().parse().ok())
+}
+
+/// Which of `count` equally good devices a process opens: its node-local rank modulo the
+/// count (a node's ranks spread over its GPUs; with one GPU they all share it), the first
+/// outside a job.
+pub fn device_for_rank(count: usize, node_local_rank: Option<usize>) -> usize {
+    node_local_rank.map_or(0, |r| r % count.max(1))
+}
+
 /// What a backend is and can do.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Capabilities {
@@ -405,4 +425,20 @@ pub trait Backend: Send {
     /// How the uploaded step's positions are held and its terms summed, with the error bound
     /// that follows (`None` before an upload).
     fn representation(&self) -> Option<Representation>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::device_for_rank;
+
+    /// A node's ranks spread over its GPUs, round robin; one GPU serves them all; outside a
+    /// job (or with no device counted) the first.
+    #[test]
+    fn ranks_of_a_node_spread_over_its_devices() {
+        let on_four: Vec<usize> = (0..9).map(|r| device_for_rank(4, Some(r))).collect();
+        assert_eq!(on_four, [0, 1, 2, 3, 0, 1, 2, 3, 0]);
+        assert!((0..5).all(|r| device_for_rank(1, Some(r)) == 0));
+        assert_eq!(device_for_rank(3, None), 0);
+        assert_eq!(device_for_rank(0, Some(2)), 0);
+    }
 }

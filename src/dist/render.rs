@@ -364,6 +364,28 @@ pub fn render_distributed(
     render_balanced(comm, backend, local, scene, frames, None).map(|(image, _)| image)
 }
 
+/// [`representation_code`] of the most precise representations: f64 on the CPU, double-single
+/// positions with compensated sums on a GPU (what each makes of [`Precision::F64`]).
+const MOST_PRECISE: u8 = 0;
+
+/// [`representation_code`] of a backend that holds no representation (a brick without
+/// particles): it asks nothing of the others.
+const NO_REPRESENTATION: u8 = u8::MAX;
+
+/// A brick's representation as one byte for the ranks to compare: [`MOST_PRECISE`], which
+/// less precise one it is, or [`NO_REPRESENTATION`].
+fn representation_code(r: Option<crate::backend::Representation>) -> u8 {
+    use crate::backend::precision::Summation;
+    match r.map(|r| (r.positions, r.summation)) {
+        None => NO_REPRESENTATION,
+        Some((PositionKind::F64, _)) => MOST_PRECISE,
+        Some((PositionKind::DoubleSingle, Summation::Compensated { .. })) => MOST_PRECISE,
+        Some((PositionKind::DoubleSingle, _)) => 1,
+        Some((PositionKind::F32, Summation::Compensated { .. })) => 2,
+        Some((PositionKind::F32, _)) => 3,
+    }
+}
+
 /// [`render_distributed`] with the leaves balanced by `cost` (equal particles where `None`),
 /// returning, on every rank, what this render measured: each leaf's render seconds per
 /// particle it owned, for the next decomposition. A rank's render time is its thread's CPU
@@ -405,18 +427,23 @@ pub fn render_balanced(
     let step = Arc::new(brick.step);
     upload(backend, &step, scene, scene.precision)?;
     // The precision a brick chooses follows its own particles; the image must not depend on
-    // the decomposition, so where any brick needs f64 every brick takes it.
-    let f64_here = backend
-        .representation()
-        .is_some_and(|r| r.positions == PositionKind::F64);
-    let any_f64 = comm
-        .all_gather_of(&[u8::from(f64_here)])?
+    // the decomposition, so where bricks chose differently every brick takes the most precise
+    // (f64 on the CPU; on a GPU backend double-single positions with compensated sums, what
+    // it makes of f64).
+    let chosen = representation_code(backend.representation());
+    let codes = comm.all_gather_of(&[chosen])?;
+    let differ = codes
         .iter()
-        .any(|v| v.first() == Some(&1));
-    if any_f64 && !f64_here {
+        .filter_map(|v| v.first())
+        .any(|&c| c != NO_REPRESENTATION && c != chosen);
+    if differ && chosen != MOST_PRECISE && chosen != NO_REPRESENTATION {
         upload(backend, &step, scene, Precision::F64)?;
     }
-    report.f64_positions = u64::from(any_f64);
+    report.f64_positions = u64::from(
+        backend
+            .representation()
+            .is_some_and(|r| r.positions == PositionKind::F64),
+    );
     (report.build_seconds, report.build_cpu_seconds) = clock.stop();
 
     let grid = TileGrid {

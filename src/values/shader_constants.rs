@@ -59,6 +59,20 @@ pub const LBVH_STACK_SIZE: u32 = 64;
 /// paper's port 15): the buffer lives in a ray payload or a kernel's private arrays.
 pub const SPLAT_K_MAX: u32 = 64;
 
+/// The light map's lattice jitter per texel is white noise of this seed (dimension 0, frame
+/// 0), so that a map is the same for every frame under one light: it is computed once and
+/// kept (`backend::cpu::owned`, `shared/integrators.glsl`'s `owned_depth_ray`).
+pub const LIGHT_MAP_SEED: u32 = 0x4C49_4748;
+
+/// What a brick kernel computes (`params.glsl`'s `Brick.task.x`): a brick's share of a frame
+/// (`Backend::render_owned`), or its optical depth along primary rays or light map rays
+/// (`Backend::owned_depth`).
+pub const OWNED_TASK_RENDER: u32 = 0;
+/// See [`OWNED_TASK_RENDER`].
+pub const OWNED_TASK_PRIMARY_DEPTH: u32 = 1;
+/// See [`OWNED_TASK_RENDER`].
+pub const OWNED_TASK_LIGHT_DEPTH: u32 = 2;
+
 /// Keys per radix-sort tile (`shaders_wgsl/radix_sort.wgsl`) and digits per pass.
 pub const SORT_TILE: u32 = 4096;
 /// Values of one radix-sort digit (4 bits a pass).
@@ -209,6 +223,10 @@ fn unsigned() -> Vec<(&'static str, u64)> {
         ("MORTON_CELLS", MORTON_CELLS.into()),
         ("LBVH_STACK_SIZE", LBVH_STACK_SIZE.into()),
         ("SPLAT_K_MAX", SPLAT_K_MAX.into()),
+        ("LIGHT_MAP_SEED", LIGHT_MAP_SEED.into()),
+        ("OWNED_TASK_RENDER", OWNED_TASK_RENDER.into()),
+        ("OWNED_TASK_PRIMARY_DEPTH", OWNED_TASK_PRIMARY_DEPTH.into()),
+        ("OWNED_TASK_LIGHT_DEPTH", OWNED_TASK_LIGHT_DEPTH.into()),
         ("SORT_TILE", SORT_TILE.into()),
         ("SORT_RADIX", SORT_RADIX.into()),
         ("HILBERT_BITS", HILBERT_BITS.into()),

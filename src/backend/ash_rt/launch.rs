@@ -24,6 +24,8 @@ pub(super) enum Launch {
     Splat,
     /// A frame over the voxel baseline's grid (a compute kernel whatever the traversal).
     Voxels,
+    /// A brick's share or optical depth (`owned.rgen`; `lbvh_owned.comp` with the LBVH).
+    Owned,
 }
 
 impl AshBackend {
@@ -130,7 +132,7 @@ impl AshBackend {
     ) -> Result<Duration, BackendError> {
         let (w, h) = match launch {
             Launch::Query => (size.0.min(QUERY_WIDTH), size.0.div_ceil(QUERY_WIDTH)),
-            Launch::Render | Launch::Splat | Launch::Voxels => size,
+            Launch::Render | Launch::Splat | Launch::Voxels | Launch::Owned => size,
         };
         enum Work {
             Rays(vk::Pipeline, [vk::StridedDeviceAddressRegionKHR; 3]),
@@ -145,13 +147,16 @@ impl AshBackend {
             Traversal::RtPipeline => {
                 let program = match launch {
                     Launch::Splat => RtProgram::Splat,
+                    Launch::Owned => RtProgram::Owned,
                     Launch::Query | Launch::Render | Launch::Voxels => RtProgram::Field,
                 };
                 let (pipeline, table) = self.rt(spec, program)?;
                 // The field pipeline's raygens: render, then query.
                 let raygen = match launch {
                     Launch::Query => table.raygens[1],
-                    Launch::Render | Launch::Splat | Launch::Voxels => table.raygens[0],
+                    Launch::Render | Launch::Splat | Launch::Voxels | Launch::Owned => {
+                        table.raygens[0]
+                    }
                 };
                 Work::Rays(pipeline, [raygen, table.miss, table.hit])
             }
@@ -162,6 +167,7 @@ impl AshBackend {
                     Launch::Render => on_ash::LBVH_RENDER,
                     Launch::Splat => on_ash::LBVH_SPLAT,
                     Launch::Voxels => on_ash::VOXEL_RENDER,
+                    Launch::Owned => on_ash::LBVH_OWNED,
                 };
                 let pipeline = pipelines::compute_pipeline(&self.ctx, kind, spec)?;
                 Work::Compute(pipeline, groups(kind, w, h))

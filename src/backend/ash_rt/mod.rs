@@ -37,6 +37,7 @@ mod inspect;
 mod launch;
 #[cfg(test)]
 mod naga_spirv;
+mod owned;
 pub mod pipelines;
 mod prepare;
 pub mod resources;
@@ -61,6 +62,7 @@ use self::structure::{BOX_BYTES, Structure};
 use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::accel::lbvh::Lbvh;
+use crate::backend::shaders::brick::BrickLaunch;
 use crate::backend::shaders::{GpuFrame, GpuVoxels, SpecConstants};
 use crate::field::FieldSettings;
 use crate::noise::BlueNoiseMask;
@@ -287,6 +289,14 @@ impl AshBackend {
         };
         backend.write_descriptors();
         Ok(backend)
+    }
+
+    /// The uploaded step's local origin (the shaders' positions are relative to it).
+    fn local_origin(&self) -> Result<DVec3, BackendError> {
+        self.uploaded
+            .as_ref()
+            .map(|u| u.data.origin)
+            .ok_or(BackendError::NothingUploaded(NAME))
     }
 
     fn built(&self) -> Result<(), BackendError> {
@@ -575,6 +585,33 @@ impl Backend for AshBackend {
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
         self.render_launch(frame, Launch::Render, 0)
+    }
+
+    /// `owned.rgen` over the share's rectangle (the shared integrators' brick variant), or
+    /// `lbvh_owned.comp` with [`Traversal::Lbvh`].
+    fn render_owned(
+        &mut self,
+        frame: &FrameParams,
+        share: &super::BrickShare<'_>,
+    ) -> Result<Vec<[f64; 4]>, BackendError> {
+        let origin = self.local_origin()?;
+        let launch = BrickLaunch::render(NAME, frame, share, origin)?;
+        let own_frame = share.own_frame(frame);
+        let bytes = self.run_owned(own_frame.as_ref().unwrap_or(frame), &launch)?;
+        Ok(BrickLaunch::pixels(&bytes))
+    }
+
+    /// `owned.rgen` (or `lbvh_owned.comp`) along the rays' rectangle.
+    fn owned_depth(
+        &mut self,
+        frame: &FrameParams,
+        owned: &crate::values::HalfOpenBox,
+        rays: super::DepthRays<'_>,
+    ) -> Result<Vec<f64>, BackendError> {
+        let origin = self.local_origin()?;
+        let launch = BrickLaunch::depth(frame, owned, rays, origin);
+        let bytes = self.run_owned(frame, &launch)?;
+        Ok(BrickLaunch::depths(&bytes))
     }
 
     /// Knoll et al.'s splatter through the RT pipeline (`splat.rgen`; the LBVH kernel

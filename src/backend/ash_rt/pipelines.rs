@@ -23,10 +23,13 @@
 //! - `splat.rgen`, `splat.rint`, `splat.rahit`: Knoll et al.'s splatter (the Table 3
 //!   baseline), its own pipeline ([`RtProgram::Splat`]), made only when a scene splats;
 //!   `lbvh_splat.comp` its LBVH twin.
+//! - `owned.rgen` over the field's `particle.*`: a brick's share of a distributed frame, its own
+//!   pipeline ([`RtProgram::Owned`]), made only when a brick renders; `lbvh_owned.comp` its
+//!   LBVH twin.
 //!
 //! Shader groups of the field pipeline: 0 render raygen, 1 query raygen, 2 miss, 3 the
 //! procedural hit group (intersection + any-hit); of the splat pipeline: 0 raygen, 1 miss, 2
-//! the hit group.
+//! the hit group; of the owned pipeline likewise.
 
 use std::io::Cursor;
 use std::sync::Arc;
@@ -137,6 +140,8 @@ pub struct Push {
     pub particle_lo_address: u64,
     /// The voxel baseline's grid (0 before a voxelisation).
     pub voxel_address: u64,
+    /// A brick kernel's brick, output and inputs (`lbvh_owned.comp`; 0 for every other launch).
+    pub owned_address: u64,
 }
 
 /// The push constants of the kernels that prepare a step (`PreparePush` in
@@ -290,6 +295,10 @@ impl RtProgram {
                 &[on_ash::SPLAT_RGEN],
                 [miss, on_ash::SPLAT_RINT, on_ash::SPLAT_RAHIT],
             ),
+            RtProgram::Owned => (
+                &[on_ash::OWNED_RGEN],
+                [miss, on_ash::PARTICLE_RINT, on_ash::PARTICLE_RAHIT],
+            ),
         }
     }
 
@@ -297,7 +306,7 @@ impl RtProgram {
     pub fn raygens(self) -> u32 {
         match self {
             RtProgram::Field => 2,
-            RtProgram::Splat => 1,
+            RtProgram::Splat | RtProgram::Owned => 1,
         }
     }
 }

@@ -15,17 +15,8 @@ use super::integrators::{
 };
 use crate::backend::{BrickShare, DepthRays};
 use crate::noise::white::white;
-use crate::values::{FrameParams, HalfOpenBox, Integrator, PixelRect};
-
-/// The frame a brick renders: delta tracking draws each brick's numbers from its own seed
-/// (brick 0 the frame's), since bricks track their segments independently; every other
-/// integrator uses the frame's numbers, which make the single rank's decisions.
-pub(super) fn frame_of_brick(frame: &FrameParams, brick: &BrickShare<'_>) -> Option<FrameParams> {
-    (frame.integrator == Integrator::Delta && brick.index > 0).then(|| FrameParams {
-        seed: frame.seed ^ brick.index.wrapping_mul(0x9E37_79B9),
-        ..frame.clone()
-    })
-}
+use crate::values::shader_constants::LIGHT_MAP_SEED;
+use crate::values::{FrameParams, HalfOpenBox, PixelRect};
 
 /// `brick.rect`'s pixels, row-major, each `[r, g, b, T]` of the samples the brick owns.
 pub(super) fn render_rect<F: FieldSampler>(
@@ -33,7 +24,7 @@ pub(super) fn render_rect<F: FieldSampler>(
     field: &F,
     brick: &BrickShare<'_>,
 ) -> Vec<[f64; 4]> {
-    let own_frame = frame_of_brick(frame, brick);
+    let own_frame = brick.own_frame(frame);
     let frame = own_frame.as_ref().unwrap_or(frame);
     in_packets(brick.rect, [0.0; 4], |scratch, pixels, values| {
         render_owned_pixels_with(frame, field, brick, pixels, scratch, values)
@@ -122,10 +113,6 @@ struct DepthRay {
     jitter: f64,
     stop_past: f64,
 }
-
-/// The light map's lattice jitter per texel: white noise of a fixed seed, so that a map is the
-/// same for every frame under one light (it is computed once and kept).
-const LIGHT_MAP_SEED: u32 = 0x4C49_4748;
 
 impl DepthRay {
     /// Pixel or texel `(x, y)` of `rays`: a primary ray on stochastic marching's lattice

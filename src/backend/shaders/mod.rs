@@ -15,6 +15,7 @@ use crate::values::shader_constants::{
 use crate::values::tables::lookup;
 use crate::values::{ColourMode, Integrator, NoiseKind};
 
+pub mod brick;
 pub mod cpu;
 pub mod table;
 

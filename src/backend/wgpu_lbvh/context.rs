@@ -213,7 +213,8 @@ impl GpuContext {
             adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
                 &instance, None,
             ))
-            .map_err(|e| format!("no wgpu adapter: {e}"));
+            .map_err(|e| format!("no wgpu adapter: {e}"))
+            .map(|default| for_this_rank(&instance, default));
             if adapter.is_ok() || chosen {
                 break;
             }
@@ -469,4 +470,31 @@ impl GpuContext {
             .insert(key, pipeline.clone());
         Ok(pipeline)
     }
+}
+
+/// In a job of several processes a node (`crate::backend::node_local_rank`), the adapter of
+/// this process's rank among those like `default` (its API and kind of device, in wgpu's
+/// order): a node's ranks spread over its GPUs. `default` itself outside a job, where
+/// `WGPU_ADAPTER_NAME` names one, or where it is the only one of its kind.
+fn for_this_rank(instance: &wgpu::Instance, default: wgpu::Adapter) -> wgpu::Adapter {
+    let Some(rank) = crate::backend::node_local_rank() else {
+        return default;
+    };
+    if std::env::var_os("WGPU_ADAPTER_NAME").is_some() {
+        return default;
+    }
+    let info = default.get_info();
+    let mut alike: Vec<wgpu::Adapter> =
+        pollster::block_on(instance.enumerate_adapters(info.backend.into()))
+            .into_iter()
+            .filter(|a| {
+                let other = a.get_info();
+                other.device_type == info.device_type
+            })
+            .collect();
+    if alike.len() <= 1 {
+        return default;
+    }
+    let index = crate::backend::device_for_rank(alike.len(), Some(rank));
+    alike.swap_remove(index)
 }

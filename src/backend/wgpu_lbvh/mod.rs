@@ -37,6 +37,7 @@
 //! them, and the backend with the CPU reference.
 
 mod context;
+mod owned;
 pub mod prepare;
 mod query;
 mod render;
@@ -58,6 +59,7 @@ use super::gpu_data::{GpuStepData, SortedParticles};
 use super::{Backend, BackendError, Capabilities, MemoryReport, StepInput, Timings};
 use crate::accel::lbvh::{KeyGrid, LBVH_STACK_SIZE, structure_bytes};
 use crate::backend::shaders::GpuFrame;
+use crate::backend::shaders::brick::BrickLaunch;
 use crate::field::FieldSettings;
 use crate::values::FrameParams;
 use crate::values::Image;
@@ -547,6 +549,32 @@ impl Backend for WgpuBackend {
 
     fn render(&mut self, frame: &FrameParams) -> Result<(), BackendError> {
         self.run_render(frame)
+    }
+
+    /// `lbvh_owned.comp` over the share's rectangle (the shared integrators' brick variant).
+    fn render_owned(
+        &mut self,
+        frame: &FrameParams,
+        share: &crate::backend::BrickShare<'_>,
+    ) -> Result<Vec<[f64; 4]>, BackendError> {
+        let origin = self.built_scene()?.data.origin;
+        let launch = BrickLaunch::render("wgpu", frame, share, origin)?;
+        let own_frame = share.own_frame(frame);
+        let bytes = self.run_owned(own_frame.as_ref().unwrap_or(frame), &launch)?;
+        Ok(BrickLaunch::pixels(&bytes))
+    }
+
+    /// `lbvh_owned.comp` along the rays' rectangle.
+    fn owned_depth(
+        &mut self,
+        frame: &FrameParams,
+        owned: &crate::values::HalfOpenBox,
+        rays: crate::backend::DepthRays<'_>,
+    ) -> Result<Vec<f64>, BackendError> {
+        let origin = self.built_scene()?.data.origin;
+        let launch = BrickLaunch::depth(frame, owned, rays, origin);
+        let bytes = self.run_owned(frame, &launch)?;
+        Ok(BrickLaunch::depths(&bytes))
     }
 
     /// The splatter's slabs collect their hits by a software traversal of the LBVH

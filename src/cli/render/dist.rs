@@ -8,14 +8,14 @@
 //! size without `--cluster`) are computed by the ranks from their parts of it
 //! ([`crate::dist::auto`]): no process reads a whole step for them.
 
+use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
 
 use anyhow::{Context, bail, ensure};
 
 use super::RenderArgs;
 use super::plan::Frame;
-use crate::backend::cpu::CpuBackend;
-use crate::backend::{BackendKind, Precision};
+use crate::backend::{Backend, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
 use crate::dist::step_stats;
@@ -92,6 +92,15 @@ impl Ranks {
             Ranks::Threads(n) => *n,
             #[cfg(feature = "mpi")]
             Ranks::Mpi(comm) => comm.size(),
+        }
+    }
+
+    /// The ranks this process runs: all of them as threads, or itself in an MPI job.
+    fn local_count(&self) -> usize {
+        match self {
+            Ranks::Threads(n) => (*n).max(1),
+            #[cfg(feature = "mpi")]
+            Ranks::Mpi(_) => 1,
         }
     }
 }
@@ -327,11 +336,6 @@ fn check_supported(
     let how = ranks.asked_by();
     ensure!(ranks.size() >= 1, "{how} needs at least 1 rank");
     ensure!(
-        matches!(args.backend, BackendKind::Auto | BackendKind::Cpu),
-        "{how} renders on the cpu backend so far (the {} backend does not render a brick yet)",
-        args.backend
-    );
-    ensure!(
         args.method == Method::Rbf && settings.splat_k.is_none() && settings.voxel_grid.is_none(),
         "{how} renders with --method rbf (the baselines are not distributed)"
     );
@@ -395,8 +399,23 @@ pub(super) fn run(
             "single scattering, shadows within each brick only (--dist-shadows local)".to_owned()
         }
     };
+    // Each rank renders its brick on a backend of its own, made once and kept for every
+    // image: on the CPU, or on the process's GPU device (one device per process, shared by
+    // the ranks that are its threads; under MPI each process opens its own).
+    let threads = matches!(ranks, Ranks::Threads(_));
+    let slots: Vec<Mutex<Option<Box<dyn Backend>>>> =
+        (0..ranks.local_count()).map(|_| Mutex::new(None)).collect();
+    let backend_name = {
+        let mut slot = lock(&slots[0]);
+        let backend = slot.insert(crate::backend::create(args.backend)?);
+        format!(
+            "{} backend ({})",
+            backend.capabilities().name,
+            backend.capabilities().device
+        )
+    };
     tracing::info!(
-        "distributed: {how}, cpu backend, {shading}, bricks balanced by {} (--balance)",
+        "distributed: {how}, {backend_name}, {shading}, bricks balanced by {} (--balance)",
         args.balance
     );
     if let Some(b) = &resolved.periodic {
@@ -474,9 +493,15 @@ pub(super) fn run(
         let rank_body = |comm: &dyn Comm| {
             let part = Part::new(comm.rank(), comm.size());
             let local = resolved.series.step_part(frame.step, part)?.step;
+            // Ranks as threads have a slot each; an MPI process's one rank the first.
+            let mut slot = lock(&slots[if threads { comm.rank() } else { 0 }]);
+            let backend = match &mut *slot {
+                Some(b) => b,
+                None => slot.insert(crate::backend::create(args.backend)?),
+            };
             render_piloted(
                 comm,
-                &mut CpuBackend::new(),
+                &mut **backend,
                 &local,
                 &scene,
                 &params,
@@ -571,4 +596,10 @@ fn log_reports(reports: &[RankReport]) {
         max_owned as f64 / mean_owned.max(1e-300),
         CostModel::imbalance(&render)
     );
+}
+
+/// A rank's backend slot, taken whatever a panicking rank left in it (the render reports the
+/// panic; the slot holds a backend or none).
+fn lock(slot: &Mutex<Option<Box<dyn Backend>>>) -> MutexGuard<'_, Option<Box<dyn Backend>>> {
+    slot.lock().unwrap_or_else(|e| e.into_inner())
 }

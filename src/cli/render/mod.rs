@@ -176,8 +176,8 @@ pub struct RenderArgs {
     pub no_legend: bool,
     /// Render with N ranks: threads of this process, each holding one k-d brick of the step
     /// (its particles and their ghosts) and rendering its samples, composited by direct send;
-    /// the code path an MPI launch will take. Every integrator, on the cpu backend
-    /// (docs/distributed.md).
+    /// the code path an MPI launch will take. Every integrator, on every backend (each rank
+    /// its own; docs/distributed.md).
     #[arg(long, value_name = "N")]
     pub ranks: Option<usize>,
     /// What a distributed render's bricks are balanced by: `count` (equal particles) or

@@ -18,7 +18,9 @@ pub const REQUIRED_EXTENSIONS: [&CStr; 3] = [
 /// Which of the devices with ray-tracing pipelines a context opens.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum DeviceChoice {
-    /// A discrete GPU before an integrated one, before a virtual one, before a CPU's.
+    /// A discrete GPU before an integrated one, before a virtual one, before a CPU's; among
+    /// several of the best kind, the one for this process's node-local rank
+    /// ([`crate::backend::device_for_rank`]).
     Best,
     /// The i-th such device in the loader's order.
     Index(usize),
@@ -171,6 +173,8 @@ pub(super) fn choose(
     let mut reasons = Vec::new();
     let mut best: Option<(u32, vk::PhysicalDevice, u32)> = None;
     let mut qualifying = 0;
+    // Every qualifying device, for Best's choice among the best kind.
+    let mut candidates: Vec<(u32, vk::PhysicalDevice, u32)> = Vec::new();
     for &pd in &devices {
         // SAFETY: pd comes from this instance.
         let props = unsafe { instance.get_physical_device_properties(pd) };
@@ -186,14 +190,19 @@ pub(super) fn choose(
             continue;
         };
         let rank = rank(props.device_type);
-        let chosen = match choice {
-            DeviceChoice::Best => best.is_none_or(|b| rank > b.0),
-            DeviceChoice::Index(i) => qualifying == i,
-        };
-        if chosen {
+        if choice == DeviceChoice::Index(qualifying) {
             best = Some((rank, pd, family));
         }
+        candidates.push((rank, pd, family));
         qualifying += 1;
+    }
+    if choice == DeviceChoice::Best
+        && let Some(top) = candidates.iter().map(|c| c.0).max()
+    {
+        let of_best_kind: Vec<_> = candidates.iter().filter(|c| c.0 == top).collect();
+        let i =
+            crate::backend::device_for_rank(of_best_kind.len(), crate::backend::node_local_rank());
+        best = Some(*of_best_kind[i]);
     }
     if let DeviceChoice::Index(index) = choice
         && best.is_none()

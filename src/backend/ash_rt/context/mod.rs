@@ -120,6 +120,9 @@ pub enum RtProgram {
     Field,
     /// Knoll et al.'s splatter (`splat.*`).
     Splat,
+    /// A brick's share of a distributed frame (`owned.rgen` over the field's `particle.*`),
+    /// made only when a brick renders.
+    Owned,
 }
 
 /// The instance, device, queue, allocator and compiled pipelines.
