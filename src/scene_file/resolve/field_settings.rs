@@ -61,10 +61,7 @@ pub(super) fn first_step_if_needed(
         None if wanted.attribute.is_none()
             || (radius_spec.is_none() && wanted.radius_attribute.is_none()) =>
         {
-            match series.step_ref(0) {
-                Some(first) => Some(reads.first_step(first)?),
-                None => series.first_step_in_full()?.map(FirstStep::Whole),
-            }
+            reads.first_step_of(series)?
         }
         None => None,
     })

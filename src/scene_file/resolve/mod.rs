@@ -159,6 +159,16 @@ pub trait DataReads {
     /// attribute its file holds.
     fn first_step(&self, first: &StepRef) -> anyhow::Result<FirstStep>;
 
+    /// The opened series' first step as the defaults see it, with every attribute its file
+    /// holds (and the smoothing lengths the series computes): by default from its file as
+    /// [`DataReads::first_step`] reads it.
+    fn first_step_of(&self, series: &TimeSeries) -> anyhow::Result<Option<FirstStep>> {
+        match series.step_ref(0) {
+            Some(first) => Ok(Some(self.first_step(first)?)),
+            None => Ok(series.first_step_in_full()?.map(FirstStep::Whole)),
+        }
+    }
+
     /// The particles' spacing in the series' first step, as the default radius measures it
     /// ([`crate::accel::spacing::median_nearest_distance`]).
     fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>>;
@@ -177,6 +187,10 @@ impl DataReads for InOneProcess {
             first,
             &crate::io::AttributeSelection::All,
         )?)))
+    }
+
+    fn first_step_of(&self, series: &TimeSeries) -> anyhow::Result<Option<FirstStep>> {
+        Ok(series.first_step_in_full()?.map(FirstStep::Whole))
     }
 
     fn first_step_spacing(&self, series: &TimeSeries) -> anyhow::Result<Option<f64>> {
