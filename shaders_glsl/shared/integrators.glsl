@@ -59,6 +59,62 @@ vec3 scattered(vec3 x, vec3 albedo, float shadow_jitter) {
     return albedo * light;
 }
 
+// What a march of a ray's samples gathered (march_samples).
+struct Marched {
+    vec3 colour;          // emission-absorption: premultiplied; stochastic marching: the light
+                          // scattered where it stopped
+    float transmittance;  // emission-absorption: what is left from 1
+    bool did_scatter;     // stochastic marching: whether its depth passed the free flight
+};
+
+// The samples t_enter + (k + jitter) dt of the ray in [a, b) (with `owned_only`, in a brick,
+// only those its half-open box holds), composited front to back from transmittance 1 (with a
+// shadow ray each for the SS reference) and stopped at the opacity threshold; or, stochastic
+// marching, their optical depth added to `tau` until it passes `target_tau`, where the ray
+// scatters. The loop of march_packet (src/backend/cpu/integrators.rs), for a whole frame and
+// a brick alike.
+Marched march_samples(vec3 origin, vec3 dir, float t_enter, float a, float b, float jitter,
+                      float shadow_jitter, float tau, float target_tau, bool owned_only) {
+    bool scatter = INTEGRATOR == INTEGRATOR_SS_REFERENCE;
+    bool stochastic = INTEGRATOR == INTEGRATOR_MARCHING;
+    float dt = frame.box_min.w;
+    Marched m = Marched(vec3(0.0), 1.0, false);
+    for (float k = first_sample(t_enter, a, dt, jitter);; k += 1.0) {
+        float t = t_enter + (k + jitter) * dt;
+        if (t >= b) {
+            break;
+        }
+        vec3 at = origin + dir * t;
+#ifdef OWNED_BRICK
+        // Another box's sample is another rank's (the ray marches on).
+        if (owned_only && !owned_contains(at)) {
+            continue;
+        }
+#endif
+        vec4 s = shade(field_query(at));
+        if (stochastic) {
+            tau += s.w * dt;
+            if (tau > target_tau) {
+                m.colour = scattered(at, s.rgb, shadow_jitter);
+                m.did_scatter = true;
+                return m;
+            }
+            continue;
+        }
+        if (s.w <= 0.0) {
+            continue;
+        }
+        float alpha = 1.0 - exp(-s.w * dt);
+        vec3 emitted = scatter ? scattered(at, s.rgb, shadow_jitter) : s.rgb;
+        m.colour += m.transmittance * alpha * emitted;
+        m.transmittance *= 1.0 - alpha;
+        if (1.0 - m.transmittance >= frame.box_max.w) {
+            break;
+        }
+    }
+    return m;
+}
+
 // The radiance of a pixel in this frame: linear RGB and opacity.
 vec4 render_pixel(uvec2 pixel) {
     vec3 origin, dir;
@@ -80,38 +136,12 @@ vec4 render_pixel(uvec2 pixel) {
         float jitter = random_number(pixel, (scatter || stochastic) ? 1u : 0u);
         float shadow_jitter = random_number(pixel, 2u);
         float target_tau = stochastic ? -log(1.0 - random_number(pixel, 0u)) : 0.0;
-        float tau = 0.0;
-        vec3 colour = vec3(0.0);
-        float transmittance = 1.0;
-        for (float k = first_sample(t_enter, t_enter, dt, jitter);; k += 1.0) {
-            float t = t_enter + (k + jitter) * dt;
-            if (t >= t_exit) {
-                break;
-            }
-            vec3 at = origin + dir * t;
-            vec4 s = shade(field_query(at));
-            if (stochastic) {
-                tau += s.w * dt;
-                if (tau > target_tau) {
-                    return vec4(scattered(at, s.rgb, shadow_jitter), 1.0);
-                }
-                continue;
-            }
-            if (s.w <= 0.0) {
-                continue;
-            }
-            float alpha = 1.0 - exp(-s.w * dt);
-            vec3 emitted = scatter ? scattered(at, s.rgb, shadow_jitter) : s.rgb;
-            colour += transmittance * alpha * emitted;
-            transmittance *= 1.0 - alpha;
-            if (1.0 - transmittance >= frame.box_max.w) {
-                break;
-            }
-        }
+        Marched m = march_samples(origin, dir, t_enter, t_enter, t_exit, jitter, shadow_jitter,
+                                  0.0, target_tau, false);
         if (stochastic) {
-            return vec4(bg, 0.0);
+            return m.did_scatter ? vec4(m.colour, 1.0) : vec4(bg, 0.0);
         }
-        return vec4(colour + transmittance * bg, 1.0 - transmittance);
+        return vec4(m.colour + m.transmittance * bg, 1.0 - m.transmittance);
     } else {
         float majorant = frame.shading.z;
         if (majorant <= 0.0) {
@@ -180,41 +210,12 @@ vec4 render_owned_pixel(uvec2 pixel) {
         if (!(tau <= target_tau)) {
             return miss;
         }
-        vec3 colour = vec3(0.0);
-        float transmittance = 1.0;
-        for (float k = first_sample(t_enter, a, dt, jitter);; k += 1.0) {
-            float t = t_enter + (k + jitter) * dt;
-            if (t >= b) {
-                break;
-            }
-            vec3 at = origin + dir * t;
-            // Another box's sample is another rank's (the ray marches on).
-            if (!owned_contains(at)) {
-                continue;
-            }
-            vec4 s = shade(field_query(at));
-            if (stochastic) {
-                tau += s.w * dt;
-                if (tau > target_tau) {
-                    return vec4(scattered(at, s.rgb, shadow_jitter), 0.0);
-                }
-                continue;
-            }
-            if (s.w <= 0.0) {
-                continue;
-            }
-            float alpha = 1.0 - exp(-s.w * dt);
-            vec3 emitted = scatter ? scattered(at, s.rgb, shadow_jitter) : s.rgb;
-            colour += transmittance * alpha * emitted;
-            transmittance *= 1.0 - alpha;
-            if (1.0 - transmittance >= frame.box_max.w) {
-                break;
-            }
-        }
+        Marched m = march_samples(origin, dir, t_enter, a, b, jitter, shadow_jitter, tau,
+                                  target_tau, true);
         if (stochastic) {
-            return miss;
+            return m.did_scatter ? vec4(m.colour, 0.0) : miss;
         }
-        return vec4(colour, transmittance);
+        return vec4(m.colour, m.transmittance);
     } else {
         // The ray's segment in the brick's box exactly (its samples are its own), tracked
         // with the brick's numbers (the host writes the brick's seed into the frame).
