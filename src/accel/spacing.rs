@@ -30,13 +30,24 @@ pub fn median_nearest_distance(positions: &[DVec3]) -> Option<f64> {
         .iter()
         .step_by(stride)
         .filter_map(|q| {
-            tree.nearest_n::<SquaredEuclidean>(q, k)
-                .into_iter()
-                .map(|n| n.distance)
-                .find(|&d2| d2 > 0.0)
-                .map(f64::sqrt)
+            nearest_apart(
+                tree.nearest_n::<SquaredEuclidean>(q, k)
+                    .into_iter()
+                    .map(|n| n.distance),
+            )
         })
         .collect();
+    median_of(&mut nearest)
+}
+
+/// A sampled particle's nearest distance from its [`NEIGHBOURS`] nearest squared distances in
+/// increasing order (itself and its co-located copies among them): the first one apart.
+pub fn nearest_apart(squared: impl IntoIterator<Item = f64>) -> Option<f64> {
+    squared.into_iter().find(|&d2| d2 > 0.0).map(f64::sqrt)
+}
+
+/// The median of the sampled nearest distances: the one at rank `n / 2` (`None` for none).
+pub fn median_of(nearest: &mut [f64]) -> Option<f64> {
     if nearest.is_empty() {
         return None;
     }

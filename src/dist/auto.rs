@@ -85,7 +85,7 @@ pub fn first_step_spacing(comm: &dyn Comm, series: &TimeSeries) -> Result<Option
 
 /// [`first_step_spacing`] over the parts `mine` of the ranks' positions, in rank order.
 pub fn median_nearest_distance(comm: &dyn Comm, mine: &[DVec3]) -> Result<Option<f64>, DistError> {
-    use crate::accel::spacing::{NEIGHBOURS, SAMPLE};
+    use crate::accel::spacing::{NEIGHBOURS, SAMPLE, median_of, nearest_apart};
     use kiddo::{ImmutableKdTree, SquaredEuclidean};
     let lengths = one_each(comm.all_gather_of(&[mine.len() as u64])?, "a part's length")?;
     let n: u64 = lengths.iter().sum();
@@ -134,9 +134,8 @@ pub fn median_nearest_distance(comm: &dyn Comm, mine: &[DVec3]) -> Result<Option
                 .collect();
             all.sort_by(f64::total_cmp);
             all.truncate(k);
-            all.into_iter()
-                .find(|&d2| d2 > 0.0 && d2.is_finite())
-                .map_or(f64::NAN, f64::sqrt)
+            // Every part pads to k with +inf; the k nearest over all parts are finite.
+            nearest_apart(all).unwrap_or(f64::NAN)
         })
         .collect();
     let merged = comm.all_gather_of(&mine_merged)?;
@@ -145,12 +144,7 @@ pub fn median_nearest_distance(comm: &dyn Comm, mine: &[DVec3]) -> Result<Option
         .map(|s| merged[s % size].get(s / size).copied().unwrap_or(f64::NAN))
         .filter(|d| !d.is_nan())
         .collect();
-    if nearest.is_empty() {
-        return Ok(None);
-    }
-    let middle = nearest.len() / 2;
-    let (_, median, _) = nearest.select_nth_unstable_by(middle, f64::total_cmp);
-    Ok(Some(*median))
+    Ok(median_of(&mut nearest))
 }
 
 /// This rank's part of the series' first step.

@@ -336,10 +336,9 @@ impl TimeSeries {
                 .map(|a| a.name.clone())
                 .collect(),
         );
-        let stats: Vec<Option<StepStats>> = std::iter::once(Some(first_stats))
+        let mut stats: Vec<Option<StepStats>> = std::iter::once(Some(first_stats))
             .chain(refs[1..].iter().map(|r| index.get(r, &selection)))
             .collect();
-        let mut stats = stats;
         let mut missing: Vec<usize> = (0..stats.len()).filter(|&i| stats[i].is_none()).collect();
         if let Some(parts) = parts.filter(|_| !missing.is_empty()) {
             let stamps: Vec<_> = missing
