@@ -891,7 +891,9 @@ fn ranks_reading_their_parts_render_what_ranks_cutting_the_whole_step_render() {
     for ranks in [3, 7] {
         let parts = run_local(ranks, |comm| {
             let part = aarbf::io::Part::new(comm.rank(), comm.size());
-            let read = series.step_part(0, part).unwrap();
+            let read = series
+                .step_part(0, part, &aarbf::dist::knn::RankLengths { comm })
+                .unwrap();
             assert_eq!(read.decoded, part.range(s.step.len()).len());
             render_distributed(comm, &mut CpuBackend::new(), &read.step, &d, &frames)
         })
@@ -991,4 +993,91 @@ fn ranks_find_a_new_series_defaults_from_their_parts() {
         // The ranks wrote the index a later open uses.
         assert!(ranked.path().join(".aarbf-index.json").exists());
     }
+}
+
+/// A GADGET-like NumPy series without smoothing lengths, `--smoothing knn:16`, no index and
+/// no cache beside it: under `--ranks 3` the ranks find each particle's length together from
+/// their parts (no rank reads a step whole) and render the single rank's image; the lengths
+/// they cache are the single rank's.
+#[test]
+fn ranks_find_neighbour_smoothing_lengths_from_their_parts() {
+    let runs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sph_runs");
+    let copy = |dir: &std::path::Path| {
+        for n in 0..3 {
+            let name = format!("snapshot_{n:03}.npy");
+            std::fs::copy(runs.join("gadget_like").join(&name), dir.join(&name)).unwrap();
+        }
+        dir.join("snapshot_*.npy")
+    };
+    let render = |dir: &std::path::Path, extra: &[&str]| {
+        let mut args: Vec<String> = [
+            "render",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--spp",
+            "1",
+            "--smoothing",
+            "knn:16",
+            "--step",
+            "2",
+        ]
+        .map(String::from)
+        .to_vec();
+        args.extend(["--data".into(), copy(dir).display().to_string()]);
+        args.extend(["--out".into(), dir.join("out.exr").display().to_string()]);
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let out = common::aarbf_logged(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let log = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{extra:?}: {log}");
+        log
+    };
+    let (one, ranked) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let single_log = render(one.path(), &[]);
+    let log = render(ranked.path(), &["--ranks", "3"]);
+    // The steps scanned from the ranks' parts, their lengths with them.
+    assert!(
+        log.contains("steps the series' index lacks, each rank its part of each"),
+        "{log}"
+    );
+    let line = |log: &str, start: &str| {
+        log.lines()
+            .find_map(|l| l.split_once(start).map(|(_, rest)| rest.to_owned()))
+            .unwrap_or_else(|| panic!("no '{start}' in {log}"))
+    };
+    for start in ["radius: ", "colour: ", "cluster size K = "] {
+        assert_eq!(line(&log, start), line(&single_log, start), "{start}");
+    }
+    assert!(line(&log, "radius: ").contains("h_knn16"), "{log}");
+    let image = |dir: &std::path::Path| image::open(dir.join("out.exr")).unwrap().into_rgba32f();
+    let (a, b) = (image(one.path()), image(ranked.path()));
+    let diff = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    eprintln!("knn:16 --ranks 3 max |difference| {diff:.2e}");
+    assert!(a.as_raw().iter().any(|&v| v > 0.01), "the particles show");
+    assert!(diff <= 1e-5, "max |difference| {diff}");
+    // Each step's lengths cached beside the data by the ranks, as one process caches them.
+    let cached = |dir: &std::path::Path| {
+        let mut files: Vec<(String, Vec<u8>)> =
+            std::fs::read_dir(dir.join(aarbf::scene::smoothing::CACHE_DIR))
+                .unwrap()
+                .map(|e| {
+                    let path = e.unwrap().path();
+                    let bytes = std::fs::read(&path).unwrap();
+                    // The values after the header (magic, the file's stamp, the count).
+                    let name = path.file_name().unwrap().to_string_lossy().into_owned();
+                    (name, bytes[36..].to_vec())
+                })
+                .collect();
+        files.sort();
+        files
+    };
+    let (single_cache, ranks_cache) = (cached(one.path()), cached(ranked.path()));
+    assert_eq!(ranks_cache.len(), 3, "{ranks_cache:?}");
+    assert_eq!(single_cache, ranks_cache);
 }

@@ -417,3 +417,85 @@ fn a_new_series_is_scanned_from_the_processes_parts() {
     assert_eq!(log.matches("radius: ").count(), 1, "{log}");
     assert_eq!(pixels(&again), mpi, "the same image from the index");
 }
+
+/// `--smoothing knn:16` on a GADGET-like NumPy series with no index or cache beside it: the MPI
+/// processes find the lengths together from their parts, render the image of the same ranks
+/// as threads bit for bit, and cache the same lengths.
+#[test]
+fn neighbour_smoothing_lengths_are_found_by_the_processes_together() {
+    let runs = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sph_runs/gadget_like");
+    let copy = |dir: &Path| {
+        for n in 0..3 {
+            let name = format!("snapshot_{n:03}.npy");
+            std::fs::copy(runs.join(&name), dir.join(&name)).unwrap();
+        }
+        dir.join("snapshot_*.npy")
+    };
+    let args = |data: &Path, out: &Path| -> Vec<String> {
+        let mut a: Vec<String> = [
+            "render",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--spp",
+            "1",
+            "--smoothing",
+            "knn:16",
+        ]
+        .map(String::from)
+        .to_vec();
+        a.extend(["--data".into(), data.display().to_string()]);
+        a.extend(["--out".into(), out.display().to_string()]);
+        a
+    };
+    let (mpi_dir, threads_dir) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let mpi_out = mpi_dir.path().join("mpi.exr");
+    let out = mpirun(3, &args(&copy(mpi_dir.path()), &mpi_out))
+        .output()
+        .unwrap();
+    let mpi_log = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{mpi_log}");
+    // The steps scanned from the ranks' parts, their lengths with them.
+    assert!(
+        mpi_log.contains("steps the series' index lacks, each rank its part of each"),
+        "{mpi_log}"
+    );
+    let threads_out = threads_dir.path().join("threads.exr");
+    let mut threads = args(&copy(threads_dir.path()), &threads_out);
+    threads.extend(["--ranks", "3"].map(String::from));
+    let out = common::aarbf_logged(&threads.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (mpi, threads) = (pixels(&mpi_out), pixels(&threads_out));
+    assert!(mpi.iter().any(|&v| v > 0.01), "the particles show");
+    assert!(
+        mpi.iter()
+            .zip(&threads)
+            .all(|(a, b)| a.to_bits() == b.to_bits()),
+        "mpirun -np 3 differs from --ranks 3"
+    );
+    let cached = |dir: &Path| {
+        let mut files: Vec<(String, Vec<u8>)> =
+            std::fs::read_dir(dir.join(aarbf::scene::smoothing::CACHE_DIR))
+                .unwrap()
+                .map(|e| {
+                    let path = e.unwrap().path();
+                    let name = path.file_name().unwrap().to_string_lossy().into_owned();
+                    (name, std::fs::read(&path).unwrap()[36..].to_vec())
+                })
+                .collect();
+        files.sort();
+        files
+    };
+    let mpi_cache = cached(mpi_dir.path());
+    assert_eq!(
+        mpi_cache.len(),
+        3,
+        "one cache file a step, no partial file left"
+    );
+    assert_eq!(mpi_cache, cached(threads_dir.path()));
+}

@@ -322,53 +322,110 @@ fn hdf5_snapshots_are_read_by_hyperslabs_across_their_files() {
     assert_eq!(part.step.attributes[0].values[0], 361.0);
 }
 
-/// Smoothing lengths from neighbours need the neighbours in other parts: each rank reads the
-/// whole step (the series says so in its log) and keeps its part, so the lengths are the
-/// single-rank lengths; without them in the selection, the part alone is read.
+/// Smoothing lengths from neighbours need the neighbours in other parts: the ranks find them
+/// together (`aarbf::dist::knn`), each reading only its part, and each part's lengths are the
+/// single process's, bit for bit; they are cached beside the data at each part's offset, and a
+/// later read takes each part's share of the cache.
 #[test]
-fn a_series_with_neighbour_smoothing_cuts_its_parts_from_the_whole_step() {
-    use aarbf::scene::{OpenOptions, TimeSeries, smoothing::Smoothing};
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("cloud.npy");
-    let n = 301;
-    let values: Vec<f64> = (0..n)
-        .flat_map(|i| {
-            let t = i as f64 * 0.37;
-            [t.sin(), t.cos(), 0.01 * t, t]
-        })
-        .collect();
-    common::write_numpy(&path, n, 4, &values);
-    let smoothing = Smoothing { neighbours: 8 };
-    let open = |attributes| {
-        TimeSeries::open(
-            &path,
-            &OpenOptions {
-                smoothing: Some(smoothing),
-                attributes,
-                ..OpenOptions::default()
-            },
-        )
-        .unwrap()
-    };
-    let series = open(AttributeSelection::All);
-    let whole = series.step(0).unwrap();
-    assert!(whole.attribute(&smoothing.attribute()).is_some());
-    for ranks in [2, 5] {
-        let parts: Vec<Step> = (0..ranks)
-            .map(|rank| {
-                let part = series.step_part(0, Part::new(rank, ranks)).unwrap();
-                assert_eq!(part.decoded, n);
-                part.step
+fn a_series_with_neighbour_smoothing_reads_only_its_parts() {
+    use aarbf::dist::comm::Comm;
+    use aarbf::dist::knn::RankLengths;
+    use aarbf::scene::smoothing::{self, Smoothing};
+    use aarbf::scene::{OpenOptions, TimeSeries};
+    let runs = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sph_runs/gadget_like");
+    // GADGET-like NumPy, N x 5 float64 (1000 particles), no smoothing length of its own.
+    for neighbours in [16, 40] {
+        let smoothing = Smoothing { neighbours };
+        let (single, ranked) = (
+            copied(&runs, &["snapshot_000.npy"]),
+            copied(&runs, &["snapshot_000.npy"]),
+        );
+        let open = |dir: &Path, attributes| {
+            TimeSeries::open(
+                &dir.join("snapshot_000.npy"),
+                &OpenOptions {
+                    smoothing: Some(smoothing),
+                    attributes,
+                    ..OpenOptions::default()
+                },
+            )
+            .unwrap()
+        };
+        let whole = open(single.path(), AttributeSelection::All)
+            .step(0)
+            .unwrap();
+        let name = smoothing.attribute();
+        assert!(whole.attribute(&name).is_some());
+        let n = whole.len();
+        // The ranks' series, opened from an index the single process did not write (each
+        // opening reads the first step whole; the parts are read below, once the cache of
+        // whole steps is cleared).
+        let series = open(ranked.path(), AttributeSelection::All);
+        series.clear_cache();
+        let cache_file = || {
+            std::fs::read_dir(ranked.path().join(smoothing::CACHE_DIR))
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .find(|p| {
+                    p.to_string_lossy()
+                        .ends_with(&format!(".k{neighbours}.f64"))
+                })
+                .unwrap()
+        };
+        // No cache: the ranks compute the lengths.
+        std::fs::remove_file(cache_file()).unwrap();
+        for ranks in RANKS {
+            let parts = aarbf::dist::run_local(ranks, |comm| {
+                let part = Part::new(comm.rank(), comm.size());
+                let read = series.step_part(0, part, &RankLengths { comm })?;
+                assert_eq!(read.decoded, part.range(n).len(), "rank {part:?}");
+                Ok(read.step)
             })
+            .unwrap();
+            let together = joined(&parts, &whole);
+            assert_eq!(together.positions, whole.positions, "{ranks} ranks");
+            assert_eq!(
+                together.attributes, whole.attributes,
+                "{ranks} ranks, K {neighbours}"
+            );
+        }
+        // The ranks wrote the cache: the whole step's lengths, in the file's order.
+        let step = series.step_ref(0).unwrap();
+        assert_eq!(
+            smoothing::cached_part(step, neighbours, n, 0..n).unwrap(),
+            whole.attribute(&name).unwrap().values
+        );
+        // A later read takes each part's share of it: cached values made recognisable (the
+        // header kept) come back in order.
+        let path = cache_file();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let header = bytes.len() - 8 * n;
+        for (i, chunk) in bytes[header..].chunks_exact_mut(8).enumerate() {
+            chunk.copy_from_slice(&(1.0 + i as f64).to_le_bytes());
+        }
+        // Written over in place, so that the data file's stamp still matches.
+        std::fs::write(&path, &bytes).unwrap();
+        let parts = aarbf::dist::run_local(3, |comm| {
+            let part = Part::new(comm.rank(), comm.size());
+            Ok(series.step_part(0, part, &RankLengths { comm })?.step)
+        })
+        .unwrap();
+        let h: Vec<f64> = parts
+            .iter()
+            .flat_map(|p| p.attribute(&name).unwrap().values.clone())
             .collect();
-        let together = joined(&parts, &whole);
-        assert_eq!(together.positions, whole.positions);
-        assert_eq!(together.attributes, whole.attributes);
+        assert_eq!(h, (0..n).map(|i| 1.0 + i as f64).collect::<Vec<_>>());
+        // Without the lengths in the selection, the part alone is read.
+        let without = open(ranked.path(), only(&["col3"]));
+        let part = aarbf::dist::run_local(3, |comm| {
+            let part = Part::new(comm.rank(), comm.size());
+            Ok(without.step_part(0, part, &RankLengths { comm })?)
+        })
+        .unwrap()
+        .swap_remove(1);
+        assert_eq!(part.decoded, Part::new(1, 3).range(n).len());
+        assert_eq!(part.step.attribute_names(), ["col3"]);
     }
-    let without = open(only(&["col3"]));
-    let part = without.step_part(0, Part::new(1, 3)).unwrap();
-    assert_eq!(part.decoded, Part::new(1, 3).range(n).len());
-    assert_eq!(part.step.attribute_names(), ["col3"]);
 }
 
 /// Ranks that scan a series from their parts ([`aarbf::dist::step_stats`]) as threads, keeping
@@ -384,9 +441,10 @@ impl aarbf::scene::StepsScan for ScanByRanks {
         steps: &[StepRef],
         which: &[usize],
         selection: &AttributeSelection,
+        smoothing: Option<aarbf::scene::smoothing::Smoothing>,
     ) -> Result<Vec<aarbf::scene::index::StepStats>, io::DataError> {
         let found = aarbf::dist::run_local(self.ranks, |comm| {
-            aarbf::dist::step_stats::of_parts(comm, steps, which, selection)
+            aarbf::dist::step_stats::of_parts(comm, steps, which, selection, smoothing)
         })
         .unwrap();
         let records: usize = found[0].0.iter().map(|s| s.count).sum();
@@ -477,5 +535,36 @@ fn a_series_without_an_index_is_scanned_from_the_ranks_parts_bit_for_bit() {
                 assert_eq!(reopened.values(), whole.values(), "{what}");
             }
         }
+    }
+    // Smoothing lengths from neighbours: the ranks find them together; the statistics of
+    // 'h_knn16' (its robust range and mean set the colours and the radius) are the whole
+    // step's, bit for bit, and no step is read whole.
+    let (from, names, pattern) = &series[1];
+    let options = OpenOptions {
+        smoothing: Some("knn:16".parse().unwrap()),
+        ..OpenOptions::default()
+    };
+    let whole = TimeSeries::open(&copied(from, names).path().join(pattern), &options).unwrap();
+    assert!(
+        whole
+            .values()
+            .attributes
+            .iter()
+            .any(|a| a.name == "h_knn16")
+    );
+    for ranks in [3, 8] {
+        let dir = copied(from, names);
+        let scan = ScanByRanks {
+            ranks,
+            most_decoded: Default::default(),
+        };
+        let by_ranks =
+            TimeSeries::open_scanned_by(&dir.path().join(pattern), &options, &scan).unwrap();
+        assert_eq!(
+            by_ranks.values(),
+            whole.values(),
+            "knn:16 over {ranks} ranks"
+        );
+        assert_eq!(by_ranks.steps_decoded(), 0, "knn:16 over {ranks} ranks");
     }
 }

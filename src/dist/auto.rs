@@ -27,6 +27,7 @@ use rayon::prelude::*;
 
 use super::DistError;
 use super::comm::{Comm, CommExt};
+use super::knn::RankLengths;
 use crate::field::FieldSettings;
 use crate::io::Part;
 use crate::render::AutoValues;
@@ -150,7 +151,11 @@ pub fn median_nearest_distance(comm: &dyn Comm, mine: &[DVec3]) -> Result<Option
 /// This rank's part of the series' first step.
 fn first_part(comm: &dyn Comm, series: &TimeSeries) -> Result<Step, DistError> {
     Ok(series
-        .step_part(0, Part::new(comm.rank(), comm.size()))?
+        .step_part(
+            0,
+            Part::new(comm.rank(), comm.size()),
+            &RankLengths { comm },
+        )?
         .step)
 }
 
@@ -585,7 +590,7 @@ mod tests {
             for p in RANKS {
                 let got = run_local(p, |comm| {
                     let part = Part::new(comm.rank(), comm.size());
-                    let read = series.step_part(0, part)?;
+                    let read = series.step_part(0, part, &RankLengths { comm })?;
                     if exact_share {
                         assert_eq!(read.decoded, part.range(n).len(), "{what}, P = {p}");
                     } else {

@@ -30,6 +30,7 @@ pub mod comm;
 pub mod composite;
 pub mod exchange;
 pub mod kd;
+pub mod knn;
 pub mod local;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;

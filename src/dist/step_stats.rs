@@ -12,22 +12,26 @@
 
 use super::DistError;
 use super::comm::{Comm, CommExt};
+use super::knn::RankLengths;
 use super::order::kth_smallest;
-use crate::io::{self, AttributeSelection, DataError, Part, Problem, StepRef};
+use crate::io::{AttributeSelection, DataError, Part, Problem, StepRef};
 use crate::scene::index::{AttributeStats, StepStats, robust_ranks};
+use crate::scene::smoothing::{self, Smoothing};
 use crate::values::Bounds;
 use crate::values::exact::ExactSum;
 use glam::DVec3;
 
 /// The statistics of `steps[i]` for each `i` of `which`, in that order, each rank reading its
-/// part of each step (`[rN/P, (r+1)N/P)`) with `selection`. Every rank calls it with the same
-/// arguments and gets the same statistics. Returns the records this rank decoded too (its
+/// part of each step (`[rN/P, (r+1)N/P)`) with `selection`, and the smoothing lengths from
+/// neighbours `smoothing` asks for found by all ranks together ([`super::knn`]). Every rank
+/// calls it with the same arguments and gets the same statistics. Returns the records this rank decoded too (its
 /// parts' own, for a format that reads a part alone).
 pub fn of_parts(
     comm: &dyn Comm,
     steps: &[StepRef],
     which: &[usize],
     selection: &AttributeSelection,
+    smoothing: Option<Smoothing>,
 ) -> Result<(Vec<StepStats>, usize), DistError> {
     // The ranks must agree on what they scan, or their collectives would pair different steps.
     let asked: Vec<u64> = which.iter().map(|&i| i as u64).collect();
@@ -47,7 +51,7 @@ pub fn of_parts(
                 steps.len()
             )));
         };
-        let (s, d) = of_part(comm, step, selection)?;
+        let (s, d) = of_part(comm, step, selection, smoothing)?;
         stats.push(s);
         decoded += d;
     }
@@ -59,8 +63,15 @@ fn of_part(
     comm: &dyn Comm,
     step: &StepRef,
     selection: &AttributeSelection,
+    smoothing: Option<Smoothing>,
 ) -> Result<(StepStats, usize), DistError> {
-    let read = io::read_step_part(step, selection, Part::new(comm.rank(), comm.size()))?;
+    let read = smoothing::read_part(
+        step,
+        selection,
+        smoothing,
+        Part::new(comm.rank(), comm.size()),
+        &RankLengths { comm },
+    )?;
     let part = read.step;
     let bounds = part.bounds();
     // The summary, in words: count, bytes, bounds (bits), attributes; per attribute its

@@ -75,13 +75,12 @@ impl AttributeSelection {
 
 /// Reads one step, keeping the attributes `selection` names.
 pub fn read_step(step: &StepRef, selection: &AttributeSelection) -> Result<Step, DataError> {
-    let at = step.at();
-    let (columns, _) = read_columns(step, selection, Part::WHOLE)?;
-    finish_step(at, &step.name, columns, selection)
+    read_step_part(step, selection, Part::WHOLE).map(|read| read.step)
 }
 
 /// Reads rank `part.rank`'s part of one step, keeping the attributes `selection` names: the
-/// same records, checks and cleaning as [`read_step`] on them, but possibly empty.
+/// same records, checks and cleaning as [`read_step`] on them, but possibly empty (the whole
+/// step, [`Part::WHOLE`], is refused empty).
 pub fn read_step_part(
     step: &StepRef,
     selection: &AttributeSelection,
@@ -89,7 +88,7 @@ pub fn read_step_part(
 ) -> Result<StepPart, DataError> {
     let at = step.at();
     let (columns, decoded) = read_columns(step, selection, part)?;
-    let step = finish::finish(at, &step.name, columns, selection, true)?;
+    let step = finish::finish(at, &step.name, columns, selection, !part.is_whole())?;
     Ok(StepPart { step, decoded })
 }
 

@@ -13,7 +13,8 @@ use glam::DVec3;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
-use crate::io::StepRef;
+use crate::io::{self, AttributeSelection, DataError, Part, StepPart, StepRef};
+use crate::values::Attribute;
 
 /// The folder, beside the data, the lengths are cached in.
 pub const CACHE_DIR: &str = ".aarbf-smoothing";
@@ -104,18 +105,24 @@ pub fn knn_lengths(positions: &[DVec3], neighbours: usize) -> Vec<f64> {
             })
             .collect()
     };
-    let floor = h
-        .iter()
-        .copied()
-        .filter(|&v| v > 0.0 && v.is_finite())
-        .fold(f64::INFINITY, f64::min);
-    let floor = if floor.is_finite() { floor } else { NO_SCALE };
+    let floor = least_positive_or(&h, NO_SCALE);
     for v in &mut h {
         if !(*v > 0.0 && v.is_finite()) {
             *v = floor;
         }
     }
     h
+}
+
+/// The least positive finite length of `h`, or `none` where it has none: the length a
+/// length of 0 takes.
+pub fn least_positive_or(h: &[f64], none: f64) -> f64 {
+    let least = h
+        .iter()
+        .copied()
+        .filter(|&v| v > 0.0 && v.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    if least.is_finite() { least } else { none }
 }
 
 /// Where step `step`'s lengths for K neighbours are cached.
@@ -190,6 +197,166 @@ pub fn lengths_for(step: &StepRef, positions: &[DVec3], neighbours: usize) -> Ve
         tracing::debug!("{}: smoothing lengths not cached ({e})", path.display());
     }
     h
+}
+
+/// How the smoothing lengths of the particles this process read are found: by this process
+/// alone where it holds the whole step ([`WholeStep`]), or by every rank together where each
+/// holds a part of it (`crate::dist::knn`), since a part's neighbours lie in other parts.
+pub trait NeighbourLengths {
+    /// The lengths for `neighbours` (K) of `positions`, this process's `part` of `step` (its
+    /// particles after the reader's checks): the whole step's lengths of those particles.
+    fn lengths(
+        &self,
+        step: &StepRef,
+        part: Part,
+        positions: &[DVec3],
+        neighbours: usize,
+    ) -> Result<Vec<f64>, DataError>;
+}
+
+/// One process holding the whole step: [`lengths_for`], cached beside the file.
+pub struct WholeStep;
+
+impl NeighbourLengths for WholeStep {
+    fn lengths(
+        &self,
+        step: &StepRef,
+        part: Part,
+        positions: &[DVec3],
+        neighbours: usize,
+    ) -> Result<Vec<f64>, DataError> {
+        if !part.is_whole() {
+            return Err(DataError::new(
+                &step.path,
+                Some(&step.name),
+                io::Problem::Malformed(format!(
+                    "smoothing lengths of part {} of {} need the other parts' particles",
+                    part.rank + 1,
+                    part.ranks
+                )),
+            ));
+        }
+        Ok(lengths_for(step, positions, neighbours))
+    }
+}
+
+/// Reads `part` of `step` with `selection`, and where `smoothing` is given and selected, the
+/// smoothing lengths from neighbours as the attribute [`Smoothing::attribute`] (in the
+/// selection's order), found by `lengths`.
+pub fn read_part(
+    step: &StepRef,
+    selection: &AttributeSelection,
+    smoothing: Option<Smoothing>,
+    part: Part,
+    lengths: &dyn NeighbourLengths,
+) -> Result<StepPart, DataError> {
+    let Some(smoothing) = smoothing.filter(|s| selection.keeps(&s.attribute())) else {
+        return io::read_step_part(step, selection, part);
+    };
+    let name = smoothing.attribute();
+    let from_file = match selection {
+        AttributeSelection::All => AttributeSelection::All,
+        AttributeSelection::Only(names) => {
+            AttributeSelection::Only(names.iter().filter(|n| **n != name).cloned().collect())
+        }
+    };
+    let mut read = io::read_step_part(step, &from_file, part)?;
+    let values = lengths.lengths(step, part, &read.step.positions, smoothing.neighbours)?;
+    read.step.attributes.push(Attribute { name, values });
+    if let AttributeSelection::Only(names) = selection {
+        read.step
+            .attributes
+            .sort_by_key(|a| names.iter().position(|n| *n == a.name));
+    }
+    Ok(read)
+}
+
+/// The bytes before a cache file's lengths: magic, the data file's stamp, the count.
+const CACHE_HEADER: u64 = 8 + 20 + 8;
+
+/// The cached lengths `range` of step `step`'s `count` lengths for `neighbours`, read alone
+/// (a rank's share), where the cache holds them for the file as it is.
+pub fn cached_part(
+    step: &StepRef,
+    neighbours: usize,
+    count: usize,
+    range: std::ops::Range<usize>,
+) -> Option<Vec<f64>> {
+    use std::io::{Read, Seek, SeekFrom};
+    let stamp = stamp(&step.path)?;
+    let mut file = std::fs::File::open(cache_path(step, neighbours)?).ok()?;
+    let mut header = [0u8; CACHE_HEADER as usize];
+    file.read_exact(&mut header).ok()?;
+    if &header[..8] != MAGIC
+        || header[8..28] != stamp
+        || u64::from_le_bytes(header[28..36].try_into().ok()?) != count as u64
+        || file.metadata().ok()?.len() != CACHE_HEADER + 8 * count as u64
+        || range.end > count
+    {
+        return None;
+    }
+    file.seek(SeekFrom::Start(CACHE_HEADER + 8 * range.start as u64))
+        .ok()?;
+    let mut bytes = vec![0u8; 8 * range.len()];
+    file.read_exact(&mut bytes).ok()?;
+    Some(
+        bytes
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+            .collect(),
+    )
+}
+
+/// A cache file written by several processes at once, each its share at its offset
+/// ([`SharedCache::write_at`]), made the cache by one of them when all have written
+/// ([`SharedCache::publish`]): until then it is a temporary file beside the cache.
+pub struct SharedCache {
+    /// The temporary file the shares are written into.
+    pub partial: PathBuf,
+    /// The cache file it becomes.
+    pub path: PathBuf,
+}
+
+impl SharedCache {
+    /// Creates the temporary file for step `step`'s `count` lengths for `neighbours`, with
+    /// its header and size (by one process, which hands `partial` to the others).
+    pub fn create(step: &StepRef, neighbours: usize, count: usize) -> std::io::Result<SharedCache> {
+        let missing = || std::io::Error::other("the data file has no folder or stamp");
+        let stamp = stamp(&step.path).ok_or_else(missing)?;
+        let path = cache_path(step, neighbours).ok_or_else(missing)?;
+        let dir = path.parent().ok_or_else(missing)?;
+        std::fs::create_dir_all(dir)?;
+        let (file, partial) = tempfile::Builder::new()
+            .prefix(".aarbf-partial-")
+            .tempfile_in(dir)?
+            .keep()
+            .map_err(|e| e.error)?;
+        let mut header = Vec::with_capacity(CACHE_HEADER as usize);
+        header.extend_from_slice(MAGIC);
+        header.extend_from_slice(&stamp);
+        header.extend_from_slice(&(count as u64).to_le_bytes());
+        use std::io::Write;
+        (&file).write_all(&header)?;
+        file.set_len(CACHE_HEADER + 8 * count as u64)?;
+        Ok(SharedCache { partial, path })
+    }
+
+    /// Writes lengths `start..start + h.len()` into the temporary file.
+    pub fn write_at(partial: &Path, start: usize, h: &[f64]) -> std::io::Result<()> {
+        use std::os::unix::fs::FileExt;
+        let file = std::fs::OpenOptions::new().write(true).open(partial)?;
+        let bytes: Vec<u8> = h.iter().flat_map(|v| v.to_le_bytes()).collect();
+        file.write_all_at(&bytes, CACHE_HEADER + 8 * start as u64)
+    }
+
+    /// Makes the written file the cache (`complete`), or removes it.
+    pub fn publish(self, complete: bool) -> std::io::Result<()> {
+        if complete {
+            std::fs::rename(&self.partial, &self.path)
+        } else {
+            std::fs::remove_file(&self.partial)
+        }
+    }
 }
 
 #[cfg(test)]

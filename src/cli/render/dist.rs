@@ -18,6 +18,7 @@ use super::plan::Frame;
 use crate::backend::{Backend, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
+use crate::dist::knn::RankLengths;
 use crate::dist::step_stats;
 use crate::dist::{
     Balance, Comm, CostModel, DistError, DistScene, DistShadows, RankReport, render_piloted,
@@ -31,6 +32,7 @@ use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
 use crate::scene::StepsScan;
 use crate::scene::TimeSeries;
 use crate::scene::index::StepStats;
+use crate::scene::smoothing::Smoothing;
 use crate::scene_file::resolve::{
     DataReads, FirstStep, FirstStepFacts, Resolved, positive, smoothing_length_in,
 };
@@ -265,9 +267,10 @@ impl StepsScan for Ranks {
         steps: &[StepRef],
         which: &[usize],
         selection: &AttributeSelection,
+        smoothing: Option<Smoothing>,
     ) -> Result<Vec<StepStats>, DataError> {
         let scan = |comm: &dyn Comm| {
-            let (stats, decoded) = step_stats::of_parts(comm, steps, which, selection)?;
+            let (stats, decoded) = step_stats::of_parts(comm, steps, which, selection, smoothing)?;
             tracing::debug!(
                 "rank {} decoded {decoded} records scanning {} steps the index lacks",
                 comm.rank(),
@@ -493,7 +496,10 @@ pub(super) fn run(
         };
         let rank_body = |comm: &dyn Comm| {
             let part = Part::new(comm.rank(), comm.size());
-            let local = resolved.series.step_part(frame.step, part)?.step;
+            let local = resolved
+                .series
+                .step_part(frame.step, part, &RankLengths { comm })?
+                .step;
             // Ranks as threads have a slot each; an MPI process's one rank the first.
             let mut slot = lock(&slots[if threads { comm.rank() } else { 0 }]);
             let backend = match &mut *slot {

@@ -9,10 +9,10 @@ use std::time::{Duration, Instant};
 use rayon::prelude::*;
 
 use super::index::{AttributeStats, FileStamp, SeriesIndex, StepStats};
-use super::smoothing::{self, Smoothing};
+use super::smoothing::{self, NeighbourLengths, Smoothing, WholeStep};
 use crate::io::{self, AttributeSelection, DataError, Format, ReadOptions, StepRef};
 use crate::progress;
-use crate::values::{Attribute, Bounds, Step};
+use crate::values::{Bounds, Step};
 
 mod cache;
 mod scan;
@@ -66,12 +66,14 @@ impl Default for OpenOptions {
 /// ([`StepStats::of`]), bit for bit.
 pub trait StepsScan {
     /// The statistics of `steps[i]` for each `i` of `which`, in that order, read with
-    /// `selection`. Collective: every rank calls it with the same arguments.
+    /// `selection` (and the smoothing lengths from neighbours `smoothing` computes, where
+    /// selected). Collective: every rank calls it with the same arguments.
     fn stats(
         &self,
         steps: &[StepRef],
         which: &[usize],
         selection: &AttributeSelection,
+        smoothing: Option<Smoothing>,
     ) -> Result<Vec<StepStats>, DataError>;
 
     /// Whether this process writes what the scan found into the series' index (one rank of a
@@ -96,33 +98,13 @@ fn one(found: Vec<StepStats>, step: &StepRef) -> Result<StepStats, DataError> {
 }
 
 /// Reads a step from its file, with the smoothing lengths from neighbours where `smoothing`
-/// asks for them and the selection keeps them (the file does not hold them: they are
-/// computed, or read from their cache, from the step's positions).
+/// asks for them and `selection` keeps them.
 fn read_file_step(
     step: &StepRef,
     selection: &AttributeSelection,
     smoothing: Option<Smoothing>,
 ) -> Result<Step, DataError> {
-    let Some(smoothing) = smoothing else {
-        return io::read_step(step, selection);
-    };
-    let name = smoothing.attribute();
-    let from_file = match selection {
-        AttributeSelection::All => AttributeSelection::All,
-        AttributeSelection::Only(names) => {
-            AttributeSelection::Only(names.iter().filter(|n| **n != name).cloned().collect())
-        }
-    };
-    let mut read = io::read_step(step, &from_file)?;
-    if selection.keeps(&name) {
-        let values = smoothing::lengths_for(step, &read.positions, smoothing.neighbours);
-        read.attributes.push(Attribute { name, values });
-        if let AttributeSelection::Only(names) = selection {
-            read.attributes
-                .sort_by_key(|a| names.iter().position(|n| *n == a.name));
-        }
-    }
-    Ok(read)
+    smoothing::read_part(step, selection, smoothing, io::Part::WHOLE, &WholeStep).map(|r| r.step)
 }
 
 /// What is known about one step without holding it.
@@ -273,9 +255,8 @@ impl TimeSeries {
     /// Opens the series at `path` as [`TimeSeries::open`] does, the statistics of the steps
     /// the index does not know gathered by `scan` (a distributed render's ranks, each reading
     /// its part of each step: [`StepsScan`]) instead of this process reading them whole, before
-    /// it returns. The series' values are the same, bit for bit. A series whose smoothing
-    /// lengths come from neighbours is scanned whole (a part's neighbours lie in other parts).
-    /// Every rank calls it, at the same point: the scan is collective.
+    /// it returns. The series' values are the same, bit for bit, smoothing lengths from
+    /// neighbours included. Every rank calls it, at the same point: the scan is collective.
     pub fn open_scanned_by(
         path: &Path,
         options: &OpenOptions,
@@ -290,7 +271,6 @@ impl TimeSeries {
         parts: Option<&dyn StepsScan>,
     ) -> Result<TimeSeries, DataError> {
         let refs = io::list_steps_reading(path, options.format, options.read)?;
-        let parts = parts.filter(|_| options.smoothing.is_none());
         let mut index = SeriesIndex::load(&refs);
         if options.rescan {
             index.forget();
@@ -315,7 +295,10 @@ impl TimeSeries {
             (Some(stats), _) => stats,
             (None, Some(parts)) => {
                 let stamp = FileStamp::of(&first.path);
-                let stats = one(parts.stats(&refs, &[0], &options.attributes)?, first)?;
+                let stats = one(
+                    parts.stats(&refs, &[0], &options.attributes, options.smoothing)?,
+                    first,
+                )?;
                 index.insert(first, stamp, &stats);
                 stats
             }
@@ -345,7 +328,7 @@ impl TimeSeries {
                 .iter()
                 .map(|&i| FileStamp::of(&refs[i].path))
                 .collect();
-            let found = parts.stats(&refs, &missing, &selection)?;
+            let found = parts.stats(&refs, &missing, &selection, options.smoothing)?;
             if found.len() != missing.len() {
                 return Err(DataError::new(
                     &refs[missing[0]].path,
@@ -644,38 +627,31 @@ impl TimeSeries {
 
     /// Rank `part.rank`'s part of step `index` ([`io::read_step_part`]): read from the file
     /// without the cache (it is one rank's, and the cache is for whole steps), or cut from a
-    /// step held in memory. Where the series computes smoothing lengths from neighbours, the
-    /// part's lengths need the neighbours in other parts: the step is read whole (or comes from
-    /// the cache) and cut, with a line in the log that says so, so that the field is the
-    /// single-rank field.
-    pub fn step_part(&self, index: usize, part: io::Part) -> Result<io::StepPart, DataError> {
+    /// step held in memory. Where the series computes smoothing lengths from neighbours, a
+    /// part's neighbours lie in other parts too: `lengths` finds them (every rank together,
+    /// `crate::dist::knn`), so that the field is the single-rank field.
+    pub fn step_part(
+        &self,
+        index: usize,
+        part: io::Part,
+        lengths: &dyn NeighbourLengths,
+    ) -> Result<io::StepPart, DataError> {
         let whole_and_cut = |step: &Step| io::StepPart {
             step: io::slice_step(step, part),
             decoded: step.len(),
         };
-        let (steps, selection, smoothing) = match &self.shared.source {
-            Source::Memory(_) => return self.step(index).map(|s| whole_and_cut(&s)),
+        let (
+            Some(step),
             Source::Files {
-                steps,
                 selection,
                 smoothing,
-            } => (steps, selection, smoothing),
-        };
-        if let Some(smoothing) = smoothing.filter(|s| selection.keeps(&s.attribute())) {
-            if part.rank == 0 {
-                tracing::info!(
-                    "smoothing lengths from the {} nearest neighbours: each of the {} ranks \
-                     reads the whole step, since a part's neighbours lie in other parts",
-                    smoothing.neighbours,
-                    part.ranks
-                );
-            }
-            return self.step(index).map(|s| whole_and_cut(&s));
-        }
-        let Some(step) = steps.get(index) else {
+                ..
+            },
+        ) = (self.step_ref(index), &self.shared.source)
+        else {
             return self.step(index).map(|s| whole_and_cut(&s));
         };
-        let read = io::read_step_part(step, selection, part)?;
+        let read = smoothing::read_part(step, selection, *smoothing, part, lengths)?;
         tracing::debug!(
             "{}: rank {} of {} decoded {} records, keeps {}",
             step.name,
