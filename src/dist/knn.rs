@@ -73,14 +73,6 @@ pub fn lengths(
             .map(|n| n.distance)
             .collect()
     };
-    let mut found: Vec<Vec<f64>> = if owned.is_empty() {
-        Vec::new()
-    } else {
-        owned
-            .par_iter()
-            .map(|q| nearest_in(&local_tree, q))
-            .collect()
-    };
     let bound = |d: &[f64]| {
         if d.len() == k + 1 {
             d[k]
@@ -88,21 +80,45 @@ pub fn lengths(
             f64::INFINITY
         }
     };
+    // The other leaves within a point's bound. The box's distance is rounded differently from
+    // a point's: a margin of 1e-9 of the bound asks a leaf more, never less (an answer beyond
+    // the bound is harmless).
+    let me = comm.rank();
+    let leaves_within = |at: DVec3, within: f64, out: &mut Vec<usize>| {
+        out.clear();
+        tree.leaves_near(at, within.sqrt(), out);
+        out.retain(|&leaf| {
+            leaf != me && tree.leaves()[leaf].distance_squared(at) <= within * (1.0 + 1e-9)
+        });
+    };
+    // A point no other leaf comes within the bound of has its length; the others keep their
+    // distances for the answers to join (only those: a point's K + 1 distances are 33 f64 for
+    // K = 32, and most points lie deep inside their leaf).
+    let mut found: Vec<Found> = owned
+        .par_iter()
+        .map_init(Vec::new, |near, q| {
+            let d = nearest_in(&local_tree, q);
+            let within = bound(&d);
+            leaves_within(DVec3::from_array(*q), within, near);
+            if near.is_empty() {
+                Found::Length(within)
+            } else {
+                Found::Asks(d)
+            }
+        })
+        .collect();
 
     // 3. Queries to the leaves within each bound: (point, bound) to the leaf's owner.
-    let me = comm.rank();
     let mut queries: Vec<Vec<f64>> = vec![Vec::new(); ranks];
     let mut asked: Vec<Vec<u32>> = vec![Vec::new(); ranks];
-    for (i, (q, d)) in owned.iter().zip(&found).enumerate() {
+    let mut near = Vec::new();
+    for (i, (q, f)) in owned.iter().zip(&found).enumerate() {
+        let Found::Asks(d) = f else { continue };
         let within = bound(d);
-        let at = DVec3::from_array(*q);
-        for (leaf, region) in tree.leaves().iter().enumerate() {
-            // The box's distance is rounded differently from a point's: a margin of 1e-9 of
-            // the bound asks a leaf more, never less (an answer beyond the bound is harmless).
-            if leaf != me && region.distance_squared(at) <= within * (1.0 + 1e-9) {
-                queries[leaf].extend_from_slice(&[q[0], q[1], q[2], within]);
-                asked[leaf].push(i as u32);
-            }
+        leaves_within(DVec3::from_array(*q), within, &mut near);
+        for &leaf in &near {
+            queries[leaf].extend_from_slice(&[q[0], q[1], q[2], within]);
+            asked[leaf].push(i as u32);
         }
     }
     let incoming = comm.all_to_all_of(&queries)?;
@@ -141,25 +157,30 @@ pub fn lengths(
                 .ok_or_else(|| {
                     DistError::Malformed(format!("rank {leaf} answered too few neighbour queries"))
                 })?;
-            found[i as usize].extend_from_slice(&reply[at + 1..at + 1 + count]);
+            if let Found::Asks(d) = &mut found[i as usize] {
+                d.extend_from_slice(&reply[at + 1..at + 1 + count]);
+            }
             at += 1 + count;
         }
     }
     drop(replies);
     let mut h: Vec<f64> = found
         .into_par_iter()
-        .map(|mut d| {
-            // At least K + 1 distances: a bound of infinity asked every leaf, and the step
-            // holds K + 1 particles.
-            if d.len() <= k {
-                return Err(DistError::Malformed(format!(
-                    "{} neighbour distances for the {}-th nearest",
-                    d.len(),
-                    k + 1
-                )));
+        .map(|f| match f {
+            Found::Length(d) => Ok(d.sqrt()),
+            Found::Asks(mut d) => {
+                // At least K + 1 distances: a bound of infinity asked every leaf, and the
+                // step holds K + 1 particles.
+                if d.len() <= k {
+                    return Err(DistError::Malformed(format!(
+                        "{} neighbour distances for the {}-th nearest",
+                        d.len(),
+                        k + 1
+                    )));
+                }
+                d.select_nth_unstable_by(k, f64::total_cmp);
+                Ok(d[k].sqrt())
             }
-            d.select_nth_unstable_by(k, f64::total_cmp);
-            Ok(d[k].sqrt())
         })
         .collect::<Result<_, _>>()?;
 
@@ -197,6 +218,15 @@ pub fn lengths(
             })
         })
         .collect()
+}
+
+/// What the owner found of a point among its own points.
+enum Found {
+    /// The squared distance to its K + 1-th nearest, which no other leaf comes nearer than.
+    Length(f64),
+    /// Its K + 1 nearest squared distances among the owner's points (fewer where the owner
+    /// holds fewer), to join with other leaves' answers.
+    Asks(Vec<f64>),
 }
 
 /// The ranks' [`NeighbourLengths`]: each rank's share of the lengths cached beside the file
