@@ -1081,3 +1081,180 @@ fn ranks_find_neighbour_smoothing_lengths_from_their_parts() {
     assert_eq!(ranks_cache.len(), 3, "{ranks_cache:?}");
     assert_eq!(single_cache, ranks_cache);
 }
+
+/// A targeted render's chunks of frames over the ranks (`dist::target::RankChunks`: each rank
+/// renders its brick's share, rank 0 composites and sends every rank the image) are the
+/// single process's session's chunks: later chunks of a sequence (their frame numbers pick
+/// the noise) and chunks on the half-resolution lattice, every rank holding the same image.
+/// Emission-absorption without early termination, where the ranks' image is the single
+/// rank's up to rounding.
+#[test]
+fn the_ranks_chunks_of_frames_are_a_session_s() {
+    use aarbf::dist::prepare_brick;
+    use aarbf::dist::target::RankChunks;
+    use aarbf::render::RenderSession;
+    use aarbf::render::target::ChunkRenderer;
+    let s = scene();
+    let d = dist_scene(s);
+    let settings = RenderSettings {
+        width: 48,
+        height: 36,
+        seed: 7,
+        integrator: Integrator::Ea,
+        opacity_threshold: 1.0,
+        camera: Some(Camera {
+            eye: DVec3::new(1.1, 0.6, 1.2),
+            at: DVec3::new(0.4, 0.15, 0.15),
+            up: DVec3::Y,
+            fovy: 45.0,
+        }),
+        background: [0.1, 0.2, 0.3],
+        ..RenderSettings::default()
+    };
+    let mut session = RenderSession::new(Box::new(CpuBackend::new()), &s.series);
+    session.set_precision(Precision::F64);
+    session.show(&s.series, STEP, &s.field, d.cluster).unwrap();
+    let chunks = [(0, 2, false), (2, 3, false), (0, 2, true), (5, 1, true)];
+    let single: Vec<aarbf::values::Image> = chunks
+        .iter()
+        .map(|&(first, count, half)| {
+            if half {
+                session.render_frames_on_half_lattice(&settings, first, count)
+            } else {
+                session.render_frames(&settings, first, count)
+            }
+            .unwrap()
+        })
+        .collect();
+    let basis = FrameBasis {
+        bounds: s.series.bounds(),
+        max_count: s.series.max_count(),
+        periodic: false,
+        field: &s.field,
+        auto: AutoValues::of(&s.series, &s.field).unwrap(),
+    };
+    for ranks in [1, 3, 4] {
+        let got = run_local(ranks, |comm| {
+            let local = slice_of(&s.step, comm.rank(), comm.size());
+            let mut backend = CpuBackend::new();
+            let brick = prepare_brick(comm, &mut backend, &local, &d, None)?;
+            let mut rank = RankChunks::new(comm, &mut backend, &brick, &d, basis);
+            let images: Vec<aarbf::values::Image> = chunks
+                .iter()
+                .map(|&(first, count, half)| rank.render_frames(&settings, first, count, half))
+                .collect::<Result<_, _>>()
+                .map_err(|e| aarbf::dist::DistError::Malformed(e.to_string()))?;
+            assert!(rank.elapsed() > std::time::Duration::ZERO, "rank 0's clock");
+            Ok(images)
+        })
+        .unwrap();
+        for (r, images) in got.iter().enumerate() {
+            assert_eq!(images, &got[0], "rank {r} of {ranks} holds rank 0's images");
+        }
+        for ((want, have), chunk) in single.iter().zip(&got[0]).zip(&chunks) {
+            assert_eq!((have.width, have.height), (want.width, want.height));
+            let diff = want
+                .pixels
+                .iter()
+                .zip(&have.pixels)
+                .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
+                .fold(0.0f32, f32::max);
+            assert!(
+                diff <= 1e-5,
+                "{ranks} ranks, chunk {chunk:?}: max |difference| {diff:e}"
+            );
+        }
+    }
+}
+
+/// `--target-error` and `--time-budget` under `--ranks`: every rank runs the single process's
+/// controller on the images rank 0 composites, and the image meets the target against a
+/// converged single-process image as one process's does (the estimates are within 2x of the
+/// truth: tests/target_error.rs), on a dam break the CLI generated.
+#[test]
+fn ranks_render_to_a_target_error_and_a_time_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("db");
+    let made = common::aarbf_logged(&[
+        "generate",
+        "dambreak-demo",
+        "--count",
+        "5003",
+        "--steps",
+        "1",
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    assert!(made.status.success(), "{made:?}");
+    let render = |out: &str, extra: &[&str]| {
+        let out = dir.path().join(out);
+        let mut args = vec!["render", "--width", "48", "--height", "36", "--data"];
+        let data = data.to_str().unwrap();
+        args.push(data);
+        let out_arg = out.to_str().unwrap().to_owned();
+        args.extend(["--out", &out_arg]);
+        args.extend(extra);
+        let done = common::aarbf_logged(&args);
+        let log = String::from_utf8_lossy(&done.stderr).into_owned();
+        assert!(done.status.success(), "{extra:?}: {log}");
+        (image::open(&out).unwrap().into_rgba32f(), log)
+    };
+    let rmse = |a: &image::Rgba32FImage, b: &image::Rgba32FImage| {
+        let (sum, n) = a
+            .pixels()
+            .zip(b.pixels())
+            .flat_map(|(p, q)| (0..3).map(move |c| f64::from(p[c] - q[c]).powi(2)))
+            .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
+        (sum / n as f64).sqrt()
+    };
+    // Stochastic marching under the default light: noise enough for the target to decide
+    // the samples (128 here, as one process chooses).
+    let marching = ["--integrator", "marching"];
+    let (truth, _) = render("truth.exr", &[&marching[..], &["--spp", "512"]].concat());
+    let target = 0.001;
+    let (ranked, log) = render(
+        "ranks.exr",
+        &[
+            &marching[..],
+            &["--ranks", "3", "--target-error", &target.to_string()],
+        ]
+        .concat(),
+    );
+    assert!(
+        log.contains("estimated error") && log.contains("met") && !log.contains("NOT met"),
+        "{log}"
+    );
+    assert_eq!(
+        log.matches("estimated error").count(),
+        1,
+        "rank 0 says it: {log}"
+    );
+    let error = rmse(&ranked, &truth);
+    eprintln!("--ranks 3 --target-error {target}: RMSE {error:.2e} against 512 spp");
+    assert!(
+        error >= 0.1 * target,
+        "the target decides the samples: RMSE {error}"
+    );
+    assert!(
+        error <= 2.0 * target,
+        "RMSE {error} for a target of {target}"
+    );
+    let (_, log) = render("budget.exr", &["--ranks", "2", "--time-budget", "0.5"]);
+    assert!(log.contains("estimated error"), "{log}");
+    // --reference is one process's converged f64 image: refused by name.
+    let out = common::aarbf_logged(&[
+        "render",
+        "--data",
+        data.to_str().unwrap(),
+        "--ranks",
+        "2",
+        "--reference",
+        "--out",
+        dir.path().join("r.exr").to_str().unwrap(),
+    ]);
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && log.contains("--reference"),
+        "{log}"
+    );
+}

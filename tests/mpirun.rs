@@ -499,3 +499,57 @@ fn neighbour_smoothing_lengths_are_found_by_the_processes_together() {
     );
     assert_eq!(mpi_cache, cached(threads_dir.path()));
 }
+
+/// `mpirun -np 2 aarbf render --target-error`: every process runs the controller on the images
+/// rank 0 composites and sends it, so they ask for the same chunks and none waits in a
+/// collective the other skipped; rank 0 says the estimate once and writes an image within
+/// twice the target of `--ranks 2`'s (the chunk sizes follow measured times, so the two may
+/// differ in samples).
+#[test]
+fn mpi_processes_render_to_a_target_error_together() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = common::generated_dam_break(d);
+    let target = 0.002;
+    let args = |out: &Path| -> Vec<String> {
+        let mut a = common::dam_break_render_args(&header, out, (48, 36), 1);
+        a.extend(
+            [
+                "--integrator",
+                "marching",
+                "--target-error",
+                &target.to_string(),
+            ]
+            .map(String::from),
+        );
+        a
+    };
+    let mpi_out = d.join("mpi.exr");
+    let started = Instant::now();
+    let out = mpirun(2, &args(&mpi_out)).output().unwrap();
+    let log = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{log}");
+    assert!(started.elapsed() < Duration::from_secs(120), "{log}");
+    assert_eq!(log.matches("estimated error").count(), 1, "{log}");
+    assert!(log.contains("met") && !log.contains("NOT met"), "{log}");
+    let threads_out = d.join("threads.exr");
+    let mut threads = args(&threads_out);
+    threads.extend(["--ranks", "2"].map(String::from));
+    let out = common::aarbf_logged(&threads.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (a, b) = (pixels(&mpi_out), pixels(&threads_out));
+    let (sum, n) = a
+        .chunks_exact(4)
+        .zip(b.chunks_exact(4))
+        .flat_map(|(p, q)| (0..3).map(move |c| f64::from(p[c] - q[c]).powi(2)))
+        .fold((0.0, 0usize), |(s, n), e| (s + e, n + 1));
+    let rmse = (sum / n as f64).sqrt();
+    assert!(
+        rmse <= 2.0 * target,
+        "RMSE {rmse} between mpirun and --ranks 2"
+    );
+}

@@ -38,6 +38,7 @@ pub mod order;
 mod render;
 pub mod scan;
 pub mod step_stats;
+pub mod target;
 
 pub use balance::{Balance, CostModel};
 pub use comm::{Comm, CommError, CommExt, Parts, launched_rank, launched_size, node_local_size};
@@ -45,8 +46,9 @@ pub use local::{LocalComm, run_local};
 #[cfg(feature = "mpi")]
 pub use mpi_comm::MpiComm;
 pub use render::{
-    DEFAULT_SHADOW_MAP, DistImage, DistScene, DistShadows, RankReport, render_balanced,
-    render_distributed, render_piloted, shadow_map_for, slice_of,
+    DEFAULT_SHADOW_MAP, DistImage, DistScene, DistShadows, PreparedBrick, RankReport,
+    prepare_brick, render_balanced, render_distributed, render_frames_on, render_piloted,
+    shadow_map_for, slice_of,
 };
 
 use crate::backend::BackendError;
@@ -67,6 +69,10 @@ pub enum DistError {
     /// The field settings are invalid for this step.
     #[error(transparent)]
     Field(#[from] FieldError),
+
+    /// A render's settings, or its chunks of frames (a targeted render's), failed.
+    #[error(transparent)]
+    Render(Box<crate::render::RenderError>),
     /// What a distributed render cannot do yet.
     #[error("{0}")]
     NotDistributed(String),
@@ -93,12 +99,24 @@ pub enum DistError {
     },
 }
 
+impl From<crate::render::RenderError> for DistError {
+    fn from(e: crate::render::RenderError) -> DistError {
+        DistError::Render(Box::new(e))
+    }
+}
+
 impl DistError {
     /// Whether this only reports that another rank failed.
     pub fn is_peer_failure(&self) -> bool {
         match self {
             DistError::Comm(CommError::PeerFailed { .. }) => true,
             DistError::Rank { source, .. } => source.is_peer_failure(),
+            DistError::Render(e) => match &**e {
+                crate::render::RenderError::Ranks(e) => e
+                    .downcast_ref::<DistError>()
+                    .is_some_and(DistError::is_peer_failure),
+                _ => false,
+            },
             _ => false,
         }
     }

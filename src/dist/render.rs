@@ -400,6 +400,29 @@ pub fn render_balanced(
     cost: Option<&CostModel>,
 ) -> Result<(Option<DistImage>, CostModel), DistError> {
     check_frames(frames)?;
+    let brick = prepare_brick(comm, backend, local, scene, cost)?;
+    render_frames_on(comm, backend, &brick, scene, frames)
+}
+
+/// A rank's brick, exchanged and uploaded to its backend: what any number of frames render
+/// from ([`render_frames_on`]).
+pub struct PreparedBrick {
+    tree: KdTree,
+    leaf: HalfOpenBox,
+    step: Arc<Step>,
+    /// The report of the exchange and build; each render adds its frames' stages to a copy.
+    report: RankReport,
+}
+
+/// The decomposition, exchange and upload of [`render_balanced`]: this rank's brick of the
+/// ranks' `local` parts, balanced by `cost` (equal particles where `None`). Collective.
+pub fn prepare_brick(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    local: &Step,
+    scene: &DistScene<'_>,
+    cost: Option<&CostModel>,
+) -> Result<PreparedBrick, DistError> {
     let mut report = RankReport {
         read: local.len() as u64,
         ..RankReport::default()
@@ -445,7 +468,33 @@ pub fn render_balanced(
             .is_some_and(|r| r.positions == PositionKind::F64),
     );
     (report.build_seconds, report.build_cpu_seconds) = clock.stop();
+    Ok(PreparedBrick {
+        tree,
+        leaf,
+        step,
+        report,
+    })
+}
 
+/// Renders `frames` (one image's, [`check_frames`]) from a brick [`prepare_brick`] made,
+/// composites them and gathers the image at rank 0, as [`render_balanced`] does; returns what
+/// the render measured for the next decomposition. Collective.
+pub fn render_frames_on(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    brick: &PreparedBrick,
+    scene: &DistScene<'_>,
+    frames: &[FrameParams],
+) -> Result<(Option<DistImage>, CostModel), DistError> {
+    check_frames(frames)?;
+    let PreparedBrick {
+        tree,
+        leaf,
+        step,
+        report,
+    } = brick;
+    let leaf = *leaf;
+    let mut report = *report;
     let grid = TileGrid {
         width: frames[0].width,
         height: frames[0].height,
@@ -471,7 +520,7 @@ pub fn render_balanced(
             DistShadows::PrefixMap(size) if comm.size() > 1 && shadows_cross_bricks(frame) => {
                 if light.as_ref().is_none_or(|(f, _)| !same_light(f, frame)) {
                     let clock = StageClock::start();
-                    let (prefix, bytes) = light_prefix(comm, backend, &tree, frame, size)?;
+                    let (prefix, bytes) = light_prefix(comm, backend, tree, frame, size)?;
                     light = Some((frame.clone(), prefix));
                     let (wall, cpu) = clock.stop();
                     report.shadow_map_seconds += wall;
@@ -527,7 +576,7 @@ pub fn render_balanced(
         report.composite_cpu_seconds += cpu;
     }
     let memory = backend.memory();
-    report.memory_bytes = (step_bytes(&step)
+    report.memory_bytes = (step_bytes(step)
         + memory.particle_bytes
         + memory.structure_bytes
         + memory.image_bytes
@@ -539,7 +588,7 @@ pub fn render_balanced(
         report.render_seconds
     };
     let measured = comm.all_gather_of(&[[report.owned as f64, seconds]])?;
-    let measured = CostModel::new(tree, &measured.concat());
+    let measured = CostModel::new(tree.clone(), &measured.concat());
 
     // The kept sums, then the final ones, end to end: one gather.
     let mut flat: Vec<[f64; 4]> = kept.iter().flat_map(|(_, k)| k.iter().copied()).collect();

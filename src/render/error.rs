@@ -19,4 +19,8 @@ pub enum RenderError {
     /// A setting is out of range or contradicts another; the message names it.
     #[error("render settings: {0}")]
     Settings(String),
+    /// The ranks of a distributed render failed (`crate::dist::DistError`, which names the
+    /// rank).
+    #[error(transparent)]
+    Ranks(Box<dyn std::error::Error + Send + Sync + 'static>),
 }

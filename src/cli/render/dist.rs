@@ -20,14 +20,16 @@ use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
 use crate::dist::knn::RankLengths;
 use crate::dist::step_stats;
+use crate::dist::target::render_to_target_on;
 use crate::dist::{
-    Balance, Comm, CostModel, DistError, DistScene, DistShadows, RankReport, render_piloted,
-    run_local, shadow_map_for,
+    Balance, Comm, CostModel, DistError, DistImage, DistScene, DistShadows, RankReport,
+    prepare_brick, render_piloted, run_local, shadow_map_for,
 };
 use crate::field::FieldSettings;
 use crate::io::Part;
 use crate::io::{AttributeSelection, DataError, Problem, StepRef};
 use crate::render::legend::Legend;
+use crate::render::target::Targeted;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
 use crate::scene::StepsScan;
 use crate::scene::TimeSeries;
@@ -333,7 +335,6 @@ impl StepsScan for Ranks {
 /// Refuses what the distributed renderer does not do yet, naming it.
 fn check_supported(
     args: &RenderArgs,
-    resolved: &Resolved,
     settings: &RenderSettings,
     ranks: &Ranks,
 ) -> anyhow::Result<()> {
@@ -344,18 +345,9 @@ fn check_supported(
         "{how} renders with --method rbf (the baselines are not distributed)"
     );
     ensure!(
-        !args.reference && args.target_error.is_none() && args.time_budget.is_none(),
-        "{how} renders a set number of samples: --reference, --target-error and \
-         --time-budget are not distributed yet"
-    );
-    ensure!(
-        resolved
-            .scene
-            .target()
-            .map_err(anyhow::Error::msg)?
-            .is_none(),
-        "{how} renders a set number of samples: the scene's target_error and time_budget \
-         are not distributed yet"
+        !args.reference,
+        "{how}: --reference is not distributed yet (it converges one process's f64 image); \
+         --target-error renders to an error over the ranks"
     );
     ensure!(
         args.save_scene.is_none(),
@@ -377,7 +369,7 @@ pub(super) fn run(
     ranks: Ranks,
 ) -> anyhow::Result<()> {
     let size = ranks.size();
-    check_supported(args, &resolved, &settings, &ranks)?;
+    check_supported(args, &settings, &ranks)?;
     let shadows = shadows(args, &settings)?;
     if settings.integrator == Integrator::Ea
         && (args.dist_shadows.is_some() || args.shadow_map.is_some())
@@ -388,6 +380,7 @@ pub(super) fn run(
         );
     }
     let spp = resolved.scene.spp();
+    let target = resolved.scene.target().map_err(anyhow::Error::msg)?;
     let how = match &ranks {
         Ranks::Threads(_) => format!("{size} ranks as threads of this process"),
         #[cfg(feature = "mpi")]
@@ -494,7 +487,7 @@ pub(super) fn run(
         } else {
             None
         };
-        let rank_body = |comm: &dyn Comm| {
+        let rank_body = |comm: &dyn Comm| -> Result<RankDone, DistError> {
             let part = Part::new(comm.rank(), comm.size());
             let local = resolved
                 .series
@@ -506,45 +499,69 @@ pub(super) fn run(
                 Some(b) => b,
                 None => slot.insert(crate::backend::create(args.backend)?),
             };
-            render_piloted(
+            let Some(target) = &target else {
+                return render_piloted(
+                    comm,
+                    &mut **backend,
+                    &local,
+                    &scene,
+                    &params,
+                    pilot.as_ref(),
+                    cost.as_ref(),
+                )
+                .map(|(image, measured)| RankDone::Frames(image, measured));
+            };
+            // A targeted render: the brick once, then every rank runs the controller on the
+            // chunks' images rank 0 sends it.
+            let brick = prepare_brick(comm, &mut **backend, &local, &scene, cost.as_ref())?;
+            drop(local);
+            let done = render_to_target_on(
                 comm,
                 &mut **backend,
-                &local,
+                &brick,
                 &scene,
-                &params,
-                pilot.as_ref(),
-                cost.as_ref(),
-            )
+                basis,
+                &settings,
+                target,
+            )?;
+            Ok(RankDone::Targeted((comm.rank() == 0).then_some(done)))
         };
-        let (image, measured) = match &ranks {
-            Ranks::Threads(n) => {
-                let mut images = run_local(*n, |comm| rank_body(comm))
-                    .with_context(|| format!("distributed render of step {}", frame.step))?;
-                let (Some(image), measured) = images.swap_remove(0) else {
-                    bail!("rank 0 returned no image");
-                };
-                (image, measured)
-            }
+        let done = match &ranks {
+            Ranks::Threads(n) => run_local(*n, |comm| rank_body(comm))
+                .with_context(|| format!("distributed render of step {}", frame.step))?
+                .swap_remove(0),
             #[cfg(feature = "mpi")]
             Ranks::Mpi(comm) => match rank_body(comm) {
-                Ok((Some(image), measured)) => (image, measured),
-                // Rank 0 writes the image.
-                Ok((None, measured)) => {
-                    if args.balance == Balance::Cost {
-                        cost = Some(measured);
-                    }
-                    continue;
-                }
+                Ok(done) => done,
                 Err(e) => {
                     comm.abort(&format!("distributed render of step {}: {e}", frame.step));
                     unreachable!("MPI_Abort returned");
                 }
             },
         };
-        if args.balance == Balance::Cost {
-            cost = Some(measured);
-        }
-        log_reports(&image.reports);
+        // Rank 0 writes the image; under MPI the other ranks go on to the next.
+        let (image, spp_done) = match done {
+            RankDone::Frames(image, measured) => {
+                if args.balance == Balance::Cost {
+                    cost = Some(measured);
+                }
+                let Some(image) = image else {
+                    ensure!(!threads, "rank 0 returned no image");
+                    continue;
+                };
+                log_reports(&image.reports);
+                (image.image(), spp)
+            }
+            RankDone::Targeted(done) => {
+                let Some(done) = done else {
+                    ensure!(!threads, "rank 0 returned no image");
+                    continue;
+                };
+                let target = target.as_ref().expect("a targeted render has a target");
+                super::image::say_targeted(frame.step, target, &done);
+                (done.image, done.spp)
+            }
+        };
         let legend = draw_legend.then(|| {
             Legend::of_field(
                 &resolved.field,
@@ -554,14 +571,9 @@ pub(super) fn run(
                 used.phi_ref,
             )
         });
-        format.write(
-            &frame.path,
-            &image.image(),
-            settings.background,
-            legend.as_ref(),
-        )?;
+        format.write(&frame.path, &image, settings.background, legend.as_ref())?;
         tracing::info!(
-            "step {}: {} ({}x{}, {spp} spp, {size} ranks) in {:.2} s",
+            "step {}: {} ({}x{}, {spp_done} spp, {size} ranks) in {:.2} s",
             frame.step,
             frame.path.display(),
             settings.width,
@@ -570,6 +582,14 @@ pub(super) fn run(
         );
     }
     Ok(())
+}
+
+/// What a rank's render of one image returns: its part of a render of a set number of frames
+/// (rank 0's image, and what it measured for the next decomposition), or of a targeted render
+/// (rank 0's result).
+enum RankDone {
+    Frames(Option<DistImage>, CostModel),
+    Targeted(Option<Targeted>),
 }
 
 /// Each rank's counts and times, and the ghosts and imbalance over all.

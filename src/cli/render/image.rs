@@ -7,7 +7,7 @@ use indicatif::ProgressBar;
 use super::{RenderArgs, Setup};
 use crate::backend::voxel::VoxelGeometry;
 use crate::render::converged::{ReferenceOptions, converged_reference};
-use crate::render::target::{Target, render_to_target};
+use crate::render::target::{Target, Targeted, render_to_target};
 use crate::render::{Method, RenderSession};
 use crate::values::Image;
 
@@ -110,6 +110,17 @@ fn targeted(
     bar: &ProgressBar,
 ) -> anyhow::Result<Rendered> {
     let done = render_to_target(session, &setup.settings, target)?;
+    say_targeted(step, target, &done);
+    bar.inc(1);
+    Ok(Rendered {
+        image: done.image,
+        step_size: Some(done.step_size),
+        spp: done.spp,
+    })
+}
+
+/// The log line of a targeted render of step `step`: its estimate, and how it got there.
+pub(super) fn say_targeted(step: usize, target: &Target, done: &Targeted) {
     tracing::info!(
         "step {step}: estimated error {:.3e} ({}{}) at step size {:.4e} and {} spp, in {:.2} s ({:.2} s calibrating; step bias {:.2e} {}, order {:.2}); noise {:.2e}",
         done.estimate,
@@ -132,12 +143,6 @@ fn targeted(
         done.bias.order,
         done.noise_rmse,
     );
-    bar.inc(1);
-    Ok(Rendered {
-        image: done.image,
-        step_size: Some(done.step_size),
-        spp: done.spp,
-    })
 }
 
 /// The voxel baseline: the backend's own voxel path, the session splatting the particles into

@@ -4,10 +4,9 @@
 use super::*;
 
 pub(super) struct Run<'a> {
-    pub(super) session: &'a mut RenderSession,
+    pub(super) session: &'a mut dyn ChunkRenderer,
     pub(super) settings: RenderSettings,
     pub(super) target: Target,
-    pub(super) started: Instant,
     pub(super) dt0: f64,
     pub(super) work: f64,
 }
@@ -24,7 +23,7 @@ impl Run<'_> {
     pub(super) fn out_of_time(&self) -> bool {
         self.target
             .time_budget
-            .is_some_and(|b| self.started.elapsed() >= b)
+            .is_some_and(|b| self.session.elapsed() >= b)
     }
 
     /// Extends the image's sequence of `level` to `frames` frames (or fewer when the time
@@ -44,7 +43,7 @@ impl Run<'_> {
                     // far: a chunk that runs slower than measured (a busy machine) overshoots
                     // the budget by at most its share of that half, and the next one measures
                     // again.
-                    let left = budget.saturating_sub(self.started.elapsed()).as_secs_f64();
+                    let left = budget.saturating_sub(self.session.elapsed()).as_secs_f64();
                     let step_time = level.step_time().max(1e-9);
                     if left < step_time {
                         break;
@@ -53,13 +52,13 @@ impl Run<'_> {
                 }
             }
             count = count.min(level.a.chunk_room());
-            let started = Instant::now();
+            let started = self.session.elapsed();
             let settings = self.at(level.dt, level.a.seed);
             let image = self
                 .session
-                .render_frames(&settings, level.a.frames, count)?;
+                .render_frames(&settings, level.a.frames, count, false)?;
             level.a.add(&image, count);
-            level.seconds += started.elapsed().as_secs_f64();
+            level.seconds += (self.session.elapsed() - started).as_secs_f64();
             self.work += f64::from(count) * self.dt0 / level.dt;
             if companion_follows {
                 self.extend_companion(level)?;
@@ -90,7 +89,7 @@ impl Run<'_> {
 
     /// Brings the companion of `level` to as many frames as its image's sequence.
     pub(super) fn extend_companion(&mut self, level: &mut Level) -> Result<(), RenderError> {
-        let started = Instant::now();
+        let started = self.session.elapsed();
         let (to, dt) = (level.a.frames, level.dt);
         let (sequence, on_lattice) = match &mut level.companion {
             Companion::Pair(b) => (b, false),
@@ -104,18 +103,18 @@ impl Run<'_> {
         let (image, share) = if on_lattice {
             let (w, h) = (settings.width, settings.height);
             let (lw, lh) = half_lattice_size(w, h);
-            let image =
-                self.session
-                    .render_frames_on_half_lattice(&settings, sequence.frames, count)?;
+            let image = self
+                .session
+                .render_frames(&settings, sequence.frames, count, true)?;
             (image, f64::from(lw * lh) / f64::from(w * h))
         } else {
             let image = self
                 .session
-                .render_frames(&settings, sequence.frames, count)?;
+                .render_frames(&settings, sequence.frames, count, false)?;
             (image, 1.0)
         };
         sequence.add(&image, count);
-        level.seconds += started.elapsed().as_secs_f64();
+        level.seconds += (self.session.elapsed() - started).as_secs_f64();
         self.work += share * f64::from(count) * self.dt0 / dt;
         Ok(())
     }
@@ -214,7 +213,7 @@ pub(super) fn choose_step(
                 ((spp - f64::from(held)).max(0.0) * frame_time, spp)
             }
             (None, Some(budget)) => {
-                let left = budget.saturating_sub(run.started.elapsed()).as_secs_f64();
+                let left = budget.saturating_sub(run.session.elapsed()).as_secs_f64();
                 let spp = f64::from(held) + left / frame_time.max(1e-9);
                 let noise = convergence.noise_at(spp);
                 (b_choice * b_choice + noise * noise, spp)
@@ -326,7 +325,7 @@ pub(super) fn finish(
                 bias,
                 convergence: level.convergence(),
                 met,
-                elapsed: run.started.elapsed(),
+                elapsed: run.session.elapsed(),
                 calibration,
                 work: run.work,
             });
@@ -349,7 +348,7 @@ fn next_stop(run: &Run<'_>, level: &Level, spp: f64, cycle: Option<u32>) -> (u32
     if let (Some(budget), Some(d)) = (target.time_budget, cycle)
         && before >= d
     {
-        let left = budget.saturating_sub(run.started.elapsed()).as_secs_f64();
+        let left = budget.saturating_sub(run.session.elapsed()).as_secs_f64();
         let cycles = (left / (f64::from(d) * level.step_time()).max(1e-9)).floor();
         frames = frames.min(before + d * cycles.min(f64::from(u32::MAX / d)) as u32);
         no_cycle_fits = frames == before;

@@ -41,6 +41,7 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 
 use super::RenderError;
+use super::Resolved;
 use super::cycles::{mask_cycle, stratified_cycle};
 use super::session::RenderSession;
 use super::settings::RenderSettings;
@@ -289,6 +290,78 @@ pub fn render_to_target(
     settings: &RenderSettings,
     target: &Target,
 ) -> Result<Targeted, RenderError> {
+    render_chunks_to_target(
+        &mut SessionChunks {
+            session,
+            started: Instant::now(),
+        },
+        settings,
+        target,
+    )
+}
+
+/// What a targeted render renders with: chunks of a sequence's frames, and a clock. One
+/// process's session ([`render_to_target`]), or the ranks of a distributed render, each
+/// running the same decisions on the same images (`crate::dist::target`).
+pub trait ChunkRenderer {
+    /// What `settings` leaves automatic, resolved ([`RenderSession::resolve`]).
+    fn resolve(&self, settings: &RenderSettings) -> Result<Resolved, RenderError>;
+
+    /// Frames `first..first + count` of `settings` as a fresh accumulation, read back
+    /// ([`RenderSession::render_frames`]); on the image's half-resolution lattice where
+    /// `half_lattice` ([`RenderSession::render_frames_on_half_lattice`]).
+    fn render_frames(
+        &mut self,
+        settings: &RenderSettings,
+        first: u32,
+        count: u32,
+        half_lattice: bool,
+    ) -> Result<Image, RenderError>;
+
+    /// The time since the render started. The decisions that follow from it must be the
+    /// same in every process that makes them: a distributed render's clock moves only when
+    /// a chunk ends, to what its rank 0 measured.
+    fn elapsed(&self) -> Duration;
+}
+
+/// One process's session, on the wall clock.
+struct SessionChunks<'a> {
+    session: &'a mut RenderSession,
+    started: Instant,
+}
+
+impl ChunkRenderer for SessionChunks<'_> {
+    fn resolve(&self, settings: &RenderSettings) -> Result<Resolved, RenderError> {
+        self.session.resolve(settings)
+    }
+
+    fn render_frames(
+        &mut self,
+        settings: &RenderSettings,
+        first: u32,
+        count: u32,
+        half_lattice: bool,
+    ) -> Result<Image, RenderError> {
+        if half_lattice {
+            self.session
+                .render_frames_on_half_lattice(settings, first, count)
+        } else {
+            self.session.render_frames(settings, first, count)
+        }
+    }
+
+    fn elapsed(&self) -> Duration {
+        self.started.elapsed()
+    }
+}
+
+/// [`render_to_target`] with the chunks rendered by `session` (a distributed render's ranks:
+/// every rank calls it with the same arguments, and gets the same result).
+pub fn render_chunks_to_target(
+    session: &mut dyn ChunkRenderer,
+    settings: &RenderSettings,
+    target: &Target,
+) -> Result<Targeted, RenderError> {
     target.check()?;
     let dt0 = session.resolve(settings)?.step_size;
     let step_fixed = settings.step_size.is_some();
@@ -297,7 +370,6 @@ pub fn render_to_target(
         session,
         settings: settings.clone(),
         target: *target,
-        started: Instant::now(),
         dt0,
         work: 0.0,
     };
@@ -375,7 +447,7 @@ fn render_loose(
             tracing::debug!(
                 "targeted: loose: twice the step, bias {b:.3e}, {needed:.1} spp predicted"
             );
-            let calibration = run.started.elapsed();
+            let calibration = run.session.elapsed();
             let bias_images = (
                 levels[2].image(&run.settings),
                 levels[1].image(&run.settings),
@@ -474,7 +546,7 @@ fn render_at_chosen_step(
     lattice: Option<u32>,
 ) -> Result<Targeted, RenderError> {
     let (target, dt0, seed) = (run.target, run.dt0, run.settings.seed);
-    let calibration = run.started.elapsed();
+    let calibration = run.session.elapsed();
     // The level at a step finer than dt0, where one was chosen: (j, level).
     let mut finer: Option<(i32, Level)> = None;
     loop {
