@@ -12,6 +12,7 @@ use vtkio::model::{
 };
 
 mod appended;
+mod legacy;
 
 use super::{
     At, AttributeSelection, Columns, DataError, Format, Part, Problem, array_attribute_names,
@@ -28,8 +29,9 @@ const MAX_COMPRESSION_RATIO: u64 = 1100;
 /// `v_z` and `v_magnitude`; only the selected ones decoded).
 ///
 /// Of that, `part`'s records, and how many were decoded: appended data is read by offset, only
-/// the part's rows of each array ([`appended`]); other files are parsed whole by vtkio and cut
-/// (with a warning once that each rank reads the whole step).
+/// the part's rows of each array ([`appended`]), and so is a part of a legacy binary file
+/// ([`legacy`]); other files are parsed whole by vtkio and cut (with a warning once that each
+/// rank reads the whole step).
 pub(super) fn read_step(
     at: At<'_>,
     legacy: bool,
@@ -42,8 +44,16 @@ pub(super) fn read_step(
     if !legacy && let Some(read) = appended::read(at, selection, part)? {
         return Ok(read);
     }
+    // A part of a legacy binary file is read by offset; the whole step, by vtkio as before.
+    if legacy
+        && !part.is_whole()
+        && let Some(read) = legacy::read(at, selection, part)?
+    {
+        return Ok(read);
+    }
     let why = if legacy {
-        "legacy VTK is parsed whole by vtkio: its ascii values are not one record a line"
+        "legacy ascii VTK (or binary with sections only vtkio reads) is parsed whole by vtkio: \
+         its ascii values are not one record a line"
     } else {
         "its arrays are inline in the XML (ascii, or a whole array's base64), parsed whole by \
          vtkio"
