@@ -303,10 +303,13 @@ struct Appended {
     zlib_block: Option<usize>,
 }
 
+/// A particle's position, `rho`, `pressure`, `id` and `velocity`.
+type Particle = ([f64; 3], f32, f64, i32, [f32; 3]);
+
 /// The particles [`write_appended`] writes, by their index in the whole step: position, and
 /// the values of `rho` (Float32, NaN at 700), `pressure` (Float64), `id` (Int32) and
 /// `velocity` (3 x Float32).
-fn particle(g: usize) -> ([f64; 3], f32, f64, i32, [f32; 3]) {
+fn particle(g: usize) -> Particle {
     let t = g as f64 * 0.37;
     let rho = if g == 700 {
         f32::NAN
@@ -325,7 +328,7 @@ fn particle(g: usize) -> ([f64; 3], f32, f64, i32, [f32; 3]) {
 /// The step [`write_appended`]'s file holds: [`particle`]s `0..n`.
 fn particles_step(n: usize) -> Step {
     let all: Vec<_> = (0..n).map(particle).collect();
-    let column = |name: &str, f: &dyn Fn(&([f64; 3], f32, f64, i32, [f32; 3])) -> f64| Attribute {
+    let column = |name: &str, f: &dyn Fn(&Particle) -> f64| Attribute {
         name: name.into(),
         values: all.iter().map(f).collect(),
     };

@@ -2,7 +2,9 @@
 //! base64-encoded — read by offset: the XML before `<AppendedData>` is parsed for each array's
 //! type, components and offset, and only the point coordinates and the selected point-data
 //! arrays are read from the file (decoded, and inflated for zlib, VTK's default compressor);
-//! every other array is never read or decoded. Files with inline (ascii or base64) arrays or
+//! every other array is never read or decoded. A rank's part reads less still: only its rows
+//! of each piece, and of each array the bytes that hold them (raw), the base64 groups that
+//! hold them, or the zlib blocks that overlap them. Files with inline (ascii or base64) arrays or
 //! another compressor go through vtkio ([`super`]). (vtkio 0.7.0-rc2 panics on the base64
 //! appended data VTK 9.7's writer makes of a million particles: `benches/peers/vtk_read.py`.)
 
