@@ -884,6 +884,43 @@ fn ascii_ply_with_the_vertex_element_last_is_read_by_byte_ranges_moved_to_line_s
         },
     );
 
+    // Rows of one length and N = 1008 (a multiple of every P but 5): the shares' ends fall on
+    // line starts exactly, where a row must go to the part that starts with it, once.
+    let fixed = dir.path().join("fixed.ply");
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 1008\nproperty int x\nproperty int y\n\
+         property int z\nproperty double density\nend_header\n",
+    );
+    for i in 0..1008 {
+        text.push_str(&format!(
+            "{i:06} {:06} 000007 {:+.15e}\n",
+            2 * i,
+            1.0 / (i as f64 + 1.0)
+        ));
+    }
+    std::fs::write(&fixed, text).unwrap();
+    let row = row_lengths(&fixed).0;
+    check_parts(
+        &the_step(&fixed),
+        &AttributeSelection::All,
+        1008,
+        Bound::Bytes {
+            longest: row,
+            shortest: row,
+        },
+    );
+
+    // A row belongs to the part whose share holds its first byte: where every share starts a
+    // line, a part's rows are exactly its share.
+    let step = the_step(&fixed);
+    for ranks in [2, 3, 4, 6, 7, 8, 9, 16] {
+        for rank in 0..ranks {
+            let part = io::read_step_part(&step, &AttributeSelection::All, Part::new(rank, ranks));
+            let share = Part::new(rank, ranks).range(1008).len();
+            assert_eq!(part.unwrap().decoded, share, "rank {rank} of {ranks}");
+        }
+    }
+
     // A face element after the vertices: read whole (its rows end before the file does).
     let faces = dir.path().join("faces.ply");
     write_ascii_ply(&faces, 101, "\n", "3 0 1 2\n");
