@@ -243,7 +243,10 @@ pub(super) fn read_step(
             body_len,
         )?;
         if element.name == "vertex" {
-            let last = std::ptr::eq(element, &header.elements[header.elements.len() - 1]);
+            let last = header
+                .elements
+                .last()
+                .is_some_and(|e| std::ptr::eq(e, element));
             return read_vertices(at, &mut body, element, n, last, selection, part);
         }
         for row in 0..element.count {
@@ -319,14 +322,14 @@ fn read_vertices(
     // the rows against the header's count (a part cannot: it does not know how many rows
     // precede it).
     let lines = body.encoding == Encoding::Ascii && scalars_only && last && !part.is_whole();
+    if lines {
+        let (positions, columns) = decode_ascii_lines(at, body, &layout, part)?;
+        let decoded = positions.len();
+        return Ok((vertex_columns(&layout, positions, columns), decoded));
+    }
     let rows = if fixed { part.range(n) } else { 0..n };
     let (positions, columns) = if fixed {
         decode_fixed_rows(at, body, &layout, n, rows.clone())?
-    } else if lines {
-        let (positions, columns) = decode_ascii_lines(at, body, &layout, part)?;
-        let decoded = positions.len();
-        let columns = vertex_columns(&layout, positions, columns);
-        return Ok((columns, decoded));
     } else {
         decode_row_by_row(at, body, element, &layout, n)?
     };
@@ -334,8 +337,10 @@ fn read_vertices(
     if fixed {
         Ok((columns, rows.len()))
     } else {
-        let why = if body.encoding == Encoding::Ascii {
-            "ascii rows followed by another element"
+        let why = if body.encoding == Encoding::Ascii && scalars_only {
+            "ascii rows followed by another element: where they end is found by parsing them"
+        } else if body.encoding == Encoding::Ascii {
+            "ascii rows with list properties"
         } else {
             "rows with list properties"
         };

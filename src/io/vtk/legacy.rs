@@ -155,7 +155,10 @@ impl<'a> Scanner<'a> {
     fn block(&mut self, count: usize, size: usize) -> Option<usize> {
         let start = self.pos;
         let end = count.checked_mul(size)?.checked_add(start)?;
-        (end <= self.bytes.len()).then(|| self.pos = end)?;
+        if end > self.bytes.len() {
+            return None;
+        }
+        self.pos = end;
         Some(start)
     }
 
