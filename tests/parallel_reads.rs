@@ -2,7 +2,8 @@
 //! on files as NumPy, h5py, GADGET-style writers and text writers make them, for P = 1..9 and
 //! 16 ranks, the parts put together in rank order are the whole step's records, and each part
 //! decoded no more than its share: exactly its records `[rN/P, (r+1)N/P)` for fixed-size
-//! records and HDF5; for CSV the records whose first byte lies in its share of the body's bytes,
+//! records, HDF5 and VTK XML appended data (of a compressed array, the blocks that hold them);
+//! for CSV and ascii PLY the records whose first byte lies in its share of the body's bytes,
 //! at most `ceil(N/P · longest row / shortest row) + 1`. Formats read whole decode N records on
 //! every rank, and say so.
 
@@ -259,23 +260,723 @@ fn a_bad_record_in_a_part_is_named_by_its_byte_offset() {
 }
 
 #[test]
-fn formats_without_a_partial_read_are_read_whole_and_cut() {
-    // VTK XML written by PySPH (appended, base64 or compressed arrays).
-    let vtp = the_step(&data("sph_runs/pysph_dam_break/fluid_00000.vtp"));
-    let n = io::read_step(&vtp, &AttributeSelection::All).unwrap().len();
-    check_parts(&vtp, &AttributeSelection::All, n, Bound::Whole);
-    // Ascii PLY: each row must be parsed to find the next.
+fn vtk_appended_data_written_by_pysph_and_vtk_is_read_by_rows_of_its_blocks() {
+    // PySPH: raw appended, zlib, Float64, 960 points (one block an array).
+    let pysph = the_step(&data("sph_runs/pysph_dam_break/fluid_00000.vtp"));
+    let n = io::read_step(&pysph, &AttributeSelection::All)
+        .unwrap()
+        .len();
+    assert_eq!(n, 960);
+    check_parts(&pysph, &AttributeSelection::All, n, Bound::Exact);
+    check_parts(&pysph, &only(&["rho"]), n, Bound::Exact);
+    // VTK 9.7's writer: base64 appended, zlib in 32 KiB blocks, 4100 points (every array
+    // spans several blocks), Float64, Int64, UInt8 and a 3-component Float32 array.
+    let vtk = the_step(&data("vtk_written.vtu"));
+    let whole = io::read_step(&vtk, &AttributeSelection::All).unwrap();
+    assert_eq!(whole.len(), 4100);
+    assert_eq!(
+        whole.attribute_names(),
+        [
+            "density",
+            "id",
+            "kind",
+            "velocity_x",
+            "velocity_y",
+            "velocity_z",
+            "velocity_magnitude"
+        ]
+    );
+    check_parts(&vtk, &AttributeSelection::All, 4100, Bound::Exact);
+    check_parts(&vtk, &only(&["velocity_y"]), 4100, Bound::Exact);
+    check_parts(&vtk, &only(&["density"]), 4100, Bound::Exact);
+}
+
+/// How [`write_appended`] writes a VTK XML file's appended data.
+#[derive(Clone, Copy, Debug)]
+struct Appended {
+    /// Bytes of a size integer: 4 (`UInt32`) or 8 (`UInt64`, pyevtk's).
+    header_bytes: usize,
+    big_endian: bool,
+    /// Base64 text (VTK's `EncodeAppendedData`), else raw bytes after the `_`.
+    base64: bool,
+    /// zlib-compressed in blocks of this many bytes, else uncompressed.
+    zlib_block: Option<usize>,
+}
+
+/// A particle's position, `rho`, `pressure`, `id` and `velocity`.
+type Particle = ([f64; 3], f32, f64, i32, [f32; 3]);
+
+/// The particles [`write_appended`] writes, by their index in the whole step: position, and
+/// the values of `rho` (Float32, NaN at 700), `pressure` (Float64), `id` (Int32) and
+/// `velocity` (3 x Float32).
+fn particle(g: usize) -> Particle {
+    let t = g as f64 * 0.37;
+    let rho = if g == 700 {
+        f32::NAN
+    } else {
+        g as f32 * 0.5 + 0.1
+    };
+    (
+        [t.sin() * 1e3, t.cos() / 3.0, -(g as f64) * 1e-7],
+        rho,
+        1.0 / (g as f64 + 3.0),
+        g as i32 - 500,
+        [g as f32 * 0.1, -(g as f32), 2.5],
+    )
+}
+
+/// The step [`write_appended`]'s file holds: [`particle`]s `0..n`.
+fn particles_step(n: usize) -> Step {
+    let all: Vec<_> = (0..n).map(particle).collect();
+    let column = |name: &str, f: &dyn Fn(&Particle) -> f64| Attribute {
+        name: name.into(),
+        values: all.iter().map(f).collect(),
+    };
+    Step {
+        name: "s".into(),
+        positions: all.iter().map(|p| DVec3::from_array(p.0)).collect(),
+        attributes: vec![
+            column("rho", &|p| p.1 as f64),
+            column("pressure", &|p| p.2),
+            column("id", &|p| p.3 as f64),
+            column("velocity_x", &|p| p.4[0] as f64),
+            column("velocity_y", &|p| p.4[1] as f64),
+            column("velocity_z", &|p| p.4[2] as f64),
+            column("velocity_magnitude", &|p| {
+                let v = p.4.map(f64::from);
+                (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+            }),
+        ],
+    }
+}
+
+/// Writes an unstructured grid of [`particle`]s in pieces of `pieces` points (VTK writes one
+/// a rank, empty for idle ranks), byte by byte as pyevtk and VTK's XML writer do: every array
+/// appended (points, cells, point data); uncompressed, an array is its size and its bytes;
+/// zlib, a header (blocks, block size, last block's size, each block's compressed size) and
+/// the blocks; base64, each of those runs encoded on its own. `corrupt`: an array's name and
+/// a block of it, in the first piece, whose compressed bytes are replaced by garbage.
+fn write_appended(path: &Path, pieces: &[usize], how: Appended, corrupt: Option<(&str, usize)>) {
+    use base64::Engine;
+    use std::io::Write;
+    let int = |v: usize| -> Vec<u8> {
+        let v = v as u64;
+        let bytes = if how.big_endian {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        };
+        if how.big_endian {
+            bytes[8 - how.header_bytes..].to_vec()
+        } else {
+            bytes[..how.header_bytes].to_vec()
+        }
+    };
+    let mut appended: Vec<u8> = Vec::new();
+    let mut xml = String::new();
+    let add = |appended: &mut Vec<u8>, name: &str, piece: usize, data: Vec<u8>| -> usize {
+        let offset = appended.len();
+        let runs: Vec<Vec<u8>> = match how.zlib_block {
+            None => vec![[int(data.len()), data].concat()],
+            Some(size) => {
+                let mut blocks: Vec<Vec<u8>> = data
+                    .chunks(size)
+                    .map(|chunk| {
+                        let mut z = flate2::write::ZlibEncoder::new(
+                            Vec::new(),
+                            flate2::Compression::default(),
+                        );
+                        z.write_all(chunk).unwrap();
+                        z.finish().unwrap()
+                    })
+                    .collect();
+                if let Some((bad, block)) = corrupt
+                    && bad == name
+                    && piece == 0
+                {
+                    blocks[block].iter_mut().for_each(|b| *b = 0x5a);
+                }
+                let last = data.len() - blocks.len().saturating_sub(1) * size;
+                let mut head = [int(blocks.len()), int(size), int(last)].concat();
+                for b in &blocks {
+                    head.extend(int(b.len()));
+                }
+                vec![head, blocks.concat()]
+            }
+        };
+        for run in runs {
+            if how.base64 {
+                let text = base64::engine::general_purpose::STANDARD.encode(&run);
+                appended.extend(text.into_bytes());
+            } else {
+                appended.extend(run);
+            }
+        }
+        offset
+    };
+    let num = |v: f64, ty: &str| -> Vec<u8> {
+        match (ty, how.big_endian) {
+            ("Float64", false) => v.to_le_bytes().to_vec(),
+            ("Float64", true) => v.to_be_bytes().to_vec(),
+            ("Float32", false) => (v as f32).to_le_bytes().to_vec(),
+            ("Float32", true) => (v as f32).to_be_bytes().to_vec(),
+            ("Int32", false) => (v as i32).to_le_bytes().to_vec(),
+            ("Int32", true) => (v as i32).to_be_bytes().to_vec(),
+            ("UInt8", _) => vec![v as u8],
+            _ => unreachable!(),
+        }
+    };
+    let array = |appended: &mut Vec<u8>,
+                 xml: &mut String,
+                 piece: usize,
+                 name: &str,
+                 ty: &str,
+                 components: usize,
+                 values: Vec<f64>| {
+        let data: Vec<u8> = values.iter().flat_map(|&v| num(v, ty)).collect();
+        let offset = add(appended, name, piece, data);
+        xml.push_str(&format!(
+            "        <DataArray type=\"{ty}\" Name=\"{name}\" NumberOfComponents=\"{components}\" \
+             format=\"appended\" offset=\"{offset}\"/>\n"
+        ));
+    };
+    let mut first = 0;
+    for (piece, &n) in pieces.iter().enumerate() {
+        let rows: Vec<_> = (first..first + n).map(particle).collect();
+        first += n;
+        xml.push_str(&format!(
+            "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">\n      <Points>\n"
+        ));
+        let points = rows.iter().flat_map(|p| p.0).collect();
+        array(
+            &mut appended,
+            &mut xml,
+            piece,
+            "points",
+            "Float64",
+            3,
+            points,
+        );
+        xml.push_str("      </Points>\n      <Cells>\n");
+        let cells = (0..n).map(|i| i as f64).collect();
+        array(
+            &mut appended,
+            &mut xml,
+            piece,
+            "connectivity",
+            "Int32",
+            1,
+            cells,
+        );
+        let offsets = (1..=n).map(|i| i as f64).collect();
+        array(
+            &mut appended,
+            &mut xml,
+            piece,
+            "offsets",
+            "Int32",
+            1,
+            offsets,
+        );
+        array(
+            &mut appended,
+            &mut xml,
+            piece,
+            "types",
+            "UInt8",
+            1,
+            vec![1.0; n],
+        );
+        xml.push_str("      </Cells>\n      <PointData>\n");
+        let rho = rows.iter().map(|p| p.1 as f64).collect();
+        array(&mut appended, &mut xml, piece, "rho", "Float32", 1, rho);
+        let pressure = rows.iter().map(|p| p.2).collect();
+        array(
+            &mut appended,
+            &mut xml,
+            piece,
+            "pressure",
+            "Float64",
+            1,
+            pressure,
+        );
+        let id = rows.iter().map(|p| p.3 as f64).collect();
+        array(&mut appended, &mut xml, piece, "id", "Int32", 1, id);
+        let velocity = rows.iter().flat_map(|p| p.4.map(f64::from)).collect();
+        array(
+            &mut appended,
+            &mut xml,
+            piece,
+            "velocity",
+            "Float32",
+            3,
+            velocity,
+        );
+        xml.push_str("      </PointData>\n    </Piece>\n");
+    }
+    let mut out = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" \
+         byte_order=\"{}\" header_type=\"{}\"{}>\n  <UnstructuredGrid>\n",
+        if how.big_endian {
+            "BigEndian"
+        } else {
+            "LittleEndian"
+        },
+        if how.header_bytes == 8 {
+            "UInt64"
+        } else {
+            "UInt32"
+        },
+        if how.zlib_block.is_some() {
+            " compressor=\"vtkZLibDataCompressor\""
+        } else {
+            ""
+        }
+    )
+    .into_bytes();
+    out.extend(xml.into_bytes());
+    out.extend(
+        format!(
+            "  </UnstructuredGrid>\n  <AppendedData encoding=\"{}\">\n   _",
+            if how.base64 { "base64" } else { "raw" }
+        )
+        .into_bytes(),
+    );
+    out.extend(appended);
+    out.extend(b"\n  </AppendedData>\n</VTKFile>\n");
+    std::fs::write(path, out).unwrap();
+}
+
+#[test]
+fn vtk_appended_data_of_several_pieces_is_read_by_the_rows_of_each_piece() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("ascii.ply");
+    let pieces = [997, 0, 1003];
+    let expected = particles_step(2000);
+    let plain = Appended {
+        header_bytes: 4,
+        big_endian: false,
+        base64: false,
+        zlib_block: None,
+    };
+    // pyevtk's (raw, UInt64 sizes); big-endian; VTK's base64 (each array one run); zlib in
+    // blocks of 100 bytes, which split rows of 4, 8 and 12 bytes, raw and base64 (the
+    // blocks one run after the header's).
+    let kinds = [
+        Appended {
+            header_bytes: 8,
+            ..plain
+        },
+        Appended {
+            big_endian: true,
+            ..plain
+        },
+        Appended {
+            base64: true,
+            ..plain
+        },
+        Appended {
+            zlib_block: Some(100),
+            ..plain
+        },
+        Appended {
+            header_bytes: 8,
+            base64: true,
+            zlib_block: Some(100),
+            ..plain
+        },
+    ];
+    for (k, how) in kinds.into_iter().enumerate() {
+        let path = dir.path().join(format!("pieces_{k}.vtu"));
+        write_appended(&path, &pieces, how, None);
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All).unwrap();
+        // The whole step is what was written (rho's NaN at 700 dropped).
+        let kept: Vec<usize> = (0..2000).filter(|&g| g != 700).collect();
+        assert_eq!(whole.len(), kept.len(), "{how:?}");
+        assert!(
+            kept.iter()
+                .enumerate()
+                .all(|(i, &g)| whole.positions[i] == expected.positions[g]),
+            "{how:?}"
+        );
+        for (a, e) in whole.attributes.iter().zip(&expected.attributes) {
+            assert_eq!(a.name, e.name, "{how:?}");
+            let e: Vec<f64> = kept.iter().map(|&g| e.values[g]).collect();
+            assert_eq!(a.values, e, "{how:?}: {}", a.name);
+        }
+        assert_eq!(whole.attributes.len(), expected.attributes.len());
+        check_parts(&step, &AttributeSelection::All, 2000, Bound::Exact);
+        check_parts(&step, &only(&["velocity_z", "id"]), 2000, Bound::Exact);
+        check_parts(&step, &only(&["pressure"]), 2000, Bound::Exact);
+    }
+}
+
+#[test]
+fn a_bad_block_or_a_truncated_file_in_a_vtk_part_is_an_error_naming_the_file_and_array() {
+    let dir = tempfile::tempdir().unwrap();
+    let how = Appended {
+        header_bytes: 4,
+        big_endian: false,
+        base64: false,
+        zlib_block: Some(100),
+    };
+    // pressure's block 40 is its bytes 4000..4100: the first piece's rows 500..512.
+    let path = dir.path().join("bad_block.vtu");
+    write_appended(&path, &[997, 1003], how, Some(("pressure", 40)));
+    let step = the_step(&path);
+    let selection = only(&["pressure"]);
+    for err in [
+        io::read_step(&step, &selection).unwrap_err(),
+        io::read_step_part(&step, &selection, Part::new(0, 2)).unwrap_err(),
+        io::read_step_part(&step, &selection, Part::new(1, 4)).unwrap_err(),
+    ] {
+        let err = err.to_string();
+        assert!(
+            err.contains("bad_block.vtu") && err.contains("'pressure' block 40"),
+            "{err}"
+        );
+    }
+    // The ranks whose rows lie in other blocks do not inflate that one.
+    for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
+        let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
+            .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
+        assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+    }
+    // Cut inside the second piece's arrays: every rank refuses (each array is checked to lie
+    // in the file), naming the file.
+    let good = dir.path().join("good.vtu");
+    write_appended(&good, &[997, 1003], how, None);
+    let bytes = std::fs::read(&good).unwrap();
+    let cut = dir.path().join("cut.vtu");
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 4]).unwrap();
+    let step = the_step(&cut);
+    for part in [Part::new(1, 2), Part::new(0, 3)] {
+        let err = io::read_step_part(&step, &AttributeSelection::All, part)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("cut.vtu") && err.contains("past the end of the file"),
+            "{err}"
+        );
+    }
+}
+
+/// Writes [`particle`]s `0..n` as VTK's legacy writer does in binary (big-endian): POINTS
+/// double, the cells (`modern`: VTK 5.1's OFFSETS and CONNECTIVITY of int64, else the older
+/// one list of int32; `grid`: an unstructured grid's CELLS and CELL_TYPES, else poly data's
+/// VERTICES), CELL_DATA, then POINT_DATA with SCALARS float and its LOOKUP_TABLE, VECTORS
+/// double and a FIELD of an int and a double array, each block followed by a newline.
+fn write_legacy_binary(path: &Path, n: usize, grid: bool, modern: bool) {
+    let rows: Vec<_> = (0..n).map(particle).collect();
+    let version = if modern { "5.1" } else { "4.2" };
+    let mut out = format!(
+        "# vtk DataFile Version {version}\nvtk output\nBINARY\nDATASET {}\nPOINTS {n} double\n",
+        if grid {
+            "UNSTRUCTURED_GRID"
+        } else {
+            "POLYDATA"
+        }
+    )
+    .into_bytes();
+    let block = |out: &mut Vec<u8>, data: Vec<u8>| {
+        out.extend(data);
+        out.push(b'\n');
+    };
+    block(
+        &mut out,
+        rows.iter()
+            .flat_map(|p| p.0)
+            .flat_map(f64::to_be_bytes)
+            .collect(),
+    );
+    let cells = if grid { "CELLS" } else { "VERTICES" };
+    if modern {
+        out.extend(format!("{cells} {} {n}\nOFFSETS vtktypeint64\n", n + 1).into_bytes());
+        block(
+            &mut out,
+            (0..=n as i64).flat_map(i64::to_be_bytes).collect(),
+        );
+        out.extend(b"CONNECTIVITY vtktypeint64\n");
+        block(&mut out, (0..n as i64).flat_map(i64::to_be_bytes).collect());
+    } else {
+        out.extend(format!("{cells} {n} {}\n", 2 * n).into_bytes());
+        block(
+            &mut out,
+            (0..n as i32)
+                .flat_map(|i| [1, i])
+                .flat_map(i32::to_be_bytes)
+                .collect(),
+        );
+    }
+    if grid {
+        out.extend(format!("CELL_TYPES {n}\n").into_bytes());
+        block(
+            &mut out,
+            vec![1i32; n]
+                .into_iter()
+                .flat_map(i32::to_be_bytes)
+                .collect(),
+        );
+    }
+    out.extend(
+        format!("CELL_DATA {n}\nSCALARS cell_id int 1\nLOOKUP_TABLE default\n").into_bytes(),
+    );
+    block(&mut out, (0..n as i32).flat_map(i32::to_be_bytes).collect());
+    out.extend(
+        format!("POINT_DATA {n}\nSCALARS density float 1\nLOOKUP_TABLE default\n").into_bytes(),
+    );
+    block(
+        &mut out,
+        rows.iter().flat_map(|p| p.1.to_be_bytes()).collect(),
+    );
+    out.extend(b"VECTORS velocity double\n");
+    block(
+        &mut out,
+        rows.iter()
+            .flat_map(|p| p.4.map(f64::from))
+            .flat_map(f64::to_be_bytes)
+            .collect(),
+    );
+    out.extend(format!("FIELD FieldData 2\nid 1 {n} int\n").into_bytes());
+    block(
+        &mut out,
+        rows.iter().flat_map(|p| p.3.to_be_bytes()).collect(),
+    );
+    out.extend(format!("pressure 1 {n} double\n").into_bytes());
+    block(
+        &mut out,
+        rows.iter().flat_map(|p| p.2.to_be_bytes()).collect(),
+    );
+    std::fs::write(path, out).unwrap();
+}
+
+/// A part of a legacy binary file is read by offset; the whole step is vtkio's, so the parts
+/// joined are checked against vtkio's reading.
+#[test]
+fn legacy_binary_vtk_is_read_by_the_rows_of_each_block() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1013;
+    for (grid, modern) in [(false, false), (true, false), (false, true), (true, true)] {
+        let path = dir.path().join(format!("legacy_{grid}_{modern}.vtk"));
+        write_legacy_binary(&path, n, grid, modern);
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All)
+            .unwrap_or_else(|e| panic!("grid {grid}, modern {modern}: {e}"));
+        assert_eq!(whole.len(), n - 1, "rho's NaN dropped");
+        assert_eq!(
+            whole.attribute_names(),
+            [
+                "density",
+                "velocity_x",
+                "velocity_y",
+                "velocity_z",
+                "velocity_magnitude",
+                "id",
+                "pressure"
+            ]
+        );
+        check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
+        check_parts(&step, &only(&["velocity_magnitude"]), n, Bound::Exact);
+        check_parts(&step, &only(&["pressure", "density"]), n, Bound::Exact);
+    }
+}
+
+/// Inline arrays (our own `write_vtp`: zlib base64 inside each DataArray; meshio's) and
+/// legacy ascii VTK are parsed whole by vtkio and cut.
+#[test]
+fn vtk_inline_arrays_and_legacy_ascii_are_read_whole_and_cut() {
+    let dir = tempfile::tempdir().unwrap();
+    let step = particles_step(37);
+    let step = Step {
+        attributes: step.attributes[1..3].to_vec(),
+        ..step
+    };
+    let vtp = dir.path().join("inline.vtp");
+    io::vtk::write_vtp(&vtp, &step).unwrap();
+    assert!(!std::fs::read_to_string(&vtp).unwrap().contains("appended"));
+    check_parts(&the_step(&vtp), &AttributeSelection::All, 37, Bound::Whole);
+
+    let legacy = dir.path().join("ascii.vtk");
     let mut text = String::from(
-        "ply\nformat ascii 1.0\nelement vertex 13\nproperty float x\nproperty float y\n\
-         property float z\nproperty float rho\nend_header\n",
+        "# vtk DataFile Version 3.0\nparticles\nASCII\nDATASET POLYDATA\nPOINTS 13 float\n",
     );
     for i in 0..13 {
-        text.push_str(&format!("{i} {} 0.5 {}\n", i * 2, i as f64 / 7.0));
+        text.push_str(&format!("{i} {} 0.5 ", i * 2));
     }
-    std::fs::write(&path, text).unwrap();
-    check_parts(&the_step(&path), &AttributeSelection::All, 13, Bound::Whole);
+    text.push_str("\nPOINT_DATA 13\nSCALARS rho float 1\nLOOKUP_TABLE default\n");
+    for i in 0..13 {
+        text.push_str(&format!("{}\n", i as f64 / 7.0));
+    }
+    std::fs::write(&legacy, text).unwrap();
+    check_parts(
+        &the_step(&legacy),
+        &AttributeSelection::All,
+        13,
+        Bound::Whole,
+    );
+}
+
+/// An ascii PLY as plyfile writes a NumPy structured array: a comment, float, double and int
+/// properties, one vertex a line with every digit, the vertex element last.
+fn write_ascii_ply(path: &Path, n: usize, line_end: &str, after: &str) {
+    let mut text = format!(
+        "ply{line_end}format ascii 1.0{line_end}comment written by plyfile{line_end}\
+         element vertex {n}{line_end}property float x{line_end}property float y{line_end}\
+         property float z{line_end}property double density{line_end}property int id{line_end}"
+    );
+    if !after.is_empty() {
+        text.push_str(&format!(
+            "element face 1{line_end}property list uchar int vertex_indices{line_end}"
+        ));
+    }
+    text.push_str(&format!("end_header{line_end}"));
+    for i in 0..n {
+        let t = i as f64 * 0.731;
+        let (x, y, z) = ((t.sin() * 1e4) as f32, (t.cos() / 7.0) as f32, -(i as f32));
+        let density = if i == 10 { f64::NAN } else { 1e-3 / (t + 1.0) };
+        text.push_str(&format!(
+            "{x:?} {y:?} {z:?} {density:?} {}{line_end}",
+            i as i64 - 300
+        ));
+    }
+    text.push_str(after);
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn ascii_ply_with_the_vertex_element_last_is_read_by_byte_ranges_moved_to_line_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cloud.ply");
+    let n = 1013;
+    write_ascii_ply(&path, n, "\n", "");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let body = &text[text.find("end_header\n").unwrap() + 11..];
+    let lengths: Vec<usize> = body.split_inclusive('\n').map(str::len).collect();
+    assert_eq!(lengths.len(), n);
+    let (longest, shortest) = (
+        *lengths.iter().max().unwrap(),
+        *lengths.iter().min().unwrap(),
+    );
+    let bound = Bound::Bytes { longest, shortest };
+    let step = the_step(&path);
+    let whole = io::read_step(&step, &AttributeSelection::All).unwrap();
+    assert_eq!(whole.len(), n - 1);
+    assert_eq!(whole.attribute_names(), ["density", "id"]);
+    assert_eq!(whole.attributes[1].values[0], -300.0);
+    check_parts(&step, &AttributeSelection::All, n, bound);
+    check_parts(&step, &only(&["id"]), n, bound);
+
+    // CRLF line ends, a blank line, no newline after the last row, fewer rows than ranks.
+    let crlf = dir.path().join("crlf.ply");
+    write_ascii_ply(&crlf, 11, "\r\n", "");
+    let mut bytes = std::fs::read(&crlf).unwrap();
+    bytes.truncate(bytes.len() - 2);
+    let line = bytes.iter().rposition(|&c| c == b'\n').unwrap() + 1;
+    bytes.splice(line..line, *b"  \r\n");
+    std::fs::write(&crlf, bytes).unwrap();
+    check_parts(
+        &the_step(&crlf),
+        &AttributeSelection::All,
+        11,
+        Bound::Bytes {
+            longest,
+            shortest: 4,
+        },
+    );
+
+    // Rows of one length and N = 1008 (a multiple of every P but 5): the shares' ends fall on
+    // line starts exactly, where a row must go to the part that starts with it, once.
+    let fixed = dir.path().join("fixed.ply");
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 1008\nproperty int x\nproperty int y\n\
+         property int z\nproperty double density\nend_header\n",
+    );
+    for i in 0..1008 {
+        text.push_str(&format!(
+            "{i:06} {:06} 000007 {:+.15e}\n",
+            2 * i,
+            1.0 / (i as f64 + 1.0)
+        ));
+    }
+    std::fs::write(&fixed, text).unwrap();
+    let row = row_lengths(&fixed).0;
+    check_parts(
+        &the_step(&fixed),
+        &AttributeSelection::All,
+        1008,
+        Bound::Bytes {
+            longest: row,
+            shortest: row,
+        },
+    );
+
+    // A row belongs to the part whose share holds its first byte: where every share starts a
+    // line, a part's rows are exactly its share.
+    let step = the_step(&fixed);
+    for ranks in [2, 3, 4, 6, 7, 8, 9, 16] {
+        for rank in 0..ranks {
+            let part = io::read_step_part(&step, &AttributeSelection::All, Part::new(rank, ranks));
+            let share = Part::new(rank, ranks).range(1008).len();
+            assert_eq!(part.unwrap().decoded, share, "rank {rank} of {ranks}");
+        }
+    }
+
+    // A face element after the vertices: read whole (its rows end before the file does).
+    let faces = dir.path().join("faces.ply");
+    write_ascii_ply(&faces, 101, "\n", "3 0 1 2\n");
+    check_parts(
+        &the_step(&faces),
+        &AttributeSelection::All,
+        101,
+        Bound::Whole,
+    );
+}
+
+#[test]
+fn a_bad_row_in_an_ascii_ply_part_is_named_by_its_byte_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.ply");
+    write_ascii_ply(&good, 200, "\n", "");
+    let text = std::fs::read_to_string(&good).unwrap();
+    let row = |i: usize| {
+        let body = text.find("end_header\n").unwrap() + 11;
+        body + text[body..]
+            .split_inclusive('\n')
+            .take(i)
+            .map(str::len)
+            .sum::<usize>()
+    };
+    // A value that is not a number; a row short of a value.
+    let at = row(150);
+    let end = at + text[at..].find(' ').unwrap();
+    let bad = format!("{}1.5e{}", &text[..at], &text[end..]);
+    let at_short = row(160);
+    let short_end = at_short + text[at_short..].find('\n').unwrap();
+    let cut = at_short + text[at_short..short_end].rfind(' ').unwrap();
+    let short = format!("{}{}", &text[..cut], &text[short_end..]);
+    for (name, text, at, what) in [
+        ("bad.ply", bad, at, "'1.5e' (property 'x') is not a number"),
+        (
+            "short.ply",
+            short,
+            at_short,
+            "4 values, but the element has 5",
+        ),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let step = the_step(&path);
+        assert!(io::read_step(&step, &AttributeSelection::All).is_err());
+        let err = io::read_step_part(&step, &AttributeSelection::All, Part::new(1, 2))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(name) && err.contains(&format!("byte {at}")) && err.contains(what),
+            "{err}"
+        );
+        // The first half's rows are fine.
+        io::read_step_part(&step, &AttributeSelection::All, Part::new(0, 2)).unwrap();
+    }
 }
 
 #[cfg(feature = "hdf5")]

@@ -108,14 +108,7 @@ fn read_columns(
         Format::Ply => ply::read_step(at, selection, part)?,
         Format::Hdf5 => hdf5_gate::read_step(at, &step.read, selection, part)?,
         Format::Vtk | Format::VtkXml => {
-            let legacy = step.format == Format::Vtk;
-            let columns = vtk::read_step(at, legacy, selection)?;
-            part::read_whole(
-                step.format,
-                "its arrays may be compressed or ascii",
-                columns,
-                part,
-            )
+            vtk::read_step(at, step.format == Format::Vtk, selection, part)?
         }
     })
 }

@@ -124,6 +124,8 @@ fn parse_header(at: At<'_>, bytes: &[u8]) -> Result<Header, DataError> {
 /// Reads values one at a time from the body, ascii or binary.
 struct Body<'a> {
     bytes: &'a [u8],
+    /// Where `bytes` start in the file.
+    start: usize,
     pos: usize,
     encoding: Encoding,
 }
@@ -203,8 +205,11 @@ impl Body<'_> {
 /// attributes (the selected ones).
 ///
 /// Of that, `part`'s vertices, and how many vertices were decoded: binary rows of
-/// scalars only are of one size, so only the part's rows are decoded; ascii rows, and rows
-/// with lists, are read whole (each row must be parsed to find the next) and sliced.
+/// scalars only are of one size, so only the part's rows are decoded; ascii rows of scalars
+/// only, of a vertex element that ends the file (what plyfile, NumPy and MeshLab write for
+/// point clouds), one a line, are split by bytes as CSV is ([`decode_ascii_lines`]); other
+/// ascii rows, and rows with lists, are read whole (each row must be parsed to find the next)
+/// and sliced.
 pub(super) fn read_step(
     at: At<'_>,
     selection: &AttributeSelection,
@@ -215,6 +220,7 @@ pub(super) fn read_step(
     let body_len = (bytes.len() - header.body_start) as u64;
     let mut body = Body {
         bytes: &bytes[header.body_start..],
+        start: header.body_start,
         pos: 0,
         encoding: header.encoding,
     };
@@ -237,7 +243,11 @@ pub(super) fn read_step(
             body_len,
         )?;
         if element.name == "vertex" {
-            return read_vertices(at, &mut body, element, n, selection, part);
+            let last = header
+                .elements
+                .last()
+                .is_some_and(|e| std::ptr::eq(e, element));
+            return read_vertices(at, &mut body, element, n, last, selection, part);
         }
         for row in 0..element.count {
             body.row(at, element, row, |_, _| {})?;
@@ -293,25 +303,58 @@ impl<'a> VertexLayout<'a> {
     }
 }
 
-/// Reads the vertex element: its positions, the selected properties as attributes, the
-/// others' names as skipped.
+/// Reads the vertex element (`last`: the file's last element): its positions, the selected
+/// properties as attributes, the others' names as skipped.
 fn read_vertices(
     at: At<'_>,
     body: &mut Body<'_>,
     element: &Element,
     n: usize,
+    last: bool,
     selection: &AttributeSelection,
     part: Part,
 ) -> Result<(Columns, usize), DataError> {
     let layout = VertexLayout::new(at, element, selection)?;
-    let fixed =
-        body.encoding != Encoding::Ascii && layout.scalars.len() == element.properties.len();
+    let scalars_only = layout.scalars.len() == element.properties.len();
+    let fixed = body.encoding != Encoding::Ascii && scalars_only;
+    // A part of ascii lines: its rows end where the file ends, so the bytes split without
+    // parsing what comes before. One process reads the whole step value by value, which checks
+    // the rows against the header's count (a part cannot: it does not know how many rows
+    // precede it).
+    let lines = body.encoding == Encoding::Ascii && scalars_only && last && !part.is_whole();
+    if lines {
+        let (positions, columns) = decode_ascii_lines(at, body, &layout, part)?;
+        let decoded = positions.len();
+        return Ok((vertex_columns(&layout, positions, columns), decoded));
+    }
     let rows = if fixed { part.range(n) } else { 0..n };
     let (positions, columns) = if fixed {
         decode_fixed_rows(at, body, &layout, n, rows.clone())?
     } else {
         decode_row_by_row(at, body, element, &layout, n)?
     };
+    let columns = vertex_columns(&layout, positions, columns);
+    if fixed {
+        Ok((columns, rows.len()))
+    } else {
+        let why = if body.encoding == Encoding::Ascii && scalars_only {
+            "ascii rows followed by another element: where they end is found by parsing them"
+        } else if body.encoding == Encoding::Ascii {
+            "ascii rows with list properties"
+        } else {
+            "rows with list properties"
+        };
+        Ok(super::part::read_whole(Format::Ply, why, columns, part))
+    }
+}
+
+/// The vertex element's positions and decoded columns as a reader's columns: the stored
+/// properties as attributes, the others' names as skipped.
+fn vertex_columns(
+    layout: &VertexLayout<'_>,
+    positions: Vec<DVec3>,
+    columns: Vec<Vec<f64>>,
+) -> Columns {
     let mut attributes = Vec::new();
     let mut skipped = Vec::new();
     for (k, ((name, _), values)) in layout.scalars.iter().zip(columns).enumerate() {
@@ -327,22 +370,87 @@ fn read_vertices(
             skipped.push((*name).to_owned());
         }
     }
-    let columns = Columns {
+    Columns {
         positions,
         attributes,
         skipped,
         finite: false,
-    };
-    if fixed {
-        Ok((columns, rows.len()))
-    } else {
-        let why = if body.encoding == Encoding::Ascii {
-            "ascii rows"
-        } else {
-            "rows with list properties"
-        };
-        Ok(super::part::read_whole(Format::Ply, why, columns, part))
     }
+}
+
+/// `part`'s ascii vertex rows, one a line, to the end of the file: the rows' bytes split
+/// evenly and each share's ends moved forward to the start of a line, as CSV's are (a row
+/// belongs to the part whose share holds its first byte; the parts together are every row, in
+/// order). Each row must hold exactly the element's values; blank lines are not rows. Only the
+/// share's bytes (of the memory map) are touched. Columns not stored are empty.
+fn decode_ascii_lines(
+    at: At<'_>,
+    body: &Body<'_>,
+    layout: &VertexLayout<'_>,
+    part: Part,
+) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
+    let rows = &body.bytes[body.pos..];
+    let share = part.range(rows.len());
+    let line_start = |from: usize| -> usize {
+        if from == 0 {
+            return 0;
+        }
+        // A line starts after a newline: look from the byte before.
+        rows[from - 1..]
+            .iter()
+            .position(|&c| c == b'\n')
+            .map_or(rows.len(), |i| from + i)
+    };
+    let (start, end) = (line_start(share.start), line_start(share.end));
+    // Byte offsets in the file, for errors: a part does not know its rows' numbers.
+    let file_offset = body.start + body.pos;
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); layout.scalars.len()];
+    let mut positions = Vec::new();
+    let mut line_at = start;
+    for line in rows[start..end].split_inclusive(|&c| c == b'\n') {
+        let offset = file_offset + line_at;
+        line_at += line.len();
+        let mut words = line
+            .split(|c| c.is_ascii_whitespace())
+            .filter(|w| !w.is_empty());
+        let mut values = [0.0; 3];
+        let mut count = 0;
+        for (k, word) in words.by_ref().take(layout.scalars.len()).enumerate() {
+            count += 1;
+            if !layout.stored[k] {
+                continue;
+            }
+            let value = std::str::from_utf8(word)
+                .ok()
+                .and_then(|w| w.parse::<f64>().ok())
+                .ok_or_else(|| {
+                    at.malformed(format!(
+                        "PLY element 'vertex', the row at byte {offset}: '{}' (property '{}') is \
+                         not a number",
+                        String::from_utf8_lossy(word),
+                        layout.scalars[k].0
+                    ))
+                })?;
+            match layout.xyz.iter().position(|&p| p == k) {
+                Some(axis) => values[axis] = value,
+                None => columns[k].push(value),
+            }
+        }
+        if count == 0 {
+            continue;
+        }
+        let extra = words.count();
+        if count != layout.scalars.len() || extra > 0 {
+            return Err(at.malformed(format!(
+                "PLY element 'vertex', the row at byte {offset}: {} values, but the element has \
+                 {} properties (a part reads ascii rows one a line)",
+                count + extra,
+                layout.scalars.len()
+            )));
+        }
+        positions.push(DVec3::from_array(values));
+    }
+    Ok((positions, columns))
 }
 
 /// Rows of scalars only have a fixed size: the positions and the stored properties are decoded

@@ -2,12 +2,15 @@
 //! base64-encoded — read by offset: the XML before `<AppendedData>` is parsed for each array's
 //! type, components and offset, and only the point coordinates and the selected point-data
 //! arrays are read from the file (decoded, and inflated for zlib, VTK's default compressor);
-//! every other array is never read or decoded. Files with inline (ascii or base64) arrays or
+//! every other array is never read or decoded. A rank's part reads less still: only its rows
+//! of each piece, and of each array the bytes that hold them (raw), the base64 groups that
+//! hold them, or the zlib blocks that overlap them. Files with inline (ascii or base64) arrays or
 //! another compressor go through vtkio ([`super`]). (vtkio 0.7.0-rc2 panics on the base64
 //! appended data VTK 9.7's writer makes of a million particles: `benches/peers/vtk_read.py`.)
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
+use std::ops::Range;
 
 use glam::DVec3;
 use quick_xml::events::{BytesStart, Event};
@@ -15,7 +18,7 @@ use quick_xml::events::{BytesStart, Event};
 use super::find;
 use crate::io::scalar::Scalar;
 use crate::io::{
-    At, AttributeSelection, Columns, DataError, array_attribute_names, split_components,
+    At, AttributeSelection, Columns, DataError, Part, array_attribute_names, split_components,
 };
 
 /// The most bytes of XML read while looking for `<AppendedData ... _` (a header describes
@@ -72,12 +75,17 @@ struct Header {
     base64: bool,
 }
 
-/// Reads the step by offset, or `None` where the file is not appended data this reader handles
-/// (vtkio reads it instead).
+/// Reads `part`'s records of the step by offset, and how many were decoded, or `None` where
+/// the file is not appended data this reader handles (vtkio reads it instead). The step's
+/// records are its pieces' points in order (pieces without points skipped): each piece gives
+/// the rows of it that lie in the part, and only those rows of each array are read, decoded
+/// and inflated. Every piece's arrays are checked against the first's from the header alone,
+/// so each part has the same attributes in the same order as the whole step.
 pub(super) fn read(
     at: At<'_>,
     selection: &AttributeSelection,
-) -> Result<Option<Columns>, DataError> {
+    part: Part,
+) -> Result<Option<(Columns, usize)>, DataError> {
     let mut file = File::open(at.file).map_err(|e| at.io(e))?;
     let file_len = crate::io::file_len(at, &file)?;
     let Some(header) = read_header(at, &mut file)? else {
@@ -93,10 +101,25 @@ pub(super) fn read(
     let mut attributes: Vec<crate::values::Attribute> = Vec::new();
     let mut skipped = Vec::new();
     // A piece without points (VTK writes them for idle MPI ranks) adds nothing.
-    let pieces = header.pieces.iter().filter(|p| p.points > 0);
-    for (index, piece) in pieces.enumerate() {
-        let n = usize::try_from(piece.points)
-            .map_err(|_| at.malformed("a piece's NumberOfPoints overflows"))?;
+    let pieces: Vec<&PieceDesc> = header.pieces.iter().filter(|p| p.points > 0).collect();
+    let mut counts = Vec::with_capacity(pieces.len());
+    for piece in &pieces {
+        counts.push(
+            usize::try_from(piece.points)
+                .map_err(|_| at.malformed("a piece's NumberOfPoints overflows"))?,
+        );
+    }
+    let records = counts
+        .iter()
+        .try_fold(0usize, |t, &n| t.checked_add(n))
+        .ok_or_else(|| at.malformed("the pieces' NumberOfPoints overflow"))?;
+    let wanted = part.range(records);
+    let mut first_record = 0;
+    for (index, (piece, &n)) in pieces.iter().zip(&counts).enumerate() {
+        // This piece's rows that lie in the part (empty where it lies outside).
+        let rows = wanted.start.clamp(first_record, first_record + n) - first_record
+            ..wanted.end.clamp(first_record, first_record + n) - first_record;
+        first_record += n;
         let Some(coordinates) = &piece.coordinates else {
             return Err(at.malformed(format!("piece {index} has no <Points> array")));
         };
@@ -106,7 +129,7 @@ pub(super) fn read(
                 coordinates.components
             )));
         }
-        let coords = reader.values(coordinates, n)?;
+        let coords = reader.values(coordinates, n, rows.clone())?;
         let mut piece_attributes = Vec::new();
         for array in &piece.arrays {
             let names = array_attribute_names(&array.name, array.components);
@@ -116,18 +139,19 @@ pub(super) fn read(
                 }
                 continue;
             }
-            let values = reader.values(array, n)?;
+            let values = reader.values(array, n, rows.clone())?;
             piece_attributes.extend(split_components(&array.name, &values, array.components));
         }
         super::append_piece(at, &mut attributes, piece_attributes, index)?;
         positions.extend(coords.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])));
     }
-    Ok(Some(Columns {
+    let columns = Columns {
         positions,
         attributes,
         skipped,
         finite: false,
-    }))
+    };
+    Ok(Some((columns, wanted.len())))
 }
 
 /// The XML before the raw appended data, parsed; `None` when the file has no raw appended
@@ -329,9 +353,10 @@ struct ArrayReader<'a> {
 }
 
 impl ArrayReader<'_> {
-    /// `len` bytes at `pos` of the appended data, refused when they lie past the file's end
-    /// (checked before allocating: a hostile offset or size cannot make us allocate).
-    fn bytes(&mut self, pos: u64, len: u64, what: &str) -> Result<Vec<u8>, DataError> {
+    /// Where `len` bytes at `pos` of the appended data start in the file, refused when they
+    /// lie past the file's end (checked before allocating: a hostile offset or size cannot make
+    /// us allocate, and a part checks the whole array lies in the file without reading it).
+    fn span(&self, pos: u64, len: u64, what: &str) -> Result<u64, DataError> {
         let start = self.header.data_start.checked_add(pos);
         let end = start.and_then(|s| s.checked_add(len));
         let (Some(start), Some(end)) = (start, end) else {
@@ -346,6 +371,12 @@ impl ArrayReader<'_> {
                 self.file_len
             )));
         }
+        Ok(start)
+    }
+
+    /// `len` bytes at `pos` of the appended data (see [`Self::span`]).
+    fn bytes(&mut self, pos: u64, len: u64, what: &str) -> Result<Vec<u8>, DataError> {
+        let start = self.span(pos, len, what)?;
         self.file
             .seek(SeekFrom::Start(start))
             .map_err(|e| self.at.io(e))?;
@@ -354,23 +385,54 @@ impl ArrayReader<'_> {
         Ok(out)
     }
 
+    /// How many bytes of the appended data a run of `len` bytes VTK wrote takes: raw, `len`;
+    /// base64, 4 characters per 3 bytes (the last group padded).
+    fn encoded_len(&self, len: u64, what: &str) -> Result<u64, DataError> {
+        if !self.header.base64 {
+            return Ok(len);
+        }
+        len.div_ceil(3)
+            .checked_mul(4)
+            .ok_or_else(|| self.at.malformed(format!("{what} overflows")))
+    }
+
+    /// Refuses a run of `len` bytes at `pos` that lies past the file's end; where the next run
+    /// starts.
+    fn check_run(&self, pos: u64, len: u64, what: &str) -> Result<u64, DataError> {
+        let encoded = self.encoded_len(len, what)?;
+        self.span(pos, encoded, what)?;
+        Ok(pos + encoded)
+    }
+
     /// The `len` bytes VTK wrote as one run at `pos` of the appended data, and where the next
     /// run starts: raw, the bytes themselves; base64, the run's own encoding (4 characters per
     /// 3 bytes, padded at its end). A prefix of a run may be asked for (its first groups
     /// decode alone).
     fn run(&mut self, pos: u64, len: u64, what: &str) -> Result<(Vec<u8>, u64), DataError> {
+        let next = pos
+            .checked_add(self.encoded_len(len, what)?)
+            .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
+        Ok((self.run_bytes(pos, 0..len, what)?, next))
+    }
+
+    /// Bytes `range` of the run VTK wrote at `pos` of the appended data, reading only them:
+    /// raw, their own bytes; base64, the 4-character groups that hold them (byte `b` of a run
+    /// lies in group `b / 3`: every group decodes alone, and only the run's last is padded).
+    fn run_bytes(&mut self, pos: u64, range: Range<u64>, what: &str) -> Result<Vec<u8>, DataError> {
+        let len = range.end - range.start;
         if !self.header.base64 {
-            let end = pos
-                .checked_add(len)
+            let from = pos
+                .checked_add(range.start)
                 .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
-            return Ok((self.bytes(pos, len, what)?, end));
+            return self.bytes(from, len, what);
         }
         use base64::Engine;
-        let chars = len
-            .div_ceil(3)
+        let (first_group, end_group) = (range.start / 3, range.end.div_ceil(3));
+        let from = first_group
             .checked_mul(4)
+            .and_then(|c| pos.checked_add(c))
             .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
-        let text = self.bytes(pos, chars, what)?;
+        let text = self.bytes(from, (end_group - first_group) * 4, what)?;
         // Decoded in parallel: every 4-character group decodes alone, and only the last may
         // be padded.
         use rayon::prelude::*;
@@ -380,14 +442,17 @@ impl ArrayReader<'_> {
             .collect::<Result<_, _>>()
             .map_err(|e| self.at.malformed(format!("{what}: bad base64: {e}")))?;
         let mut decoded = pieces.concat();
-        if (decoded.len() as u64) < len {
+        let skip = (range.start - first_group * 3) as usize;
+        if (decoded.len() as u64) < range.end - first_group * 3 {
             return Err(self.at.malformed(format!(
-                "{what}: its base64 holds {} bytes, not {len}",
-                decoded.len()
+                "{what}: its base64 holds {} bytes, not {}",
+                first_group * 3 + decoded.len() as u64,
+                range.end
             )));
         }
-        decoded.truncate(len as usize);
-        Ok((decoded, pos + chars))
+        decoded.truncate(skip + len as usize);
+        decoded.drain(..skip);
+        Ok(decoded)
     }
 
     /// The size integers in `bytes` (the file's integer width and byte order).
@@ -406,12 +471,20 @@ impl ArrayReader<'_> {
             .collect()
     }
 
-    /// The values of `array` for `n` points, as f64.
-    fn values(&mut self, array: &ArrayDesc, n: usize) -> Result<Vec<f64>, DataError> {
+    /// The values of rows `rows` of `array` (of `n` points), as f64: only those rows' bytes
+    /// are read, decoded and inflated (for zlib, the blocks that hold them).
+    fn values(
+        &mut self,
+        array: &ArrayDesc,
+        n: usize,
+        rows: Range<usize>,
+    ) -> Result<Vec<f64>, DataError> {
         let name = &array.name;
+        let row_bytes = (array.components as u64)
+            .checked_mul(array.scalar.size() as u64)
+            .ok_or_else(|| self.at.malformed(format!("array '{name}' overflows")))?;
         let expected = (n as u64)
-            .checked_mul(array.components as u64)
-            .and_then(|v| v.checked_mul(array.scalar.size() as u64))
+            .checked_mul(row_bytes)
             .ok_or_else(|| self.at.malformed(format!("array '{name}' overflows")))?;
         // Checked before anything is allocated: a hostile header could declare terabytes.
         let limit = if self.header.zlib {
@@ -429,63 +502,21 @@ impl ArrayReader<'_> {
             )));
         }
         let w = self.header.int_bytes as u64;
+        if rows.is_empty() {
+            // Another part's rows: only checked to lie in the file, from the header (a
+            // compressed array's block sizes are not read, so only its header's start).
+            let extent = if self.header.zlib {
+                3 * w
+            } else {
+                w + expected
+            };
+            self.check_run(array.offset, extent, &format!("array '{name}'"))?;
+            return Ok(Vec::new());
+        }
+        // The rows' bytes in the uncompressed array (within `expected`: rows lie in 0..n).
+        let wanted = rows.start as u64 * row_bytes..rows.end as u64 * row_bytes;
         let data = if self.header.zlib {
-            let what = format!("array '{name}'s compressed header");
-            let (head, _) = self.run(array.offset, 3 * w, &what)?;
-            let head = self.ints(&head);
-            // The last block's size is 0 when it is full (VTK's format).
-            let (blocks, block_size) = (head[0], head[1]);
-            let last = if head[2] == 0 { block_size } else { head[2] };
-            let declared = block_size
-                .checked_mul(blocks.saturating_sub(1))
-                .and_then(|v| v.checked_add(if blocks == 0 { 0 } else { last }));
-            if declared != Some(expected) || last > block_size {
-                return Err(self.at.malformed(format!(
-                    "array '{name}' declares {} uncompressed bytes ({blocks} blocks of \
-                     {block_size}, the last {last}); {n} points of {} {:?} need {expected}",
-                    declared.map_or_else(|| "overflowing".into(), |d| d.to_string()),
-                    array.components,
-                    array.scalar
-                )));
-            }
-            let header_len = blocks
-                .checked_add(3)
-                .and_then(|b| b.checked_mul(w))
-                .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
-            let (header, data_pos) = self.run(array.offset, header_len, &what)?;
-            let sizes = self.ints(&header[(3 * w) as usize..]);
-            let total = sizes
-                .iter()
-                .try_fold(0u64, |t, &s| t.checked_add(s))
-                .ok_or_else(|| {
-                    self.at
-                        .malformed(format!("array '{name}': block sizes overflow"))
-                })?;
-            let (packed, _) = self.run(data_pos, total, &format!("array '{name}'s blocks"))?;
-            // The blocks inflate independently: in parallel, each into its place.
-            let mut starts = Vec::with_capacity(sizes.len());
-            let mut at = 0usize;
-            for &size in &sizes {
-                starts.push(at);
-                at += size as usize;
-            }
-            let mut out = vec![0u8; expected as usize];
-            use rayon::prelude::*;
-            let at = self.at;
-            out.par_chunks_mut(block_size.max(1) as usize)
-                .zip(sizes.par_iter().zip(&starts))
-                .enumerate()
-                .try_for_each(|(b, (target, (&size, &start)))| {
-                    let mut inflater =
-                        flate2::read::ZlibDecoder::new(&packed[start..start + size as usize]);
-                    inflater.read_exact(target).map_err(|e| {
-                        at.malformed(format!(
-                            "array '{name}' block {b}: cannot inflate its zlib data to {} bytes: {e}",
-                            target.len()
-                        ))
-                    })
-                })?;
-            out
+            self.inflated(array, n, expected, wanted)?
         } else {
             let what = format!("array '{name}'s size");
             let (head, _) = self.run(array.offset, w, &what)?;
@@ -496,9 +527,10 @@ impl ArrayReader<'_> {
                     array.components, array.scalar
                 )));
             }
-            let (mut all, _) = self.run(array.offset, w + size, &format!("array '{name}'"))?;
-            all.drain(..w as usize);
-            all
+            // The size and the data are one run: the whole must lie in the file.
+            let what = format!("array '{name}'");
+            self.check_run(array.offset, w + size, &what)?;
+            self.run_bytes(array.offset, w + wanted.start..w + wanted.end, &what)?
         };
         let big_endian = self.header.big_endian;
         use rayon::prelude::*;
@@ -506,5 +538,86 @@ impl ArrayReader<'_> {
             .par_chunks_exact(array.scalar.size())
             .map(|b| array.scalar.value(b, big_endian))
             .collect())
+    }
+
+    /// Bytes `wanted` of a zlib-compressed array of `expected` bytes: its header read whole
+    /// (block count, block size, last block's size, each block's compressed size), then only
+    /// the blocks that overlap `wanted` read and inflated.
+    fn inflated(
+        &mut self,
+        array: &ArrayDesc,
+        n: usize,
+        expected: u64,
+        wanted: Range<u64>,
+    ) -> Result<Vec<u8>, DataError> {
+        let name = &array.name;
+        let w = self.header.int_bytes as u64;
+        let what = format!("array '{name}'s compressed header");
+        let (head, _) = self.run(array.offset, 3 * w, &what)?;
+        let head = self.ints(&head);
+        // The last block's size is 0 when it is full (VTK's format).
+        let (blocks, block_size) = (head[0], head[1]);
+        let last = if head[2] == 0 { block_size } else { head[2] };
+        let declared = block_size
+            .checked_mul(blocks.saturating_sub(1))
+            .and_then(|v| v.checked_add(if blocks == 0 { 0 } else { last }));
+        if declared != Some(expected) || last > block_size {
+            return Err(self.at.malformed(format!(
+                "array '{name}' declares {} uncompressed bytes ({blocks} blocks of \
+                 {block_size}, the last {last}); {n} points of {} {:?} need {expected}",
+                declared.map_or_else(|| "overflowing".into(), |d| d.to_string()),
+                array.components,
+                array.scalar
+            )));
+        }
+        let header_len = blocks
+            .checked_add(3)
+            .and_then(|b| b.checked_mul(w))
+            .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
+        let (header, data_pos) = self.run(array.offset, header_len, &what)?;
+        let sizes = self.ints(&header[(3 * w) as usize..]);
+        // Where each block starts among the compressed bytes, and where they end.
+        let mut starts = Vec::with_capacity(sizes.len() + 1);
+        let mut total = 0u64;
+        for &size in &sizes {
+            starts.push(total);
+            total = total.checked_add(size).ok_or_else(|| {
+                self.at
+                    .malformed(format!("array '{name}': block sizes overflow"))
+            })?;
+        }
+        starts.push(total);
+        let what = format!("array '{name}'s blocks");
+        // Every block must lie in the file, as when the whole array is read.
+        self.check_run(data_pos, total, &what)?;
+        // The blocks that overlap the wanted bytes (`expected` > 0 here, so block_size > 0).
+        let first = (wanted.start / block_size) as usize;
+        let end = wanted.end.div_ceil(block_size) as usize;
+        let packed = self.run_bytes(data_pos, starts[first]..starts[end], &what)?;
+        let base = starts[first];
+        let unpacked_start = first as u64 * block_size;
+        let unpacked_end = (end as u64 * block_size).min(expected);
+        let mut out = vec![0u8; (unpacked_end - unpacked_start) as usize];
+        // The blocks inflate independently: in parallel, each into its place.
+        use rayon::prelude::*;
+        let at = self.at;
+        out.par_chunks_mut(block_size as usize)
+            .enumerate()
+            .try_for_each(|(k, target)| {
+                let b = first + k;
+                let from = (starts[b] - base) as usize;
+                let to = (starts[b + 1] - base) as usize;
+                let mut inflater = flate2::read::ZlibDecoder::new(&packed[from..to]);
+                inflater.read_exact(target).map_err(|e| {
+                    at.malformed(format!(
+                        "array '{name}' block {b}: cannot inflate its zlib data to {} bytes: {e}",
+                        target.len()
+                    ))
+                })
+            })?;
+        let skip = (wanted.start - unpacked_start) as usize;
+        out.truncate(skip + (wanted.end - wanted.start) as usize);
+        out.drain(..skip);
+        Ok(out)
     }
 }

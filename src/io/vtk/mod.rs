@@ -12,9 +12,11 @@ use vtkio::model::{
 };
 
 mod appended;
+mod legacy;
 
 use super::{
-    At, AttributeSelection, Columns, DataError, Problem, array_attribute_names, split_components,
+    At, AttributeSelection, Columns, DataError, Format, Part, Problem, array_attribute_names,
+    split_components,
 };
 use crate::values::{Attribute, Step};
 
@@ -25,17 +27,48 @@ const MAX_COMPRESSION_RATIO: u64 = 1100;
 /// Reads a VTK file (`legacy`: a legacy `.vtk` file, else XML `.vtp`, `.vtu` or `.vts`): its points
 /// as positions, its point-data arrays as attributes (a 3-component array `v` as `v_x`, `v_y`,
 /// `v_z` and `v_magnitude`; only the selected ones decoded).
-pub fn read_step(
+///
+/// Of that, `part`'s records, and how many were decoded: appended data is read by offset, only
+/// the part's rows of each array ([`appended`]), and so is a part of a legacy binary file
+/// ([`legacy`]); other files are parsed whole by vtkio and cut (with a warning once that each
+/// rank reads the whole step).
+pub(super) fn read_step(
+    at: At<'_>,
+    legacy: bool,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
+    precheck_counts(at, legacy)?;
+    // Raw or base64 appended data (VTK's and ParaView's default) is read by offset, only the
+    // arrays asked for and the part's rows of them; everything else is parsed whole by vtkio.
+    if !legacy && let Some(read) = appended::read(at, selection, part)? {
+        return Ok(read);
+    }
+    // A part of a legacy binary file is read by offset; the whole step, by vtkio as before.
+    if legacy
+        && !part.is_whole()
+        && let Some(read) = legacy::read(at, selection, part)?
+    {
+        return Ok(read);
+    }
+    let why = if legacy {
+        "legacy ascii VTK (or binary with sections only vtkio reads) is parsed whole by vtkio: \
+         its ascii values are not one record a line"
+    } else {
+        "its arrays are inline in the XML (ascii, or a whole array's base64), parsed whole by \
+         vtkio"
+    };
+    let columns = read_whole_file(at, legacy, selection)?;
+    let format = if legacy { Format::Vtk } else { Format::VtkXml };
+    Ok(super::part::read_whole(format, why, columns, part))
+}
+
+/// The whole file parsed by vtkio: every piece's points and the selected point-data arrays.
+fn read_whole_file(
     at: At<'_>,
     legacy: bool,
     selection: &AttributeSelection,
 ) -> Result<Columns, DataError> {
-    precheck_counts(at, legacy)?;
-    // Raw appended data (VTK's and ParaView's default) is read by offset, only the arrays
-    // asked for; everything else is parsed whole by vtkio below.
-    if !legacy && let Some(columns) = appended::read(at, selection)? {
-        return Ok(columns);
-    }
     let pieces = point_pieces(at, parse(at, legacy)?)?;
     let mut positions = Vec::new();
     let mut attributes: Vec<Attribute> = Vec::new();

@@ -1,0 +1,346 @@
+//! A part of a legacy binary VTK file (`# vtk DataFile Version x`, `BINARY`, poly data or an
+//! unstructured grid), read by offset: the ascii lines between the binary blocks are scanned,
+//! each block stepped over by its size (computed from its line's counts and type), and only the
+//! part's rows of the points and of the selected point-data arrays are decoded (big-endian, as
+//! the format stores them). The pages of the file's other rows are never touched.
+//!
+//! Only the sections vtkio reads the same way are understood (POINTS of float or double; the
+//! cell lists in either layout and CELL_TYPES; POINT_DATA and one CELL_DATA holding SCALARS,
+//! VECTORS, NORMALS and FIELD arrays of vtkio's types); a file holding anything else, or whose
+//! blocks do not fit in it, is left to vtkio (`None`), which reads it whole and reports what is
+//! wrong. A whole step is always read by vtkio, so a part here is cut from the same records,
+//! attribute names and order as [`super::read_whole_file`] gives.
+
+use glam::DVec3;
+
+use crate::io::mapped::Mapped;
+use crate::io::scalar::Scalar;
+use crate::io::{
+    At, AttributeSelection, Columns, DataError, Part, array_attribute_names, split_components,
+};
+use crate::values::Attribute;
+
+/// A binary block's place in the file: its first byte and what it holds.
+#[derive(Clone, Debug)]
+struct Block {
+    name: String,
+    scalar: Scalar,
+    components: usize,
+    offset: usize,
+}
+
+/// The header lines' findings: the points and the point-data arrays, in file order.
+struct Layout {
+    points: usize,
+    coordinates: Block,
+    arrays: Vec<Block>,
+}
+
+/// `part`'s records and how many were decoded, or `None` where the file is not legacy binary
+/// VTK of the sections this reader understands (vtkio reads it whole instead).
+pub(super) fn read(
+    at: At<'_>,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<Option<(Columns, usize)>, DataError> {
+    let bytes = Mapped::open(at)?;
+    let Some(layout) = scan(&bytes) else {
+        return Ok(None);
+    };
+    let rows = part.range(layout.points);
+    let decode = |block: &Block| -> Vec<f64> {
+        let row = block.components * block.scalar.size();
+        let from = block.offset + rows.start * row;
+        bytes[from..from + rows.len() * row]
+            .chunks_exact(block.scalar.size())
+            .map(|b| block.scalar.value(b, true))
+            .collect()
+    };
+    let coords = decode(&layout.coordinates);
+    let positions = coords
+        .chunks_exact(3)
+        .map(|c| DVec3::new(c[0], c[1], c[2]))
+        .collect();
+    let mut attributes: Vec<Attribute> = Vec::new();
+    let mut skipped = Vec::new();
+    for array in &layout.arrays {
+        let names = array_attribute_names(&array.name, array.components);
+        if !names.iter().any(|n| selection.keeps(n)) {
+            skipped.extend(names);
+            continue;
+        }
+        attributes.extend(split_components(
+            &array.name,
+            &decode(array),
+            array.components,
+        ));
+    }
+    let columns = Columns {
+        positions,
+        attributes,
+        skipped,
+        finite: false,
+    };
+    Ok(Some((columns, rows.len())))
+}
+
+/// A scalar type as vtkio's legacy parser names it (`bit` is packed, not a scalar of bytes).
+fn parse_scalar(word: &str) -> Option<Scalar> {
+    let is = |name: &str| word.eq_ignore_ascii_case(name);
+    Some(if is("int") || is("vtkIdType") {
+        Scalar::I32
+    } else if is("char") {
+        Scalar::I8
+    } else if is("long") {
+        Scalar::I64
+    } else if is("short") {
+        Scalar::I16
+    } else if is("float") {
+        Scalar::F32
+    } else if is("double") {
+        Scalar::F64
+    } else if is("unsigned_int") {
+        Scalar::U32
+    } else if is("unsigned_char") {
+        Scalar::U8
+    } else if is("unsigned_long") {
+        Scalar::U64
+    } else {
+        return None;
+    })
+}
+
+/// Walks the file's lines and blocks.
+struct Scanner<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Scanner<'a> {
+    /// Steps over spaces, tabs and line ends (what vtkio allows between sections).
+    fn skip_space(&mut self) {
+        while self
+            .bytes
+            .get(self.pos)
+            .is_some_and(u8::is_ascii_whitespace)
+        {
+            self.pos += 1;
+        }
+    }
+
+    /// The words of the line at the cursor, which moves to the next line's start; `None` at the
+    /// end of the file, or for a line that is not text or does not end.
+    fn line(&mut self) -> Option<Vec<&'a str>> {
+        let rest = self.bytes.get(self.pos..)?;
+        let end = rest.iter().position(|&c| c == b'\n')?;
+        self.pos += end + 1;
+        let text = std::str::from_utf8(&rest[..end]).ok()?;
+        Some(text.split_ascii_whitespace().collect())
+    }
+
+    /// Whether the text at the cursor, after spaces and tabs, starts with `word` (any case).
+    fn next_is(&self, word: &str) -> bool {
+        let rest = &self.bytes[self.pos.min(self.bytes.len())..];
+        let start = rest
+            .iter()
+            .position(|&c| c != b' ' && c != b'\t')
+            .unwrap_or(rest.len());
+        rest[start..]
+            .get(..word.len())
+            .is_some_and(|w| w.eq_ignore_ascii_case(word.as_bytes()))
+    }
+
+    /// Steps over a block of `count` values of `size` bytes; where it starts. `None` where it
+    /// does not fit in the file.
+    fn block(&mut self, count: usize, size: usize) -> Option<usize> {
+        let start = self.pos;
+        let end = count.checked_mul(size)?.checked_add(start)?;
+        if end > self.bytes.len() {
+            return None;
+        }
+        self.pos = end;
+        Some(start)
+    }
+
+    /// A cell list's `n size` counts and its blocks: VTK 5's OFFSETS and CONNECTIVITY of
+    /// 64-bit integers, or the older one list of `size` 32-bit integers.
+    fn cells(&mut self, words: &[&str]) -> Option<()> {
+        let [_, n, size] = words else { return None };
+        let (n, size): (usize, usize) = (n.parse().ok()?, size.parse().ok()?);
+        let mut probe = Scanner {
+            bytes: self.bytes,
+            pos: self.pos,
+        };
+        probe.skip_space();
+        if !probe.next_is("OFFSETS") {
+            self.block(size, 4)?;
+            return Some(());
+        }
+        *self = probe;
+        for (tag, count) in [("OFFSETS", n), ("CONNECTIVITY", size)] {
+            self.skip_space();
+            let line = self.line()?;
+            let [word, kind] = line.as_slice() else {
+                return None;
+            };
+            if !word.eq_ignore_ascii_case(tag) || !kind.eq_ignore_ascii_case("vtktypeint64") {
+                return None;
+            }
+            self.block(count, 8)?;
+        }
+        Some(())
+    }
+
+    /// One attribute of `n` elements at the cursor (its keyword's line in `words`), into
+    /// `arrays`: SCALARS (with its optional lookup table line), VECTORS, NORMALS or FIELD.
+    fn attribute(&mut self, words: &[&str], n: usize, arrays: &mut Vec<Block>) -> Option<()> {
+        let keyword = words.first()?.to_ascii_uppercase();
+        let mut add = |scanner: &mut Self, name: &str, scalar: Scalar, components: usize| {
+            let offset = scanner.block(n.checked_mul(components)?, scalar.size())?;
+            arrays.push(Block {
+                name: name.to_owned(),
+                scalar,
+                components,
+                offset,
+            });
+            Some(())
+        };
+        match (keyword.as_str(), &words[1..]) {
+            ("SCALARS", [name, kind, rest @ ..]) if rest.len() <= 1 => {
+                let components = match rest {
+                    [c] => c.parse::<usize>().ok().filter(|&c| c > 0)?,
+                    _ => 1,
+                };
+                if self.next_is("LOOKUP_TABLE") {
+                    let table = self.line()?;
+                    if table.len() != 2 {
+                        return None;
+                    }
+                }
+                add(self, name, parse_scalar(kind)?, components)
+            }
+            ("VECTORS" | "NORMALS", [name, kind]) => add(self, name, parse_scalar(kind)?, 3),
+            ("FIELD", [_, count]) => {
+                for _ in 0..count.parse::<usize>().ok()? {
+                    self.skip_space();
+                    let line = self.line()?;
+                    let [name, components, tuples, kind] = line.as_slice() else {
+                        return None;
+                    };
+                    let components = components.parse::<usize>().ok().filter(|&c| c > 0)?;
+                    // vtkio checks an array's tuples against the points, in its words.
+                    if tuples.parse::<usize>().ok()? != n || name.eq_ignore_ascii_case("METADATA") {
+                        return None;
+                    }
+                    add(self, name, parse_scalar(kind)?, components)?;
+                }
+                Some(())
+            }
+            _ => None,
+        }
+    }
+}
+
+/// The points and point-data arrays of a legacy binary file, found by its lines; `None` for
+/// anything else.
+fn scan(bytes: &[u8]) -> Option<Layout> {
+    let mut s = Scanner { bytes, pos: 0 };
+    s.skip_space();
+    let version = s.line()?;
+    let is = |w: &str, word: &str| w.eq_ignore_ascii_case(word);
+    let number = |text: &str| text.parse::<u32>().is_ok();
+    if !matches!(version.as_slice(), ["#", vtk, datafile, v, x]
+        if is(vtk, "vtk") && is(datafile, "DataFile") && is(v, "Version")
+            && x.split_once('.').is_some_and(|(a, b)| number(a) && number(b)))
+    {
+        return None;
+    }
+    s.line()?.first()?; // the title: not empty
+    if !matches!(s.line()?.as_slice(), [kind] if is(kind, "BINARY")) {
+        return None;
+    }
+    s.skip_space();
+    let grid = match s.line()?.as_slice() {
+        [dataset, kind] if is(dataset, "DATASET") && is(kind, "POLYDATA") => false,
+        [dataset, kind] if is(dataset, "DATASET") && is(kind, "UNSTRUCTURED_GRID") => true,
+        _ => return None,
+    };
+    s.skip_space();
+    let line = s.line()?;
+    let [word, count, kind] = line.as_slice() else {
+        return None;
+    };
+    let points: usize = count.parse().ok()?;
+    let scalar = parse_scalar(kind).filter(|t| matches!(t, Scalar::F32 | Scalar::F64))?;
+    if !is(word, "POINTS") {
+        return None;
+    }
+    let coordinates = Block {
+        name: String::new(),
+        scalar,
+        components: 3,
+        offset: s.block(points.checked_mul(3)?, scalar.size())?,
+    };
+    // What vtkio reads after the points: cell lists (an unstructured grid's CELLS, then its
+    // CELL_TYPES), then one CELL_DATA and one POINT_DATA in either order.
+    let mut arrays = Vec::new();
+    let mut cell_arrays = Vec::new();
+    // The section the cursor is in: its element count, and whether it is the points'.
+    let mut section: Option<(usize, bool)> = None;
+    let (mut cells, mut cell_types, mut point_data, mut cell_data) = (false, false, false, false);
+    loop {
+        s.skip_space();
+        if s.pos == bytes.len() {
+            break;
+        }
+        let line = s.line()?;
+        let keyword = line.first()?.to_ascii_uppercase();
+        match keyword.as_str() {
+            "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" if !grid && section.is_none() => {
+                s.cells(&line)?
+            }
+            "CELLS" if grid && !cells => {
+                s.cells(&line)?;
+                cells = true;
+            }
+            "CELL_TYPES" if grid && cells && !cell_types => {
+                let [_, n] = line.as_slice() else { return None };
+                s.block(n.parse().ok()?, 4)?;
+                cell_types = true;
+            }
+            "POINT_DATA" | "CELL_DATA" => {
+                let [_, n] = line.as_slice() else { return None };
+                let n: usize = n.parse().ok()?;
+                let is_points = keyword == "POINT_DATA";
+                let seen = if is_points {
+                    &mut point_data
+                } else {
+                    &mut cell_data
+                };
+                // vtkio checks point data's count against the points, in its words.
+                if *seen || (grid && !cell_types) || (is_points && n != points) {
+                    return None;
+                }
+                *seen = true;
+                section = Some((n, is_points));
+            }
+            _ => {
+                let (n, is_points) = section?;
+                let into = if is_points {
+                    &mut arrays
+                } else {
+                    &mut cell_arrays
+                };
+                s.attribute(&line, n, into)?;
+            }
+        }
+    }
+    if grid && !cell_types {
+        return None;
+    }
+    Some(Layout {
+        points,
+        coordinates,
+        arrays,
+    })
+}
