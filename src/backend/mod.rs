@@ -81,6 +81,26 @@ pub fn create(kind: BackendKind) -> Result<Box<dyn Backend>, BackendError> {
 /// backend. A software device (lavapipe) is never "best": on the same cores the CPU backend is
 /// faster (docs/benchmarks.md); ask for `--backend ash|wgpu` to use one anyway.
 fn auto() -> Box<dyn Backend> {
+    // Opening a GPU backend opens a device and builds its kernels, which on a software device
+    // (lavapipe, llvmpipe) loads its compiler: 140 MB a process on lavapipe, kept after the
+    // backend is dropped. Where every adapter is a CPU, the CPU backend is chosen without
+    // opening one.
+    let adapters = wgpu_lbvh::adapters();
+    if adapters
+        .iter()
+        .all(|a| a.info.device_type == wgpu::DeviceType::Cpu)
+    {
+        let names: Vec<&str> = adapters.iter().map(|a| a.info.name.as_str()).collect();
+        tracing::info!(
+            "auto: no GPU adapter ({}): the cpu backend",
+            if names.is_empty() {
+                "none found".to_owned()
+            } else {
+                format!("only software ones: {}", names.join(", "))
+            }
+        );
+        return Box::new(cpu::CpuBackend::new());
+    }
     match ash_rt::AshBackend::new() {
         Ok(b) if !b.capabilities().software => return Box::new(b),
         Ok(b) => tracing::info!(

@@ -246,22 +246,16 @@ impl NeighbourLengths for RankLengths<'_> {
         neighbours: usize,
     ) -> Result<Vec<f64>, DataError> {
         cached_or_found(self.comm, step, positions, neighbours).map_err(|e| {
-            // A rank's read error as the reader said it; anything else names the step.
-            let e = match e {
-                DistError::Rank { source, .. } => *source,
-                e => e,
-            };
-            match e {
-                DistError::Read(e) => e,
-                other => DataError::new(
+            e.into_data_error(|other| {
+                DataError::new(
                     &step.path,
                     Some(&step.name),
                     Problem::Malformed(format!(
                         "smoothing lengths of rank {} of {}'s part: {other}",
                         part.rank, part.ranks
                     )),
-                ),
-            }
+                )
+            })
         })
     }
 }

@@ -106,6 +106,22 @@ impl From<crate::render::RenderError> for DistError {
 }
 
 impl DistError {
+    /// A rank's read error as the reader said it (naming the file, the field and the value);
+    /// any other error as `otherwise` words it.
+    pub fn into_data_error(
+        self,
+        otherwise: impl FnOnce(DistError) -> crate::io::DataError,
+    ) -> crate::io::DataError {
+        let e = match self {
+            DistError::Rank { source, .. } => *source,
+            e => e,
+        };
+        match e {
+            DistError::Read(e) => e,
+            other => otherwise(other),
+        }
+    }
+
     /// Whether this only reports that another rank failed.
     pub fn is_peer_failure(&self) -> bool {
         match self {

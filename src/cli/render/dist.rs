@@ -281,19 +281,13 @@ impl StepsScan for Ranks {
             Ok(stats)
         };
         let as_data_error = |e: DistError| {
-            // A rank's read error as the reader said it; anything else names the series.
-            let e = match e {
-                DistError::Rank { source, .. } => *source,
-                e => e,
-            };
-            match e {
-                DistError::Read(e) => e,
-                other => DataError::new(
+            e.into_data_error(|other| {
+                DataError::new(
                     &steps[which.first().copied().unwrap_or(0)].path,
                     None,
                     Problem::Malformed(format!("the ranks' scan of the series: {other}")),
-                ),
-            }
+                )
+            })
         };
         if which.len() > 1 {
             tracing::info!(
