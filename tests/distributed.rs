@@ -1258,3 +1258,40 @@ fn ranks_render_to_a_target_error_and_a_time_budget() {
         "{log}"
     );
 }
+
+/// Under `--ranks`, each rank reads its part of the first step once for the automatic values
+/// that come from it (the spacing that sets the radius, the mean overlap that sets the cluster
+/// size, Phi_ref), not once for each, then once more to render it.
+#[test]
+fn ranks_read_the_first_step_once_for_its_automatic_values() {
+    let runs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sph_runs");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        runs.join("gadget_like/snapshot_000.npy"),
+        dir.path().join("snapshot_000.npy"),
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(["render", "--width", "32", "--height", "24", "--ranks", "3"])
+        .arg("--data")
+        .arg(dir.path().join("snapshot_000.npy"))
+        .arg("--out")
+        .arg(dir.path().join("out.exr"))
+        .env("AARBF_LOG", "info,aarbf::scene::series=debug")
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{log}");
+    // The radius from the spacing, the cluster size and Phi_ref all came from the parts.
+    for said in [
+        "particles' spacing",
+        "cluster size K = ",
+        "automatic, from the 3 ranks",
+    ] {
+        assert!(log.contains(said), "{said}: {log}");
+    }
+    for rank in 0..3 {
+        let reads = log.matches(&format!("rank {rank} of 3 decoded")).count();
+        assert_eq!(reads, 2, "rank {rank}: {log}");
+    }
+}

@@ -48,7 +48,7 @@ pub fn auto_values(
     given: Option<f64>,
 ) -> Result<AutoValues, DistError> {
     AutoValues::estimated(series, field, given, |estimate| {
-        phi_ref_of_part(comm, estimate, &first_part(comm, series)?)
+        phi_ref_of_part(comm, estimate, &*first_part(comm, series)?)
     })
 }
 
@@ -65,7 +65,7 @@ pub fn mean_overlap(
     overlap_of_part(
         comm,
         &Estimate::new(series, field),
-        &first_part(comm, series)?,
+        &*first_part(comm, series)?,
     )
 }
 
@@ -148,15 +148,15 @@ pub fn median_nearest_distance(comm: &dyn Comm, mine: &[DVec3]) -> Result<Option
     Ok(median_of(&mut nearest))
 }
 
-/// This rank's part of the series' first step.
-fn first_part(comm: &dyn Comm, series: &TimeSeries) -> Result<Step, DistError> {
-    Ok(series
-        .step_part(
-            0,
-            Part::new(comm.rank(), comm.size()),
-            &RankLengths { comm },
-        )?
-        .step)
+/// This rank's part of the series' first step, read once for the spacing, the mean overlap
+/// and Phi_ref ([`TimeSeries::step_part_kept`]; the render loop clears it with the series'
+/// cache once its automatic values are known).
+fn first_part(comm: &dyn Comm, series: &TimeSeries) -> Result<std::sync::Arc<Step>, DistError> {
+    Ok(series.step_part_kept(
+        0,
+        Part::new(comm.rank(), comm.size()),
+        &RankLengths { comm },
+    )?)
 }
 
 /// Phi_ref under `estimate`'s rules, `first` being this rank's part of the first step.

@@ -34,7 +34,7 @@ use super::{Columns, Format};
 use crate::values::{Attribute, Step};
 
 /// Rank `rank` of `ranks`: the part of a step it reads.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Part {
     /// This rank, `0..ranks`.
     pub rank: usize,

@@ -229,6 +229,8 @@ struct Shared {
     scan_error: Mutex<Option<DataError>>,
     /// Each step's time, once asked for ([`TimeSeries::times`]).
     times: std::sync::OnceLock<Option<Vec<f64>>>,
+    /// Ranks' parts kept by [`TimeSeries::step_part_kept`] until [`TimeSeries::clear_cache`].
+    kept_parts: Mutex<HashMap<(usize, io::Part), Arc<Step>>>,
 }
 
 /// A time series of particle steps. Opening lists the step files and reads at most the first
@@ -436,6 +438,7 @@ impl TimeSeries {
                 decoded: AtomicUsize::new(0),
                 scan_error: Mutex::new(None),
                 times: std::sync::OnceLock::new(),
+                kept_parts: Mutex::new(HashMap::new()),
             }),
             len,
             scanner: None,
@@ -663,6 +666,28 @@ impl TimeSeries {
         Ok(read)
     }
 
+    /// [`Self::step_part`]'s step, read once and kept until [`Self::clear_cache`]: the
+    /// automatic values a distributed render computes from the first step (its spacing, the
+    /// mean overlap, Phi_ref) read each rank's part of it once. Every rank must clear at the
+    /// same point, since the lengths from neighbours are found by all ranks together.
+    pub fn step_part_kept(
+        &self,
+        index: usize,
+        part: io::Part,
+        lengths: &dyn NeighbourLengths,
+    ) -> Result<Arc<Step>, DataError> {
+        if let Some(kept) = self.shared.kept_parts.lock().unwrap().get(&(index, part)) {
+            return Ok(kept.clone());
+        }
+        let read = Arc::new(self.step_part(index, part, lengths)?.step);
+        self.shared
+            .kept_parts
+            .lock()
+            .unwrap()
+            .insert((index, part), read.clone());
+        Ok(read)
+    }
+
     /// How long the last read of step `index` from its file took (reading and decoding, on
     /// whichever thread read it), if it was read from a file.
     pub fn read_time(&self, index: usize) -> Option<Duration> {
@@ -716,6 +741,7 @@ impl TimeSeries {
         let mut cache = self.shared.cache.lock().unwrap();
         cache.entries.clear();
         cache.bytes = 0;
+        self.shared.kept_parts.lock().unwrap().clear();
     }
 
     /// Marks the cached steps among `indices` as just used, in this order: the cache drops
