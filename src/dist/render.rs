@@ -268,29 +268,27 @@ fn periodic_images(
 
 /// [`render_balanced`] balanced by what a `pilot` frame measures where one is given (rendered
 /// first on the same bricks' rules and not kept: how `--balance cost` starts), else by `cost`.
+/// It takes this rank's part: once the exchange has put what the rank renders into its brick,
+/// the part is dropped, so that a rank does not hold its read share through the render.
 pub fn render_piloted(
     comm: &dyn Comm,
     backend: &mut dyn Backend,
-    local: &Step,
+    local: Step,
     scene: &DistScene<'_>,
     frames: &[FrameParams],
     pilot: Option<&FrameParams>,
     cost: Option<&CostModel>,
 ) -> Result<(Option<DistImage>, CostModel), DistError> {
+    check_frames(frames)?;
     let piloted = match pilot {
         Some(p) => {
-            Some(render_balanced(comm, backend, local, scene, std::slice::from_ref(p), None)?.1)
+            Some(render_balanced(comm, backend, &local, scene, std::slice::from_ref(p), None)?.1)
         }
         None => None,
     };
-    render_balanced(
-        comm,
-        backend,
-        local,
-        scene,
-        frames,
-        piloted.as_ref().or(cost),
-    )
+    let brick = prepare_brick(comm, backend, &local, scene, piloted.as_ref().or(cost))?;
+    drop(local);
+    render_frames_on(comm, backend, &brick, scene, frames)
 }
 
 /// Stochastic marching's pass 1: the brick's optical depth along its pixels' primary rays

@@ -270,7 +270,7 @@ fn run_one(
             let (image, _) = render_piloted(
                 comm,
                 &mut CpuBackend::new(),
-                &local,
+                local,
                 &scene,
                 &frames,
                 pilot.as_ref(),

@@ -497,7 +497,7 @@ pub(super) fn run(
                 return render_piloted(
                     comm,
                     &mut **backend,
-                    &local,
+                    local,
                     &scene,
                     &params,
                     pilot.as_ref(),
