@@ -1062,22 +1062,10 @@ fn ranks_find_neighbour_smoothing_lengths_from_their_parts() {
     assert!(a.as_raw().iter().any(|&v| v > 0.01), "the particles show");
     assert!(diff <= 1e-5, "max |difference| {diff}");
     // Each step's lengths cached beside the data by the ranks, as one process caches them.
-    let cached = |dir: &std::path::Path| {
-        let mut files: Vec<(String, Vec<u8>)> =
-            std::fs::read_dir(dir.join(aarbf::scene::smoothing::CACHE_DIR))
-                .unwrap()
-                .map(|e| {
-                    let path = e.unwrap().path();
-                    let bytes = std::fs::read(&path).unwrap();
-                    // The values after the header (magic, the file's stamp, the count).
-                    let name = path.file_name().unwrap().to_string_lossy().into_owned();
-                    (name, bytes[36..].to_vec())
-                })
-                .collect();
-        files.sort();
-        files
-    };
-    let (single_cache, ranks_cache) = (cached(one.path()), cached(ranked.path()));
+    let (single_cache, ranks_cache) = (
+        common::cached_lengths(one.path()),
+        common::cached_lengths(ranked.path()),
+    );
     assert_eq!(ranks_cache.len(), 3, "{ranks_cache:?}");
     assert_eq!(single_cache, ranks_cache);
 }

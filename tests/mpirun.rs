@@ -478,26 +478,13 @@ fn neighbour_smoothing_lengths_are_found_by_the_processes_together() {
             .all(|(a, b)| a.to_bits() == b.to_bits()),
         "mpirun -np 3 differs from --ranks 3"
     );
-    let cached = |dir: &Path| {
-        let mut files: Vec<(String, Vec<u8>)> =
-            std::fs::read_dir(dir.join(aarbf::scene::smoothing::CACHE_DIR))
-                .unwrap()
-                .map(|e| {
-                    let path = e.unwrap().path();
-                    let name = path.file_name().unwrap().to_string_lossy().into_owned();
-                    (name, std::fs::read(&path).unwrap()[36..].to_vec())
-                })
-                .collect();
-        files.sort();
-        files
-    };
-    let mpi_cache = cached(mpi_dir.path());
+    let mpi_cache = common::cached_lengths(mpi_dir.path());
     assert_eq!(
         mpi_cache.len(),
         3,
         "one cache file a step, no partial file left"
     );
-    assert_eq!(mpi_cache, cached(threads_dir.path()));
+    assert_eq!(mpi_cache, common::cached_lengths(threads_dir.path()));
 }
 
 /// `mpirun -np 2 aarbf render --target-error`: every process runs the controller on the images

@@ -285,3 +285,19 @@ pub(crate) fn swift_render_args(data: &std::path::Path, out: &std::path::Path) -
     .map(String::from)
     .to_vec()
 }
+
+/// The smoothing lengths cached beside the data in `dir` (`.aarbf-smoothing/`), each file's
+/// name and the values after its header (magic, the data file's stamp, the count), by name.
+pub(crate) fn cached_lengths(dir: &std::path::Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> =
+        std::fs::read_dir(dir.join(aarbf::scene::smoothing::CACHE_DIR))
+            .unwrap()
+            .map(|e| {
+                let path = e.unwrap().path();
+                let name = path.file_name().unwrap().to_string_lossy().into_owned();
+                (name, std::fs::read(&path).unwrap()[36..].to_vec())
+            })
+            .collect();
+    files.sort();
+    files
+}
