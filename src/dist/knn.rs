@@ -37,11 +37,26 @@ pub fn lengths(
     positions: &[DVec3],
     neighbours: usize,
 ) -> Result<Vec<f64>, DistError> {
-    let total: usize = comm
+    let total = part_counts(comm, positions)?.iter().sum();
+    lengths_among(comm, positions, neighbours, total)
+}
+
+/// Every rank's count of `positions`, rank order (one all-gather).
+fn part_counts(comm: &dyn Comm, positions: &[DVec3]) -> Result<Vec<usize>, DistError> {
+    Ok(comm
         .all_gather_of(&[positions.len() as u64])?
         .iter()
         .map(|c| c.first().copied().unwrap_or(0) as usize)
-        .sum();
+        .collect())
+}
+
+/// [`lengths`] where the ranks' positions number `total` in all.
+fn lengths_among(
+    comm: &dyn Comm,
+    positions: &[DVec3],
+    neighbours: usize,
+    total: usize,
+) -> Result<Vec<f64>, DistError> {
     if total == 0 {
         return Ok(Vec::new());
     }
@@ -267,11 +282,7 @@ fn cached_or_found(
     neighbours: usize,
 ) -> Result<Vec<f64>, DistError> {
     // Where this rank's particles stand in the step: after the parts of the ranks before it.
-    let counts: Vec<usize> = comm
-        .all_gather_of(&[positions.len() as u64])?
-        .iter()
-        .map(|c| c.first().copied().unwrap_or(0) as usize)
-        .collect();
+    let counts = part_counts(comm, positions)?;
     let total: usize = counts.iter().sum();
     let start: usize = counts[..comm.rank()].iter().sum();
     let range = start..start + positions.len();
@@ -283,7 +294,7 @@ fn cached_or_found(
     if everyone && let Some(h) = cached {
         return Ok(h);
     }
-    let h = lengths(comm, positions, neighbours)?;
+    let h = lengths_among(comm, positions, neighbours, total)?;
     // Rank 0 makes the cache file and names it; each rank writes its share; rank 0 renames
     // it once all have. A cache that cannot be written is skipped.
     let made = if comm.rank() == 0 {
