@@ -85,7 +85,7 @@ fn auto() -> Box<dyn Backend> {
     // (lavapipe, llvmpipe) loads its compiler: 140 MB a process on lavapipe, kept after the
     // backend is dropped. Where every adapter is a CPU, the CPU backend is chosen without
     // opening one.
-    let adapters = wgpu_lbvh::adapters();
+    let adapters = wgpu_lbvh::adapters_to_choose_from();
     if adapters
         .iter()
         .all(|a| a.info.device_type == wgpu::DeviceType::Cpu)

@@ -72,7 +72,11 @@ pub struct AdapterSummary {
 
 /// Every adapter wgpu finds, on every backend it was built with.
 pub fn adapters() -> Vec<AdapterSummary> {
-    let instance = instance();
+    listed(&instance())
+}
+
+/// Every adapter `instance` finds.
+fn listed(instance: &wgpu::Instance) -> Vec<AdapterSummary> {
     pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
         .into_iter()
         .map(|a| AdapterSummary {
@@ -81,6 +85,22 @@ pub fn adapters() -> Vec<AdapterSummary> {
             limits: a.limits(),
         })
         .collect()
+}
+
+/// The adapters a wgpu backend chooses among ([`GpuContext::new`]'s order): Vulkan, Metal or
+/// DX12 ones, or every backend's where those have none or `WGPU_BACKEND` chooses. Listing GL
+/// only then keeps its driver unloaded (and its EGL errors unsaid on a machine without a
+/// display) where Vulkan answers.
+pub fn adapters_to_choose_from() -> Vec<AdapterSummary> {
+    let chosen = std::env::var_os("WGPU_BACKEND").is_some();
+    for backends in [wgpu::Backends::PRIMARY, wgpu::Backends::all()] {
+        let instance = instance_for((!chosen).then_some(backends));
+        let found = listed(&instance);
+        if !found.is_empty() || chosen {
+            return found;
+        }
+    }
+    Vec::new()
 }
 
 fn instance() -> wgpu::Instance {

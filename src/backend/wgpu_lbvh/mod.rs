@@ -52,7 +52,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-pub use context::{AdapterSummary, GpuContext, adapters, buffers_made, instance_flags};
+pub use context::{
+    AdapterSummary, GpuContext, adapters, adapters_to_choose_from, buffers_made, instance_flags,
+};
 pub use tree::{BuildStage, TreeReport, TreeSnapshot};
 
 use super::gpu_data::{GpuStepData, SortedParticles};
