@@ -1187,14 +1187,6 @@ fn ranks_render_to_a_target_error_and_a_time_budget() {
         assert!(done.status.success(), "{extra:?}: {log}");
         (image::open(&out).unwrap().into_rgba32f(), log)
     };
-    let rmse = |a: &image::Rgba32FImage, b: &image::Rgba32FImage| {
-        let (sum, n) = a
-            .pixels()
-            .zip(b.pixels())
-            .flat_map(|(p, q)| (0..3).map(move |c| f64::from(p[c] - q[c]).powi(2)))
-            .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
-        (sum / n as f64).sqrt()
-    };
     // Stochastic marching under the default light: noise enough for the target to decide
     // the samples (128 here, as one process chooses).
     let marching = ["--integrator", "marching"];
@@ -1229,22 +1221,96 @@ fn ranks_render_to_a_target_error_and_a_time_budget() {
     );
     let (_, log) = render("budget.exr", &["--ranks", "2", "--time-budget", "0.5"]);
     assert!(log.contains("estimated error"), "{log}");
-    // --reference is one process's converged f64 image: refused by name.
-    let out = common::aarbf_logged(&[
-        "render",
-        "--data",
-        data.to_str().unwrap(),
-        "--ranks",
-        "2",
-        "--reference",
+}
+
+/// `--reference` under `--ranks`: the ranks run the single process's search (samples doubled,
+/// then the step halved, until each changes the image by at most the tolerance) on the images
+/// rank 0 composites from bricks in f64 on the CPU. It converges where one process's does, to
+/// its image within the tolerance, and each finds the other's reference in the cache: the
+/// ranks' parts digest to the whole step's particles.
+#[test]
+fn ranks_converge_the_reference_one_process_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("db");
+    let made = common::aarbf_logged(&[
+        "generate",
+        "dambreak-demo",
+        "--count",
+        "5003",
+        "--steps",
+        "1",
         "--out",
-        dir.path().join("r.exr").to_str().unwrap(),
+        data.to_str().unwrap(),
     ]);
-    let log = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !out.status.success() && log.contains("--reference"),
-        "{log}"
-    );
+    assert!(made.status.success(), "{made:?}");
+    let tolerance = 0.004;
+    let render = |out: &str, cache: &str, extra: &[&str]| {
+        let out = dir.path().join(out);
+        let done = std::process::Command::new(env!("CARGO_BIN_EXE_aarbf"))
+            .args(["render", "--width", "40", "--height", "30", "--data"])
+            .arg(&data)
+            .args([
+                "--reference",
+                "--reference-tolerance",
+                &tolerance.to_string(),
+            ])
+            .arg("--out")
+            .arg(&out)
+            .args(extra)
+            .env("AARBF_LOG", "info")
+            .env("XDG_CACHE_HOME", dir.path().join(cache))
+            .output()
+            .unwrap();
+        let log = String::from_utf8_lossy(&done.stderr).into_owned();
+        assert!(done.status.success(), "{extra:?}: {log}");
+        (image::open(&out).unwrap().into_rgba32f(), log)
+    };
+    // What the search settled on: "step size S, N spp; ... (tolerance T, converged)".
+    let settled = |log: &str| {
+        let line = log
+            .lines()
+            .find(|l| l.contains("reference of step 0"))
+            .unwrap_or_else(|| panic!("no reference line: {log}"));
+        assert!(
+            line.contains(", converged)") && !line.contains("from the cache"),
+            "{line}"
+        );
+        let from = line.find("step size").unwrap();
+        line[from..line.find(" spp").unwrap()].to_owned()
+    };
+    let (single, log) = render("one.exr", "one", &[]);
+    let single_settled = settled(&log);
+    for ranks in ["2", "3"] {
+        let (ranked, log) = render(&format!("{ranks}.exr"), ranks, &["--ranks", ranks]);
+        assert_eq!(
+            log.matches("reference of step").count(),
+            1,
+            "rank 0 says it: {log}"
+        );
+        assert_eq!(settled(&log), single_settled, "{ranks} ranks: {log}");
+        let error = rmse(&ranked, &single);
+        eprintln!("--ranks {ranks} --reference: RMSE {error:.2e} against one process's");
+        assert!(error <= tolerance, "{ranks} ranks: RMSE {error}");
+    }
+    // One process's reference serves the ranks, and the ranks' one process.
+    for (cache, extra) in [("one", &["--ranks", "3"][..]), ("2", &[][..])] {
+        let (_, log) = render(&format!("again-{cache}.exr"), cache, extra);
+        assert!(
+            log.contains("reference from the cache") && log.contains("from the cache"),
+            "{extra:?} with the {cache} cache: {log}"
+        );
+    }
+}
+
+/// RMSE over RGB of two images of one size.
+fn rmse(a: &image::Rgba32FImage, b: &image::Rgba32FImage) -> f64 {
+    assert_eq!(a.dimensions(), b.dimensions());
+    let (sum, n) = a
+        .pixels()
+        .zip(b.pixels())
+        .flat_map(|(p, q)| (0..3).map(move |c| f64::from(p[c] - q[c]).powi(2)))
+        .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
+    (sum / n as f64).sqrt()
 }
 
 /// Under `--ranks`, each rank reads its part of the first step once for the automatic values

@@ -540,3 +540,57 @@ fn mpi_processes_render_to_a_target_error_together() {
         "RMSE {rmse} between mpirun and --ranks 2"
     );
 }
+
+/// `mpirun -np 3 aarbf render --reference`: the processes run the single process's search on
+/// the images rank 0 composites, as three ranks as threads do, to the same image bit for bit;
+/// rank 0 alone caches it, and a later job finds it there.
+#[test]
+fn mpi_processes_converge_the_reference_of_as_many_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = common::generated_dam_break(d);
+    let args = |out: &Path| -> Vec<String> {
+        let mut a = common::dam_break_render_args(&header, out, (40, 30), 1);
+        a.extend(["--reference", "--reference-tolerance", "0.004"].map(String::from));
+        a
+    };
+    let mpi_out = d.join("mpi.exr");
+    let out = mpirun(3, &args(&mpi_out))
+        .env("XDG_CACHE_HOME", d.join("mpi-cache"))
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{log}");
+    assert_eq!(log.matches("reference of step").count(), 1, "{log}");
+    assert!(log.contains(", converged)"), "{log}");
+    let cached: Vec<_> = std::fs::read_dir(d.join("mpi-cache/aarbf/references"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(cached.len(), 1, "one cache file: {cached:?}");
+
+    let threads_out = d.join("threads.exr");
+    let mut threads = args(&threads_out);
+    threads.extend(["--ranks", "3"].map(String::from));
+    let out = Command::new(env!("CARGO_BIN_EXE_aarbf"))
+        .args(&threads)
+        .env("XDG_CACHE_HOME", d.join("threads-cache"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(pixels(&mpi_out), pixels(&threads_out));
+
+    let again = d.join("again.exr");
+    let out = mpirun(3, &args(&again))
+        .env("XDG_CACHE_HOME", d.join("mpi-cache"))
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{log}");
+    assert!(log.contains("reference from the cache"), "{log}");
+    assert_eq!(pixels(&again), pixels(&mpi_out));
+}

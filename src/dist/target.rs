@@ -5,13 +5,20 @@
 //! image and its clock, so that every rank's controller sees the same images and the same
 //! times and makes the same decisions, and so asks for the same next chunk: no rank waits in
 //! a collective the others skip.
+//!
+//! The converged reference (`--reference`) runs the single process's search the same way
+//! ([`converged_reference_on`]), on a brick the ranks prepared in f64 on the CPU.
 
 use std::time::{Duration, Instant};
 
 use super::DistError;
-use super::comm::Comm;
+use super::comm::{Comm, CommExt};
 use super::render::{DistScene, PreparedBrick, render_frames_on};
 use crate::backend::Backend;
+use crate::render::converged::{
+    ParticlesDigest, Reference, ReferenceCache, ReferenceOptions, cache_key, reference_settings,
+    search_reference,
+};
 use crate::render::target::{ChunkRenderer, Target, Targeted, render_chunks_to_target};
 use crate::render::{FrameBasis, RenderError, RenderSettings, Resolved};
 use crate::values::{FrameParams, Image};
@@ -41,6 +48,58 @@ pub fn render_to_target_on(
 ) -> Result<Targeted, RenderError> {
     let mut chunks = RankChunks::new(comm, backend, brick, scene, basis);
     render_chunks_to_target(&mut chunks, settings, target)
+}
+
+/// The converged reference of `settings` over the ranks ([`search_reference`], the single
+/// process's search, on chunks rendered from `brick`: prepared in f64 on the CPU backend
+/// `backend` holds); `part` digests this rank's part of the step as read. The digests join to
+/// the whole step's, so the reference is cached under the key one process gives it, and
+/// either finds the other's. Rank 0 reads and writes the cache and tells the others whether it
+/// found the reference. Rank 0 returns the reference, the others `None`. Collective.
+#[allow(clippy::too_many_arguments)]
+pub fn converged_reference_on(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    brick: &PreparedBrick,
+    scene: &DistScene<'_>,
+    basis: FrameBasis<'_>,
+    settings: &RenderSettings,
+    options: &ReferenceOptions,
+    part: ParticlesDigest,
+) -> Result<Option<Reference>, RenderError> {
+    options.check()?;
+    let ranks = |e: DistError| RenderError::Ranks(Box::new(e));
+    let base = reference_settings(settings);
+    let digest = comm
+        .all_gather_of(&[part.records, part.sum])
+        .map_err(|e| ranks(e.into()))?
+        .iter()
+        .map(|p| ParticlesDigest {
+            records: p[0],
+            sum: p[1],
+        })
+        .fold(ParticlesDigest::default(), ParticlesDigest::joined);
+    let cache = ReferenceCache::new(
+        options,
+        cache_key(&basis.frame_params(&base, 0)?, digest, scene.field, options),
+    );
+    let root = comm.rank() == 0;
+    let found = if root { cache.load() } else { None };
+    let agreed = comm
+        .all_gather_of(&[u8::from(found.is_some())])
+        .map_err(|e| ranks(e.into()))?;
+    if agreed.first().and_then(|f| f.first()) == Some(&1) {
+        if root {
+            tracing::info!("reference from the cache");
+        }
+        return Ok(found);
+    }
+    let mut chunks = RankChunks::new(comm, backend, brick, scene, basis);
+    let reference = search_reference(&mut chunks, &base, options, root)?;
+    Ok(root.then(|| {
+        cache.store(&reference);
+        reference
+    }))
 }
 
 impl<'a> RankChunks<'a> {

@@ -3,7 +3,10 @@
 //! and a sample count fine enough that doubling the samples and halving the step each change
 //! the image by less than a stated tolerance (RMSE over linear RGB). Both changes are checked
 //! and reported, and the image is cached on disk per scene (keyed by the frame's every
-//! parameter and a hash of the step's particles), so studies and tests reuse it.
+//! parameter and a digest of the step's particles), so studies and tests reuse it. One
+//! search ([`search_reference`]) runs on any renderer of chunks of frames: one process's
+//! session, or the ranks of a distributed render (`crate::dist::converged_reference_on`),
+//! whose parts' digests join to the whole step's, so both find each other's references.
 //!
 //! The samples are doubled until their change is within half the tolerance first, so the
 //! step check that follows compares images whose noise cannot by itself exceed it.
@@ -16,14 +19,16 @@ use base64::Engine as _;
 use serde::{Deserialize, Serialize};
 
 use super::RenderError;
+use super::cycles::CycleWeights;
 use super::session::RenderSession;
 use super::settings::RenderSettings;
+use super::target::{ChunkRenderer, SessionChunks};
 use crate::accel::ClusterSize;
 use crate::backend::Precision;
 use crate::backend::cpu::CpuBackend;
 use crate::field::FieldSettings;
 use crate::scene::TimeSeries;
-use crate::values::{Image, Integrator, NoiseKind, Step};
+use crate::values::{FrameParams, Image, Integrator, NoiseKind, Step};
 
 /// The seed of every reference (renders under test use their own).
 pub const REFERENCE_SEED: u32 = 0x5EED_0F0F;
@@ -128,7 +133,8 @@ pub fn reference_settings(settings: &RenderSettings) -> RenderSettings {
 
 /// The converged reference of `settings` (its camera, size, maps and light; its noise and seed
 /// are the reference's own, and a scattering integrator is the deterministic `ss-reference`
-/// all of them converge to) for step `step` of `series` under `field`.
+/// all of them converge to) for step `step` of `series` under `field`: one process's session
+/// on the CPU backend in f64 (the ranks' is `crate::dist::converged_reference_on`).
 pub fn converged_reference(
     series: &TimeSeries,
     step: usize,
@@ -137,49 +143,78 @@ pub fn converged_reference(
     settings: &RenderSettings,
     options: &ReferenceOptions,
 ) -> Result<Reference, RenderError> {
-    if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
-        return Err(RenderError::Settings(format!(
-            "reference tolerance {} must be a positive number",
-            options.tolerance
-        )));
-    }
-    if options.start_spp == 0 || options.start_spp > options.max_spp {
-        return Err(RenderError::Settings(format!(
-            "reference samples: start {} must lie in 1..={}",
-            options.start_spp, options.max_spp
-        )));
-    }
-    let started = Instant::now();
+    options.check()?;
     let mut session = RenderSession::new(Box::new(CpuBackend::new()), series);
     session.set_precision(Precision::F64);
     session.show(series, step, field, cluster)?;
     let base = reference_settings(settings);
-    let start_dt = session.resolve(&base)?.step_size / 2.0;
-    let key = cache_key(&session, &base, &*series.step(step)?, field, options)?;
-    let cache_path = options
-        .cache
-        .as_ref()
-        .map(|dir| dir.join(format!("{:016x}.json", hash_of(&key))));
-    if let Some(found) = cache_path.as_deref().and_then(|p| load(p, &key)) {
+    let key = cache_key(
+        &session.frame_params(&base, 0)?,
+        ParticlesDigest::of(&*series.step(step)?),
+        field,
+        options,
+    );
+    let cache = ReferenceCache::new(options, key);
+    if let Some(found) = cache.load() {
         tracing::info!("reference from the cache");
         return Ok(found);
     }
+    let reference = search_reference(&mut SessionChunks::new(&mut session), &base, options, true)?;
+    cache.store(&reference);
+    Ok(reference)
+}
 
+impl ReferenceOptions {
+    /// Refuses a tolerance or sample bounds no search can meet.
+    pub fn check(&self) -> Result<(), RenderError> {
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(RenderError::Settings(format!(
+                "reference tolerance {} must be a positive number",
+                self.tolerance
+            )));
+        }
+        if self.start_spp == 0 || self.start_spp > self.max_spp {
+            return Err(RenderError::Settings(format!(
+                "reference samples: start {} must lie in 1..={}",
+                self.start_spp, self.max_spp
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The search for the converged reference of `base` (already [`reference_settings`]) on the
+/// frames `chunks` renders: the samples doubled until they change the image by at most half
+/// the tolerance, then the step halved, until both changes are within it. Every process that
+/// renders the chunks runs it on the same images and makes the same decisions; the one that
+/// `speaks` shows the progress and warns where it did not converge.
+pub fn search_reference(
+    chunks: &mut dyn ChunkRenderer,
+    base: &RenderSettings,
+    options: &ReferenceOptions,
+    speaks: bool,
+) -> Result<Reference, RenderError> {
+    let started = Instant::now();
     let at = |dt: f64| RenderSettings {
         step_size: Some(dt),
         ..base.clone()
     };
-    let mut dt = start_dt;
+    let mut dt = chunks.resolve(base)?.step_size / 2.0;
     let mut spp = options.start_spp;
-    let bar = crate::progress::bar(u64::from(options.max_spp), "reference");
+    let bar = if speaks {
+        crate::progress::bar(u64::from(options.max_spp), "reference")
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut frames = Accumulation::default();
     let (image, step_size, spp_change, step_change, converged) = loop {
         // Double the samples until they change the image by at most half the tolerance.
-        session.accumulate(&at(dt), spp.saturating_sub(session.frames_of(&at(dt))))?;
-        let mut before = session.image()?;
+        frames.extend_to(chunks, &at(dt), spp)?;
+        let mut before = frames.image();
         let (spp_change, coarse) = loop {
-            session.accumulate(&at(dt), spp)?;
+            frames.extend_to(chunks, &at(dt), 2 * spp)?;
             bar.set_position(u64::from(2 * spp));
-            let after = session.image()?;
+            let after = frames.image();
             let change = before.rmse(&after);
             spp *= 2;
             if change <= 0.5 * options.tolerance || spp >= options.max_spp {
@@ -189,11 +224,11 @@ pub fn converged_reference(
         };
         // Halve the step at the same samples.
         let finer = dt / 2.0;
-        if session.resolve(&at(finer)).is_err() {
+        if chunks.resolve(&at(finer)).is_err() {
             break (coarse, dt, spp_change, None, false);
         }
-        session.accumulate(&at(finer), spp)?;
-        let fine = session.image()?;
+        frames.extend_to(chunks, &at(finer), spp)?;
+        let fine = frames.image();
         let step_change = coarse.rmse(&fine);
         let converged = spp_change <= options.tolerance && step_change <= options.tolerance;
         if step_change <= options.tolerance || spp >= options.max_spp {
@@ -213,7 +248,7 @@ pub fn converged_reference(
         seconds: started.elapsed().as_secs_f64(),
         from_cache: false,
     };
-    if !reference.converged {
+    if speaks && !reference.converged {
         tracing::warn!(
             "the reference did not converge to {} within {} spp: doubling the samples changed it by {:.3e}, halving the step by {}",
             options.tolerance,
@@ -226,12 +261,167 @@ pub fn converged_reference(
                 ))
         );
     }
-    if let Some(path) = &cache_path
-        && let Err(e) = store(path, &key, &reference)
-    {
-        tracing::warn!("the reference was not cached: {e}");
-    }
     Ok(reference)
+}
+
+/// The frames of one setting rendered so far, as a session accumulates them: their mean (in
+/// f64, from chunks of frames), and past a blue-noise mask cycle the cycles' weights
+/// ([`CycleWeights`]), each chunk ending where the weights may want the mean.
+#[derive(Default)]
+struct Accumulation {
+    settings: Option<RenderSettings>,
+    frames: u32,
+    size: (u32, u32),
+    mean: Vec<[f64; 4]>,
+    cycles: Option<CycleWeights>,
+}
+
+impl Accumulation {
+    /// Renders the frames of `settings` up to `frames` (from the first where the settings
+    /// changed).
+    fn extend_to(
+        &mut self,
+        chunks: &mut dyn ChunkRenderer,
+        settings: &RenderSettings,
+        frames: u32,
+    ) -> Result<(), RenderError> {
+        if self.settings.as_ref() != Some(settings) {
+            *self = Accumulation {
+                settings: Some(settings.clone()),
+                cycles: CycleWeights::of(settings),
+                ..Accumulation::default()
+            };
+        }
+        while self.frames < frames {
+            if self
+                .cycles
+                .as_ref()
+                .is_some_and(|c| c.wants_mean_at(self.frames))
+            {
+                let mean = self.mean_image();
+                if let Some(cycles) = &mut self.cycles {
+                    cycles.took_mean(self.frames, mean);
+                }
+            }
+            let stop = (self.frames + 1..frames)
+                .find(|&f| self.cycles.as_ref().is_some_and(|c| c.may_want_mean_at(f)))
+                .unwrap_or(frames);
+            let count = stop - self.frames;
+            let chunk = chunks.render_frames(settings, self.frames, count, false)?;
+            let total = f64::from(stop);
+            let (w_old, w_new) = (f64::from(self.frames) / total, f64::from(count) / total);
+            if self.mean.len() != chunk.pixels.len() {
+                self.mean = vec![[0.0; 4]; chunk.pixels.len()];
+            }
+            for (m, p) in self.mean.iter_mut().zip(&chunk.pixels) {
+                for c in 0..4 {
+                    m[c] = w_old * m[c] + w_new * f64::from(p[c]);
+                }
+            }
+            self.size = (chunk.width, chunk.height);
+            self.frames = stop;
+        }
+        Ok(())
+    }
+
+    fn mean_image(&self) -> Image {
+        Image {
+            width: self.size.0,
+            height: self.size.1,
+            pixels: self.mean.iter().map(|p| p.map(|v| v as f32)).collect(),
+        }
+    }
+
+    /// The image of the frames so far.
+    fn image(&self) -> Image {
+        let mean = self.mean_image();
+        match &self.cycles {
+            Some(cycles) => cycles.image(self.frames, mean),
+            None => mean,
+        }
+    }
+}
+
+/// An order-free digest of a step's particles (every bit of each record, and the attributes'
+/// names): the wrapping sum of the records' hashes, so that the parts the ranks read of a step
+/// join to the whole step's digest ([`ParticlesDigest::joined`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ParticlesDigest {
+    /// Records digested.
+    pub records: u64,
+    /// The wrapping sum of their hashes.
+    pub sum: u64,
+}
+
+impl ParticlesDigest {
+    /// The digest of `step`'s records.
+    pub fn of(step: &Step) -> ParticlesDigest {
+        use rayon::prelude::*;
+        let names = hash_of(
+            &step
+                .attributes
+                .iter()
+                .map(|a| a.name.as_str())
+                .collect::<Vec<_>>(),
+        );
+        let sum = (0..step.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut h = std::hash::DefaultHasher::new();
+                names.hash(&mut h);
+                step.positions[i].to_array().map(f64::to_bits).hash(&mut h);
+                for a in &step.attributes {
+                    a.values[i].to_bits().hash(&mut h);
+                }
+                h.finish()
+            })
+            .reduce(|| 0, u64::wrapping_add);
+        ParticlesDigest {
+            records: step.len() as u64,
+            sum,
+        }
+    }
+
+    /// The digest of both digests' records together.
+    pub fn joined(self, other: ParticlesDigest) -> ParticlesDigest {
+        ParticlesDigest {
+            records: self.records + other.records,
+            sum: self.sum.wrapping_add(other.sum),
+        }
+    }
+}
+
+/// Where a reference is cached, under the key of everything it depends on.
+pub struct ReferenceCache {
+    path: Option<PathBuf>,
+    key: String,
+}
+
+impl ReferenceCache {
+    /// The cache file of `key` under `options.cache` (none where that is `None`).
+    pub fn new(options: &ReferenceOptions, key: String) -> ReferenceCache {
+        ReferenceCache {
+            path: options
+                .cache
+                .as_ref()
+                .map(|dir| dir.join(format!("{:016x}.json", hash_of(&key)))),
+            key,
+        }
+    }
+
+    /// The reference cached under the key, if any.
+    pub fn load(&self) -> Option<Reference> {
+        load(self.path.as_deref()?, &self.key)
+    }
+
+    /// Caches `reference` (a warning where it cannot).
+    pub fn store(&self, reference: &Reference) {
+        if let Some(path) = &self.path
+            && let Err(e) = store(path, &self.key, reference)
+        {
+            tracing::warn!("the reference was not cached: {e}");
+        }
+    }
 }
 
 fn hash_of<T: Hash + ?Sized>(value: &T) -> u64 {
@@ -243,32 +433,16 @@ fn hash_of<T: Hash + ?Sized>(value: &T) -> u64 {
 /// Everything the reference depends on: the frame's parameters (camera, box, maps, tables),
 /// the field, the particles' every bit, the convergence options. A cache file is used only
 /// if its key is this string exactly.
-fn cache_key(
-    session: &RenderSession,
-    settings: &RenderSettings,
-    step: &Step,
+pub fn cache_key(
+    frame: &FrameParams,
+    particles: ParticlesDigest,
     field: &FieldSettings,
     options: &ReferenceOptions,
-) -> Result<String, RenderError> {
-    let params = session.frame_params(settings, 0)?;
-    let mut h = std::hash::DefaultHasher::new();
-    step.positions.len().hash(&mut h);
-    for p in &step.positions {
-        p.to_array().map(f64::to_bits).hash(&mut h);
-    }
-    for a in &step.attributes {
-        a.name.hash(&mut h);
-        for v in &a.values {
-            v.to_bits().hash(&mut h);
-        }
-    }
-    Ok(format!(
-        "aarbf reference v1; particles {:016x}; field {field:?}; frame {params:?}; tolerance {}; spp {}..{}",
-        h.finish(),
-        options.tolerance,
-        options.start_spp,
-        options.max_spp
-    ))
+) -> String {
+    format!(
+        "aarbf reference v2; particles {} {:016x}; field {field:?}; frame {frame:?}; tolerance {}; spp {}..{}",
+        particles.records, particles.sum, options.tolerance, options.start_spp, options.max_spp
+    )
 }
 
 fn load(path: &Path, key: &str) -> Option<Reference> {
@@ -328,4 +502,103 @@ fn store(
     }
     let text = serde_json::to_string(&file).expect("a reference serialises");
     crate::io::output::write_atomically(path, true, |tmp| std::fs::write(tmp, &text))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::{Part, slice_step};
+    use crate::scene::synth::Generator;
+
+    #[test]
+    fn the_parts_digests_join_to_the_whole_step_s() {
+        let step = Generator::DambreakDemo.generate(3_011, 1, 5).remove(0);
+        let whole = ParticlesDigest::of(&step);
+        assert_eq!(whole.records, 3_011);
+        for ranks in (1..=9).chain([16, 4_000]) {
+            let joined = (0..ranks)
+                .map(|r| ParticlesDigest::of(&slice_step(&step, Part::new(r, ranks))))
+                .fold(ParticlesDigest::default(), ParticlesDigest::joined);
+            assert_eq!(joined, whole, "{ranks} parts");
+        }
+        // The order of the records does not matter; every bit of each, and the names, do.
+        let mut reversed = step.clone();
+        reversed.positions.reverse();
+        for a in &mut reversed.attributes {
+            a.values.reverse();
+        }
+        assert_eq!(ParticlesDigest::of(&reversed), whole);
+        let mut nudged = step.clone();
+        let last = nudged.attributes.len() - 1;
+        let v = &mut nudged.attributes[last].values[1_234];
+        *v = f64::from_bits(v.to_bits() ^ 1);
+        assert_ne!(ParticlesDigest::of(&nudged), whole);
+        let mut moved = step.clone();
+        moved.positions[7].z = f64::from_bits(moved.positions[7].z.to_bits() ^ 1);
+        assert_ne!(ParticlesDigest::of(&moved), whole);
+        let mut renamed = step.clone();
+        renamed.attributes[0].name.push('_');
+        assert_ne!(ParticlesDigest::of(&renamed), whole);
+        // Two records swapping one attribute's values are other particles.
+        let mut swapped = step.clone();
+        swapped.attributes[last].values.swap(10, 2_000);
+        assert_ne!(ParticlesDigest::of(&swapped), whole);
+    }
+
+    /// The search's frames, accumulated from chunks, make the image a session's own
+    /// accumulation makes, past a mask cycle (where the cycles' weights combine them) too.
+    #[test]
+    fn chunks_accumulate_to_the_session_s_image() {
+        let series = TimeSeries::from_steps(Generator::DambreakDemo.generate(2_003, 1, 5));
+        let field = FieldSettings::new(Some("velocity"), 0.04 * series.bounds().diagonal());
+        let settings = RenderSettings {
+            width: 23,
+            height: 17,
+            integrator: Integrator::Marching,
+            ..RenderSettings::default()
+        };
+        let cycle = crate::noise::BlueNoiseMask::builtin().depth;
+        let session = || {
+            let mut session = RenderSession::new(Box::new(CpuBackend::new()), &series);
+            session.set_precision(Precision::F64);
+            session
+                .show(&series, 0, &field, ClusterSize::new(8).unwrap())
+                .unwrap();
+            session
+        };
+        let mut whole = session();
+        let mut chunked = session();
+        let mut frames = Accumulation::default();
+        for total in [
+            3,
+            cycle / 2,
+            cycle + cycle / 4 + 1,
+            cycle + cycle / 2 + 3,
+            2 * cycle + 5,
+        ] {
+            whole
+                .accumulate(&settings, total - whole.frames_of(&settings))
+                .unwrap();
+            frames
+                .extend_to(&mut SessionChunks::new(&mut chunked), &settings, total)
+                .unwrap();
+            let (want, have) = (whole.image().unwrap(), frames.image());
+            let diff = want
+                .pixels
+                .iter()
+                .zip(&have.pixels)
+                .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
+                .fold(0.0f32, f32::max);
+            assert!(diff <= 1e-5, "{total} frames: max |difference| {diff:e}");
+        }
+        // Other settings start again.
+        let finer = RenderSettings {
+            step_size: Some(0.01),
+            ..settings.clone()
+        };
+        frames
+            .extend_to(&mut SessionChunks::new(&mut chunked), &finer, 2)
+            .unwrap();
+        assert_eq!(frames.frames, 2);
+    }
 }

@@ -15,12 +15,13 @@ use anyhow::{Context, bail, ensure};
 
 use super::RenderArgs;
 use super::plan::Frame;
+use crate::backend::cpu::CpuBackend;
 use crate::backend::{Backend, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
 use crate::dist::knn::RankLengths;
 use crate::dist::step_stats;
-use crate::dist::target::render_to_target_on;
+use crate::dist::target::{converged_reference_on, render_to_target_on};
 use crate::dist::{
     Balance, Comm, CostModel, DistError, DistImage, DistScene, DistShadows, RankReport,
     prepare_brick, render_piloted, run_local, shadow_map_for,
@@ -28,6 +29,7 @@ use crate::dist::{
 use crate::field::FieldSettings;
 use crate::io::Part;
 use crate::io::{AttributeSelection, DataError, Problem, StepRef};
+use crate::render::converged::{ParticlesDigest, Reference, ReferenceOptions};
 use crate::render::legend::Legend;
 use crate::render::target::Targeted;
 use crate::render::{AutoValues, FrameBasis, Method, RenderSettings};
@@ -339,11 +341,6 @@ fn check_supported(
         "{how} renders with --method rbf (the baselines are not distributed)"
     );
     ensure!(
-        !args.reference,
-        "{how}: --reference is not distributed yet (it converges one process's f64 image); \
-         --target-error renders to an error over the ranks"
-    );
-    ensure!(
         args.save_scene.is_none(),
         "{how}: --save-scene is not distributed yet; save the scene from a single-rank render"
     );
@@ -396,7 +393,11 @@ pub(super) fn run(
     let threads = matches!(ranks, Ranks::Threads(_));
     let slots: Vec<Mutex<Option<Box<dyn Backend>>>> =
         (0..ranks.local_count()).map(|_| Mutex::new(None)).collect();
-    let backend_name = {
+    let backend_name = if args.reference {
+        // The reference is the CPU backend's f64 image, whatever --backend says (as one
+        // process makes it).
+        "cpu backend in f64 (--reference)".to_owned()
+    } else {
         let mut slot = lock(&slots[0]);
         let backend = slot.insert(crate::backend::create(args.backend)?);
         format!(
@@ -487,6 +488,26 @@ pub(super) fn run(
                 .series
                 .step_part(frame.step, part, &RankLengths { comm })?
                 .step;
+            if args.reference {
+                // The converged reference: the brick once, in f64 on the CPU, and every rank
+                // runs the single process's search on the chunks' images rank 0 sends it.
+                let digest = ParticlesDigest::of(&local);
+                let scene = DistScene {
+                    precision: Precision::F64,
+                    ..scene
+                };
+                let mut cpu = CpuBackend::new();
+                let brick = prepare_brick(comm, &mut cpu, &local, &scene, None)?;
+                drop(local);
+                let options = ReferenceOptions {
+                    tolerance: args.reference_tolerance,
+                    ..ReferenceOptions::default()
+                };
+                let reference = converged_reference_on(
+                    comm, &mut cpu, &brick, &scene, basis, &settings, &options, digest,
+                )?;
+                return Ok(RankDone::Reference(reference));
+            }
             // Ranks as threads have a slot each; an MPI process's one rank the first.
             let mut slot = lock(&slots[if threads { comm.rank() } else { 0 }]);
             let backend = match &mut *slot {
@@ -546,6 +567,15 @@ pub(super) fn run(
                 log_reports(&image.reports);
                 (image.image(), spp)
             }
+            RankDone::Reference(reference) => {
+                let Some(reference) = reference else {
+                    ensure!(!threads, "rank 0 returned no image");
+                    continue;
+                };
+                super::image::say_reference(frame.step, &reference);
+                let spp = reference.spp;
+                (reference.image.expect("a reference holds its image"), spp)
+            }
             RankDone::Targeted(done) => {
                 let Some(done) = done else {
                     ensure!(!threads, "rank 0 returned no image");
@@ -579,11 +609,12 @@ pub(super) fn run(
 }
 
 /// What a rank's render of one image returns: its part of a render of a set number of frames
-/// (rank 0's image, and what it measured for the next decomposition), or of a targeted render
-/// (rank 0's result).
+/// (rank 0's image, and what it measured for the next decomposition), of a targeted render or
+/// of the converged reference (rank 0's result).
 enum RankDone {
     Frames(Option<DistImage>, CostModel),
     Targeted(Option<Targeted>),
+    Reference(Option<Reference>),
 }
 
 /// Each rank's counts and times, and the ghosts and imbalance over all.

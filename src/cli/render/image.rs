@@ -6,7 +6,7 @@ use indicatif::ProgressBar;
 
 use super::{RenderArgs, Setup};
 use crate::backend::voxel::VoxelGeometry;
-use crate::render::converged::{ReferenceOptions, converged_reference};
+use crate::render::converged::{Reference, ReferenceOptions, converged_reference};
 use crate::render::target::{Target, Targeted, render_to_target};
 use crate::render::{Method, RenderSession};
 use crate::values::Image;
@@ -71,6 +71,17 @@ fn reference(
         &setup.settings,
         &options,
     )?;
+    say_reference(step, &reference);
+    bar.inc(1);
+    Ok(Rendered {
+        image: reference.image().clone(),
+        step_size: Some(reference.step_size),
+        spp: reference.spp,
+    })
+}
+
+/// Says how converged the reference of step `step` is, and at what step and samples.
+pub(super) fn say_reference(step: usize, reference: &Reference) {
     tracing::info!(
         "reference of step {step}: step size {:.4e}, {} spp; doubling the samples changes it by {:.2e}, halving the step by {} (tolerance {:.1e}, {}){}",
         reference.step_size,
@@ -93,12 +104,6 @@ fn reference(
             ""
         },
     );
-    bar.inc(1);
-    Ok(Rendered {
-        image: reference.image().clone(),
-        step_size: Some(reference.step_size),
-        spp: reference.spp,
-    })
 }
 
 /// An image rendered to a target error or within a time budget, with its estimate said.

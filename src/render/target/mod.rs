@@ -290,14 +290,7 @@ pub fn render_to_target(
     settings: &RenderSettings,
     target: &Target,
 ) -> Result<Targeted, RenderError> {
-    render_chunks_to_target(
-        &mut SessionChunks {
-            session,
-            started: Instant::now(),
-        },
-        settings,
-        target,
-    )
+    render_chunks_to_target(&mut SessionChunks::new(session), settings, target)
 }
 
 /// What a targeted render renders with: chunks of a sequence's frames, and a clock. One
@@ -325,9 +318,19 @@ pub trait ChunkRenderer {
 }
 
 /// One process's session, on the wall clock.
-struct SessionChunks<'a> {
+pub(crate) struct SessionChunks<'a> {
     session: &'a mut RenderSession,
     started: Instant,
+}
+
+impl<'a> SessionChunks<'a> {
+    /// The chunks `session` renders; its clock starts now.
+    pub(crate) fn new(session: &'a mut RenderSession) -> SessionChunks<'a> {
+        SessionChunks {
+            session,
+            started: Instant::now(),
+        }
+    }
 }
 
 impl ChunkRenderer for SessionChunks<'_> {
