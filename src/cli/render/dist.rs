@@ -457,9 +457,6 @@ pub(super) fn run(
             auto,
         };
         let used = basis.resolve(&settings)?;
-        let params: Vec<FrameParams> = (0..spp)
-            .map(|f| basis.frame_params(&settings, f))
-            .collect::<Result<_, _>>()?;
         let scene = DistScene {
             field: &resolved.field,
             cluster: resolved.cluster,
@@ -469,16 +466,25 @@ pub(super) fn run(
             periodic: resolved.periodic,
             shadows,
         };
-        // Balanced by cost, the first image starts from a pilot image, and every later one
-        // from the image before it.
-        let pilot = if args.balance == Balance::Cost && cost.is_none() {
-            let (width, height) = pilot_size(settings.width, settings.height);
-            let small = RenderSettings {
-                width,
-                height,
-                ..settings.clone()
+        // A render of a set number of frames (not to a target, nor the reference): its frames,
+        // and balanced by cost, the first image's pilot (every later one starts from the image
+        // before it).
+        let fixed_frames = if target.is_none() && !args.reference {
+            let params: Vec<FrameParams> = (0..spp)
+                .map(|f| basis.frame_params(&settings, f))
+                .collect::<Result<_, _>>()?;
+            let pilot = if args.balance == Balance::Cost && cost.is_none() {
+                let (width, height) = pilot_size(settings.width, settings.height);
+                let small = RenderSettings {
+                    width,
+                    height,
+                    ..settings.clone()
+                };
+                Some(basis.frame_params(&small, 0)?)
+            } else {
+                None
             };
-            Some(basis.frame_params(&small, 0)?)
+            Some((params, pilot))
         } else {
             None
         };
@@ -515,12 +521,15 @@ pub(super) fn run(
                 None => slot.insert(crate::backend::create(args.backend)?),
             };
             let Some(target) = &target else {
+                let (params, pilot) = fixed_frames
+                    .as_ref()
+                    .expect("a render of set frames plans them");
                 return render_piloted(
                     comm,
                     &mut **backend,
                     local,
                     &scene,
-                    &params,
+                    params,
                     pilot.as_ref(),
                     cost.as_ref(),
                 )
