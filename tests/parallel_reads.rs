@@ -1694,3 +1694,57 @@ fn a_series_without_an_index_is_scanned_from_the_ranks_parts_bit_for_bit() {
         assert_eq!(by_ranks.steps_decoded(), 0, "knn:16 over {ranks} ranks");
     }
 }
+
+/// The whole step's read against rank 1's and rank 3's of 4 on a 1M-vertex ascii mesh (2M
+/// faces after the vertices) and a 1M binary PLY with a list in each vertex row: the median of
+/// three, for docs/distributed.md. `cargo test --profile checked --test suite --
+/// parallel_reads::ply_part_read_times --ignored --nocapture`.
+#[test]
+#[ignore = "a measurement (docs/distributed.md, PLY parts), not a guard"]
+fn ply_part_read_times() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1_000_000;
+    let ascii = dir.path().join("mesh.ply");
+    let mesh = AsciiMesh {
+        faces: Some(2 * n),
+        ..PLYFILE_MESH
+    };
+    write_ascii_mesh(&ascii, n, mesh);
+    let binary = dir.path().join("lists.ply");
+    write_binary_ply(&binary, n, false, false, true);
+    for path in [&ascii, &binary] {
+        let step = the_step(path);
+        let time = |part: Option<Part>| {
+            let mut times: Vec<f64> = (0..3)
+                .map(|_| {
+                    let t = std::time::Instant::now();
+                    match part {
+                        None => assert_eq!(
+                            io::read_step(&step, &AttributeSelection::All)
+                                .unwrap()
+                                .len(),
+                            n - 1
+                        ),
+                        Some(p) => assert_eq!(
+                            io::read_step_part(&step, &AttributeSelection::All, p)
+                                .unwrap()
+                                .decoded,
+                            n / 4
+                        ),
+                    }
+                    t.elapsed().as_secs_f64()
+                })
+                .collect();
+            times.sort_by(f64::total_cmp);
+            times[1]
+        };
+        eprintln!(
+            "{} ({} bytes): whole {:.3} s, rank 1 of 4 {:.3} s, rank 3 of 4 {:.3} s",
+            path.file_name().unwrap().to_string_lossy(),
+            std::fs::metadata(path).unwrap().len(),
+            time(None),
+            time(Some(Part::new(1, 4))),
+            time(Some(Part::new(3, 4)))
+        );
+    }
+}
