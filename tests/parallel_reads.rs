@@ -1695,6 +1695,43 @@ fn a_series_without_an_index_is_scanned_from_the_ranks_parts_bit_for_bit() {
     }
 }
 
+#[test]
+fn a_ply_cut_anywhere_is_an_error_or_a_step_in_every_part_never_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let ascii = dir.path().join("ascii.ply");
+    let mesh = AsciiMesh {
+        before: true,
+        vertex_list: true,
+        faces: Some(4),
+        ..PLYFILE_MESH
+    };
+    write_ascii_mesh(&ascii, 12, mesh);
+    let binary = dir.path().join("binary.ply");
+    write_binary_ply(&binary, 12, true, true, true);
+    for path in [ascii, binary] {
+        let bytes = std::fs::read(&path).unwrap();
+        let body = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
+        let cut = dir.path().join("cut.ply");
+        for len in body..bytes.len() {
+            std::fs::write(&cut, &bytes[..len]).unwrap();
+            let step = the_step(&cut);
+            for ranks in [1, 2, 3, 5] {
+                for rank in 0..ranks {
+                    if let Err(e) =
+                        io::read_step_part(&step, &AttributeSelection::All, Part::new(rank, ranks))
+                    {
+                        assert!(e.to_string().contains("cut.ply"), "{e}");
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// The whole step's read against rank 1's and rank 3's of 4 on a 1M-vertex ascii mesh (2M
 /// faces after the vertices) and a 1M binary PLY with a list in each vertex row: the median of
 /// three, for docs/distributed.md. `cargo test --profile checked --test suite --
