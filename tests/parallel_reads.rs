@@ -2,10 +2,11 @@
 //! on files as NumPy, h5py, GADGET-style writers and text writers make them, for P = 1..9 and
 //! 16 ranks, the parts put together in rank order are the whole step's records, and each part
 //! decoded no more than its share: exactly its records `[rN/P, (r+1)N/P)` for fixed-size
-//! records, HDF5 and VTK XML appended data (of a compressed array, the blocks that hold them);
-//! for CSV and ascii PLY the records whose first byte lies in its share of the body's bytes,
-//! at most `ceil(N/P · longest row / shortest row) + 1`. Formats read whole decode N records on
-//! every rank, and say so.
+//! records, HDF5, VTK XML appended data (of a compressed array, the blocks that hold them),
+//! binary PLY with lists and ascii PLY meshes (vertices followed by faces) or with lists; for
+//! CSV and ascii PLY ending in its vertex rows of scalars the records whose first byte lies in
+//! its share of the body's bytes, at most `ceil(N/P · longest row / shortest row) + 1`.
+//! Formats read whole decode N records on every rank, and say so.
 
 use std::path::Path;
 
@@ -921,14 +922,15 @@ fn ascii_ply_with_the_vertex_element_last_is_read_by_byte_ranges_moved_to_line_s
         }
     }
 
-    // A face element after the vertices: read whole (its rows end before the file does).
+    // A face element after the vertices: read by counted lines, each part exactly its rows
+    // (more in ascii_ply_meshes_and_lists_are_read_by_counted_lines).
     let faces = dir.path().join("faces.ply");
     write_ascii_ply(&faces, 101, "\n", "3 0 1 2\n");
     check_parts(
         &the_step(&faces),
         &AttributeSelection::All,
         101,
-        Bound::Whole,
+        Bound::Exact,
     );
 }
 
@@ -976,6 +978,429 @@ fn a_bad_row_in_an_ascii_ply_part_is_named_by_its_byte_offset() {
         );
         // The first half's rows are fine.
         io::read_step_part(&step, &AttributeSelection::All, Part::new(0, 2)).unwrap();
+    }
+}
+
+/// How a writer lays out an ascii mesh: vertices, then `element face` with
+/// `property list uchar int vertex_indices`.
+#[derive(Clone, Copy)]
+struct AsciiMesh {
+    line_end: &'static str,
+    /// Faces after the vertices (`None`: the vertex element is the last).
+    faces: Option<usize>,
+    /// A list property in the vertex element (texture coordinates of 0 to 3 items).
+    vertex_list: bool,
+    /// A space after each row's last value (MeshLab's VCG writer).
+    trailing_space: bool,
+    /// A line break after the last line.
+    final_newline: bool,
+    /// Doubles as `{:.16e}` (17 significant digits, as plyfile's `%.17g`), else `{:?}`.
+    digits17: bool,
+    /// An element of lists before the vertices (two materials' ids).
+    before: bool,
+}
+
+const PLYFILE_MESH: AsciiMesh = AsciiMesh {
+    line_end: "\n",
+    faces: Some(675),
+    vertex_list: false,
+    trailing_space: false,
+    final_newline: true,
+    digits17: true,
+    before: false,
+};
+
+/// An ascii mesh as plyfile, Open3D and MeshLab write one: comments, double, float and int
+/// vertex properties (x, y, z, maybe a list, density, id), one row a line, then faces.
+fn write_ascii_mesh(path: &Path, n: usize, m: AsciiMesh) {
+    let mut lines = vec![
+        "ply".to_string(),
+        "format ascii 1.0".into(),
+        "comment VCGLIB generated".into(),
+        "comment Created by Open3D and plyfile alike".into(),
+    ];
+    if m.before {
+        lines.push("element material 2".into());
+        lines.push("property list uchar int ids".into());
+    }
+    lines.extend([
+        format!("element vertex {n}"),
+        "property double x".into(),
+        "property double y".into(),
+        "property float z".into(),
+    ]);
+    if m.vertex_list {
+        lines.push("property list uchar float texture_u".into());
+    }
+    lines.extend(["property double density".into(), "property int id".into()]);
+    if let Some(faces) = m.faces {
+        lines.push(format!("element face {faces}"));
+        lines.push("property list uchar int vertex_indices".into());
+    }
+    lines.push("end_header".into());
+    if m.before {
+        lines.push("0".into());
+        lines.push("2 7 11".into());
+    }
+    let double = |v: f64| {
+        if m.digits17 {
+            format!("{v:.16e}")
+        } else {
+            format!("{v:?}")
+        }
+    };
+    let space = if m.trailing_space { " " } else { "" };
+    for i in 0..n {
+        let t = i as f64 * 0.731;
+        let density = if i == 10 { f64::NAN } else { 1e-3 / (t + 1.0) };
+        let mut row = format!(
+            "{} {} {:?}",
+            double(t.sin() * 1e4),
+            double(t.cos() / 7.0),
+            -(i as f32) * 0.1
+        );
+        if m.vertex_list {
+            row.push_str(&format!(" {}", i % 4));
+            for k in 0..i % 4 {
+                row.push_str(&format!(" {:?}", k as f32 * 0.25 + i as f32));
+            }
+        }
+        row.push_str(&format!(" {} {}{space}", double(density), i as i64 - 300));
+        lines.push(row);
+    }
+    for f in 0..m.faces.unwrap_or(0) {
+        lines.push(format!(
+            "3 {} {} {}{space}",
+            f % n,
+            (f + 1) % n,
+            (f * 7) % n
+        ));
+    }
+    let mut text = lines.join(m.line_end);
+    if m.final_newline {
+        text.push_str(m.line_end);
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// A binary PLY of `n` vertices (float x, double y, float z, maybe a list of 0 to 4 ints,
+/// double density, int id), maybe after an element of lists (materials), then faces.
+fn write_binary_ply(path: &Path, n: usize, big: bool, before: bool, vertex_list: bool) {
+    let order = if big { "big" } else { "little" };
+    let mut header = format!("ply\nformat binary_{order}_endian 1.0\ncomment made by a test\n");
+    if before {
+        header.push_str(
+            "element material 5\nproperty list uchar int ids\nproperty float shininess\n",
+        );
+    }
+    header.push_str(
+        "element vertex N\nproperty float x\nproperty double y\nproperty float z\n"
+            .replace('N', &n.to_string())
+            .as_str(),
+    );
+    if vertex_list {
+        header.push_str("property list uchar int neighbours\n");
+    }
+    header.push_str(&format!(
+        "property double density\nproperty int id\nelement face {}\n\
+         property list uchar int vertex_indices\nend_header\n",
+        n / 2
+    ));
+    let mut bytes = header.into_bytes();
+    macro_rules! put {
+        ($v:expr) => {
+            bytes.extend(if big {
+                $v.to_be_bytes()
+            } else {
+                $v.to_le_bytes()
+            })
+        };
+    }
+    if before {
+        for m in 0..5u8 {
+            bytes.push(m * 3);
+            for k in 0..m as i32 * 3 {
+                put!(k);
+            }
+            put!(m as f32 * 0.5);
+        }
+    }
+    for i in 0..n {
+        let t = i as f64 * 0.731;
+        put!((t.sin() * 1e4) as f32);
+        put!(t.cos() / 7.0);
+        put!(-(i as f32) * 0.1);
+        if vertex_list {
+            bytes.push((i % 5) as u8);
+            for k in 0..(i % 5) as i32 {
+                put!(i as i32 + k);
+            }
+        }
+        put!(if i == 10 { f64::NAN } else { 1e-3 / (t + 1.0) });
+        put!(i as i32 - 300);
+    }
+    for f in 0..(n / 2) as i32 {
+        bytes.push(3);
+        for k in [f, f + 1, f + 2] {
+            put!(k);
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn ascii_ply_meshes_and_lists_are_read_by_counted_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1013;
+    let open3d = AsciiMesh {
+        line_end: "\r\n",
+        trailing_space: true,
+        final_newline: false,
+        digits17: false,
+        ..PLYFILE_MESH
+    };
+    let with_list = AsciiMesh {
+        vertex_list: true,
+        faces: Some(3),
+        ..PLYFILE_MESH
+    };
+    let list_last = AsciiMesh {
+        vertex_list: true,
+        faces: None,
+        final_newline: false,
+        ..PLYFILE_MESH
+    };
+    let no_faces = AsciiMesh {
+        faces: Some(0),
+        ..PLYFILE_MESH
+    };
+    let materials = AsciiMesh {
+        before: true,
+        vertex_list: true,
+        ..open3d
+    };
+    for (name, mesh, rows) in [
+        ("plyfile.ply", PLYFILE_MESH, n),
+        ("open3d.ply", open3d, n),
+        ("list.ply", with_list, n),
+        ("list_last.ply", list_last, n),
+        ("no_faces.ply", no_faces, n),
+        ("materials.ply", materials, n),
+        ("few.ply", open3d, 5),
+    ] {
+        let path = dir.path().join(name);
+        write_ascii_mesh(&path, rows, mesh);
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All).unwrap();
+        assert_eq!(whole.len(), rows - usize::from(rows > 10), "{name}");
+        assert_eq!(whole.attribute_names(), ["density", "id"], "{name}");
+        assert_eq!(whole.attributes[1].values[0], -300.0, "{name}");
+        check_parts(&step, &AttributeSelection::All, rows, Bound::Exact);
+        check_parts(&step, &only(&["id"]), rows, Bound::Exact);
+        check_parts(&step, &only(&[]), rows, Bound::Exact);
+    }
+}
+
+#[test]
+fn binary_ply_with_lists_is_read_by_stepping_over_the_rows_before_the_part() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1013;
+    for big in [false, true] {
+        for (before, vertex_list) in [(false, true), (true, true), (true, false)] {
+            let path = dir
+                .path()
+                .join(format!("lists_{big}_{before}_{vertex_list}.ply"));
+            write_binary_ply(&path, n, big, before, vertex_list);
+            let step = the_step(&path);
+            let whole = io::read_step(&step, &AttributeSelection::All).unwrap();
+            assert_eq!(whole.len(), n - 1);
+            assert_eq!(whole.attribute_names(), ["density", "id"]);
+            assert_eq!(whole.attributes[1].values[0], -300.0);
+            assert_eq!(whole.positions[n - 2].z, -((n - 1) as f32 * 0.1) as f64);
+            check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
+            check_parts(&step, &only(&["density"]), n, Bound::Exact);
+        }
+    }
+}
+
+/// The error of rank `rank` of `ranks` reading `path`.
+fn part_error(path: &Path, rank: usize, ranks: usize) -> String {
+    io::read_step_part(
+        &the_step(path),
+        &AttributeSelection::All,
+        Part::new(rank, ranks),
+    )
+    .unwrap_err()
+    .to_string()
+}
+
+#[test]
+fn a_bad_row_or_a_short_file_in_a_ply_part_is_named_by_its_line_or_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.ply");
+    write_ascii_mesh(&good, 200, PLYFILE_MESH);
+    let text = std::fs::read_to_string(&good).unwrap();
+    let header_lines = text[..text.find("end_header\n").unwrap()].lines().count() + 1;
+    // Row i's byte offset and line number.
+    let row = |i: usize| {
+        let body = text.find("end_header\n").unwrap() + 11;
+        let at = body
+            + text[body..]
+                .split_inclusive('\n')
+                .take(i)
+                .map(str::len)
+                .sum::<usize>();
+        (at, header_lines + i + 1)
+    };
+    // A value that is not a number; a row short of a value; fewer vertex rows than the header
+    // says (the part reads a face as a vertex row).
+    let (at, line) = row(150);
+    let end = at + text[at..].find(' ').unwrap();
+    let bad = format!("{}1.5e{}", &text[..at], &text[end..]);
+    let (at_short, line_short) = row(160);
+    let short_end = at_short + text[at_short..].find('\n').unwrap();
+    let cut = at_short + text[at_short..short_end].rfind(' ').unwrap();
+    let short = format!("{}{}", &text[..cut], &text[short_end..]);
+    // (Row 200 is the first face.)
+    let few = text.replace("element vertex 200", "element vertex 201");
+    let (at_few, line_few) = row(200);
+    for (name, text, at, line, row, what) in [
+        (
+            "bad.ply",
+            bad,
+            at,
+            line,
+            150,
+            "'1.5e' (property 'x') is not a number",
+        ),
+        (
+            "short.ply",
+            short,
+            at_short,
+            line_short,
+            160,
+            "4 values, but the element has 5 properties",
+        ),
+        (
+            "few.ply",
+            few,
+            at_few,
+            line_few,
+            200,
+            "4 values, but the element has 5 properties",
+        ),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, &text).unwrap();
+        // One process reads ascii values one after another across lines: a row short of a
+        // value takes the next row's first, and it may reach the end of the faces unrefused.
+        if name == "bad.ply" {
+            assert!(io::read_step(&the_step(&path), &AttributeSelection::All).is_err());
+        }
+        let err = part_error(&path, 1, 2);
+        assert!(
+            err.contains(name)
+                && err.contains(&format!("row {row}, line {line} (byte {at})"))
+                && err.contains(what),
+            "{err}"
+        );
+        // The first half's rows are fine.
+        io::read_step_part(&the_step(&path), &AttributeSelection::All, Part::new(0, 2)).unwrap();
+    }
+
+    // The file ends before the vertex rows do: the part that needs them says where.
+    let list_last = AsciiMesh {
+        vertex_list: true,
+        faces: None,
+        ..PLYFILE_MESH
+    };
+    let cut = dir.path().join("cut.ply");
+    write_ascii_mesh(&cut, 200, list_last);
+    let text = std::fs::read_to_string(&cut).unwrap();
+    let text = text.replace("element vertex 200", "element vertex 210");
+    std::fs::write(&cut, &text).unwrap();
+    let err = part_error(&cut, 2, 3);
+    let lines = text.lines().count();
+    assert!(
+        err.contains("cut.ply")
+            && err.contains("truncated")
+            && err.contains(&format!(
+                "'vertex' has 210 rows in the header, but the file ends after line {lines} (byte {}) with 200 of them",
+                text.len()
+            )),
+        "{err}"
+    );
+    io::read_step_part(&the_step(&cut), &AttributeSelection::All, Part::new(0, 3)).unwrap();
+
+    // A list count past the end of the file, in the vertex element's last row and in the
+    // element before it; and a file cut in a row.
+    let binary = dir.path().join("binary.ply");
+    write_binary_ply(&binary, 100, false, true, true);
+    let bytes = std::fs::read(&binary).unwrap();
+    let body = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    // Material m: 1 + 12 m + 4 bytes; vertex i: 4 + 8 + 4 + 1 + 4 (i % 5) + 8 + 4.
+    let vertex = |i: usize| {
+        body + (0..5).map(|m| 5 + 12 * m).sum::<usize>()
+            + (0..i).map(|i| 29 + 4 * (i % 5)).sum::<usize>()
+    };
+    let mut long_list = bytes[..vertex(100)].to_vec();
+    long_list[vertex(99) + 16] = 200;
+    // In a file of 8 vertices, material 2's 255 ints run past the end.
+    let small = dir.path().join("small.ply");
+    write_binary_ply(&small, 8, false, true, true);
+    let mut long_material = std::fs::read(&small).unwrap();
+    let small_body = long_material
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    long_material[small_body + 5 + 17] = 255;
+    for (name, bytes, rank, what) in [
+        (
+            "long_list.ply",
+            long_list,
+            3,
+            format!(
+                "PLY element 'vertex' row 99, property 'neighbours': its list of 200 items at byte {}",
+                vertex(99) + 16
+            ),
+        ),
+        (
+            "long_material.ply",
+            long_material,
+            0,
+            format!(
+                "PLY element 'material' row 2, property 'ids': its list of 255 items at byte {}",
+                small_body + 5 + 17
+            ),
+        ),
+        (
+            "cut_binary.ply",
+            bytes[..vertex(77) + 10].to_vec(),
+            3,
+            format!(
+                "PLY element 'vertex' row 77, property 'y': its value at byte {}",
+                vertex(77) + 4
+            ),
+        ),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        assert!(io::read_step(&the_step(&path), &AttributeSelection::All).is_err());
+        let err = part_error(&path, rank, 4);
+        assert!(
+            err.contains(name)
+                && err.contains(&what)
+                && err.contains(&format!(
+                    "runs past the end of the file ({} bytes)",
+                    bytes.len()
+                )),
+            "{err}"
+        );
     }
 }
 
@@ -1267,5 +1692,96 @@ fn a_series_without_an_index_is_scanned_from_the_ranks_parts_bit_for_bit() {
             "knn:16 over {ranks} ranks"
         );
         assert_eq!(by_ranks.steps_decoded(), 0, "knn:16 over {ranks} ranks");
+    }
+}
+
+#[test]
+fn a_ply_cut_anywhere_is_an_error_or_a_step_in_every_part_never_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let ascii = dir.path().join("ascii.ply");
+    let mesh = AsciiMesh {
+        before: true,
+        vertex_list: true,
+        faces: Some(4),
+        ..PLYFILE_MESH
+    };
+    write_ascii_mesh(&ascii, 12, mesh);
+    let binary = dir.path().join("binary.ply");
+    write_binary_ply(&binary, 12, true, true, true);
+    for path in [ascii, binary] {
+        let bytes = std::fs::read(&path).unwrap();
+        let body = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
+        let cut = dir.path().join("cut.ply");
+        for len in body..bytes.len() {
+            std::fs::write(&cut, &bytes[..len]).unwrap();
+            let step = the_step(&cut);
+            for ranks in [1, 2, 3, 5] {
+                for rank in 0..ranks {
+                    if let Err(e) =
+                        io::read_step_part(&step, &AttributeSelection::All, Part::new(rank, ranks))
+                    {
+                        assert!(e.to_string().contains("cut.ply"), "{e}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The whole step's read against rank 1's and rank 3's of 4 on a 1M-vertex ascii mesh (2M
+/// faces after the vertices) and a 1M binary PLY with a list in each vertex row: the median of
+/// three, for docs/distributed.md. `cargo test --profile checked --test suite --
+/// parallel_reads::ply_part_read_times --ignored --nocapture`.
+#[test]
+#[ignore = "a measurement (docs/distributed.md, PLY parts), not a guard"]
+fn ply_part_read_times() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1_000_000;
+    let ascii = dir.path().join("mesh.ply");
+    let mesh = AsciiMesh {
+        faces: Some(2 * n),
+        ..PLYFILE_MESH
+    };
+    write_ascii_mesh(&ascii, n, mesh);
+    let binary = dir.path().join("lists.ply");
+    write_binary_ply(&binary, n, false, false, true);
+    for path in [&ascii, &binary] {
+        let step = the_step(path);
+        let time = |part: Option<Part>| {
+            let mut times: Vec<f64> = (0..3)
+                .map(|_| {
+                    let t = std::time::Instant::now();
+                    match part {
+                        None => assert_eq!(
+                            io::read_step(&step, &AttributeSelection::All)
+                                .unwrap()
+                                .len(),
+                            n - 1
+                        ),
+                        Some(p) => assert_eq!(
+                            io::read_step_part(&step, &AttributeSelection::All, p)
+                                .unwrap()
+                                .decoded,
+                            n / 4
+                        ),
+                    }
+                    t.elapsed().as_secs_f64()
+                })
+                .collect();
+            times.sort_by(f64::total_cmp);
+            times[1]
+        };
+        eprintln!(
+            "{} ({} bytes): whole {:.3} s, rank 1 of 4 {:.3} s, rank 3 of 4 {:.3} s",
+            path.file_name().unwrap().to_string_lossy(),
+            std::fs::metadata(path).unwrap().len(),
+            time(None),
+            time(Some(Part::new(1, 4))),
+            time(Some(Part::new(3, 4)))
+        );
     }
 }

@@ -14,15 +14,22 @@
 //! - ascii PLY whose vertex element is the last and has scalar properties only: as CSV, the
 //!   vertex rows' bytes split the same way, one row a line (a part checks each row holds every
 //!   property; the header's count is checked where one process reads the step);
+//! - other ascii PLY (a vertex element followed by faces or edges, as meshes are written, or
+//!   with list properties): one row a line, the lines before the part's rows counted by their
+//!   line breaks (memchr), not parsed, from the body's start (the rows of elements before the
+//!   vertex element too); the part parses exactly its rows `range(n)`, list counts and items
+//!   included, and a file that ends before them is an error naming the line;
+//! - binary PLY with list properties (in the vertex element or in an element before it): the
+//!   rows before the part's stepped over by reading only their list counts (scalars and list
+//!   items stepped over by their size), then the part's rows decoded;
 //! - VTK XML of appended data (raw or base64, uncompressed or zlib): the pieces' points in
 //!   order are the step's records; of each piece the part's rows, and of each array only their
 //!   bytes, base64 groups, or the zlib blocks that overlap them, read and inflated;
 //! - legacy binary VTK: the ascii lines between the binary blocks scanned, each block stepped
 //!   over by its size, only the part's rows decoded (a whole step is vtkio's);
-//! - VTK XML with inline arrays, legacy ascii VTK (or binary with sections only vtkio reads),
-//!   ascii PLY followed by another element and PLY with list properties: read whole and
-//!   sliced, with a warning once per format that says why (an inline array is parsed whole;
-//!   ascii values are not one record a line; a row's end is found by parsing the rows).
+//! - VTK XML with inline arrays, legacy ascii VTK (or binary with sections only vtkio reads):
+//!   read whole and sliced, with a warning once per format that says why (an inline array is
+//!   parsed whole; ascii values are not one record a line).
 //!
 //! A part goes through the same checks as a whole step ([`super::finish_step`]'s rule), except
 //! that it may be empty: the whole step's records are the parts' records, in rank order.
@@ -70,9 +77,9 @@ impl Part {
 pub struct StepPart {
     /// The part's records that are finite, with the selected attributes (may be empty).
     pub step: Step,
-    /// Records decoded from the file: the part's own (CSV and ascii PLY: the records whose
-    /// first byte lies in the part's byte range), or every record of the step for a format
-    /// read whole.
+    /// Records decoded from the file: the part's own (CSV and ascii PLY ending in its vertex
+    /// rows of scalars: the records whose first byte lies in the part's byte range), or every
+    /// record of the step for a format read whole.
     pub decoded: usize,
 }
 

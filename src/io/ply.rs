@@ -1,5 +1,13 @@
 //! Stanford PLY (ascii, binary little- and big-endian): the `vertex` element's `x, y, z` are
-//! positions, its other scalar properties attributes. Other elements (faces, ...) are skipped.
+//! positions, its other scalar properties attributes. Other elements (faces, ...) and list
+//! properties are skipped.
+//!
+//! One rank's part ([`Part`]) decodes only its own vertex rows ([`read_step`]): binary rows of
+//! scalars at their offset; binary rows with lists after stepping over the rows before them
+//! (and the elements before the vertex element) by their list counts; ascii rows, one a line,
+//! by byte ranges where the vertex element ends the file and has scalars only, else by
+//! counting the lines before them. One process reading the whole step reads value by value
+//! and checks the rows against the header's count.
 
 use std::io::Write;
 use std::path::Path;
@@ -7,7 +15,7 @@ use std::path::Path;
 use glam::DVec3;
 
 use super::scalar::{InRecord, Scalar, decode_records};
-use super::{At, AttributeSelection, Columns, DataError, Format, Part, Problem};
+use super::{At, AttributeSelection, Columns, DataError, Part, Problem};
 use crate::values::{Attribute, Step};
 
 /// Largest header we accept: real headers are a few hundred bytes.
@@ -38,8 +46,8 @@ fn parse_scalar(s: &str) -> Option<Scalar> {
 #[derive(Debug)]
 enum Property {
     Scalar(String, Scalar),
-    /// A list property (count type, item type): skipped.
-    List(Scalar, Scalar),
+    /// A list property (name, count type, item type): stepped over, never an attribute.
+    List(String, Scalar, Scalar),
 }
 
 #[derive(Debug)]
@@ -95,13 +103,13 @@ fn parse_header(at: At<'_>, bytes: &[u8]) -> Result<Header, DataError> {
                 count: count.parse().map_err(|_| bad("bad element count"))?,
                 properties: Vec::new(),
             }),
-            ["property", "list", count_type, item_type, _name] => {
+            ["property", "list", count_type, item_type, name] => {
                 let e = elements
                     .last_mut()
                     .ok_or_else(|| bad("property before any element"))?;
                 let c = parse_scalar(count_type).ok_or_else(|| bad("unknown type"))?;
                 let i = parse_scalar(item_type).ok_or_else(|| bad("unknown type"))?;
-                e.properties.push(Property::List(c, i));
+                e.properties.push(Property::List((*name).to_owned(), c, i));
             }
             ["property", ty, name] => {
                 let e = elements
@@ -189,7 +197,7 @@ impl Body<'_> {
                     scalar(k, self.next(at, *t, &element.name, row)?);
                     k += 1;
                 }
-                Property::List(c, i) => {
+                Property::List(_, c, i) => {
                     let len = self.next(at, *c, &element.name, row)?;
                     for _ in 0..(len.max(0.0) as u64) {
                         self.next(at, *i, &element.name, row)?;
@@ -199,17 +207,141 @@ impl Body<'_> {
         }
         Ok(())
     }
+
+    /// Binary: one row of `element` from `pos`, each scalar's bytes handed to `scalar` with its
+    /// index among the scalars and its type (to decode or not); a list's count is decoded and
+    /// its items stepped over by their size. Nothing is read past the file's end.
+    fn binary_row(
+        &mut self,
+        at: At<'_>,
+        element: &Element,
+        row: u64,
+        mut scalar: impl FnMut(usize, Scalar, &[u8]),
+    ) -> Result<(), DataError> {
+        let big = self.encoding == Encoding::BigEndian;
+        let mut k = 0;
+        for p in &element.properties {
+            let left = self.bytes.len() - self.pos;
+            match p {
+                Property::Scalar(name, t) => {
+                    if t.size() > left {
+                        return Err(self.past_end(at, element, row, name, "its value"));
+                    }
+                    scalar(k, *t, &self.bytes[self.pos..]);
+                    self.pos += t.size();
+                    k += 1;
+                }
+                Property::List(name, c, i) => {
+                    if c.size() > left {
+                        return Err(self.past_end(at, element, row, name, "its list count"));
+                    }
+                    let count = c.value(&self.bytes[self.pos..], big).max(0.0) as u64;
+                    let items = count
+                        .checked_mul(i.size() as u64)
+                        .filter(|&b| b <= (left - c.size()) as u64)
+                        .ok_or_else(|| {
+                            self.past_end(
+                                at,
+                                element,
+                                row,
+                                name,
+                                &format!("its list of {count} items"),
+                            )
+                        })?;
+                    self.pos += c.size() + items as usize;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Binary: steps over rows `first..first + rows` of `element` from `pos` without decoding
+    /// them: rows of scalars only by their size at once, rows with lists one by one, reading
+    /// only the lists' counts.
+    fn step_binary_rows(
+        &mut self,
+        at: At<'_>,
+        element: &Element,
+        first: u64,
+        rows: u64,
+    ) -> Result<(), DataError> {
+        let mut sizes = Vec::with_capacity(element.properties.len());
+        for p in &element.properties {
+            match p {
+                Property::Scalar(_, t) => sizes.push(t.size()),
+                Property::List(..) => {
+                    for row in first..first + rows {
+                        self.binary_row(at, element, row, |_, _, _| {})?;
+                    }
+                    return Ok(());
+                }
+            }
+        }
+        let stride = sizes.iter().sum::<usize>();
+        let left = self.bytes.len() - self.pos;
+        match rows.checked_mul(stride as u64) {
+            Some(b) if b <= left as u64 => {
+                self.pos += b as usize;
+                Ok(())
+            }
+            _ => {
+                // The first row that does not fit, and the property that runs past the end.
+                let complete = left / stride;
+                let mut within = left % stride;
+                let k = sizes
+                    .iter()
+                    .position(|&s| {
+                        let past = s > within;
+                        within = within.saturating_sub(s);
+                        past
+                    })
+                    .unwrap_or(0);
+                self.pos += complete * stride + sizes[..k].iter().sum::<usize>();
+                let Property::Scalar(name, _) = &element.properties[k] else {
+                    unreachable!("scalars only")
+                };
+                Err(self.past_end(at, element, first + complete as u64, name, "its value"))
+            }
+        }
+    }
+
+    /// Binary: property `property` of `element`'s row `row`, at `pos`, runs past the end.
+    fn past_end(
+        &self,
+        at: At<'_>,
+        element: &Element,
+        row: u64,
+        property: &str,
+        what: &str,
+    ) -> DataError {
+        at.malformed(format!(
+            "file is truncated: PLY element '{}' row {row}, property '{property}': {what} at \
+             byte {} runs past the end of the file ({} bytes)",
+            element.name,
+            self.start + self.pos,
+            self.start + self.bytes.len()
+        ))
+    }
 }
 
 /// Reads a PLY file: the `vertex` element's `x, y, z` as positions, its other scalar properties as
 /// attributes (the selected ones).
 ///
-/// Of that, `part`'s vertices, and how many vertices were decoded: binary rows of
-/// scalars only are of one size, so only the part's rows are decoded; ascii rows of scalars
-/// only, of a vertex element that ends the file (what plyfile, NumPy and MeshLab write for
-/// point clouds), one a line, are split by bytes as CSV is ([`decode_ascii_lines`]); other
-/// ascii rows, and rows with lists, are read whole (each row must be parsed to find the next)
-/// and sliced.
+/// Of that, `part`'s vertices, and how many vertices were decoded (a part decodes only its
+/// own rows; the elements and rows before them are stepped over, never decoded):
+/// - binary rows of scalars only are of one size: the part's rows are decoded at their offset;
+/// - binary rows with lists: the rows before the part's are stepped over by reading only their
+///   list counts (a list's items are stepped over by their size), and so are the rows of the
+///   elements before the vertex element;
+/// - ascii rows of scalars only, of a vertex element that ends the file (what plyfile, NumPy
+///   and MeshLab write for point clouds), one a line, are split by bytes as CSV is
+///   ([`decode_ascii_lines`]);
+/// - other ascii rows (a vertex element followed by faces or edges, or with lists), one a
+///   line: the lines before the part's rows are counted (the elements before the vertex
+///   element's rows too), not parsed, and the part parses exactly its rows `part.range(n)`
+///   ([`decode_counted_lines`]).
+///
+/// One process (`part` whole) reads the rows value by value, as it always has.
 pub(super) fn read_step(
     at: At<'_>,
     selection: &AttributeSelection,
@@ -224,7 +356,7 @@ pub(super) fn read_step(
         pos: 0,
         encoding: header.encoding,
     };
-    for element in &header.elements {
+    for (index, element) in header.elements.iter().enumerate() {
         // The smallest a row can be: in binary, its scalars' sizes; in ascii, one character and
         // one separator per value. Checked before allocating anything from the count.
         let min_row = element
@@ -233,7 +365,7 @@ pub(super) fn read_step(
             .map(|p| match (header.encoding, p) {
                 (Encoding::Ascii, _) => 2,
                 (_, Property::Scalar(_, t)) => t.size() as u64,
-                (_, Property::List(c, _)) => c.size() as u64,
+                (_, Property::List(_, c, _)) => c.size() as u64,
             })
             .sum::<u64>();
         let n = at.check_count(
@@ -243,14 +375,23 @@ pub(super) fn read_step(
             body_len,
         )?;
         if element.name == "vertex" {
-            let last = header
-                .elements
-                .last()
-                .is_some_and(|e| std::ptr::eq(e, element));
-            return read_vertices(at, &mut body, element, n, last, selection, part);
+            if part.is_whole() {
+                return read_vertices(at, &mut body, element, n, selection);
+            }
+            let before = &header.elements[..index];
+            let last = index + 1 == header.elements.len();
+            let first_line = 1 + bytes[..header.body_start]
+                .iter()
+                .filter(|&&c| c == b'\n')
+                .count() as u64;
+            return read_vertex_part(
+                at, &mut body, first_line, before, element, n, last, selection, part,
+            );
         }
-        for row in 0..element.count {
-            body.row(at, element, row, |_, _| {})?;
+        if part.is_whole() {
+            for row in 0..element.count {
+                body.row(at, element, row, |_, _| {})?;
+            }
         }
     }
     Err(at.err(Problem::Dimensionality(
@@ -303,11 +444,35 @@ impl<'a> VertexLayout<'a> {
     }
 }
 
-/// Reads the vertex element (`last`: the file's last element): its positions, the selected
-/// properties as attributes, the others' names as skipped.
+/// Reads the whole vertex element: its positions, the selected properties as attributes, the
+/// others' names as skipped; and the rows decoded (all of them).
 fn read_vertices(
     at: At<'_>,
     body: &mut Body<'_>,
+    element: &Element,
+    n: usize,
+    selection: &AttributeSelection,
+) -> Result<(Columns, usize), DataError> {
+    let layout = VertexLayout::new(at, element, selection)?;
+    let fixed =
+        body.encoding != Encoding::Ascii && layout.scalars.len() == element.properties.len();
+    let (positions, columns) = if fixed {
+        decode_fixed_rows(at, body, &layout, n, 0..n)?
+    } else {
+        decode_row_by_row(at, body, element, &layout, n)?
+    };
+    Ok((vertex_columns(&layout, positions, columns), n))
+}
+
+/// `part`'s rows of the vertex element (`last`: the file's last element; `before`: the elements
+/// the body holds before it, whose rows are stepped over; `first_line`: the body's first line's
+/// number in the file), and the rows decoded (the part's own).
+#[allow(clippy::too_many_arguments)]
+fn read_vertex_part(
+    at: At<'_>,
+    body: &mut Body<'_>,
+    first_line: u64,
+    before: &[Element],
     element: &Element,
     n: usize,
     last: bool,
@@ -316,36 +481,38 @@ fn read_vertices(
 ) -> Result<(Columns, usize), DataError> {
     let layout = VertexLayout::new(at, element, selection)?;
     let scalars_only = layout.scalars.len() == element.properties.len();
-    let fixed = body.encoding != Encoding::Ascii && scalars_only;
-    // A part of ascii lines: its rows end where the file ends, so the bytes split without
-    // parsing what comes before. One process reads the whole step value by value, which checks
-    // the rows against the header's count (a part cannot: it does not know how many rows
-    // precede it).
-    let lines = body.encoding == Encoding::Ascii && scalars_only && last && !part.is_whole();
-    if lines {
-        let (positions, columns) = decode_ascii_lines(at, body, &layout, part)?;
-        let decoded = positions.len();
-        return Ok((vertex_columns(&layout, positions, columns), decoded));
-    }
-    let rows = if fixed { part.range(n) } else { 0..n };
-    let (positions, columns) = if fixed {
-        decode_fixed_rows(at, body, &layout, n, rows.clone())?
-    } else {
-        decode_row_by_row(at, body, element, &layout, n)?
-    };
-    let columns = vertex_columns(&layout, positions, columns);
-    if fixed {
-        Ok((columns, rows.len()))
-    } else {
-        let why = if body.encoding == Encoding::Ascii && scalars_only {
-            "ascii rows followed by another element: where they end is found by parsing them"
-        } else if body.encoding == Encoding::Ascii {
-            "ascii rows with list properties"
-        } else {
-            "rows with list properties"
+    let rows = part.range(n);
+    let (positions, columns) = if body.encoding == Encoding::Ascii {
+        let mut lines = Lines {
+            bytes: body.bytes,
+            start: body.start,
+            pos: 0,
+            line: first_line,
         };
-        Ok(super::part::read_whole(Format::Ply, why, columns, part))
-    }
+        for e in before {
+            lines.skip_rows(at, e, 0, e.count)?;
+        }
+        if scalars_only && last {
+            // Its rows end where the file ends, so the bytes split without counting lines.
+            body.pos = lines.pos;
+            let (positions, columns) = decode_ascii_lines(at, body, &layout, element, part)?;
+            let decoded = positions.len();
+            return Ok((vertex_columns(&layout, positions, columns), decoded));
+        }
+        lines.skip_rows(at, element, 0, rows.start as u64)?;
+        decode_counted_lines(at, &mut lines, element, &layout, rows.clone())?
+    } else {
+        for e in before {
+            body.step_binary_rows(at, e, 0, e.count)?;
+        }
+        if scalars_only {
+            decode_fixed_rows(at, body, &layout, n, rows.clone())?
+        } else {
+            body.step_binary_rows(at, element, 0, rows.start as u64)?;
+            decode_binary_rows(at, body, element, &layout, rows.clone())?
+        }
+    };
+    Ok((vertex_columns(&layout, positions, columns), rows.len()))
 }
 
 /// The vertex element's positions and decoded columns as a reader's columns: the stored
@@ -381,12 +548,14 @@ fn vertex_columns(
 /// `part`'s ascii vertex rows, one a line, to the end of the file: the rows' bytes split
 /// evenly and each share's ends moved forward to the start of a line, as CSV's are (a row
 /// belongs to the part whose share holds its first byte; the parts together are every row, in
-/// order). Each row must hold exactly the element's values; blank lines are not rows. Only the
-/// share's bytes (of the memory map) are touched. Columns not stored are empty.
+/// order). Each row must hold exactly the element's values ([`parse_line`]); blank lines are
+/// not rows. Only the share's bytes (of the memory map) are touched. Columns not stored are
+/// empty.
 fn decode_ascii_lines(
     at: At<'_>,
     body: &Body<'_>,
     layout: &VertexLayout<'_>,
+    element: &Element,
     part: Part,
 ) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
     let rows = &body.bytes[body.pos..];
@@ -396,10 +565,7 @@ fn decode_ascii_lines(
             return 0;
         }
         // A line starts after a newline: look from the byte before.
-        rows[from - 1..]
-            .iter()
-            .position(|&c| c == b'\n')
-            .map_or(rows.len(), |i| from + i)
+        memchr::memchr(b'\n', &rows[from - 1..]).map_or(rows.len(), |i| from + i)
     };
     let (start, end) = (line_start(share.start), line_start(share.end));
     // Byte offsets in the file, for errors: a part does not know its rows' numbers.
@@ -410,45 +576,244 @@ fn decode_ascii_lines(
     for line in rows[start..end].split_inclusive(|&c| c == b'\n') {
         let offset = file_offset + line_at;
         line_at += line.len();
-        let mut words = line
-            .split(|c| c.is_ascii_whitespace())
-            .filter(|w| !w.is_empty());
-        let mut values = [0.0; 3];
-        let mut count = 0;
-        for (k, word) in words.by_ref().take(layout.scalars.len()).enumerate() {
-            count += 1;
-            if !layout.stored[k] {
-                continue;
+        let mut xyz = [0.0; 3];
+        let row = parse_line(line, element, layout, &mut xyz, &mut columns).map_err(|what| {
+            at.malformed(format!(
+                "PLY element '{}', the row at byte {offset}: {what} (a part reads ascii rows \
+                 one a line)",
+                element.name
+            ))
+        })?;
+        if row {
+            positions.push(DVec3::from_array(xyz));
+        }
+    }
+    Ok((positions, columns))
+}
+
+/// Ascii rows, one a line, from `pos` on: lines are found by their line breaks (memchr), not
+/// parsed. Blank lines are not rows.
+struct Lines<'a> {
+    /// The body.
+    bytes: &'a [u8],
+    /// Where `bytes` start in the file.
+    start: usize,
+    pos: usize,
+    /// The number in the file of the line at `pos` (the first is 1).
+    line: u64,
+}
+
+impl<'a> Lines<'a> {
+    /// The next line that is not blank: its number, its byte offset in the file and its bytes
+    /// (its line break included); `None` where the file ends first.
+    fn next_row(&mut self) -> Option<(u64, usize, &'a [u8])> {
+        while self.pos < self.bytes.len() {
+            let rest = &self.bytes[self.pos..];
+            let len = memchr::memchr(b'\n', rest).map_or(rest.len(), |i| i + 1);
+            let (line, number, offset) = (&rest[..len], self.line, self.start + self.pos);
+            self.pos += len;
+            self.line += 1;
+            let blank = match line.first() {
+                Some(c) if !c.is_ascii_whitespace() => false,
+                _ => line.iter().all(u8::is_ascii_whitespace),
+            };
+            if !blank {
+                return Some((number, offset, line));
             }
-            let value = std::str::from_utf8(word)
-                .ok()
-                .and_then(|w| w.parse::<f64>().ok())
-                .ok_or_else(|| {
-                    at.malformed(format!(
-                        "PLY element 'vertex', the row at byte {offset}: '{}' (property '{}') is \
-                         not a number",
-                        String::from_utf8_lossy(word),
-                        layout.scalars[k].0
-                    ))
-                })?;
-            match layout.xyz.iter().position(|&p| p == k) {
-                Some(axis) => values[axis] = value,
-                None => columns[k].push(value),
+        }
+        None
+    }
+
+    /// Steps over rows `first..first + rows` of `element`, counting lines.
+    fn skip_rows(
+        &mut self,
+        at: At<'_>,
+        element: &Element,
+        first: u64,
+        rows: u64,
+    ) -> Result<(), DataError> {
+        for row in first..first + rows {
+            if self.next_row().is_none() {
+                return Err(self.ended(at, element, row));
             }
         }
-        if count == 0 {
-            continue;
+        Ok(())
+    }
+
+    /// The file ended where `element`'s row `row` should have started.
+    fn ended(&self, at: At<'_>, element: &Element, row: u64) -> DataError {
+        at.malformed(format!(
+            "file is truncated: PLY element '{}' has {} rows in the header, but the file ends \
+             after line {} (byte {}) with {row} of them (ascii rows are read one a line)",
+            element.name,
+            element.count,
+            self.line - 1,
+            self.start + self.pos
+        ))
+    }
+}
+
+/// One ascii row of `element` on one line (`Ok(false)`: a blank line): its stored scalars
+/// parsed, x, y and z into `xyz` and the others onto `columns` (indexed as the layout's
+/// scalars); each list's count parsed and its items checked to be numbers. `Err`: what is
+/// wrong with the row.
+fn parse_line(
+    line: &[u8],
+    element: &Element,
+    layout: &VertexLayout<'_>,
+    xyz: &mut [f64; 3],
+    columns: &mut [Vec<f64>],
+) -> Result<bool, String> {
+    let mut words = line
+        .split(|c| c.is_ascii_whitespace())
+        .filter(|w| !w.is_empty());
+    let number = |word: &[u8], name: &str| {
+        std::str::from_utf8(word)
+            .ok()
+            .and_then(|w| w.parse::<f64>().ok())
+            .ok_or_else(|| {
+                format!(
+                    "'{}' (property '{name}') is not a number",
+                    String::from_utf8_lossy(word)
+                )
+            })
+    };
+    let scalars = layout.scalars.len();
+    let lists = scalars != element.properties.len();
+    let short = |found: usize, name: &str| {
+        if lists {
+            format!("{found} values: the row ends before property '{name}'")
+        } else {
+            format!("{found} values, but the element has {scalars} properties")
         }
-        let extra = words.count();
-        if count != layout.scalars.len() || extra > 0 {
-            return Err(at.malformed(format!(
-                "PLY element 'vertex', the row at byte {offset}: {} values, but the element has \
-                 {} properties (a part reads ascii rows one a line)",
-                count + extra,
-                layout.scalars.len()
-            )));
+    };
+    let mut found = 0;
+    let mut k = 0;
+    for p in &element.properties {
+        match p {
+            Property::Scalar(name, _) => {
+                let Some(word) = words.next() else {
+                    return if found == 0 {
+                        Ok(false)
+                    } else {
+                        Err(short(found, name))
+                    };
+                };
+                found += 1;
+                if layout.stored[k] {
+                    let value = number(word, name)?;
+                    match layout.xyz.iter().position(|&p| p == k) {
+                        Some(axis) => xyz[axis] = value,
+                        None => columns[k].push(value),
+                    }
+                }
+                k += 1;
+            }
+            Property::List(name, ..) => {
+                let Some(word) = words.next() else {
+                    return if found == 0 {
+                        Ok(false)
+                    } else {
+                        Err(short(found, name))
+                    };
+                };
+                found += 1;
+                let count = number(word, name)?.max(0.0) as u64;
+                for item in 0..count {
+                    let Some(word) = words.next() else {
+                        return Err(format!(
+                            "{found} values: the row ends at item {item} of the {count} of list \
+                             '{name}'"
+                        ));
+                    };
+                    found += 1;
+                    number(word, name)?;
+                }
+            }
         }
-        positions.push(DVec3::from_array(values));
+    }
+    let extra = words.count();
+    if extra > 0 {
+        return Err(if lists {
+            format!(
+                "{} values, but its properties and list counts make {found}",
+                found + extra
+            )
+        } else {
+            format!(
+                "{} values, but the element has {scalars} properties",
+                found + extra
+            )
+        });
+    }
+    Ok(true)
+}
+
+/// Rows `rows` of the vertex element, one a line from `lines`' position (its row
+/// `rows.start`): each parsed ([`parse_line`]). Columns not stored are empty.
+fn decode_counted_lines(
+    at: At<'_>,
+    lines: &mut Lines<'_>,
+    element: &Element,
+    layout: &VertexLayout<'_>,
+    rows: std::ops::Range<usize>,
+) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
+    let mut columns: Vec<Vec<f64>> = (0..layout.scalars.len())
+        .map(|k| {
+            let kept = layout.stored[k] && !layout.is_position(k);
+            Vec::with_capacity(if kept { rows.len() } else { 0 })
+        })
+        .collect();
+    let mut positions = Vec::with_capacity(rows.len());
+    for row in rows {
+        let Some((line, offset, bytes)) = lines.next_row() else {
+            return Err(lines.ended(at, element, row as u64));
+        };
+        let mut xyz = [0.0; 3];
+        parse_line(bytes, element, layout, &mut xyz, &mut columns).map_err(|what| {
+            at.malformed(format!(
+                "PLY element '{}' row {row}, line {line} (byte {offset}): {what} (a part reads \
+                 ascii rows one a line)",
+                element.name
+            ))
+        })?;
+        positions.push(DVec3::from_array(xyz));
+    }
+    Ok((positions, columns))
+}
+
+/// Binary rows `rows` with lists, from the body's position (its row `rows.start`): the
+/// positions and the stored scalars decoded, lists stepped over. Columns not stored are empty.
+fn decode_binary_rows(
+    at: At<'_>,
+    body: &mut Body<'_>,
+    element: &Element,
+    layout: &VertexLayout<'_>,
+    rows: std::ops::Range<usize>,
+) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
+    let big = body.encoding == Encoding::BigEndian;
+    let mut columns: Vec<Vec<f64>> = (0..layout.scalars.len())
+        .map(|k| {
+            let kept = layout.stored[k] && !layout.is_position(k);
+            Vec::with_capacity(if kept { rows.len() } else { 0 })
+        })
+        .collect();
+    let axis: Vec<Option<usize>> = (0..layout.scalars.len())
+        .map(|k| layout.xyz.iter().position(|&p| p == k))
+        .collect();
+    let mut positions = Vec::with_capacity(rows.len());
+    for row in rows {
+        let mut xyz = [0.0; 3];
+        body.binary_row(at, element, row as u64, |k, t, bytes| {
+            if layout.stored[k] {
+                let value = t.value(bytes, big);
+                match axis[k] {
+                    Some(a) => xyz[a] = value,
+                    None => columns[k].push(value),
+                }
+            }
+        })?;
+        positions.push(DVec3::from_array(xyz));
     }
     Ok((positions, columns))
 }
