@@ -408,6 +408,17 @@ struct VertexLayout<'a> {
 }
 
 impl<'a> VertexLayout<'a> {
+    /// Empty columns for `rows` rows of each property: room in those kept as attributes (the
+    /// stored ones that are not a position), none in the others.
+    fn attribute_columns(&self, rows: usize) -> Vec<Vec<f64>> {
+        (0..self.scalars.len())
+            .map(|k| {
+                let kept = self.stored[k] && !self.is_position(k);
+                Vec::with_capacity(if kept { rows } else { 0 })
+            })
+            .collect()
+    }
+
     fn new(
         at: At<'_>,
         element: &'a Element,
@@ -758,12 +769,7 @@ fn decode_counted_lines(
     layout: &VertexLayout<'_>,
     rows: std::ops::Range<usize>,
 ) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
-    let mut columns: Vec<Vec<f64>> = (0..layout.scalars.len())
-        .map(|k| {
-            let kept = layout.stored[k] && !layout.is_position(k);
-            Vec::with_capacity(if kept { rows.len() } else { 0 })
-        })
-        .collect();
+    let mut columns = layout.attribute_columns(rows.len());
     let mut positions = Vec::with_capacity(rows.len());
     for row in rows {
         let Some((line, offset, bytes)) = lines.next_row() else {
@@ -792,12 +798,7 @@ fn decode_binary_rows(
     rows: std::ops::Range<usize>,
 ) -> Result<(Vec<DVec3>, Vec<Vec<f64>>), DataError> {
     let big = body.encoding == Encoding::BigEndian;
-    let mut columns: Vec<Vec<f64>> = (0..layout.scalars.len())
-        .map(|k| {
-            let kept = layout.stored[k] && !layout.is_position(k);
-            Vec::with_capacity(if kept { rows.len() } else { 0 })
-        })
-        .collect();
+    let mut columns = layout.attribute_columns(rows.len());
     let axis: Vec<Option<usize>> = (0..layout.scalars.len())
         .map(|k| layout.xyz.iter().position(|&p| p == k))
         .collect();
