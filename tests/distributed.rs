@@ -1050,6 +1050,12 @@ fn ranks_find_neighbour_smoothing_lengths_from_their_parts() {
         assert_eq!(line(&log, start), line(&single_log, start), "{start}");
     }
     assert!(line(&log, "radius: ").contains("h_knn16"), "{log}");
+    // The backend is chosen once: the ranks that are threads take the first one's kind.
+    assert_eq!(
+        log.matches("auto: ").count(),
+        single_log.matches("auto: ").count(),
+        "{log}"
+    );
     let image = |dir: &std::path::Path| image::open(dir.join("out.exr")).unwrap().into_rgba32f();
     let (a, b) = (image(one.path()), image(ranked.path()));
     let diff = a

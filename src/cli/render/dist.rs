@@ -16,7 +16,7 @@ use anyhow::{Context, bail, ensure};
 use super::RenderArgs;
 use super::plan::Frame;
 use crate::backend::cpu::CpuBackend;
-use crate::backend::{Backend, Precision};
+use crate::backend::{Backend, BackendKind, Precision};
 use crate::cli::output_format::OutputFormat;
 use crate::dist::balance::pilot_size;
 use crate::dist::knn::RankLengths;
@@ -393,17 +393,21 @@ pub(super) fn run(
     let threads = matches!(ranks, Ranks::Threads(_));
     let slots: Vec<Mutex<Option<Box<dyn Backend>>>> =
         (0..ranks.local_count()).map(|_| Mutex::new(None)).collect();
-    let backend_name = if args.reference {
+    // The kind the first rank's backend turned out to be: the other ranks that are threads of
+    // this process take it without choosing (and saying so) again.
+    let (backend_name, backend_kind) = if args.reference {
         // The reference is the CPU backend's f64 image, whatever --backend says (as one
         // process makes it).
-        "cpu backend in f64 (--reference)".to_owned()
+        ("cpu backend in f64 (--reference)".to_owned(), BackendKind::Cpu)
     } else {
         let mut slot = lock(&slots[0]);
         let backend = slot.insert(crate::backend::create(args.backend)?);
-        format!(
-            "{} backend ({})",
-            backend.capabilities().name,
-            backend.capabilities().device
+        let capabilities = backend.capabilities();
+        let kind = <BackendKind as clap::ValueEnum>::from_str(capabilities.name, false)
+            .map_err(anyhow::Error::msg)?;
+        (
+            format!("{} backend ({})", capabilities.name, capabilities.device),
+            kind,
         )
     };
     tracing::info!(
@@ -518,7 +522,7 @@ pub(super) fn run(
             let mut slot = lock(&slots[if threads { comm.rank() } else { 0 }]);
             let backend = match &mut *slot {
                 Some(b) => b,
-                None => slot.insert(crate::backend::create(args.backend)?),
+                None => slot.insert(crate::backend::create(backend_kind)?),
             };
             let Some(target) = &target else {
                 let (params, pilot) = fixed_frames
