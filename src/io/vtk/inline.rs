@@ -9,7 +9,8 @@
 //!   the base64 groups, or inflates only the zlib blocks, that hold its rows. The walk steps
 //!   over an array by the length its header gives, without reading its text. An array whose
 //!   text does not end there because whitespace stands inside its base64 (a writer that
-//!   wraps lines) is left to vtkio, whole.
+//!   wraps lines) is left to vtkio, whole (vtkio 0.7.0-rc2 refuses such base64: the whole
+//!   step and every part give its error).
 //! - `format="ascii"`: values separated by any whitespace, any number a line. The walk finds
 //!   the array's end tag (a scan for `<`); every value of the array is counted (not parsed)
 //!   to check their number, as a whole read does; the values before the part's rows are
