@@ -1823,7 +1823,7 @@ fn inline_and_legacy_ascii_part_reads_timed() {
         let part_s = t.elapsed().as_secs_f64();
         assert_eq!(part.decoded, n / 4);
         let size = std::fs::metadata(&path).unwrap().len() as f64 / 1e6;
-        println!(
+        eprintln!(
             "{label}: {size:.0} MB, whole {whole_s:.3} s ({} records), rank 1 of 4 {part_s:.3} s",
             whole.len()
         );
