@@ -7,8 +7,9 @@
 //! hold them, or the zlib blocks that overlap them. The same reader reads a part of inline
 //! arrays ([`super::inline`] finds them: base64 arrays are the same runs as base64 appended
 //! data; ascii ones are counted and parsed by [`super::tokens`]). Files of another compressor
-//! go through vtkio ([`super`]), and so does a whole step of inline arrays. (vtkio 0.7.0-rc2 panics on the base64
-//! appended data VTK 9.7's writer makes of a million particles: `benches/peers/vtk_read.py`.)
+//! go through vtkio ([`super`]), and so does a whole step of inline arrays. (vtkio 0.7.0-rc2
+//! panics on the base64 appended data VTK 9.7's writer makes of a million particles:
+//! `benches/peers/vtk_read.py`.)
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -350,13 +351,13 @@ fn read_array(at: At<'_>, e: &BytesStart<'_>) -> Result<Option<ArrayDesc>, DataE
     if attribute(e, b"format").as_deref() != Some("appended") {
         return Ok(None);
     }
-    let offset = attribute(e, b"offset")
+    let Some(mut desc) = array_desc(at, e, 0, Stored::Appended)? else {
+        return Ok(None);
+    };
+    desc.offset = attribute(e, b"offset")
         .and_then(|v| v.trim().parse::<u64>().ok())
-        .ok_or_else(|| {
-            let name = attribute(e, b"Name").unwrap_or_default();
-            at.malformed(format!("array '{name}': bad offset"))
-        })?;
-    array_desc(at, e, offset, Stored::Appended)
+        .ok_or_else(|| at.malformed(format!("array '{}': bad offset", desc.name)))?;
+    Ok(Some(desc))
 }
 
 /// A `<DataArray>`'s name, type and components, its values at `offset` stored as `stored`;
