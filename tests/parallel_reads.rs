@@ -1316,6 +1316,22 @@ fn a_bad_value_in_a_legacy_ascii_part_is_an_error_naming_the_file_and_array() {
             "{err}"
         );
     }
+
+    // Cut inside the last array: every part refuses, naming it and where its values stop.
+    let cut = dir.path().join("cut.vtk");
+    std::fs::write(&cut, &text[..text.len() - 1000]).unwrap();
+    let step = the_step(&cut);
+    for part in [Part::new(0, 2), Part::new(1, 2)] {
+        let err = io::read_step_part(&step, &AttributeSelection::All, part)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("cut.vtk")
+                && err.contains("array 'pressure' should hold 1013 values")
+                && err.contains("the file ends after"),
+            "{err}"
+        );
+    }
 }
 
 /// An ascii PLY as plyfile writes a NumPy structured array: a comment, float, double and int
