@@ -398,7 +398,10 @@ pub(super) fn run(
     let (backend_name, backend_kind) = if args.reference {
         // The reference is the CPU backend's f64 image, whatever --backend says (as one
         // process makes it).
-        ("cpu backend in f64 (--reference)".to_owned(), BackendKind::Cpu)
+        (
+            "cpu backend in f64 (--reference)".to_owned(),
+            BackendKind::Cpu,
+        )
     } else {
         let mut slot = lock(&slots[0]);
         let backend = slot.insert(crate::backend::create(args.backend)?);

@@ -4,9 +4,12 @@
 //! arrays are read from the file (decoded, and inflated for zlib, VTK's default compressor);
 //! every other array is never read or decoded. A rank's part reads less still: only its rows
 //! of each piece, and of each array the bytes that hold them (raw), the base64 groups that
-//! hold them, or the zlib blocks that overlap them. Files with inline (ascii or base64) arrays or
-//! another compressor go through vtkio ([`super`]). (vtkio 0.7.0-rc2 panics on the base64
-//! appended data VTK 9.7's writer makes of a million particles: `benches/peers/vtk_read.py`.)
+//! hold them, or the zlib blocks that overlap them. The same reader reads a part of inline
+//! arrays ([`super::inline`] finds them: base64 arrays are the same runs as base64 appended
+//! data; ascii ones are counted and parsed by [`super::tokens`]). Files of another compressor
+//! go through vtkio ([`super`]), and so does a whole step of inline arrays. (vtkio 0.7.0-rc2
+//! panics on the base64 appended data VTK 9.7's writer makes of a million particles:
+//! `benches/peers/vtk_read.py`.)
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -27,15 +30,30 @@ const MAX_HEADER: usize = 64 << 20;
 
 /// An array as the header describes it.
 #[derive(Clone, Debug)]
-struct ArrayDesc {
-    name: String,
-    scalar: Scalar,
-    components: usize,
-    offset: u64,
+pub(super) struct ArrayDesc {
+    pub(super) name: String,
+    pub(super) scalar: Scalar,
+    pub(super) components: usize,
+    /// Where its bytes are: see [`Stored`].
+    pub(super) offset: u64,
+    pub(super) stored: Stored,
+}
+
+/// How an array's values are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Stored {
+    /// In the appended data, `offset` from its start (raw or base64 as the file says).
+    Appended,
+    /// Inline base64 (`format="binary"`): the same runs as base64 appended data (an
+    /// uncompressed array's size and data; a compressed array's header, then its blocks),
+    /// starting at byte `offset` of the file.
+    Inline,
+    /// Inline ascii: whitespace-separated values in the file's bytes `offset..end`.
+    Ascii { end: u64 },
 }
 
 /// A VTK type name (the XML's and the legacy spellings) as a scalar.
-fn parse_scalar(text: &str) -> Option<Scalar> {
+pub(super) fn parse_scalar(text: &str) -> Option<Scalar> {
     Some(match text {
         "Int8" | "Char" => Scalar::I8,
         "UInt8" | "UnsignedChar" => Scalar::U8,
@@ -53,26 +71,26 @@ fn parse_scalar(text: &str) -> Option<Scalar> {
 
 /// One piece: its point count, coordinates and point-data arrays.
 #[derive(Default, Debug)]
-struct PieceDesc {
-    points: u64,
-    coordinates: Option<ArrayDesc>,
-    arrays: Vec<ArrayDesc>,
+pub(super) struct PieceDesc {
+    pub(super) points: u64,
+    pub(super) coordinates: Option<ArrayDesc>,
+    pub(super) arrays: Vec<ArrayDesc>,
 }
 
 /// What the header says about the whole file.
-struct Header {
-    big_endian: bool,
+pub(super) struct Header {
+    pub(super) big_endian: bool,
     /// Bytes of each size integer in an array's header (UInt32 or UInt64).
-    int_bytes: usize,
-    zlib: bool,
-    pieces: Vec<PieceDesc>,
-    /// Where the appended data starts (just after the `_`).
-    data_start: u64,
+    pub(super) int_bytes: usize,
+    pub(super) zlib: bool,
+    pub(super) pieces: Vec<PieceDesc>,
+    /// Where the appended data starts (just after the `_`; 0 where there is none).
+    pub(super) data_start: u64,
     /// The appended data is base64 text (VTK's writer's default where `EncodeAppendedData`
     /// is on): offsets count characters, and each run of bytes VTK wrote is encoded on its
     /// own (an uncompressed array's size and data together; a compressed array's header,
     /// then all its blocks).
-    base64: bool,
+    pub(super) base64: bool,
 }
 
 /// Reads `part`'s records of the step by offset, and how many were decoded, or `None` where
@@ -87,16 +105,28 @@ pub(super) fn read(
     part: Part,
 ) -> Result<Option<(Columns, usize)>, DataError> {
     let mut file = File::open(at.file).map_err(|e| at.io(e))?;
-    let file_len = crate::io::file_len(at, &file)?;
     let Some(header) = read_header(at, &mut file)? else {
         return Ok(None);
     };
-    let mut reader = ArrayReader {
-        at,
-        file,
-        file_len,
-        header: &header,
-    };
+    read_arrays(at, file, &header, None, selection, part).map(Some)
+}
+
+/// Reads `part`'s records of the step the header describes, and how many were decoded:
+/// appended and inline base64 arrays from `file`, inline ascii ones from `text` (the file's
+/// bytes, mapped). The step's records are its pieces' points in order (pieces without points
+/// skipped): each piece gives the rows of it that lie in the part, and only those rows of
+/// each array are read, decoded and inflated (ascii: parsed; the values before them are
+/// counted). Every piece's arrays are checked against the first's from the header alone, so
+/// each part has the same attributes in the same order as the whole step.
+pub(super) fn read_arrays(
+    at: At<'_>,
+    file: File,
+    header: &Header,
+    text: Option<&[u8]>,
+    selection: &AttributeSelection,
+    part: Part,
+) -> Result<(Columns, usize), DataError> {
+    let mut reader = ArrayReader::new(at, file, header, text)?;
     let mut positions = Vec::new();
     let mut attributes: Vec<crate::values::Attribute> = Vec::new();
     let mut skipped = Vec::new();
@@ -151,7 +181,7 @@ pub(super) fn read(
         skipped,
         finite: false,
     };
-    Ok(Some((columns, wanted.len())))
+    Ok((columns, wanted.len()))
 }
 
 /// The XML before the raw appended data, parsed; `None` when the file has no raw appended
@@ -214,7 +244,7 @@ fn read_to_appended_data(
 }
 
 /// The value of an XML element's attribute `key`.
-fn attribute(e: &BytesStart<'_>, key: &[u8]) -> Option<String> {
+pub(super) fn attribute(e: &BytesStart<'_>, key: &[u8]) -> Option<String> {
     e.attributes()
         .flatten()
         .find(|a| a.key.as_ref() == key)
@@ -292,7 +322,7 @@ fn read_pieces(at: At<'_>, xml: &[u8], header: &mut Header) -> Result<Option<()>
 
 /// The `<VTKFile>` tag's byte order, size integers and compressor, into `header`; `None` where
 /// they are for vtkio.
-fn read_file_settings(e: &BytesStart<'_>, header: &mut Header) -> Option<()> {
+pub(super) fn read_file_settings(e: &BytesStart<'_>, header: &mut Header) -> Option<()> {
     // Image data and rectilinear grids have no particle positions: vtkio's path says so.
     if !matches!(
         attribute(e, b"type").as_deref(),
@@ -321,6 +351,23 @@ fn read_array(at: At<'_>, e: &BytesStart<'_>) -> Result<Option<ArrayDesc>, DataE
     if attribute(e, b"format").as_deref() != Some("appended") {
         return Ok(None);
     }
+    let Some(mut desc) = array_desc(at, e, 0, Stored::Appended)? else {
+        return Ok(None);
+    };
+    desc.offset = attribute(e, b"offset")
+        .and_then(|v| v.trim().parse::<u64>().ok())
+        .ok_or_else(|| at.malformed(format!("array '{}': bad offset", desc.name)))?;
+    Ok(Some(desc))
+}
+
+/// A `<DataArray>`'s name, type and components, its values at `offset` stored as `stored`;
+/// `None` for a type this reader leaves to vtkio.
+pub(super) fn array_desc(
+    at: At<'_>,
+    e: &BytesStart<'_>,
+    offset: u64,
+    stored: Stored,
+) -> Result<Option<ArrayDesc>, DataError> {
     let Some(scalar) = attribute(e, b"type").as_deref().and_then(parse_scalar) else {
         return Ok(None);
     };
@@ -333,31 +380,54 @@ fn read_array(at: At<'_>, e: &BytesStart<'_>) -> Result<Option<ArrayDesc>, DataE
     if components == 0 {
         return Err(at.malformed(format!("array '{name}' has 0 components")));
     }
-    let offset = attribute(e, b"offset")
-        .and_then(|v| v.trim().parse::<u64>().ok())
-        .ok_or_else(|| at.malformed(format!("array '{name}': bad offset")))?;
     Ok(Some(ArrayDesc {
         name,
         scalar,
         components,
         offset,
+        stored,
     }))
 }
 
-/// Reads arrays out of the appended data.
-struct ArrayReader<'a> {
+/// Reads arrays out of the appended data, or inline in the XML.
+pub(super) struct ArrayReader<'a> {
     at: At<'a>,
     file: File,
     file_len: u64,
     header: &'a Header,
+    /// The file's bytes (mapped) where it has inline ascii arrays.
+    text: Option<&'a [u8]>,
+    /// Where the runs of the array being read count their offsets from, and whether they are
+    /// base64: the appended data's, or (an inline array) the file's start and base64.
+    data_start: u64,
+    base64: bool,
 }
 
-impl ArrayReader<'_> {
+impl<'a> ArrayReader<'a> {
+    /// A reader of `file`'s arrays as `header` describes them (`text`: its bytes, mapped,
+    /// where it has inline ascii arrays).
+    pub(super) fn new(
+        at: At<'a>,
+        file: File,
+        header: &'a Header,
+        text: Option<&'a [u8]>,
+    ) -> Result<Self, DataError> {
+        Ok(ArrayReader {
+            at,
+            file_len: crate::io::file_len(at, &file)?,
+            file,
+            header,
+            text,
+            data_start: header.data_start,
+            base64: header.base64,
+        })
+    }
+
     /// Where `len` bytes at `pos` of the appended data start in the file, refused when they
     /// lie past the file's end (checked before allocating: a hostile offset or size cannot make
     /// us allocate, and a part checks the whole array lies in the file without reading it).
     fn span(&self, pos: u64, len: u64, what: &str) -> Result<u64, DataError> {
-        let start = self.header.data_start.checked_add(pos);
+        let start = self.data_start.checked_add(pos);
         let end = start.and_then(|s| s.checked_add(len));
         let (Some(start), Some(end)) = (start, end) else {
             return Err(self
@@ -388,7 +458,7 @@ impl ArrayReader<'_> {
     /// How many bytes of the appended data a run of `len` bytes VTK wrote takes: raw, `len`;
     /// base64, 4 characters per 3 bytes (the last group padded).
     fn encoded_len(&self, len: u64, what: &str) -> Result<u64, DataError> {
-        if !self.header.base64 {
+        if !self.base64 {
             return Ok(len);
         }
         len.div_ceil(3)
@@ -420,7 +490,7 @@ impl ArrayReader<'_> {
     /// lies in group `b / 3`: every group decodes alone, and only the run's last is padded).
     fn run_bytes(&mut self, pos: u64, range: Range<u64>, what: &str) -> Result<Vec<u8>, DataError> {
         let len = range.end - range.start;
-        if !self.header.base64 {
+        if !self.base64 {
             let from = pos
                 .checked_add(range.start)
                 .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
@@ -472,7 +542,7 @@ impl ArrayReader<'_> {
     }
 
     /// The values of rows `rows` of `array` (of `n` points), as f64: only those rows' bytes
-    /// are read, decoded and inflated (for zlib, the blocks that hold them).
+    /// are read, decoded and inflated (for zlib, the blocks that hold them; ascii, parsed).
     fn values(
         &mut self,
         array: &ArrayDesc,
@@ -480,6 +550,11 @@ impl ArrayReader<'_> {
         rows: Range<usize>,
     ) -> Result<Vec<f64>, DataError> {
         let name = &array.name;
+        (self.data_start, self.base64) = match array.stored {
+            Stored::Appended => (self.header.data_start, self.header.base64),
+            Stored::Inline => (0, true),
+            Stored::Ascii { end } => return self.ascii_values(array, end, n, rows),
+        };
         let row_bytes = (array.components as u64)
             .checked_mul(array.scalar.size() as u64)
             .ok_or_else(|| self.at.malformed(format!("array '{name}' overflows")))?;
@@ -538,6 +613,81 @@ impl ArrayReader<'_> {
             .par_chunks_exact(array.scalar.size())
             .map(|b| array.scalar.value(b, big_endian))
             .collect())
+    }
+
+    /// Rows `rows` of an inline ascii array of `n` points whose text ends at byte `end`: every
+    /// value of the array counted (their number checked, as a whole read checks it), the
+    /// values before the rows skipped by counting, only the rows' own parsed.
+    fn ascii_values(
+        &self,
+        array: &ArrayDesc,
+        end: u64,
+        n: usize,
+        rows: Range<usize>,
+    ) -> Result<Vec<f64>, DataError> {
+        let name = &array.name;
+        let Some(text) = self
+            .text
+            .and_then(|t| t.get(array.offset as usize..end as usize))
+        else {
+            return Err(self
+                .at
+                .malformed(format!("array '{name}' lies past the end of the file")));
+        };
+        let c = array.components;
+        let expected = n.checked_mul(c);
+        let found = super::tokens::count(text);
+        if expected != Some(found) {
+            return Err(self.at.malformed(format!(
+                "array '{name}' holds {found} values (bytes {}..{end}); {n} points of {c} \
+                 components need {}",
+                array.offset,
+                expected.map_or_else(|| "overflowing".into(), |e| e.to_string())
+            )));
+        }
+        if rows.is_empty() {
+            return Ok(Vec::new());
+        }
+        let first = super::tokens::skip(text, rows.start * c, false)
+            .map_err(|_| self.at.malformed(format!("array '{name}' ends early")))?;
+        super::tokens::parse(&text[first..], rows.len() * c, array.scalar, false).map_err(|bad| {
+            self.at.malformed(format!(
+                "array '{name}': '{}' at byte {} is not a {:?} value",
+                bad.token,
+                array.offset as usize + first + bad.at,
+                array.scalar
+            ))
+        })
+    }
+
+    /// How many bytes of the file the inline base64 array at byte `pos` takes (its runs, as
+    /// their headers size them), refused where they lie past the file's end.
+    pub(super) fn inline_extent(&mut self, pos: u64, what: &str) -> Result<u64, DataError> {
+        (self.data_start, self.base64) = (0, true);
+        let w = self.header.int_bytes as u64;
+        let end = if self.header.zlib {
+            let (head, _) = self.run(pos, 3 * w, what)?;
+            let blocks = self.ints(&head)[0];
+            let header_len = blocks
+                .checked_add(3)
+                .and_then(|b| b.checked_mul(w))
+                .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
+            let (header, data_pos) = self.run(pos, header_len, what)?;
+            let total = self
+                .ints(&header[(3 * w) as usize..])
+                .into_iter()
+                .try_fold(0u64, u64::checked_add)
+                .ok_or_else(|| self.at.malformed(format!("{what}: block sizes overflow")))?;
+            self.check_run(data_pos, total, what)?
+        } else {
+            let (head, _) = self.run(pos, w, what)?;
+            let size = self.ints(&head)[0];
+            let total = size
+                .checked_add(w)
+                .ok_or_else(|| self.at.malformed(format!("{what} overflows")))?;
+            self.check_run(pos, total, what)?
+        };
+        Ok(end - pos)
     }
 
     /// Bytes `wanted` of a zlib-compressed array of `expected` bytes: its header read whole

@@ -1,8 +1,12 @@
-//! A part of a legacy binary VTK file (`# vtk DataFile Version x`, `BINARY`, poly data or an
-//! unstructured grid), read by offset: the ascii lines between the binary blocks are scanned,
-//! each block stepped over by its size (computed from its line's counts and type), and only the
-//! part's rows of the points and of the selected point-data arrays are decoded (big-endian, as
-//! the format stores them). The pages of the file's other rows are never touched.
+//! A part of a legacy VTK file (`# vtk DataFile Version x`, `BINARY` or `ASCII`, poly data or an
+//! unstructured grid), read by rows. Binary: the ascii lines between the binary blocks are
+//! scanned, each block stepped over by its size (computed from its line's counts and type),
+//! and only the part's rows of the points and of the selected point-data arrays are decoded
+//! (big-endian, as the format stores them); the pages of the file's other rows are never
+//! touched. Ascii: a block is its line's count of values, any number a line, so each block is
+//! stepped over by counting its values (each must start as a number: a keyword where a value
+//! should be is an error naming the block), and a part counts its way to its rows and parses
+//! only them ([`super::tokens`]): it scans the whole file, but parses and keeps its rows only.
 //!
 //! Only the sections vtkio reads the same way are understood (POINTS of float or double; the
 //! cell lists in either layout and CELL_TYPES; POINT_DATA and one CELL_DATA holding SCALARS,
@@ -13,6 +17,7 @@
 
 use glam::DVec3;
 
+use super::tokens::{self, Short};
 use crate::io::mapped::Mapped;
 use crate::io::scalar::Scalar;
 use crate::io::{
@@ -36,27 +41,33 @@ struct Layout {
     arrays: Vec<Block>,
 }
 
-/// `part`'s records and how many were decoded, or `None` where the file is not legacy binary
-/// VTK of the sections this reader understands (vtkio reads it whole instead).
+/// `part`'s records and how many were decoded, or `None` where the file is not legacy VTK of
+/// the sections this reader understands (vtkio reads it whole instead). Values of an ascii
+/// file that are not numbers, or too few of them, are an error naming the array.
 pub(super) fn read(
     at: At<'_>,
     selection: &AttributeSelection,
     part: Part,
 ) -> Result<Option<(Columns, usize)>, DataError> {
     let bytes = Mapped::open(at)?;
-    let Some(layout) = scan(&bytes) else {
-        return Ok(None);
+    let (layout, ascii) = match scan(&bytes) {
+        Ok(Some(found)) => found,
+        Ok(None) => return Ok(None),
+        Err(message) => return Err(at.malformed(message)),
     };
     let rows = part.range(layout.points);
-    let decode = |block: &Block| -> Vec<f64> {
+    let decode = |block: &Block| -> Result<Vec<f64>, DataError> {
+        if ascii {
+            return decode_ascii(at, &bytes, block, rows.clone());
+        }
         let row = block.components * block.scalar.size();
         let from = block.offset + rows.start * row;
-        bytes[from..from + rows.len() * row]
+        Ok(bytes[from..from + rows.len() * row]
             .chunks_exact(block.scalar.size())
             .map(|b| block.scalar.value(b, true))
-            .collect()
+            .collect())
     };
-    let coords = decode(&layout.coordinates);
+    let coords = decode(&layout.coordinates)?;
     let positions = coords
         .chunks_exact(3)
         .map(|c| DVec3::new(c[0], c[1], c[2]))
@@ -71,7 +82,7 @@ pub(super) fn read(
         }
         attributes.extend(split_components(
             &array.name,
-            &decode(array),
+            &decode(array)?,
             array.components,
         ));
     }
@@ -82,6 +93,38 @@ pub(super) fn read(
         finite: false,
     };
     Ok(Some((columns, rows.len())))
+}
+
+/// What a block holds, for messages.
+fn label(block: &Block) -> String {
+    if block.name.is_empty() {
+        "the POINTS".to_owned()
+    } else {
+        format!("array '{}'", block.name)
+    }
+}
+
+/// Rows `rows` of an ascii block: the values before them counted (the scan checked the block
+/// holds all its values), only theirs parsed.
+fn decode_ascii(
+    at: At<'_>,
+    bytes: &[u8],
+    block: &Block,
+    rows: std::ops::Range<usize>,
+) -> Result<Vec<f64>, DataError> {
+    let text = &bytes[block.offset..];
+    let c = block.components;
+    let first = tokens::skip(text, rows.start * c, true)
+        .map_err(|_| at.malformed(format!("{} ends early", label(block))))?;
+    tokens::parse(&text[first..], rows.len() * c, block.scalar, true).map_err(|bad| {
+        at.malformed(format!(
+            "{}: '{}' at byte {} is not a {:?} value",
+            label(block),
+            bad.token,
+            block.offset + first + bad.at,
+            block.scalar
+        ))
+    })
 }
 
 /// A scalar type as vtkio's legacy parser names it (`bit` is packed, not a scalar of bytes).
@@ -114,6 +157,10 @@ fn parse_scalar(word: &str) -> Option<Scalar> {
 struct Scanner<'a> {
     bytes: &'a [u8],
     pos: usize,
+    /// An ascii file: a block is a number of values, whitespace-separated, counted.
+    ascii: bool,
+    /// Why an ascii block's values are not all there (the scan stops: an error, not vtkio's).
+    error: Option<String>,
 }
 
 impl<'a> Scanner<'a> {
@@ -150,10 +197,39 @@ impl<'a> Scanner<'a> {
             .is_some_and(|w| w.eq_ignore_ascii_case(word.as_bytes()))
     }
 
-    /// Steps over a block of `count` values of `size` bytes; where it starts. `None` where it
-    /// does not fit in the file.
-    fn block(&mut self, count: usize, size: usize) -> Option<usize> {
+    /// Steps over a block of `count` values of `size` bytes (ascii: `count` values, counted,
+    /// not parsed); where it starts. `None` where it does not fit in the file (ascii: where the
+    /// file ends, or a word stands, before its last value: an error naming `what`).
+    fn block(&mut self, count: usize, size: usize, what: &str) -> Option<usize> {
         let start = self.pos;
+        if self.ascii {
+            return match tokens::skip(&self.bytes[start..], count, true) {
+                Ok(end) => {
+                    self.pos = start + end;
+                    Some(start)
+                }
+                Err(short) => {
+                    let found = match short {
+                        Short::Ends { found } => format!("the file ends after {found}"),
+                        Short::Word { at } => {
+                            let at = start + at;
+                            let word: String = String::from_utf8_lossy(&self.bytes[at..])
+                                .split_ascii_whitespace()
+                                .next()
+                                .unwrap_or_default()
+                                .chars()
+                                .take(40)
+                                .collect();
+                            format!("'{word}' at byte {at} is not a number")
+                        }
+                    };
+                    self.error = Some(format!(
+                        "{what} should hold {count} values from byte {start}, but {found}"
+                    ));
+                    None
+                }
+            };
+        }
         let end = count.checked_mul(size)?.checked_add(start)?;
         if end > self.bytes.len() {
             return None;
@@ -170,10 +246,12 @@ impl<'a> Scanner<'a> {
         let mut probe = Scanner {
             bytes: self.bytes,
             pos: self.pos,
+            ascii: self.ascii,
+            error: None,
         };
         probe.skip_space();
         if !probe.next_is("OFFSETS") {
-            self.block(size, 4)?;
+            self.block(size, 4, &format!("{}'s cell list", words[0]))?;
             return Some(());
         }
         *self = probe;
@@ -186,7 +264,7 @@ impl<'a> Scanner<'a> {
             if !word.eq_ignore_ascii_case(tag) || !kind.eq_ignore_ascii_case("vtktypeint64") {
                 return None;
             }
-            self.block(count, 8)?;
+            self.block(count, 8, tag)?;
         }
         Some(())
     }
@@ -196,7 +274,8 @@ impl<'a> Scanner<'a> {
     fn attribute(&mut self, words: &[&str], n: usize, arrays: &mut Vec<Block>) -> Option<()> {
         let keyword = words.first()?.to_ascii_uppercase();
         let mut add = |scanner: &mut Self, name: &str, scalar: Scalar, components: usize| {
-            let offset = scanner.block(n.checked_mul(components)?, scalar.size())?;
+            let what = format!("array '{name}'");
+            let offset = scanner.block(n.checked_mul(components)?, scalar.size(), &what)?;
             arrays.push(Block {
                 name: name.to_owned(),
                 scalar,
@@ -241,10 +320,25 @@ impl<'a> Scanner<'a> {
     }
 }
 
-/// The points and point-data arrays of a legacy binary file, found by its lines; `None` for
-/// anything else.
-fn scan(bytes: &[u8]) -> Option<Layout> {
-    let mut s = Scanner { bytes, pos: 0 };
+/// The points and point-data arrays of a legacy file, found by its lines, and whether it is
+/// ascii; `None` for anything else, an error where an ascii block's values are not all there.
+fn scan(bytes: &[u8]) -> Result<Option<(Layout, bool)>, String> {
+    let mut s = Scanner {
+        bytes,
+        pos: 0,
+        ascii: false,
+        error: None,
+    };
+    let layout = scan_lines(&mut s);
+    match s.error {
+        Some(error) => Err(error),
+        None => Ok(layout.map(|l| (l, s.ascii))),
+    }
+}
+
+/// [`scan`]'s walk.
+fn scan_lines(s: &mut Scanner<'_>) -> Option<Layout> {
+    let bytes = s.bytes;
     s.skip_space();
     let version = s.line()?;
     let is = |w: &str, word: &str| w.eq_ignore_ascii_case(word);
@@ -256,9 +350,11 @@ fn scan(bytes: &[u8]) -> Option<Layout> {
         return None;
     }
     s.line()?.first()?; // the title: not empty
-    if !matches!(s.line()?.as_slice(), [kind] if is(kind, "BINARY")) {
-        return None;
-    }
+    s.ascii = match s.line()?.as_slice() {
+        [kind] if is(kind, "BINARY") => false,
+        [kind] if is(kind, "ASCII") => true,
+        _ => return None,
+    };
     s.skip_space();
     let grid = match s.line()?.as_slice() {
         [dataset, kind] if is(dataset, "DATASET") && is(kind, "POLYDATA") => false,
@@ -279,7 +375,7 @@ fn scan(bytes: &[u8]) -> Option<Layout> {
         name: String::new(),
         scalar,
         components: 3,
-        offset: s.block(points.checked_mul(3)?, scalar.size())?,
+        offset: s.block(points.checked_mul(3)?, scalar.size(), "the POINTS")?,
     };
     // What vtkio reads after the points: cell lists (an unstructured grid's CELLS, then its
     // CELL_TYPES), then one CELL_DATA and one POINT_DATA in either order.
@@ -305,7 +401,7 @@ fn scan(bytes: &[u8]) -> Option<Layout> {
             }
             "CELL_TYPES" if grid && cells && !cell_types => {
                 let [_, n] = line.as_slice() else { return None };
-                s.block(n.parse().ok()?, 4)?;
+                s.block(n.parse().ok()?, 4, "CELL_TYPES")?;
                 cell_types = true;
             }
             "POINT_DATA" | "CELL_DATA" => {

@@ -2,6 +2,13 @@
 //! `.vtu`, `.vts`; ascii, base64 binary, appended and compressed) and legacy `.vtk` files.
 //! Every point-data array is an attribute; a 3-component array `v` becomes `v_x`, `v_y`, `v_z`
 //! and `v_magnitude`.
+//!
+//! A rank's part is read by rows where the layout allows: appended data by offset
+//! ([`appended`]), inline base64 and ascii arrays ([`inline`]: base64 by the groups and zlib
+//! blocks that hold the rows; ascii by counting the values before the rows, [`tokens`]) and
+//! legacy binary and ascii files ([`legacy`]). What remains (legacy sections only vtkio reads;
+//! XML of LZ4 or LZMA, of appended and inline arrays mixed, or of base64 holding whitespace)
+//! is parsed whole by vtkio and cut, with a warning.
 
 use std::path::Path;
 
@@ -12,7 +19,9 @@ use vtkio::model::{
 };
 
 mod appended;
+mod inline;
 mod legacy;
+mod tokens;
 
 use super::{
     At, AttributeSelection, Columns, DataError, Format, Part, Problem, array_attribute_names,
@@ -29,9 +38,9 @@ const MAX_COMPRESSION_RATIO: u64 = 1100;
 /// `v_z` and `v_magnitude`; only the selected ones decoded).
 ///
 /// Of that, `part`'s records, and how many were decoded: appended data is read by offset, only
-/// the part's rows of each array ([`appended`]), and so is a part of a legacy binary file
-/// ([`legacy`]); other files are parsed whole by vtkio and cut (with a warning once that each
-/// rank reads the whole step).
+/// the part's rows of each array ([`appended`]), and so is a part of inline arrays
+/// ([`inline`]) and of a legacy binary or ascii file ([`legacy`]); other files are parsed
+/// whole by vtkio and cut (with a warning once that each rank reads the whole step).
 pub(super) fn read_step(
     at: At<'_>,
     legacy: bool,
@@ -39,24 +48,34 @@ pub(super) fn read_step(
     part: Part,
 ) -> Result<(Columns, usize), DataError> {
     precheck_counts(at, legacy)?;
+    // A part of a file of inline arrays (base64 or ascii) is read by rows; the whole step, by
+    // vtkio as before.
+    if !legacy
+        && !part.is_whole()
+        && let Some(read) = inline::read(at, selection, part)?
+    {
+        return Ok(read);
+    }
     // Raw or base64 appended data (VTK's and ParaView's default) is read by offset, only the
-    // arrays asked for and the part's rows of them; everything else is parsed whole by vtkio.
+    // arrays asked for and the part's rows of them.
     if !legacy && let Some(read) = appended::read(at, selection, part)? {
         return Ok(read);
     }
-    // A part of a legacy binary file is read by offset; the whole step, by vtkio as before.
+    // A part of a legacy file (binary or ascii) is read by rows; the whole step, by vtkio as
+    // before.
     if legacy
         && !part.is_whole()
         && let Some(read) = legacy::read(at, selection, part)?
     {
         return Ok(read);
     }
+    // What is left is parsed whole by vtkio (and a part cut from it).
     let why = if legacy {
-        "legacy ascii VTK (or binary with sections only vtkio reads) is parsed whole by vtkio: \
-         its ascii values are not one record a line"
+        "legacy VTK with sections only vtkio reads (COLOR_SCALARS, TENSORS, METADATA, ...) is \
+         parsed whole by vtkio"
     } else {
-        "its arrays are inline in the XML (ascii, or a whole array's base64), parsed whole by \
-         vtkio"
+        "XML of LZ4 or LZMA compression, of appended and inline arrays mixed, or of base64 text \
+         holding whitespace, is parsed whole by vtkio"
     };
     let columns = read_whole_file(at, legacy, selection)?;
     let format = if legacy { Format::Vtk } else { Format::VtkXml };
