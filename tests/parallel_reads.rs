@@ -352,9 +352,38 @@ fn particles_step(n: usize) -> Step {
 /// zlib, a header (blocks, block size, last block's size, each block's compressed size) and
 /// the blocks; base64, each of those runs encoded on its own. `corrupt`: an array's name and
 /// a block of it, in the first piece, whose compressed bytes are replaced by garbage.
+/// `data` as VTK's zlib compressor (and meshio) writes it in blocks of `size` bytes: the
+/// header (the block count, the block size, the last block's size, full or not, and each
+/// block's compressed size, each number written by `int`) and the compressed blocks, block
+/// `corrupt` overwritten with garbage.
+fn zlib_blocks(
+    data: &[u8],
+    size: usize,
+    int: &dyn Fn(usize) -> Vec<u8>,
+    corrupt: Option<usize>,
+) -> (Vec<u8>, Vec<u8>) {
+    use std::io::Write;
+    let mut blocks: Vec<Vec<u8>> = data
+        .chunks(size)
+        .map(|chunk| {
+            let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+            z.write_all(chunk).unwrap();
+            z.finish().unwrap()
+        })
+        .collect();
+    if let Some(block) = corrupt {
+        blocks[block].iter_mut().for_each(|b| *b = 0x5a);
+    }
+    let last = data.len() - blocks.len().saturating_sub(1) * size;
+    let mut head = [int(blocks.len()), int(size), int(last)].concat();
+    for b in &blocks {
+        head.extend(int(b.len()));
+    }
+    (head, blocks.concat())
+}
+
 fn write_appended(path: &Path, pieces: &[usize], how: Appended, corrupt: Option<(&str, usize)>) {
     use base64::Engine;
-    use std::io::Write;
     let int = |v: usize| -> Vec<u8> {
         let v = v as u64;
         let bytes = if how.big_endian {
@@ -375,29 +404,10 @@ fn write_appended(path: &Path, pieces: &[usize], how: Appended, corrupt: Option<
         let runs: Vec<Vec<u8>> = match how.zlib_block {
             None => vec![[int(data.len()), data].concat()],
             Some(size) => {
-                let mut blocks: Vec<Vec<u8>> = data
-                    .chunks(size)
-                    .map(|chunk| {
-                        let mut z = flate2::write::ZlibEncoder::new(
-                            Vec::new(),
-                            flate2::Compression::default(),
-                        );
-                        z.write_all(chunk).unwrap();
-                        z.finish().unwrap()
-                    })
-                    .collect();
-                if let Some((bad, block)) = corrupt
-                    && bad == name
-                    && piece == 0
-                {
-                    blocks[block].iter_mut().for_each(|b| *b = 0x5a);
-                }
-                let last = data.len() - blocks.len().saturating_sub(1) * size;
-                let mut head = [int(blocks.len()), int(size), int(last)].concat();
-                for b in &blocks {
-                    head.extend(int(b.len()));
-                }
-                vec![head, blocks.concat()]
+                let bad =
+                    corrupt.and_then(|(bad, block)| (bad == name && piece == 0).then_some(block));
+                let (head, blocks) = zlib_blocks(&data, size, &int, bad);
+                vec![head, blocks]
             }
         };
         for run in runs {
@@ -809,7 +819,6 @@ fn ascii_value(v: f64, ty: &str) -> String {
 /// name and a zlib block of it, in the first piece, whose bytes are replaced by garbage.
 fn write_inline(path: &Path, pieces: &[usize], how: Inline, corrupt: Option<(&str, usize)>) {
     use base64::Engine;
-    use std::io::Write;
     let int = |v: usize| (v as u64).to_le_bytes()[..how.header_bytes].to_vec();
     let b64 = |b: &[u8]| base64::engine::general_purpose::STANDARD.encode(b);
     let array =
@@ -847,31 +856,11 @@ fn write_inline(path: &Path, pieces: &[usize], how: Inline, corrupt: Option<(&st
                 match how.zlib_block {
                     None => xml.push_str(&b64(&[int(data.len()), data].concat())),
                     Some(size) => {
-                        let mut blocks: Vec<Vec<u8>> = data
-                            .chunks(size)
-                            .map(|chunk| {
-                                let mut z = flate2::write::ZlibEncoder::new(
-                                    Vec::new(),
-                                    flate2::Compression::default(),
-                                );
-                                z.write_all(chunk).unwrap();
-                                z.finish().unwrap()
-                            })
-                            .collect();
-                        if let Some((bad, block)) = corrupt
-                            && bad == name
-                            && piece == 0
-                        {
-                            blocks[block].iter_mut().for_each(|b| *b = 0x5a);
-                        }
-                        // meshio's last block size: the bytes of the last block, full or not.
-                        let last = data.len() - blocks.len().saturating_sub(1) * size;
-                        let mut head = [int(blocks.len()), int(size), int(last)].concat();
-                        for b in &blocks {
-                            head.extend(int(b.len()));
-                        }
+                        let bad = corrupt
+                            .and_then(|(bad, block)| (bad == name && piece == 0).then_some(block));
+                        let (head, blocks) = zlib_blocks(&data, size, &int, bad);
                         xml.push_str(&b64(&head));
-                        xml.push_str(&b64(&blocks.concat()));
+                        xml.push_str(&b64(&blocks));
                     }
                 }
                 xml.push('\n');

@@ -251,6 +251,17 @@ pub(super) fn attribute(e: &BytesStart<'_>, key: &[u8]) -> Option<String> {
         .and_then(|a| a.unescape_value().ok().map(|v| v.into_owned()))
 }
 
+/// A `<Piece>` of `NumberOfPoints` points, its arrays to come.
+pub(super) fn piece(at: At<'_>, e: &BytesStart<'_>) -> Result<PieceDesc, DataError> {
+    let points = attribute(e, b"NumberOfPoints")
+        .and_then(|v| v.trim().parse::<u64>().ok())
+        .ok_or_else(|| at.malformed("a <Piece> lacks a valid NumberOfPoints"))?;
+    Ok(PieceDesc {
+        points,
+        ..PieceDesc::default()
+    })
+}
+
 /// Parses the XML before `<AppendedData>` into `header`'s file settings and pieces; `None`
 /// where it holds what this reader leaves to vtkio.
 fn read_pieces(at: At<'_>, xml: &[u8], header: &mut Header) -> Result<Option<()>, DataError> {
@@ -280,15 +291,7 @@ fn read_pieces(at: At<'_>, xml: &[u8], header: &mut Header) -> Result<Option<()>
                         return Ok(None);
                     };
                 }
-                b"Piece" => {
-                    let points = attribute(&e, b"NumberOfPoints")
-                        .and_then(|v| v.trim().parse::<u64>().ok())
-                        .ok_or_else(|| at.malformed("a <Piece> lacks a valid NumberOfPoints"))?;
-                    header.pieces.push(PieceDesc {
-                        points,
-                        ..PieceDesc::default()
-                    });
-                }
+                b"Piece" => header.pieces.push(piece(at, &e)?),
                 b"Points" => inside = In::Points,
                 b"PointData" => inside = In::PointData,
                 b"CellData" | b"FieldData" | b"Verts" | b"Lines" | b"Strips" | b"Polys"

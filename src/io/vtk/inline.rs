@@ -24,7 +24,7 @@ use std::fs::File;
 use quick_xml::events::Event;
 use quick_xml::name::QName;
 
-use super::appended::{self, ArrayReader, Header, PieceDesc, Stored};
+use super::appended::{self, ArrayReader, Header, Stored};
 use crate::io::mapped::Mapped;
 use crate::io::{At, AttributeSelection, Columns, DataError, Part};
 
@@ -120,17 +120,7 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
                 Event::Eof => break 'walk,
                 Event::Start(ref e) | Event::Empty(ref e) => match e.name().as_ref() {
                     b"AppendedData" => return Ok(None),
-                    b"Piece" => {
-                        let points = appended::attribute(e, b"NumberOfPoints")
-                            .and_then(|v| v.trim().parse::<u64>().ok())
-                            .ok_or_else(|| {
-                                at.malformed("a <Piece> lacks a valid NumberOfPoints")
-                            })?;
-                        header.pieces.push(PieceDesc {
-                            points,
-                            ..PieceDesc::default()
-                        });
-                    }
+                    b"Piece" => header.pieces.push(appended::piece(at, e)?),
                     b"Points" => inside = In::Points,
                     b"PointData" => inside = In::PointData,
                     b"CellData" | b"FieldData" | b"Verts" | b"Lines" | b"Strips" | b"Polys"
