@@ -451,7 +451,9 @@ pub(super) fn run(
                         format!("automatic, from the {size} ranks' parts of step 0")
                     }
                 );
-                resolved.series.clear_cache();
+                // The ranks' parts of the step about to be rendered stay: its render starts
+                // from them (the first step's, read once for the automatic values above).
+                resolved.series.clear_cache_but_parts_of(Some(frame.step));
                 auto_for = Some((resolved.field.clone(), auto));
                 auto
             }
@@ -497,10 +499,15 @@ pub(super) fn run(
         };
         let rank_body = |comm: &dyn Comm| -> Result<RankDone, DistError> {
             let part = Part::new(comm.rank(), comm.size());
-            let local = resolved
-                .series
-                .step_part(frame.step, part, &RankLengths { comm })?
-                .step;
+            let local = match resolved.series.take_kept_part(frame.step, part) {
+                Some(kept) => kept,
+                None => {
+                    resolved
+                        .series
+                        .step_part(frame.step, part, &RankLengths { comm })?
+                        .step
+                }
+            };
             if args.reference {
                 // The converged reference: the brick once, in f64 on the CPU, and every rank
                 // runs the single process's search on the chunks' images rank 0 sends it.

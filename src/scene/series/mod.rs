@@ -688,6 +688,19 @@ impl TimeSeries {
         Ok(read)
     }
 
+    /// Takes the part of step `index` that [`Self::step_part_kept`] kept for `part`, if any: the
+    /// render of that step starts from it instead of reading it again, and owns it (so that it
+    /// can drop it once its brick is made).
+    pub fn take_kept_part(&self, index: usize, part: io::Part) -> Option<Step> {
+        let kept = self
+            .shared
+            .kept_parts
+            .lock()
+            .unwrap()
+            .remove(&(index, part))?;
+        Some(Arc::try_unwrap(kept).unwrap_or_else(|shared| (*shared).clone()))
+    }
+
     /// How long the last read of step `index` from its file took (reading and decoding, on
     /// whichever thread read it), if it was read from a file.
     pub fn read_time(&self, index: usize) -> Option<Duration> {
@@ -738,10 +751,21 @@ impl TimeSeries {
 
     /// Drops every cached step (steps in use elsewhere live on until they are dropped there).
     pub fn clear_cache(&self) {
+        self.clear_cache_but_parts_of(None);
+    }
+
+    /// Drops every cached step, but the ranks' parts of step `keep` where they were kept
+    /// ([`Self::step_part_kept`]): the step a distributed render renders next takes them
+    /// ([`Self::take_kept_part`]).
+    pub fn clear_cache_but_parts_of(&self, keep: Option<usize>) {
         let mut cache = self.shared.cache.lock().unwrap();
         cache.entries.clear();
         cache.bytes = 0;
-        self.shared.kept_parts.lock().unwrap().clear();
+        self.shared
+            .kept_parts
+            .lock()
+            .unwrap()
+            .retain(|(index, _), _| Some(*index) == keep);
     }
 
     /// Marks the cached steps among `indices` as just used, in this order: the cache drops
