@@ -295,8 +295,10 @@ struct Appended {
     big_endian: bool,
     /// Base64 text (VTK's `EncodeAppendedData`), else raw bytes after the `_`.
     base64: bool,
-    /// zlib-compressed in blocks of this many bytes, else uncompressed.
+    /// Compressed in blocks of this many bytes, else uncompressed.
     zlib_block: Option<usize>,
+    /// The compressor of those blocks.
+    codec: Codec,
 }
 
 /// A particle's position, `rho`, `pressure`, `id` and `velocity`.
@@ -352,25 +354,59 @@ fn particles_step(n: usize) -> Step {
 /// zlib, a header (blocks, block size, last block's size, each block's compressed size) and
 /// the blocks; base64, each of those runs encoded on its own. `corrupt`: an array's name and
 /// a block of it, in the first piece, whose compressed bytes are replaced by garbage.
-/// `data` as VTK's zlib compressor (and meshio) writes it in blocks of `size` bytes: the
-/// header (the block count, the block size, the last block's size, full or not, and each
-/// block's compressed size, each number written by `int`) and the compressed blocks, block
-/// `corrupt` overwritten with garbage.
+/// VTK's compressors: each writes the same header and blocks, each block in its own format.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Codec {
+    /// `vtkZLibDataCompressor`: a zlib stream a block.
+    Zlib,
+    /// `vtkLZ4DataCompressor`: LZ4's raw block format a block (`LZ4_compress_default`).
+    Lz4,
+    /// `vtkLZMADataCompressor`: an .xz stream a block (`lzma_easy_buffer_encode`, CRC64).
+    Lzma,
+}
+
+impl Codec {
+    /// Its `compressor` attribute.
+    fn attribute(self) -> &'static str {
+        match self {
+            Codec::Zlib => " compressor=\"vtkZLibDataCompressor\"",
+            Codec::Lz4 => " compressor=\"vtkLZ4DataCompressor\"",
+            Codec::Lzma => " compressor=\"vtkLZMADataCompressor\"",
+        }
+    }
+
+    /// One block compressed as VTK does.
+    fn compress(self, chunk: &[u8]) -> Vec<u8> {
+        use std::io::Write;
+        match self {
+            Codec::Zlib => {
+                let mut z =
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+                z.write_all(chunk).unwrap();
+                z.finish().unwrap()
+            }
+            Codec::Lz4 => lz4_flex::block::compress(chunk),
+            Codec::Lzma => {
+                let mut z = xz2::write::XzEncoder::new(Vec::new(), 6);
+                z.write_all(chunk).unwrap();
+                z.finish().unwrap()
+            }
+        }
+    }
+}
+
+/// `data` as VTK's compressors (and meshio) write it in blocks of `size` bytes: the header
+/// (the block count, the block size, the last block's size, full or not, and each block's
+/// compressed size, each number written by `int`) and the blocks, each compressed by `codec`,
+/// block `corrupt` overwritten with garbage.
 fn zlib_blocks(
     data: &[u8],
     size: usize,
+    codec: Codec,
     int: &dyn Fn(usize) -> Vec<u8>,
     corrupt: Option<usize>,
 ) -> (Vec<u8>, Vec<u8>) {
-    use std::io::Write;
-    let mut blocks: Vec<Vec<u8>> = data
-        .chunks(size)
-        .map(|chunk| {
-            let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
-            z.write_all(chunk).unwrap();
-            z.finish().unwrap()
-        })
-        .collect();
+    let mut blocks: Vec<Vec<u8>> = data.chunks(size).map(|c| codec.compress(c)).collect();
     if let Some(block) = corrupt {
         blocks[block].iter_mut().for_each(|b| *b = 0x5a);
     }
@@ -406,7 +442,7 @@ fn write_appended(path: &Path, pieces: &[usize], how: Appended, corrupt: Option<
             Some(size) => {
                 let bad =
                     corrupt.and_then(|(bad, block)| (bad == name && piece == 0).then_some(block));
-                let (head, blocks) = zlib_blocks(&data, size, &int, bad);
+                let (head, blocks) = zlib_blocks(&data, size, how.codec, &int, bad);
                 vec![head, blocks]
             }
         };
@@ -534,7 +570,7 @@ fn write_appended(path: &Path, pieces: &[usize], how: Appended, corrupt: Option<
             "UInt32"
         },
         if how.zlib_block.is_some() {
-            " compressor=\"vtkZLibDataCompressor\""
+            how.codec.attribute()
         } else {
             ""
         }
@@ -563,6 +599,7 @@ fn vtk_appended_data_of_several_pieces_is_read_by_the_rows_of_each_piece() {
         big_endian: false,
         base64: false,
         zlib_block: None,
+        codec: Codec::Zlib,
     };
     // pyevtk's (raw, UInt64 sizes); big-endian; VTK's base64 (each array one run); zlib in
     // blocks of 100 bytes, which split rows of 4, 8 and 12 bytes, raw and base64 (the
@@ -588,6 +625,30 @@ fn vtk_appended_data_of_several_pieces_is_read_by_the_rows_of_each_piece() {
             header_bytes: 8,
             base64: true,
             zlib_block: Some(100),
+            ..plain
+        },
+        // VTK's other compressors, raw and base64.
+        Appended {
+            zlib_block: Some(100),
+            codec: Codec::Lz4,
+            ..plain
+        },
+        Appended {
+            header_bytes: 8,
+            base64: true,
+            zlib_block: Some(100),
+            codec: Codec::Lz4,
+            ..plain
+        },
+        Appended {
+            zlib_block: Some(100),
+            codec: Codec::Lzma,
+            ..plain
+        },
+        Appended {
+            base64: true,
+            zlib_block: Some(1000),
+            codec: Codec::Lzma,
             ..plain
         },
     ];
@@ -625,28 +686,43 @@ fn a_bad_block_or_a_truncated_file_in_a_vtk_part_is_an_error_naming_the_file_and
         big_endian: false,
         base64: false,
         zlib_block: Some(100),
+        codec: Codec::Zlib,
     };
-    // pressure's block 40 is its bytes 4000..4100: the first piece's rows 500..512.
-    let path = dir.path().join("bad_block.vtu");
-    write_appended(&path, &[997, 1003], how, Some(("pressure", 40)));
-    let step = the_step(&path);
-    let selection = only(&["pressure"]);
-    for err in [
-        io::read_step(&step, &selection).unwrap_err(),
-        io::read_step_part(&step, &selection, Part::new(0, 2)).unwrap_err(),
-        io::read_step_part(&step, &selection, Part::new(1, 4)).unwrap_err(),
-    ] {
-        let err = err.to_string();
-        assert!(
-            err.contains("bad_block.vtu") && err.contains("'pressure' block 40"),
-            "{err}"
-        );
-    }
-    // The ranks whose rows lie in other blocks do not inflate that one.
-    for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
-        let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
-            .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
-        assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+    // pressure's block 40 is its bytes 4000..4100: the first piece's rows 500..512; each
+    // compressor's corrupt block named by the whole read and the parts that hold it (rank 1
+    // of 4 is a later part).
+    for codec in [Codec::Zlib, Codec::Lz4, Codec::Lzma] {
+        let how = Appended { codec, ..how };
+        let name = format!("bad_block_{codec:?}.vtu");
+        let path = dir.path().join(&name);
+        write_appended(&path, &[997, 1003], how, Some(("pressure", 40)));
+        let step = the_step(&path);
+        let selection = only(&["pressure"]);
+        for err in [
+            io::read_step(&step, &selection).unwrap_err(),
+            io::read_step_part(&step, &selection, Part::new(0, 2)).unwrap_err(),
+            io::read_step_part(&step, &selection, Part::new(1, 4)).unwrap_err(),
+        ] {
+            let err = err.to_string();
+            // The codec named too.
+            let codec_name = match codec {
+                Codec::Zlib => "zlib",
+                Codec::Lz4 => "LZ4",
+                Codec::Lzma => "LZMA",
+            };
+            assert!(
+                err.contains(&name)
+                    && err.contains("'pressure' block 40")
+                    && err.contains(&format!("its {codec_name} data")),
+                "{err}"
+            );
+        }
+        // The ranks whose rows lie in other blocks do not inflate that one.
+        for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
+            let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
+                .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
+            assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+        }
     }
     // Cut inside the second piece's arrays: every rank refuses (each array is checked to lie
     // in the file), naming the file.
@@ -792,8 +868,10 @@ fn legacy_binary_vtk_is_read_by_the_rows_of_each_block() {
 struct Inline {
     /// Bytes of a size integer: 4 (`UInt32`, VTK's) or 8 (`UInt64`, meshio's).
     header_bytes: usize,
-    /// zlib-compressed in blocks of this many bytes (meshio's and VTK's `compressor`).
+    /// Compressed in blocks of this many bytes (meshio's and VTK's `compressor`).
     zlib_block: Option<usize>,
+    /// The compressor of those blocks.
+    codec: Codec,
     /// `format="ascii"` with this many values a line, else `format="binary"` (base64).
     ascii: Option<usize>,
 }
@@ -858,7 +936,7 @@ fn write_inline(path: &Path, pieces: &[usize], how: Inline, corrupt: Option<(&st
                     Some(size) => {
                         let bad = corrupt
                             .and_then(|(bad, block)| (bad == name && piece == 0).then_some(block));
-                        let (head, blocks) = zlib_blocks(&data, size, &int, bad);
+                        let (head, blocks) = zlib_blocks(&data, size, how.codec, &int, bad);
                         xml.push_str(&b64(&head));
                         xml.push_str(&b64(&blocks));
                     }
@@ -876,7 +954,7 @@ fn write_inline(path: &Path, pieces: &[usize], how: Inline, corrupt: Option<(&st
             "UInt32"
         },
         if how.zlib_block.is_some() {
-            " compressor=\"vtkZLibDataCompressor\""
+            how.codec.attribute()
         } else {
             ""
         }
@@ -953,6 +1031,7 @@ fn vtk_inline_arrays_are_read_by_the_rows_of_each_piece() {
     let binary = Inline {
         header_bytes: 8,
         zlib_block: None,
+        codec: Codec::Zlib,
         ascii: None,
     };
     let kinds = [
@@ -968,6 +1047,18 @@ fn vtk_inline_arrays_are_read_by_the_rows_of_each_piece() {
         Inline {
             header_bytes: 4,
             zlib_block: Some(100),
+            ..binary
+        },
+        // VTK's other compressors (the whole step, vtkio's, decompresses them too).
+        Inline {
+            header_bytes: 4,
+            zlib_block: Some(100),
+            codec: Codec::Lz4,
+            ..binary
+        },
+        Inline {
+            zlib_block: Some(1000),
+            codec: Codec::Lzma,
             ..binary
         },
         Inline {
@@ -1032,6 +1123,7 @@ fn a_bad_value_block_or_cut_in_an_inline_vtk_part_is_an_error_naming_the_file_an
     let ascii = Inline {
         header_bytes: 4,
         zlib_block: None,
+        codec: Codec::Zlib,
         ascii: Some(6),
     };
     let good = dir.path().join("good.vtu");
@@ -1141,29 +1233,35 @@ fn a_bad_value_block_or_cut_in_an_inline_vtk_part_is_an_error_naming_the_file_an
     }
 
     // pressure's block 40 is its bytes 4000..4100: the first piece's rows 500..512.
-    let how = Inline {
-        header_bytes: 8,
-        zlib_block: Some(100),
-        ascii: None,
-    };
-    let path = dir.path().join("bad_block.vtu");
-    write_inline(&path, &[997, 1003], how, Some(("pressure", 40)));
-    let step = the_step(&path);
-    let selection = only(&["pressure"]);
-    for part in [Part::new(0, 2), Part::new(1, 4)] {
-        let err = io::read_step_part(&step, &selection, part)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("bad_block.vtu") && err.contains("'pressure' block 40"),
-            "{err}"
-        );
-    }
-    assert!(io::read_step(&step, &selection).is_err());
-    for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
-        let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
-            .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
-        assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+    // Each compressor's corrupt block, in a later part's rows, is named by the parts that
+    // hold it.
+    for codec in [Codec::Zlib, Codec::Lz4, Codec::Lzma] {
+        let how = Inline {
+            header_bytes: 8,
+            zlib_block: Some(100),
+            codec,
+            ascii: None,
+        };
+        let path = dir.path().join(format!("bad_block_{codec:?}.vtu"));
+        write_inline(&path, &[997, 1003], how, Some(("pressure", 40)));
+        let step = the_step(&path);
+        let selection = only(&["pressure"]);
+        for part in [Part::new(0, 2), Part::new(1, 4)] {
+            let err = io::read_step_part(&step, &selection, part)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!("bad_block_{codec:?}.vtu"))
+                    && err.contains("'pressure' block 40"),
+                "{err}"
+            );
+        }
+        assert!(io::read_step(&step, &selection).is_err());
+        for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
+            let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
+                .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
+            assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+        }
     }
 }
 
@@ -2299,6 +2397,7 @@ fn inline_and_legacy_ascii_part_reads_timed() {
     let binary = Inline {
         header_bytes: 8,
         zlib_block: None,
+        codec: Codec::Zlib,
         ascii: None,
     };
     let mut files = Vec::new();

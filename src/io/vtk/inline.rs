@@ -29,8 +29,8 @@ use crate::io::mapped::Mapped;
 use crate::io::{At, AttributeSelection, Columns, DataError, Part};
 
 /// `part`'s records and how many were decoded, or `None` where the file is not XML of inline
-/// arrays this reader handles (appended data, LZ4 or LZMA compression, base64 holding
-/// whitespace, malformed XML: the appended reader or vtkio read it).
+/// arrays this reader handles (appended data, base64 holding whitespace, malformed XML: the
+/// appended reader or vtkio read it).
 pub(super) fn read(
     at: At<'_>,
     selection: &AttributeSelection,
@@ -69,7 +69,7 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
     let mut header = Header {
         big_endian: false,
         int_bytes: 4,
-        zlib: false,
+        compressor: None,
         pieces: Vec::new(),
         data_start: 0,
         base64: true,
