@@ -863,6 +863,228 @@ fn legacy_binary_vtk_is_read_by_the_rows_of_each_block() {
     }
 }
 
+/// What VTK 9 writes after its points and after an array of information keys: a METADATA
+/// block of INFORMATION lines, ended by an empty line.
+const LEGACY_METADATA: &str = "METADATA\nINFORMATION 2\nNAME L2_NORM_RANGE LOCATION vtkDataArray\n\
+     DATA 2 0.865742 1.73177\nNAME L2_NORM_FINITE_RANGE LOCATION vtkDataArray\n\
+     DATA 2 0.865742 1.73177\n\n";
+
+/// Writes [`particle`]s `0..n` as VTK's legacy writer does, ascii (9 values a line, doubles of
+/// 17 digits) or binary (big-endian): poly data, POINTS double and a METADATA block, VTK 5.1's
+/// VERTICES, a CELL_DATA (before POINT_DATA where `cells_first`, else after it) of SCALARS,
+/// COLOR_SCALARS and TENSORS, and POINT_DATA of SCALARS float (its LOOKUP_TABLE named, a
+/// METADATA block after its values), COLOR_SCALARS of 3 (ascii: floats; binary: unsigned
+/// char), TENSORS double, TEXTURE_COORDINATES of 2 float, and a LOOKUP_TABLE `table` of
+/// `table_size` colours (4 values each: ascii floats, binary unsigned char). Each block ends
+/// with a line end.
+fn write_legacy_sections(path: &Path, n: usize, ascii: bool, cells_first: bool, table_size: usize) {
+    let rows: Vec<_> = (0..n).map(particle).collect();
+    let mut out = format!(
+        "# vtk DataFile Version 5.1\nvtk output\n{}\nDATASET POLYDATA\nPOINTS {n} double\n",
+        if ascii { "ASCII" } else { "BINARY" }
+    )
+    .into_bytes();
+    // Values of a VTK type: ascii 9 a line, binary big-endian bytes.
+    let block = |out: &mut Vec<u8>, ty: &str, values: Vec<f64>| {
+        if ascii {
+            for (i, v) in values.iter().enumerate() {
+                let text = match ty {
+                    "double" => format!("{v:.16e}"),
+                    "float" => format!("{:?}", *v as f32),
+                    _ => format!("{}", *v as i64),
+                };
+                out.extend(text.into_bytes());
+                out.push(if i % 9 == 8 { b'\n' } else { b' ' });
+            }
+        } else {
+            for &v in &values {
+                match ty {
+                    "double" => out.extend(v.to_be_bytes()),
+                    "float" => out.extend((v as f32).to_be_bytes()),
+                    "int" => out.extend((v as i32).to_be_bytes()),
+                    "vtktypeint64" => out.extend((v as i64).to_be_bytes()),
+                    "unsigned_char" => out.push(v as u8),
+                    _ => unreachable!(),
+                }
+            }
+        }
+        out.push(b'\n');
+    };
+    // Colours: ascii floats in [0, 1], binary bytes.
+    let colour_type = if ascii { "float" } else { "unsigned_char" };
+    let colour = |g: usize, c: usize| {
+        let byte = ((g * 7 + c * 31) % 256) as f64;
+        if ascii { byte / 255.0 } else { byte }
+    };
+    block(&mut out, "double", rows.iter().flat_map(|p| p.0).collect());
+    out.extend(LEGACY_METADATA.as_bytes());
+    out.extend(format!("VERTICES {} {n}\nOFFSETS vtktypeint64\n", n + 1).into_bytes());
+    block(
+        &mut out,
+        "vtktypeint64",
+        (0..=n).map(|i| i as f64).collect(),
+    );
+    out.extend(b"CONNECTIVITY vtktypeint64\n");
+    block(&mut out, "vtktypeint64", (0..n).map(|i| i as f64).collect());
+    let cell_data = |out: &mut Vec<u8>| {
+        out.extend(
+            format!("CELL_DATA {n}\nSCALARS cell_id int 1\nLOOKUP_TABLE default\n").into_bytes(),
+        );
+        block(out, "int", (0..n).map(|i| i as f64).collect());
+        out.extend(b"COLOR_SCALARS cell_rgba 4\n");
+        block(
+            out,
+            colour_type,
+            (0..4 * n).map(|k| colour(k / 4, k % 4)).collect(),
+        );
+        out.extend(b"TENSORS cell_stress float\n");
+        block(out, "float", (0..9 * n).map(|k| k as f64 * 0.25).collect());
+    };
+    if cells_first {
+        cell_data(&mut out);
+    }
+    out.extend(
+        format!("POINT_DATA {n}\nSCALARS density float 1\nLOOKUP_TABLE table\n").into_bytes(),
+    );
+    // vtkio reads no NaN in ascii: rho's becomes 0.5 there.
+    let rho = |p: &Particle| {
+        if ascii && p.1.is_nan() {
+            0.5
+        } else {
+            p.1 as f64
+        }
+    };
+    block(&mut out, "float", rows.iter().map(rho).collect());
+    out.extend(LEGACY_METADATA.as_bytes());
+    out.extend(b"COLOR_SCALARS rgb 3\n");
+    block(
+        &mut out,
+        colour_type,
+        (0..3 * n).map(|k| colour(k / 3, k % 3)).collect(),
+    );
+    out.extend(b"TENSORS stress double\n");
+    block(
+        &mut out,
+        "double",
+        (0..9 * n)
+            .map(|k| rows[k / 9].2 * (k % 9) as f64 - 1e-3)
+            .collect(),
+    );
+    out.extend(b"TEXTURE_COORDINATES uv 2 float\n");
+    block(
+        &mut out,
+        "float",
+        (0..2 * n).map(|k| rows[k / 2].4[k % 2] as f64).collect(),
+    );
+    out.extend(format!("LOOKUP_TABLE table {table_size}\n").into_bytes());
+    block(
+        &mut out,
+        colour_type,
+        (0..4 * table_size).map(|k| colour(k / 4, k % 4)).collect(),
+    );
+    if !cells_first {
+        cell_data(&mut out);
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+/// The attributes of [`write_legacy_sections`]'s point data, as the whole read (vtkio's) names
+/// them, the lookup table's where it has a colour a point.
+fn legacy_section_names(table: bool) -> Vec<String> {
+    let mut names = vec!["density".to_owned()];
+    names.extend(["rgb_x", "rgb_y", "rgb_z", "rgb_magnitude"].map(String::from));
+    names.extend((0..9).map(|i| format!("stress_{i}")));
+    names.extend(["uv_0", "uv_1"].map(String::from));
+    if table {
+        names.extend((0..4).map(|i| format!("table_{i}")));
+    }
+    names
+}
+
+/// Legacy files of every section VTK writes (COLOR_SCALARS, TENSORS, TEXTURE_COORDINATES, a
+/// lookup table, METADATA blocks, CELL_DATA before or after POINT_DATA), ascii and binary, are
+/// read by rows: each part decodes exactly its share, and the parts joined are vtkio's whole
+/// read bit for bit, with its attributes in its order.
+#[test]
+fn legacy_vtk_of_every_section_vtk_writes_is_read_by_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1013;
+    for ascii in [false, true] {
+        for cells_first in [false, true] {
+            let path = dir
+                .path()
+                .join(format!("sections_{ascii}_{cells_first}.vtk"));
+            write_legacy_sections(&path, n, ascii, cells_first, n);
+            let step = the_step(&path);
+            let whole = io::read_step(&step, &AttributeSelection::All)
+                .unwrap_or_else(|e| panic!("ascii {ascii}, cells first {cells_first}: {e}"));
+            // Binary: rho's NaN dropped.
+            assert_eq!(whole.len(), if ascii { n } else { n - 1 });
+            assert_eq!(whole.attribute_names(), legacy_section_names(true));
+            check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
+            check_parts(
+                &step,
+                &only(&["stress_8", "rgb_magnitude"]),
+                n,
+                Bound::Exact,
+            );
+            check_parts(&step, &only(&["uv_1", "table_3"]), n, Bound::Exact);
+        }
+    }
+    // A lookup table of 7 colours, not one a point: kept, it is refused by the whole read and
+    // every part alike; left out, the rest is read by rows.
+    for ascii in [false, true] {
+        let path = dir.path().join(format!("table_{ascii}.vtk"));
+        write_legacy_sections(&path, n, ascii, false, 7);
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All)
+            .unwrap_err()
+            .to_string();
+        assert!(whole.contains("'table' has 28 values"), "{whole}");
+        for part in [Part::new(0, 1), Part::new(2, 3)] {
+            let err = io::read_step_part(&step, &AttributeSelection::All, part)
+                .unwrap_err()
+                .to_string();
+            assert_eq!(err, whole);
+        }
+        let names = legacy_section_names(false);
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        let whole = io::read_step(&step, &only(&names)).unwrap();
+        assert_eq!(whole.attribute_names(), legacy_section_names(false));
+        check_parts(&step, &only(&names), n, Bound::Exact);
+    }
+}
+
+/// A legacy section whose count runs past the end of the file is refused by a part, naming the
+/// file, the section and where it starts.
+#[test]
+fn a_legacy_section_running_past_the_end_is_named_by_a_part() {
+    let dir = tempfile::tempdir().unwrap();
+    for ascii in [false, true] {
+        let good = dir.path().join(format!("good_{ascii}.vtk"));
+        write_legacy_sections(&good, 101, ascii, false, 101);
+        let bytes = std::fs::read(&good).unwrap();
+        // Cut inside the tensors' values.
+        let word = b"TEXTURE_COORDINATES";
+        let at = bytes.windows(word.len()).position(|w| w == word).unwrap() - 40;
+        let path = dir.path().join(format!("cut_{ascii}.vtk"));
+        std::fs::write(&path, &bytes[..at]).unwrap();
+        let step = the_step(&path);
+        assert!(io::read_step(&step, &AttributeSelection::All).is_err());
+        for part in [Part::new(0, 2), Part::new(1, 2)] {
+            let err = io::read_step_part(&step, &AttributeSelection::All, part)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!("cut_{ascii}.vtk"))
+                    && err.contains("array 'stress' should hold 909 values")
+                    && err.contains("from byte"),
+                "{err}"
+            );
+        }
+    }
+}
+
 /// How [`write_inline`] writes a VTK XML file's inline arrays.
 #[derive(Clone, Copy, Debug)]
 struct Inline {
