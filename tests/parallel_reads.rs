@@ -1031,6 +1031,23 @@ fn legacy_vtk_of_every_section_vtk_writes_is_read_by_rows() {
             check_parts(&step, &only(&["uv_1", "table_3"]), n, Bound::Exact);
         }
     }
+    // The same sections in a structured grid (DIMENSIONS, no cells).
+    for ascii in [false, true] {
+        let poly = dir.path().join(format!("poly_{ascii}.vtk"));
+        write_legacy_sections(&poly, n, ascii, false, n);
+        let bytes = std::fs::read(&poly).unwrap();
+        let at = |word: &[u8]| bytes.windows(word.len()).position(|w| w == word).unwrap();
+        let mut grid = bytes[..at(b"DATASET")].to_vec();
+        grid.extend(format!("DATASET STRUCTURED_GRID\nDIMENSIONS {n} 1 1\n").into_bytes());
+        grid.extend(&bytes[at(b"POINTS")..at(b"VERTICES")]);
+        grid.extend(&bytes[at(b"POINT_DATA")..]);
+        let path = dir.path().join(format!("grid_{ascii}.vtk"));
+        std::fs::write(&path, grid).unwrap();
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All).unwrap();
+        assert_eq!(whole.attribute_names(), legacy_section_names(true));
+        check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
+    }
     // A lookup table of 7 colours, not one a point: kept, it is refused by the whole read and
     // every part alike; left out, the rest is read by rows.
     for ascii in [false, true] {
