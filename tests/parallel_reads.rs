@@ -743,6 +743,77 @@ fn a_bad_block_or_a_truncated_file_in_a_vtk_part_is_an_error_naming_the_file_and
     }
 }
 
+/// Rewrites [`write_appended`]'s uncompressed file of `pieces` (UInt32 sizes, little-endian)
+/// so that each piece's `points` and `pressure` are inline base64 arrays (`format="binary"`,
+/// their size and bytes one run), the other arrays still appended: a file mixing both.
+fn mix_inline(path: &Path, pieces: &[usize]) {
+    use base64::Engine;
+    let bytes = std::fs::read(path).unwrap();
+    let split = bytes
+        .windows(13)
+        .position(|w| w == b"<AppendedData")
+        .unwrap();
+    let mut xml = String::from_utf8(bytes[..split].to_vec()).unwrap();
+    let (mut cursor, mut first) = (0, 0);
+    for &n in pieces {
+        let rows: Vec<_> = (first..first + n).map(particle).collect();
+        first += n;
+        let points: Vec<f64> = rows.iter().flat_map(|p| p.0).collect();
+        let pressure: Vec<f64> = rows.iter().map(|p| p.2).collect();
+        for (name, components, values) in [("points", 3, points), ("pressure", 1, pressure)] {
+            let at = cursor + xml[cursor..].find(&format!("Name=\"{name}\"")).unwrap();
+            let start = xml[..at].rfind("<DataArray").unwrap();
+            let end = at + xml[at..].find("/>").unwrap() + 2;
+            let data: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+            let run = [(data.len() as u32).to_le_bytes().to_vec(), data].concat();
+            let tag = format!(
+                "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"{components}\" \
+                 format=\"binary\">\n{}\n</DataArray>",
+                base64::engine::general_purpose::STANDARD.encode(&run)
+            );
+            xml.replace_range(start..end, &tag);
+            cursor = start + tag.len();
+        }
+    }
+    let mut out = xml.into_bytes();
+    out.extend(&bytes[split..]);
+    std::fs::write(path, out).unwrap();
+}
+
+/// A file mixing inline arrays (the points, `pressure`) with appended ones, raw or base64, in
+/// pieces of unequal sizes: a part reads each kind by its rows, and the parts joined are
+/// vtkio's whole read bit for bit.
+#[test]
+fn vtk_xml_mixing_appended_and_inline_arrays_is_read_by_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let pieces = [997, 0, 1003];
+    for base64 in [false, true] {
+        let how = Appended {
+            header_bytes: 4,
+            big_endian: false,
+            base64,
+            zlib_block: None,
+            codec: Codec::Zlib,
+        };
+        let path = dir.path().join(format!("mixed_{base64}.vtu"));
+        write_appended(&path, &pieces, how, None);
+        mix_inline(&path, &pieces);
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All)
+            .unwrap_or_else(|e| panic!("base64 {base64}: {e}"));
+        assert_eq!(whole.len(), 1999, "rho's NaN dropped");
+        assert_eq!(whole.attribute_names(), particles_step(1).attribute_names());
+        check_parts(&step, &AttributeSelection::All, 2000, Bound::Exact);
+        check_parts(
+            &step,
+            &only(&["pressure", "velocity_z"]),
+            2000,
+            Bound::Exact,
+        );
+        check_parts(&step, &only(&["id"]), 2000, Bound::Exact);
+    }
+}
+
 /// Writes [`particle`]s `0..n` as VTK's legacy writer does in binary (big-endian): POINTS
 /// double, the cells (`modern`: VTK 5.1's OFFSETS and CONNECTIVITY of int64, else the older
 /// one list of int32; `grid`: an unstructured grid's CELLS and CELL_TYPES, else poly data's

@@ -23,7 +23,8 @@
 //!   rows before the part's stepped over by reading only their list counts (scalars and list
 //!   items stepped over by their size), then the part's rows decoded;
 //! - VTK XML of appended data (raw or base64, uncompressed or compressed: zlib, LZ4 or LZMA)
-//!   or of inline base64 arrays (`format="binary"`, likewise): the pieces' points in order are
+//!   or of inline base64 arrays (`format="binary"`, likewise), or of both mixed in one file:
+//!   the pieces' points in order are
 //!   the step's records; of each piece the part's rows, and of each array only their bytes,
 //!   base64 groups, or the compressed blocks that overlap them, read and decompressed (an
 //!   inline array is stepped over by the length its header gives; a whole step of inline
@@ -39,7 +40,7 @@
 //!   TEXTURE_COORDINATES, LOOKUP_TABLE, METADATA blocks, CELL_DATA before or after POINT_DATA)
 //!   are read so;
 //! - legacy VTK outside the layout VTK writes (`bit` arrays, a POINT_DATA or FIELD count other
-//!   than the points', ...), VTK XML mixing appended and inline arrays, or whose base64 holds
+//!   than the points', ...), VTK XML of a type name only vtkio knows, or whose base64 holds
 //!   whitespace: read whole and sliced, with a warning once per format that says why (vtkio
 //!   alone reads them).
 //!
