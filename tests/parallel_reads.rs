@@ -295,8 +295,10 @@ struct Appended {
     big_endian: bool,
     /// Base64 text (VTK's `EncodeAppendedData`), else raw bytes after the `_`.
     base64: bool,
-    /// zlib-compressed in blocks of this many bytes, else uncompressed.
+    /// Compressed in blocks of this many bytes, else uncompressed.
     zlib_block: Option<usize>,
+    /// The compressor of those blocks.
+    codec: Codec,
 }
 
 /// A particle's position, `rho`, `pressure`, `id` and `velocity`.
@@ -352,25 +354,59 @@ fn particles_step(n: usize) -> Step {
 /// zlib, a header (blocks, block size, last block's size, each block's compressed size) and
 /// the blocks; base64, each of those runs encoded on its own. `corrupt`: an array's name and
 /// a block of it, in the first piece, whose compressed bytes are replaced by garbage.
-/// `data` as VTK's zlib compressor (and meshio) writes it in blocks of `size` bytes: the
-/// header (the block count, the block size, the last block's size, full or not, and each
-/// block's compressed size, each number written by `int`) and the compressed blocks, block
-/// `corrupt` overwritten with garbage.
+/// VTK's compressors: each writes the same header and blocks, each block in its own format.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Codec {
+    /// `vtkZLibDataCompressor`: a zlib stream a block.
+    Zlib,
+    /// `vtkLZ4DataCompressor`: LZ4's raw block format a block (`LZ4_compress_default`).
+    Lz4,
+    /// `vtkLZMADataCompressor`: an .xz stream a block (`lzma_easy_buffer_encode`, CRC64).
+    Lzma,
+}
+
+impl Codec {
+    /// Its `compressor` attribute.
+    fn attribute(self) -> &'static str {
+        match self {
+            Codec::Zlib => " compressor=\"vtkZLibDataCompressor\"",
+            Codec::Lz4 => " compressor=\"vtkLZ4DataCompressor\"",
+            Codec::Lzma => " compressor=\"vtkLZMADataCompressor\"",
+        }
+    }
+
+    /// One block compressed as VTK does.
+    fn compress(self, chunk: &[u8]) -> Vec<u8> {
+        use std::io::Write;
+        match self {
+            Codec::Zlib => {
+                let mut z =
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+                z.write_all(chunk).unwrap();
+                z.finish().unwrap()
+            }
+            Codec::Lz4 => lz4_flex::block::compress(chunk),
+            Codec::Lzma => {
+                let mut z = xz2::write::XzEncoder::new(Vec::new(), 6);
+                z.write_all(chunk).unwrap();
+                z.finish().unwrap()
+            }
+        }
+    }
+}
+
+/// `data` as VTK's compressors (and meshio) write it in blocks of `size` bytes: the header
+/// (the block count, the block size, the last block's size, full or not, and each block's
+/// compressed size, each number written by `int`) and the blocks, each compressed by `codec`,
+/// block `corrupt` overwritten with garbage.
 fn zlib_blocks(
     data: &[u8],
     size: usize,
+    codec: Codec,
     int: &dyn Fn(usize) -> Vec<u8>,
     corrupt: Option<usize>,
 ) -> (Vec<u8>, Vec<u8>) {
-    use std::io::Write;
-    let mut blocks: Vec<Vec<u8>> = data
-        .chunks(size)
-        .map(|chunk| {
-            let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
-            z.write_all(chunk).unwrap();
-            z.finish().unwrap()
-        })
-        .collect();
+    let mut blocks: Vec<Vec<u8>> = data.chunks(size).map(|c| codec.compress(c)).collect();
     if let Some(block) = corrupt {
         blocks[block].iter_mut().for_each(|b| *b = 0x5a);
     }
@@ -406,7 +442,7 @@ fn write_appended(path: &Path, pieces: &[usize], how: Appended, corrupt: Option<
             Some(size) => {
                 let bad =
                     corrupt.and_then(|(bad, block)| (bad == name && piece == 0).then_some(block));
-                let (head, blocks) = zlib_blocks(&data, size, &int, bad);
+                let (head, blocks) = zlib_blocks(&data, size, how.codec, &int, bad);
                 vec![head, blocks]
             }
         };
@@ -534,7 +570,7 @@ fn write_appended(path: &Path, pieces: &[usize], how: Appended, corrupt: Option<
             "UInt32"
         },
         if how.zlib_block.is_some() {
-            " compressor=\"vtkZLibDataCompressor\""
+            how.codec.attribute()
         } else {
             ""
         }
@@ -563,6 +599,7 @@ fn vtk_appended_data_of_several_pieces_is_read_by_the_rows_of_each_piece() {
         big_endian: false,
         base64: false,
         zlib_block: None,
+        codec: Codec::Zlib,
     };
     // pyevtk's (raw, UInt64 sizes); big-endian; VTK's base64 (each array one run); zlib in
     // blocks of 100 bytes, which split rows of 4, 8 and 12 bytes, raw and base64 (the
@@ -588,6 +625,30 @@ fn vtk_appended_data_of_several_pieces_is_read_by_the_rows_of_each_piece() {
             header_bytes: 8,
             base64: true,
             zlib_block: Some(100),
+            ..plain
+        },
+        // VTK's other compressors, raw and base64.
+        Appended {
+            zlib_block: Some(100),
+            codec: Codec::Lz4,
+            ..plain
+        },
+        Appended {
+            header_bytes: 8,
+            base64: true,
+            zlib_block: Some(100),
+            codec: Codec::Lz4,
+            ..plain
+        },
+        Appended {
+            zlib_block: Some(100),
+            codec: Codec::Lzma,
+            ..plain
+        },
+        Appended {
+            base64: true,
+            zlib_block: Some(1000),
+            codec: Codec::Lzma,
             ..plain
         },
     ];
@@ -625,28 +686,43 @@ fn a_bad_block_or_a_truncated_file_in_a_vtk_part_is_an_error_naming_the_file_and
         big_endian: false,
         base64: false,
         zlib_block: Some(100),
+        codec: Codec::Zlib,
     };
-    // pressure's block 40 is its bytes 4000..4100: the first piece's rows 500..512.
-    let path = dir.path().join("bad_block.vtu");
-    write_appended(&path, &[997, 1003], how, Some(("pressure", 40)));
-    let step = the_step(&path);
-    let selection = only(&["pressure"]);
-    for err in [
-        io::read_step(&step, &selection).unwrap_err(),
-        io::read_step_part(&step, &selection, Part::new(0, 2)).unwrap_err(),
-        io::read_step_part(&step, &selection, Part::new(1, 4)).unwrap_err(),
-    ] {
-        let err = err.to_string();
-        assert!(
-            err.contains("bad_block.vtu") && err.contains("'pressure' block 40"),
-            "{err}"
-        );
-    }
-    // The ranks whose rows lie in other blocks do not inflate that one.
-    for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
-        let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
-            .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
-        assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+    // pressure's block 40 is its bytes 4000..4100: the first piece's rows 500..512; each
+    // compressor's corrupt block named by the whole read and the parts that hold it (rank 1
+    // of 4 is a later part).
+    for codec in [Codec::Zlib, Codec::Lz4, Codec::Lzma] {
+        let how = Appended { codec, ..how };
+        let name = format!("bad_block_{codec:?}.vtu");
+        let path = dir.path().join(&name);
+        write_appended(&path, &[997, 1003], how, Some(("pressure", 40)));
+        let step = the_step(&path);
+        let selection = only(&["pressure"]);
+        for err in [
+            io::read_step(&step, &selection).unwrap_err(),
+            io::read_step_part(&step, &selection, Part::new(0, 2)).unwrap_err(),
+            io::read_step_part(&step, &selection, Part::new(1, 4)).unwrap_err(),
+        ] {
+            let err = err.to_string();
+            // The codec named too.
+            let codec_name = match codec {
+                Codec::Zlib => "zlib",
+                Codec::Lz4 => "LZ4",
+                Codec::Lzma => "LZMA",
+            };
+            assert!(
+                err.contains(&name)
+                    && err.contains("'pressure' block 40")
+                    && err.contains(&format!("its {codec_name} data")),
+                "{err}"
+            );
+        }
+        // The ranks whose rows lie in other blocks do not inflate that one.
+        for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
+            let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
+                .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
+            assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+        }
     }
     // Cut inside the second piece's arrays: every rank refuses (each array is checked to lie
     // in the file), naming the file.
@@ -664,6 +740,77 @@ fn a_bad_block_or_a_truncated_file_in_a_vtk_part_is_an_error_naming_the_file_and
             err.contains("cut.vtu") && err.contains("past the end of the file"),
             "{err}"
         );
+    }
+}
+
+/// Rewrites [`write_appended`]'s uncompressed file of `pieces` (UInt32 sizes, little-endian)
+/// so that each piece's `points` and `pressure` are inline base64 arrays (`format="binary"`,
+/// their size and bytes one run), the other arrays still appended: a file mixing both.
+fn mix_inline(path: &Path, pieces: &[usize]) {
+    use base64::Engine;
+    let bytes = std::fs::read(path).unwrap();
+    let split = bytes
+        .windows(13)
+        .position(|w| w == b"<AppendedData")
+        .unwrap();
+    let mut xml = String::from_utf8(bytes[..split].to_vec()).unwrap();
+    let (mut cursor, mut first) = (0, 0);
+    for &n in pieces {
+        let rows: Vec<_> = (first..first + n).map(particle).collect();
+        first += n;
+        let points: Vec<f64> = rows.iter().flat_map(|p| p.0).collect();
+        let pressure: Vec<f64> = rows.iter().map(|p| p.2).collect();
+        for (name, components, values) in [("points", 3, points), ("pressure", 1, pressure)] {
+            let at = cursor + xml[cursor..].find(&format!("Name=\"{name}\"")).unwrap();
+            let start = xml[..at].rfind("<DataArray").unwrap();
+            let end = at + xml[at..].find("/>").unwrap() + 2;
+            let data: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+            let run = [(data.len() as u32).to_le_bytes().to_vec(), data].concat();
+            let tag = format!(
+                "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"{components}\" \
+                 format=\"binary\">\n{}\n</DataArray>",
+                base64::engine::general_purpose::STANDARD.encode(&run)
+            );
+            xml.replace_range(start..end, &tag);
+            cursor = start + tag.len();
+        }
+    }
+    let mut out = xml.into_bytes();
+    out.extend(&bytes[split..]);
+    std::fs::write(path, out).unwrap();
+}
+
+/// A file mixing inline arrays (the points, `pressure`) with appended ones, raw or base64, in
+/// pieces of unequal sizes: a part reads each kind by its rows, and the parts joined are
+/// vtkio's whole read bit for bit.
+#[test]
+fn vtk_xml_mixing_appended_and_inline_arrays_is_read_by_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let pieces = [997, 0, 1003];
+    for base64 in [false, true] {
+        let how = Appended {
+            header_bytes: 4,
+            big_endian: false,
+            base64,
+            zlib_block: None,
+            codec: Codec::Zlib,
+        };
+        let path = dir.path().join(format!("mixed_{base64}.vtu"));
+        write_appended(&path, &pieces, how, None);
+        mix_inline(&path, &pieces);
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All)
+            .unwrap_or_else(|e| panic!("base64 {base64}: {e}"));
+        assert_eq!(whole.len(), 1999, "rho's NaN dropped");
+        assert_eq!(whole.attribute_names(), particles_step(1).attribute_names());
+        check_parts(&step, &AttributeSelection::All, 2000, Bound::Exact);
+        check_parts(
+            &step,
+            &only(&["pressure", "velocity_z"]),
+            2000,
+            Bound::Exact,
+        );
+        check_parts(&step, &only(&["id"]), 2000, Bound::Exact);
     }
 }
 
@@ -787,13 +934,254 @@ fn legacy_binary_vtk_is_read_by_the_rows_of_each_block() {
     }
 }
 
+/// What VTK 9 writes after its points and after an array of information keys: a METADATA
+/// block of INFORMATION lines, ended by an empty line.
+const LEGACY_METADATA: &str = "METADATA\nINFORMATION 2\nNAME L2_NORM_RANGE LOCATION vtkDataArray\n\
+     DATA 2 0.865742 1.73177\nNAME L2_NORM_FINITE_RANGE LOCATION vtkDataArray\n\
+     DATA 2 0.865742 1.73177\n\n";
+
+/// Writes [`particle`]s `0..n` as VTK's legacy writer does, ascii (9 values a line, doubles of
+/// 17 digits) or binary (big-endian): poly data, POINTS double and a METADATA block, VTK 5.1's
+/// VERTICES, a CELL_DATA (before POINT_DATA where `cells_first`, else after it) of SCALARS,
+/// COLOR_SCALARS and TENSORS, and POINT_DATA of SCALARS float (its LOOKUP_TABLE named, a
+/// METADATA block after its values), COLOR_SCALARS of 3 (ascii: floats; binary: unsigned
+/// char), TENSORS double, TEXTURE_COORDINATES of 2 float, and a LOOKUP_TABLE `table` of
+/// `table_size` colours (4 values each: ascii floats, binary unsigned char). Each block ends
+/// with a line end.
+fn write_legacy_sections(path: &Path, n: usize, ascii: bool, cells_first: bool, table_size: usize) {
+    let rows: Vec<_> = (0..n).map(particle).collect();
+    let mut out = format!(
+        "# vtk DataFile Version 5.1\nvtk output\n{}\nDATASET POLYDATA\nPOINTS {n} double\n",
+        if ascii { "ASCII" } else { "BINARY" }
+    )
+    .into_bytes();
+    // Values of a VTK type: ascii 9 a line, binary big-endian bytes.
+    let block = |out: &mut Vec<u8>, ty: &str, values: Vec<f64>| {
+        if ascii {
+            for (i, v) in values.iter().enumerate() {
+                let text = match ty {
+                    "double" => format!("{v:.16e}"),
+                    "float" => format!("{:?}", *v as f32),
+                    _ => format!("{}", *v as i64),
+                };
+                out.extend(text.into_bytes());
+                out.push(if i % 9 == 8 { b'\n' } else { b' ' });
+            }
+        } else {
+            for &v in &values {
+                match ty {
+                    "double" => out.extend(v.to_be_bytes()),
+                    "float" => out.extend((v as f32).to_be_bytes()),
+                    "int" => out.extend((v as i32).to_be_bytes()),
+                    "vtktypeint64" => out.extend((v as i64).to_be_bytes()),
+                    "unsigned_char" => out.push(v as u8),
+                    _ => unreachable!(),
+                }
+            }
+        }
+        out.push(b'\n');
+    };
+    // Colours: ascii floats in [0, 1], binary bytes.
+    let colour_type = if ascii { "float" } else { "unsigned_char" };
+    let colour = |g: usize, c: usize| {
+        let byte = ((g * 7 + c * 31) % 256) as f64;
+        if ascii { byte / 255.0 } else { byte }
+    };
+    block(&mut out, "double", rows.iter().flat_map(|p| p.0).collect());
+    out.extend(LEGACY_METADATA.as_bytes());
+    out.extend(format!("VERTICES {} {n}\nOFFSETS vtktypeint64\n", n + 1).into_bytes());
+    block(
+        &mut out,
+        "vtktypeint64",
+        (0..=n).map(|i| i as f64).collect(),
+    );
+    out.extend(b"CONNECTIVITY vtktypeint64\n");
+    block(&mut out, "vtktypeint64", (0..n).map(|i| i as f64).collect());
+    let cell_data = |out: &mut Vec<u8>| {
+        out.extend(
+            format!("CELL_DATA {n}\nSCALARS cell_id int 1\nLOOKUP_TABLE default\n").into_bytes(),
+        );
+        block(out, "int", (0..n).map(|i| i as f64).collect());
+        out.extend(b"COLOR_SCALARS cell_rgba 4\n");
+        block(
+            out,
+            colour_type,
+            (0..4 * n).map(|k| colour(k / 4, k % 4)).collect(),
+        );
+        out.extend(b"TENSORS cell_stress float\n");
+        block(out, "float", (0..9 * n).map(|k| k as f64 * 0.25).collect());
+    };
+    if cells_first {
+        cell_data(&mut out);
+    }
+    out.extend(
+        format!("POINT_DATA {n}\nSCALARS density float 1\nLOOKUP_TABLE table\n").into_bytes(),
+    );
+    // vtkio reads no NaN in ascii: rho's becomes 0.5 there.
+    let rho = |p: &Particle| {
+        if ascii && p.1.is_nan() {
+            0.5
+        } else {
+            p.1 as f64
+        }
+    };
+    block(&mut out, "float", rows.iter().map(rho).collect());
+    out.extend(LEGACY_METADATA.as_bytes());
+    out.extend(b"COLOR_SCALARS rgb 3\n");
+    block(
+        &mut out,
+        colour_type,
+        (0..3 * n).map(|k| colour(k / 3, k % 3)).collect(),
+    );
+    out.extend(b"TENSORS stress double\n");
+    block(
+        &mut out,
+        "double",
+        (0..9 * n)
+            .map(|k| rows[k / 9].2 * (k % 9) as f64 - 1e-3)
+            .collect(),
+    );
+    out.extend(b"TEXTURE_COORDINATES uv 2 float\n");
+    block(
+        &mut out,
+        "float",
+        (0..2 * n).map(|k| rows[k / 2].4[k % 2] as f64).collect(),
+    );
+    out.extend(format!("LOOKUP_TABLE table {table_size}\n").into_bytes());
+    block(
+        &mut out,
+        colour_type,
+        (0..4 * table_size).map(|k| colour(k / 4, k % 4)).collect(),
+    );
+    if !cells_first {
+        cell_data(&mut out);
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+/// The attributes of [`write_legacy_sections`]'s point data, as the whole read (vtkio's) names
+/// them, the lookup table's where it has a colour a point.
+fn legacy_section_names(table: bool) -> Vec<String> {
+    let mut names = vec!["density".to_owned()];
+    names.extend(["rgb_x", "rgb_y", "rgb_z", "rgb_magnitude"].map(String::from));
+    names.extend((0..9).map(|i| format!("stress_{i}")));
+    names.extend(["uv_0", "uv_1"].map(String::from));
+    if table {
+        names.extend((0..4).map(|i| format!("table_{i}")));
+    }
+    names
+}
+
+/// Legacy files of every section VTK writes (COLOR_SCALARS, TENSORS, TEXTURE_COORDINATES, a
+/// lookup table, METADATA blocks, CELL_DATA before or after POINT_DATA), ascii and binary, are
+/// read by rows: each part decodes exactly its share, and the parts joined are vtkio's whole
+/// read bit for bit, with its attributes in its order.
+#[test]
+fn legacy_vtk_of_every_section_vtk_writes_is_read_by_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 1013;
+    for ascii in [false, true] {
+        for cells_first in [false, true] {
+            let path = dir
+                .path()
+                .join(format!("sections_{ascii}_{cells_first}.vtk"));
+            write_legacy_sections(&path, n, ascii, cells_first, n);
+            let step = the_step(&path);
+            let whole = io::read_step(&step, &AttributeSelection::All)
+                .unwrap_or_else(|e| panic!("ascii {ascii}, cells first {cells_first}: {e}"));
+            // Binary: rho's NaN dropped.
+            assert_eq!(whole.len(), if ascii { n } else { n - 1 });
+            assert_eq!(whole.attribute_names(), legacy_section_names(true));
+            check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
+            check_parts(
+                &step,
+                &only(&["stress_8", "rgb_magnitude"]),
+                n,
+                Bound::Exact,
+            );
+            check_parts(&step, &only(&["uv_1", "table_3"]), n, Bound::Exact);
+        }
+    }
+    // The same sections in a structured grid (DIMENSIONS, no cells).
+    for ascii in [false, true] {
+        let poly = dir.path().join(format!("poly_{ascii}.vtk"));
+        write_legacy_sections(&poly, n, ascii, false, n);
+        let bytes = std::fs::read(&poly).unwrap();
+        let at = |word: &[u8]| bytes.windows(word.len()).position(|w| w == word).unwrap();
+        let mut grid = bytes[..at(b"DATASET")].to_vec();
+        grid.extend(format!("DATASET STRUCTURED_GRID\nDIMENSIONS {n} 1 1\n").into_bytes());
+        grid.extend(&bytes[at(b"POINTS")..at(b"VERTICES")]);
+        grid.extend(&bytes[at(b"POINT_DATA")..]);
+        let path = dir.path().join(format!("grid_{ascii}.vtk"));
+        std::fs::write(&path, grid).unwrap();
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All).unwrap();
+        assert_eq!(whole.attribute_names(), legacy_section_names(true));
+        check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
+    }
+    // A lookup table of 7 colours, not one a point: kept, it is refused by the whole read and
+    // every part alike; left out, the rest is read by rows.
+    for ascii in [false, true] {
+        let path = dir.path().join(format!("table_{ascii}.vtk"));
+        write_legacy_sections(&path, n, ascii, false, 7);
+        let step = the_step(&path);
+        let whole = io::read_step(&step, &AttributeSelection::All)
+            .unwrap_err()
+            .to_string();
+        assert!(whole.contains("'table' has 28 values"), "{whole}");
+        for part in [Part::new(0, 1), Part::new(2, 3)] {
+            let err = io::read_step_part(&step, &AttributeSelection::All, part)
+                .unwrap_err()
+                .to_string();
+            assert_eq!(err, whole);
+        }
+        let names = legacy_section_names(false);
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        let whole = io::read_step(&step, &only(&names)).unwrap();
+        assert_eq!(whole.attribute_names(), legacy_section_names(false));
+        check_parts(&step, &only(&names), n, Bound::Exact);
+    }
+}
+
+/// A legacy section whose count runs past the end of the file is refused by a part, naming the
+/// file, the section and where it starts.
+#[test]
+fn a_legacy_section_running_past_the_end_is_named_by_a_part() {
+    let dir = tempfile::tempdir().unwrap();
+    for ascii in [false, true] {
+        let good = dir.path().join(format!("good_{ascii}.vtk"));
+        write_legacy_sections(&good, 101, ascii, false, 101);
+        let bytes = std::fs::read(&good).unwrap();
+        // Cut inside the tensors' values.
+        let word = b"TEXTURE_COORDINATES";
+        let at = bytes.windows(word.len()).position(|w| w == word).unwrap() - 40;
+        let path = dir.path().join(format!("cut_{ascii}.vtk"));
+        std::fs::write(&path, &bytes[..at]).unwrap();
+        let step = the_step(&path);
+        assert!(io::read_step(&step, &AttributeSelection::All).is_err());
+        for part in [Part::new(0, 2), Part::new(1, 2)] {
+            let err = io::read_step_part(&step, &AttributeSelection::All, part)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!("cut_{ascii}.vtk"))
+                    && err.contains("array 'stress' should hold 909 values")
+                    && err.contains("from byte"),
+                "{err}"
+            );
+        }
+    }
+}
+
 /// How [`write_inline`] writes a VTK XML file's inline arrays.
 #[derive(Clone, Copy, Debug)]
 struct Inline {
     /// Bytes of a size integer: 4 (`UInt32`, VTK's) or 8 (`UInt64`, meshio's).
     header_bytes: usize,
-    /// zlib-compressed in blocks of this many bytes (meshio's and VTK's `compressor`).
+    /// Compressed in blocks of this many bytes (meshio's and VTK's `compressor`).
     zlib_block: Option<usize>,
+    /// The compressor of those blocks.
+    codec: Codec,
     /// `format="ascii"` with this many values a line, else `format="binary"` (base64).
     ascii: Option<usize>,
 }
@@ -858,7 +1246,7 @@ fn write_inline(path: &Path, pieces: &[usize], how: Inline, corrupt: Option<(&st
                     Some(size) => {
                         let bad = corrupt
                             .and_then(|(bad, block)| (bad == name && piece == 0).then_some(block));
-                        let (head, blocks) = zlib_blocks(&data, size, &int, bad);
+                        let (head, blocks) = zlib_blocks(&data, size, how.codec, &int, bad);
                         xml.push_str(&b64(&head));
                         xml.push_str(&b64(&blocks));
                     }
@@ -876,7 +1264,7 @@ fn write_inline(path: &Path, pieces: &[usize], how: Inline, corrupt: Option<(&st
             "UInt32"
         },
         if how.zlib_block.is_some() {
-            " compressor=\"vtkZLibDataCompressor\""
+            how.codec.attribute()
         } else {
             ""
         }
@@ -953,6 +1341,7 @@ fn vtk_inline_arrays_are_read_by_the_rows_of_each_piece() {
     let binary = Inline {
         header_bytes: 8,
         zlib_block: None,
+        codec: Codec::Zlib,
         ascii: None,
     };
     let kinds = [
@@ -968,6 +1357,18 @@ fn vtk_inline_arrays_are_read_by_the_rows_of_each_piece() {
         Inline {
             header_bytes: 4,
             zlib_block: Some(100),
+            ..binary
+        },
+        // VTK's other compressors (the whole step, vtkio's, decompresses them too).
+        Inline {
+            header_bytes: 4,
+            zlib_block: Some(100),
+            codec: Codec::Lz4,
+            ..binary
+        },
+        Inline {
+            zlib_block: Some(1000),
+            codec: Codec::Lzma,
             ..binary
         },
         Inline {
@@ -1032,6 +1433,7 @@ fn a_bad_value_block_or_cut_in_an_inline_vtk_part_is_an_error_naming_the_file_an
     let ascii = Inline {
         header_bytes: 4,
         zlib_block: None,
+        codec: Codec::Zlib,
         ascii: Some(6),
     };
     let good = dir.path().join("good.vtu");
@@ -1141,29 +1543,35 @@ fn a_bad_value_block_or_cut_in_an_inline_vtk_part_is_an_error_naming_the_file_an
     }
 
     // pressure's block 40 is its bytes 4000..4100: the first piece's rows 500..512.
-    let how = Inline {
-        header_bytes: 8,
-        zlib_block: Some(100),
-        ascii: None,
-    };
-    let path = dir.path().join("bad_block.vtu");
-    write_inline(&path, &[997, 1003], how, Some(("pressure", 40)));
-    let step = the_step(&path);
-    let selection = only(&["pressure"]);
-    for part in [Part::new(0, 2), Part::new(1, 4)] {
-        let err = io::read_step_part(&step, &selection, part)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("bad_block.vtu") && err.contains("'pressure' block 40"),
-            "{err}"
-        );
-    }
-    assert!(io::read_step(&step, &selection).is_err());
-    for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
-        let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
-            .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
-        assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+    // Each compressor's corrupt block, in a later part's rows, is named by the parts that
+    // hold it.
+    for codec in [Codec::Zlib, Codec::Lz4, Codec::Lzma] {
+        let how = Inline {
+            header_bytes: 8,
+            zlib_block: Some(100),
+            codec,
+            ascii: None,
+        };
+        let path = dir.path().join(format!("bad_block_{codec:?}.vtu"));
+        write_inline(&path, &[997, 1003], how, Some(("pressure", 40)));
+        let step = the_step(&path);
+        let selection = only(&["pressure"]);
+        for part in [Part::new(0, 2), Part::new(1, 4)] {
+            let err = io::read_step_part(&step, &selection, part)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!("bad_block_{codec:?}.vtu"))
+                    && err.contains("'pressure' block 40"),
+                "{err}"
+            );
+        }
+        assert!(io::read_step(&step, &selection).is_err());
+        for (rank, ranks) in [(1, 2), (0, 4), (2, 4)] {
+            let part = io::read_step_part(&step, &selection, Part::new(rank, ranks))
+                .unwrap_or_else(|e| panic!("rank {rank} of {ranks}: {e}"));
+            assert_eq!(part.decoded, Part::new(rank, ranks).range(2000).len());
+        }
     }
 }
 
@@ -2299,6 +2707,7 @@ fn inline_and_legacy_ascii_part_reads_timed() {
     let binary = Inline {
         header_bytes: 8,
         zlib_block: None,
+        codec: Codec::Zlib,
         ascii: None,
     };
     let mut files = Vec::new();

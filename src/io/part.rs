@@ -22,22 +22,27 @@
 //! - binary PLY with list properties (in the vertex element or in an element before it): the
 //!   rows before the part's stepped over by reading only their list counts (scalars and list
 //!   items stepped over by their size), then the part's rows decoded;
-//! - VTK XML of appended data (raw or base64, uncompressed or zlib) or of inline base64 arrays
-//!   (`format="binary"`, uncompressed or zlib): the pieces' points in order are the step's
-//!   records; of each piece the part's rows, and of each array only their bytes, base64
-//!   groups, or the zlib blocks that overlap them, read and inflated (an inline array is
-//!   stepped over by the length its header gives; a whole step of inline arrays is vtkio's);
+//! - VTK XML of appended data (raw or base64, uncompressed or compressed: zlib, LZ4 or LZMA)
+//!   or of inline base64 arrays (`format="binary"`, likewise), or of both mixed in one file:
+//!   the pieces' points in order are
+//!   the step's records; of each piece the part's rows, and of each array only their bytes,
+//!   base64 groups, or the compressed blocks that overlap them, read and decompressed (an
+//!   inline array is stepped over by the length its header gives; a whole step of inline
+//!   arrays is vtkio's);
 //! - VTK XML of inline ascii arrays and legacy ascii VTK: values are not one record a line, so
 //!   a part counts the values (whitespace-separated words, not parsed) from an array's start
 //!   to its rows and parses only its own; it scans the bytes before its rows (XML: every
 //!   ascii array whole, counting its values to check their number), but its memory is its
 //!   rows' (a whole step is vtkio's);
 //! - legacy binary VTK: the ascii lines between the binary blocks scanned, each block stepped
-//!   over by its size, only the part's rows decoded (a whole step is vtkio's);
-//! - legacy VTK with sections only vtkio reads (COLOR_SCALARS, TENSORS, METADATA, ...), VTK
-//!   XML compressed with LZ4 or LZMA, mixing appended and inline arrays, or whose base64
-//!   holds whitespace: read whole and sliced, with a warning once per format that says why
-//!   (vtkio alone reads them).
+//!   over by its size, only the part's rows decoded (a whole step is vtkio's); legacy files,
+//!   ascii or binary, of every section VTK writes (COLOR_SCALARS, TENSORS,
+//!   TEXTURE_COORDINATES, LOOKUP_TABLE, METADATA blocks, CELL_DATA before or after POINT_DATA)
+//!   are read so;
+//! - legacy VTK outside the layout VTK writes (`bit` arrays, a POINT_DATA or FIELD count other
+//!   than the points', ...), VTK XML of a type name only vtkio knows, or whose base64 holds
+//!   whitespace: read whole and sliced, with a warning once per format that says why (vtkio
+//!   alone reads them).
 //!
 //! A part goes through the same checks as a whole step ([`super::finish_step`]'s rule), except
 //! that it may be empty: the whole step's records are the parts' records, in rank order.

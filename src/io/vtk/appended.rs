@@ -1,13 +1,14 @@
 //! VTK XML files whose arrays are appended data — what VTK and ParaView write by default, raw or
 //! base64-encoded — read by offset: the XML before `<AppendedData>` is parsed for each array's
 //! type, components and offset, and only the point coordinates and the selected point-data
-//! arrays are read from the file (decoded, and inflated for zlib, VTK's default compressor);
+//! arrays are read from the file (decoded, and decompressed: zlib, VTK's default, LZ4 or LZMA);
 //! every other array is never read or decoded. A rank's part reads less still: only its rows
 //! of each piece, and of each array the bytes that hold them (raw), the base64 groups that
-//! hold them, or the zlib blocks that overlap them. The same reader reads a part of inline
+//! hold them, or the compressed blocks that overlap them (one [`Codec`] a file). The same reader reads a part of inline
 //! arrays ([`super::inline`] finds them: base64 arrays are the same runs as base64 appended
-//! data; ascii ones are counted and parsed by [`super::tokens`]). Files of another compressor
-//! go through vtkio ([`super`]), and so does a whole step of inline arrays. (vtkio 0.7.0-rc2
+//! data; ascii ones are counted and parsed by [`super::tokens`]). A compressor VTK does not
+//! write goes to vtkio ([`super`]), which refuses it, and a whole step of inline arrays is
+//! vtkio's. (vtkio 0.7.0-rc2
 //! panics on the base64 appended data VTK 9.7's writer makes of a million particles:
 //! `benches/peers/vtk_read.py`.)
 
@@ -77,12 +78,73 @@ pub(super) struct PieceDesc {
     pub(super) arrays: Vec<ArrayDesc>,
 }
 
+/// A VTK compressor: each array is the same header (block count, block size, last block's
+/// size, each block's compressed size) and blocks that decompress one by one, each as the
+/// codec's own format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Codec {
+    /// `vtkZLibDataCompressor`: each block a zlib stream (VTK's default).
+    ZLib,
+    /// `vtkLZ4DataCompressor`: each block LZ4's raw block format (`LZ4_compress_default`, no
+    /// frame).
+    Lz4,
+    /// `vtkLZMADataCompressor`: each block an .xz stream (`lzma_easy_buffer_encode`).
+    Lzma,
+}
+
+impl Codec {
+    /// The codec a `compressor` attribute names; `None` for one VTK does not write.
+    pub(super) fn parse(name: &str) -> Option<Self> {
+        Some(match name {
+            "vtkZLibDataCompressor" => Codec::ZLib,
+            "vtkLZ4DataCompressor" => Codec::Lz4,
+            "vtkLZMADataCompressor" => Codec::Lzma,
+            _ => return None,
+        })
+    }
+
+    /// Its name in messages.
+    fn name(self) -> &'static str {
+        match self {
+            Codec::ZLib => "zlib",
+            Codec::Lz4 => "LZ4",
+            Codec::Lzma => "LZMA",
+        }
+    }
+
+    /// What it does to a block, in messages (zlib's word is "inflate").
+    fn verb(self) -> &'static str {
+        match self {
+            Codec::ZLib => "inflate",
+            Codec::Lz4 | Codec::Lzma => "decompress",
+        }
+    }
+
+    /// Decompresses one block, `packed`, into `target`, which it must fill exactly.
+    fn unpack(self, packed: &[u8], target: &mut [u8]) -> Result<(), String> {
+        match self {
+            Codec::ZLib => flate2::read::ZlibDecoder::new(packed)
+                .read_exact(target)
+                .map_err(|e| e.to_string()),
+            Codec::Lz4 => match lz4_flex::block::decompress_into(packed, target) {
+                Ok(n) if n == target.len() => Ok(()),
+                Ok(n) => Err(format!("it holds {n} bytes")),
+                Err(e) => Err(e.to_string()),
+            },
+            Codec::Lzma => xz2::read::XzDecoder::new(packed)
+                .read_exact(target)
+                .map_err(|e| e.to_string()),
+        }
+    }
+}
+
 /// What the header says about the whole file.
 pub(super) struct Header {
     pub(super) big_endian: bool,
     /// Bytes of each size integer in an array's header (UInt32 or UInt64).
     pub(super) int_bytes: usize,
-    pub(super) zlib: bool,
+    /// The compressor of every array's blocks (`compressor="vtk...DataCompressor"`), if any.
+    pub(super) compressor: Option<Codec>,
     pub(super) pieces: Vec<PieceDesc>,
     /// Where the appended data starts (just after the `_`; 0 where there is none).
     pub(super) data_start: u64,
@@ -202,7 +264,7 @@ fn read_header(at: At<'_>, file: &mut File) -> Result<Option<Header>, DataError>
     let mut header = Header {
         big_endian: false,
         int_bytes: 4,
-        zlib: false,
+        compressor: None,
         pieces: Vec::new(),
         data_start: underscore as u64 + 1,
         base64,
@@ -339,12 +401,11 @@ pub(super) fn read_file_settings(e: &BytesStart<'_>, header: &mut Header) -> Opt
         Some("UInt32") | None => 4,
         Some(_) => return None,
     };
-    match attribute(e, b"compressor").as_deref() {
-        None | Some("") => {}
-        Some("vtkZLibDataCompressor") => header.zlib = true,
-        // LZ4 and LZMA: vtkio's.
-        Some(_) => return None,
-    }
+    header.compressor = match attribute(e, b"compressor").as_deref() {
+        None | Some("") => None,
+        // Another name: vtkio refuses it in its words.
+        Some(name) => Some(Codec::parse(name)?),
+    };
     Some(())
 }
 
@@ -565,7 +626,7 @@ impl<'a> ArrayReader<'a> {
             .checked_mul(row_bytes)
             .ok_or_else(|| self.at.malformed(format!("array '{name}' overflows")))?;
         // Checked before anything is allocated: a hostile header could declare terabytes.
-        let limit = if self.header.zlib {
+        let limit = if self.header.compressor.is_some() {
             self.file_len
                 .saturating_mul(super::MAX_INFLATION as u64)
                 .saturating_add(1 << 20)
@@ -583,7 +644,7 @@ impl<'a> ArrayReader<'a> {
         if rows.is_empty() {
             // Another part's rows: only checked to lie in the file, from the header (a
             // compressed array's block sizes are not read, so only its header's start).
-            let extent = if self.header.zlib {
+            let extent = if self.header.compressor.is_some() {
                 3 * w
             } else {
                 w + expected
@@ -593,8 +654,8 @@ impl<'a> ArrayReader<'a> {
         }
         // The rows' bytes in the uncompressed array (within `expected`: rows lie in 0..n).
         let wanted = rows.start as u64 * row_bytes..rows.end as u64 * row_bytes;
-        let data = if self.header.zlib {
-            self.inflated(array, n, expected, wanted)?
+        let data = if let Some(codec) = self.header.compressor {
+            self.inflated(array, codec, n, expected, wanted)?
         } else {
             let what = format!("array '{name}'s size");
             let (head, _) = self.run(array.offset, w, &what)?;
@@ -668,7 +729,7 @@ impl<'a> ArrayReader<'a> {
     pub(super) fn inline_extent(&mut self, pos: u64, what: &str) -> Result<u64, DataError> {
         (self.data_start, self.base64) = (0, true);
         let w = self.header.int_bytes as u64;
-        let end = if self.header.zlib {
+        let end = if self.header.compressor.is_some() {
             let (head, _) = self.run(pos, 3 * w, what)?;
             let blocks = self.ints(&head)[0];
             let header_len = blocks
@@ -693,12 +754,13 @@ impl<'a> ArrayReader<'a> {
         Ok(end - pos)
     }
 
-    /// Bytes `wanted` of a zlib-compressed array of `expected` bytes: its header read whole
-    /// (block count, block size, last block's size, each block's compressed size), then only
-    /// the blocks that overlap `wanted` read and inflated.
+    /// Bytes `wanted` of an array of `expected` bytes compressed by `codec`: its header read
+    /// whole (block count, block size, last block's size, each block's compressed size), then
+    /// only the blocks that overlap `wanted` read and decompressed.
     fn inflated(
         &mut self,
         array: &ArrayDesc,
+        codec: Codec,
         n: usize,
         expected: u64,
         wanted: Range<u64>,
@@ -760,11 +822,12 @@ impl<'a> ArrayReader<'a> {
                 let b = first + k;
                 let from = (starts[b] - base) as usize;
                 let to = (starts[b + 1] - base) as usize;
-                let mut inflater = flate2::read::ZlibDecoder::new(&packed[from..to]);
-                inflater.read_exact(target).map_err(|e| {
+                let len = target.len();
+                codec.unpack(&packed[from..to], target).map_err(|e| {
                     at.malformed(format!(
-                        "array '{name}' block {b}: cannot inflate its zlib data to {} bytes: {e}",
-                        target.len()
+                        "array '{name}' block {b}: cannot {} its {} data to {len} bytes: {e}",
+                        codec.verb(),
+                        codec.name()
                     ))
                 })
             })?;

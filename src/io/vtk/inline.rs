@@ -1,5 +1,7 @@
-//! A part of a VTK XML file whose arrays are inline in the XML (no `<AppendedData>`): meshio's
-//! writer, VTK's `SetDataModeToBinary` or `SetDataModeToAscii`, our own [`super::write_vtp`].
+//! A part of a VTK XML file whose arrays are inline in the XML: meshio's writer, VTK's
+//! `SetDataModeToBinary` or `SetDataModeToAscii`, our own [`super::write_vtp`]; and of a file
+//! mixing inline point arrays with appended ones (`format="appended"`, read by offset from the
+//! `<AppendedData>` that ends the XML, raw or base64, as [`super::appended`] reads them).
 //!
 //! The file is mapped and its XML walked for the pieces and their arrays; an array's values
 //! are then read as a part needs them:
@@ -29,8 +31,8 @@ use crate::io::mapped::Mapped;
 use crate::io::{At, AttributeSelection, Columns, DataError, Part};
 
 /// `part`'s records and how many were decoded, or `None` where the file is not XML of inline
-/// arrays this reader handles (appended data, LZ4 or LZMA compression, base64 holding
-/// whitespace, malformed XML: the appended reader or vtkio read it).
+/// arrays this reader handles (appended data alone, base64 holding whitespace, malformed XML:
+/// the appended reader or vtkio read it).
 pub(super) fn read(
     at: At<'_>,
     selection: &AttributeSelection,
@@ -69,7 +71,7 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
     let mut header = Header {
         big_endian: false,
         int_bytes: 4,
-        zlib: false,
+        compressor: None,
         pieces: Vec::new(),
         data_start: 0,
         base64: true,
@@ -102,6 +104,8 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
     }
     let mut inside = In::Other;
     let mut closed = false;
+    // Arrays of the appended data seen (a file mixing them with inline arrays), and inline ones.
+    let mut inline_arrays = false;
     // The XML is read from `base`; after a base64 array the walk starts again at its end tag.
     'walk: loop {
         let mut xml = quick_xml::Reader::from_reader(&bytes[base..]);
@@ -119,7 +123,26 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
             match event {
                 Event::Eof => break 'walk,
                 Event::Start(ref e) | Event::Empty(ref e) => match e.name().as_ref() {
-                    b"AppendedData" => return Ok(None),
+                    b"AppendedData" => {
+                        // Only appended arrays: the appended reader's. Mixed with inline ones:
+                        // the appended arrays are read from the data after its '_'.
+                        if !inline_arrays {
+                            return Ok(None);
+                        }
+                        header.base64 = match appended::attribute(e, b"encoding").as_deref() {
+                            Some("raw") => false,
+                            Some("base64") => true,
+                            _ => return Ok(None),
+                        };
+                        let Some(underscore) = super::find(bytes, b"_", here) else {
+                            return Ok(None);
+                        };
+                        header.data_start = underscore as u64 + 1;
+                        // The raw data that follows is no XML: what the header sizes is
+                        // checked to lie in the file as each array is read.
+                        closed = true;
+                        break 'walk;
+                    }
                     b"Piece" => header.pieces.push(appended::piece(at, e)?),
                     b"Points" => inside = In::Points,
                     b"PointData" => inside = In::PointData,
@@ -132,7 +155,14 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
                         let mut resume = None;
                         let empty = matches!(event, Event::Empty(_))
                             || bytes.get(after_space(bytes, here)) == Some(&b'<');
-                        let (offset, stored) = if empty {
+                        let appended = format.as_deref() == Some("appended");
+                        inline_arrays |= inside != In::Other && !appended;
+                        let (offset, stored) = if appended {
+                            let offset = appended::attribute(e, b"offset")
+                                .and_then(|v| v.trim().parse::<usize>().ok())
+                                .ok_or_else(|| at.malformed(format!("{what}: bad offset")))?;
+                            (offset, Stored::Appended)
+                        } else if empty {
                             // No values at all: an array of none.
                             (here, Stored::Ascii { end: here as u64 })
                         } else {

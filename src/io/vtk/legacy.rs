@@ -8,12 +8,20 @@
 //! should be is an error naming the block), and a part counts its way to its rows and parses
 //! only them ([`super::tokens`]): it scans the whole file, but parses and keeps its rows only.
 //!
-//! Only the sections vtkio reads the same way are understood (POINTS of float or double; the
-//! cell lists in either layout and CELL_TYPES; POINT_DATA and one CELL_DATA holding SCALARS,
-//! VECTORS, NORMALS and FIELD arrays of vtkio's types); a file holding anything else, or whose
-//! blocks do not fit in it, is left to vtkio (`None`), which reads it whole and reports what is
-//! wrong. A whole step is always read by vtkio, so a part here is cut from the same records,
-//! attribute names and order as [`super::read_whole_file`] gives.
+//! The sections are those vtkio reads: poly data, unstructured and structured grids; POINTS
+//! of float or double and the METADATA block VTK 9 writes after them; the cell lists in either
+//! layout and CELL_TYPES; POINT_DATA and a CELL_DATA before and after it, holding SCALARS
+//! (with their LOOKUP_TABLE line), COLOR_SCALARS (ascii floats, binary unsigned char),
+//! VECTORS, NORMALS, TENSORS (9 values a point), TEXTURE_COORDINATES, standalone LOOKUP_TABLEs
+//! (4 values a colour, floats or unsigned char) and FIELD arrays, each followed or not by a
+//! METADATA block (its lines up to an empty one, stepped over). Every point-data array is an
+//! attribute, as in the whole read; a lookup table of another size than the points is refused
+//! where selected, in the whole read's words. Cell data is stepped over. A block that runs past
+//! the end of the file is an error naming it and where it starts. A file holding anything else
+//! (`bit` arrays, a POINT_DATA or FIELD count other than the points', ...) is left to vtkio
+//! (`None`), which reads it whole or reports what is wrong. A whole step is always read by
+//! vtkio, so a part here is cut from the same records, attribute names and order as
+//! [`super::read_whole_file`] gives.
 
 use glam::DVec3;
 
@@ -32,6 +40,8 @@ struct Block {
     scalar: Scalar,
     components: usize,
     offset: usize,
+    /// Its tuples: the section's count, but a standalone LOOKUP_TABLE's own size.
+    tuples: usize,
 }
 
 /// The header lines' findings: the points and the point-data arrays, in file order.
@@ -79,6 +89,17 @@ pub(super) fn read(
         if !names.iter().any(|n| selection.keeps(n)) {
             skipped.extend(names);
             continue;
+        }
+        if array.tuples != layout.points {
+            // A lookup table of another size than the points: refused as the whole read
+            // refuses it, in its words.
+            return Err(at.malformed(format!(
+                "point-data array '{}' has {} values for {} points of {} components",
+                array.name,
+                array.tuples * array.components,
+                layout.points,
+                array.components
+            )));
         }
         attributes.extend(split_components(
             &array.name,
@@ -230,12 +251,55 @@ impl<'a> Scanner<'a> {
                 }
             };
         }
-        let end = count.checked_mul(size)?.checked_add(start)?;
-        if end > self.bytes.len() {
+        let end = count
+            .checked_mul(size)
+            .and_then(|len| len.checked_add(start))
+            .filter(|&end| end <= self.bytes.len());
+        let Some(end) = end else {
+            self.error = Some(format!(
+                "{what} should hold {count} values of {size} bytes from byte {start}, but the \
+                 file ends at byte {}",
+                self.bytes.len()
+            ));
             return None;
-        }
+        };
         self.pos = end;
         Some(start)
+    }
+
+    /// Steps over a METADATA block at the cursor, if one stands there (after whitespace): its
+    /// line, then lines up to an empty one or the file's end, as vtkio throws it away. `None`
+    /// for a line that does not end.
+    fn metadata(&mut self) -> Option<()> {
+        let mut probe = Scanner {
+            bytes: self.bytes,
+            pos: self.pos,
+            ascii: self.ascii,
+            error: None,
+        };
+        probe.skip_space();
+        if !probe.next_is("METADATA") {
+            return Some(());
+        }
+        self.pos = probe.pos;
+        if self.pos + "METADATA".len() == self.bytes.len() {
+            self.pos = self.bytes.len();
+            return Some(());
+        }
+        self.line()?;
+        loop {
+            let rest = &self.bytes[self.pos..];
+            if rest.is_empty() {
+                return Some(());
+            }
+            for end in [&b"\n"[..], b"\r\n"] {
+                if rest.starts_with(end) {
+                    self.pos += end.len();
+                    return Some(());
+                }
+            }
+            self.line()?;
+        }
     }
 
     /// A cell list's `n size` counts and its blocks: VTK 5's OFFSETS and CONNECTIVITY of
@@ -270,20 +334,29 @@ impl<'a> Scanner<'a> {
     }
 
     /// One attribute of `n` elements at the cursor (its keyword's line in `words`), into
-    /// `arrays`: SCALARS (with its optional lookup table line), VECTORS, NORMALS or FIELD.
+    /// `arrays`: SCALARS (with its optional lookup table line), COLOR_SCALARS, VECTORS,
+    /// NORMALS, TENSORS, TEXTURE_COORDINATES, a LOOKUP_TABLE or FIELD, each array with the
+    /// METADATA block that may follow it.
     fn attribute(&mut self, words: &[&str], n: usize, arrays: &mut Vec<Block>) -> Option<()> {
         let keyword = words.first()?.to_ascii_uppercase();
-        let mut add = |scanner: &mut Self, name: &str, scalar: Scalar, components: usize| {
-            let what = format!("array '{name}'");
-            let offset = scanner.block(n.checked_mul(components)?, scalar.size(), &what)?;
-            arrays.push(Block {
-                name: name.to_owned(),
-                scalar,
-                components,
-                offset,
-            });
-            Some(())
-        };
+        // An array of `tuples` tuples, and the METADATA block vtkio allows after it.
+        let mut add_of =
+            |scanner: &mut Self, name: &str, scalar: Scalar, components: usize, tuples: usize| {
+                let what = format!("array '{name}'");
+                let offset =
+                    scanner.block(tuples.checked_mul(components)?, scalar.size(), &what)?;
+                arrays.push(Block {
+                    name: name.to_owned(),
+                    scalar,
+                    components,
+                    offset,
+                    tuples,
+                });
+                scanner.metadata()
+            };
+        // Colours and lookup tables: floats in ascii, bytes in binary.
+        let colour = if self.ascii { Scalar::F32 } else { Scalar::U8 };
+        let positive = |text: &str| text.parse::<usize>().ok().filter(|&c| c > 0);
         match (keyword.as_str(), &words[1..]) {
             ("SCALARS", [name, kind, rest @ ..]) if rest.len() <= 1 => {
                 let components = match rest {
@@ -296,9 +369,18 @@ impl<'a> Scanner<'a> {
                         return None;
                     }
                 }
-                add(self, name, parse_scalar(kind)?, components)
+                add_of(self, name, parse_scalar(kind)?, components, n)
             }
-            ("VECTORS" | "NORMALS", [name, kind]) => add(self, name, parse_scalar(kind)?, 3),
+            ("VECTORS" | "NORMALS", [name, kind]) => add_of(self, name, parse_scalar(kind)?, 3, n),
+            ("TENSORS", [name, kind]) => add_of(self, name, parse_scalar(kind)?, 9, n),
+            ("COLOR_SCALARS", [name, components]) => {
+                add_of(self, name, colour, positive(components)?, n)
+            }
+            ("TEXTURE_COORDINATES", [name, dim, kind]) => {
+                add_of(self, name, parse_scalar(kind)?, positive(dim)?, n)
+            }
+            // A lookup table standing alone: `size` colours of 4 values, whatever the count.
+            ("LOOKUP_TABLE", [name, size]) => add_of(self, name, colour, 4, size.parse().ok()?),
             ("FIELD", [_, count]) => {
                 for _ in 0..count.parse::<usize>().ok()? {
                     self.skip_space();
@@ -311,7 +393,7 @@ impl<'a> Scanner<'a> {
                     if tuples.parse::<usize>().ok()? != n || name.eq_ignore_ascii_case("METADATA") {
                         return None;
                     }
-                    add(self, name, parse_scalar(kind)?, components)?;
+                    add_of(self, name, parse_scalar(kind)?, components, n)?;
                 }
                 Some(())
             }
@@ -356,12 +438,23 @@ fn scan_lines(s: &mut Scanner<'_>) -> Option<Layout> {
         _ => return None,
     };
     s.skip_space();
-    let grid = match s.line()?.as_slice() {
-        [dataset, kind] if is(dataset, "DATASET") && is(kind, "POLYDATA") => false,
-        [dataset, kind] if is(dataset, "DATASET") && is(kind, "UNSTRUCTURED_GRID") => true,
+    // Poly data, an unstructured grid (`grid`), or a structured grid (`structured`: its
+    // DIMENSIONS line, then the points and the data, without cells).
+    let (grid, structured) = match s.line()?.as_slice() {
+        [dataset, kind] if is(dataset, "DATASET") && is(kind, "POLYDATA") => (false, false),
+        [dataset, kind] if is(dataset, "DATASET") && is(kind, "UNSTRUCTURED_GRID") => (true, false),
+        [dataset, kind] if is(dataset, "DATASET") && is(kind, "STRUCTURED_GRID") => (false, true),
         _ => return None,
     };
     s.skip_space();
+    if structured {
+        match s.line()?.as_slice() {
+            [word, dims @ ..]
+                if is(word, "DIMENSIONS") && dims.len() == 3 && dims.iter().all(|d| number(d)) => {}
+            _ => return None,
+        }
+        s.skip_space();
+    }
     let line = s.line()?;
     let [word, count, kind] = line.as_slice() else {
         return None;
@@ -376,14 +469,19 @@ fn scan_lines(s: &mut Scanner<'_>) -> Option<Layout> {
         scalar,
         components: 3,
         offset: s.block(points.checked_mul(3)?, scalar.size(), "the POINTS")?,
+        tuples: points,
     };
+    // VTK 9 writes a METADATA block after the points (vtkio throws it away).
+    s.metadata()?;
     // What vtkio reads after the points: cell lists (an unstructured grid's CELLS, then its
     // CELL_TYPES), then one CELL_DATA and one POINT_DATA in either order.
     let mut arrays = Vec::new();
     let mut cell_arrays = Vec::new();
     // The section the cursor is in: its element count, and whether it is the points'.
     let mut section: Option<(usize, bool)> = None;
-    let (mut cells, mut cell_types, mut point_data, mut cell_data) = (false, false, false, false);
+    let (mut cells, mut cell_types, mut point_data) = (false, false, false);
+    // vtkio reads one CELL_DATA before POINT_DATA and one after (keeping the first's).
+    let (mut cell_data_before, mut cell_data_after) = (false, false);
     loop {
         s.skip_space();
         if s.pos == bytes.len() {
@@ -392,7 +490,9 @@ fn scan_lines(s: &mut Scanner<'_>) -> Option<Layout> {
         let line = s.line()?;
         let keyword = line.first()?.to_ascii_uppercase();
         match keyword.as_str() {
-            "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" if !grid && section.is_none() => {
+            "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS"
+                if !grid && !structured && section.is_none() =>
+            {
                 s.cells(&line)?
             }
             "CELLS" if grid && !cells => {
@@ -410,8 +510,10 @@ fn scan_lines(s: &mut Scanner<'_>) -> Option<Layout> {
                 let is_points = keyword == "POINT_DATA";
                 let seen = if is_points {
                     &mut point_data
+                } else if point_data {
+                    &mut cell_data_after
                 } else {
-                    &mut cell_data
+                    &mut cell_data_before
                 };
                 // vtkio checks point data's count against the points, in its words.
                 if *seen || (grid && !cell_types) || (is_points && n != points) {

@@ -6,9 +6,12 @@
 //! A rank's part is read by rows where the layout allows: appended data by offset
 //! ([`appended`]), inline base64 and ascii arrays ([`inline`]: base64 by the groups and zlib
 //! blocks that hold the rows; ascii by counting the values before the rows, [`tokens`]) and
-//! legacy binary and ascii files ([`legacy`]). What remains (legacy sections only vtkio reads;
-//! XML of LZ4 or LZMA, of appended and inline arrays mixed, or of base64 holding whitespace)
-//! is parsed whole by vtkio and cut, with a warning.
+//! legacy binary and ascii files ([`legacy`]: every section VTK writes). Compressed arrays are
+//! read by their blocks whatever VTK's compressor (zlib, LZ4, LZMA). What remains (legacy files
+//! outside the layout VTK writes, such as `bit` arrays or a POINT_DATA or FIELD count other
+//! than the points'; XML of base64 holding whitespace, which vtkio refuses, or of a type name
+//! these readers do not know) is parsed whole by vtkio and cut, with a warning. A file mixing
+//! appended and inline arrays is read by parts ([`inline`] locates both kinds).
 
 use std::path::Path;
 
@@ -71,11 +74,11 @@ pub(super) fn read_step(
     }
     // What is left is parsed whole by vtkio (and a part cut from it).
     let why = if legacy {
-        "legacy VTK with sections only vtkio reads (COLOR_SCALARS, TENSORS, METADATA, ...) is \
-         parsed whole by vtkio"
+        "legacy VTK outside the layout VTK writes (bit arrays, a POINT_DATA or FIELD count \
+         other than the points', ...) is parsed whole by vtkio"
     } else {
-        "XML of LZ4 or LZMA compression, of appended and inline arrays mixed, or of base64 text \
-         holding whitespace, is parsed whole by vtkio"
+        "XML of base64 text holding whitespace, or of a type name only vtkio knows, is parsed \
+         whole by vtkio"
     };
     let columns = read_whole_file(at, legacy, selection)?;
     let format = if legacy { Format::Vtk } else { Format::VtkXml };
