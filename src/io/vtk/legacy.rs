@@ -185,6 +185,19 @@ struct Scanner<'a> {
 }
 
 impl<'a> Scanner<'a> {
+    /// A copy of this scanner past the whitespace at its cursor: to look at the next word
+    /// without moving (take it by assigning it back).
+    fn past_space(&self) -> Scanner<'a> {
+        let mut probe = Scanner {
+            bytes: self.bytes,
+            pos: self.pos,
+            ascii: self.ascii,
+            error: None,
+        };
+        probe.skip_space();
+        probe
+    }
+
     /// Steps over spaces, tabs and line ends (what vtkio allows between sections).
     fn skip_space(&mut self) {
         while self
@@ -271,13 +284,7 @@ impl<'a> Scanner<'a> {
     /// line, then lines up to an empty one or the file's end, as vtkio throws it away. `None`
     /// for a line that does not end.
     fn metadata(&mut self) -> Option<()> {
-        let mut probe = Scanner {
-            bytes: self.bytes,
-            pos: self.pos,
-            ascii: self.ascii,
-            error: None,
-        };
-        probe.skip_space();
+        let probe = self.past_space();
         if !probe.next_is("METADATA") {
             return Some(());
         }
@@ -307,13 +314,7 @@ impl<'a> Scanner<'a> {
     fn cells(&mut self, words: &[&str]) -> Option<()> {
         let [_, n, size] = words else { return None };
         let (n, size): (usize, usize) = (n.parse().ok()?, size.parse().ok()?);
-        let mut probe = Scanner {
-            bytes: self.bytes,
-            pos: self.pos,
-            ascii: self.ascii,
-            error: None,
-        };
-        probe.skip_space();
+        let probe = self.past_space();
         if !probe.next_is("OFFSETS") {
             self.block(size, 4, &format!("{}'s cell list", words[0]))?;
             return Some(());
