@@ -155,6 +155,27 @@ pub(super) struct Header {
     pub(super) base64: bool,
 }
 
+impl Header {
+    /// Adds `desc` to the last piece: its points' coordinates where `points`, else a point-data
+    /// array.
+    pub(super) fn add_array(
+        &mut self,
+        at: At<'_>,
+        points: bool,
+        desc: ArrayDesc,
+    ) -> Result<(), DataError> {
+        let Some(piece) = self.pieces.last_mut() else {
+            return Err(at.malformed("a DataArray lies outside any <Piece>"));
+        };
+        if points {
+            piece.coordinates = Some(desc);
+        } else {
+            piece.arrays.push(desc);
+        }
+        Ok(())
+    }
+}
+
 /// Reads `part`'s records of the step by offset, and how many were decoded, or `None` where
 /// the file is not appended data this reader handles (vtkio reads it instead). The step's
 /// records are its pieces' points in order (pieces without points skipped): each piece gives
@@ -362,14 +383,7 @@ fn read_pieces(at: At<'_>, xml: &[u8], header: &mut Header) -> Result<Option<()>
                     let Some(desc) = read_array(at, &e)? else {
                         return Ok(None);
                     };
-                    let Some(piece) = header.pieces.last_mut() else {
-                        return Err(at.malformed("a DataArray lies outside any <Piece>"));
-                    };
-                    if inside == In::Points {
-                        piece.coordinates = Some(desc);
-                    } else {
-                        piece.arrays.push(desc);
-                    }
+                    header.add_array(at, inside == In::Points, desc)?;
                 }
                 _ => {}
             },

@@ -206,14 +206,7 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
                             else {
                                 return Ok(None);
                             };
-                            let Some(piece) = header.pieces.last_mut() else {
-                                return Err(at.malformed("a DataArray lies outside any <Piece>"));
-                            };
-                            if inside == In::Points {
-                                piece.coordinates = Some(desc);
-                            } else {
-                                piece.arrays.push(desc);
-                            }
+                            header.add_array(at, inside == In::Points, desc)?;
                         }
                         if let Some(close) = resume {
                             base = close;
