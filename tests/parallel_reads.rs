@@ -819,6 +819,26 @@ fn vtk_xml_mixing_appended_and_inline_arrays_is_read_by_rows() {
 /// one list of int32; `grid`: an unstructured grid's CELLS and CELL_TYPES, else poly data's
 /// VERTICES), CELL_DATA, then POINT_DATA with SCALARS float and its LOOKUP_TABLE, VECTORS
 /// double and a FIELD of an int and a double array, each block followed by a newline.
+/// A legacy file of `write_legacy_binary`'s or `write_legacy_ascii`'s arrays (`whole`, its
+/// step read whole): its attributes as vtkio names them, and every selection's parts exact.
+fn check_legacy_parts(step: &StepRef, whole: &Step, n: usize) {
+    assert_eq!(
+        whole.attribute_names(),
+        [
+            "density",
+            "velocity_x",
+            "velocity_y",
+            "velocity_z",
+            "velocity_magnitude",
+            "id",
+            "pressure"
+        ]
+    );
+    check_parts(step, &AttributeSelection::All, n, Bound::Exact);
+    check_parts(step, &only(&["velocity_magnitude"]), n, Bound::Exact);
+    check_parts(step, &only(&["pressure", "density"]), n, Bound::Exact);
+}
+
 fn write_legacy_binary(path: &Path, n: usize, grid: bool, modern: bool) {
     let rows: Vec<_> = (0..n).map(particle).collect();
     let version = if modern { "5.1" } else { "4.2" };
@@ -916,21 +936,7 @@ fn legacy_binary_vtk_is_read_by_the_rows_of_each_block() {
         let whole = io::read_step(&step, &AttributeSelection::All)
             .unwrap_or_else(|e| panic!("grid {grid}, modern {modern}: {e}"));
         assert_eq!(whole.len(), n - 1, "rho's NaN dropped");
-        assert_eq!(
-            whole.attribute_names(),
-            [
-                "density",
-                "velocity_x",
-                "velocity_y",
-                "velocity_z",
-                "velocity_magnitude",
-                "id",
-                "pressure"
-            ]
-        );
-        check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
-        check_parts(&step, &only(&["velocity_magnitude"]), n, Bound::Exact);
-        check_parts(&step, &only(&["pressure", "density"]), n, Bound::Exact);
+        check_legacy_parts(&step, &whole, n);
     }
 }
 
@@ -1642,21 +1648,7 @@ fn legacy_ascii_vtk_is_read_by_counting_to_the_rows_of_each_section() {
         let whole = io::read_step(&step, &AttributeSelection::All)
             .unwrap_or_else(|e| panic!("{per_line} a line, modern {modern}: {e}"));
         assert_eq!(whole.len(), n);
-        assert_eq!(
-            whole.attribute_names(),
-            [
-                "density",
-                "velocity_x",
-                "velocity_y",
-                "velocity_z",
-                "velocity_magnitude",
-                "id",
-                "pressure"
-            ]
-        );
-        check_parts(&step, &AttributeSelection::All, n, Bound::Exact);
-        check_parts(&step, &only(&["velocity_magnitude"]), n, Bound::Exact);
-        check_parts(&step, &only(&["pressure", "density"]), n, Bound::Exact);
+        check_legacy_parts(&step, &whole, n);
     }
 }
 

@@ -334,6 +334,15 @@ pub(super) fn attribute(e: &BytesStart<'_>, key: &[u8]) -> Option<String> {
         .and_then(|a| a.unescape_value().ok().map(|v| v.into_owned()))
 }
 
+/// Where an XML reader stands in a piece: its points, its point data, or elsewhere (cells'
+/// and field arrays, which are not the particles' and are skipped).
+#[derive(PartialEq)]
+pub(super) enum In {
+    Other,
+    Points,
+    PointData,
+}
+
 /// A `<Piece>` of `NumberOfPoints` points, its arrays to come.
 pub(super) fn piece(at: At<'_>, e: &BytesStart<'_>) -> Result<PieceDesc, DataError> {
     let points = attribute(e, b"NumberOfPoints")
@@ -352,12 +361,6 @@ fn read_pieces(at: At<'_>, xml: &[u8], header: &mut Header) -> Result<Option<()>
     xml.config_mut().check_end_names = false;
     // Where we are: in <Points> or <PointData> of the current piece (other arrays, such as
     // cells', are not particles' and are skipped).
-    #[derive(PartialEq)]
-    enum In {
-        Other,
-        Points,
-        PointData,
-    }
     let mut inside = In::Other;
     let mut buffer = Vec::new();
     loop {

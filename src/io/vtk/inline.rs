@@ -26,7 +26,7 @@ use std::fs::File;
 use quick_xml::events::Event;
 use quick_xml::name::QName;
 
-use super::appended::{self, ArrayReader, Header, Stored};
+use super::appended::{self, ArrayReader, Header, In, Stored};
 use crate::io::mapped::Mapped;
 use crate::io::{At, AttributeSelection, Columns, DataError, Part};
 
@@ -96,12 +96,6 @@ fn walk(at: At<'_>, bytes: &[u8], file: &File) -> Result<Option<Header>, DataErr
     };
     let file = file.try_clone().map_err(|e| at.io(e))?;
     let mut extents = ArrayReader::new(at, file, &settings, None)?;
-    #[derive(PartialEq)]
-    enum In {
-        Other,
-        Points,
-        PointData,
-    }
     let mut inside = In::Other;
     let mut closed = false;
     // Arrays of the appended data seen (a file mixing them with inline arrays), and inline ones.
