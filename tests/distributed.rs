@@ -203,6 +203,118 @@ fn emission_absorption_with_termination_stays_within_the_threshold() {
     }
 }
 
+/// A brick wholly behind an opaque one renders nothing: a dense slab in front of the camera
+/// and a cloud behind it of as many particles, split between two ranks at the gap. Emission–absorption's occluding
+/// pass gives the cloud's brick the slab's depth, and under the opacity threshold its rays end
+/// before their first sample: its layer is all `[0, 0, 0, 1]`, so it sends rank 0 (which owns
+/// the image's one tile) nothing (and, last in view order, no depth either). Without early termination it renders the cloud, which the
+/// composite then hides. Both images are the single rank's (within the threshold's remainder).
+#[test]
+fn a_brick_behind_an_opaque_one_renders_nothing() {
+    // A fixed quasi-random fill (R3 sequence) of a box.
+    let alpha = [
+        0.819_172_513_396_164_4,
+        0.671_043_606_703_789_2,
+        0.549_700_477_901_970_4,
+    ];
+    let fill = |n: usize, lo: DVec3, hi: DVec3| -> Vec<DVec3> {
+        (0..n)
+            .map(|i| {
+                lo + (hi - lo) * DVec3::from_array(alpha.map(|a| (0.5 + a * i as f64).fract()))
+            })
+            .collect()
+    };
+    let mut positions = fill(4507, DVec3::ZERO, DVec3::new(0.15, 1.0, 1.0));
+    positions.extend(fill(
+        4507,
+        DVec3::new(0.85, 0.35, 0.35),
+        DVec3::new(1.0, 0.65, 0.65),
+    ));
+    let attribute = positions.iter().map(|p| p.y + 0.5 * p.z).collect();
+    let step = Step {
+        name: "slab and cloud".into(),
+        positions,
+        attributes: vec![aarbf::values::Attribute {
+            name: "a".into(),
+            values: attribute,
+        }],
+    };
+    let series = TimeSeries::from_steps(vec![step.clone()]);
+    let field = FieldSettings::new(Some("a"), 0.06);
+    let range = series.attribute("a").map(|a| (a.min, a.max));
+    let settings = RenderSettings {
+        width: 64,
+        height: 48,
+        camera: Some(Camera {
+            eye: DVec3::new(-2.0, 0.5, 0.5),
+            at: DVec3::splat(0.5),
+            up: DVec3::Y,
+            fovy: 20.0,
+        }),
+        ..RenderSettings::default()
+    };
+    let basis = FrameBasis {
+        bounds: series.bounds(),
+        max_count: series.max_count(),
+        periodic: false,
+        field: &field,
+        auto: AutoValues::of(&series, &field).unwrap(),
+    };
+    let scene = DistScene {
+        field: &field,
+        cluster: ClusterSize::new(4).unwrap(),
+        series_bounds: series.bounds(),
+        series_range: range,
+        precision: Precision::F64,
+        periodic: None,
+        shadows: DistShadows::default(),
+    };
+    for threshold in [0.99, 2.0] {
+        let mut frame = basis.frame_params(&settings, 0).unwrap();
+        frame.opacity_threshold = threshold;
+        // Dense enough that the slab is opaque along every pixel.
+        frame.density_scale *= 200.0;
+        let frames = [frame];
+        let mut single = CpuBackend::new();
+        single
+            .upload(&scene.step_input(&Arc::new(step.clone()), Precision::F64))
+            .unwrap();
+        single.build().unwrap();
+        single.render(&frames[0]).unwrap();
+        let want = single.mean_f64().unwrap();
+        assert!(
+            want.iter().all(|p| p[3] >= 0.99),
+            "the slab covers the image: least opacity {}",
+            want.iter().map(|p| p[3]).fold(1.0, f64::min)
+        );
+        let got = run_local(2, |comm| {
+            let local = slice_of(&step, comm.rank(), comm.size());
+            render_distributed(comm, &mut CpuBackend::new(), &local, &scene, &frames)
+        })
+        .unwrap()
+        .swap_remove(0)
+        .expect("rank 0 holds the image");
+        let diff = max_abs(&got.mean, &want);
+        let [front, behind] = [got.reports[0], got.reports[1]];
+        eprintln!(
+            "threshold {threshold}: max |distributed - single rank| {diff:.2e}; tile bytes sent \
+             {} in front, {} behind",
+            front.tile_bytes, behind.tile_bytes
+        );
+        assert_eq!(
+            (front.owned, behind.owned),
+            (4507, 4507),
+            "split at the gap"
+        );
+        assert!(diff <= 0.01, "threshold {threshold}: {diff:e}");
+        if threshold < 1.0 {
+            assert_eq!(behind.tile_bytes, 0, "the cloud's brick sends nothing");
+        } else {
+            assert!(behind.tile_bytes > 0, "the cloud's brick renders it");
+        }
+    }
+}
+
 fn distributed_shadowed(ranks: usize, frames: &[FrameParams], shadows: DistShadows) -> DistImage {
     let s = scene();
     let d = DistScene {

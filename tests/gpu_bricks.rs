@@ -202,16 +202,26 @@ fn brick_shares_match_the_cpu_backend(gpu: Gpu) {
         Integrator::SsReference,
     ] {
         let seed = rng.random_range(1..1000);
-        let frame = frame(integrator, size, seed);
+        let mut frame = frame(integrator, size, seed);
+        if integrator == Integrator::Ea {
+            // Early termination on, where the depth in front ends rays sooner.
+            frame.opacity_threshold = 0.99;
+        }
         let map = LightMap::new(frame.light_dir, frame.march_box(), 24);
         let mut worst = 0.0f64;
         let (mut over, mut values, mut lit) = (0, 0, 0);
         for (index, owned) in bricks(&frame, &mut rng).iter().enumerate() {
             let rect = rect(size.0, size.1, &mut rng);
-            // Stochastic marching: random depths in front (some past the free flight) and a
-            // random light prefix over the texels near the brick.
+            // Random depths in front: stochastic marching's (some past the free flight), and
+            // emission-absorption's bounds (some past the threshold's 4.6, where no sample is
+            // taken); and a random light prefix over the texels near the brick.
+            let deepest = if integrator == Integrator::Marching {
+                1.5
+            } else {
+                6.0
+            };
             let depth: Vec<f64> = (0..rect.len())
-                .map(|_| rng.random_range(0.0..1.5))
+                .map(|_| rng.random_range(0.0..deepest))
                 .collect();
             let near = map.texels_near(owned.clipped_to(frame.march_box()));
             let prefix = LightPrefix {
@@ -225,7 +235,7 @@ fn brick_shares_match_the_cpu_backend(gpu: Gpu) {
                 owned,
                 rect,
                 index: index as u32,
-                depth_in_front: (integrator == Integrator::Marching).then_some(&depth[..]),
+                depth_in_front: Some(&depth[..]),
                 light: (integrator != Integrator::Ea).then_some(&prefix),
             };
             let want = cpu.render_owned(&frame, &share).unwrap();
@@ -269,6 +279,13 @@ fn owned_depths_match_the_cpu_backend(gpu: Gpu) {
         (
             "primary",
             DepthRays::Primary(rect(size.0, size.1, &mut rng)),
+        ),
+        (
+            "occluding",
+            DepthRays::Occluding {
+                rect: rect(size.0, size.1, &mut rng),
+                stop_past: 1.2,
+            },
         ),
         ("light", DepthRays::Light(&map, rect(32, 32, &mut rng))),
     ] {

@@ -69,15 +69,17 @@ struct Marched {
 
 // The samples t_enter + (k + jitter) dt of the ray in [a, b) (with `owned_only`, in a brick,
 // only those its half-open box holds), composited front to back from transmittance 1 (with a
-// shadow ray each for the SS reference) and stopped at the opacity threshold; or, stochastic
-// marching, their optical depth added to `tau` until it passes `target_tau`, where the ray
-// scatters. The loop of march_packet (src/backend/cpu/integrators.rs), for a whole frame and
+// shadow ray each for the SS reference) and stopped where exp(-tau), at most the transmittance
+// in front (1 for a whole frame), times the ray's own falls to 1 - the opacity threshold; or,
+// stochastic marching, their optical depth added to `tau` until it passes `target_tau`, where
+// the ray scatters. The loop of march_packet (src/backend/cpu/integrators.rs), for a whole frame and
 // a brick alike.
 Marched march_samples(vec3 origin, vec3 dir, float t_enter, float a, float b, float jitter,
                       float shadow_jitter, float tau, float target_tau, bool owned_only) {
     bool scatter = INTEGRATOR == INTEGRATOR_SS_REFERENCE;
     bool stochastic = INTEGRATOR == INTEGRATOR_MARCHING;
     float dt = frame.box_min.w;
+    float front_transmittance = stochastic ? 1.0 : exp(-tau);
     Marched m = Marched(vec3(0.0), 1.0, false);
     for (float k = first_sample(t_enter, a, dt, jitter);; k += 1.0) {
         float t = t_enter + (k + jitter) * dt;
@@ -108,7 +110,7 @@ Marched march_samples(vec3 origin, vec3 dir, float t_enter, float a, float b, fl
         vec3 emitted = scatter ? scattered(at, s.rgb, shadow_jitter) : s.rgb;
         m.colour += m.transmittance * alpha * emitted;
         m.transmittance *= 1.0 - alpha;
-        if (1.0 - m.transmittance >= frame.box_max.w) {
+        if (1.0 - front_transmittance * m.transmittance >= frame.box_max.w) {
             break;
         }
     }
@@ -206,8 +208,11 @@ vec4 render_owned_pixel(uvec2 pixel) {
         float target_tau = stochastic ? -log(1.0 - random_number(pixel, 0u)) : 3.0e38;
         // Stochastic marching goes on from the depth of the bricks in front; past the
         // free-flight depth already, the ray scattered in front of this brick.
+        // Emission-absorption ends where the transmittance in front times its own falls to
+        // 1 - threshold; where that in front does, before its first sample.
         float tau = owned_depth_in_front(pixel);
-        if (!(tau <= target_tau)) {
+        bool ended_in_front = !stochastic && 1.0 - exp(-tau) >= frame.box_max.w;
+        if (!(tau <= target_tau) || ended_in_front) {
             return miss;
         }
         Marched m = march_samples(origin, dir, t_enter, a, b, jitter, shadow_jitter, tau,
@@ -253,7 +258,8 @@ vec4 render_owned_pixel(uvec2 pixel) {
 // The optical depth Σ sigma dt of the samples the brick owns along one ray of a depth pass:
 // the twin of depth_packet (with DepthRay::of) in src/backend/cpu/owned.rs. A primary ray
 // on stochastic marching's lattice (jitter dimension 1), stopped past its free-flight depth
-// (dimension 0); a light map texel's ray marched whole.
+// (dimension 0); an occluding primary ray on emission-absorption's (dimension 0), stopped past
+// brick.depth_stop.x; a light map texel's ray marched whole.
 float owned_depth_ray(uvec2 texel) {
     vec3 origin, dir;
     float jitter;
@@ -262,6 +268,10 @@ float owned_depth_ray(uvec2 texel) {
         primary_ray(texel, origin, dir);
         jitter = random_number(texel, 1u);
         stop_past = -log(1.0 - random_number(texel, 0u));
+    } else if (brick.task.x == OWNED_TASK_OCCLUDING_DEPTH) {
+        primary_ray(texel, origin, dir);
+        jitter = random_number(texel, 0u);
+        stop_past = brick.depth_stop.x;
     } else {
         // LightMap::texel_ray.
         float u = brick.light_u.w + (float(texel.x) + 0.5) * brick.light_texel.x;

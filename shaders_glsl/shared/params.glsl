@@ -71,4 +71,5 @@ struct Brick {
     vec4 light_v;      // xyz the rows' axis; w the map's least v
     vec4 light_dir;    // xyz towards the light; w unused
     vec4 light_texel;  // x, y a texel's width along u and v; zw unused
+    vec4 depth_stop;   // x the depth past which an occluding depth pass's rays stop; yzw unused
 };

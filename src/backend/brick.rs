@@ -167,8 +167,29 @@ pub enum DepthRays<'a> {
     /// each stopped once past its free-flight depth `-ln(1 - xi)` (a larger depth decides
     /// nothing more: the ray has scattered in this brick or before it).
     Primary(PixelRect),
+    /// The frame's primary rays of these pixels on emission–absorption's lattice (jitter
+    /// dimension 0), each stopped once past `stop_past`: the depth in front of a brick past
+    /// which every ray behind it is ended by the opacity threshold, so that a larger depth
+    /// decides nothing more. Distributed emission–absorption marches these on a coarse frame
+    /// to end the rays of the bricks behind opaque ones.
+    Occluding {
+        /// The pixels.
+        rect: PixelRect,
+        /// The depth past which a ray stops.
+        stop_past: f64,
+    },
     /// The light map's rays of these texels, on the frame's step, marched whole.
     Light(&'a LightMap, PixelRect),
+}
+
+impl DepthRays<'_> {
+    /// The pixels (texels) whose rays these are.
+    pub fn rect(&self) -> PixelRect {
+        match *self {
+            DepthRays::Primary(rect) | DepthRays::Occluding { rect, .. } => rect,
+            DepthRays::Light(_, rect) => rect,
+        }
+    }
 }
 
 /// A brick's share of a distributed frame: the samples its box holds, for the pixels its box
@@ -183,8 +204,13 @@ pub struct BrickShare<'a> {
     /// memoryless, so each brick tracks its own segment with independent numbers; brick 0
     /// draws the single rank's).
     pub index: u32,
-    /// Stochastic marching: per pixel of `rect`, the optical depth of the bricks a primary ray
-    /// meets before this one (the exclusive scan of [`DepthRays::Primary`]).
+    /// Per pixel of `rect`, the optical depth of the bricks a primary ray meets before this
+    /// one. Stochastic marching: that depth (the exclusive scan of [`DepthRays::Primary`]),
+    /// which the ray goes on from. Emission–absorption: at most that depth (from
+    /// [`DepthRays::Occluding`] on a coarse frame), so that `exp(-depth)` bounds the
+    /// transmittance in front from above: a ray ends where that bound times its own
+    /// transmittance falls to `1 - threshold` (never before the single rank's ray would end),
+    /// and is not marched at all where the bricks in front reach the threshold.
     pub depth_in_front: Option<&'a [f64]>,
     /// Shadows across bricks: the depth nearer the light. `None`: a shadow ray sees only its
     /// own brick (`--dist-shadows local`).

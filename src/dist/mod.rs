@@ -7,7 +7,10 @@
 //! 2. [`exchange::exchange`]: one all-to-all-v sends each particle to the rank owning its leaf,
 //!    and as a ghost to every rank whose leaf it reaches (the field's own radius rule);
 //! 3. each rank renders its brick: the frame's own sample lattice and noise, only the samples
-//!    whose points its leaf holds ([`crate::backend::Backend::render_owned`]);
+//!    whose points its leaf holds ([`crate::backend::Backend::render_owned`]), after a pass
+//!    that gives it the optical depth of the bricks in front where its rays need it
+//!    (stochastic marching's free flight; emission–absorption's early termination across
+//!    bricks, [`occlusion`]);
 //! 4. [`composite::direct_send`]: one all-to-all-v of the tiles each brick's screen rectangle
 //!    touches to their owners, blended in the leaves' front-to-back order;
 //! 5. one gather-v of the accumulated tiles to rank 0.
@@ -34,6 +37,7 @@ pub mod knn;
 pub mod local;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
+pub mod occlusion;
 pub mod order;
 mod render;
 pub mod scan;

@@ -10,6 +10,7 @@ use super::comm::{Comm, CommExt};
 use super::composite::{TileGrid, TileSums, assemble, direct_send, screen_rect};
 use super::exchange::{decompose, exchange};
 use super::kd::KdTree;
+use super::occlusion;
 use super::scan::exclusive_scan;
 use crate::accel::ClusterSize;
 use crate::backend::precision::PositionKind;
@@ -291,21 +292,33 @@ pub fn render_piloted(
     render_frames_on(comm, backend, &brick, scene, frames)
 }
 
-/// Stochastic marching's pass 1: the brick's optical depth along its pixels' primary rays
-/// (each stopped past its free-flight depth), and the exclusive scan of them in view order:
-/// per pixel of this brick's rectangle, the depth of the bricks in front. The march is timed
-/// as rendering, the scan as compositing.
-fn depth_in_front(
+/// A pass before a frame's render: this brick's optical depth along `rays` (the pixels of
+/// `rects[rank]`), and the exclusive scan of the bricks' depths in view order `order`: per
+/// pixel of that rectangle, the depth of the bricks in front. A brick that no brick behind it
+/// needs (no later rectangle meets its own) marches nothing. The march is timed as rendering,
+/// the scan as compositing.
+#[allow(clippy::too_many_arguments)]
+fn scanned_depth(
     comm: &dyn Comm,
     backend: &mut dyn Backend,
     frame: &FrameParams,
     leaf: &HalfOpenBox,
+    rays: DepthRays<'_>,
     order: &[usize],
     rects: &[PixelRect],
     report: &mut RankReport,
 ) -> Result<Vec<f64>, DistError> {
+    let me = comm.rank();
     let clock = StageClock::start();
-    let mine = backend.owned_depth(frame, leaf, DepthRays::Primary(rects[comm.rank()]))?;
+    let behind = order.iter().skip_while(|&&r| r != me).skip(1);
+    let mine = if behind
+        .into_iter()
+        .any(|&r| !rects[r].intersection(&rects[me]).is_empty())
+    {
+        backend.owned_depth(frame, leaf, rays)?
+    } else {
+        vec![0.0; rects[me].len()]
+    };
     let (wall, cpu) = clock.stop();
     report.render_seconds += wall;
     report.render_cpu_seconds += cpu;
@@ -316,6 +329,62 @@ fn depth_in_front(
     report.composite_seconds += wall;
     report.composite_cpu_seconds += cpu;
     Ok(scanned.sums)
+}
+
+/// The depth in front of this brick per pixel of `rects[rank]`, where the frame's bricks need
+/// it: stochastic marching's pass 1 (each primary ray's depth, stopped past its free-flight
+/// depth); emission–absorption's occluding pass, a bound from below of it from a coarse frame
+/// ([`occlusion`]; the bound's making is timed as compositing). `None` where no brick needs it.
+#[allow(clippy::too_many_arguments)]
+fn depth_in_front(
+    comm: &dyn Comm,
+    backend: &mut dyn Backend,
+    frame: &FrameParams,
+    tree: &KdTree,
+    leaf: &HalfOpenBox,
+    order: &[usize],
+    rects: &[PixelRect],
+    report: &mut RankReport,
+) -> Result<Option<Vec<f64>>, DistError> {
+    let me = comm.rank();
+    if frame.integrator == Integrator::Marching {
+        let rays = DepthRays::Primary(rects[me]);
+        return scanned_depth(comm, backend, frame, leaf, rays, order, rects, report).map(Some);
+    }
+    if !occlusion::needed(frame, comm.size()) {
+        return Ok(None);
+    }
+    let coarse = occlusion::coarse_frame(frame);
+    let coarse_rects = brick_rects(&coarse, tree);
+    let rays = DepthRays::Occluding {
+        rect: coarse_rects[me],
+        stop_past: occlusion::stop_depth(frame),
+    };
+    let scanned = scanned_depth(
+        comm,
+        backend,
+        &coarse,
+        leaf,
+        rays,
+        order,
+        &coarse_rects,
+        report,
+    )?;
+    let clock = StageClock::start();
+    let bound = occlusion::depth_bound(frame, rects[me], &coarse, coarse_rects[me], &scanned);
+    let (wall, cpu) = clock.stop();
+    report.composite_seconds += wall;
+    report.composite_cpu_seconds += cpu;
+    Ok(Some(bound))
+}
+
+/// Each leaf's pixels of `frame`: those whose rays can meet its part of the march box.
+fn brick_rects(frame: &FrameParams, tree: &KdTree) -> Vec<PixelRect> {
+    let march_box = frame.march_box();
+    tree.leaves()
+        .iter()
+        .map(|l| screen_rect(frame, l.clipped_to(march_box)))
+        .collect()
 }
 
 /// A mean image, rounded to f32 as a backend returns it.
@@ -529,27 +598,19 @@ pub fn render_frames_on(
             }
             _ => None,
         };
-        let march_box = frame.march_box();
-        let rects: Vec<PixelRect> = tree
-            .leaves()
-            .iter()
-            .map(|l| screen_rect(frame, l.clipped_to(march_box)))
-            .collect();
+        let rects = brick_rects(frame, tree);
         let rect = rects[comm.rank()];
         let order = tree.front_to_back(frame.camera.eye);
-        let depth_in_front = if frame.integrator == Integrator::Marching {
-            Some(depth_in_front(
-                comm,
-                backend,
-                frame,
-                &leaf,
-                &order,
-                &rects,
-                &mut report,
-            )?)
-        } else {
-            None
-        };
+        let depth_in_front = depth_in_front(
+            comm,
+            backend,
+            frame,
+            tree,
+            &leaf,
+            &order,
+            &rects,
+            &mut report,
+        )?;
 
         let clock = StageClock::start();
         let share = BrickShare {

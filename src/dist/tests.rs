@@ -193,7 +193,7 @@ impl FieldSampler for Recorder {
     }
 }
 
-fn frame(eye: DVec3, at: DVec3, march: Bounds, width: u32, height: u32) -> FrameParams {
+pub(super) fn frame(eye: DVec3, at: DVec3, march: Bounds, width: u32, height: u32) -> FrameParams {
     let camera = Camera {
         eye,
         at,

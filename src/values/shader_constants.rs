@@ -65,13 +65,15 @@ pub const SPLAT_K_MAX: u32 = 64;
 pub const LIGHT_MAP_SEED: u32 = 0x4C49_4748;
 
 /// What a brick kernel computes (`params.glsl`'s `Brick.task.x`): a brick's share of a frame
-/// (`Backend::render_owned`), or its optical depth along primary rays or light map rays
-/// (`Backend::owned_depth`).
+/// (`Backend::render_owned`), or its optical depth along primary rays (stochastic marching's,
+/// or emission–absorption's occluding rays) or light map rays (`Backend::owned_depth`).
 pub const OWNED_TASK_RENDER: u32 = 0;
 /// See [`OWNED_TASK_RENDER`].
 pub const OWNED_TASK_PRIMARY_DEPTH: u32 = 1;
 /// See [`OWNED_TASK_RENDER`].
 pub const OWNED_TASK_LIGHT_DEPTH: u32 = 2;
+/// See [`OWNED_TASK_RENDER`].
+pub const OWNED_TASK_OCCLUDING_DEPTH: u32 = 3;
 
 /// Keys per radix-sort tile (`shaders_wgsl/radix_sort.wgsl`) and digits per pass.
 pub const SORT_TILE: u32 = 4096;
@@ -227,6 +229,10 @@ fn unsigned() -> Vec<(&'static str, u64)> {
         ("OWNED_TASK_RENDER", OWNED_TASK_RENDER.into()),
         ("OWNED_TASK_PRIMARY_DEPTH", OWNED_TASK_PRIMARY_DEPTH.into()),
         ("OWNED_TASK_LIGHT_DEPTH", OWNED_TASK_LIGHT_DEPTH.into()),
+        (
+            "OWNED_TASK_OCCLUDING_DEPTH",
+            OWNED_TASK_OCCLUDING_DEPTH.into(),
+        ),
         ("SORT_TILE", SORT_TILE.into()),
         ("SORT_RADIX", SORT_RADIX.into()),
         ("HILBERT_BITS", HILBERT_BITS.into()),

@@ -319,7 +319,8 @@ pub fn render_pixels_with<F: FieldSampler>(
 /// every pixel's samples between them, each sample to one box, so compositing their values in
 /// the order a ray meets the boxes (`C = C_front + T_front C`, `T = T_front T`) gives the
 /// whole frame's emission–absorption up to rounding, and exactly its value for a box holding
-/// all of space. Early termination applies per box. Single scattering gives `[L, 0]` where
+/// all of space. Early termination applies per box, from the bound of the transmittance in
+/// front where the share gives a depth in front ([`BrickShare::depth_in_front`]). Single scattering gives `[L, 0]` where
 /// the pixel scatters in this brick and `[0, 0, 0, 1]` elsewhere: stochastic marching starts
 /// from the depth in front of the brick, delta tracking tracks the brick's segment, and
 /// shadow rays add the depth nearer the light ([`BrickShare`]).
@@ -399,9 +400,11 @@ struct MarchedRay {
     clear_where_empty: bool,
     samples: MarchSamples,
     shadow_jitter: f64,
-    /// Emission–absorption: the colour gathered and the transmittance so far.
+    /// Emission–absorption: the colour gathered and the transmittance so far, and at most
+    /// the transmittance of the bricks in front (1 for a whole frame).
     colour: [f64; 3],
     transmittance: f64,
+    front_transmittance: f64,
     /// Stochastic marching: the optical depth so far and the one it stops at.
     tau: f64,
     target_tau: f64,
@@ -436,8 +439,16 @@ impl MarchedRay {
         };
         // In a brick, stochastic marching goes on from the depth of the bricks in front; past
         // the free-flight depth already, the ray scattered in front of this brick.
+        // Emission–absorption ends where the transmittance in front times its own falls to
+        // 1 - threshold; where that in front does, before its first sample.
         let tau = brick.map_or(0.0, |b| b.depth_in_front(x, y));
-        (tau <= target_tau).then_some(MarchedRay {
+        let front_transmittance = if p.integrator == Integrator::Marching {
+            1.0
+        } else {
+            (-tau).exp()
+        };
+        let ended_in_front = brick.is_some() && 1.0 - front_transmittance >= p.opacity_threshold;
+        (tau <= target_tau && !ended_in_front).then_some(MarchedRay {
             origin,
             dir,
             clear_where_empty,
@@ -445,6 +456,7 @@ impl MarchedRay {
             shadow_jitter: p.random(x, y, 2),
             colour: [0.0; 3],
             transmittance: 1.0,
+            front_transmittance,
             tau,
             target_tau,
         })
@@ -574,7 +586,7 @@ fn march_packet<F: FieldSampler>(
                 *c += ray.transmittance * alpha * e;
             }
             ray.transmittance *= 1.0 - alpha;
-            if 1.0 - ray.transmittance >= p.opacity_threshold {
+            if 1.0 - ray.front_transmittance * ray.transmittance >= p.opacity_threshold {
                 out[i] = ray.finish(bg, brick);
                 rays[i] = None;
             }

@@ -39,10 +39,7 @@ pub(super) fn depth_rect<F: FieldSampler>(
     owned: &HalfOpenBox,
     rays: DepthRays<'_>,
 ) -> Vec<f64> {
-    let rect = match rays {
-        DepthRays::Primary(rect) | DepthRays::Light(_, rect) => rect,
-    };
-    in_packets(rect, 0.0, |scratch, pixels, values| {
+    in_packets(rays.rect(), 0.0, |scratch, pixels, values| {
         let mut specs = [DepthRay::default(); PACKET];
         for (spec, &(x, y)) in specs.iter_mut().zip(pixels) {
             *spec = DepthRay::of(frame, rays, x, y);
@@ -117,7 +114,8 @@ struct DepthRay {
 impl DepthRay {
     /// Pixel or texel `(x, y)` of `rays`: a primary ray on stochastic marching's lattice
     /// (jitter dimension 1) stopped past its free-flight depth (dimension 0), as
-    /// `MarchedRay::start` starts it; a light map ray marched whole.
+    /// `MarchedRay::start` starts it; an occluding ray on emission–absorption's (dimension 0)
+    /// stopped past its given depth; a light map ray marched whole.
     fn of(frame: &FrameParams, rays: DepthRays<'_>, x: u32, y: u32) -> DepthRay {
         match rays {
             DepthRays::Primary(_) => {
@@ -127,6 +125,15 @@ impl DepthRay {
                     origin,
                     dir,
                     jitter,
+                    stop_past,
+                }
+            }
+            DepthRays::Occluding { stop_past, .. } => {
+                let (origin, dir) = frame.primary_ray(x, y);
+                DepthRay {
+                    origin,
+                    dir,
+                    jitter: frame.random(x, y, 0),
                     stop_past,
                 }
             }

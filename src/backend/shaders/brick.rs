@@ -9,7 +9,7 @@ use glam::DVec3;
 use super::GpuFrame;
 use crate::backend::{BackendError, BrickShare, DepthRays};
 use crate::values::shader_constants::{
-    OWNED_TASK_LIGHT_DEPTH, OWNED_TASK_PRIMARY_DEPTH, OWNED_TASK_RENDER,
+    OWNED_TASK_LIGHT_DEPTH, OWNED_TASK_OCCLUDING_DEPTH, OWNED_TASK_PRIMARY_DEPTH, OWNED_TASK_RENDER,
 };
 use crate::values::{Bounds, FrameParams, HalfOpenBox, PixelRect};
 
@@ -48,6 +48,8 @@ pub struct GpuBrick {
     pub light_dir: [f32; 4],
     /// A texel's width along u and v; zw unused.
     pub light_texel: [f32; 4],
+    /// The depth past which an occluding depth pass's rays stop; yzw unused.
+    pub depth_stop: [f32; 4],
 }
 
 fn v4(v: DVec3) -> [f32; 4] {
@@ -130,6 +132,12 @@ impl BrickLaunch {
         let brick = match rays {
             DepthRays::Primary(rect) => {
                 GpuBrick::new(frame, owned, origin, rect, OWNED_TASK_PRIMARY_DEPTH)
+            }
+            DepthRays::Occluding { rect, stop_past } => {
+                let mut b = GpuBrick::new(frame, owned, origin, rect, OWNED_TASK_OCCLUDING_DEPTH);
+                // An f32 stop past the largest f32 is infinite: the ray is marched whole.
+                b.depth_stop[0] = stop_past as f32;
+                b
             }
             DepthRays::Light(map, rect) => {
                 let mut b = GpuBrick::new(frame, owned, origin, rect, OWNED_TASK_LIGHT_DEPTH);
