@@ -4,7 +4,8 @@
 //! brick's render work follows the samples its leaf holds: a leaf that reaches into empty
 //! space, or that the camera sees through its long side, renders more for the same
 //! particles (`docs/distributed.md`, "Scaling"). A [`CostModel`] keeps what renders
-//! measured: each leaf's render seconds per particle it owned, corrected by each later
+//! measured: each leaf's seconds (its render and its light map) per particle it owned,
+//! corrected by each later
 //! render's leaves. The next decomposition weights every sampled particle by its cost there,
 //! so the quantile splits cost instead of count. The image does not depend on the
 //! decomposition, only the time does.
@@ -19,8 +20,9 @@ pub enum Balance {
     /// The same number of particles in each leaf.
     #[default]
     Count,
-    /// The same measured render time in each leaf: a pilot render at a quarter of the size
-    /// measures each brick's time, and later images of a sequence reuse the last image's.
+    /// The same measured render time in each leaf: two pilot renders at a quarter of the size
+    /// measure each brick's time (the second balanced by the first), and each later image of
+    /// a sequence corrects the balance by the last image's.
     Cost,
 }
 
@@ -36,7 +38,14 @@ impl std::fmt::Display for Balance {
 /// The size of the pilot image that measures the cost of the first decomposition balanced
 /// by cost: a quarter of each side, a sixteenth of the samples.
 pub fn pilot_size(width: u32, height: u32) -> (u32, u32) {
-    (width.div_ceil(4), height.div_ceil(4))
+    (pilot_side(width), pilot_side(height))
+}
+
+/// A side of a pilot's image, or of its light map: a quarter of the image's (the map's), so
+/// that the pilot's light map is to its render what the image's is to the image's, and the
+/// measured cost of a brick weighs the two as the image will.
+pub fn pilot_side(side: u32) -> u32 {
+    side.div_ceil(4)
 }
 
 /// How many decompositions' measurements a [`CostModel`] keeps: each corrects the model the

@@ -95,21 +95,51 @@ pub fn depth_bound(
             0.0
         }
     };
-    // The least over each row's window, per column of `rect`, then over the rows' windows.
-    let columns: Vec<_> = (rect.x0..rect.x1)
-        .map(|x| window(x, frame.width, coarse.width))
+    // The windows of `rect`'s columns and rows, each distinct one once (they follow the
+    // pixels in order), and for each pixel which of them it takes.
+    let distinct = |range: std::ops::Range<u32>, fine: u32, coarse: u32| {
+        let mut windows: Vec<std::ops::RangeInclusive<i64>> = Vec::new();
+        let mut of = Vec::with_capacity(range.len());
+        for x in range {
+            let w = window(x, fine, coarse);
+            if windows.last() != Some(&w) {
+                windows.push(w);
+            }
+            of.push(windows.len() - 1);
+        }
+        (windows, of)
+    };
+    let (columns, column_of) = distinct(rect.x0..rect.x1, frame.width, coarse.width);
+    let (rows, row_of) = distinct(rect.y0..rect.y1, frame.height, coarse.height);
+    let Some(first_row) = rows.first().map(|r| *r.start()) else {
+        return Vec::new();
+    };
+    // The least over each column window, on every coarse row the row windows span; then over
+    // each row window: the bound of every pixel taking that pair of windows.
+    let across: Vec<Vec<f64>> = (first_row..=*rows.last().expect("not empty").end())
+        .map(|j| {
+            let row: Vec<f64> = columns
+                .iter()
+                .map(|c| c.clone().map(|i| at(i, j)).fold(f64::INFINITY, f64::min))
+                .collect();
+            row
+        })
+        .collect();
+    let least: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| {
+            (0..columns.len())
+                .map(|k| {
+                    r.clone()
+                        .map(|j| across[(j - first_row) as usize][k])
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .collect()
+        })
         .collect();
     let mut bound = Vec::with_capacity(rect.len());
-    for y in rect.y0..rect.y1 {
-        let rows = window(y, frame.height, coarse.height);
-        for columns in &columns {
-            let least = rows
-                .clone()
-                .flat_map(|j| columns.clone().map(move |i| (i, j)))
-                .map(|(i, j)| at(i, j))
-                .fold(f64::INFINITY, f64::min);
-            bound.push(DEPTH_MARGIN * least);
-        }
+    for &r in &row_of {
+        bound.extend(column_of.iter().map(|&k| DEPTH_MARGIN * least[r][k]));
     }
     bound
 }

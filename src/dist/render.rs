@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use super::DistError;
-use super::balance::CostModel;
+use super::balance::{CostModel, pilot_side};
 use super::clock::StageClock;
 use super::comm::{Comm, CommExt};
 use super::composite::{TileGrid, TileSums, assemble, direct_send, screen_rect};
@@ -292,10 +292,25 @@ pub fn render_piloted(
     check_frames(frames)?;
     let mut piloted: Option<CostModel> = None;
     if let Some(p) = pilot {
+        // The pilot's light map is to its render what the image's is to the image's.
+        let pilot_scene = DistScene {
+            shadows: match scene.shadows {
+                DistShadows::PrefixMap(side) => DistShadows::PrefixMap(pilot_side(side)),
+                local => local,
+            },
+            ..*scene
+        };
         for _ in 0..PILOT_ROUNDS {
             let frames = std::slice::from_ref(p);
-            piloted =
-                Some(render_balanced(comm, backend, &local, scene, frames, piloted.as_ref())?.1);
+            let (_, measured) = render_balanced(
+                comm,
+                backend,
+                &local,
+                &pilot_scene,
+                frames,
+                piloted.as_ref(),
+            )?;
+            piloted = Some(measured);
         }
     }
     let brick = prepare_brick(comm, backend, &local, scene, piloted.as_ref().or(cost))?;
@@ -465,8 +480,8 @@ fn representation_code(r: Option<crate::backend::Representation>) -> u8 {
 }
 
 /// [`render_distributed`] with the leaves balanced by `cost` (equal particles where `None`),
-/// returning, on every rank, what this render measured: each leaf's render seconds per
-/// particle it owned, for the next decomposition. A rank's render time is its thread's CPU
+/// returning, on every rank, what this render measured: each leaf's seconds of render and
+/// light map per particle it owned, for the next decomposition. A rank's render time is its thread's CPU
 /// time where it runs on one thread (its own work, whatever else shares the core), and the
 /// wall time otherwise (its threads are its own cores under MPI).
 pub fn render_balanced(
@@ -667,10 +682,13 @@ pub fn render_frames_on(
         + memory.image_bytes
         + largest_layer) as u64;
 
+    // The work that follows the brick: its render and its light map (single scattering's
+    // shadows across bricks), which balancing by render alone would pile on the bricks it
+    // gives more particles.
     let seconds = if rayon::current_num_threads() == 1 {
-        report.render_cpu_seconds
+        report.render_cpu_seconds + report.shadow_map_cpu_seconds
     } else {
-        report.render_seconds
+        report.render_seconds + report.shadow_map_seconds
     };
     let measured = comm.all_gather_of(&[[report.owned as f64, seconds, *predicted_cost]])?;
     let measured = CostModel::refined(balanced_by.as_ref(), tree.clone(), &measured.concat());

@@ -424,12 +424,6 @@ impl MarchedRay {
     ) -> Option<MarchedRay> {
         let (origin, dir) = p.primary_ray(x, y);
         let (t_enter, t_exit) = ray_box(origin, dir, p.box_min, p.box_max)?;
-        intervals.clear();
-        let clear_where_empty =
-            march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
-        if let Some(b) = brick {
-            clip_to_owned(p, b.owned, origin, dir, intervals);
-        }
         // Dimension 0 is the primary decision: emission–absorption's jitter, or stochastic
         // marching's free-flight number (its jitter is dimension 1, as the reference's).
         let (jitter, target_tau) = match p.integrator {
@@ -440,7 +434,8 @@ impl MarchedRay {
         // In a brick, stochastic marching goes on from the depth of the bricks in front; past
         // the free-flight depth already, the ray scattered in front of this brick.
         // Emission–absorption ends where the transmittance in front times its own falls to
-        // 1 - threshold; where that in front does, before its first sample.
+        // 1 - threshold; where that in front does, before its first sample (and before its
+        // intervals are looked for).
         let tau = brick.map_or(0.0, |b| b.depth_in_front(x, y));
         let front_transmittance = if p.integrator == Integrator::Marching {
             1.0
@@ -448,7 +443,16 @@ impl MarchedRay {
             (-tau).exp()
         };
         let ended_in_front = brick.is_some() && 1.0 - front_transmittance >= p.opacity_threshold;
-        (tau <= target_tau && !ended_in_front).then_some(MarchedRay {
+        if tau.is_nan() || tau > target_tau || ended_in_front {
+            return None;
+        }
+        intervals.clear();
+        let clear_where_empty =
+            march_intervals(p, field, primary, origin, dir, t_enter, t_exit, intervals);
+        if let Some(b) = brick {
+            clip_to_owned(p, b.owned, origin, dir, intervals);
+        }
+        Some(MarchedRay {
             origin,
             dir,
             clear_where_empty,

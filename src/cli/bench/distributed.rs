@@ -49,13 +49,13 @@ pub struct DistributedArgs {
     /// Frames accumulated (samples per pixel).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
-    /// Early ray termination: the opacity a ray stops at (each brick stops on its own, so
-    /// bricks behind an opaque one render what a single rank skips); 1 composites every
-    /// sample.
+    /// Early ray termination: the opacity a ray stops at (a brick stops where a bound of the
+    /// bricks' in front times its own reaches it, from a coarse pass before the render); 1
+    /// composites every sample.
     #[arg(long, default_value_t = 0.99)]
     pub opacity_threshold: f64,
     /// What the bricks are balanced by: `count` (equal particles) or `cost` (equal render
-    /// time, measured by a pilot render at a quarter of the size, which is not timed).
+    /// time, measured by two pilot renders at a quarter of the size, which are not timed).
     #[arg(long, value_enum, default_value_t = Balance::Count)]
     pub balance: Balance,
     /// The particles' radius as a fraction of the step's diagonal.

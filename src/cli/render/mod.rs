@@ -181,8 +181,9 @@ pub struct RenderArgs {
     #[arg(long, value_name = "N")]
     pub ranks: Option<usize>,
     /// What a distributed render's bricks are balanced by: `count` (equal particles) or
-    /// `cost` (equal measured render time: a pilot image at a quarter of the size measures
-    /// each brick, and each image of a sequence balances by the one before it).
+    /// `cost` (equal measured render time: two pilot images at a quarter of the size measure
+    /// each brick, the second balanced by the first, and each image of a sequence corrects
+    /// the balance by what the one before it measured).
     #[arg(long, value_enum, default_value_t = Balance::Count)]
     pub balance: Balance,
     /// How a distributed render's shadow rays (single scattering) cross bricks: `prefix-map`
