@@ -336,11 +336,12 @@ fn scanned_depth(
 ) -> Result<Vec<f64>, DistError> {
     let me = comm.rank();
     let clock = StageClock::start();
-    let behind = order.iter().skip_while(|&&r| r != me).skip(1);
-    let mine = if behind
-        .into_iter()
-        .any(|&r| !rects[r].intersection(&rects[me]).is_empty())
-    {
+    let needed_behind = order
+        .iter()
+        .skip_while(|&&r| r != me)
+        .skip(1)
+        .any(|&r| !rects[r].intersection(&rects[me]).is_empty());
+    let mine = if needed_behind {
         backend.owned_depth(frame, leaf, rays)?
     } else {
         vec![0.0; rects[me].len()]
