@@ -210,9 +210,11 @@ fn same_light(a: &FrameParams, b: &FrameParams) -> bool {
         && a.optical_table == b.optical_table
 }
 
-/// The brick's [`LightPrefix`] for `frame`'s light: every brick marches the map's texels near
-/// its box through its own samples, and an exclusive scan in the order from the light sums,
-/// per texel, the bricks nearer the light. Returns the bytes sent.
+/// The brick's [`LightPrefix`] for `frame`'s light: every brick marches through its own
+/// samples the map's texels near its box that a brick farther from the light needs (those
+/// near both boxes; none for the brick farthest along every texel), and an exclusive scan in
+/// the order from the light sums, per texel, the bricks nearer the light. Returns the bytes
+/// sent.
 fn light_prefix(
     comm: &dyn Comm,
     backend: &mut dyn Backend,
@@ -226,10 +228,30 @@ fn light_prefix(
         .iter()
         .map(|l| map.texels_near(l.clipped_to(frame.march_box())))
         .collect();
-    let me = comm.rank();
-    let mine = backend.owned_depth(frame, &tree.leaves()[me], DepthRays::Light(&map, near[me]))?;
     let order = tree.nearest_first_along(frame.light_dir);
-    let scanned = exclusive_scan(comm, &order, &near, &near, &mine)?;
+    // Per brick, the texels a brick after it in that order needs: the rectangle around their
+    // overlaps (every rank computes every brick's, so the scan knows what each one holds).
+    let marched: Vec<PixelRect> = order.iter().enumerate().fold(
+        vec![PixelRect::default(); near.len()],
+        |mut marched, (k, &b)| {
+            marched[b] = order[k + 1..]
+                .iter()
+                .map(|&later| near[b].intersection(&near[later]))
+                .fold(PixelRect::default(), |around, o| around.around(&o));
+            marched
+        },
+    );
+    let me = comm.rank();
+    let mine = if marched[me].is_empty() {
+        Vec::new()
+    } else {
+        backend.owned_depth(
+            frame,
+            &tree.leaves()[me],
+            DepthRays::Light(&map, marched[me]),
+        )?
+    };
+    let scanned = exclusive_scan(comm, &order, &marched, &near, &mine)?;
     let prefix = LightPrefix {
         map,
         rect: near[me],

@@ -105,6 +105,22 @@ impl PixelRect {
         }
     }
 
+    /// The least rectangle holding both (the other where one is empty).
+    pub fn around(&self, other: &PixelRect) -> PixelRect {
+        if self.is_empty() {
+            return *other;
+        }
+        if other.is_empty() {
+            return *self;
+        }
+        PixelRect {
+            x0: self.x0.min(other.x0),
+            y0: self.y0.min(other.y0),
+            x1: self.x1.max(other.x1),
+            y1: self.y1.max(other.y1),
+        }
+    }
+
     /// Whether it holds pixel `(x, y)`.
     pub fn contains(&self, x: u32, y: u32) -> bool {
         x >= self.x0 && x < self.x1 && y >= self.y0 && y < self.y1
@@ -168,5 +184,14 @@ mod tests {
         assert_eq!(c.len(), 15);
         assert_eq!(c.index(4, 7), 4 * 3 + 2);
         assert!(a.intersection(&PixelRect::full(2, 2)).is_empty());
+        let d = a.around(&PixelRect {
+            x0: 12,
+            y0: 1,
+            x1: 13,
+            y1: 4,
+        });
+        assert_eq!((d.x0, d.y0, d.x1, d.y1), (2, 1, 13, 8));
+        assert_eq!(a.around(&PixelRect::default()), a);
+        assert_eq!(PixelRect::default().around(&a), a);
     }
 }
