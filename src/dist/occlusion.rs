@@ -61,11 +61,13 @@ pub fn stop_depth(frame: &FrameParams) -> f64 {
 /// across, in a coarse frame `coarse` pixels across: the two whose rays bracket the pixel's,
 /// and one more on each side, those of them the coarse frame has (at its edges, the pixel's
 /// ray lies beyond the last coarse ray, and the nearest three stand for it).
-fn window(x: u32, fine: u32, coarse: u32) -> std::ops::RangeInclusive<i64> {
+fn window(x: u32, fine: u32, coarse: u32) -> std::ops::RangeInclusive<u32> {
     // Pixel x's ray has s = 2 (x + 0.5) / fine - 1, coarse pixel i's 2 (i + 0.5) / coarse - 1.
     let at = (f64::from(x) + 0.5) * f64::from(coarse) / f64::from(fine) - 0.5;
     let below = at.floor() as i64;
-    (below - 1).max(0)..=(below + 2).min(i64::from(coarse) - 1)
+    let last = i64::from(coarse) - 1;
+    // Both ends within 0..=last (below >= -1).
+    (below - 1).clamp(0, last) as u32..=(below + 2).clamp(0, last) as u32
 }
 
 /// Per pixel of `rect` (row-major) of `frame`, a bound from below of the depth in front
@@ -84,13 +86,9 @@ pub fn depth_bound(
         coarse_rect.len(),
         "one depth a coarse pixel"
     );
-    let at = |i: i64, j: i64| -> f64 {
-        let inside = i >= i64::from(coarse_rect.x0)
-            && i < i64::from(coarse_rect.x1)
-            && j >= i64::from(coarse_rect.y0)
-            && j < i64::from(coarse_rect.y1);
-        if inside {
-            coarse_depth[coarse_rect.index(i as u32, j as u32)]
+    let at = |i: u32, j: u32| -> f64 {
+        if coarse_rect.contains(i, j) {
+            coarse_depth[coarse_rect.index(i, j)]
         } else {
             0.0
         }
@@ -98,7 +96,7 @@ pub fn depth_bound(
     // The windows of `rect`'s columns and rows, each distinct one once (they follow the
     // pixels in order), and for each pixel which of them it takes.
     let distinct = |range: std::ops::Range<u32>, fine: u32, coarse: u32| {
-        let mut windows: Vec<std::ops::RangeInclusive<i64>> = Vec::new();
+        let mut windows: Vec<std::ops::RangeInclusive<u32>> = Vec::new();
         let mut of = Vec::with_capacity(range.len());
         for x in range {
             let w = window(x, fine, coarse);
