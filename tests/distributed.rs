@@ -136,6 +136,17 @@ fn max_abs(a: &[[f64; 4]], b: &[[f64; 4]]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Point `i` of the R3 quasi-random sequence in the unit cube: a fixed fill with no two
+/// points alike and no lattice to line up with the bricks' planes.
+fn r3_point(i: usize) -> DVec3 {
+    let alpha = [
+        0.819_172_513_396_164_4,
+        0.671_043_606_703_789_2,
+        0.549_700_477_901_970_4,
+    ];
+    DVec3::from_array(alpha.map(|a| (0.5 + a * i as f64).fract()))
+}
+
 /// Pixels where the data shows (opacity above a hundredth): the comparison is not of
 /// background alone.
 fn covered(pixels: &[[f64; 4]]) -> usize {
@@ -204,25 +215,17 @@ fn emission_absorption_with_termination_stays_within_the_threshold() {
 }
 
 /// A brick wholly behind an opaque one renders nothing: a dense slab in front of the camera
-/// and a cloud behind it of as many particles, split between two ranks at the gap. Emission–absorption's occluding
-/// pass gives the cloud's brick the slab's depth, and under the opacity threshold its rays end
-/// before their first sample: its layer is all `[0, 0, 0, 1]`, so it sends rank 0 (which owns
-/// the image's one tile) nothing (and, last in view order, no depth either). Without early termination it renders the cloud, which the
+/// and a cloud behind it of as many particles, split between two ranks at the gap.
+/// Emission–absorption's occluding pass gives the cloud's brick the slab's depth, and under
+/// the opacity threshold its rays end before their first sample: its layer is all
+/// `[0, 0, 0, 1]`, so it sends rank 0 (which owns the image's one tile) nothing (and, last in
+/// view order, no depth either). Without early termination it renders the cloud, which the
 /// composite then hides. Both images are the single rank's (within the threshold's remainder).
 #[test]
 fn a_brick_behind_an_opaque_one_renders_nothing() {
-    // A fixed quasi-random fill (R3 sequence) of a box.
-    let alpha = [
-        0.819_172_513_396_164_4,
-        0.671_043_606_703_789_2,
-        0.549_700_477_901_970_4,
-    ];
+    // A fixed quasi-random fill of a box.
     let fill = |n: usize, lo: DVec3, hi: DVec3| -> Vec<DVec3> {
-        (0..n)
-            .map(|i| {
-                lo + (hi - lo) * DVec3::from_array(alpha.map(|a| (0.5 + a * i as f64).fract()))
-            })
-            .collect()
+        (0..n).map(|i| lo + (hi - lo) * r3_point(i)).collect()
     };
     let mut positions = fill(4507, DVec3::ZERO, DVec3::new(0.15, 1.0, 1.0));
     positions.extend(fill(
@@ -621,15 +624,10 @@ fn emission_absorption_in_f32_matches_to_f32_rounding() {
 fn a_periodic_box_matches_the_single_rank_to_rounding() {
     use aarbf::field::PeriodicBox;
     let n: usize = 6001;
-    // A fixed quasi-random fill (R3 sequence), and every 97th particle pushed 1e-12 past a face.
-    let alpha = [
-        0.819_172_513_396_164_4,
-        0.671_043_606_703_789_2,
-        0.549_700_477_901_970_4,
-    ];
+    // A fixed quasi-random fill, and every 97th particle pushed 1e-12 past a face.
     let positions: Vec<DVec3> = (0..n)
         .map(|i| {
-            let p = DVec3::from_array(alpha.map(|a| (0.5 + a * i as f64).fract()));
+            let p = r3_point(i);
             if i % 97 == 0 {
                 p.with_x(1.0 + 1e-12)
             } else {
